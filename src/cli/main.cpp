@@ -1,0 +1,55 @@
+// hgs — command-line entry point. Errors from hgs::Error print one line and exit with status 1.
+#include <omp.h>
+
+#include <algorithm>
+#include <cstdio>
+
+#include "cli/command.h"
+#include "core/error.h"
+
+namespace hgs::cli {
+
+std::vector<CommandSpec>& registry() {
+  static std::vector<CommandSpec> r;
+  return r;
+}
+
+void set_threads(int threads) {
+  if (threads > 0) omp_set_num_threads(threads);
+}
+
+}  // namespace hgs::cli
+
+int main(int argc, char** argv) {
+  using namespace hgs::cli;
+  CLI::App app{"hgs " HGS_VERSION " — Hybrid Gaussians: open-vocabulary 3D segmentation with Gaussian splatting, on the CPU"};
+  app.set_version_flag("--version", std::string("hgs ") + HGS_VERSION);
+  app.require_subcommand(1);
+  app.fallthrough(false);
+  auto& reg = registry();
+  std::sort(reg.begin(), reg.end(), [](const CommandSpec& a, const CommandSpec& b) { return a.order < b.order; });
+  std::function<void()> run;
+  for (auto& spec : reg) {
+    CLI::App* sub = app.add_subcommand(spec.name, spec.help);
+    auto fn = spec.setup(*sub);
+    sub->callback([fn, &run] { run = fn; });
+  }
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  try {
+    if (run) run();
+  } catch (const hgs::Error& e) {
+    std::fprintf(stderr, "hgs: error: %s\n", e.what());
+    return 1;
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "hgs: error: out of memory\n");
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "hgs: internal error: %s\n", e.what());
+    return 2;
+  }
+  return 0;
+}

@@ -1,0 +1,264 @@
+#include "scene/scene.h"
+
+#include <stb/stb_image_write.h>
+
+#include <algorithm>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+
+#include "core/error.h"
+#include "core/fs.h"
+#include "core/npy.h"
+#include "scene/colmap.h"
+
+namespace hgs {
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+std::vector<int> Scene::train_indices() const {
+  std::vector<int> r;
+  for (auto& v : views) if (!v.is_test) r.push_back(v.index);
+  return r;
+}
+std::vector<int> Scene::test_indices() const {
+  std::vector<int> r;
+  for (auto& v : views) if (v.is_test) r.push_back(v.index);
+  return r;
+}
+bool Scene::has_masks() const {
+  return std::any_of(views.begin(), views.end(), [](const View& v) { return v.mask_path.has_value(); });
+}
+bool Scene::has_features() const {
+  return std::any_of(views.begin(), views.end(), [](const View& v) { return v.feature_path.has_value(); });
+}
+
+namespace {
+
+std::string strip_ext(const std::string& name) {
+  fs::path p(name);
+  return (p.parent_path() / p.stem()).generic_string();
+}
+
+json read_json(const fs::path& p) {
+  std::string text = read_file_text(p);
+  try {
+    return json::parse(text);
+  } catch (const json::parse_error& e) {
+    fail("{}: invalid JSON ({})", p.string(), e.what());
+  }
+}
+
+}  // namespace
+
+Scene load_scene(const fs::path& root_in, const SceneOptions& opt) {
+  Scene s;
+  s.root = root_in;
+  s.downscale = std::max(1, opt.downscale);
+  if (!fs::exists(s.root)) fail("{}: scene folder not found", s.root.string());
+  if (!fs::is_directory(s.root)) fail("{}: not a folder", s.root.string());
+  fs::path sparse = s.root / "sparse" / "0";
+  if (!fs::is_directory(sparse)) {
+    if (fs::is_directory(s.root / "sparse") && fs::exists(s.root / "sparse" / "cameras.bin")) sparse = s.root / "sparse";
+    else fail("{}: no COLMAP model (expected sparse/0/ with cameras, images, points3D)", s.root.string());
+  }
+  fs::path images_dir = s.root / "images";
+  if (!fs::is_directory(images_dir)) fail("{}: images/ folder not found", s.root.string());
+  ColmapModel m = read_colmap(sparse);
+  if (m.images.empty()) fail("{}: the COLMAP model lists no images", sparse.string());
+
+  const int F = s.downscale;
+  fs::path scaled_dir = s.root / fmt::format("images_{}", F);
+  for (auto& im : m.images) {
+    View v;
+    v.colmap_id = im.id;
+    v.name = im.name;
+    v.stem = strip_ext(im.name);
+    const ColmapCamera& cam = m.cameras.at(im.camera_id);
+    double fx, fy, cx, cy;
+    require_pinhole(cam, (sparse / "cameras").string(), fx, fy, cx, cy);
+    v.image_path = images_dir / im.name;
+    if (!fs::exists(v.image_path))
+      fail("{}: image '{}' is listed in the COLMAP model but missing", v.image_path.string(), im.name);
+    // COLMAP puts the pixel-coordinate origin at the top-left corner of the top-left pixel, so an integer
+    // downscale divides every intrinsic by F exactly.
+    v.width = static_cast<int>(cam.width) / F;
+    v.height = static_cast<int>(cam.height) / F;
+    v.fx = fx / F; v.fy = fy / F; v.cx = cx / F; v.cy = cy / F;
+    if (F > 1 && fs::exists(scaled_dir / im.name)) v.image_path = scaled_dir / im.name;
+    v.R = qvec_to_rotmat(im.qvec);
+    v.t = im.tvec;
+    fs::path mp = s.root / "masks" / (v.stem + ".png");
+    if (fs::exists(mp)) v.mask_path = mp;
+    fs::path cp = s.root / "masks" / (v.stem + ".conf.npy");
+    if (fs::exists(cp)) v.conf_path = cp;
+    fs::path fp = s.root / "features" / (v.stem + ".npy");
+    if (fs::exists(fp)) v.feature_path = fp;
+    s.views.push_back(std::move(v));
+  }
+  std::sort(s.views.begin(), s.views.end(), [](const View& a, const View& b) { return a.name < b.name; });
+  for (size_t i = 0; i < s.views.size(); ++i) s.views[i].index = static_cast<int>(i);
+
+  // Train/test split.
+  fs::path test_txt = s.root / "test.txt";
+  if (fs::exists(test_txt)) {
+    std::istringstream in(read_file_text(test_txt));
+    std::set<std::string> names;
+    std::string line;
+    while (std::getline(in, line)) {
+      while (!line.empty() && (line.back() == '\r' || line.back() == ' ')) line.pop_back();
+      if (!line.empty()) names.insert(line);
+    }
+    int found = 0;
+    for (auto& v : s.views)
+      if (names.count(v.name) || names.count(v.stem)) { v.is_test = true; ++found; }
+    if (found != static_cast<int>(names.size()))
+      fail("{}: {} of the {} listed test images are not in the COLMAP model", test_txt.string(), names.size() - found, names.size());
+    s.split_source = "test.txt";
+  } else {
+    for (auto& v : s.views) v.is_test = (v.index % 8 == 0);
+    s.split_source = "every 8th view (LLFF)";
+  }
+
+  s.points.reserve(m.points.size());
+  for (auto& p : m.points) {
+    s.points.emplace_back(p.xyz.cast<float>());
+    s.point_colors.emplace_back(p.rgb[0] / 255.f, p.rgb[1] / 255.f, p.rgb[2] / 255.f);
+  }
+
+  fs::path objects = s.root / "masks" / "objects.json";
+  if (fs::exists(objects)) {
+    json j = read_json(objects);
+    if (!j.is_object()) fail("{}: expected an object {{\"1\": \"name\", ...}}", objects.string());
+    for (auto& [k, val] : j.items()) {
+      int id;
+      try { id = std::stoi(k); } catch (...) { fail("{}: key '{}' is not an object id", objects.string(), k); }
+      if (!val.is_string()) fail("{}: name of object {} is not a string", objects.string(), k);
+      s.object_names[id] = val.get<std::string>();
+    }
+  }
+  fs::path te = s.root / "text_embeddings.json";
+  if (fs::exists(te)) {
+    json j = read_json(te);
+    if (!j.is_object()) fail("{}: expected an object {{\"phrase\": [floats], ...}}", te.string());
+    size_t dim = 0;
+    for (auto& [k, val] : j.items()) {
+      if (!val.is_array() || val.empty() || !val[0].is_number())
+        fail("{}: embedding of '{}' is not an array of numbers", te.string(), k);
+      auto vec = val.get<std::vector<float>>();
+      if (dim && vec.size() != dim) fail("{}: embedding of '{}' has {} values, others have {}", te.string(), k, vec.size(), dim);
+      dim = vec.size();
+      s.text_embeddings[k] = std::move(vec);
+    }
+  }
+
+  if (opt.cache_downscaled && F > 1) {
+    for (auto& v : s.views) {
+      if (v.image_path.parent_path() == scaled_dir / fs::path(v.name).parent_path()) continue;
+      Image img = s.load_image(v.index);
+      fs::path out = scaled_dir / v.name;
+      std::string ext = out.extension().string();
+      std::transform(ext.begin(), ext.end(), ext.begin(), ::tolower);
+      if (ext == ".png") {
+        save_png(out, img);
+      } else {
+        std::vector<uint8_t> b(img.px.size());
+        for (size_t i = 0; i < b.size(); ++i) b[i] = static_cast<uint8_t>(std::clamp(img.px[i], 0.f, 1.f) * 255.f + 0.5f);
+        atomic_write(out, [&](const fs::path& tmp) {
+          if (!stbi_write_jpg(tmp.c_str(), img.width, img.height, 3, b.data(), 95)) fail("{}: cannot write", out.string());
+        });
+      }
+      v.image_path = out;
+    }
+  }
+  return s;
+}
+
+Image Scene::load_image(int vi) const {
+  const View& v = views.at(vi);
+  Image img = hgs::load_image(v.image_path, 3);
+  if (img.width == v.width && img.height == v.height) return img;
+  if (img.width / downscale == v.width && img.height / downscale == v.height) return downscale_area(img, downscale);
+  fail("{}: image is {}x{} but the COLMAP camera says {}x{}", v.image_path.string(), img.width, img.height,
+       v.width * downscale, v.height * downscale);
+}
+
+std::optional<LabelMap> Scene::load_mask(int vi) const {
+  const View& v = views.at(vi);
+  if (!v.mask_path) return std::nullopt;
+  LabelMap m = load_label_png(*v.mask_path);
+  if (m.width == v.width && m.height == v.height) return m;
+  if (m.width / downscale == v.width && m.height / downscale == v.height) return downscale_labels(m, downscale);
+  fail("{}: mask is {}x{} but its image is {}x{}", v.mask_path->string(), m.width, m.height, v.width * downscale,
+       v.height * downscale);
+}
+
+std::optional<std::vector<float>> Scene::load_confidence(int vi) const {
+  const View& v = views.at(vi);
+  if (!v.conf_path) return std::nullopt;
+  NpyArray a = read_npy(*v.conf_path);
+  if (a.shape.size() != 2) fail("{}: confidence must be a 2-D [H, W] array, found {} dimensions", v.conf_path->string(), a.shape.size());
+  if (a.dtype != DType::F32 && a.dtype != DType::F16) fail("{}: confidence must be float16 or float32", v.conf_path->string());
+  int h = static_cast<int>(a.shape[0]), w = static_cast<int>(a.shape[1]);
+  std::vector<float> c = a.to_float();
+  if (w == v.width && h == v.height) return c;
+  if (w / downscale == v.width && h / downscale == v.height) {
+    Image im(w, h, 1);
+    im.px = std::move(c);
+    return downscale_area(im, downscale).px;
+  }
+  fail("{}: confidence is {}x{} but its image is {}x{}", v.conf_path->string(), w, h, v.width * downscale, v.height * downscale);
+}
+
+std::optional<std::vector<float>> Scene::load_features(int vi, int& dim) const {
+  const View& v = views.at(vi);
+  if (!v.feature_path) return std::nullopt;
+  NpyArray a = read_npy(*v.feature_path);
+  if (a.shape.size() != 3) fail("{}: features must be a 3-D [h, w, D] array, found {} dimensions", v.feature_path->string(), a.shape.size());
+  if (a.dtype != DType::F32 && a.dtype != DType::F16) fail("{}: features must be float16 or float32", v.feature_path->string());
+  int h = static_cast<int>(a.shape[0]), w = static_cast<int>(a.shape[1]);
+  dim = static_cast<int>(a.shape[2]);
+  if (h == 0 || w == 0 || dim == 0) fail("{}: empty feature array", v.feature_path->string());
+  std::vector<float> f = a.to_float();
+  if (h == v.height && w == v.width) return f;
+  return upsample_bilinear(f.data(), h, w, dim, v.height, v.width);
+}
+
+int Scene::num_objects() const {
+  if (num_objects_cache_ >= 0) return num_objects_cache_;
+  int k = 0;
+  for (auto& v : views) {
+    if (!v.mask_path) continue;
+    LabelMap m = load_label_png(*v.mask_path);
+    for (uint16_t l : m.v) k = std::max<int>(k, l);
+  }
+  for (auto& [id, name] : object_names) k = std::max(k, id);
+  num_objects_cache_ = k;
+  return k;
+}
+
+std::vector<float> upsample_bilinear(const float* src, int h, int w, int d, int H, int W) {
+  std::vector<float> out(size_t(H) * W * d);
+  const float sy = float(h) / H, sx = float(w) / W;
+  for (int y = 0; y < H; ++y) {
+    float fy = std::clamp((y + 0.5f) * sy - 0.5f, 0.f, float(h - 1));
+    int y0 = static_cast<int>(fy), y1 = std::min(y0 + 1, h - 1);
+    float ay = fy - y0;
+    for (int x = 0; x < W; ++x) {
+      float fx = std::clamp((x + 0.5f) * sx - 0.5f, 0.f, float(w - 1));
+      int x0 = static_cast<int>(fx), x1 = std::min(x0 + 1, w - 1);
+      float ax = fx - x0;
+      const float* p00 = src + (size_t(y0) * w + x0) * d;
+      const float* p01 = src + (size_t(y0) * w + x1) * d;
+      const float* p10 = src + (size_t(y1) * w + x0) * d;
+      const float* p11 = src + (size_t(y1) * w + x1) * d;
+      float w00 = (1 - ay) * (1 - ax), w01 = (1 - ay) * ax, w10 = ay * (1 - ax), w11 = ay * ax;
+      float* o = out.data() + (size_t(y) * W + x) * d;
+      for (int c = 0; c < d; ++c) o[c] = w00 * p00[c] + w01 * p01[c] + w10 * p10[c] + w11 * p11[c];
+    }
+  }
+  return out;
+}
+
+}  // namespace hgs

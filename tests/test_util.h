@@ -1,0 +1,34 @@
+// Shared helpers for the GoogleTest suites: temporary folders, running the `hgs` binary, and skipping
+// tests whose real data (../shared) is absent.
+#pragma once
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <string>
+
+namespace hgs::test {
+
+// A fresh empty folder under the system temp dir, removed when the object dies.
+struct TempDir {
+  TempDir();
+  ~TempDir();
+  std::filesystem::path path;
+  std::filesystem::path operator/(const std::string& s) const { return path / s; }
+};
+
+struct RunResult {
+  int exit_code;
+  std::string out;  // stdout
+  std::string err;  // stderr
+};
+// Runs the built `hgs` binary with `args` (a shell-quoted string).
+RunResult run_hgs(const std::string& args);
+
+// Path of ../shared/data/<name>, or empty when absent.
+std::filesystem::path shared_data(const std::string& name);
+
+}  // namespace hgs::test
+
+#define HGS_REQUIRE_SHARED(var, name)                                                          \
+  auto var = ::hgs::test::shared_data(name);                                                   \
+  if (var.empty()) GTEST_SKIP() << "../shared/data/" name " is absent: skipping real-data test"
