@@ -1,0 +1,106 @@
+// Differentiable CPU Gaussian splatting: the public, trainer-independent API of the render module.
+//
+// Pipeline (each stage has its own file with forward and backward):
+//   project.{h,cpp}   EWA projection of 3D Gaussians to 2D conics (+0.3 px low-pass), depth, radius
+//   sh.{h,cpp}        spherical-harmonics colour per view direction (degree 0..3), clamped at 0 as in 3DGS
+//   binning.{h,cpp}   16x16 tile binning, per-tile front-to-back depth order
+//   rasterize.{h,cpp} per-pixel front-to-back alpha compositing of RGB, alpha, depth and C extra channels
+// GaussianRenderer ties them together and keeps every buffer between calls (no allocation once warm).
+//
+// Conventions
+// - Camera: world-to-camera rotation R (row-major 3x3) and translation t (x_cam = R x_world + t); pinhole
+//   intrinsics in COLMAP's pixel convention (origin at the top-left corner of the top-left pixel), so pixel
+//   (x, y) is evaluated at (x + 0.5, y + 0.5).
+// - Gaussians: mean [N,3]; log_scale [N,3] (scale = exp); quat [N,4] as (w, x, y, z), normalised inside (the
+//   gradient goes through the normalisation); opacity_logit [N] (opacity = sigmoid); sh [N, S, 3] with
+//   S = sh_stride >= (sh_degree + 1)^2 coefficients, coefficient-major then RGB (the 3DGS feature layout);
+//   colour = max(SH(dir) + 0.5, 0) with dir = normalise(mean - camera centre).
+// - Optional `colors` [N,3] replace the SH colour (used by object-conditioned rendering).
+// - Extra channels: extra [N, C] per-Gaussian vectors, composited as sum_n v_n alpha_n T_n (no background).
+// - Outputs: rgb [H,W,3] = sum c alpha T + T_final * background; alpha [H,W] = 1 - T_final;
+//   depth [H,W] = sum z_n alpha_n T_n (expected depth, not divided by alpha); extra [H,W,C].
+// - 3DGS cut-offs: skip a Gaussian at a pixel when alpha < 1/255; alpha clamped to 0.99; stop when the
+//   transmittance would drop below 1e-4.
+#pragma once
+#include <cstdint>
+#include <vector>
+
+namespace hgs::render {
+
+struct Camera {
+  int width = 0, height = 0;
+  float fx = 0, fy = 0, cx = 0, cy = 0;
+  float R[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};  // world -> camera, row-major
+  float t[3] = {0, 0, 0};
+  float near_plane = 0.01f;  // Gaussians with camera-space depth below this are culled
+};
+
+// Read-only views of the Gaussian parameters (plain arrays, not owned).
+struct GaussianInputs {
+  int n = 0;
+  const float* mean = nullptr;           // [N, 3]
+  const float* log_scale = nullptr;      // [N, 3]
+  const float* quat = nullptr;           // [N, 4] (w, x, y, z)
+  const float* opacity_logit = nullptr;  // [N]
+  const float* sh = nullptr;             // [N, sh_stride, 3]; may be null when `colors` is given
+  int sh_stride = 1;
+  int sh_degree = 0;                     // active degree, 0..3
+  const float* colors = nullptr;         // [N, 3] optional precomputed colours (replace SH)
+  const float* extra = nullptr;          // [N, num_extra] optional
+  int num_extra = 0;
+};
+
+struct RenderSettings {
+  float background[3] = {0, 0, 0};
+  bool want_depth = true;
+};
+
+struct RenderOutputs {
+  std::vector<float> rgb;    // [H, W, 3]
+  std::vector<float> alpha;  // [H, W]
+  std::vector<float> depth;  // [H, W] (empty when !want_depth)
+  std::vector<float> extra;  // [H, W, C] (empty when C = 0)
+  int num_visible = 0;       // Gaussians that passed culling
+};
+
+// Upstream gradients of a scalar loss with respect to the outputs. Null pointers mean zero.
+struct OutputGrads {
+  const float* rgb = nullptr;    // [H, W, 3]
+  const float* alpha = nullptr;  // [H, W]
+  const float* depth = nullptr;  // [H, W]
+  const float* extra = nullptr;  // [H, W, C]
+};
+
+// Gradients with respect to the inputs. Buffers are resized and overwritten (not accumulated) by backward().
+struct GaussianGrads {
+  std::vector<float> mean;           // [N, 3]
+  std::vector<float> log_scale;      // [N, 3]
+  std::vector<float> quat;           // [N, 4]
+  std::vector<float> opacity_logit;  // [N]
+  std::vector<float> sh;             // [N, sh_stride, 3] (zero beyond the active degree; empty if colours given)
+  std::vector<float> colors;         // [N, 3] when precomputed colours were given
+  std::vector<float> extra;          // [N, C]
+  std::vector<float> mean2d;         // [N, 2] dL/d(projected centre) in pixels (densification statistic)
+};
+
+class GaussianRenderer {
+ public:
+  GaussianRenderer();
+  ~GaussianRenderer();
+  GaussianRenderer(const GaussianRenderer&) = delete;
+  GaussianRenderer& operator=(const GaussianRenderer&) = delete;
+
+  // Renders one view and keeps what backward() needs. The input arrays must stay alive until backward().
+  void forward(const Camera& cam, const GaussianInputs& g, const RenderSettings& s, RenderOutputs& out);
+  // Exact gradients of the last forward() for the given output gradients.
+  void backward(const OutputGrads& dout, GaussianGrads& grads);
+
+  // Per-Gaussian visibility of the last forward: radius in pixels (0 = culled). [N]
+  const std::vector<int>& radii() const;
+
+ private:
+  struct State;
+  State* st_;
+};
+
+}  // namespace hgs::render
