@@ -1,0 +1,68 @@
+// GaussianModel: the trainable 3D Gaussians as a structure of float32 arrays (row i = Gaussian i), plus named
+// extra per-Gaussian channel groups that later methods add (object associations, hard ids, language
+// embeddings). Every per-Gaussian array is reachable through `fields()`, so densification, Adam and the PLY
+// and checkpoint writers handle extra groups without knowing them.
+#pragma once
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "scene/scene.h"
+
+namespace hgs {
+
+struct ExtraGroup {
+  std::string name;         // lower-case [a-z0-9_], e.g. "obj", "obj_id", "lang" (see docs/formats.md)
+  int dim = 1;
+  std::vector<float> data;  // [N, dim]
+};
+
+// A named per-Gaussian array: `data` has N * dim floats.
+struct Field {
+  std::string name;
+  int dim;
+  std::vector<float>* data;
+};
+
+struct GaussianModel {
+  int n = 0;
+  int sh_degree = 3;               // maximum SH degree stored (0..3)
+  std::vector<float> mean;           // [N, 3]
+  std::vector<float> log_scale;      // [N, 3]
+  std::vector<float> quat;           // [N, 4] (w, x, y, z)
+  std::vector<float> opacity_logit;  // [N]
+  std::vector<float> sh;             // [N, S, 3], S = (sh_degree + 1)^2, coefficient-major then RGB
+  std::vector<ExtraGroup> extras;
+
+  int sh_stride() const { return (sh_degree + 1) * (sh_degree + 1); }
+  // Base fields "mean", "log_scale", "quat", "opacity", "sh", then one per extra group (by its name).
+  std::vector<Field> fields();
+  // Allocates every array for `count` Gaussians (zero-filled; quaternions identity).
+  void resize(int count);
+  // Adds an extra group filled with `fill`; fails if the name exists.
+  ExtraGroup& add_extra(const std::string& name, int dim, float fill = 0.f);
+  ExtraGroup* find_extra(const std::string& name);
+  const ExtraGroup* find_extra(const std::string& name) const;
+  // Replaces the model by rows `src` of itself: row i of the result is old row src[i] (rows may repeat).
+  void gather(const std::vector<int>& src);
+  // Checks every array has the size implied by n, dim and sh_degree (throws hgs::Error naming `where`).
+  void validate(const std::string& where) const;
+};
+
+constexpr float kSH_C0 = 0.28209479177387814f;
+inline float rgb_to_sh(float c) { return (c - 0.5f) / kSH_C0; }
+inline float sh_to_rgb(float s) { return s * kSH_C0 + 0.5f; }
+inline float sigmoid(float x) { return 1.f / (1.f + std::exp(-x)); }
+inline float inverse_sigmoid(float y) { return std::log(y / (1.f - y)); }
+
+// 3DGS initialisation from SfM points: DC colour from the point colour, higher SH zero, isotropic scale
+// sqrt(mean squared distance to the 3 nearest neighbours) (squared distance clamped at 1e-7), identity
+// rotation, opacity 0.1. Fails when there are fewer than 4 points.
+GaussianModel init_from_points(const std::vector<Eigen::Vector3f>& points,      // [P, 3]
+                               const std::vector<Eigen::Vector3f>& colors,      // [P, 3] in [0, 1]
+                               int sh_degree);
+
+// 3DGS's "cameras extent": 1.1 x the largest distance of a camera centre from the mean camera centre.
+float scene_extent(const Scene& scene);
+
+}  // namespace hgs

@@ -1,0 +1,287 @@
+// PLY reader/writer for Gaussian models. The writer emits the fixed 3DGS layout; the reader parses the
+// header into (name, type, offset) properties, maps them to model arrays by name and then decodes the body
+// row by row, so the property order in the file does not matter.
+#include "model/ply.h"
+
+#include <cstring>
+#include <map>
+#include <sstream>
+
+#include "core/error.h"
+#include "core/fs.h"
+
+namespace hgs {
+namespace {
+
+bool valid_group_name(const std::string& s) {
+  if (s.empty() || s.rfind("f_", 0) == 0) return false;
+  for (char c : s)
+    if (!((c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_')) return false;
+  static const char* reserved[] = {"x", "y", "z", "nx", "ny", "nz", "opacity"};
+  for (auto r : reserved)
+    if (s == r) return false;
+  return s.rfind("scale_", 0) != 0 && s.rfind("rot_", 0) != 0;
+}
+
+std::vector<std::string> property_names(const GaussianModel& m) {
+  std::vector<std::string> names = {"x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"};
+  for (int i = 0; i < 3 * (m.sh_stride() - 1); ++i) names.push_back(fmt::format("f_rest_{}", i));
+  names.push_back("opacity");
+  for (int i = 0; i < 3; ++i) names.push_back(fmt::format("scale_{}", i));
+  for (int i = 0; i < 4; ++i) names.push_back(fmt::format("rot_{}", i));
+  for (auto& e : m.extras) {
+    if (e.dim == 1) names.push_back(e.name);
+    else for (int i = 0; i < e.dim; ++i) names.push_back(fmt::format("f_{}_{}", e.name, i));
+  }
+  return names;
+}
+
+struct Prop {
+  std::string name;
+  int type;  // index into kTypes
+  size_t offset;
+};
+
+struct TypeInfo {
+  const char* names[2];
+  int size;
+};
+const TypeInfo kTypes[] = {{{"float", "float32"}, 4}, {{"double", "float64"}, 8}, {{"uchar", "uint8"}, 1},
+                           {{"char", "int8"}, 1},     {{"ushort", "uint16"}, 2},  {{"short", "int16"}, 2},
+                           {{"uint", "uint32"}, 4},   {{"int", "int32"}, 4}};
+
+float decode(const uint8_t* p, int type) {
+  switch (type) {
+    case 0: { float v; std::memcpy(&v, p, 4); return v; }
+    case 1: { double v; std::memcpy(&v, p, 8); return float(v); }
+    case 2: return float(*p);
+    case 3: return float(int8_t(*p));
+    case 4: { uint16_t v; std::memcpy(&v, p, 2); return float(v); }
+    case 5: { int16_t v; std::memcpy(&v, p, 2); return float(v); }
+    case 6: { uint32_t v; std::memcpy(&v, p, 4); return float(v); }
+    default: { int32_t v; std::memcpy(&v, p, 4); return float(v); }
+  }
+}
+
+// Parses "<prefix><integer>" -> integer, or -1.
+int suffix_index(const std::string& s, const std::string& prefix) {
+  if (s.size() <= prefix.size() || s.compare(0, prefix.size(), prefix) != 0) return -1;
+  int v = 0;
+  for (size_t i = prefix.size(); i < s.size(); ++i) {
+    if (s[i] < '0' || s[i] > '9' || v > 100000) return -1;
+    v = v * 10 + (s[i] - '0');
+  }
+  if (s.size() - prefix.size() > 1 && s[prefix.size()] == '0') return -1;  // no leading zeros
+  return v;
+}
+
+}  // namespace
+
+void write_model_ply(const std::filesystem::path& path, const GaussianModel& m) {
+  m.validate(path.string());
+  for (auto& e : m.extras)
+    if (!valid_group_name(e.name))
+      fail("{}: extra channel group name '{}' is not writable (use [a-z0-9_], not starting with f_)", path.string(), e.name);
+  auto names = property_names(m);
+  std::string header = "ply\nformat binary_little_endian 1.0\ncomment written by hgs " HGS_VERSION "\n";
+  header += fmt::format("element vertex {}\n", m.n);
+  for (auto& nm : names) header += "property float " + nm + "\n";
+  header += "end_header\n";
+  const size_t row = names.size();
+  const int S = m.sh_stride();
+  std::vector<float> body(size_t(m.n) * row);
+#pragma omp parallel for
+  for (long i = 0; i < m.n; ++i) {
+    float* r = body.data() + size_t(i) * row;
+    size_t k = 0;
+    for (int c = 0; c < 3; ++c) r[k++] = m.mean[i * 3 + c];
+    for (int c = 0; c < 3; ++c) r[k++] = 0.f;
+    const float* sh = m.sh.data() + size_t(i) * S * 3;
+    for (int c = 0; c < 3; ++c) r[k++] = sh[c];
+    for (int c = 0; c < 3; ++c)
+      for (int j = 1; j < S; ++j) r[k++] = sh[j * 3 + c];
+    r[k++] = m.opacity_logit[i];
+    for (int c = 0; c < 3; ++c) r[k++] = m.log_scale[i * 3 + c];
+    for (int c = 0; c < 4; ++c) r[k++] = m.quat[i * 4 + c];
+    for (auto& e : m.extras)
+      for (int c = 0; c < e.dim; ++c) r[k++] = e.data[size_t(i) * e.dim + c];
+  }
+  static_assert(sizeof(float) == 4);
+  atomic_write(path, [&](const std::filesystem::path& tmp) {
+    FILE* f = std::fopen(tmp.c_str(), "wb");
+    if (!f) fail("{}: cannot open for writing", path.string());
+    bool ok = std::fwrite(header.data(), 1, header.size(), f) == header.size() &&
+              std::fwrite(body.data(), sizeof(float), body.size(), f) == body.size();
+    ok = (std::fclose(f) == 0) && ok;
+    if (!ok) fail("{}: write failed (disk full?)", path.string());
+  });
+}
+
+GaussianModel read_model_ply(const std::filesystem::path& path) {
+  const std::string where = path.string();
+  std::vector<uint8_t> bytes = read_file_bytes(path);
+  // Header.
+  size_t pos = 0;
+  auto next_line = [&](std::string& line) {
+    size_t e = pos;
+    while (e < bytes.size() && bytes[e] != '\n') ++e;
+    if (e >= bytes.size()) fail("{}: PLY header is not terminated by end_header", where);
+    line.assign(reinterpret_cast<const char*>(bytes.data()) + pos, e - pos);
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    pos = e + 1;
+  };
+  std::string line;
+  if (bytes.size() < 4 || std::memcmp(bytes.data(), "ply", 3) != 0 || (bytes[3] != '\n' && bytes[3] != '\r'))
+    fail("{}: not a PLY file (first line is not 'ply')", where);
+  next_line(line);
+  if (line != "ply") fail("{}: not a PLY file (first line is not 'ply')", where);
+  std::vector<Prop> props;
+  long count = -1;
+  bool in_vertex = false, seen_format = false, vertex_done = false;
+  size_t row = 0;
+  int lineno = 1;
+  while (true) {
+    next_line(line);
+    ++lineno;
+    std::istringstream ls(line);
+    std::string kw;
+    ls >> kw;
+    if (kw == "end_header") break;
+    if (kw == "comment" || kw == "obj_info" || kw.empty()) continue;
+    if (kw == "format") {
+      std::string fmt_, ver;
+      ls >> fmt_ >> ver;
+      if (fmt_ == "ascii") fail("{}: ASCII PLY is not supported; write binary_little_endian", where);
+      if (fmt_ == "binary_big_endian") fail("{}: big-endian PLY is not supported; write binary_little_endian", where);
+      if (fmt_ != "binary_little_endian") fail("{}: header line {}: unknown PLY format '{}'", where, lineno, fmt_);
+      seen_format = true;
+    } else if (kw == "element") {
+      std::string name;
+      long c = -1;
+      ls >> name >> c;
+      if (ls.fail() || c < 0) fail("{}: header line {}: malformed element line '{}'", where, lineno, line);
+      if (in_vertex) vertex_done = true;
+      in_vertex = name == "vertex";
+      if (in_vertex) {
+        if (count >= 0) fail("{}: more than one vertex element", where);
+        if (c > (1L << 31) - 1) fail("{}: vertex count {} is too large", where, c);
+        count = c;
+      } else if (count < 0 && c > 0) {
+        fail("{}: element '{}' before the vertex element is not supported", where, name);
+      }
+    } else if (kw == "property") {
+      if (!in_vertex) continue;  // properties of ignored elements after vertex
+      std::string type, name;
+      ls >> type >> name;
+      if (type == "list") fail("{}: header line {}: list property in the vertex element is not supported", where, lineno);
+      if (ls.fail() || name.empty()) fail("{}: header line {}: malformed property line '{}'", where, lineno, line);
+      int t = -1;
+      for (int i = 0; i < 8; ++i)
+        if (type == kTypes[i].names[0] || type == kTypes[i].names[1]) t = i;
+      if (t < 0) fail("{}: header line {}: unknown property type '{}'", where, lineno, type);
+      for (auto& p : props)
+        if (p.name == name) fail("{}: property '{}' appears twice", where, name);
+      props.push_back({name, t, row});
+      row += kTypes[t].size;
+    } else {
+      fail("{}: header line {}: unexpected '{}'", where, lineno, line);
+    }
+  }
+  (void)vertex_done;
+  if (!seen_format) fail("{}: PLY header has no format line", where);
+  if (count < 0) fail("{}: PLY has no vertex element", where);
+  const size_t body = bytes.size() - pos;
+  if (body < size_t(count) * row)
+    fail("{}: truncated body: {} vertices of {} bytes need {} bytes, file has {}", where, count, row, size_t(count) * row, body);
+
+  // Map properties to model slots.
+  std::map<std::string, const Prop*> by_name;
+  for (auto& p : props) by_name[p.name] = &p;
+  auto need = [&](const std::string& nm) {
+    auto it = by_name.find(nm);
+    if (it == by_name.end()) fail("{}: missing property '{}'", where, nm);
+    return it->second;
+  };
+  const char* required[] = {"x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
+                            "rot_0", "rot_1", "rot_2", "rot_3"};
+  for (auto r : required) need(r);
+  int n_rest = 0;
+  std::map<std::string, std::map<int, const Prop*>> groups;  // f_<name>_<i>
+  std::vector<std::string> group_order;
+  for (auto& p : props) {
+    int idx;
+    if ((idx = suffix_index(p.name, "f_rest_")) >= 0) { n_rest = std::max(n_rest, idx + 1); continue; }
+    bool standard = false;
+    for (auto r : required) standard |= p.name == r;
+    if (standard || p.name == "nx" || p.name == "ny" || p.name == "nz") continue;
+    std::string gname = p.name;
+    idx = 0;
+    if (p.name.rfind("f_", 0) == 0) {
+      size_t us = p.name.rfind('_');
+      idx = us > 2 ? suffix_index(p.name, p.name.substr(0, us + 1)) : -1;
+      if (idx < 0) fail("{}: property '{}' does not follow the f_<group>_<index> pattern", where, p.name);
+      gname = p.name.substr(2, us - 2);
+      if (gname == "dc" || gname == "rest") fail("{}: unexpected property '{}'", where, p.name);
+    }
+    if (!groups.count(gname)) group_order.push_back(gname);
+    auto& g = groups[gname];
+    if (g.count(idx)) fail("{}: extra channel '{}' is given twice", where, p.name);
+    g[idx] = &p;
+  }
+  int degree = -1;
+  for (int d = 0; d <= 3; ++d)
+    if (n_rest == 3 * ((d + 1) * (d + 1) - 1)) degree = d;
+  if (degree < 0) fail("{}: {} f_rest properties; expected 0, 9, 24 or 45 (SH degree 0..3)", where, n_rest);
+  for (int i = 0; i < n_rest; ++i) need(fmt::format("f_rest_{}", i));
+
+  GaussianModel m;
+  m.sh_degree = degree;
+  m.resize(int(count));
+  struct Slot {
+    const Prop* p;
+    float* dst;
+    size_t stride;
+  };
+  std::vector<Slot> slots;
+  const int S = m.sh_stride();
+  for (int c = 0; c < 3; ++c) slots.push_back({need(std::string(1, "xyz"[c])), m.mean.data() + c, 3});
+  for (int c = 0; c < 3; ++c) slots.push_back({need(fmt::format("f_dc_{}", c)), m.sh.data() + c, size_t(S) * 3});
+  for (int c = 0; c < 3; ++c)
+    for (int j = 1; j < S; ++j)
+      slots.push_back({need(fmt::format("f_rest_{}", c * (S - 1) + j - 1)), m.sh.data() + j * 3 + c, size_t(S) * 3});
+  slots.push_back({need("opacity"), m.opacity_logit.data(), 1});
+  for (int c = 0; c < 3; ++c) slots.push_back({need(fmt::format("scale_{}", c)), m.log_scale.data() + c, 3});
+  for (int c = 0; c < 4; ++c) slots.push_back({need(fmt::format("rot_{}", c)), m.quat.data() + c, 4});
+  for (auto& gname : group_order) {
+    auto& g = groups[gname];
+    int dim = int(g.size());
+    for (int i = 0; i < dim; ++i)
+      if (!g.count(i)) fail("{}: extra channel group '{}' has {} channels but no index {}", where, gname, dim, i);
+    m.add_extra(gname, dim);
+    for (int i = 0; i < dim; ++i) slots.push_back({g[i], nullptr, size_t(dim)});
+  }
+  // Resolve extra destinations now that `extras` no longer reallocates.
+  {
+    size_t s = slots.size();
+    for (int gi = int(m.extras.size()) - 1; gi >= 0; --gi) {
+      auto& e = m.extras[gi];
+      s -= e.dim;
+      for (int i = 0; i < e.dim; ++i) slots[s + i].dst = e.data.data() + i;
+    }
+  }
+  const uint8_t* base = bytes.data() + pos;
+  bool nonfinite = false;
+#pragma omp parallel for reduction(|| : nonfinite)
+  for (long i = 0; i < count; ++i) {
+    const uint8_t* r = base + size_t(i) * row;
+    for (auto& s : slots) {
+      float v = decode(r + s.p->offset, s.p->type);
+      nonfinite = nonfinite || !std::isfinite(v);
+      s.dst[size_t(i) * s.stride] = v;
+    }
+  }
+  if (nonfinite) fail("{}: the body holds NaN or infinite values", where);
+  return m;
+}
+
+}  // namespace hgs
