@@ -35,72 +35,105 @@ struct Camera {
   float near_plane = 0.01f;  // Gaussians with camera-space depth below this are culled
 };
 
-// Read-only views of the Gaussian parameters (plain arrays, not owned).
-struct GaussianInputs {
+// Read-only views of the Gaussian parameters (plain arrays, not owned). T = float in production; the pipeline is
+// also instantiated for double so tests can check gradients exactly.
+template <class T>
+struct GaussianInputsT {
   int n = 0;
-  const float* mean = nullptr;           // [N, 3]
-  const float* log_scale = nullptr;      // [N, 3]
-  const float* quat = nullptr;           // [N, 4] (w, x, y, z)
-  const float* opacity_logit = nullptr;  // [N]
-  const float* sh = nullptr;             // [N, sh_stride, 3]; may be null when `colors` is given
+  const T* mean = nullptr;           // [N, 3]
+  const T* log_scale = nullptr;      // [N, 3]
+  const T* quat = nullptr;           // [N, 4] (w, x, y, z)
+  const T* opacity_logit = nullptr;  // [N]
+  const T* sh = nullptr;             // [N, sh_stride, 3]; may be null when `colors` is given
   int sh_stride = 1;
-  int sh_degree = 0;                     // active degree, 0..3
-  const float* colors = nullptr;         // [N, 3] optional precomputed colours (replace SH)
-  const float* extra = nullptr;          // [N, num_extra] optional
+  int sh_degree = 0;                 // active degree, 0..3
+  const T* colors = nullptr;         // [N, 3] optional precomputed colours (replace SH)
+  const T* extra = nullptr;          // [N, num_extra] optional
   int num_extra = 0;
 };
+using GaussianInputs = GaussianInputsT<float>;
 
 struct RenderSettings {
   float background[3] = {0, 0, 0};
   bool want_depth = true;
 };
 
-struct RenderOutputs {
-  std::vector<float> rgb;    // [H, W, 3]
-  std::vector<float> alpha;  // [H, W]
-  std::vector<float> depth;  // [H, W] (empty when !want_depth)
-  std::vector<float> extra;  // [H, W, C] (empty when C = 0)
-  int num_visible = 0;       // Gaussians that passed culling
+template <class T>
+struct RenderOutputsT {
+  std::vector<T> rgb;    // [H, W, 3]
+  std::vector<T> alpha;  // [H, W]
+  std::vector<T> depth;  // [H, W] (empty when !want_depth)
+  std::vector<T> extra;  // [H, W, C] (empty when C = 0)
+  int num_visible = 0;   // Gaussians that passed culling
 };
+using RenderOutputs = RenderOutputsT<float>;
 
 // Upstream gradients of a scalar loss with respect to the outputs. Null pointers mean zero.
-struct OutputGrads {
-  const float* rgb = nullptr;    // [H, W, 3]
-  const float* alpha = nullptr;  // [H, W]
-  const float* depth = nullptr;  // [H, W]
-  const float* extra = nullptr;  // [H, W, C]
+template <class T>
+struct OutputGradsT {
+  const T* rgb = nullptr;    // [H, W, 3]
+  const T* alpha = nullptr;  // [H, W]
+  const T* depth = nullptr;  // [H, W]
+  const T* extra = nullptr;  // [H, W, C]
 };
+using OutputGrads = OutputGradsT<float>;
 
 // Gradients with respect to the inputs. Buffers are resized and overwritten (not accumulated) by backward().
-struct GaussianGrads {
-  std::vector<float> mean;           // [N, 3]
-  std::vector<float> log_scale;      // [N, 3]
-  std::vector<float> quat;           // [N, 4]
-  std::vector<float> opacity_logit;  // [N]
-  std::vector<float> sh;             // [N, sh_stride, 3] (zero beyond the active degree; empty if colours given)
-  std::vector<float> colors;         // [N, 3] when precomputed colours were given
-  std::vector<float> extra;          // [N, C]
-  std::vector<float> mean2d;         // [N, 2] dL/d(projected centre) in pixels (densification statistic)
+template <class T>
+struct GaussianGradsT {
+  std::vector<T> mean;           // [N, 3]
+  std::vector<T> log_scale;      // [N, 3]
+  std::vector<T> quat;           // [N, 4]
+  std::vector<T> opacity_logit;  // [N]
+  std::vector<T> sh;             // [N, sh_stride, 3] (zero beyond the active degree; empty if colours given)
+  std::vector<T> colors;         // [N, 3] when precomputed colours were given
+  std::vector<T> extra;          // [N, C]
+  std::vector<T> mean2d;         // [N, 2] dL/d(projected centre) in pixels (densification statistic)
+};
+using GaussianGrads = GaussianGradsT<float>;
+
+// What the last forward() computed per Gaussian (views into the renderer's buffers, valid until the next call).
+template <class T>
+struct ProjectedView {
+  int n = 0;
+  const T* mean2d = nullptr;   // [N, 2] projected centre, pixels
+  const T* conic = nullptr;    // [N, 3] inverse 2D covariance (a, b, c)
+  const T* depth = nullptr;    // [N] camera-space depth
+  const T* opacity = nullptr;  // [N] sigmoid(opacity_logit)
+  const T* colors = nullptr;   // [N, 3] colours composited (SH result or the given colours)
+  const int* radii = nullptr;  // [N] 0 = culled
 };
 
-class GaussianRenderer {
+// The whole pipeline for scalar T (float and double are instantiated in renderer.cpp).
+template <class T>
+class RendererT {
  public:
-  GaussianRenderer();
-  ~GaussianRenderer();
-  GaussianRenderer(const GaussianRenderer&) = delete;
-  GaussianRenderer& operator=(const GaussianRenderer&) = delete;
+  RendererT();
+  ~RendererT();
+  RendererT(const RendererT&) = delete;
+  RendererT& operator=(const RendererT&) = delete;
 
   // Renders one view and keeps what backward() needs. The input arrays must stay alive until backward().
-  void forward(const Camera& cam, const GaussianInputs& g, const RenderSettings& s, RenderOutputs& out);
+  void forward(const Camera& cam, const GaussianInputsT<T>& g, const RenderSettings& s, RenderOutputsT<T>& out);
   // Exact gradients of the last forward() for the given output gradients.
-  void backward(const OutputGrads& dout, GaussianGrads& grads);
+  void backward(const OutputGradsT<T>& dout, GaussianGradsT<T>& grads);
 
   // Per-Gaussian visibility of the last forward: radius in pixels (0 = culled). [N]
   const std::vector<int>& radii() const;
+  // Per-Gaussian intermediate results of the last forward.
+  ProjectedView<T> projected() const;
 
  private:
   struct State;
   State* st_;
+};
+
+extern template class RendererT<float>;
+extern template class RendererT<double>;
+
+class GaussianRenderer : public RendererT<float> {
+ public:
+  using RendererT<float>::RendererT;
 };
 
 }  // namespace hgs::render

@@ -1,0 +1,98 @@
+// Per-pixel front-to-back alpha compositing over 16x16 tiles (3DGS semantics), forward and exact backward.
+//
+// Pixel p (centre (x + 0.5, y + 0.5)) walks its tile's list in (depth, index) order:
+//   d = mean2d - p, alpha = min(0.99, opacity * exp(-0.5 d^T conic d)); skip when alpha < 1/255;
+//   stop (without accumulating) when T * (1 - alpha) < 1e-4; otherwise w = alpha T, accumulate w * (colour,
+//   depth, extra) and T *= 1 - alpha. rgb = sum + T_final * background, alpha = 1 - T_final.
+// Layout for speed: each tile's Gaussians are loaded once into structure-of-arrays scratch; the tile is cut into
+// 32 batches of 8 pixels (half a row); per batch a list of the tile's Gaussians whose opacity box (binning.h)
+// touches it is built, so the inner loop runs 8 lanes (one AVX2 register for float) over exactly those.
+// Backward walks each batch list back to front from the per-pixel last contributor, rebuilds T_i = T_{i+1} /
+// (1 - alpha_i) from the saved final T, and keeps one scalar per pixel, S = sum_{j>i} w_j <value_j, dL/dout>,
+// so dL/dalpha_i = T_i <value_i, g> - (S + T_final (<bg, g_rgb> - g_alpha)) / (1 - alpha_i) for any number of
+// channels. Gradients of a (tile, Gaussian) pair are summed in vector registers per Gaussian over the tile and
+// stored in that pair's slot; slots are reduced per Gaussian in a fixed order, so the result is bitwise
+// deterministic for any thread count and any schedule. Parallel over tiles with OpenMP (dynamic schedule).
+// Everything is templated on the scalar (float in production, double in the tests).
+#pragma once
+#include <cstdint>
+#include <vector>
+
+#include "render/binning.h"
+#include "render/simd.h"
+
+namespace hgs::render {
+
+template <class T>
+struct RasterInputs {
+  int width = 0, height = 0, n = 0;
+  const T* mean2d = nullptr;   // [N, 2] pixels
+  const T* conic = nullptr;    // [N, 3] (a, b, c) of [[a, b], [b, c]]
+  const T* opacity = nullptr;  // [N] in (0, 1)
+  const T* color = nullptr;    // [N, 3]
+  const T* depth = nullptr;    // [N] camera-space depth; null = no depth channel
+  const T* extra = nullptr;    // [N, C]; null when num_extra = 0
+  int num_extra = 0;
+  T background[3] = {0, 0, 0};
+};
+
+template <class T>
+struct RasterOutputs {
+  T* rgb = nullptr;         // [H, W, 3]
+  T* alpha = nullptr;       // [H, W]
+  T* depth = nullptr;       // [H, W] (needed when inputs.depth != null)
+  T* extra = nullptr;       // [H, W, C]
+  T* final_T = nullptr;     // [H, W] saved for backward
+  int32_t* last = nullptr;  // [H, W] saved for backward: batch-list entries up to the last accumulated one
+};
+
+// Upstream gradients (null = zero) and per-Gaussian results (overwritten).
+template <class T>
+struct RasterGrads {
+  const T* d_rgb = nullptr;    // [H, W, 3]
+  const T* d_alpha = nullptr;  // [H, W]
+  const T* d_depth = nullptr;  // [H, W]
+  const T* d_extra = nullptr;  // [H, W, C]
+  T* mean2d = nullptr;         // [N, 2] out
+  T* conic = nullptr;          // [N, 3] out (b counted once)
+  T* opacity = nullptr;        // [N] out (w.r.t. opacity after the sigmoid)
+  T* color = nullptr;          // [N, 3] out
+  T* depth = nullptr;          // [N] out (may be null)
+  T* extra = nullptr;          // [N, C] out (may be null)
+};
+
+// Scratch reused between calls (grown, never shrunk): per-thread tile buffers and per-pair gradients.
+template <class T>
+struct RasterWorkspace {
+  struct PerThread {
+    std::vector<T> soa;                     // per-tile structure of arrays
+    std::vector<int> ibuf;                  // per-tile ints (opacity boxes)
+    std::vector<int> lists;                 // [32, n] batch lists
+    std::vector<simd::Pack<T>> acc;         // backward accumulators [n, F]
+    std::vector<simd::Pack<T>> chan;        // per-batch extra-channel packs [2, C]
+  };
+  std::vector<PerThread> threads;
+  std::vector<T> pair_grad;  // [P, F]
+};
+
+template <class T>
+void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws,
+                       const RasterOutputs<T>& out);
+
+template <class T>
+void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws,
+                        const T* final_T,      // [H, W] from forward
+                        const int32_t* last,   // [H, W] from forward
+                        const RasterGrads<T>& g);
+
+extern template void rasterize_forward<float>(const RasterInputs<float>&, const Binning&, RasterWorkspace<float>&,
+                                              const RasterOutputs<float>&);
+extern template void rasterize_forward<double>(const RasterInputs<double>&, const Binning&,
+                                               RasterWorkspace<double>&, const RasterOutputs<double>&);
+extern template void rasterize_backward<float>(const RasterInputs<float>&, const Binning&, RasterWorkspace<float>&,
+                                               const float*, const int32_t*, const RasterGrads<float>&);
+extern template void rasterize_backward<double>(const RasterInputs<double>&, const Binning&,
+                                                RasterWorkspace<double>&, const double*, const int32_t*,
+                                                const RasterGrads<double>&);
+
+}  // namespace hgs::render

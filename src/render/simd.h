@@ -1,0 +1,105 @@
+// Tiny SIMD layer for the rasterizer: fixed 8-lane packs built on GCC vector extensions, so the same template
+// code runs as float x 8 (one AVX2 register; the production path) and double x 8 (the exact test path).
+// Masks are integer vectors of the same lane size (-1 = true), `m ? a : b` selects lane-wise.
+// vexp(float pack) is a Cephes-style polynomial exp (about 1 ulp on the rasterizer's range, x <= 0);
+// vexp(double pack) calls std::exp per lane so double instantiations are exact references.
+#pragma once
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
+
+// Passing 64-byte double packs by value only changes the ABI of non-inlined helpers; silence GCC's note.
+#pragma GCC diagnostic ignored "-Wpsabi"
+
+namespace hgs::render::simd {
+
+constexpr int kLanes = 8;  // pixels per batch (half a 16-pixel tile row)
+
+template <class T> struct PackTraits;
+template <> struct PackTraits<float> {
+  typedef float P __attribute__((vector_size(32)));
+  typedef int32_t M __attribute__((vector_size(32)));
+};
+template <> struct PackTraits<double> {
+  typedef double P __attribute__((vector_size(64)));
+  typedef int64_t M __attribute__((vector_size(64)));
+};
+template <class T> using Pack = typename PackTraits<T>::P;
+template <class T> using Mask = typename PackTraits<T>::M;
+
+template <class T> inline __attribute__((always_inline)) Pack<T> splat(T v) { return Pack<T>{} + v; }
+
+template <class T> inline __attribute__((always_inline)) Pack<T> iota_pack() {
+  Pack<T> p;
+  for (int l = 0; l < kLanes; ++l) p[l] = T(l);
+  return p;
+}
+
+template <class T> inline __attribute__((always_inline)) Pack<T> vmin(Pack<T> a, Pack<T> b) { return a < b ? a : b; }
+
+// True when any lane of the mask is set.
+inline __attribute__((always_inline)) bool any(Mask<float> m) {
+#if defined(__AVX2__)
+  __m256i v;
+  std::memcpy(&v, &m, sizeof(v));
+  return !_mm256_testz_si256(v, v);
+#else
+  int32_t r = 0;
+  for (int l = 0; l < kLanes; ++l) r |= m[l];
+  return r != 0;
+#endif
+}
+inline __attribute__((always_inline)) bool any(Mask<double> m) {
+  int64_t r = 0;
+  for (int l = 0; l < kLanes; ++l) r |= m[l];
+  return r != 0;
+}
+
+// Lane sum in a fixed order (deterministic).
+template <class T> inline __attribute__((always_inline)) T hsum(Pack<T> p) {
+  T a = (p[0] + p[4]) + (p[2] + p[6]);
+  T b = (p[1] + p[5]) + (p[3] + p[7]);
+  return a + b;
+}
+
+// exp for x <= ~88: range-reduced polynomial (Cephes expf coefficients); x < -87 flushes to ~0.
+inline __attribute__((always_inline)) Pack<float> vexp(Pack<float> x) {
+  typedef Pack<float> P;
+  typedef Mask<float> M;
+  x = x < -87.0f ? splat(-87.0f) : x;
+  x = x > 88.0f ? splat(88.0f) : x;
+  P fx = x * 1.44269504088896341f;
+  // round to nearest via the 1.5 * 2^23 trick (|fx| < 2^22 here)
+  const float magic = 12582912.0f;
+  P n = (fx + magic) - magic;
+  P r = x - n * 0.693359375f;
+  r = r - n * -2.12194440e-4f;
+  P r2 = r * r;
+  P p = splat(1.9875691500e-4f);
+  p = p * r + 1.3981999507e-3f;
+  p = p * r + 8.3334519073e-3f;
+  p = p * r + 4.1665795894e-2f;
+  p = p * r + 1.6666665459e-1f;
+  p = p * r + 5.0000001201e-1f;
+  p = p * r2 + r + 1.0f;
+  M e = __builtin_convertvector(n, M);
+  e = (e + 127) << 23;
+  P scale;
+  std::memcpy(&scale, &e, sizeof(scale));
+  return p * scale;
+}
+inline __attribute__((always_inline)) Pack<double> vexp(Pack<double> x) {
+  Pack<double> r;
+  for (int l = 0; l < kLanes; ++l) r[l] = std::exp(x[l]);
+  return r;
+}
+
+// Scalar exp matching the pack version lane-for-lane (used by scalar code paths that must agree bitwise).
+inline float exp_like_pack(float x) { return vexp(splat(x))[0]; }
+inline double exp_like_pack(double x) { return std::exp(x); }
+
+}  // namespace hgs::render::simd
+
