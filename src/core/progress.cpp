@@ -57,9 +57,12 @@ void Progress::update(long done, const std::string& status) {
 
 void Progress::finish(const std::string& status) {
   if (!enabled_ || finished_) return;
-  last_printed_done_ = -1;
-  last_print_ = std::chrono::steady_clock::time_point{};
-  update(total_, status);
+  // Print the final state unless that exact line is already on screen (non-TTY logs).
+  if (tty_ || last_printed_done_ != total_ || !status.empty()) {
+    last_printed_done_ = -1;
+    last_print_ = std::chrono::steady_clock::time_point{};
+    update(total_, status);
+  }
   if (tty_) std::fputc('\n', stderr);
   finished_ = true;
 }

@@ -1,0 +1,262 @@
+// Orchestrates `hgs synth`: builds the world, renders every view, simulates masks and features, samples
+// SfM-like points with visibility tracks, writes the COLMAP model, labels for the held-out views (LERF-OVS
+// JSON polygons and 3D-OVS PNGs) and a synth.json record. Everything is written into a temporary folder
+// beside the output and renamed at the end, so a failure leaves nothing behind.
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <random>
+
+#include "core/error.h"
+#include "core/fs.h"
+#include "core/npy.h"
+#include "core/progress.h"
+#include "scene/colmap.h"
+#include "synth/synth.h"
+
+namespace hgs::synth {
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+namespace {
+
+uint64_t mix(uint64_t seed, uint64_t a, uint64_t b = 0) {
+  uint64_t x = seed * 0x9E3779B97F4A7C15ULL + a * 0xD1B54A32D192ED03ULL + b;
+  return splitmix64(x);
+}
+
+std::vector<float> noisy(const std::vector<float>& base, double rel, Rng& rng) {
+  std::vector<float> v(base);
+  double s = 0;
+  const double k = rel / std::sqrt(double(v.size()));
+  for (auto& x : v) { x += static_cast<float>(k * rng.normal()); s += double(x) * x; }
+  for (auto& x : v) x = static_cast<float>(x / std::sqrt(s));
+  return v;
+}
+
+json float_array(const std::vector<float>& v) {
+  json a = json::array();
+  for (float x : v) a.push_back(std::round(double(x) * 1e6) / 1e6);
+  return a;
+}
+
+void validate(const SynthOptions& o) {
+  if (o.views < 2 || o.views > 10000) fail("--views: must be between 2 and 10000, got {}", o.views);
+  if (o.width < 16 || o.height < 16 || o.width > 8192 || o.height > 8192)
+    fail("--width/--height: must be between 16 and 8192, got {}x{}", o.width, o.height);
+  if (o.points < 0 || o.points > 10000000) fail("--points: must be between 0 and 10000000, got {}", o.points);
+  if (o.feature_dim < 1 || o.feature_dim > 4096) fail("--feature-dim: must be between 1 and 4096, got {}", o.feature_dim);
+  noise_level(o.noise);
+}
+
+}  // namespace
+
+void generate(const fs::path& out, const SynthOptions& opt) {
+  validate(opt);
+  if (fs::exists(out) && (!fs::is_directory(out) || !fs::is_empty(out)))
+    fail("{}: output folder exists and is not empty (choose a new folder)", out.string());
+  const NoiseLevel nl = noise_level(opt.noise);
+  World world = make_world(opt.preset, opt.objects, opt.seed);
+  const int K = opt.objects;
+
+  // Concepts: index 0 is the sky / empty background, then every distinct surface concept.
+  std::vector<std::string> concept_names = {"sky"};
+  for (auto& p : world.prims)
+    if (std::find(concept_names.begin(), concept_names.end(), p.concept_name) == concept_names.end()) concept_names.push_back(p.concept_name);
+  std::vector<std::vector<float>> concepts;
+  for (auto& c : concept_names) concepts.push_back(concept_vector(c, opt.feature_dim));
+  const std::string context_phrase = opt.preset == "room" ? "a photo of a room" : "a photo of a tabletop";
+  std::vector<float> context = concept_vector(context_phrase, opt.feature_dim);
+
+  const Intrinsics K_ = make_intrinsics(opt.width, opt.height);
+  auto poses = make_poses(world, opt.views, opt.seed);
+
+  fs::path parent = fs::absolute(out).parent_path();
+  ensure_dir(parent);
+  fs::path tmp = parent / (out.filename().string() + fmt::format(".tmp{:x}", mix(opt.seed, std::random_device{}()) & 0xffffff));
+  try {
+    ensure_dir(tmp);
+    std::vector<RenderedView> views(opt.views);
+    {
+      Progress bar("synth: render", opt.views, opt.progress);
+      for (int i = 0; i < opt.views; ++i) {
+        views[i] = render_view(world, K_, poses[i].first, poses[i].second, opt.supersample, concept_names);
+        views[i].name = fmt::format("frame_{:05d}.png", i + 1);
+        save_png(tmp / "images" / views[i].name, views[i].rgb);
+        save_label_png(tmp / "gt" / "instances" / views[i].name, views[i].instances);
+        bar.update(i + 1);
+      }
+      bar.finish();
+    }
+    // Simulated SAM2 masks and confidences.
+    {
+      Progress bar("synth: masks+features", opt.views, opt.progress);
+      for (int i = 0; i < opt.views; ++i) {
+        const std::string stem = views[i].name.substr(0, views[i].name.size() - 4);
+        LabelMap mask;
+        std::vector<float> conf;
+        simulate_masks(views[i].instances, nl, K, mix(opt.seed, 1, i), mask, conf);
+        save_label_png(tmp / "masks" / (stem + ".png"), mask);
+        if (!conf.empty())
+          write_npy(tmp / "masks" / (stem + ".conf.npy"), make_npy_f16({size_t(opt.height), size_t(opt.width)}, conf.data()));
+        int gh, gw;
+        auto feat = simulate_features(views[i], concepts, context, nl.feature, opt.feature_dim, mix(opt.seed, 2, i), gh, gw);
+        write_npy(tmp / "features" / (stem + ".npy"), make_npy_f16({size_t(gh), size_t(gw), size_t(opt.feature_dim)}, feat.data()));
+        bar.update(i + 1);
+      }
+      bar.finish();
+    }
+    {
+      json names = json::object();
+      for (auto& o : world.objects) names[std::to_string(o.id)] = o.name;
+      atomic_write_text(tmp / "masks" / "objects.json", names.dump(2) + "\n");
+    }
+    // Text embeddings: class names (concept + small noise), synonyms (more noise), background surfaces,
+    // distractors (pool names not in the scene, plus a few unrelated phrases) and LERF's canonical phrases.
+    {
+      Rng rng(mix(opt.seed, 3));
+      json te = json::object();
+      for (auto& o : world.objects) te[o.name] = float_array(noisy(concept_vector(o.name, opt.feature_dim), 0.15, rng));
+      for (auto& [syn, name] : world.synonyms) te[syn] = float_array(noisy(concept_vector(name, opt.feature_dim), 0.45, rng));
+      for (size_t c = 1; c < concept_names.size(); ++c)
+        if (!te.contains(concept_names[c])) te[concept_names[c]] = float_array(noisy(concepts[c], 0.15, rng));
+      std::vector<std::string> distract = world.unused_names;
+      for (const char* d : {"violin", "sports car", "umbrella", "laptop computer"}) distract.push_back(d);
+      for (auto& d : distract) te[d] = float_array(noisy(concept_vector(d, opt.feature_dim), 0.15, rng));
+      for (const char* c : {"object", "things", "stuff", "texture"}) {
+        auto own = concept_vector(c, opt.feature_dim);
+        std::vector<float> v(opt.feature_dim);
+        for (int d = 0; d < opt.feature_dim; ++d) v[d] = context[d] + 0.6f * own[d];
+        te[c] = float_array(noisy(v, 0.0, rng));
+      }
+      atomic_write_text(tmp / "text_embeddings.json", te.dump() + "\n");
+    }
+    // SfM-like points: random visible surface samples with position noise; the track is every view whose
+    // depth map agrees with the point's depth there (so occluded views are not in it).
+    ColmapModel model;
+    model.cameras[1] = ColmapCamera{1, "PINHOLE", uint64_t(opt.width), uint64_t(opt.height), {K_.fx, K_.fy, K_.cx, K_.cy}};
+    for (int i = 0; i < opt.views; ++i) {
+      ColmapImage im;
+      im.id = i + 1;
+      im.qvec = rotmat_to_qvec(views[i].R);
+      im.tvec = views[i].t;
+      im.camera_id = 1;
+      im.name = views[i].name;
+      model.images.push_back(im);
+    }
+    {
+      Rng rng(mix(opt.seed, 4));
+      const double sigma = (opt.preset == "room" ? 0.004 : 0.0015) * (nl.feature > 0 ? 1.0 : 0.5);
+      const int W = opt.width, H = opt.height;
+      long attempts = 0;
+      while (static_cast<int>(model.points.size()) < opt.points && attempts < 20L * opt.points + 1000) {
+        ++attempts;
+        int v = rng.integer(0, opt.views - 1), x = rng.integer(0, W - 1), y = rng.integer(0, H - 1);
+        const RenderedView& rv = views[v];
+        float z = rv.depth[size_t(y) * W + x];
+        if (z <= 0) continue;
+        Vec3 pc((x + 0.5 - K_.cx) / K_.fx * z, (y + 0.5 - K_.cy) / K_.fy * z, z);
+        Vec3 X = rv.R.transpose() * (pc - rv.t);
+        X += sigma * Vec3(rng.normal(), rng.normal(), rng.normal());
+        ColmapPoint p;
+        p.id = model.points.size() + 1;
+        p.xyz = X;
+        for (int c = 0; c < 3; ++c) p.rgb[c] = static_cast<uint8_t>(std::lround(rv.rgb.px[(size_t(y) * W + x) * 3 + c] * 255));
+        p.error = rng.uniform(0.3, 1.2);
+        std::vector<std::pair<int, Eigen::Vector2d>> obs;
+        for (int u = 0; u < opt.views; ++u) {
+          Vec3 q = views[u].R * X + views[u].t;
+          if (q.z() <= 1e-6) continue;
+          double px = K_.fx * q.x() / q.z() + K_.cx, py = K_.fy * q.y() / q.z() + K_.cy;
+          if (px < 0 || py < 0 || px >= W || py >= H) continue;
+          float dz = views[u].depth[size_t(py) * W + size_t(px)];
+          if (dz <= 0 || std::abs(q.z() - dz) > 0.01 * dz + 4 * sigma) continue;
+          obs.emplace_back(u, Eigen::Vector2d(px, py));
+        }
+        if (obs.size() < 2) continue;
+        for (auto& [u, xy] : obs) {
+          ColmapImage& im = model.images[u];
+          p.track.emplace_back(im.id, static_cast<int32_t>(im.xys.size()));
+          im.xys.push_back(xy);
+          im.point3d_ids.push_back(static_cast<int64_t>(p.id));
+        }
+        model.points.push_back(std::move(p));
+      }
+      if (static_cast<int>(model.points.size()) < opt.points)
+        fail("synth: could only place {} of {} points seen by two views (too few views?)", model.points.size(), opt.points);
+    }
+    write_colmap_bin(tmp / "sparse" / "0", model);
+
+    // Labels for the held-out views (every 8th view, the LLFF split hgs uses without test.txt).
+    {
+      std::vector<std::string> classes;
+      for (auto& o : world.objects) classes.push_back(o.name);
+      std::vector<std::string> seg_classes = classes;
+      std::sort(seg_classes.begin(), seg_classes.end());
+      std::string ctext;
+      for (auto& c : seg_classes) ctext += c + "\n";
+      atomic_write_text(tmp / "segmentations" / "classes.txt", ctext);
+      for (int i = 0; i < opt.views; i += 8) {
+        const RenderedView& rv = views[i];
+        const std::string stem = rv.name.substr(0, rv.name.size() - 4);
+        json objs = json::array();
+        for (auto& o : world.objects) {
+          std::vector<uint8_t> inside(rv.instances.v.size());
+          size_t cnt = 0;
+          for (size_t p = 0; p < inside.size(); ++p) cnt += inside[p] = rv.instances.v[p] == o.id;
+          Image seg(opt.width, opt.height, 1);
+          for (size_t p = 0; p < inside.size(); ++p) seg.px[p] = inside[p] ? 1.f : 0.f;
+          save_png(tmp / "segmentations" / std::to_string(i) / (o.name + ".png"), seg);
+          if (!cnt) continue;
+          for (auto& poly : trace_polygons(inside, opt.width, opt.height)) {
+            int x1 = opt.width, y1 = opt.height, x2 = 0, y2 = 0;
+            json pts = json::array();
+            for (auto [x, y] : poly) {
+              x1 = std::min(x1, x); y1 = std::min(y1, y); x2 = std::max(x2, x); y2 = std::max(y2, y);
+              pts.push_back({x, y});
+            }
+            objs.push_back({{"category", o.name}, {"bbox", {x1, y1, x2, y2}}, {"segmentation", pts}});
+          }
+        }
+        json label = {{"info", {{"name", rv.name}, {"width", opt.width}, {"height", opt.height}}}, {"objects", objs}};
+        atomic_write_text(tmp / "label" / (stem + ".json"), label.dump() + "\n");
+      }
+    }
+    // Record of what was generated.
+    {
+      json objs = json::array();
+      for (auto& o : world.objects)
+        objs.push_back({{"id", o.id}, {"name", o.name}, {"shape", o.shape}, {"position", {o.position.x(), o.position.y(), o.position.z()}}});
+      json syn = json::object();
+      for (auto& [s, n] : world.synonyms) syn[s] = n;
+      json meta = {{"generator", "hgs synth " HGS_VERSION},
+                   {"preset", opt.preset},
+                   {"seed", opt.seed},
+                   {"views", opt.views},
+                   {"width", opt.width},
+                   {"height", opt.height},
+                   {"points", opt.points},
+                   {"noise", opt.noise},
+                   {"noise_params", {{"miss", nl.miss}, {"jitter_px", nl.jitter}, {"merge", nl.merge}, {"swap", nl.swap},
+                                     {"confidence_noise", nl.conf_noise}, {"feature_noise", nl.feature}}},
+                   {"feature_dim", opt.feature_dim},
+                   {"feature_patch", 16},
+                   {"objects", objs},
+                   {"synonyms", syn},
+                   {"distractors", world.unused_names},
+                   {"background_concepts", std::vector<std::string>(concept_names.begin() + 1, concept_names.end())}};
+      atomic_write_text(tmp / "synth.json", meta.dump(2) + "\n");
+    }
+    std::error_code ec;
+    if (fs::exists(out)) fs::remove(out, ec);  // an empty folder
+    fs::rename(tmp, out, ec);
+    if (ec) fail("{}: cannot move the generated scene into place ({})", out.string(), ec.message());
+  } catch (...) {
+    std::error_code ec;
+    fs::remove_all(tmp, ec);
+    throw;
+  }
+}
+
+}  // namespace hgs::synth

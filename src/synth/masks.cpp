@@ -1,0 +1,122 @@
+// Simulated SAM2 masks: starting from the exact instance map of a view, apply in order an id swap between
+// two objects (propagation failure), missed detections, boundary jitter (erosion or dilation of each
+// object by a random radius, square element, via a chessboard distance transform), and merges of touching
+// objects. Confidence is lower near label boundaries (ramp over 4 px) plus Gaussian noise.
+#include <algorithm>
+#include <cmath>
+#include <set>
+
+#include "core/error.h"
+#include "synth/synth.h"
+
+namespace hgs::synth {
+
+NoiseLevel noise_level(const std::string& name) {
+  if (name == "none") return {0, 0, 0, 0, 0, 0};
+  if (name == "low") return {0.02, 1, 0.05, 0.02, 0.04, 0.3};
+  if (name == "medium") return {0.05, 2, 0.10, 0.05, 0.07, 0.5};
+  if (name == "high") return {0.12, 4, 0.20, 0.12, 0.10, 0.8};
+  fail("--noise: unknown level '{}' (none, low, medium or high)", name);
+}
+
+namespace {
+
+// Chessboard (L-infinity) distance from every pixel to the nearest pixel with src != 0; two passes.
+std::vector<int> chessboard_distance(const std::vector<uint8_t>& src, int w, int h) {
+  const int inf = w + h;
+  std::vector<int> d(src.size());
+  for (size_t i = 0; i < src.size(); ++i) d[i] = src[i] ? 0 : inf;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      int& v = d[size_t(y) * w + x];
+      if (x > 0) v = std::min(v, d[size_t(y) * w + x - 1] + 1);
+      if (y > 0) {
+        for (int dx = -1; dx <= 1; ++dx)
+          if (x + dx >= 0 && x + dx < w) v = std::min(v, d[size_t(y - 1) * w + x + dx] + 1);
+      }
+    }
+  for (int y = h - 1; y >= 0; --y)
+    for (int x = w - 1; x >= 0; --x) {
+      int& v = d[size_t(y) * w + x];
+      if (x + 1 < w) v = std::min(v, d[size_t(y) * w + x + 1] + 1);
+      if (y + 1 < h) {
+        for (int dx = -1; dx <= 1; ++dx)
+          if (x + dx >= 0 && x + dx < w) v = std::min(v, d[size_t(y + 1) * w + x + dx] + 1);
+      }
+    }
+  return d;
+}
+
+}  // namespace
+
+void simulate_masks(const LabelMap& gt, const NoiseLevel& nl, int num_objects, uint64_t seed, LabelMap& mask,
+                    std::vector<float>& conf) {
+  const int w = gt.width, h = gt.height;
+  const size_t n = gt.v.size();
+  mask = gt;
+  Rng rng(seed);
+  std::vector<int> present;
+  {
+    std::vector<int> count(num_objects + 1, 0);
+    for (uint16_t l : gt.v) if (l && l <= num_objects) count[l]++;
+    for (int k = 1; k <= num_objects; ++k) if (count[k] > 0) present.push_back(k);
+  }
+  // 1. id swap (a propagation failure exchanges two identities in this view)
+  if (present.size() >= 2 && rng.chance(nl.swap)) {
+    int a = present[rng.integer(0, int(present.size()) - 1)], b;
+    do { b = present[rng.integer(0, int(present.size()) - 1)]; } while (b == a);
+    for (auto& l : mask.v) l = l == a ? b : l == b ? a : l;
+  }
+  // 2-3. missed detections and boundary jitter
+  for (int k : present) {
+    if (rng.chance(nl.miss)) {
+      for (auto& l : mask.v) if (l == k) l = 0;
+      continue;
+    }
+    if (nl.jitter <= 0) continue;
+    int r = rng.integer(0, nl.jitter);
+    bool erode = rng.chance(0.5);
+    if (r == 0) continue;
+    std::vector<uint8_t> src(n);
+    for (size_t i = 0; i < n; ++i) src[i] = erode ? (mask.v[i] != k) : (mask.v[i] == k);
+    std::vector<int> d = chessboard_distance(src, w, h);
+    for (size_t i = 0; i < n; ++i) {
+      if (erode && mask.v[i] == k && d[i] <= r) mask.v[i] = 0;
+      if (!erode && mask.v[i] == 0 && d[i] <= r) mask.v[i] = static_cast<uint16_t>(k);
+    }
+  }
+  // 4. merges of touching objects (4-neighbours with two different object labels)
+  if (nl.merge > 0) {
+    std::set<std::pair<int, int>> touching;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        int a = mask.at(x, y);
+        if (!a) continue;
+        if (x + 1 < w) { int b = mask.at(x + 1, y); if (b && b != a) touching.insert({std::min(a, b), std::max(a, b)}); }
+        if (y + 1 < h) { int b = mask.at(x, y + 1); if (b && b != a) touching.insert({std::min(a, b), std::max(a, b)}); }
+      }
+    for (auto [a, b] : touching) {
+      if (!rng.chance(nl.merge)) continue;
+      for (auto& l : mask.v) if (l == b) l = static_cast<uint16_t>(a);
+    }
+  }
+  // 5. confidence
+  conf.clear();
+  if (nl.conf_noise <= 0) return;
+  std::vector<uint8_t> edge(n, 0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      int l = mask.at(x, y);
+      if ((x + 1 < w && mask.at(x + 1, y) != l) || (y + 1 < h && mask.at(x, y + 1) != l) || (x > 0 && mask.at(x - 1, y) != l) ||
+          (y > 0 && mask.at(x, y - 1) != l))
+        edge[size_t(y) * w + x] = 1;
+    }
+  std::vector<int> d = chessboard_distance(edge, w, h);
+  conf.resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    double c = 0.45 + 0.55 * std::min(1.0, d[i] / 4.0) + nl.conf_noise * rng.normal();
+    conf[i] = static_cast<float>(std::clamp(c, 0.0, 1.0));
+  }
+}
+
+}  // namespace hgs::synth

@@ -1,0 +1,79 @@
+// `hgs synth`: synthetic benchmark scenes with exact ground truth and simulated 2D foundation-model outputs
+// (SAM2-like masks with controlled errors, CLIP-like patch features, text embeddings), written in the scene
+// format of docs/formats.md.
+#pragma once
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "core/image.h"
+#include "synth/world.h"
+
+namespace hgs::synth {
+
+struct SynthOptions {
+  std::string preset = "tabletop";
+  uint64_t seed = 1;
+  int views = 48;
+  int width = 320, height = 240;
+  int objects = 8;
+  int points = 30000;
+  std::string noise = "medium";  // none | low | medium | high
+  int feature_dim = 512;
+  int supersample = 2;  // per-axis samples per pixel for the RGB images
+  bool progress = true;
+};
+
+// Error rates of the simulated SAM2 masks and CLIP features for a noise level.
+struct NoiseLevel {
+  double miss = 0;        // probability an object is missed in a view
+  int jitter = 0;         // max boundary erosion/dilation radius (px)
+  double merge = 0;       // probability two touching objects are merged in a view
+  double swap = 0;        // probability of an id swap between two objects in a view
+  double conf_noise = 0;  // std of per-pixel confidence noise; 0 with `none` (no confidence files written)
+  double feature = 0;     // relative norm of the per-patch feature noise
+};
+NoiseLevel noise_level(const std::string& name);
+
+// One rendered view: RGB, ground-truth instance ids and camera-space depth at pixel centres.
+struct RenderedView {
+  std::string name;
+  Eigen::Matrix3d R;  // world -> camera
+  Eigen::Vector3d t;
+  Image rgb;          // [H, W, 3]
+  LabelMap instances; // [H, W]
+  std::vector<float> depth;  // [H, W], 0 where the ray hits nothing
+  std::vector<uint16_t> concept_id;  // [H, W] index into the generator's concept list of the surface seen
+};
+
+struct Intrinsics {
+  int width, height;
+  double fx, fy, cx, cy;
+};
+
+// Camera poses for the preset (orbit around the table, or inside the room).
+std::vector<std::pair<Eigen::Matrix3d, Eigen::Vector3d>> make_poses(const World& w, int n, uint64_t seed);
+Intrinsics make_intrinsics(int width, int height);
+RenderedView render_view(const World& w, const Intrinsics& K, const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
+                         int supersample, const std::vector<std::string>& concept_names);
+
+// Simulated SAM2 label map for one view and its per-pixel confidence (empty when noise is none).
+void simulate_masks(const LabelMap& gt, const NoiseLevel& nl, int num_objects, uint64_t seed, LabelMap& mask,
+                    std::vector<float>& confidence);
+
+// Unit "concept" vector of a phrase in R^D, fixed by the phrase alone (the same in every scene, like a real text encoder).
+std::vector<float> concept_vector(const std::string& phrase, int dim);
+// Simulated dense CLIP features on a 16-pixel patch grid: [ceil(H/16), ceil(W/16), D].
+std::vector<float> simulate_features(const RenderedView& v, const std::vector<std::vector<float>>& concepts,
+                                     const std::vector<float>& context, double noise, int dim, uint64_t seed,
+                                     int& grid_h, int& grid_w);
+
+// Outer boundary polygons (one per 8-connected part, vertices on pixel corners) of the pixels where
+// `inside` is true; filling them with an even-odd rule at pixel centres gives back each part without holes.
+std::vector<std::vector<std::pair<int, int>>> trace_polygons(const std::vector<uint8_t>& inside, int width, int height);
+
+// Generates the whole scene into `out` (created; must not exist or be empty).
+void generate(const std::filesystem::path& out, const SynthOptions& opt);
+
+}  // namespace hgs::synth
