@@ -1,0 +1,23 @@
+// Structural similarity as in 3DGS's loss_utils.ssim: 11x11 Gaussian window (sigma 1.5, normalised), 'same'
+// size output with zero padding, C1 = 0.01^2, C2 = 0.03^2, each channel separately, mean of the SSIM map
+// over all pixels and channels. Templated on the scalar type so tests can run the same code in double.
+#pragma once
+#include <vector>
+
+namespace hgs::train {
+
+template <typename T>
+struct SsimWorkspace {
+  std::vector<T> mx, my, exx, eyy, exy, tmp;  // [H, W, C] each; reused between calls (no allocation once warm)
+};
+
+// Mean SSIM of images x and y, both [H, W, C] (channel-interleaved). When `grad_x` is not null it receives
+// d(mean SSIM)/dx, [H, W, C] (overwritten). Uses OpenMP over rows; deterministic.
+template <typename T>
+T ssim(const T* x, const T* y, int H, int W, int C, T* grad_x, SsimWorkspace<T>& ws);
+
+// The normalised 1D window (11 taps) shared by the forward and the tests.
+template <typename T>
+const T* ssim_window();
+
+}  // namespace hgs::train

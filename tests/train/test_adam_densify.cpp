@@ -1,0 +1,174 @@
+// Adam against a hand computation of torch's update; densification clone/split/prune on hand-made
+// Gaussians, with Adam moments following their rows; opacity reset.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "train/adam.h"
+#include "train/densify.h"
+
+namespace hgs::train {
+namespace {
+
+TEST(Adam, MatchesHandComputation) {
+  Adam adam;
+  AdamParam& p = adam.add("x", 2, 1, 0.1f);
+  p.lr = {0.1f, 0.01f};  // per-column rates
+  std::vector<float> x = {1.f, -2.f};
+  // Step 1, g = (0.5, -3): m = 0.1 g, v = 0.001 g^2, mhat = g, vhat = g^2 -> x -= lr * sign(g) (eps tiny).
+  adam.begin_step();
+  std::vector<float> g = {0.5f, -3.f};
+  adam.update(p, x.data(), g.data(), 1);
+  EXPECT_NEAR(x[0], 1.f - 0.1f, 1e-6f);
+  EXPECT_NEAR(x[1], -2.f + 0.01f, 1e-6f);
+  // Step 2, g = (-1, 1), in double by hand.
+  adam.begin_step();
+  g = {-1.f, 1.f};
+  adam.update(p, x.data(), g.data(), 1);
+  double m0 = 0.9 * 0.05 + 0.1 * -1, v0 = 0.999 * 0.001 * 0.25 + 0.001 * 1;
+  double m1 = 0.9 * -0.3 + 0.1 * 1, v1 = 0.999 * 0.001 * 9 + 0.001 * 1;
+  double bc1 = 1 - 0.81, bc2 = 1 - 0.999 * 0.999;
+  double x0 = 0.9 - 0.1 / bc1 * m0 / (std::sqrt(v0) / std::sqrt(bc2) + 1e-15);
+  double x1 = -1.99 - 0.01 / bc1 * m1 / (std::sqrt(v1) / std::sqrt(bc2) + 1e-15);
+  EXPECT_NEAR(x[0], x0, 1e-6);
+  EXPECT_NEAR(x[1], x1, 1e-6);
+  EXPECT_NEAR(p.m[0], m0, 1e-7);
+  EXPECT_NEAR(p.v[1], v1, 1e-4 * v1);  // float (1 - beta2) vs the exact 0.001
+  // Uniform-rate path gives the same as the per-column path.
+  Adam a2;
+  AdamParam& q = a2.add("y", 3, 2, 0.05f);
+  std::vector<float> y = {1, 2, 3, 4, 5, 6}, gy = {0.1f, -0.2f, 0.3f, 0, 1, -1};
+  a2.begin_step();
+  a2.update(q, y.data(), gy.data(), 2);
+  EXPECT_NEAR(y[0], 0.95f, 1e-6f);
+  EXPECT_NEAR(y[1], 2.05f, 1e-6f);
+  EXPECT_FLOAT_EQ(y[3], 4.f);  // zero gradient, zero moments: no move
+}
+
+TEST(Adam, GatherCarriesMoments) {
+  Adam adam;
+  AdamParam& p = adam.add("x", 2, 3, 0.1f);
+  for (int i = 0; i < 6; ++i) p.m[i] = float(i), p.v[i] = float(10 + i);
+  adam.gather({2, 0, 2}, {0, 0, 1});
+  EXPECT_EQ(p.m, (std::vector<float>{4, 5, 0, 1, 0, 0}));
+  EXPECT_EQ(p.v, (std::vector<float>{14, 15, 10, 11, 0, 0}));
+}
+
+struct Fixture {
+  GaussianModel m;
+  Adam adam;
+  DensifyStats stats;
+  // Four Gaussians: 0 small + high gradient (clone), 1 large + high gradient (split), 2 low gradient,
+  // 3 transparent (pruned).
+  Fixture() {
+    m.sh_degree = 0;
+    m.resize(4);
+    m.add_extra("obj", 2);
+    float ls[4] = {std::log(0.005f), std::log(0.5f), std::log(0.005f), std::log(0.005f)};
+    float op[4] = {0.5f, 0.6f, 0.7f, 0.001f};
+    for (int i = 0; i < 4; ++i) {
+      for (int a = 0; a < 3; ++a) m.mean[i * 3 + a] = float(10 * i + a);
+      for (int a = 0; a < 3; ++a) m.log_scale[i * 3 + a] = ls[i] + (a == 1 ? std::log(0.5f) : 0.f);
+      m.opacity_logit[i] = inverse_sigmoid(op[i]);
+      m.sh[i * 3] = float(i);
+      m.extras[0].data[i * 2] = float(100 + i);
+    }
+    for (auto& f : m.fields()) {
+      AdamParam& p = adam.add(f.name, f.dim, m.n, 0.1f);
+      for (int i = 0; i < m.n; ++i)
+        for (int c = 0; c < f.dim; ++c) p.m[i * f.dim + c] = float(i + 1), p.v[i * f.dim + c] = float(i + 1) * 2;
+    }
+    stats.reset(4);
+    // Two views; gradients in pixels at 200x100: NDC norm = |(gx * 100, gy * 50)|.
+    float g1[8] = {3e-6f, 0, 0, 4e-6f, 1e-7f, 0, 0, 0};
+    int r1[4] = {3, 5, 2, 2};
+    stats.add(g1, r1, 4, 200, 100);
+    float g2[8] = {3e-6f, 0, 0, 4e-6f, 1e-7f, 0, 0, 0};
+    int r2[4] = {4, 0, 1, 0};  // Gaussian 1 and 3 not visible in view 2
+    stats.add(g2, r2, 4, 200, 100);
+  }
+};
+
+TEST(Densify, StatisticsInNdcUnits) {
+  Fixture f;
+  EXPECT_EQ(f.stats.count, (std::vector<int>{2, 1, 2, 1}));
+  EXPECT_NEAR(f.stats.grad_accum[2], 2 * 1e-5f, 1e-10f);
+  EXPECT_NEAR(f.stats.grad_accum[0], 2 * 3e-4f, 1e-9f);
+  EXPECT_NEAR(f.stats.grad_accum[1], 2e-4f, 1e-9f);  // 4e-6 * 50, seen once
+  EXPECT_EQ(f.stats.max_radius, (std::vector<float>{4, 5, 2, 2}));
+}
+
+TEST(Densify, CloneSplitPruneWithMoments) {
+  Fixture f;
+  std::mt19937_64 rng(1);
+  DensifyConfig cfg;
+  const float extent = 2.f;  // clone if max scale <= 0.02
+  DensifyResult r = densify_and_prune(f.m, f.adam, f.stats, cfg, extent, 0.f, rng);
+  EXPECT_EQ(r.cloned, 1);
+  EXPECT_EQ(r.split, 1);
+  EXPECT_EQ(r.pruned, 1);
+  // Rows: survivors 0, 2 (3 pruned), clone of 0, two children of 1.
+  ASSERT_EQ(f.m.n, 5);
+  float sh[5] = {0, 2, 0, 1, 1};
+  float id[5] = {100, 102, 100, 101, 101};
+  for (int i = 0; i < 5; ++i) {
+    EXPECT_EQ(f.m.sh[i * 3], sh[i]) << i;
+    EXPECT_EQ(f.m.extras[0].data[i * 2], id[i]) << i;
+  }
+  // Clone identical to its parent.
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_EQ(f.m.mean[2 * 3 + a], f.m.mean[a]);
+    EXPECT_EQ(f.m.log_scale[2 * 3 + a], f.m.log_scale[a]);
+  }
+  // Children: scale / 1.6, centres sampled near the parent (10, 11, 12) within a few sigma (0.5).
+  for (int c = 3; c < 5; ++c)
+    for (int a = 0; a < 3; ++a) {
+      float parent_ls = std::log(0.5f) + (a == 1 ? std::log(0.5f) : 0.f);
+      EXPECT_NEAR(f.m.log_scale[c * 3 + a], parent_ls - std::log(1.6f), 1e-6f);
+      EXPECT_NEAR(f.m.mean[c * 3 + a], 10.f + a, 2.5f);
+      EXPECT_NE(f.m.mean[c * 3 + a], 10.f + a);
+    }
+  EXPECT_NE(f.m.mean[3 * 3], f.m.mean[4 * 3]);
+  // Moments: survivors keep theirs (Gaussian 0 -> 1, Gaussian 2 -> 3), new rows zero.
+  for (auto& p : f.adam.params) {
+    ASSERT_EQ(p.m.size(), 5u * p.dim) << p.name;
+    float expect_m[5] = {1, 3, 0, 0, 0};
+    for (int i = 0; i < 5; ++i) {
+      EXPECT_EQ(p.m[i * p.dim], expect_m[i]) << p.name << " row " << i;
+      EXPECT_EQ(p.v[i * p.dim + p.dim - 1], 2 * expect_m[i]) << p.name << " row " << i;
+    }
+  }
+  EXPECT_EQ(f.stats.count, std::vector<int>(5, 0));
+  EXPECT_EQ(f.stats.max_radius, std::vector<float>(5, 0.f));
+}
+
+TEST(Densify, ScreenAndWorldSizePruning) {
+  Fixture f;
+  f.stats.grad_accum.assign(4, 0.f);  // no densification
+  std::mt19937_64 rng(1);
+  DensifyConfig cfg;
+  // Screen limit 3 px prunes 0 (radius 4) and 1 (radius 5; also world scale 0.5 > 0.1 x 2); 3 is transparent.
+  DensifyResult r = densify_and_prune(f.m, f.adam, f.stats, cfg, 2.f, 3.f, rng);
+  EXPECT_EQ(r.pruned, 3);
+  ASSERT_EQ(f.m.n, 1);
+  EXPECT_EQ(f.m.sh[0], 2.f);
+  EXPECT_EQ(f.adam.get("quat").m, std::vector<float>(4, 3.f));
+  // World size alone: limit large, extent small.
+  Fixture g;
+  g.stats.grad_accum.assign(4, 0.f);
+  r = densify_and_prune(g.m, g.adam, g.stats, cfg, 0.04f, 1000.f, rng);  // 0.1 x 0.04 = 0.004 < 0.005
+  EXPECT_EQ(g.m.n, 0);
+}
+
+TEST(Densify, OpacityReset) {
+  Fixture f;
+  reset_opacity(f.m, f.adam, 0.01f);
+  EXPECT_NEAR(sigmoid(f.m.opacity_logit[0]), 0.01f, 1e-6f);
+  EXPECT_NEAR(sigmoid(f.m.opacity_logit[3]), 0.001f, 1e-7f);  // below the cap: unchanged
+  EXPECT_EQ(f.adam.get("opacity").m, std::vector<float>(4, 0.f));
+  EXPECT_EQ(f.adam.get("opacity").v, std::vector<float>(4, 0.f));
+  EXPECT_EQ(f.adam.get("mean").m[0], 1.f);
+}
+
+}  // namespace
+}  // namespace hgs::train
