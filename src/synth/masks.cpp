@@ -14,8 +14,8 @@ namespace hgs::synth {
 NoiseLevel noise_level(const std::string& name) {
   if (name == "none") return {0, 0, 0, 0, 0, 0};
   if (name == "low") return {0.02, 1, 0.05, 0.02, 0.04, 0.3};
-  if (name == "medium") return {0.05, 2, 0.10, 0.05, 0.07, 0.5};
-  if (name == "high") return {0.12, 4, 0.20, 0.12, 0.10, 0.8};
+  if (name == "medium") return {0.04, 2, 0.05, 0.04, 0.07, 0.5};
+  if (name == "high") return {0.10, 3, 0.15, 0.10, 0.10, 0.8};
   fail("--noise: unknown level '{}' (none, low, medium or high)", name);
 }
 

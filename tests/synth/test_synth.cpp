@@ -1,0 +1,277 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+#include <nlohmann/json.hpp>
+
+#include "core/error.h"
+#include "core/fs.h"
+#include "core/image.h"
+#include "core/npy.h"
+#include "scene/colmap.h"
+#include "scene/scene.h"
+#include "synth/synth.h"
+#include "test_util.h"
+
+using namespace hgs;
+namespace fs = std::filesystem;
+
+namespace {
+
+synth::SynthOptions tiny(const std::string& noise = "medium", uint64_t seed = 7) {
+  synth::SynthOptions o;
+  o.seed = seed;
+  o.views = 16;
+  o.width = 96;
+  o.height = 72;
+  o.objects = 5;
+  o.points = 1500;
+  o.noise = noise;
+  o.feature_dim = 32;
+  o.supersample = 1;
+  o.progress = false;
+  return o;
+}
+
+std::map<std::string, std::vector<uint8_t>> all_files(const fs::path& root) {
+  std::map<std::string, std::vector<uint8_t>> m;
+  for (auto& e : fs::recursive_directory_iterator(root))
+    if (e.is_regular_file()) m[fs::relative(e.path(), root).string()] = read_file_bytes(e.path());
+  return m;
+}
+
+bool even_odd(const std::vector<std::pair<int, int>>& poly, double px, double py) {
+  bool in = false;
+  for (size_t i = 0, j = poly.size() - 1; i < poly.size(); j = i++) {
+    double xi = poly[i].first, yi = poly[i].second, xj = poly[j].first, yj = poly[j].second;
+    if ((yi > py) != (yj > py) && px < (xj - xi) * (py - yi) / (yj - yi) + xi) in = !in;
+  }
+  return in;
+}
+
+}  // namespace
+
+TEST(Synth, SameSeedSameBytes) {
+  test::TempDir tmp;
+  synth::generate(tmp / "a", tiny());
+  synth::generate(tmp / "b", tiny());
+  auto a = all_files(tmp / "a"), b = all_files(tmp / "b");
+  ASSERT_EQ(a.size(), b.size());
+  for (auto& [name, bytes] : a) EXPECT_TRUE(bytes == b[name]) << name << " differs between two runs with the same seed";
+  synth::generate(tmp / "c", tiny("medium", 8));
+  auto c = all_files(tmp / "c");
+  EXPECT_NE(a["images/frame_00001.png"], c["images/frame_00001.png"]);
+}
+
+TEST(Synth, SceneIsCompleteAndConsistent) {
+  test::TempDir tmp;
+  auto o = tiny();
+  synth::generate(tmp / "s", o);
+  Scene s = load_scene(tmp / "s");
+  ASSERT_EQ(s.views.size(), 16u);
+  EXPECT_EQ(s.points.size(), 1500u);
+  EXPECT_EQ(s.num_objects(), 5);
+  EXPECT_EQ(s.object_names.size(), 5u);
+  EXPECT_TRUE(s.has_features());
+  // The binary model reads back with tracks of at least two views whose keypoints point back at the point.
+  ColmapModel m = read_colmap_bin(tmp / "s" / "sparse" / "0");
+  std::map<int, const ColmapImage*> by_id;
+  for (auto& im : m.images) by_id[im.id] = &im;
+  for (auto& p : m.points) {
+    ASSERT_GE(p.track.size(), 2u);
+    for (auto [img, idx] : p.track) EXPECT_EQ(by_id.at(img)->point3d_ids.at(idx), int64_t(p.id));
+  }
+  // Every object is visible (>= 50 px) in several views; the points project near their observations.
+  std::vector<int> seen(6, 0);
+  for (auto& v : s.views) {
+    LabelMap gt = load_label_png(tmp / "s" / "gt" / "instances" / v.name);
+    std::vector<int> cnt(6, 0);
+    for (auto l : gt.v) cnt[l]++;
+    for (int k = 1; k <= 5; ++k) seen[k] += cnt[k] >= 50;
+  }
+  for (int k = 1; k <= 5; ++k) EXPECT_GE(seen[k], 4) << "object " << k << " visible in too few views";
+  const ColmapImage& im0 = m.images[0];
+  const ColmapCamera& cam = m.cameras.at(1);
+  Eigen::Matrix3d R = qvec_to_rotmat(im0.qvec);
+  for (size_t k = 0; k < im0.xys.size(); ++k) {
+    const auto& P = m.points[im0.point3d_ids[k] - 1];
+    Eigen::Vector3d q = R * P.xyz + im0.tvec;
+    EXPECT_NEAR(cam.params[0] * q.x() / q.z() + cam.params[2], im0.xys[k].x(), 1e-6);
+  }
+  // Features: 16-px patch grid, unit norm.
+  NpyArray f = read_npy(tmp / "s" / "features" / "frame_00001.npy");
+  EXPECT_EQ(f.dtype, DType::F16);
+  EXPECT_EQ(f.shape, (std::vector<size_t>{5, 6, 32}));
+  auto fv = f.to_float();
+  double n2 = 0;
+  for (int d = 0; d < 32; ++d) n2 += fv[d] * fv[d];
+  EXPECT_NEAR(n2, 1.0, 1e-2);
+  // Text embeddings hold class names, synonyms, distractors and the canonical phrases.
+  for (auto& [id, name] : s.object_names) EXPECT_TRUE(s.text_embeddings.count(name)) << name;
+  for (const char* c : {"object", "things", "stuff", "texture"}) EXPECT_TRUE(s.text_embeddings.count(c)) << c;
+  EXPECT_GT(s.text_embeddings.size(), 5u + 5u + 4u);
+}
+
+TEST(Synth, FeaturesPointAtTheRightObject) {
+  // For every 16-px patch mostly covered by one object, that object's class-name embedding must be the most
+  // similar among the scene's objects far more often than chance (1/5).
+  test::TempDir tmp;
+  auto o = tiny("low");
+  o.width = 320;
+  o.height = 240;
+  o.views = 6;
+  o.points = 300;
+  o.feature_dim = 64;
+  synth::generate(tmp / "s", o);
+  Scene s = load_scene(tmp / "s");
+  int correct = 0, total = 0;
+  for (int vi = 0; vi < 6; ++vi) {
+    NpyArray fa = read_npy(s.views[vi].feature_path.value());
+    auto feat = fa.to_float();
+    const int gh = int(fa.shape[0]), gw = int(fa.shape[1]), dim = int(fa.shape[2]);
+    LabelMap gt = load_label_png(tmp / "s" / "gt" / "instances" / s.views[vi].name);
+    for (int py = 0; py < gh; ++py)
+      for (int px = 0; px < gw; ++px) {
+        std::map<int, int> cnt;
+        for (int y = py * 16; y < std::min(240, py * 16 + 16); ++y)
+          for (int x = px * 16; x < px * 16 + 16; ++x) cnt[gt.at(x, y)]++;
+        int k = 0;
+        for (auto [id, c] : cnt) if (id && c > 128) k = id;
+        if (!k) continue;
+        int best = -1;
+        double bs = -2;
+        for (auto& [id, name] : s.object_names) {
+          const auto& t = s.text_embeddings.at(name);
+          double d = 0;
+          for (int c = 0; c < dim; ++c) d += t[c] * feat[(size_t(py) * gw + px) * dim + c];
+          if (d > bs) { bs = d; best = id; }
+        }
+        total++;
+        correct += best == k;
+      }
+  }
+  ASSERT_GT(total, 10);
+  EXPECT_GT(double(correct) / total, 0.8) << correct << "/" << total;
+}
+
+namespace {
+// Mean IoU between simulated masks and ground truth over (view, object) pairs present in the ground truth.
+double mask_iou(const fs::path& root, int views, int min_pixels) {
+  double sum = 0;
+  int n = 0;
+  for (int i = 1; i <= views; ++i) {
+    auto name = fmt::format("frame_{:05d}", i);
+    LabelMap gt = load_label_png(root / "gt" / "instances" / (name + ".png"));
+    LabelMap m = load_label_png(root / "masks" / (name + ".png"));
+    for (int k = 1; k <= 5; ++k) {
+      long inter = 0, uni = 0, g = 0;
+      for (size_t p = 0; p < gt.v.size(); ++p) {
+        bool a = gt.v[p] == k, b = m.v[p] == k;
+        inter += a && b; uni += a || b; g += a;
+      }
+      if (g < min_pixels) continue;
+      sum += double(inter) / uni;
+      ++n;
+    }
+  }
+  return sum / n;
+}
+}  // namespace
+
+TEST(Synth, MaskNoiseFollowsTheRequestedLevel) {
+  test::TempDir tmp;
+  // At the default resolution (objects a few thousand pixels) jitter of 2 px is a modest error.
+  for (auto lvl : {"none", "medium", "high"}) {
+    auto o = tiny(lvl);
+    o.width = 320;
+    o.height = 240;
+    o.views = 8;
+    o.points = 300;
+    synth::generate(tmp / lvl, o);
+  }
+  EXPECT_DOUBLE_EQ(mask_iou(tmp / "none", 8, 200), 1.0);
+  EXPECT_FALSE(fs::exists(tmp / "none" / "masks" / "frame_00001.conf.npy"));
+  double med = mask_iou(tmp / "medium", 8, 200), high = mask_iou(tmp / "high", 8, 200);
+  std::printf("mean mask IoU vs ground truth: medium %.3f, high %.3f\n", med, high);
+  EXPECT_LT(med, 0.97);
+  EXPECT_GT(med, 0.75);
+  EXPECT_LT(high, med);
+  NpyArray c = read_npy(tmp / "medium" / "masks" / "frame_00001.conf.npy");
+  EXPECT_EQ(c.shape, (std::vector<size_t>{240, 320}));
+}
+
+TEST(Synth, MaskSimulationOnHandMadeCase) {
+  // Two touching squares; with merges certain and nothing else, one id absorbs the other.
+  LabelMap gt(20, 10);
+  for (int y = 2; y < 8; ++y)
+    for (int x = 2; x < 18; ++x) gt.at(x, y) = x < 10 ? 1 : 2;
+  synth::NoiseLevel nl{0, 0, 1.0, 0, 0, 0};
+  LabelMap m;
+  std::vector<float> conf;
+  synth::simulate_masks(gt, nl, 2, 3, m, conf);
+  EXPECT_EQ(m.at(3, 3), m.at(15, 3));
+  EXPECT_EQ(m.at(0, 0), 0);
+  EXPECT_TRUE(conf.empty());
+  // Always missed -> all background.
+  synth::NoiseLevel miss{1.0, 0, 0, 0, 0.05, 0};
+  synth::simulate_masks(gt, miss, 2, 3, m, conf);
+  for (auto l : m.v) EXPECT_EQ(l, 0);
+  ASSERT_EQ(conf.size(), gt.v.size());
+  // Swap certain -> ids exchanged.
+  synth::NoiseLevel swap{0, 0, 0, 1.0, 0, 0};
+  synth::simulate_masks(gt, swap, 2, 3, m, conf);
+  EXPECT_EQ(m.at(3, 3), 2);
+  EXPECT_EQ(m.at(15, 3), 1);
+}
+
+TEST(Synth, PolygonsRasteriseBackToTheParts) {
+  const int W = 40, H = 30;
+  std::vector<uint8_t> in(W * H, 0);
+  auto set = [&](int x, int y) { in[y * W + x] = 1; };
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      if ((x - 10) * (x - 10) + (y - 12) * (y - 12) < 40) set(x, y);  // disc
+      if (x >= 25 && x < 39 && y >= 0 && y < 6) set(x, y);              // box on the border
+    }
+  set(30, 10); set(31, 11); set(32, 12);  // diagonal chain (one 8-connected part)
+  auto polys = synth::trace_polygons(in, W, H);
+  ASSERT_EQ(polys.size(), 3u);
+  std::vector<uint8_t> back(W * H, 0);
+  for (auto& p : polys)
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x)
+        if (even_odd(p, x + 0.5, y + 0.5)) back[y * W + x] = 1;
+  EXPECT_EQ(back, in);
+}
+
+TEST(Synth, LabelsMatchGroundTruth) {
+  test::TempDir tmp;
+  synth::generate(tmp / "s", tiny());
+  auto j = nlohmann::json::parse(read_file_text(tmp / "s" / "label" / "frame_00009.json"));
+  EXPECT_EQ(j["info"]["width"], 96);
+  LabelMap gt = load_label_png(tmp / "s" / "gt" / "instances" / "frame_00009.png");
+  ASSERT_FALSE(j["objects"].empty());
+  auto cls = read_file_text(tmp / "s" / "segmentations" / "classes.txt");
+  Scene s = load_scene(tmp / "s");
+  for (auto& [id, name] : s.object_names) {
+    EXPECT_NE(cls.find(name + "\n"), std::string::npos);
+    LabelMap seg = load_label_png(tmp / "s" / "segmentations" / "8" / (name + ".png"));
+    for (size_t p = 0; p < gt.v.size(); ++p) ASSERT_EQ(seg.v[p] == 255, gt.v[p] == id);
+  }
+  EXPECT_TRUE(s.views[8].is_test);
+}
+
+TEST(Synth, CliErrors) {
+  test::TempDir tmp;
+  atomic_write_text(tmp / "full" / "x", "x");
+  auto r = test::run_hgs("synth --out " + (tmp / "full").string() + " --views 4");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("not empty"), std::string::npos) << r.err;
+  r = test::run_hgs("synth --out " + (tmp / "n").string() + " --noise loud");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_FALSE(fs::exists(tmp / "n"));
+  r = test::run_hgs("synth --out " + (tmp / "o").string() + " --objects 99");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("--objects"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(tmp / "o"));
+}
