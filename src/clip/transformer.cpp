@@ -1,0 +1,118 @@
+// CLIP transformer block kernels: see transformer.h.
+#include "clip/transformer.h"
+
+#include <cblas.h>
+
+#include <algorithm>
+#include <cmath>
+
+namespace hgs::clip {
+
+void Workspace::reserve(int n, int width, int mlp_width, int max_len) {
+  h.resize(size_t(n) * width);
+  qkv.resize(size_t(n) * 3 * width);
+  attn.resize(size_t(n) * width);
+  mlp.resize(size_t(n) * mlp_width);
+  scores.resize(size_t(max_len) * max_len);
+}
+
+void linear(const Linear& l, const float* x, int n, float* y) {
+  if (n <= 0) return;
+  for (int i = 0; i < n; ++i) std::copy(l.b.begin(), l.b.end(), y + size_t(i) * l.out);
+  cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, n, l.out, l.in, 1.f, x, l.in, l.w.data(), l.in, 1.f, y, l.out);
+}
+
+void linear_add(const Linear& l, const float* x, int n, float* y) {
+  if (n <= 0) return;
+  cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, n, l.out, l.in, 1.f, x, l.in, l.w.data(), l.in, 1.f, y, l.out);
+  for (int i = 0; i < n; ++i) {
+    float* r = y + size_t(i) * l.out;
+    for (int j = 0; j < l.out; ++j) r[j] += l.b[j];
+  }
+}
+
+void matmul(const float* x, int n, int k, const float* p, int n_out, float* y) {
+  if (n <= 0) return;
+  cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, n, n_out, k, 1.f, x, k, p, n_out, 0.f, y, n_out);
+}
+
+void layer_norm(const LayerNorm& ln, const float* x, int n, int c, float* y) {
+#pragma omp parallel for schedule(static) if (size_t(n) * c > 32768)
+  for (int i = 0; i < n; ++i) {
+    const float* r = x + size_t(i) * c;
+    float* o = y + size_t(i) * c;
+    double mean = 0, var = 0;
+    for (int j = 0; j < c; ++j) mean += r[j];
+    mean /= c;
+    for (int j = 0; j < c; ++j) var += (r[j] - mean) * (r[j] - mean);
+    var /= c;
+    const float m = float(mean), inv = float(1.0 / std::sqrt(var + 1e-5));
+    for (int j = 0; j < c; ++j) o[j] = (r[j] - m) * inv * ln.g[j] + ln.b[j];
+  }
+}
+
+void activation(Activation a, float* x, size_t count) {
+  const long n = long(count);
+  if (a == Activation::GELU) {
+#pragma omp parallel for schedule(static) if (n > 65536)
+    for (long i = 0; i < n; ++i) x[i] = 0.5f * x[i] * (1.f + std::erf(x[i] * 0.70710678118654752f));
+  } else {
+#pragma omp parallel for schedule(static) if (n > 65536)
+    for (long i = 0; i < n; ++i) x[i] = x[i] / (1.f + std::exp(-1.702f * x[i]));
+  }
+}
+
+void softmax_rows(float* s, int rows, int cols, bool causal, int row0) {
+#pragma omp parallel for schedule(static) if (size_t(rows) * cols > 16384)
+  for (int i = 0; i < rows; ++i) {
+    float* r = s + size_t(i) * cols;
+    const int m = causal ? std::min(cols, row0 + i + 1) : cols;
+    float mx = r[0];
+    for (int j = 1; j < m; ++j) mx = std::max(mx, r[j]);
+    float sum = 0;
+    for (int j = 0; j < m; ++j) sum += (r[j] = std::exp(r[j] - mx));
+    const float inv = 1.f / sum;
+    for (int j = 0; j < m; ++j) r[j] *= inv;
+    for (int j = m; j < cols; ++j) r[j] = 0.f;
+  }
+}
+
+void l2_normalize_rows(float* x, int n, int d) {
+  for (int i = 0; i < n; ++i) {
+    float* r = x + size_t(i) * d;
+    double s = 0;
+    for (int j = 0; j < d; ++j) s += double(r[j]) * r[j];
+    const float inv = s > 0 ? float(1.0 / std::sqrt(s)) : 0.f;
+    for (int j = 0; j < d; ++j) r[j] *= inv;
+  }
+}
+
+void block_forward(const Block& b, int heads, Activation act, const std::vector<Segment>& segs, bool causal, float* x,
+                   int n, Workspace& ws) {
+  const int w = b.qkv.in, hd = w / heads, w3 = 3 * w;
+  const float scale = 1.f / std::sqrt(float(hd));
+  // Attention.
+  layer_norm(b.ln1, x, n, w, ws.h.data());
+  linear(b.qkv, ws.h.data(), n, ws.qkv.data());
+  for (const Segment& sg : segs) {
+    const float* base = ws.qkv.data() + size_t(sg.start) * w3;
+    for (int hh = 0; hh < heads; ++hh) {
+      const float* q = base + hh * hd;
+      const float* k = base + w + hh * hd;
+      const float* v = base + 2 * w + hh * hd;
+      float* s = ws.scores.data();
+      cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, sg.len, sg.len, hd, scale, q, w3, k, w3, 0.f, s, sg.len);
+      softmax_rows(s, sg.len, sg.len, causal);
+      cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, sg.len, hd, sg.len, 1.f, s, sg.len, v, w3, 0.f,
+                  ws.attn.data() + size_t(sg.start) * w + hh * hd, w);
+    }
+  }
+  linear_add(b.out, ws.attn.data(), n, x);
+  // MLP.
+  layer_norm(b.ln2, x, n, w, ws.h.data());
+  linear(b.fc, ws.h.data(), n, ws.mlp.data());
+  activation(act, ws.mlp.data(), size_t(n) * b.fc.out);
+  linear_add(b.proj, ws.mlp.data(), n, x);
+}
+
+}  // namespace hgs::clip

@@ -1,0 +1,46 @@
+// Pre-LayerNorm transformer blocks as in CLIP (x += attn(ln_1(x)); x += mlp(ln_2(x))), float32 on the CPU.
+// All matrix products are cblas_sgemm calls on whole token matrices (OpenBLAS threads them); attention runs
+// per sequence and head as two sgemm calls (Q K^T, then P V) with a row softmax in between; LayerNorm,
+// activation and softmax loops are OpenMP-parallel over rows. Several independent sequences can be packed
+// into one token matrix (`Segment`s): linear layers see all of them at once, attention stays within each.
+// Buffers live in a Workspace sized once per forward call; nothing is allocated per token or per layer.
+#pragma once
+#include <vector>
+
+#include "clip/model.h"
+
+namespace hgs::clip {
+
+struct Segment {
+  int start = 0, len = 0;  // rows [start, start + len) of the token matrix
+};
+
+struct Workspace {
+  std::vector<float> h;     // [N, width]
+  std::vector<float> qkv;   // [N, 3 * width]
+  std::vector<float> attn;  // [N, width]
+  std::vector<float> mlp;   // [N, mlp]
+  std::vector<float> scores;  // [max_len, max_len]
+  void reserve(int n, int width, int mlp_width, int max_len);
+};
+
+// y [N, out] = x [N, in] W^T + b.
+void linear(const Linear& l, const float* x, int n, float* y);
+// y [N, out] += x [N, in] W^T + b.
+void linear_add(const Linear& l, const float* x, int n, float* y);
+// y [N, C] = LayerNorm(x [N, C]) with eps 1e-5 (in place allowed).
+void layer_norm(const LayerNorm& ln, const float* x, int n, int c, float* y);
+void activation(Activation a, float* x, size_t count);  // in place
+// Row-wise softmax of s [rows, cols]; with `causal`, row i keeps columns 0..row0+i only (others set to 0).
+void softmax_rows(float* s, int rows, int cols, bool causal, int row0 = 0);
+
+// One block applied in place to x [N, width].
+void block_forward(const Block& b, int heads, Activation act, const std::vector<Segment>& segs, bool causal, float* x,
+                   int n, Workspace& ws);
+
+// x [N, n_out] = x [N, k] P for a projection matrix P [k, n_out].
+void matmul(const float* x, int n, int k, const float* p, int n_out, float* y);
+
+void l2_normalize_rows(float* x, int n, int d);
+
+}  // namespace hgs::clip

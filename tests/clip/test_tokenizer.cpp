@@ -1,0 +1,66 @@
+// CLIP tokenizer: known ids, and ids of tricky strings (punctuation, numbers, apostrophes, non-ASCII, HTML
+// entities, truncation, empty) from an independent Python implementation (tests/data/clip/tokens.json).
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "clip/text_clean.h"
+#include "clip/tokenizer.h"
+#include "clip_test_util.h"
+
+using namespace hgs::clip;
+
+TEST(ClipTokenizer, KnownIds) {
+  const Tokenizer& tok = Tokenizer::shared();
+  EXPECT_EQ(tok.tokenize("a photo of a cat"), (std::vector<int>{49406, 320, 1125, 539, 320, 2368, 49407}));
+  EXPECT_EQ(tok.tokenize("A  Photo of a CAT. "), (std::vector<int>{49406, 320, 1125, 539, 320, 2368, 269, 49407}));
+  EXPECT_EQ(tok.tokenize(""), (std::vector<int>{49406, 49407}));
+  EXPECT_EQ(tok.token_string(2368), "cat</w>");
+  auto padded = tok.tokenize_padded("a photo of a cat");
+  ASSERT_EQ(padded.size(), 77u);
+  EXPECT_EQ(padded[6], 49407);
+  EXPECT_EQ(padded[7], 0);
+}
+
+TEST(ClipTokenizer, Truncation) {
+  const Tokenizer& tok = Tokenizer::shared();
+  std::string long_text;
+  for (int i = 0; i < 200; ++i) long_text += "cat ";
+  auto ids = tok.tokenize(long_text);
+  ASSERT_EQ(ids.size(), 77u);
+  EXPECT_EQ(ids.front(), Tokenizer::kSot);
+  EXPECT_EQ(ids.back(), Tokenizer::kEot);
+  EXPECT_EQ(ids[75], 2368);
+  EXPECT_EQ(tok.tokenize(long_text, 10).size(), 10u);
+}
+
+TEST(ClipTokenizer, MatchesPythonReference) {
+  std::ifstream in(hgs::test::clip_data("tokens.json"));
+  ASSERT_TRUE(in) << "tests/data/clip/tokens.json missing";
+  nlohmann::json cases = nlohmann::json::parse(in);
+  ASSERT_GE(cases.size(), 10u);
+  const Tokenizer& tok = Tokenizer::shared();
+  for (auto& c : cases) {
+    std::string text = c["text"].get<std::string>();
+    EXPECT_EQ(tok.tokenize(text), c["ids"].get<std::vector<int>>()) << "text: " << text;
+  }
+}
+
+TEST(ClipTokenizer, HtmlUnescape) {
+  EXPECT_EQ(html_unescape("&amp; &lt;b&gt; &quot;x&quot; &#39;y&#39; &#x263A;"), "& <b> \"x\" 'y' \xE2\x98\xBA");
+  EXPECT_EQ(html_unescape("&amp;amp;"), "&amp;");
+  EXPECT_EQ(html_unescape(html_unescape("&amp;amp;")), "&");
+  EXPECT_EQ(html_unescape("&copy 2024 &ampx"), "\xC2\xA9 2024 &x");  // legacy names without ';'
+  EXPECT_EQ(html_unescape("&#128;&#0;&#1;"), "\xE2\x82\xAC\xEF\xBF\xBD");  // cp1252 fix, NUL -> U+FFFD, ^A dropped
+  EXPECT_EQ(html_unescape("&unknownentity; & &# &#x;"), "&unknownentity; & &# &#x;");
+  EXPECT_EQ(html_unescape("&#99999999999;"), "\xEF\xBF\xBD");
+}
+
+TEST(ClipTokenizer, CleanText) {
+  EXPECT_EQ(clean_text("  Hello\t\n  WORLD  "), "hello world");
+  EXPECT_EQ(clean_text("\xC3\x89T\xC3\x89 \xD0\x9F\xD0\xA0"), "\xC3\xA9t\xC3\xA9 \xD0\xBF\xD1\x80");  // ÉTÉ ПР -> été пр
+  EXPECT_EQ(clean_text("\xE2\x80\x9Cq\xE2\x80\x9D \xEF\xAC\x81"), "\"q\" fi");
+  EXPECT_EQ(clean_text("a\xC2\xA0" "b\xE3\x80\x80" "c"), "a b c");  // NBSP and ideographic space are whitespace
+  EXPECT_EQ(clean_text("bad \xFF byte"), "bad \xEF\xBF\xBD byte");
+}
