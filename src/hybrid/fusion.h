@@ -1,0 +1,148 @@
+// Observation Fusion (paper eqs. 2-5).
+//
+// observe():  projects every Gaussian centre into every training view (eq. 3) and records the mask label at the
+//             projected pixel, or "no observation" when the depth is not positive or the pixel is outside the
+//             image (V_{n,u} = 0). Masks are the confidence-filtered label maps, so M_{u,k}(p) = [label = k] and
+//             M_{u,0} = 1 - OR_k M_{u,k} holds by construction. The table is rebuilt every R iterations and after
+//             densification; it does not depend on the view weights.
+// fuse():     w = softmax(view logits) ("learnable normalised reliability"),
+//             s_{n,k} = sum_u w_u V_{n,u} M_{u,k}(p_{n,u}) / (sum_u w_u V_{n,u} + eps)        (eq. 4)
+//             q_n = softmax(s_n / T), z_n = argmax_k q_{n,k}                                  (eq. 5)
+//             Gaussians without any valid view keep their previous q (and z).
+// fuse_backward(): exact dL/dlogits from dL/dq through eqs. 4-5 and the softmax over views (Gaussians without a
+//             valid view pass no gradient: their q is a constant).
+// Templated on the scalar so the tests check the gradient in double precision.
+#pragma once
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "core/image.h"
+
+namespace hgs::hybrid {
+
+constexpr uint16_t kNoObservation = 0xFFFF;
+
+// A training view's camera and its confidence-filtered label map.
+struct MaskView {
+  int width = 0, height = 0;
+  double fx = 0, fy = 0, cx = 0, cy = 0;
+  double R[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};  // world -> camera, row-major
+  double t[3] = {0, 0, 0};
+  LabelMap labels;  // [H, W] in 0..K
+};
+
+// labels[k] = 0 wherever confidence < tau1 (conf may be empty: no filtering). [H, W]
+void apply_confidence(LabelMap& labels, const std::vector<float>& conf, float tau1);
+
+struct ObservationTable {
+  int n = 0, num_views = 0;
+  std::vector<uint16_t> label;  // [N, U]: observed label, or kNoObservation
+};
+
+// means [N, 3]
+void observe(const float* means, int n, const std::vector<MaskView>& views, ObservationTable& table);
+
+template <class T>
+void softmax(const T* x, int n, T* y) {
+  T m = x[0];
+  for (int i = 1; i < n; ++i) m = std::max(m, x[i]);
+  T s = 0;
+  for (int i = 0; i < n; ++i) s += (y[i] = std::exp(x[i] - m));
+  for (int i = 0; i < n; ++i) y[i] /= s;
+}
+
+// dx = y * (dy - <y, dy>) for y = softmax(x).
+template <class T>
+void softmax_backward(const T* y, const T* dy, int n, T* dx) {
+  T d = 0;
+  for (int i = 0; i < n; ++i) d += y[i] * dy[i];
+  for (int i = 0; i < n; ++i) dx[i] = y[i] * (dy[i] - d);
+}
+
+struct FusionParams {
+  int num_labels = 2;     // K + 1
+  double temperature = 0.1;  // T of eq. 5
+  double eps = 1e-6;      // epsilon of eq. 4
+};
+
+// w [U] (already softmax-normalised), q [N, K+1] in/out (kept where no view is valid), s [N, K+1] out,
+// valid [N] out (1 if some view observed the Gaussian).
+template <class T>
+void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, T* s, uint8_t* valid) {
+  const int L = p.num_labels, U = tab.num_views;
+#pragma omp parallel for schedule(static)
+  for (int n = 0; n < tab.n; ++n) {
+    const uint16_t* lab = &tab.label[size_t(n) * U];
+    T* sn = s + size_t(n) * L;
+    std::fill(sn, sn + L, T(0));
+    T den = 0;
+    for (int u = 0; u < U; ++u) {
+      if (lab[u] == kNoObservation) continue;
+      den += w[u];
+      if (lab[u] < L) sn[lab[u]] += w[u];
+    }
+    valid[n] = den > 0;
+    if (!valid[n]) continue;
+    const T inv = T(1) / (den + T(p.eps));
+    T logits[256];
+    T* lg = L <= 256 ? logits : nullptr;
+    std::vector<T> big;
+    if (!lg) { big.resize(L); lg = big.data(); }
+    for (int k = 0; k < L; ++k) {
+      sn[k] *= inv;
+      lg[k] = sn[k] / T(p.temperature);
+    }
+    softmax(lg, L, q + size_t(n) * L);
+  }
+}
+
+// dq [N, K+1] -> dw [U] (dL/dw, overwritten). s, q, valid from fuse().
+template <class T>
+void fuse_backward(const ObservationTable& tab, const T* w, const FusionParams& p, const T* s, const T* q,
+                   const uint8_t* valid, const T* dq, T* dw) {
+  const int L = p.num_labels, U = tab.num_views;
+  std::fill(dw, dw + U, T(0));
+#pragma omp parallel
+  {
+    std::vector<T> dw_local(U, T(0)), ds(L);
+#pragma omp for schedule(static)
+    for (int n = 0; n < tab.n; ++n) {
+      if (!valid[n]) continue;
+      const T* qn = q + size_t(n) * L;
+      const T* sn = s + size_t(n) * L;
+      softmax_backward(qn, dq + size_t(n) * L, L, ds.data());
+      T den = 0;
+      const uint16_t* lab = &tab.label[size_t(n) * U];
+      for (int u = 0; u < U; ++u)
+        if (lab[u] != kNoObservation) den += w[u];
+      const T inv = T(1) / (den + T(p.eps));
+      // ds/ds_logit scale 1/T; d s_k / d w_u = V_u ([label_u = k] - s_k) / (den + eps)
+      T sum_ds_s = 0;
+      for (int k = 0; k < L; ++k) {
+        ds[k] /= T(p.temperature);
+        sum_ds_s += ds[k] * sn[k];
+      }
+      for (int u = 0; u < U; ++u) {
+        if (lab[u] == kNoObservation) continue;
+        T g = -sum_ds_s;
+        if (lab[u] < L) g += ds[lab[u]];
+        dw_local[u] += g * inv;
+      }
+    }
+#pragma omp critical
+    for (int u = 0; u < U; ++u) dw[u] += dw_local[u];
+  }
+}
+
+// z_n = argmax_k q_{n,k} (first maximum). q [N, K+1] -> z [N]
+template <class T>
+void hard_ids(const T* q, int n, int num_labels, uint16_t* z) {
+  for (int i = 0; i < n; ++i) {
+    const T* qi = q + size_t(i) * num_labels;
+    z[i] = static_cast<uint16_t>(std::max_element(qi, qi + num_labels) - qi);
+  }
+}
+
+}  // namespace hgs::hybrid

@@ -1,0 +1,110 @@
+#include "hybrid/scl.h"
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+namespace hgs::hybrid {
+
+template <class T>
+T normalize(T* v, int D) {
+  T s = 0;
+  for (int d = 0; d < D; ++d) s += v[d] * v[d];
+  T nrm = std::sqrt(s);
+  if (nrm > T(0))
+    for (int d = 0; d < D; ++d) v[d] /= nrm;
+  return nrm;
+}
+
+template <class T>
+void pooled_prediction(int n, int D, int L, int J, const T* q, const T* f, const T* a, const int* objs, const T* mass,
+                       T eps, T* P) {
+  std::fill(P, P + size_t(J) * D, T(0));
+#pragma omp parallel
+  {
+    std::vector<T> local(size_t(J) * D, T(0));
+#pragma omp for schedule(static)
+    for (int i = 0; i < n; ++i) {
+      const T* fi = f + size_t(i) * D;
+      for (int j = 0; j < J; ++j) {
+        const T w = a[size_t(i) * J + j] * q[size_t(i) * L + objs[j]];
+        if (w == T(0)) continue;  // most Gaussians do not touch most masks
+        T* o = &local[size_t(j) * D];
+        for (int d = 0; d < D; ++d) o[d] += w * fi[d];
+      }
+    }
+#pragma omp critical
+    for (size_t k = 0; k < local.size(); ++k) P[k] += local[k];
+  }
+  for (int j = 0; j < J; ++j) {
+    const T inv = T(1) / (mass[j] + eps);
+    for (int d = 0; d < D; ++d) P[size_t(j) * D + d] *= inv;
+  }
+}
+
+template <class T>
+void pooled_prediction_backward(int n, int D, int L, int J, const T* q, const T* f, const T* a, const int* objs,
+                                const T* mass, T eps, const T* dP, T* dq, T* df, T* da) {
+  std::vector<T> g(size_t(J) * D);  // dP / (m + eps)
+  for (int j = 0; j < J; ++j) {
+    const T inv = T(1) / (mass[j] + eps);
+    for (int d = 0; d < D; ++d) g[size_t(j) * D + d] = dP[size_t(j) * D + d] * inv;
+  }
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i) {
+    const T* fi = f + size_t(i) * D;
+    T* dfi = df + size_t(i) * D;
+    for (int j = 0; j < J; ++j) {
+      const T* gj = &g[size_t(j) * D];
+      const T ai = a[size_t(i) * J + j], qi = q[size_t(i) * L + objs[j]];
+      T dot = 0;
+      for (int d = 0; d < D; ++d) dot += fi[d] * gj[d];
+      da[size_t(i) * J + j] = qi * dot;
+      if (ai == T(0)) continue;
+      dq[size_t(i) * L + objs[j]] += ai * dot;
+      const T w = ai * qi;
+      if (w != T(0))
+        for (int d = 0; d < D; ++d) dfi[d] += w * gj[d];
+    }
+  }
+}
+
+template <class T>
+T info_nce(const T* p, int D, const T* refs, int R, int positive, T tau2, T* dp, T scale) {
+  std::vector<T> u(p, p + D);
+  const T nrm = normalize(u.data(), D);
+  std::vector<T> logit(R);
+  T mx = -1e30;
+  for (int r = 0; r < R; ++r) {
+    T s = 0;
+    for (int d = 0; d < D; ++d) s += u[d] * refs[size_t(r) * D + d];
+    logit[r] = s / tau2;
+    mx = std::max(mx, logit[r]);
+  }
+  T z = 0;
+  for (int r = 0; r < R; ++r) z += std::exp(logit[r] - mx);
+  const T loss = -(logit[positive] - mx - std::log(z));
+  if (dp && nrm > T(0)) {
+    // dL/du = sum_r (softmax_r - [r = pos]) refs_r / tau2; then through u = p / |p|.
+    std::vector<T> du(D, T(0));
+    for (int r = 0; r < R; ++r) {
+      const T c = (std::exp(logit[r] - mx) / z - (r == positive ? T(1) : T(0))) / tau2;
+      for (int d = 0; d < D; ++d) du[d] += c * refs[size_t(r) * D + d];
+    }
+    T ud = 0;
+    for (int d = 0; d < D; ++d) ud += u[d] * du[d];
+    for (int d = 0; d < D; ++d) dp[d] += scale * (du[d] - u[d] * ud) / nrm;
+  }
+  return loss;
+}
+
+template float normalize<float>(float*, int);
+template double normalize<double>(double*, int);
+template void pooled_prediction<float>(int, int, int, int, const float*, const float*, const float*, const int*, const float*, float, float*);
+template void pooled_prediction<double>(int, int, int, int, const double*, const double*, const double*, const int*, const double*, double, double*);
+template void pooled_prediction_backward<float>(int, int, int, int, const float*, const float*, const float*, const int*, const float*, float, const float*, float*, float*, float*);
+template void pooled_prediction_backward<double>(int, int, int, int, const double*, const double*, const double*, const int*, const double*, double, const double*, double*, double*, double*);
+template float info_nce<float>(const float*, int, const float*, int, int, float, float*, float);
+template double info_nce<double>(const double*, int, const double*, int, int, double, double*, double);
+
+}  // namespace hgs::hybrid

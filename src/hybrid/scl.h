@@ -1,0 +1,41 @@
+// Semantic Contrastive Learning (paper eqs. 7-10).
+//
+// Pooling identity. The object-conditioned semantic render S_{u,k}(p) = sum_n q_{n,k} f_n alpha_n(p) T_n(p)
+// (eq. 8) is only ever used mask-pooled (eq. 9), and pooling commutes with the sum over Gaussians:
+//   z^pred_{u,k} = sum_p M_{u,k}(p) S_{u,k}(p) / (m + eps)
+//                = sum_n q_{n,k} f_n [sum_p M_{u,k}(p) alpha_n(p) T_n(p)] / (m + eps)
+//                = sum_n q_{n,k} f_n a_{n,k,u} / (m + eps),      m = sum_p M_{u,k}(p),
+// so the rasterizer only accumulates one scalar a_{n,k,u} per Gaussian and object instead of rendering a
+// D-channel image per object (tests/hybrid checks this against the direct render).
+//
+// InfoNCE (eq. 10). Anchor: the L2-normalised pooled prediction of object k in view u. Positive: the
+// normalised reference z^ref_{v,k} of the same object in another view v that sees it; negatives: the
+// references of the other foreground objects present in view v. sim = cosine, temperature tau2.
+//   L = -log( exp(sim(a, r_k)/tau2) / sum_{k' in F_v} exp(sim(a, r_k')/tau2) )
+#pragma once
+#include <cstdint>
+#include <vector>
+
+namespace hgs::hybrid {
+
+// P [J, D] = pooled predictions of objects objs[j] (column of q) with per-Gaussian weights a [N, J] and mask
+// areas mass [J]. q [N, L], f [N, D].
+template <class T>
+void pooled_prediction(int n, int D, int L, int J, const T* q, const T* f, const T* a, const int* objs, const T* mass,
+                       T eps, T* P);
+
+// Backward of pooled_prediction: dP [J, D] -> dq [N, L] (added), df [N, D] (added), da [N, J] (overwritten).
+template <class T>
+void pooled_prediction_backward(int n, int D, int L, int J, const T* q, const T* f, const T* a, const int* objs,
+                                const T* mass, T eps, const T* dP, T* dq, T* df, T* da);
+
+// InfoNCE of one anchor. p: unnormalised prediction [D]; refs: the candidates' unit reference vectors
+// [R, D]; positive: index of the positive among them. dp (may be null) receives scale * dL/dp.
+template <class T>
+T info_nce(const T* p, int D, const T* refs, int R, int positive, T tau2, T* dp, T scale);
+
+// L2-normalise v [D] in place; returns the norm before.
+template <class T>
+T normalize(T* v, int D);
+
+}  // namespace hgs::hybrid

@@ -1,0 +1,222 @@
+// Finite-difference checks (double precision) for the hybrid method's own gradients: Observation Fusion to
+// the view logits, object channels, pooled semantics, InfoNCE and BRO; plus hand-made Observation Fusion cases.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+#include <random>
+
+#include "hybrid/bro.h"
+#include "hybrid/fusion.h"
+#include "hybrid/object_channels.h"
+#include "hybrid/scl.h"
+
+using namespace hgs;
+using namespace hgs::hybrid;
+
+namespace {
+
+// Central differences of f at x for every coordinate; compares with `analytic` by relative error.
+void check_grad(std::vector<double>& x, const std::function<double()>& f, const std::vector<double>& analytic,
+                double h = 1e-6, double tol = 1e-6) {
+  ASSERT_EQ(x.size(), analytic.size());
+  double max_abs = 1e-12;
+  for (double g : analytic) max_abs = std::max(max_abs, std::abs(g));
+  int checked_nonzero = 0;
+  for (size_t i = 0; i < x.size(); ++i) {
+    const double x0 = x[i];
+    x[i] = x0 + h;
+    const double fp = f();
+    x[i] = x0 - h;
+    const double fm = f();
+    x[i] = x0;
+    const double num = (fp - fm) / (2 * h);
+    EXPECT_NEAR(analytic[i], num, tol * max_abs + 1e-9) << "coordinate " << i;
+    checked_nonzero += std::abs(num) > 1e-8;
+  }
+  EXPECT_GT(checked_nonzero, 0) << "the check would pass for a zero gradient";
+}
+
+std::vector<double> randv(size_t n, std::mt19937& rng, double lo = -1, double hi = 1) {
+  std::uniform_real_distribution<double> u(lo, hi);
+  std::vector<double> v(n);
+  for (auto& x : v) x = u(rng);
+  return v;
+}
+
+}  // namespace
+
+TEST(ObservationFusion, GradientToViewLogits) {
+  std::mt19937 rng(1);
+  const int N = 30, U = 6, L = 4;
+  ObservationTable tab;
+  tab.n = N;
+  tab.num_views = U;
+  tab.label.resize(N * U);
+  for (auto& l : tab.label) l = rng() % 5 == 0 ? kNoObservation : uint16_t(rng() % L);
+  for (int u = 0; u < U; ++u) tab.label[u] = kNoObservation;  // Gaussian 0 has no valid view
+  FusionParams p{L, 0.3, 1e-6};
+  std::vector<double> logits = randv(U, rng), dq = randv(N * L, rng), q0(N * L, 0.25);
+  auto loss = [&](std::vector<double>* q_out, std::vector<double>* s_out, std::vector<uint8_t>* valid_out) {
+    std::vector<double> w(U), q = q0, s(N * L);
+    std::vector<uint8_t> valid(N);
+    softmax(logits.data(), U, w.data());
+    fuse(tab, w.data(), p, q.data(), s.data(), valid.data());
+    double l = 0;
+    for (int i = 0; i < N * L; ++i) l += dq[i] * q[i];
+    if (q_out) *q_out = q, *s_out = s, *valid_out = valid;
+    return l;
+  };
+  std::vector<double> q, s, w(U), dw(U), dlogits(U);
+  std::vector<uint8_t> valid;
+  loss(&q, &s, &valid);
+  EXPECT_EQ(valid[0], 0);
+  for (int k = 0; k < L; ++k) EXPECT_EQ(q[k], 0.25);  // kept
+  softmax(logits.data(), U, w.data());
+  fuse_backward(tab, w.data(), p, s.data(), q.data(), valid.data(), dq.data(), dw.data());
+  softmax_backward(w.data(), dw.data(), U, dlogits.data());
+  check_grad(logits, [&] { return loss(nullptr, nullptr, nullptr); }, dlogits);
+}
+
+TEST(ObservationFusion, HandMadeCases) {
+  // One camera at the origin looking down +z, 10x10 image, left half labelled 1, right half 2;
+  // a second identical camera whose mask says 0 everywhere.
+  MaskView v;
+  v.width = 10;
+  v.height = 10;
+  v.fx = v.fy = 10;
+  v.cx = v.cy = 5;
+  v.labels = LabelMap(10, 10);
+  for (int y = 0; y < 10; ++y)
+    for (int x = 0; x < 10; ++x) v.labels.at(x, y) = x < 5 ? 1 : 2;
+  MaskView bg = v;
+  bg.labels = LabelMap(10, 10, 0);
+  const float means[] = {
+      -0.2f, 0.f, 1.f,  // left -> 1
+      0.2f, 0.f, 1.f,   // right -> 2
+      0.f, 0.f, -1.f,   // behind the camera
+      3.f, 0.f, 1.f,    // outside the image
+  };
+  ObservationTable tab;
+  observe(means, 4, {v, bg}, tab);
+  EXPECT_EQ(tab.label[0], 1);
+  EXPECT_EQ(tab.label[1], 0);
+  EXPECT_EQ(tab.label[2], 2);
+  EXPECT_EQ(tab.label[4], kNoObservation);
+  EXPECT_EQ(tab.label[5], kNoObservation);
+  EXPECT_EQ(tab.label[6], kNoObservation);
+  // Equal weights: Gaussian 0 has s = (0.5, 0.5, 0); with w = (0.9, 0.1) the reliable view wins.
+  FusionParams p{3, 0.1, 1e-9};
+  std::vector<float> q(12, 0.f), s(12);
+  q[9] = 1.f;  // Gaussian 3 (never observed) keeps its previous association
+  std::vector<uint8_t> valid(4);
+  float w_eq[] = {0.5f, 0.5f};
+  fuse(tab, w_eq, p, q.data(), s.data(), valid.data());
+  EXPECT_NEAR(s[0], 0.5f, 1e-6);
+  EXPECT_NEAR(s[1], 0.5f, 1e-6);
+  EXPECT_NEAR(q[0], q[1], 1e-6);
+  EXPECT_EQ(valid[2], 0);
+  EXPECT_EQ(valid[3], 0);
+  EXPECT_EQ(q[9], 1.f);
+  float w_rel[] = {0.9f, 0.1f};
+  fuse(tab, w_rel, p, q.data(), s.data(), valid.data());
+  std::vector<uint16_t> z(4);
+  hard_ids(q.data(), 4, 3, z.data());
+  EXPECT_EQ(z[0], 1);  // s = (0.1, 0.9, 0): the reliable view (label 1) wins
+  EXPECT_NEAR(s[1], 0.9f, 1e-5);
+  EXPECT_EQ(std::max_element(q.begin(), q.begin() + 3) - q.begin(), 1);
+  EXPECT_EQ(z[3], 0);  // kept q = (1, 0, 0)
+}
+
+TEST(ObjectChannels, GradientToQAndColour) {
+  std::mt19937 rng(2);
+  const int N = 7, L = 5, J = 3, stride = 13;
+  const int objs[J] = {0, 2, 4};
+  std::vector<double> q = randv(N * L, rng, 0, 1), c = randv(N * 3, rng, 0, 1), up = randv(N * stride, rng);
+  auto loss = [&] {
+    std::vector<double> e(N * stride, 0.0);
+    object_channels(N, L, J, objs, q.data(), c.data(), stride, e.data());
+    double l = 0;
+    for (int i = 0; i < N * stride; ++i) l += up[i] * e[i];
+    return l;
+  };
+  std::vector<double> dq(N * L, 0.0), dc(N * 3, 0.0);
+  // channels beyond 4J are not written, so their upstream gradient must not matter
+  for (int i = 0; i < N; ++i) up[i * stride + 12] = 0;
+  object_channels_backward(N, L, J, objs, q.data(), c.data(), stride, up.data(), dq.data(), dc.data());
+  check_grad(q, loss, dq);
+  check_grad(c, loss, dc);
+}
+
+TEST(Scl, PooledPredictionAndInfoNceGradients) {
+  std::mt19937 rng(3);
+  const int N = 9, D = 6, L = 4, J = 2;
+  const int objs[J] = {1, 3};
+  std::vector<double> q = randv(N * L, rng, 0, 1), f = randv(N * D, rng), a = randv(N * J, rng, 0, 2);
+  a[2 * J] = 0;  // a Gaussian that does not touch object 0's mask
+  const double mass[J] = {5, 3};
+  std::vector<double> refs = randv(3 * D, rng);
+  for (int r = 0; r < 3; ++r) normalize(&refs[r * D], D);
+  auto loss = [&] {
+    std::vector<double> P(J * D);
+    pooled_prediction(N, D, L, J, q.data(), f.data(), a.data(), objs, mass, 1e-6, P.data());
+    return info_nce(&P[0], D, refs.data(), 3, 0, 0.2, (double*)nullptr, 1.0) +
+           0.5 * info_nce(&P[D], D, refs.data(), 3, 2, 0.2, (double*)nullptr, 1.0);
+  };
+  std::vector<double> P(J * D), dP(J * D, 0.0);
+  pooled_prediction(N, D, L, J, q.data(), f.data(), a.data(), objs, mass, 1e-6, P.data());
+  info_nce(&P[0], D, refs.data(), 3, 0, 0.2, &dP[0], 1.0);
+  info_nce(&P[D], D, refs.data(), 3, 2, 0.2, &dP[D], 0.5);
+  std::vector<double> dq(N * L, 0.0), df(N * D, 0.0), da(N * J);
+  pooled_prediction_backward(N, D, L, J, q.data(), f.data(), a.data(), objs, mass, 1e-6, dP.data(), dq.data(),
+                             df.data(), da.data());
+  check_grad(q, loss, dq);
+  check_grad(f, loss, df);
+  check_grad(a, loss, da);
+}
+
+TEST(Scl, InfoNceValue) {
+  // Two orthogonal references, anchor along the positive: L = -log(e^{1/t} / (e^{1/t} + e^0)).
+  double refs[] = {1, 0, 0, 1};
+  double p[] = {3, 0};
+  const double t = 0.5;
+  EXPECT_NEAR(info_nce(p, 2, refs, 2, 0, t, (double*)nullptr, 1.0), -std::log(std::exp(2.0) / (std::exp(2.0) + 1)), 1e-12);
+}
+
+TEST(Bro, BandOnHandMadeMask) {
+  // A 3x3 square in a 9x9 image with a 3x3 element: band = dilation minus erosion = 5x5 ring incl. centre
+  // square (erosion of a 3x3 square by 3x3 is its centre pixel only).
+  const int H = 9, W = 9;
+  std::vector<float> M(H * W, 0.f), A(H * W, 0.f), B(H * W);
+  for (int y = 3; y < 6; ++y)
+    for (int x = 3; x < 6; ++x) M[y * W + x] = 1;
+  std::vector<float> tmp;
+  boundary_band(A.data(), M.data(), H, W, 3, B.data(), tmp);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      bool in5 = x >= 2 && x <= 6 && y >= 2 && y <= 6, centre = x == 4 && y == 4;
+      EXPECT_EQ(B[y * W + x], in5 && !centre ? 1.f : 0.f) << x << "," << y;
+    }
+  // A predicted opacity adds its own band, clipped at 1.
+  A[0] = 0.5f;
+  boundary_band(A.data(), M.data(), H, W, 3, B.data(), tmp);
+  EXPECT_FLOAT_EQ(B[0], 0.5f);
+  EXPECT_FLOAT_EQ(B[1 * W + 1], 0.5f);
+  EXPECT_FLOAT_EQ(B[2 * W + 2], 1.f);
+}
+
+TEST(Bro, LossGradient) {
+  std::mt19937 rng(4);
+  const int H = 6, W = 7, C = 3, cs = 4;
+  std::vector<double> pred = randv(H * W * cs, rng, 0, 1), gt = randv(H * W * cs, rng, 0, 1);
+  std::vector<float> B(H * W);
+  for (auto& b : B) b = (rng() % 3) * 0.5f;
+  auto loss = [&] { return bro_loss(pred.data(), gt.data(), cs, C, B.data(), H, W, 1e-6, (double*)nullptr, 1.0); };
+  std::vector<double> g(H * W * cs, 0.0);
+  const double l = bro_loss(pred.data(), gt.data(), cs, C, B.data(), H, W, 1e-6, g.data(), 1.0);
+  EXPECT_GT(l, 0);
+  for (int i = 0; i < H * W; ++i) EXPECT_EQ(g[i * cs + 3], 0.0);  // the 4th channel is not part of the image
+  check_grad(pred, loss, g);
+  // Identical differences give zero loss.
+  EXPECT_EQ(bro_loss(pred.data(), pred.data(), cs, C, B.data(), H, W, 1e-6, (double*)nullptr, 1.0), 0.0);
+}
