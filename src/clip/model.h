@@ -18,6 +18,11 @@ namespace hgs::clip {
 enum class Naming { OpenClip, HuggingFace };
 enum class Activation { GELU, QuickGELU };  // x*Phi(x) (erf) and x*sigmoid(1.702x)
 
+// "gelu" / "quick_gelu" -> the activation; "auto" or "" -> nullopt. Throws hgs::Error for anything else.
+std::optional<Activation> parse_activation(const std::string& s);
+// Sets the thread count of OpenBLAS and OpenMP (0 = leave the defaults: all cores).
+void set_num_threads(int n);
+
 struct ClipOptions {
   // Attention heads per tower; 0 = from config.json (HF) / open_clip_config.json beside the weights, else
   // width / 64 (true for every released CLIP ViT).

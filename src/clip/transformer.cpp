@@ -5,6 +5,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <omp.h>
+
+#include "core/error.h"
 
 namespace hgs::clip {
 
@@ -113,6 +116,23 @@ void block_forward(const Block& b, int heads, Activation act, const std::vector<
   linear(b.fc, ws.h.data(), n, ws.mlp.data());
   activation(act, ws.mlp.data(), size_t(n) * b.fc.out);
   linear_add(b.proj, ws.mlp.data(), n, x);
+}
+
+}  // namespace hgs::clip
+
+namespace hgs::clip {
+
+std::optional<Activation> parse_activation(const std::string& s) {
+  if (s.empty() || s == "auto") return std::nullopt;
+  if (s == "gelu") return Activation::GELU;
+  if (s == "quick_gelu" || s == "quickgelu") return Activation::QuickGELU;
+  fail("--act: unknown activation \"{}\" (auto, gelu or quick_gelu)", s);
+}
+
+void set_num_threads(int n) {
+  if (n <= 0) return;
+  openblas_set_num_threads(n);
+  omp_set_num_threads(n);
 }
 
 }  // namespace hgs::clip

@@ -1,0 +1,85 @@
+// `hgs embed-text --clip W --text "..." [--text ...] --out FILE.json`: CLIP text embeddings in the
+// text_embeddings.json format {"phrase": [D floats], ...} (L2-normalised).
+#include <fmt/format.h>
+
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "cli/command.h"
+#include "clip/model.h"
+#include "core/error.h"
+#include "core/fs.h"
+
+namespace hgs::cli {
+namespace {
+namespace fs = std::filesystem;
+
+struct EmbedTextArgs {
+  std::string clip, out, text_file, act = "auto";
+  std::vector<std::string> texts;
+  bool canonical = false, merge = false;
+  int threads = 0;
+};
+
+void run_embed_text(const EmbedTextArgs& a) {
+  clip::set_num_threads(a.threads);
+  std::vector<std::string> phrases = a.texts;
+  if (!a.text_file.empty()) {
+    std::string body = read_file_text(a.text_file);
+    size_t pos = 0;
+    while (pos <= body.size()) {
+      size_t e = body.find('\n', pos);
+      if (e == std::string::npos) e = body.size();
+      std::string line = body.substr(pos, e - pos);
+      if (!line.empty() && line.back() == '\r') line.pop_back();
+      if (!line.empty()) phrases.push_back(line);
+      pos = e + 1;
+    }
+  }
+  if (a.canonical)
+    for (const char* c : {"object", "things", "stuff", "texture"}) phrases.push_back(c);
+  if (phrases.empty()) fail("embed-text: no phrases (use --text, --text-file or --canonical)");
+  nlohmann::json out = nlohmann::json::object();
+  if (a.merge && fs::exists(a.out)) {
+    try {
+      out = nlohmann::json::parse(read_file_text(a.out));
+    } catch (const nlohmann::json::exception&) {
+      fail("{}: not valid JSON (cannot --merge into it)", a.out);
+    }
+    if (!out.is_object()) fail("{}: not a JSON object of phrases (cannot --merge into it)", a.out);
+  }
+  clip::ClipOptions opt;
+  opt.activation = clip::parse_activation(a.act);
+  clip::ClipModel m = clip::ClipModel::load(a.clip, opt);
+  if (!m.has_text) fail("{}: the model has no text tower", a.clip);
+  if (a.merge && !out.empty()) {
+    auto first = out.begin();
+    if (first->is_array() && int(first->size()) != m.embed_dim)
+      fail("{}: holds {}-dimensional embeddings but the model gives {}", a.out, first->size(), m.embed_dim);
+  }
+  std::vector<float> e = m.embed_text(phrases);
+  for (size_t i = 0; i < phrases.size(); ++i)
+    out[phrases[i]] = std::vector<float>(e.begin() + i * m.embed_dim, e.begin() + (i + 1) * m.embed_dim);
+  atomic_write_text(a.out, out.dump() + "\n");
+  fmt::print("wrote {} phrases (D = {}) to {}\n", phrases.size(), m.embed_dim, a.out);
+}
+
+CommandRegistration reg({"embed-text", "Embed text phrases with a CLIP model (safetensors) into text_embeddings.json", 20,
+                         [](CLI::App& sub) {
+                           auto a = std::make_shared<EmbedTextArgs>();
+                           sub.add_option("--clip", a->clip, "CLIP weights (.safetensors, open_clip or Hugging Face naming)")
+                               ->required()
+                               ->check(CLI::ExistingFile);
+                           sub.add_option("--text", a->texts, "A phrase to embed (repeatable)");
+                           sub.add_option("--text-file", a->text_file, "File with one phrase per line")->check(CLI::ExistingFile);
+                           sub.add_flag("--canonical", a->canonical, "Also embed LERF's canonical phrases (object, things, stuff, texture)");
+                           sub.add_option("--out", a->out, "Output JSON {\"phrase\": [D floats]}")->required();
+                           sub.add_flag("--merge", a->merge, "Keep the phrases already in --out (replacing those embedded again)");
+                           sub.add_option("--act", a->act, "Activation: auto (config file, else GELU for open_clip / QuickGELU for HF naming), gelu, quick_gelu")
+                               ->capture_default_str();
+                           sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();
+                           return [a] { run_embed_text(*a); };
+                         }});
+
+}  // namespace
+}  // namespace hgs::cli

@@ -1,0 +1,81 @@
+// `hgs features SCENE --clip W`: dense CLIP (MaskCLIP) features of every view, written to
+// SCENE/features/<stem>.npy as float16 [h, w, D], L2-normalised per patch.
+#include <fmt/format.h>
+
+#include "cli/command.h"
+#include "clip/model.h"
+#include "core/error.h"
+#include "core/npy.h"
+#include "core/progress.h"
+#include "scene/scene.h"
+
+namespace hgs::cli {
+namespace {
+namespace fs = std::filesystem;
+
+struct FeaturesArgs {
+  std::string scene, clip, act = "auto";
+  int input_size = 448, downscale = 1, tile = 0, max_tokens = 2304, threads = 0;
+  bool raw = false, skip_existing = false, quiet = false;
+};
+
+void run_features(const FeaturesArgs& a) {
+  clip::set_num_threads(a.threads);
+  Scene s = load_scene(a.scene, {a.downscale, false});
+  clip::ClipOptions opt;
+  opt.activation = clip::parse_activation(a.act);
+  clip::ClipModel m = clip::ClipModel::load(a.clip, opt);
+  if (!m.has_vision) fail("{}: the model has no vision tower", a.clip);
+  clip::DenseOptions d;
+  d.input_size = a.input_size;
+  d.tile_size = a.tile;
+  d.max_tokens = a.max_tokens;
+  d.normalize = !a.raw;
+  if (d.input_size < m.vision.patch) fail("--input-size {} is smaller than the patch size {}", d.input_size, m.vision.patch);
+  const fs::path out_dir = s.root / "features";
+  Progress bar("features", long(s.views.size()), !a.quiet);
+  int done = 0, skipped = 0, h = 0, w = 0;
+  for (const View& v : s.views) {
+    fs::path out = out_dir / (v.stem + ".npy");
+    if (a.skip_existing && fs::exists(out)) {
+      ++skipped;
+    } else {
+      Image img = s.load_image(v.index);
+      clip::DenseFeatures f = m.dense_features(img, d);
+      write_npy(out, make_npy_f16({size_t(f.h), size_t(f.w), size_t(f.dim)}, f.data.data()));
+      h = f.h, w = f.w;
+    }
+    bar.update(++done, h ? fmt::format("{}x{} grid", w, h) : "");
+  }
+  bar.finish();
+  fmt::print("wrote {} feature maps to {} ({} skipped; D = {}{})\n", done - skipped, out_dir.string(), skipped, m.embed_dim,
+             h ? fmt::format(", last grid {}x{}", w, h) : "");
+}
+
+CommandRegistration reg({"features", "Extract dense CLIP (MaskCLIP) features of every view into SCENE/features/", 25,
+                         [](CLI::App& sub) {
+                           auto a = std::make_shared<FeaturesArgs>();
+                           sub.add_option("SCENE", a->scene, "Scene folder (images/, sparse/0/)")->required();
+                           sub.add_option("--clip", a->clip, "CLIP weights (.safetensors, open_clip or Hugging Face naming)")
+                               ->required()
+                               ->check(CLI::ExistingFile);
+                           sub.add_option("--input-size", a->input_size, "Shorter image side fed to the ViT, in pixels (grid = size / patch)")
+                               ->capture_default_str()
+                               ->check(CLI::Range(8, 4096));
+                           sub.add_option("--downscale", a->downscale, "Integer image downscale factor before extraction")
+                               ->capture_default_str()
+                               ->check(CLI::Range(1, 64));
+                           sub.add_option("--max-tokens", a->max_tokens, "Above this many patches, run overlapping square tiles")
+                               ->capture_default_str()
+                               ->check(CLI::Range(1, 1 << 20));
+                           sub.add_option("--tile", a->tile, "Tile side in pixels when tiling (0 = --input-size)")->capture_default_str();
+                           sub.add_flag("--raw", a->raw, "Do not L2-normalise the features");
+                           sub.add_flag("--skip-existing", a->skip_existing, "Keep feature files that already exist");
+                           sub.add_option("--act", a->act, "Activation: auto, gelu, quick_gelu")->capture_default_str();
+                           sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();
+                           sub.add_flag("--quiet", a->quiet, "No progress bar");
+                           return [a] { run_features(*a); };
+                         }});
+
+}  // namespace
+}  // namespace hgs::cli
