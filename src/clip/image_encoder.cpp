@@ -23,7 +23,6 @@ void ClipModel::vision_forward(const float* img, int H, int W, bool dense, std::
   const int gh = H / p, gw = W / p, np = gh * gw, n = np + 1, kk = 3 * p * p;
   // im2col: patches [np, 3 * p * p] in (c, ky, kx) order, matching the conv weight.
   std::vector<float> cols(size_t(np) * kk);
-#pragma omp parallel for schedule(static)
   for (int gy = 0; gy < gh; ++gy)
     for (int gx = 0; gx < gw; ++gx) {
       float* c = cols.data() + (size_t(gy) * gw + gx) * kk;

@@ -1,6 +1,8 @@
 // CLIP transformer block kernels: see transformer.h.
 #include "clip/transformer.h"
 
+#include "clip/fastmath.h"
+
 #include <cblas.h>
 
 #include <algorithm>
@@ -40,7 +42,6 @@ void matmul(const float* x, int n, int k, const float* p, int n_out, float* y) {
 }
 
 void layer_norm(const LayerNorm& ln, const float* x, int n, int c, float* y) {
-#pragma omp parallel for schedule(static) if (size_t(n) * c > 32768)
   for (int i = 0; i < n; ++i) {
     const float* r = x + size_t(i) * c;
     float* o = y + size_t(i) * c;
@@ -57,23 +58,21 @@ void layer_norm(const LayerNorm& ln, const float* x, int n, int c, float* y) {
 void activation(Activation a, float* x, size_t count) {
   const long n = long(count);
   if (a == Activation::GELU) {
-#pragma omp parallel for schedule(static) if (n > 65536)
-    for (long i = 0; i < n; ++i) x[i] = 0.5f * x[i] * (1.f + std::erf(x[i] * 0.70710678118654752f));
+    for (long i = 0; i < n; ++i) x[i] = 0.5f * x[i] * (1.f + fast_erf(x[i] * 0.70710678118654752f));
   } else {
-#pragma omp parallel for schedule(static) if (n > 65536)
-    for (long i = 0; i < n; ++i) x[i] = x[i] / (1.f + std::exp(-1.702f * x[i]));
+    for (long i = 0; i < n; ++i) x[i] = x[i] / (1.f + fast_exp(-1.702f * x[i]));
   }
 }
 
 void softmax_rows(float* s, int rows, int cols, bool causal, int row0) {
-#pragma omp parallel for schedule(static) if (size_t(rows) * cols > 16384)
   for (int i = 0; i < rows; ++i) {
     float* r = s + size_t(i) * cols;
     const int m = causal ? std::min(cols, row0 + i + 1) : cols;
     float mx = r[0];
     for (int j = 1; j < m; ++j) mx = std::max(mx, r[j]);
     float sum = 0;
-    for (int j = 0; j < m; ++j) sum += (r[j] = std::exp(r[j] - mx));
+    for (int j = 0; j < m; ++j) r[j] = fast_exp(r[j] - mx);
+    for (int j = 0; j < m; ++j) sum += r[j];
     const float inv = 1.f / sum;
     for (int j = 0; j < m; ++j) r[j] *= inv;
     for (int j = m; j < cols; ++j) r[j] = 0.f;
