@@ -1,7 +1,7 @@
 // Branch-free float exp and erf that GCC auto-vectorises (AVX2 / AVX-512), for softmax and the activations.
 //   fast_exp: Cephes' expf — x = n ln2 + r with n rounded by the 1.5 * 2^23 trick, degree-6 polynomial for e^r,
 //             2^n put straight into the exponent bits. Relative error ~1e-7 over [-87, 88] (input clamped).
-//   fast_erf: Abramowitz & Stegun 7.1.26, |error| <= 1.5e-7.
+//   fast_erf: Abramowitz & Stegun 7.1.26 (|error| <= 1.5e-7 in exact arithmetic, <= 5e-7 evaluated in float).
 #pragma once
 #include <cstdint>
 #include <cstring>
