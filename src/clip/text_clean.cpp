@@ -245,7 +245,7 @@ struct Pcre {
 };
 
 std::string collapse_whitespace(const std::string& s) {
-  static Pcre ws("\\s+");
+  static Pcre ws("[\\s\\x{85}]+");  // \s of Python's regex module, which CLIP uses: White_Space incl. NEL
   pcre2_match_data* md = pcre2_match_data_create_from_pattern(ws.code, nullptr);
   std::string out;
   PCRE2_SIZE pos = 0;
@@ -259,8 +259,9 @@ std::string collapse_whitespace(const std::string& s) {
   }
   if (pos < s.size()) out.append(s, pos, std::string::npos);
   pcre2_match_data_free(md);
-  // strip
-  size_t b = out.find_first_not_of(' '), e = out.find_last_not_of(' ');
+  // str.strip(): after the collapse the only str.isspace characters left are ' ' and U+001C-001F.
+  static const char kStrip[] = " \x1c\x1d\x1e\x1f";
+  size_t b = out.find_first_not_of(kStrip), e = out.find_last_not_of(kStrip);
   return b == std::string::npos ? std::string() : out.substr(b, e - b + 1);
 }
 
@@ -277,9 +278,46 @@ std::string clean_text(const std::string& s) {
   std::string t = utf8_encode(ftfy_subset(utf8_decode(s)));
   t = html_unescape(html_unescape(t));
   t = collapse_whitespace(t);  // also strips both ends (Python's strip() + whitespace_clean)
-  std::u32string u = utf8_decode(t);
-  for (char32_t& c : u) c = to_lower(c);
-  return utf8_encode(u);
+  // Python's str.lower: simple mappings plus the two context-free/contextual special cases of Unicode's
+  // SpecialCasing that it applies: U+0130 -> "i\u0307" and the final sigma (capital sigma at the end of a
+  // word -> U+03C2), with approximations of Unicode's Cased and Case_Ignorable properties.
+  std::u32string u = utf8_decode(t), lower;
+  lower.reserve(u.size());
+  static locale_t loc = newlocale(LC_CTYPE_MASK, "C.UTF-8", locale_t(0));
+  // "Cased": a lower/upper case letter or one with another case form (approximates Unicode's Cased property).
+  auto cased = [&](char32_t c) {
+    if (c < 0x80) return (c | 0x20) >= 'a' && (c | 0x20) <= 'z';
+    return loc && (iswlower_l(wint_t(c), loc) || iswupper_l(wint_t(c), loc) || towlower_l(wint_t(c), loc) != wint_t(c) ||
+                   towupper_l(wint_t(c), loc) != wint_t(c));
+  };
+  // Case_Ignorable: general categories Mn, Me, Cf, Lm, Sk plus the word-break MidLetter / MidNumLet /
+  // Single_Quote characters (Unicode's definition), tested with PCRE2's Unicode properties.
+  static Pcre ign("^[\\p{Mn}\\p{Me}\\p{Cf}\\p{Lm}\\p{Sk}'.:\\x{B7}\\x{387}\\x{55F}\\x{5F4}\\x{2018}\\x{2019}\\x{2024}\\x{2027}\\x{FE13}\\x{FE52}\\x{FE55}\\x{FF07}\\x{FF0E}\\x{FF1A}]$");
+  pcre2_match_data* md = pcre2_match_data_create_from_pattern(ign.code, nullptr);
+  auto ignorable = [&](char32_t c) {
+    std::string e = utf8_encode(c);
+    return pcre2_match(ign.code, reinterpret_cast<PCRE2_SPTR>(e.data()), e.size(), 0, PCRE2_NO_UTF_CHECK, md, nullptr) >= 0;
+  };
+  auto final_sigma = [&](size_t i) {
+    size_t k = i;
+    while (k > 0 && ignorable(u[k - 1])) --k;
+    if (k == 0 || !cased(u[k - 1])) return false;
+    size_t j = i + 1;
+    while (j < u.size() && ignorable(u[j])) ++j;
+    return !(j < u.size() && cased(u[j]));
+  };
+  for (size_t i = 0; i < u.size(); ++i) {
+    char32_t c = u[i];
+    if (c == 0x130) {
+      lower += U"i\u0307";
+    } else if (c == 0x3A3 && final_sigma(i)) {
+      lower.push_back(0x3C2);
+    } else {
+      lower.push_back(to_lower(c));
+    }
+  }
+  pcre2_match_data_free(md);
+  return utf8_encode(lower);
 }
 
 }  // namespace hgs::clip

@@ -4,8 +4,8 @@
 //   2. html.unescape applied twice (numeric references with the HTML5 replacement rules, and the common named
 //      entities — not the full 2231-entry HTML5 table);
 //   3. whitespace runs (Unicode \s, via PCRE2 with UCP) collapsed to one space, ends stripped;
-//   4. Unicode lower case (simple case mapping of the C.UTF-8 locale; Python's str.lower uses the full mapping,
-//      which differs for a handful of characters such as U+0130).
+//   4. Unicode lower case like Python's str.lower: the C.UTF-8 locale's simple mapping, plus U+0130 -> "i\u0307"
+//      and the final sigma rule (letters judged by iswalpha rather than Unicode's "cased" property).
 // Not reproduced from ftfy: mojibake repair (fix_encoding), NFC normalisation, terminal-escape removal.
 #pragma once
 #include <string>

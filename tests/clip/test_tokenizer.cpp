@@ -47,6 +47,21 @@ TEST(ClipTokenizer, MatchesPythonReference) {
   }
 }
 
+// 500 random strings over many Unicode blocks (marks, controls, odd spaces, CJK, emoji, full-width forms).
+TEST(ClipTokenizer, MatchesPythonOnRandomUnicode) {
+  std::ifstream in(hgs::test::clip_data("tokens_fuzz.json"));
+  ASSERT_TRUE(in) << "tests/data/clip/tokens_fuzz.json missing";
+  nlohmann::json cases = nlohmann::json::parse(in);
+  ASSERT_EQ(cases.size(), 500u);
+  const Tokenizer& tok = Tokenizer::shared();
+  int bad = 0;
+  for (auto& c : cases) {
+    std::string text = c["text"].get<std::string>();
+    if (tok.tokenize(text) != c["ids"].get<std::vector<int>>() && ++bad <= 5) ADD_FAILURE() << "text: " << c["text"].dump();
+  }
+  EXPECT_EQ(bad, 0);
+}
+
 TEST(ClipTokenizer, HtmlUnescape) {
   EXPECT_EQ(html_unescape("&amp; &lt;b&gt; &quot;x&quot; &#39;y&#39; &#x263A;"), "& <b> \"x\" 'y' \xE2\x98\xBA");
   EXPECT_EQ(html_unescape("&amp;amp;"), "&amp;");

@@ -11,6 +11,7 @@ safetensors in both naming schemes and the outputs of the torch forward passes a
   hf_f32/         Hugging Face CLIPModel naming, F32 weights, QuickGELU, with config.json (heads, hidden_act)
   tokens.json     CLIP tokenizer ids of tricky strings, from an independent Python implementation of the
                   "simple tokenizer" (regex module with \\p{L}/\\p{N}, html.unescape twice)
+  tokens_fuzz.json  the same for 500 random strings over many Unicode blocks
 
 Per model folder: text_ids.npy [T, 77] int32 and text_emb.npy [T, D] (normalised, full 77-token forward);
 image.npy [S, S, 3] (a normalised input tensor), image_emb.npy [D] (normalised), dense.npy [g, g, D]
@@ -144,7 +145,22 @@ TOKEN_CASES = [
     "UPPER lower MiXeD",
     "a " * 100,
     "pneumonoultramicroscopicsilicovolcanoconiosis antidisestablishmentarianism",
+    "İSTANBUL ΟΔΥΣΣΕΥΣ ΣΑΣ. Σ",                      # Python's full lower case: U+0130, final sigma
+    "\x1cfile\x1dsep\x1f and NEL\x85here \x1e",    # str.strip vs the regex module's \s
+    "a\u0345b ᾳ \u0345",                              # U+0345 matches none of the split alternatives
+    "हिन्दी ไทย العربية",                                 # combining marks split letter runs
 ]
+
+
+def fuzz_cases(n, seed):
+    """Random strings over many Unicode blocks (letters, marks, digits, spaces, controls, emoji)."""
+    import random
+    rng = random.Random(seed)
+    ranges = [(0x20, 0x7E), (0xA0, 0x17F), (0x300, 0x36F), (0x370, 0x3FF), (0x400, 0x4FF), (0x590, 0x6FF),
+              (0x900, 0x97F), (0xE00, 0xE7F), (0x1E00, 0x1EFF), (0x2000, 0x206F), (0x2100, 0x214F), (0x3000, 0x30FF),
+              (0x4E00, 0x4E80), (0xAC00, 0xAC80), (0xFF00, 0xFFEF), (0x1F300, 0x1F6FF), (0x1C, 0x1F), (0x85, 0x85),
+              (0x9, 0xD)]
+    return ["".join(chr(rng.randint(*rng.choice(ranges))) for _ in range(rng.randint(0, 25))) for _ in range(n)]
 
 # --------------------------------------------------------------------------------------------------- model
 
@@ -399,6 +415,8 @@ def main():
     os.makedirs(OUT, exist_ok=True)
     cases = [{"text": s, "ids": tok.tokenize(s)} for s in TOKEN_CASES]
     json.dump(cases, open(os.path.join(OUT, "tokens.json"), "w", encoding="utf-8"), ensure_ascii=False, indent=1)
+    fuzz = [{"text": s, "ids": tok.tokenize(s)} for s in fuzz_cases(500, 7)]
+    json.dump(fuzz, open(os.path.join(OUT, "tokens_fuzz.json"), "w", encoding="utf-8"), ensure_ascii=False)
     phrases = ["a photo of a cat", "chair", "the red mug on the wooden table, seen from above", "",
                "a " * 100, "Café & “tea”"]
     json.dump(phrases, open(os.path.join(OUT, "phrases.json"), "w", encoding="utf-8"), ensure_ascii=False)
