@@ -78,6 +78,7 @@ void bin_gaussians(int width, int height, int n, const T* mean2d, const T* conic
   b.trect.resize(size_t(n) * 4);
   b.pair_offset.resize(size_t(n) + 1);
   b.counts.resize(size_t(n));
+  b.mahal.resize(size_t(n));
 
   // 1. boxes
 #pragma omp parallel for schedule(static)
@@ -89,6 +90,7 @@ void bin_gaussians(int width, int height, int n, const T* mean2d, const T* conic
     bb[2] = tr[2] = 1;
     bb[3] = tr[3] = 0;
     b.counts[i] = 0;
+    b.mahal[i] = -1;
     const T o = opacity[i];
     if (radius[i] <= 0 || !(o * T(255) >= T(1))) continue;
     const T u = mean2d[2 * i], v = mean2d[2 * i + 1];
@@ -96,6 +98,7 @@ void bin_gaussians(int width, int height, int n, const T* mean2d, const T* conic
     const T det = a * c - bc * bc;
     // alpha >= 1/255 needs d^T conic d <= m; bounding box of that ellipse is +-sqrt(m * cov_xx), +-sqrt(m * cov_yy)
     const T m = T(2) * std::log(T(255) * o) * T(1.0001) + T(1e-4);
+    b.mahal[i] = double(m);
     const T ex = std::sqrt(std::max(T(0), m * c / det)) + T(1e-3);
     const T ey = std::sqrt(std::max(T(0), m * a / det)) + T(1e-3);
     // pixel x is evaluated at x + 0.5

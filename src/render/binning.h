@@ -21,6 +21,7 @@ constexpr int kTileSize = 16;
 struct Binning {
   int width = 0, height = 0, tiles_x = 0, tiles_y = 0, num_tiles = 0, num_pairs = 0;
   std::vector<int> bbox;         // [N, 4] pixel box (x0, x1, y0, y1) inclusive where alpha >= 1/255 is possible
+  std::vector<double> mahal;     // [N] squared Mahalanobis radius (with margin) beyond which alpha < 1/255
   std::vector<int> trect;        // [N, 4] tile rect (tx0, tx1, ty0, ty1) inclusive; empty when x0 > x1
   std::vector<int> pair_offset;  // [N + 1] Gaussian-major pair numbering
   std::vector<int> tile_start;   // [num_tiles + 1] ranges into tile_gauss / tile_pair

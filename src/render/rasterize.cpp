@@ -15,90 +15,142 @@ using simd::kLanes;
 constexpr int kBatchesPerRow = kTileSize / kLanes;
 constexpr int kBatches = kTileSize * kBatchesPerRow;  // 32 batches of 8 pixels per tile
 
-// Structure-of-arrays fields of a tile's Gaussians.
-enum Field { kMx, kMy, kHa, kB, kHc, kA, kC, kOp, kCr, kCg, kCb, kZ, kNumFields };
+// Gaussian records: one 16-scalar record per Gaussian (one cache line for float), built once per forward in index
+// order and copied per tile into contiguous per-thread scratch (the inner loops read them with broadcasts).
+enum Field { kMx, kMy, kHa, kB, kHc, kA, kC, kOp, kCr, kCg, kCb, kZ, kMahal, kEy, kRecord = 16 };
 // Backward accumulator slots per Gaussian (and per pair); extras follow.
 enum Grad { gMx, gMy, gA, gB, gC, gOp, gR, gG, gBl, gZ, kNumGrads };
 
 template <class T>
 struct TileData {
-  int n = 0, cap = 0, C = 0;
-  const T* f[kNumFields];
-  const T* extra = nullptr;  // [n, C]
-  const int* lists = nullptr;
-  int count[kBatches];
+  int n = 0, C = 0;
+  const T* rec = nullptr;      // [n, 16]
+  const T* extra = nullptr;    // [n, C]
+  const int* lists = nullptr;  // [32, n] batch lists (tile-local indices, depth order)
+  const int* count = nullptr;  // [32]
 };
 
-// Loads the tile's Gaussians into SoA scratch and builds the 32 batch lists. Returns false for an empty tile.
 template <class T>
-bool load_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typename RasterWorkspace<T>::PerThread& w,
-               TileData<T>& td) {
-  const int s = bins.tile_start[tile], e = bins.tile_start[tile + 1];
-  const int n = e - s;
-  td.n = n;
-  td.C = in.num_extra;
-  if (n == 0) return false;
-  const int C = in.num_extra;
-  const int cap = (n + 7) & ~7;
-  td.cap = cap;
-  if (w.soa.size() < size_t(cap) * (kNumFields + C)) w.soa.resize(size_t(cap) * (kNumFields + C));
-  if (w.lists.size() < size_t(kBatches) * n) w.lists.resize(size_t(kBatches) * n);
-  if (w.ibuf.size() < size_t(4) * n) w.ibuf.resize(size_t(4) * n);
-  T* soa = w.soa.data();
-  T* f[kNumFields];
-  for (int k = 0; k < kNumFields; ++k) {
-    f[k] = soa + size_t(k) * cap;
-    td.f[k] = f[k];
+void build_records(const RasterInputs<T>& in, const Binning& bins, T* records) {
+#pragma omp parallel for schedule(static)
+  for (int g = 0; g < in.n; ++g) {
+    T* r = records + size_t(g) * kRecord;
+    r[kMx] = in.mean2d[2 * g];
+    r[kMy] = in.mean2d[2 * g + 1];
+    const T a = in.conic[3 * g], b = in.conic[3 * g + 1], c = in.conic[3 * g + 2];
+    r[kHa] = T(0.5) * a;
+    r[kB] = b;
+    r[kHc] = T(0.5) * c;
+    r[kA] = a;
+    r[kC] = c;
+    r[kOp] = in.opacity[g];
+    r[kCr] = in.color[3 * g];
+    r[kCg] = in.color[3 * g + 1];
+    r[kCb] = in.color[3 * g + 2];
+    r[kZ] = in.depth ? in.depth[g] : T(0);
+    const double m = bins.mahal[g];
+    r[kMahal] = T(m);
+    const double det = double(a) * double(c) - double(b) * double(b);
+    r[kEy] = m > 0 && det > 0 ? T(std::sqrt(m * double(a) / det) + 1e-3) : T(-1);
+    r[14] = r[15] = 0;
   }
-  T* ex = soa + size_t(kNumFields) * cap;
+}
+
+// Copies the tile's records (and extras) into per-thread scratch. Returns false for an empty tile.
+template <class T>
+bool load_records(const RasterInputs<T>& in, const Binning& bins, const T* records, int tile,
+                  typename RasterWorkspace<T>::PerThread& w, TileData<T>& td) {
+  const int s = bins.tile_start[tile], e = bins.tile_start[tile + 1];
+  const int n = e - s, C = in.num_extra;
+  td.n = n;
+  td.C = C;
+  if (n == 0) return false;
+  if (w.soa.size() < size_t(n) * (kRecord + C)) w.soa.resize(size_t(n) * (kRecord + C));
+  T* rec = w.soa.data();
+  T* ex = rec + size_t(n) * kRecord;
+  td.rec = rec;
   td.extra = ex;
-  const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
-  int* lists = w.lists.data();
-  td.lists = lists;
-  for (int b = 0; b < kBatches; ++b) td.count[b] = 0;
-  const int ymax = std::min(ty0 + kTileSize, bins.height) - 1;
   for (int k = 0; k < n; ++k) {
     const int g = bins.tile_gauss[s + k];
-    f[kMx][k] = in.mean2d[2 * g];
-    f[kMy][k] = in.mean2d[2 * g + 1];
-    const T a = in.conic[3 * g], b = in.conic[3 * g + 1], c = in.conic[3 * g + 2];
-    f[kHa][k] = T(0.5) * a;
-    f[kB][k] = b;
-    f[kHc][k] = T(0.5) * c;
-    f[kA][k] = a;
-    f[kC][k] = c;
-    f[kOp][k] = in.opacity[g];
-    f[kCr][k] = in.color[3 * g];
-    f[kCg][k] = in.color[3 * g + 1];
-    f[kCb][k] = in.color[3 * g + 2];
-    f[kZ][k] = in.depth ? in.depth[g] : T(0);
+    std::memcpy(rec + size_t(k) * kRecord, records + size_t(g) * kRecord, sizeof(T) * kRecord);
     for (int c2 = 0; c2 < C; ++c2) ex[size_t(k) * C + c2] = in.extra[size_t(g) * C + c2];
-    const int* bb = &bins.bbox[4 * size_t(g)];
-    const int y0 = std::max(bb[2], ty0), y1 = std::min(bb[3], ymax);
-    for (int y = y0; y <= y1; ++y) {
-      const int row = y - ty0;
-      for (int h = 0; h < kBatchesPerRow; ++h) {
-        const int xs = tx0 + h * kLanes;
-        if (bb[0] <= xs + kLanes - 1 && bb[1] >= xs) {
-          const int bt = row * kBatchesPerRow + h;
-          lists[size_t(bt) * n + td.count[bt]++] = k;
-        }
-      }
-    }
   }
   return true;
 }
 
+// Builds the 32 batch lists of a tile into lists [32, n] / count [32]: for each of the 16 pixel rows the exact
+// x-interval where d^T conic d <= m (the alpha >= 1/255 region, with margin; binning.h) is computed in double
+// (4 rows per vector), and the Gaussian is listed in the 8-pixel batches that interval touches.
+template <class T>
+void build_lists(const Binning& bins, int tile, const TileData<T>& td, int* lists, int* count) {
+  typedef double v4d __attribute__((vector_size(32)));
+  typedef int64_t v4l __attribute__((vector_size(32)));
+  const int n = td.n;
+  const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
+  int cnt[kBatches];
+  for (int b = 0; b < kBatches; ++b) cnt[b] = 0;
+  v4d rowc[4];  // pixel-centre y of the tile rows
+  for (int q = 0; q < 4; ++q)
+    for (int l = 0; l < 4; ++l) rowc[q][l] = ty0 + 4 * q + l + 0.5;
+  const double bx0[2] = {double(tx0), double(tx0 + kLanes)};
+  const double bx1[2] = {double(tx0 + kLanes - 1), double(tx0 + 2 * kLanes - 1)};
+  for (int k = 0; k < n; ++k) {
+    const T* r = td.rec + size_t(k) * kRecord;
+    const double ey = double(r[kEy]);
+    const double u = double(r[kMx]), v = double(r[kMy]);
+    if (ey < 0 || v + ey - 0.5 < ty0 || v - ey - 0.5 > ty0 + kTileSize - 1) continue;
+    const double a = double(r[kA]), b = double(r[kB]), c = double(r[kC]);
+    const double m = double(r[kMahal]), ndet = b * b - a * c, am = a * m, ia = 1.0 / a;
+    uint32_t hit[2] = {0, 0};
+    for (int q = 0; q < 4; ++q) {
+      const v4d dy = v - rowc[q];
+      const v4d disc = dy * dy * ndet + am;
+      const v4l valid = disc >= 0.0;
+      v4d dc = valid ? disc : v4d{} ;
+#if defined(__AVX__)
+      const v4d sq = (v4d)_mm256_sqrt_pd((__m256d)dc);
+#else
+      v4d sq;
+      for (int l = 0; l < 4; ++l) sq[l] = std::sqrt(dc[l]);
+#endif
+      // pixel x (centre x + 0.5) with dx = u - x - 0.5 in [(-b dy - sq) / a, (-b dy + sq) / a]
+      const v4d xl = u - (sq - b * dy) * ia - (0.5 + 1e-3);
+      const v4d xr = u + (sq + b * dy) * ia - (0.5 - 1e-3);
+      for (int h = 0; h < kBatchesPerRow; ++h) {
+        const v4l hm = valid & (xl <= bx1[h]) & (xr >= bx0[h]);
+        for (int l = 0; l < 4; ++l) hit[h] |= uint32_t(hm[l] & 1) << (4 * q + l);
+      }
+    }
+    for (int h = 0; h < kBatchesPerRow; ++h) {
+      uint32_t mbits = hit[h];
+      while (mbits) {
+        const int row = __builtin_ctz(mbits);
+        mbits &= mbits - 1;
+        const int bt = row * kBatchesPerRow + h;
+        lists[size_t(bt) * n + cnt[bt]++] = k;
+      }
+    }
+  }
+  for (int b = 0; b < kBatches; ++b) count[b] = cnt[b];
+}
+
 template <class T, bool kDepth, bool kExtra>
 void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typename RasterWorkspace<T>::PerThread& w,
-                  const RasterOutputs<T>& out) {
+                  const T* records, int* ws_lists, int* ws_count, const RasterOutputs<T>& out) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
   using I = typename std::remove_reference<decltype(M{}[0])>::type;
   const int W = bins.width, H = bins.height, C = in.num_extra;
   const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
   TileData<T> td;
-  const bool any_g = load_tile(in, bins, tile, w, td);
+  const bool any_g = load_records(in, bins, records, tile, w, td);
+  if (any_g) {
+    int* lists = ws_lists + size_t(kBatches) * bins.tile_start[tile];
+    int* count = ws_count + size_t(kBatches) * tile;
+    build_lists(bins, tile, td, lists, count);
+    td.lists = lists;
+    td.count = count;
+  }
   if (kExtra && w.chan.size() < size_t(C)) w.chan.resize(size_t(C));
   P* E = w.chan.data();
   const P lane = simd::iota_pack<T>();
@@ -119,21 +171,22 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
     const int* list = any_g ? td.lists + size_t(bt) * td.n : nullptr;
     for (int j = 0; j < cnt; ++j) {
       const int k = list[j];
-      const T dy = td.f[kMy][k] - fy;
-      const P dx = td.f[kMx][k] - fx;
-      const T bdy = td.f[kB][k] * dy, hcdy2 = td.f[kHc][k] * dy * dy;
-      const P power = -(dx * (td.f[kHa][k] * dx + bdy) + hcdy2);
-      const P alpha = simd::vmin<T>(td.f[kOp][k] * simd::vexp(power), simd::splat(T(0.99)));
+      const T* rc = td.rec + size_t(k) * kRecord;
+      const T dy = rc[kMy] - fy;
+      const P dx = rc[kMx] - fx;
+      const T bdy = rc[kB] * dy, hcdy2 = rc[kHc] * dy * dy;
+      const P power = -(dx * (rc[kHa] * dx + bdy) + hcdy2);
+      const P alpha = simd::vmin<T>(rc[kOp] * simd::vexp(power), simd::splat(T(0.99)));
       const M valid = active & (alpha >= T(1.0 / 255.0));
       const P testT = Tr * (T(1) - alpha);
       const M stop = valid & (testT < T(1e-4));
       active = active & ~stop;
       const M acc = valid & ~stop;
       const P wgt = acc ? alpha * Tr : P{};
-      R += wgt * td.f[kCr][k];
-      G += wgt * td.f[kCg][k];
-      B += wgt * td.f[kCb][k];
-      if (kDepth) D += wgt * td.f[kZ][k];
+      R += wgt * rc[kCr];
+      G += wgt * rc[kCg];
+      B += wgt * rc[kCb];
+      if (kDepth) D += wgt * rc[kZ];
       if (kExtra) {
         const T* e = td.extra + size_t(k) * C;
         for (int c = 0; c < C; ++c) E[c] += wgt * e[c];
@@ -160,7 +213,8 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
 template <class T, bool kDepth, bool kExtra>
 void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
                    typename RasterWorkspace<T>::PerThread& w, const T* final_T, const int32_t* last,
-                   const RasterGrads<T>& g, T* pair_grad) {
+                   const RasterGrads<T>& g, const T* records, const int* ws_lists, const int* ws_count,
+                   T* pair_grad) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
   using I = typename std::remove_reference<decltype(M{}[0])>::type;
@@ -168,7 +222,9 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
   const int F = kNumGrads + C;
   const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
   TileData<T> td;
-  if (!load_tile(in, bins, tile, w, td)) return;
+  if (!load_records(in, bins, records, tile, w, td)) return;
+  td.lists = ws_lists + size_t(kBatches) * bins.tile_start[tile];
+  td.count = ws_count + size_t(kBatches) * tile;
   const int n = td.n;
   if (w.acc.size() < size_t(n) * F) w.acc.resize(size_t(n) * F);
   P* acc = w.acc.data();
@@ -210,20 +266,21 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
     for (int j = jmax - 1; j >= 0; --j) {
       const int k = list[j];
       const M inr = (M{} + I(j)) < lastp;
-      const T dy = td.f[kMy][k] - fy;
-      const P dx = td.f[kMx][k] - fx;
-      const T bdy = td.f[kB][k] * dy, hcdy2 = td.f[kHc][k] * dy * dy;
-      const P power = -(dx * (td.f[kHa][k] * dx + bdy) + hcdy2);
+      const T* rc = td.rec + size_t(k) * kRecord;
+      const T dy = rc[kMy] - fy;
+      const P dx = rc[kMx] - fx;
+      const T bdy = rc[kB] * dy, hcdy2 = rc[kHc] * dy * dy;
+      const P power = -(dx * (rc[kHa] * dx + bdy) + hcdy2);
       const P gauss = simd::vexp(power);
-      const P araw = td.f[kOp][k] * gauss;
+      const P araw = rc[kOp] * gauss;
       const P alpha = simd::vmin<T>(araw, simd::splat(T(0.99)));
       const M c = inr & (alpha >= T(1.0 / 255.0));
       if (!simd::any(c)) continue;
       const P ioma = T(1) / (T(1) - alpha);
       const P Ti = Tc * ioma;
       const P wgt = alpha * Ti;
-      P dot = td.f[kCr][k] * gr + td.f[kCg][k] * gg + td.f[kCb][k] * gb;
-      if (kDepth) dot += td.f[kZ][k] * gd;
+      P dot = rc[kCr] * gr + rc[kCg] * gg + rc[kCb] * gb;
+      if (kDepth) dot += rc[kZ] * gd;
       const T* e = kExtra ? td.extra + size_t(k) * C : nullptr;
       if (kExtra)
         for (int ch = 0; ch < C; ++ch) dot += e[ch] * GE[ch];
@@ -242,8 +299,8 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
       a[gOp] += gauss * dLda;
       const P pw = araw * dLda;  // dL/dpower
       const P pdx = pw * dx;
-      a[gMx] += td.f[kA][k] * pdx + bdy * pw;
-      a[gMy] += td.f[kB][k] * pdx + (td.f[kC][k] * dy) * pw;
+      a[gMx] += rc[kA] * pdx + bdy * pw;
+      a[gMy] += rc[kB] * pdx + (rc[kC] * dy) * pw;
       a[gA] += pdx * dx;
       a[gB] += pdx * dy;
       a[gC] += pw * (dy * dy);
@@ -281,15 +338,22 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
                        const RasterOutputs<T>& out) {
   ensure_threads(ws);
   const bool dep = in.depth != nullptr, ext = in.num_extra > 0;
+  if (ws.lists.size() < size_t(kBatches) * bins.num_pairs) ws.lists.resize(size_t(kBatches) * bins.num_pairs);
+  ws.list_count.resize(size_t(kBatches) * bins.num_tiles);
+  int* L = ws.lists.data();
+  int* Cn = ws.list_count.data();
+  if (ws.records.size() < size_t(in.n) * kRecord) ws.records.resize(size_t(in.n) * kRecord);
+  build_records(in, bins, ws.records.data());
+  const T* R = ws.records.data();
 #pragma omp parallel
   {
     auto& w = ws.threads[omp_get_thread_num()];
 #pragma omp for schedule(dynamic, 1)
     for (int t = 0; t < bins.num_tiles; ++t) {
-      if (dep && ext) forward_tile<T, true, true>(in, bins, t, w, out);
-      else if (dep) forward_tile<T, true, false>(in, bins, t, w, out);
-      else if (ext) forward_tile<T, false, true>(in, bins, t, w, out);
-      else forward_tile<T, false, false>(in, bins, t, w, out);
+      if (dep && ext) forward_tile<T, true, true>(in, bins, t, w, R, L, Cn, out);
+      else if (dep) forward_tile<T, true, false>(in, bins, t, w, R, L, Cn, out);
+      else if (ext) forward_tile<T, false, true>(in, bins, t, w, R, L, Cn, out);
+      else forward_tile<T, false, false>(in, bins, t, w, R, L, Cn, out);
     }
   }
 }
@@ -303,6 +367,9 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
   const bool ext = C > 0 && g.d_extra != nullptr;
   if (ws.pair_grad.size() < size_t(bins.num_pairs) * F) ws.pair_grad.resize(size_t(bins.num_pairs) * F);
   T* pg = ws.pair_grad.data();
+  const int* L = ws.lists.data();
+  const int* Cn = ws.list_count.data();
+  const T* R = ws.records.data();
   if (!ext && C > 0) {
     // extra slots are not written by the kernel in this case; keep them zero
     std::fill(pg, pg + size_t(bins.num_pairs) * F, T(0));
@@ -312,10 +379,10 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
     auto& w = ws.threads[omp_get_thread_num()];
 #pragma omp for schedule(dynamic, 1)
     for (int t = 0; t < bins.num_tiles; ++t) {
-      if (dep && ext) backward_tile<T, true, true>(in, bins, t, w, final_T, last, g, pg);
-      else if (dep) backward_tile<T, true, false>(in, bins, t, w, final_T, last, g, pg);
-      else if (ext) backward_tile<T, false, true>(in, bins, t, w, final_T, last, g, pg);
-      else backward_tile<T, false, false>(in, bins, t, w, final_T, last, g, pg);
+      if (dep && ext) backward_tile<T, true, true>(in, bins, t, w, final_T, last, g, R, L, Cn, pg);
+      else if (dep) backward_tile<T, true, false>(in, bins, t, w, final_T, last, g, R, L, Cn, pg);
+      else if (ext) backward_tile<T, false, true>(in, bins, t, w, final_T, last, g, R, L, Cn, pg);
+      else backward_tile<T, false, false>(in, bins, t, w, final_T, last, g, R, L, Cn, pg);
     }
     // reduce pair slots per Gaussian in a fixed order
 #pragma omp for schedule(static)

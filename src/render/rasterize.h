@@ -61,18 +61,19 @@ struct RasterGrads {
   T* extra = nullptr;          // [N, C] out (may be null)
 };
 
-// Scratch reused between calls (grown, never shrunk): per-thread tile buffers and per-pair gradients.
+// Scratch reused between calls; backward must get the workspace of the forward it differentiates (grown, never shrunk): per-thread tile buffers and per-pair gradients.
 template <class T>
 struct RasterWorkspace {
   struct PerThread {
-    std::vector<T> soa;                     // per-tile structure of arrays
-    std::vector<int> ibuf;                  // per-tile ints (opacity boxes)
-    std::vector<int> lists;                 // [32, n] batch lists
+    std::vector<T> soa;                     // per-tile Gaussian records [n, 16] then extras [n, C]
     std::vector<simd::Pack<T>> acc;         // backward accumulators [n, F]
     std::vector<simd::Pack<T>> chan;        // per-batch extra-channel packs [2, C]
   };
   std::vector<PerThread> threads;
-  std::vector<T> pair_grad;  // [P, F]
+  std::vector<T> records;       // [N, 16] per-Gaussian records built by forward, reused by backward
+  std::vector<int> lists;       // [32 * P] per-tile batch lists built by forward, reused by backward
+  std::vector<int> list_count;  // [num_tiles, 32]
+  std::vector<T> pair_grad;     // [P, F]
 };
 
 template <class T>
