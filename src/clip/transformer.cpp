@@ -2,6 +2,7 @@
 #include "clip/transformer.h"
 
 #include "clip/fastmath.h"
+#include "clip/thread_pool.h"
 
 #include <cblas.h>
 
@@ -42,41 +43,46 @@ void matmul(const float* x, int n, int k, const float* p, int n_out, float* y) {
 }
 
 void layer_norm(const LayerNorm& ln, const float* x, int n, int c, float* y) {
-  for (int i = 0; i < n; ++i) {
-    const float* r = x + size_t(i) * c;
-    float* o = y + size_t(i) * c;
-    double mean = 0, var = 0;
-    for (int j = 0; j < c; ++j) mean += r[j];
-    mean /= c;
-    for (int j = 0; j < c; ++j) var += (r[j] - mean) * (r[j] - mean);
-    var /= c;
-    const float m = float(mean), inv = float(1.0 / std::sqrt(var + 1e-5));
-    for (int j = 0; j < c; ++j) o[j] = (r[j] - m) * inv * ln.g[j] + ln.b[j];
-  }
+  parallel_for(n, std::max(1, 32768 / std::max(c, 1)), [&](long r0, long r1) {
+    for (long i = r0; i < r1; ++i) {
+      const float* r = x + size_t(i) * c;
+      float* o = y + size_t(i) * c;
+      double mean = 0, var = 0;
+      for (int j = 0; j < c; ++j) mean += r[j];
+      mean /= c;
+      for (int j = 0; j < c; ++j) var += (r[j] - mean) * (r[j] - mean);
+      var /= c;
+      const float m = float(mean), inv = float(1.0 / std::sqrt(var + 1e-5));
+      for (int j = 0; j < c; ++j) o[j] = (r[j] - m) * inv * ln.g[j] + ln.b[j];
+    }
+  });
 }
 
 void activation(Activation a, float* x, size_t count) {
-  const long n = long(count);
-  if (a == Activation::GELU) {
-    for (long i = 0; i < n; ++i) x[i] = 0.5f * x[i] * (1.f + fast_erf(x[i] * 0.70710678118654752f));
-  } else {
-    for (long i = 0; i < n; ++i) x[i] = x[i] / (1.f + fast_exp(-1.702f * x[i]));
-  }
+  parallel_for(long(count), 65536, [&](long b, long e) {
+    if (a == Activation::GELU) {
+      for (long i = b; i < e; ++i) x[i] = 0.5f * x[i] * (1.f + fast_erf(x[i] * 0.70710678118654752f));
+    } else {
+      for (long i = b; i < e; ++i) x[i] = x[i] / (1.f + fast_exp(-1.702f * x[i]));
+    }
+  });
 }
 
 void softmax_rows(float* s, int rows, int cols, bool causal, int row0) {
-  for (int i = 0; i < rows; ++i) {
-    float* r = s + size_t(i) * cols;
-    const int m = causal ? std::min(cols, row0 + i + 1) : cols;
-    float mx = r[0];
-    for (int j = 1; j < m; ++j) mx = std::max(mx, r[j]);
-    float sum = 0;
-    for (int j = 0; j < m; ++j) r[j] = fast_exp(r[j] - mx);
-    for (int j = 0; j < m; ++j) sum += r[j];
-    const float inv = 1.f / sum;
-    for (int j = 0; j < m; ++j) r[j] *= inv;
-    for (int j = m; j < cols; ++j) r[j] = 0.f;
-  }
+  parallel_for(rows, std::max(1, 32768 / std::max(cols, 1)), [&](long r0, long r1) {
+    for (long i = r0; i < r1; ++i) {
+      float* r = s + size_t(i) * cols;
+      const int m = causal ? std::min(cols, int(row0 + i + 1)) : cols;
+      float mx = r[0];
+      for (int j = 1; j < m; ++j) mx = std::max(mx, r[j]);
+      for (int j = 0; j < m; ++j) r[j] = fast_exp(r[j] - mx);
+      float sum = 0;
+      for (int j = 0; j < m; ++j) sum += r[j];
+      const float inv = 1.f / sum;
+      for (int j = 0; j < m; ++j) r[j] *= inv;
+      for (int j = m; j < cols; ++j) r[j] = 0.f;
+    }
+  });
 }
 
 void l2_normalize_rows(float* x, int n, int d) {

@@ -1,8 +1,9 @@
 // Pre-LayerNorm transformer blocks as in CLIP (x += attn(ln_1(x)); x += mlp(ln_2(x))), float32 on the CPU.
 // All matrix products are cblas_sgemm calls on whole token matrices (OpenBLAS threads them); attention runs
 // per sequence and head as two sgemm calls (Q K^T, then P V) with a row softmax in between. LayerNorm,
-// activation and softmax are single-threaded vectorised loops (fastmath.h): OpenMP regions between the
-// OpenBLAS calls made both thread pools spin against each other and halved the speed on 2 cores. Several independent sequences can be packed
+// activation and softmax are vectorised loops (fastmath.h) split over a blocking thread pool (thread_pool.h):
+// OpenMP regions between the OpenBLAS calls made both thread pools spin against each other and halved the
+// speed on 2 cores. Several independent sequences can be packed
 // into one token matrix (`Segment`s): linear layers see all of them at once, attention stays within each.
 // Buffers live in a Workspace sized once per forward call; nothing is allocated per token or per layer.
 #pragma once

@@ -1,0 +1,97 @@
+// Blocking thread pool: see thread_pool.h. One job at a time (calls from several threads serialise on a mutex);
+// workers are started lazily and live for the process.
+#include "clip/thread_pool.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <condition_variable>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+namespace hgs::clip {
+namespace {
+
+class Pool {
+ public:
+  ~Pool() {
+    {
+      std::lock_guard<std::mutex> l(m_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    for (auto& t : workers_) t.join();
+  }
+
+  void run(int nthreads, long n, const std::function<void(long, long)>& fn) {
+    std::lock_guard<std::mutex> job_lock(job_);
+    while (int(workers_.size()) < nthreads - 1) {
+      int id = int(workers_.size()) + 1;
+      workers_.emplace_back([this, id] { loop(id); });
+    }
+    {
+      std::lock_guard<std::mutex> l(m_);
+      fn_ = &fn;
+      n_ = n;
+      parts_ = nthreads;
+      pending_ = nthreads - 1;
+      ++generation_;
+    }
+    cv_.notify_all();
+    chunk(0, fn);
+    std::unique_lock<std::mutex> l(m_);
+    done_cv_.wait(l, [&] { return pending_ == 0; });
+    fn_ = nullptr;
+  }
+
+ private:
+  void chunk(int part, const std::function<void(long, long)>& fn) {
+    long b = n_ * part / parts_, e = n_ * (part + 1) / parts_;
+    if (b < e) fn(b, e);
+  }
+  void loop(int id) {
+    long seen = 0;
+    for (;;) {
+      const std::function<void(long, long)>* fn;
+      {
+        std::unique_lock<std::mutex> l(m_);
+        cv_.wait(l, [&] { return stop_ || (generation_ != seen && id < parts_); });
+        if (stop_) return;
+        seen = generation_;
+        fn = fn_;
+      }
+      chunk(id, *fn);
+      std::lock_guard<std::mutex> l(m_);
+      if (--pending_ == 0) done_cv_.notify_one();
+    }
+  }
+
+  std::mutex job_, m_;
+  std::condition_variable cv_, done_cv_;
+  std::vector<std::thread> workers_;
+  const std::function<void(long, long)>* fn_ = nullptr;
+  long n_ = 0, generation_ = 0;
+  int parts_ = 1, pending_ = 0;
+  bool stop_ = false;
+};
+
+Pool& pool() {
+  static Pool p;
+  return p;
+}
+
+}  // namespace
+
+int pool_threads() { return std::clamp(omp_get_max_threads(), 1, 64); }
+
+void parallel_for(long n, long min_parallel, const std::function<void(long, long)>& fn) {
+  const int t = int(std::min<long>(pool_threads(), std::max<long>(n, 1)));
+  if (n < min_parallel || t <= 1) {
+    if (n > 0) fn(0, n);
+    return;
+  }
+  pool().run(t, n, fn);
+}
+
+}  // namespace hgs::clip
