@@ -1,0 +1,31 @@
+// Hyper-parameters of the hybrid method (paper eq. 15 and sections 2.2-2.3). The paper gives no values; the
+// defaults here are ours, chosen on the synthetic benchmark, and every one is a `hgs train` option.
+#pragma once
+#include <nlohmann/json.hpp>
+
+namespace hgs::hybrid {
+
+struct HybridConfig {
+  bool use_of = true;    // Observation Fusion (else single-view hard assignment)
+  bool use_scl = true;   // Semantic Contrastive Learning (else per-pixel cosine on the full semantic render)
+  bool use_bro = true;   // Boundary Reconstruction Optimization (else lambda_bro = 0)
+  float lambda_rgb = 1.0f;  // plain 3DGS photometric loss on the full image (not in eq. 15; 0 = eq. 15 alone)
+  float lambda_app = 1.0f, lambda_sem = 0.1f, lambda_bro = 1.0f;
+  float lambda_dssim = 0.2f;  // lambda of eq. 6
+  float tau1 = 0.5f;          // mask confidence threshold (eq. 2)
+  float temperature = 0.1f;   // T of eq. 5
+  float fusion_eps = 1e-6f;   // epsilon of eq. 4
+  float tau2 = 0.1f;          // InfoNCE temperature (eq. 10)
+  int fusion_every = 100;     // R: rebuild the observation table every R iterations (and after densification)
+  int bro_kernel = 5;         // square structuring element of D and E (eq. 12)
+  float bro_eps = 1e-6f;
+  int min_mask_pixels = 16;   // objects smaller than this in a view are not SCL anchors/candidates
+  float lr_lang = 2.5e-3f;    // Adam learning rate of f_n
+  float lr_view = 1e-2f;      // Adam learning rate of the view reliability logits
+  float lang_init_std = 0.1f;
+
+  nlohmann::json to_json() const;
+  static HybridConfig from_json(const nlohmann::json& j);
+};
+
+}  // namespace hgs::hybrid

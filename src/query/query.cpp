@@ -1,0 +1,147 @@
+#include "query/query.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/error.h"
+
+namespace hgs::query {
+
+const char* const kCanonicalPhrases[4] = {"object", "things", "stuff", "texture"};
+
+ObjectEmbeddings object_embeddings(const GaussianModel& m) {
+  const ExtraGroup* q = m.find_extra("obj");
+  const ExtraGroup* f = m.find_extra("lang");
+  const ExtraGroup* z = m.find_extra("obj_id");
+  if (!q || !f || !z) fail("the model has no object associations / language embeddings (train it with --method hybrid)");
+  ObjectEmbeddings oe;
+  oe.num_labels = q->dim;
+  oe.dim = f->dim;
+  const int L = q->dim, D = f->dim;
+  std::vector<double> acc(size_t(L) * D, 0.0);
+  oe.weight.assign(L, 0.f);
+  oe.count.assign(L, 0);
+  for (int i = 0; i < m.n; ++i) {
+    const float op = sigmoid(m.opacity_logit[i]);
+    const float* fi = &f->data[size_t(i) * D];
+    const int zi = static_cast<int>(z->data[i]);
+    if (zi >= 0 && zi < L) oe.count[zi]++;
+    for (int k = 0; k < L; ++k) {
+      const float w = q->data[size_t(i) * L + k] * op;
+      if (w < 1e-4f) continue;
+      oe.weight[k] += w;
+      double* a = &acc[size_t(k) * D];
+      for (int d = 0; d < D; ++d) a[d] += w * fi[d];
+    }
+  }
+  oe.e.assign(size_t(L) * D, 0.f);
+  for (int k = 0; k < L; ++k) {
+    double s = 0;
+    for (int d = 0; d < D; ++d) s += acc[size_t(k) * D + d] * acc[size_t(k) * D + d];
+    if (s <= 0) continue;
+    const double inv = 1.0 / std::sqrt(s);
+    for (int d = 0; d < D; ++d) oe.e[size_t(k) * D + d] = float(acc[size_t(k) * D + d] * inv);
+  }
+  return oe;
+}
+
+float relevancy(const float* x, const float* q, const float* canon, int C, int D) {
+  double sq = 0;
+  for (int d = 0; d < D; ++d) sq += double(x[d]) * q[d];
+  float best = 1.f;
+  for (int c = 0; c < C; ++c) {
+    double sc = 0;
+    for (int d = 0; d < D; ++d) sc += double(x[d]) * canon[size_t(c) * D + d];
+    // exp(10 sq) / (exp(10 sq) + exp(10 sc)) = 1 / (1 + exp(10 (sc - sq)))
+    best = std::min(best, float(1.0 / (1.0 + std::exp(10.0 * (sc - sq)))));
+  }
+  return best;
+}
+
+std::vector<ObjectScore> score_objects(const ObjectEmbeddings& oe, const float* text, const float* canon, int C) {
+  std::vector<ObjectScore> out;
+  for (int k = 1; k < oe.num_labels; ++k) {
+    if (oe.weight[k] <= 0) continue;
+    const float* e = &oe.e[size_t(k) * oe.dim];
+    double c = 0;
+    for (int d = 0; d < oe.dim; ++d) c += double(e[d]) * text[d];
+    out.push_back({k, float(c), relevancy(e, text, canon, C, oe.dim)});
+  }
+  std::sort(out.begin(), out.end(), [](const ObjectScore& a, const ObjectScore& b) {
+    return a.relevancy != b.relevancy ? a.relevancy > b.relevancy : a.object < b.object;
+  });
+  return out;
+}
+
+render::GaussianInputs model_inputs(const GaussianModel& m) {
+  render::GaussianInputs in;
+  in.n = m.n;
+  in.mean = m.mean.data();
+  in.log_scale = m.log_scale.data();
+  in.quat = m.quat.data();
+  in.opacity_logit = m.opacity_logit.data();
+  in.sh = m.sh.data();
+  in.sh_stride = m.sh_stride();
+  in.sh_degree = m.sh_degree;
+  return in;
+}
+
+std::vector<float> render_object_opacity(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
+                                         const std::vector<int>& ks) {
+  const ExtraGroup* q = m.find_extra("obj");
+  if (!q) fail("the model has no object associations (train it with --method hybrid)");
+  const int J = static_cast<int>(ks.size()), L = q->dim;
+  std::vector<float> ch(size_t(m.n) * J);
+  for (int i = 0; i < m.n; ++i)
+    for (int j = 0; j < J; ++j) ch[size_t(i) * J + j] = (ks[j] >= 0 && ks[j] < L) ? q->data[size_t(i) * L + ks[j]] : 0.f;
+  render::GaussianInputs in = model_inputs(m);
+  in.extra = ch.data();
+  in.num_extra = J;
+  render::RenderSettings rs;
+  rs.want_depth = false;
+  render::RenderOutputs out;
+  r.forward(cam, in, rs, out);
+  return out.extra;
+}
+
+std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
+                                    const float* text, const float* canon, int C) {
+  const ExtraGroup* f = m.find_extra("lang");
+  if (!f) fail("the model has no language embeddings (train it with --method hybrid)");
+  const int D = f->dim;
+  render::GaussianInputs in = model_inputs(m);
+  in.extra = f->data.data();
+  in.num_extra = D;
+  render::RenderSettings rs;
+  rs.want_depth = false;
+  render::RenderOutputs out;
+  r.forward(cam, in, rs, out);
+  const size_t HW = size_t(cam.width) * cam.height;
+  std::vector<float> rel(HW, 0.f);
+#pragma omp parallel for schedule(static)
+  for (size_t p = 0; p < HW; ++p) {
+    float* x = &out.extra[p * D];
+    double s = 0;
+    for (int d = 0; d < D; ++d) s += double(x[d]) * x[d];
+    if (s <= 1e-20) continue;
+    const float inv = float(1.0 / std::sqrt(s));
+    for (int d = 0; d < D; ++d) x[d] *= inv;
+    rel[p] = relevancy(x, text, canon, C, D);
+  }
+  return rel;
+}
+
+GaussianModel select_objects(const GaussianModel& m, const std::vector<int>& objects, bool remove) {
+  const ExtraGroup* z = m.find_extra("obj_id");
+  if (!z) fail("the model has no object ids (train it with --method hybrid)");
+  std::vector<int> keep;
+  for (int i = 0; i < m.n; ++i) {
+    const bool hit = std::find(objects.begin(), objects.end(), static_cast<int>(z->data[i])) != objects.end();
+    if (hit != remove) keep.push_back(i);
+  }
+  GaussianModel out = m;
+  out.gather(keep);
+  return out;
+}
+
+}  // namespace hgs::query

@@ -1,0 +1,55 @@
+// Open-vocabulary queries on a trained hybrid model.
+//
+// Object level (the hybrid way): every object k gets one language embedding
+//   e_k = normalise( sum_n q_{n,k} sigmoid(o_n) f_n )
+// and is scored against the text with LERF's relevancy rule against the canonical phrases. Its mask in a view
+// is its rendered opacity A_k = sum_n q_{n,k} alpha T, thresholded (default 0.5).
+// Pixel level (LERF / LangSplat style): the language map sum_n f_n alpha T is rendered and scored per pixel.
+// 3D selection: the Gaussians whose hard id z_n is one of the chosen objects (or all others, for removal).
+#pragma once
+#include <map>
+#include <string>
+#include <vector>
+
+#include "model/gaussian_model.h"
+#include "render/renderer.h"
+
+namespace hgs::query {
+
+extern const char* const kCanonicalPhrases[4];  // "object", "things", "stuff", "texture"
+
+struct ObjectEmbeddings {
+  int num_labels = 0, dim = 0;
+  std::vector<float> e;       // [L, D] unit vectors (zero for objects without Gaussians)
+  std::vector<float> weight;  // [L] sum_n q_{n,k} sigmoid(o_n)
+  std::vector<int> count;     // [L] Gaussians whose hard id is k
+};
+
+// Fails with a clear error when the model has no "obj"/"lang" groups (not a hybrid model).
+ObjectEmbeddings object_embeddings(const GaussianModel& m);
+
+// LERF relevancy of an embedding x (unit) for a query q (unit) against canonical phrases c_i (unit):
+// min_i exp(10 x.q) / (exp(10 x.q) + exp(10 x.c_i)). canon [C, D].
+float relevancy(const float* x, const float* q, const float* canon, int C, int D);
+
+struct ObjectScore {
+  int object = 0;
+  float cosine = 0, relevancy = 0;
+};
+// Scores of every foreground object (1..K with Gaussians), best first.
+std::vector<ObjectScore> score_objects(const ObjectEmbeddings& oe, const float* text, const float* canon, int C);
+
+// Gaussian inputs for rendering a model (SH colours at the model's degree).
+render::GaussianInputs model_inputs(const GaussianModel& m);
+
+// Opacity render of objects `ks` (channel j = A_{ks[j]}). Returns [H, W, J].
+std::vector<float> render_object_opacity(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
+                                         const std::vector<int>& ks);
+// Per-pixel relevancy of the rendered language map for a query: [H, W] (0 where nothing is rendered).
+std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
+                                    const float* text, const float* canon, int C);
+
+// Copy of the model keeping Gaussians whose hard id is in `objects` (or not in it when `remove`).
+GaussianModel select_objects(const GaussianModel& m, const std::vector<int>& objects, bool remove);
+
+}  // namespace hgs::query
