@@ -1,0 +1,78 @@
+// The two evaluation protocols on per-pixel relevancy maps.
+//
+// LERF-OVS (LangSplat's evaluate_iou_loc.py, re-implemented):
+//   smoothed  v' = 0.5 * (box_k(v) + v)               box_k: filters.h box_filter, k = 30
+//   n         = (v' - min v') / (max v' - min v' + 1e-9)
+//   out       = clip(2 n - 1, 0, 1)
+//   mask      = majority_7x7(out > 0.4)
+//   IoU / boundary IoU / pixel accuracy of the mask against the category's ground truth.
+//   Localisation: the argmax of box_k(v) (the box filter alone) is a hit when it lies in any of the category's
+//   ground-truth boxes (pixel centre in the closed box); with tied maxima, any tied pixel may hit (as LangSplat).
+//   A constant map gives n = 0 everywhere, hence an empty mask.
+//
+// 3D-OVS (the 3D-OVS paper's evaluation, re-implemented): per pixel the class with the largest relevancy
+//   (no background class; ties go to the lower class index), per image and class IoU with classes absent
+//   from both prediction and ground truth scoring 0 (sklearn's jaccard_score zero_division), image mIoU =
+//   mean over all classes; accuracy = fraction of pixels whose ground-truth class vector is exactly the
+//   one-hot of the predicted class (sklearn's accuracy_score on the multi-label indicator matrices), so
+//   unlabelled pixels and pixels in several class masks count as errors. Boundary IoU per class uses the
+//   same pairs and the same absent-in-both = 0 rule.
+#pragma once
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "eval/labels.h"
+#include "eval/metrics.h"
+
+namespace hgs::eval {
+
+struct LerfOptions {
+  int box = 30;            // box filter window (smoothing and localisation)
+  float threshold = 0.4f;  // on out = clip(2n - 1, 0, 1)
+  int majority = 7;        // majority filter window (odd); <= 1 disables it
+  int boundary_d = 0;      // boundary IoU width; <= 0: Cheng et al.'s d from the image size
+};
+
+struct LerfPost {
+  std::vector<float> boxed;       // [H, W] box_k(v)
+  std::vector<float> smoothed;    // [H, W] 0.5 (box_k(v) + v)
+  std::vector<float> activation;  // [H, W] clip(2n - 1, 0, 1)
+  Mask raw_mask;                  // [H, W] activation > threshold
+  Mask mask;                      // [H, W] after the majority filter
+};
+LerfPost lerf_postprocess(const std::vector<float>& relevancy, int width, int height,  // [H, W]
+                          const LerfOptions& opt = {});
+
+struct Localisation {
+  int x = -1, y = -1;  // first maximum of box_k(v) in raster order
+  float score = 0;     // box_k(v) there
+  bool hit = false;
+};
+// `boxed` is box_k(v) ([H, W]), e.g. LerfPost::boxed.
+Localisation lerf_localise(const std::vector<float>& boxed, int width, int height, const std::vector<BBox>& bboxes);
+
+struct LerfQueryResult {
+  MaskScores scores;
+  Localisation loc;
+  LerfPost post;
+};
+// The whole per-(frame, query) protocol for one relevancy map against one category.
+LerfQueryResult evaluate_lerf_query(const std::vector<float>& relevancy, int width, int height,  // [H, W]
+                                    const LerfCategory& gt, const LerfOptions& opt = {});
+
+struct OvsImageResult {
+  std::vector<uint16_t> prediction;  // [H, W] class index per pixel
+  std::vector<double> iou, biou;     // [C]
+  double miou = 0, mbiou = 0, accuracy = 0;
+};
+// Per-pixel argmax over class relevancy maps (`relevancy[c]` is [H, W], C >= 1) -> class index map [H, W].
+std::vector<uint16_t> argmax_classes(const std::vector<std::vector<float>>& relevancy, int width, int height);
+// 3D-OVS metrics of a predicted class map against the class masks (`gt[c]` [H, W], same C as classes).
+OvsImageResult evaluate_3dovs_prediction(const std::vector<uint16_t>& prediction, const std::vector<Mask>& gt,
+                                         int width, int height, int boundary_d = 0);
+// argmax_classes + evaluate_3dovs_prediction.
+OvsImageResult evaluate_3dovs_image(const std::vector<std::vector<float>>& relevancy, const std::vector<Mask>& gt,
+                                    int width, int height, int boundary_d = 0);
+
+}  // namespace hgs::eval

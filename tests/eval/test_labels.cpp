@@ -1,0 +1,251 @@
+// Polygon rasterisation (even-odd, pixel centres, pixel-corner vertices, border clipping) and the LERF-OVS /
+// 3D-OVS label loaders with valid and malformed files.
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+
+#include "core/error.h"
+#include "core/fs.h"
+#include "core/image.h"
+#include "eval/labels.h"
+#include "eval_test_util.h"
+#include "test_util.h"
+
+using namespace hgs;
+using namespace hgs::eval;
+using hgs::eval::test::ascii;
+namespace fs = std::filesystem;
+
+TEST(EvalPolygon, PixelCornerUnitsAndPixelCentres) {
+  // The square [1, 3] x [1, 3] in corner units covers exactly pixels 1..2 x 1..2.
+  EXPECT_EQ(rasterize_polygon({{1, 1}, {3, 1}, {3, 3}, {1, 3}}, 4, 4), ascii({"....", ".##.", ".##.", "...."}));
+  // Triangle (0,0), (4,0), (0,4): centre (x+.5, y+.5) inside iff x + y + 1 < 4; centres exactly on the
+  // hypotenuse (x + y + 1 = 4, e.g. (3.5, 0.5)) are on a span's right end -> outside.
+  EXPECT_EQ(rasterize_polygon({{0, 0}, {4, 0}, {0, 4}}, 4, 4), ascii({"###.", "##..", "#...", "...."}));
+  // Vertices given as pixel centres would shift the result: [0.5, 2.5]^2 covers centres 0.5..1.5 -> pixels 0..1.
+  EXPECT_EQ(rasterize_polygon({{0.5, 0.5}, {2.5, 0.5}, {2.5, 2.5}, {0.5, 2.5}}, 4, 4),
+            ascii({"##..", "##..", "....", "...."}));
+  // Orientation does not matter.
+  EXPECT_EQ(rasterize_polygon({{1, 3}, {3, 3}, {3, 1}, {1, 1}}, 4, 4), ascii({"....", ".##.", ".##.", "...."}));
+}
+
+TEST(EvalPolygon, EvenOddSelfOverlap) {
+  // The path runs twice around the square [2, 4] x [2, 4]: winding number 2 there, so even-odd leaves it out.
+  std::vector<Point2> p = {{0, 0}, {6, 0}, {6, 4}, {2, 4}, {2, 2}, {4, 2}, {4, 6}, {0, 6}};
+  EXPECT_EQ(rasterize_polygon(p, 6, 6), ascii({"######", "######", "##..##", "##..##", "####..", "####.."}));
+}
+
+TEST(EvalPolygon, BowTieHandComputed) {
+  // Two triangles meeting at (2, 2). Row y has crossings at 0, 4 (the closing verticals) and at yc, 4 - yc
+  // (the diagonals); spans are [c0, c1), [c2, c3), so a centre on a span's right end is outside.
+  std::vector<Point2> bow = {{0, 0}, {4, 4}, {4, 0}, {0, 4}};
+  // Row 0: crossings 0, 0.5, 3.5, 4: [0, 0.5) holds no centre, [3.5, 4) holds 3.5 -> pixel 3.
+  // Row 1 (1.5): 0, 1.5, 2.5, 4: [0,1.5) -> pixel 0; [2.5, 4) -> pixels 2, 3.
+  // Row 2 (2.5): 0, 1.5, 2.5, 4: same as row 1. Row 3 (3.5): 0, 0.5, 3.5, 4 -> pixel 3.
+  EXPECT_EQ(rasterize_polygon(bow, 4, 4), ascii({"...#", "#.##", "#.##", "...#"}));
+}
+
+TEST(EvalPolygon, BorderAndOutsideAreClipped) {
+  EXPECT_EQ(rasterize_polygon({{0, 0}, {5, 0}, {5, 2}, {0, 2}}, 5, 3), ascii({"#####", "#####", "....."}));
+  EXPECT_EQ(rasterize_polygon({{-10, -10}, {50, -10}, {50, 1}, {-10, 1}}, 5, 3), ascii({"#####", ".....", "....."}));
+  EXPECT_EQ(rasterize_polygon({{3, -5}, {100, -5}, {100, 100}, {3, 100}}, 5, 3), ascii({"...##", "...##", "...##"}));
+  EXPECT_EQ(rasterize_polygon({{10, 10}, {20, 10}, {20, 20}}, 5, 3), Mask(15, 0));
+  EXPECT_EQ(rasterize_polygon({{0, 0}, {5, 0}}, 5, 3), Mask(15, 0));  // < 3 vertices
+  EXPECT_EQ(rasterize_polygon({{-1e300, -1e300}, {1e300, -1e300}, {1e300, 1e300}, {-1e300, 1e300}}, 5, 3), Mask(15, 1));
+}
+
+TEST(EvalPolygon, MatchesNaivePointInPolygon) {
+  // Random star-like self-intersecting polygons with fractional vertices vs a crossing-count reference.
+  std::vector<Point2> p;
+  uint32_t s = 12345;
+  auto rnd = [&] { s = s * 1664525u + 1013904223u; return (s >> 8) / double(1 << 24); };
+  for (int trial = 0; trial < 30; ++trial) {
+    p.clear();
+    const int n = 3 + trial % 9;
+    for (int k = 0; k < n; ++k) p.push_back({rnd() * 24 - 2, rnd() * 18 - 2});
+    Mask m = rasterize_polygon(p, 20, 14);
+    for (int y = 0; y < 14; ++y)
+      for (int x = 0; x < 20; ++x) {
+        const double px = x + 0.5, py = y + 0.5;
+        bool in = false;
+        for (int i = 0, j = n - 1; i < n; j = i++) {
+          const double xi = p[i][0], yi = p[i][1], xj = p[j][0], yj = p[j][1];
+          if ((yi > py) != (yj > py) && px < (xj - xi) * (py - yi) / (yj - yi) + xi) in = !in;
+        }
+        ASSERT_EQ(m[y * 20 + x] != 0, in) << "trial " << trial << " pixel " << x << "," << y;
+      }
+  }
+}
+
+namespace {
+
+void write(const fs::path& p, const std::string& s) {
+  fs::create_directories(p.parent_path());
+  atomic_write_text(p, s);
+}
+
+std::string error_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+void expect_error(const std::function<void()>& f, const std::string& file, const std::string& what) {
+  const std::string msg = error_of(f);
+  EXPECT_NE(msg.find(file), std::string::npos) << msg;
+  EXPECT_NE(msg.find(what), std::string::npos) << msg;
+  EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+}
+
+const char* kValid = R"({"info": {"name": "frame_00001.jpg", "width": 6, "height": 4},
+  "objects": [
+    {"category": "mug", "bbox": [0, 0, 2, 2], "segmentation": [[0, 0], [2, 0], [2, 2], [0, 2]]},
+    {"category": "plate", "bbox": [6, 4, 3, 1], "segmentation": [[3, 1], [6, 1], [6, 4], [3, 4]]},
+    {"category": "mug", "bbox": [4.0, 0.0, 6.0, 1.0], "segmentation": [[4.0, 0.0], [6.0, 0.0], [6.0, 1.0], [4.0, 1.0]]}
+  ]})";
+
+}  // namespace
+
+TEST(EvalLerfLabels, LoadsAndMergesCategories) {
+  hgs::test::TempDir tmp;
+  write(tmp / "scene/label/frame_00001.json", kValid);
+  write(tmp / "scene/label/frame_00000.json",
+        R"({"info": {"name": "frame_00000.jpg", "width": 6, "height": 4}, "objects": []})");
+  write(tmp / "scene/label/notes.txt", "ignored");
+  auto all = load_lerf_labels(tmp / "scene", 6, 4);
+  ASSERT_EQ(all.size(), 2u);
+  EXPECT_EQ(all[0].stem, "frame_00000");
+  EXPECT_TRUE(all[0].categories.empty());
+  const LerfFrameLabels& L = all[1];
+  EXPECT_EQ(L.image_name, "frame_00001.jpg");
+  EXPECT_EQ(L.width, 6);
+  EXPECT_EQ(L.height, 4);
+  ASSERT_EQ(L.categories.size(), 2u);
+  EXPECT_EQ(L.categories[0].name, "mug");
+  EXPECT_EQ(L.categories[1].name, "plate");
+  const LerfCategory* mug = L.find("mug");
+  ASSERT_NE(mug, nullptr);
+  EXPECT_EQ(L.find("cup"), nullptr);
+  EXPECT_EQ(mug->mask, ascii({"##..##", "##....", "......", "......"}));
+  EXPECT_EQ(L.find("plate")->mask, ascii({"......", "...###", "...###", "...###"}));
+  ASSERT_EQ(mug->bboxes.size(), 2u);
+  EXPECT_EQ(mug->polygons.size(), 2u);
+  // Swapped corners are normalised; pixel centres inside the closed box count.
+  const BBox& pb = L.find("plate")->bboxes[0];
+  EXPECT_EQ(pb.x1, 3);
+  EXPECT_EQ(pb.y1, 1);
+  EXPECT_EQ(pb.x2, 6);
+  EXPECT_EQ(pb.y2, 4);
+  EXPECT_TRUE(pb.contains_pixel(3, 1));
+  EXPECT_TRUE(pb.contains_pixel(5, 3));
+  EXPECT_FALSE(pb.contains_pixel(2, 1));
+  EXPECT_FALSE(pb.contains_pixel(3, 0));
+  // Without an expected size any size is accepted.
+  EXPECT_EQ(load_lerf_frame(tmp / "scene/label/frame_00001.json").width, 6);
+}
+
+TEST(EvalLerfLabels, MalformedFilesGiveClearErrors) {
+  hgs::test::TempDir tmp;
+  const fs::path f = tmp / "frame_00001.json";
+  auto check = [&](const std::string& text, const std::string& what, int ew = 0, int eh = 0) {
+    write(f, text);
+    expect_error([&] { load_lerf_frame(f, ew, eh); }, f.string(), what);
+  };
+  check("{\"info\": ", "invalid JSON");
+  check("[1, 2]", "expected a JSON object");
+  check(R"({"objects": []})", "missing key \"info\"");
+  check(R"({"info": {"name": "a", "width": 6, "height": 4}})", "missing key \"objects\"");
+  check(R"({"info": {"width": 6, "height": 4}, "objects": []})", "info.name");
+  check(R"({"info": {"name": "a", "height": 4}, "objects": []})", "missing key info.width");
+  check(R"({"info": {"name": "a", "width": -6, "height": 4}, "objects": []})", "info.width must be a positive integer");
+  check(R"({"info": {"name": "a", "width": 6, "height": 4}, "objects": []})", "label size 6x4 does not match the image size 8x4", 8, 4);
+  const std::string head = R"({"info": {"name": "a", "width": 6, "height": 4}, "objects": [)";
+  check(head + R"({"bbox": [0,0,1,1], "segmentation": [[0,0],[1,0],[1,1]]}]})", "objects[0]: missing key \"category\"");
+  check(head + R"({"category": "mug", "segmentation": [[0,0],[1,0],[1,1]]}]})", "missing key \"bbox\"");
+  check(head + R"({"category": "mug", "bbox": [0,0,1], "segmentation": [[0,0],[1,0],[1,1]]}]})", "bbox must be");
+  check(head + R"({"category": "mug", "bbox": [0,0,1,1]}]})", "missing key \"segmentation\"");
+  check(head + R"({"category": "mug", "bbox": [0,0,1,1], "segmentation": [[0,0],[1,0]]}]})",
+        "polygon has 2 point(s), need at least 3");
+  check(head + R"({"category": "mug", "bbox": [0,0,1,1], "segmentation": [[0,0],[1,"x"],[1,1]]}]})",
+        "objects[0].segmentation[1][1] must be a number");
+  check(head + R"({"category": "mug", "bbox": [0,0,1,1], "segmentation": [[0,0],[1],[1,1]]}]})",
+        "objects[0].segmentation[1] must be an [x, y] pair");
+  expect_error([&] { load_lerf_frame(tmp / "missing.json"); }, (tmp / "missing.json").string(), "");
+  expect_error([&] { load_lerf_labels(tmp / "nothing"); }, (tmp / "nothing" / "label").string(), "no LERF-OVS label folder");
+  fs::create_directories(tmp / "empty/label");
+  expect_error([&] { load_lerf_labels(tmp / "empty"); }, (tmp / "empty" / "label").string(), "no LERF-OVS label files");
+}
+
+namespace {
+
+void write_mask_png(const fs::path& p, const Mask& m, int w, int h, float on = 1.f) {
+  fs::create_directories(p.parent_path());
+  Image img(w, h, 1);
+  for (size_t i = 0; i < m.size(); ++i) img.px[i] = m[i] ? on : 0.f;
+  save_png(p, img);
+}
+
+}  // namespace
+
+TEST(EvalOvsLabels, LoadsSortedClassesAndViews) {
+  hgs::test::TempDir tmp;
+  const fs::path seg = tmp / "scene/segmentations";
+  write(seg / "classes.txt", "teddy bear\r\n  apple \n\nbook\n");
+  const Mask apple = ascii({"##..", "....", "...."}), bear = ascii({"..##", "..##", "...."}), book = ascii({"....", "....", "####"});
+  for (const char* v : {"03", "0"}) {
+    write_mask_png(seg / v / "apple.png", apple, 4, 3);
+    write_mask_png(seg / v / "teddy bear.png", bear, 4, 3);
+    write_mask_png(seg / v / "book.png", book, 4, 3);
+  }
+  fs::create_directories(seg / "notes");  // not a view folder
+  OvsLabelSet L = open_3dovs_labels(tmp / "scene");
+  EXPECT_EQ(L.classes, (std::vector<std::string>{"apple", "book", "teddy bear"}));
+  ASSERT_EQ(L.views.size(), 2u);
+  EXPECT_EQ(L.views[0].index, 0);
+  EXPECT_EQ(L.views[1].index, 3);
+  OvsViewLabels V = load_3dovs_view(L, 1, 4, 3);
+  EXPECT_EQ(V.index, 3);
+  ASSERT_EQ(V.masks.size(), 3u);
+  EXPECT_EQ(V.masks[0], apple);
+  EXPECT_EQ(V.masks[1], book);
+  EXPECT_EQ(V.masks[2], bear);
+  // Grey 254 is not "inside" (only 255 is); colour PNGs are read through their grey value.
+  write_mask_png(seg / "0" / "apple.png", apple, 4, 3, 254.f / 255.f);
+  EXPECT_EQ(load_3dovs_view(L, 0).masks[0], Mask(12, 0));
+  Image rgb(4, 3, 3, 0.f);
+  for (int c = 0; c < 3; ++c) rgb.at(1, 1, c) = 1.f;
+  save_png(seg / "0" / "apple.png", rgb);
+  EXPECT_EQ(load_3dovs_view(L, 0).masks[0], ascii({"....", ".#..", "...."}));
+}
+
+TEST(EvalOvsLabels, MalformedInputsGiveClearErrors) {
+  hgs::test::TempDir tmp;
+  const fs::path seg = tmp / "s/segmentations";
+  expect_error([&] { open_3dovs_labels(tmp / "s"); }, seg.string(), "no 3D-OVS segmentation folder");
+  fs::create_directories(seg);
+  expect_error([&] { open_3dovs_labels(tmp / "s"); }, (seg / "classes.txt").string(), "file not found");
+  write(seg / "classes.txt", "\n \n");
+  expect_error([&] { open_3dovs_labels(tmp / "s"); }, (seg / "classes.txt").string(), "no class names");
+  write(seg / "classes.txt", "a\nb\na\n");
+  expect_error([&] { open_3dovs_labels(tmp / "s"); }, (seg / "classes.txt").string(), "line 3: duplicate class \"a\"");
+  write(seg / "classes.txt", "a\nb\n");
+  expect_error([&] { open_3dovs_labels(tmp / "s"); }, seg.string(), "no labelled views");
+  write_mask_png(seg / "0" / "a.png", Mask(6, 1), 3, 2);
+  fs::create_directories(seg / "00");
+  expect_error([&] { open_3dovs_labels(tmp / "s"); }, seg.string(), "both name view 0");
+  fs::remove_all(seg / "00");
+  OvsLabelSet L = open_3dovs_labels(tmp / "s");
+  expect_error([&] { load_3dovs_view(L, 0); }, (seg / "0" / "b.png").string(), "missing class mask for \"b\"");
+  write_mask_png(seg / "0" / "b.png", Mask(8, 1), 4, 2);
+  expect_error([&] { load_3dovs_view(L, 0); }, (seg / "0" / "b.png").string(),
+               "mask size 4x2 does not match the view's other masks 3x2");
+  write_mask_png(seg / "0" / "b.png", Mask(6, 1), 3, 2);
+  EXPECT_EQ(load_3dovs_view(L, 0).masks.size(), 2u);
+  expect_error([&] { load_3dovs_view(L, 0, 4, 2); }, (seg / "0" / "a.png").string(), "does not match the image size 4x2");
+  write(seg / "0" / "b.png", "not a png");
+  expect_error([&] { load_3dovs_view(L, 0); }, (seg / "0" / "b.png").string(), "cannot decode");
+  expect_error([&] { load_3dovs_view(L, 5); }, seg.string(), "out of range");
+}

@@ -1,0 +1,131 @@
+// The label loaders on a scene written by `hgs synth`: LERF-OVS polygons rasterise back to the exact
+// ground-truth instance masks (hole-filled; exactly equal for objects without holes), and the 3D-OVS masks
+// equal the instance masks of the name-sorted view they index.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <map>
+#include <nlohmann/json.hpp>
+
+#include "core/fs.h"
+#include "core/image.h"
+#include "eval/labels.h"
+#include "synth/synth.h"
+#include "test_util.h"
+
+using namespace hgs;
+using namespace hgs::eval;
+namespace fs = std::filesystem;
+
+namespace {
+
+// Fills the holes of a mask: outside pixels not 4-connected to the image exterior (the complement of an
+// 8-connected foreground uses 4-connectivity).
+Mask fill_holes(const Mask& m, int w, int h) {
+  Mask reach(m.size(), 0);
+  std::vector<int> stack;
+  auto push = [&](int x, int y) {
+    if (x < 0 || y < 0 || x >= w || y >= h) return;
+    const size_t i = size_t(y) * w + x;
+    if (m[i] || reach[i]) return;
+    reach[i] = 1;
+    stack.push_back(static_cast<int>(i));
+  };
+  for (int x = 0; x < w; ++x) { push(x, 0); push(x, h - 1); }
+  for (int y = 0; y < h; ++y) { push(0, y); push(w - 1, y); }
+  while (!stack.empty()) {
+    const int i = stack.back();
+    stack.pop_back();
+    const int x = i % w, y = i / w;
+    push(x - 1, y); push(x + 1, y); push(x, y - 1); push(x, y + 1);
+  }
+  Mask out(m.size());
+  for (size_t i = 0; i < m.size(); ++i) out[i] = reach[i] ? 0 : 1;
+  return out;
+}
+
+}  // namespace
+
+TEST(EvalSynthLabels, PolygonsAndSegmentationsMatchInstanceMasks) {
+  hgs::test::TempDir tmp;
+  synth::SynthOptions o;
+  o.views = 16;
+  o.width = 96;
+  o.height = 72;
+  o.objects = 4;
+  o.points = 500;
+  o.feature_dim = 16;
+  o.supersample = 1;
+  o.progress = false;
+  const fs::path scene = tmp / "scene";
+  synth::generate(scene, o);
+
+  std::map<int, std::string> names;
+  const nlohmann::json objects = nlohmann::json::parse(read_file_text(scene / "masks/objects.json"));
+  for (auto& [k, v] : objects.items())
+    names[std::stoi(k)] = v.get<std::string>();
+  ASSERT_EQ(names.size(), 4u);
+  std::vector<std::string> views;
+  for (auto& e : fs::directory_iterator(scene / "images")) views.push_back(e.path().filename().string());
+  std::sort(views.begin(), views.end());
+
+  // LERF-OVS.
+  auto frames = load_lerf_labels(scene, o.width, o.height);
+  ASSERT_EQ(frames.size(), 2u);  // views 0 and 8 are held out
+  int exact = 0, with_holes = 0, present = 0;
+  for (auto& F : frames) {
+    const LabelMap inst = load_label_png(scene / "gt/instances" / F.image_name);
+    ASSERT_EQ(inst.width, o.width);
+    for (auto& [id, name] : names) {
+      Mask gt(inst.v.size());
+      long n = 0;
+      for (size_t i = 0; i < gt.size(); ++i) n += gt[i] = inst.v[i] == id;
+      const LerfCategory* c = F.find(name);
+      if (n == 0) {
+        EXPECT_EQ(c, nullptr) << F.stem << " " << name;
+        continue;
+      }
+      ++present;
+      ASSERT_NE(c, nullptr) << F.stem << " " << name;
+      const Mask filled = fill_holes(gt, o.width, o.height);
+      EXPECT_EQ(c->mask, filled) << F.stem << " " << name;
+      if (filled == gt) {
+        EXPECT_EQ(c->mask, gt);
+        ++exact;
+      } else {
+        ++with_holes;
+      }
+      // Every bbox holds its polygon, and the category's pixels lie in the union of its boxes.
+      for (size_t i = 0; i < gt.size(); ++i)
+        if (c->mask[i]) {
+          bool in = false;
+          for (auto& b : c->bboxes) in |= b.contains_pixel(int(i % o.width), int(i / o.width));
+          ASSERT_TRUE(in) << F.stem << " " << name;
+        }
+    }
+  }
+  EXPECT_GE(present, 4);
+  EXPECT_GE(exact, present / 2) << "too few hole-free objects to test exact equality (" << with_holes << " with holes)";
+
+  // 3D-OVS.
+  OvsLabelSet L = open_3dovs_labels(scene);
+  std::vector<std::string> sorted;
+  for (auto& [id, name] : names) sorted.push_back(name);
+  std::sort(sorted.begin(), sorted.end());
+  EXPECT_EQ(L.classes, sorted);
+  ASSERT_EQ(L.views.size(), 2u);
+  EXPECT_EQ(L.views[0].index, 0);
+  EXPECT_EQ(L.views[1].index, 8);
+  for (size_t v = 0; v < L.views.size(); ++v) {
+    OvsViewLabels V = load_3dovs_view(L, v, o.width, o.height);
+    const LabelMap inst = load_label_png(scene / "gt/instances" / views[V.index]);
+    for (size_t c = 0; c < L.classes.size(); ++c) {
+      int id = -1;
+      for (auto& [k, name] : names)
+        if (name == L.classes[c]) id = k;
+      Mask gt(inst.v.size());
+      for (size_t i = 0; i < gt.size(); ++i) gt[i] = inst.v[i] == id;
+      EXPECT_EQ(V.masks[c], gt) << "view " << V.index << " class " << L.classes[c];
+    }
+  }
+}
