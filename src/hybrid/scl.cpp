@@ -98,6 +98,30 @@ T info_nce(const T* p, int D, const T* refs, int R, int positive, T tau2, T* dp,
   return loss;
 }
 
+template <class T>
+T cosine_loss(const T* S, int stride, const T* R, size_t P, int D, T* grad, T scale) {
+  double loss = 0;
+  const T g = scale / T(P);
+#pragma omp parallel for reduction(+ : loss) schedule(static)
+  for (size_t p = 0; p < P; ++p) {
+    const T* s = S + p * stride;
+    const T* r = R + p * D;
+    double ss = 0, rr = 0, sr = 0;
+    for (int d = 0; d < D; ++d) { ss += double(s[d]) * s[d]; rr += double(r[d]) * r[d]; sr += double(s[d]) * r[d]; }
+    if (ss <= 1e-30 || rr <= 1e-30) { loss += 1; continue; }
+    const double ns = std::sqrt(ss), nr = std::sqrt(rr), c = sr / (ns * nr);
+    loss += 1 - c;
+    if (grad) {
+      T* gp = grad + p * stride;
+      // d(1 - cos)/dS = -(R / (|S| |R|) - cos S / |S|^2)
+      for (int d = 0; d < D; ++d) gp[d] += T(-double(g) * (r[d] / (ns * nr) - c * s[d] / ss));
+    }
+  }
+  return T(loss / double(P));
+}
+
+template float cosine_loss<float>(const float*, int, const float*, size_t, int, float*, float);
+template double cosine_loss<double>(const double*, int, const double*, size_t, int, double*, double);
 template float normalize<float>(float*, int);
 template double normalize<double>(double*, int);
 template void pooled_prediction<float>(int, int, int, int, const float*, const float*, const float*, const int*, const float*, float, float*);

@@ -13,6 +13,7 @@
 // references of the other foreground objects present in view v. sim = cosine, temperature tau2.
 //   L = -log( exp(sim(a, r_k)/tau2) / sum_{k' in F_v} exp(sim(a, r_k')/tau2) )
 #pragma once
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -33,6 +34,13 @@ void pooled_prediction_backward(int n, int D, int L, int J, const T* q, const T*
 // [R, D]; positive: index of the positive among them. dp (may be null) receives scale * dL/dp.
 template <class T>
 T info_nce(const T* p, int D, const T* refs, int R, int positive, T tau2, T* dp, T scale);
+
+// Full-scene semantic loss of the no-SCL ablation: mean over the P pixels of 1 - cos(S(p), R(p)), where
+// S(p) = the rendered language feature (sum_n f_n alpha T) at channel offset 0 of a pixel block of `stride`
+// floats and R(p) the reference feature. Pixels where either is zero count 1 and pass no gradient.
+// grad (may be null) receives scale * dL/dS added into [P, stride].
+template <class T>
+T cosine_loss(const T* S, int stride, const T* R, size_t P, int D, T* grad, T scale);
 
 // L2-normalise v [D] in place; returns the norm before.
 template <class T>

@@ -220,3 +220,31 @@ TEST(Bro, LossGradient) {
   // Identical differences give zero loss.
   EXPECT_EQ(bro_loss(pred.data(), pred.data(), cs, C, B.data(), H, W, 1e-6, (double*)nullptr, 1.0), 0.0);
 }
+
+TEST(Scl, NoSclCosineLossGradient) {
+  std::mt19937 rng(5);
+  const size_t P = 7;
+  const int D = 5, stride = 9;
+  std::vector<double> S = randv(P * stride, rng), R = randv(P * D, rng);
+  for (int d = 0; d < D; ++d) S[3 * stride + d] = 0;  // an empty pixel: counts 1, no gradient
+  auto loss = [&] { return cosine_loss(S.data(), stride, R.data(), P, D, (double*)nullptr, 1.0); };
+  std::vector<double> g(P * stride, 0.0);
+  const double l = cosine_loss(S.data(), stride, R.data(), P, D, g.data(), 1.0);
+  EXPECT_GT(l, 0);
+  for (int d = 0; d < stride; ++d) EXPECT_EQ(g[3 * stride + d], 0.0);
+  for (size_t p = 0; p < P; ++p)
+    for (int d = D; d < stride; ++d) EXPECT_EQ(g[p * stride + d], 0.0);
+  // FD away from the empty pixel (its loss is piecewise constant there).
+  std::vector<double> S0 = S;
+  std::vector<double> x(S.begin(), S.begin() + 3 * stride);
+  auto loss_x = [&] {
+    std::copy(x.begin(), x.end(), S.begin());
+    return loss();
+  };
+  std::vector<double> gx(g.begin(), g.begin() + 3 * stride);
+  check_grad(x, loss_x, gx);
+  S = S0;
+  // Parallel vectors give zero loss.
+  std::vector<double> A = {1, 2, 3}, B = {2, 4, 6};
+  EXPECT_NEAR(cosine_loss(A.data(), 3, B.data(), 1, 3, (double*)nullptr, 1.0), 0.0, 1e-12);
+}
