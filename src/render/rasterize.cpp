@@ -136,7 +136,7 @@ void build_lists(const Binning& bins, int tile, const TileData<T>& td, int* list
 
 template <class T, bool kDepth, bool kExtra>
 void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typename RasterWorkspace<T>::PerThread& w,
-                  const T* records, int* ws_lists, int* ws_count, const RasterOutputs<T>& out) {
+                  const T* records, int* ws_lists, int* ws_count, T* pair_w, const RasterOutputs<T>& out) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
   using I = typename std::remove_reference<decltype(M{}[0])>::type;
@@ -153,6 +153,12 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   }
   if (kExtra && w.chan.size() < size_t(C)) w.chan.resize(size_t(C));
   P* E = w.chan.data();
+  const int J = in.num_weights;
+  if (w.mw.size() < size_t(J)) w.mw.resize(size_t(J));
+  P* MW = w.mw.data();
+  if (J > 0 && w.wacc.size() < size_t(td.n) * J) w.wacc.resize(size_t(td.n) * J);
+  P* wacc = w.wacc.data();
+  if (J > 0) std::fill(wacc, wacc + size_t(td.n) * J, P{});
   const P lane = simd::iota_pack<T>();
   M lane_i = __builtin_convertvector(lane, M);
   const T bg0 = in.background[0], bg1 = in.background[1], bg2 = in.background[2];
@@ -167,6 +173,11 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
     M lastp = M{};
     if (kExtra)
       for (int c = 0; c < C; ++c) E[c] = P{};
+    if (J > 0)
+      for (int jj = 0; jj < J; ++jj) {
+        MW[jj] = P{};
+        for (int l = 0; l < nvalid; ++l) MW[jj][l] = T(in.pixel_weights[(size_t(py) * W + px0 + l) * J + jj]);
+      }
     const int cnt = any_g ? td.count[bt] : 0;
     const int* list = any_g ? td.lists + size_t(bt) * td.n : nullptr;
     for (int j = 0; j < cnt; ++j) {
@@ -191,6 +202,10 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
         const T* e = td.extra + size_t(k) * C;
         for (int c = 0; c < C; ++c) E[c] += wgt * e[c];
       }
+      if (J > 0) {
+        P* wa = wacc + size_t(k) * J;
+        for (int jj = 0; jj < J; ++jj) wa[jj] += wgt * MW[jj];
+      }
       Tr = acc ? testT : Tr;
       lastp = acc ? M{} + I(j + 1) : lastp;
       if (!simd::any(active)) break;
@@ -207,6 +222,12 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
       if (kExtra)
         for (int c = 0; c < C; ++c) out.extra[p * C + c] = E[c][l];
     }
+  }
+  if (J > 0 && any_g) {
+    const int s = bins.tile_start[tile];
+    for (int k = 0; k < td.n; ++k)
+      for (int jj = 0; jj < J; ++jj)
+        pair_w[size_t(bins.tile_pair[s + k]) * J + jj] = simd::hsum<T>(wacc[size_t(k) * J + jj]);
   }
 }
 
@@ -231,6 +252,17 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
   std::fill(acc, acc + size_t(n) * F, P{});
   if (kExtra && w.chan.size() < size_t(C)) w.chan.resize(size_t(C));
   P* GE = w.chan.data();
+  const int J = g.d_weight_sums ? in.num_weights : 0;
+  if (w.mw.size() < size_t(J)) w.mw.resize(size_t(J));
+  P* MW = w.mw.data();
+  if (J > 0) {
+    if (w.dw.size() < size_t(n) * J) w.dw.resize(size_t(n) * J);
+    const int s0 = bins.tile_start[tile];
+    for (int k = 0; k < n; ++k)
+      for (int jj = 0; jj < J; ++jj)
+        w.dw[size_t(k) * J + jj] = g.d_weight_sums[size_t(bins.tile_gauss[s0 + k]) * J + jj];
+  }
+  const T* DW = w.dw.data();
   const P lane = simd::iota_pack<T>();
   const T bg0 = in.background[0], bg1 = in.background[1], bg2 = in.background[2];
   for (int bt = 0; bt < kBatches; ++bt) {
@@ -256,6 +288,10 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
       if (kDepth && g.d_depth) gd[l] = g.d_depth[p];
       if (kExtra && g.d_extra)
         for (int c = 0; c < C; ++c) GE[c][l] = g.d_extra[p * C + c];
+    }
+    for (int jj = 0; jj < J; ++jj) {
+      MW[jj] = P{};
+      for (int l = 0; l < nvalid; ++l) MW[jj][l] = T(in.pixel_weights[(size_t(py) * W + px0 + l) * J + jj]);
     }
     if (jmax == 0) continue;
     const P Tbg = Tf * (gr * bg0 + gg * bg1 + gb * bg2 - ga);
@@ -284,6 +320,10 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
       const T* e = kExtra ? td.extra + size_t(k) * C : nullptr;
       if (kExtra)
         for (int ch = 0; ch < C; ++ch) dot += e[ch] * GE[ch];
+      if (J > 0) {
+        const T* dw = DW + size_t(k) * J;
+        for (int jj = 0; jj < J; ++jj) dot += dw[jj] * MW[jj];
+      }
       P dLda = Ti * dot - (S + Tbg) * ioma;
       S = c ? S + wgt * dot : S;
       Tc = c ? Ti : Tc;
@@ -345,15 +385,27 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
   if (ws.records.size() < size_t(in.n) * kRecord) ws.records.resize(size_t(in.n) * kRecord);
   build_records(in, bins, ws.records.data());
   const T* R = ws.records.data();
+  const int J = in.num_weights;
+  if (J > 0 && ws.pair_w.size() < size_t(bins.num_pairs) * J) ws.pair_w.resize(size_t(bins.num_pairs) * J);
+  T* PW = ws.pair_w.data();
 #pragma omp parallel
   {
     auto& w = ws.threads[omp_get_thread_num()];
 #pragma omp for schedule(dynamic, 1)
     for (int t = 0; t < bins.num_tiles; ++t) {
-      if (dep && ext) forward_tile<T, true, true>(in, bins, t, w, R, L, Cn, out);
-      else if (dep) forward_tile<T, true, false>(in, bins, t, w, R, L, Cn, out);
-      else if (ext) forward_tile<T, false, true>(in, bins, t, w, R, L, Cn, out);
-      else forward_tile<T, false, false>(in, bins, t, w, R, L, Cn, out);
+      if (dep && ext) forward_tile<T, true, true>(in, bins, t, w, R, L, Cn, PW, out);
+      else if (dep) forward_tile<T, true, false>(in, bins, t, w, R, L, Cn, PW, out);
+      else if (ext) forward_tile<T, false, true>(in, bins, t, w, R, L, Cn, PW, out);
+      else forward_tile<T, false, false>(in, bins, t, w, R, L, Cn, PW, out);
+    }
+    if (J > 0) {
+#pragma omp for schedule(static)
+      for (int i = 0; i < in.n; ++i) {
+        T* o = out.weight_sums + size_t(i) * J;
+        for (int jj = 0; jj < J; ++jj) o[jj] = 0;
+        for (int p = bins.pair_offset[i]; p < bins.pair_offset[i + 1]; ++p)
+          for (int jj = 0; jj < J; ++jj) o[jj] += PW[size_t(p) * J + jj];
+      }
     }
   }
 }

@@ -10,7 +10,9 @@
 // Backward walks each batch list back to front from the per-pixel last contributor, rebuilds T_i = T_{i+1} /
 // (1 - alpha_i) from the saved final T, and keeps one scalar per pixel, S = sum_{j>i} w_j <value_j, dL/dout>,
 // so dL/dalpha_i = T_i <value_i, g> - (S + T_final (<bg, g_rgb> - g_alpha)) / (1 - alpha_i) for any number of
-// channels. Gradients of a (tile, Gaussian) pair are summed in vector registers per Gaussian over the tile and
+// channels. Optional pixel-weight maps M_j give per-Gaussian sums a_{n,j} = sum_p M_j(p) alpha_n(p) T_n(p) (the
+// blending weight a Gaussian receives inside mask j); their gradient enters S / dot as the per-pixel value
+// sum_j dL/da_{n,j} M_j(p). Gradients of a (tile, Gaussian) pair are summed in vector registers per Gaussian over the tile and
 // stored in that pair's slot; slots are reduced per Gaussian in a fixed order, so the result is bitwise
 // deterministic for any thread count and any schedule. Parallel over tiles with OpenMP (dynamic schedule).
 // Everything is templated on the scalar (float in production, double in the tests).
@@ -34,6 +36,8 @@ struct RasterInputs {
   const T* extra = nullptr;    // [N, C]; null when num_extra = 0
   int num_extra = 0;
   T background[3] = {0, 0, 0};
+  const float* pixel_weights = nullptr;  // [H, W, J] optional per-pixel weight maps M_j
+  int num_weights = 0;                   // J
 };
 
 template <class T>
@@ -44,6 +48,7 @@ struct RasterOutputs {
   T* extra = nullptr;       // [H, W, C]
   T* final_T = nullptr;     // [H, W] saved for backward
   int32_t* last = nullptr;  // [H, W] saved for backward: batch-list entries up to the last accumulated one
+  T* weight_sums = nullptr; // [N, J] sum_p M_j(p) alpha_n(p) T_n(p) (when num_weights > 0)
 };
 
 // Upstream gradients (null = zero) and per-Gaussian results (overwritten).
@@ -53,6 +58,7 @@ struct RasterGrads {
   const T* d_alpha = nullptr;  // [H, W]
   const T* d_depth = nullptr;  // [H, W]
   const T* d_extra = nullptr;  // [H, W, C]
+  const T* d_weight_sums = nullptr;  // [N, J]
   T* mean2d = nullptr;         // [N, 2] out
   T* conic = nullptr;          // [N, 3] out (b counted once)
   T* opacity = nullptr;        // [N] out (w.r.t. opacity after the sigmoid)
@@ -67,13 +73,17 @@ struct RasterWorkspace {
   struct PerThread {
     std::vector<T> soa;                     // per-tile Gaussian records [n, 16] then extras [n, C]
     std::vector<simd::Pack<T>> acc;         // backward accumulators [n, F]
-    std::vector<simd::Pack<T>> chan;        // per-batch extra-channel packs [2, C]
+    std::vector<simd::Pack<T>> chan;        // per-batch extra-channel gradient packs [C]
+    std::vector<simd::Pack<T>> wacc;        // forward weight-sum accumulators [n, J]
+    std::vector<simd::Pack<T>> mw;          // per-batch pixel-weight packs [J]
+    std::vector<T> dw;                      // backward d(weight_sums) of the tile's Gaussians [n, J]
   };
   std::vector<PerThread> threads;
   std::vector<T> records;       // [N, 16] per-Gaussian records built by forward, reused by backward
   std::vector<int> lists;       // [32 * P] per-tile batch lists built by forward, reused by backward
   std::vector<int> list_count;  // [num_tiles, 32]
   std::vector<T> pair_grad;     // [P, F]
+  std::vector<T> pair_w;        // [P, J] forward weight sums per pair
 };
 
 template <class T>

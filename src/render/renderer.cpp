@@ -71,6 +71,8 @@ void RendererT<T>::forward(const Camera& cam, const GaussianInputsT<T>& g, const
       fail("render: sh_stride {} is smaller than the {} coefficients of degree {}", g.sh_stride,
            sh_num_coeffs(g.sh_degree), g.sh_degree);
   }
+  if (s.num_pixel_weights < 0 || (s.num_pixel_weights > 0 && !s.pixel_weights))
+    fail("render: num_pixel_weights is {} but no pixel_weights array was given", s.num_pixel_weights);
   if (g.num_extra < 0 || (g.num_extra > 0 && g.n > 0 && !g.extra))
     fail("render: num_extra is {} but no extra array was given", g.num_extra);
 
@@ -106,6 +108,9 @@ void RendererT<T>::forward(const Camera& cam, const GaussianInputsT<T>& g, const
   else out.depth.clear();
   if (C > 0) out.extra.resize(P * C);
   else out.extra.clear();
+  const int J = s.num_pixel_weights;
+  if (J > 0) out.weight_sums.resize(size_t(n) * J);
+  else out.weight_sums.clear();
   st.final_T.resize(P);
   st.last.resize(P);
   RasterInputs<T> ri;
@@ -120,7 +125,10 @@ void RendererT<T>::forward(const Camera& cam, const GaussianInputsT<T>& g, const
   ri.extra = C > 0 ? g.extra : nullptr;
   ri.num_extra = C;
   for (int k = 0; k < 3; ++k) ri.background[k] = s.background[k];
+  ri.pixel_weights = J > 0 ? s.pixel_weights : nullptr;
+  ri.num_weights = J;
   RasterOutputs<T> ro;
+  ro.weight_sums = J > 0 ? out.weight_sums.data() : nullptr;
   ro.rgb = out.rgb.data();
   ro.alpha = out.alpha.data();
   ro.depth = s.want_depth ? out.depth.data() : nullptr;
@@ -172,7 +180,10 @@ void RendererT<T>::backward(const OutputGradsT<T>& dout, GaussianGradsT<T>& grad
   ri.extra = C > 0 ? g.extra : nullptr;
   ri.num_extra = C;
   for (int k = 0; k < 3; ++k) ri.background[k] = st.s.background[k];
+  ri.pixel_weights = st.s.num_pixel_weights > 0 ? st.s.pixel_weights : nullptr;
+  ri.num_weights = st.s.num_pixel_weights;
   RasterGrads<T> rg;
+  rg.d_weight_sums = st.s.num_pixel_weights > 0 ? dout.weight_sums : nullptr;
   rg.d_rgb = dout.rgb;
   rg.d_alpha = dout.alpha;
   rg.d_depth = want_depth ? dout.depth : nullptr;

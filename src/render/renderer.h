@@ -56,6 +56,10 @@ using GaussianInputs = GaussianInputsT<float>;
 struct RenderSettings {
   float background[3] = {0, 0, 0};
   bool want_depth = true;
+  // Optional per-pixel weight maps M_j [H, W, J]: forward then also returns per-Gaussian sums
+  // weight_sums[n, j] = sum_p M_j(p) alpha_n(p) T_n(p), differentiable through OutputGrads::weight_sums.
+  const float* pixel_weights = nullptr;
+  int num_pixel_weights = 0;  // J
 };
 
 template <class T>
@@ -64,6 +68,7 @@ struct RenderOutputsT {
   std::vector<T> alpha;  // [H, W]
   std::vector<T> depth;  // [H, W] (empty when !want_depth)
   std::vector<T> extra;  // [H, W, C] (empty when C = 0)
+  std::vector<T> weight_sums;  // [N, J] when pixel weights were given (else empty)
   int num_visible = 0;   // Gaussians that passed culling
 };
 using RenderOutputs = RenderOutputsT<float>;
@@ -75,6 +80,7 @@ struct OutputGradsT {
   const T* alpha = nullptr;  // [H, W]
   const T* depth = nullptr;  // [H, W]
   const T* extra = nullptr;  // [H, W, C]
+  const T* weight_sums = nullptr;  // [N, J]
 };
 using OutputGrads = OutputGradsT<float>;
 

@@ -22,6 +22,19 @@ struct Scene {
   std::vector<double> mean, log_scale, quat, opacity_logit, sh, colors, extra;
   bool use_colors = false;
   RenderSettings settings;
+  std::vector<float> pixel_weights;  // [H, W, J] optional weight maps
+  int num_weights = 0;
+
+  // Random soft weight maps; the settings point into this scene (keep it alive and unmoved while rendering).
+  void add_pixel_weights(int J, uint32_t seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> U(0, 1);
+    num_weights = J;
+    pixel_weights.resize(size_t(cam.width) * cam.height * J);
+    for (float& v : pixel_weights) v = U(rng) < 0.3f ? 0.f : U(rng);
+    settings.pixel_weights = pixel_weights.data();
+    settings.num_pixel_weights = J;
+  }
 
   template <class T>
   GaussianInputsT<T> inputs(std::vector<std::vector<T>>& store) const {
@@ -137,7 +150,7 @@ struct RefProjected {
 };
 
 struct RefImage {
-  std::vector<double> rgb, alpha, depth, extra;
+  std::vector<double> rgb, alpha, depth, extra, weight_sums;
   std::vector<int> signature;
 };
 
@@ -234,6 +247,8 @@ inline RefImage ref_composite(const Scene& s, const std::vector<RefProjected>& P
   img.alpha.assign(size_t(W) * H, 0);
   img.depth.assign(want_depth ? size_t(W) * H : 0, 0);
   img.extra.assign(size_t(W) * H * C, 0);
+  const int J = s.num_weights;
+  img.weight_sums.assign(size_t(s.n) * J, 0);
   std::vector<int> order;
   for (int i = 0; i < s.n; ++i)
     if (P[i].visible) order.push_back(i);
@@ -269,6 +284,7 @@ inline RefImage ref_composite(const Scene& s, const std::vector<RefProjected>& P
             for (int c = 0; c < 3; ++c) acc[c] += w * g.color[c];
             dep += w * g.depth;
             for (int c = 0; c < C; ++c) ex[c] += w * s.extra[size_t(i) * C + c];
+            for (int j = 0; j < J; ++j) img.weight_sums[size_t(i) * J + j] += w * s.pixel_weights[p * J + j];
             T *= 1 - a;
           }
         }

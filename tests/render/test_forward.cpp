@@ -30,6 +30,7 @@ void check_against_reference(const Scene& s, double tol) {
   if (s.settings.want_depth) EXPECT_LT(max_abs_diff(out.depth, ref.depth), tol * 10);  // depths are ~5
   else EXPECT_TRUE(out.depth.empty());
   EXPECT_LT(max_abs_diff(out.extra, ref.extra), tol * 4);
+  EXPECT_LT(max_abs_diff(out.weight_sums, ref.weight_sums), tol * 20);  // sums over up to ~100 pixels
   // the scene really exercises compositing: some pixels are covered, some not fully
   double amax = 0, amin = 1;
   for (double a : ref.alpha) amax = std::max(amax, a), amin = std::min(amin, a);
@@ -47,6 +48,7 @@ TEST(RenderForward, MatchesBruteForceDouble) {
   for (uint32_t seed = 1; seed <= 6; ++seed) {
     Scene s = random_scene(60, 40, 36, seed, 0.95, seed % 2 ? 3 : 0);
     s.sh_degree = int(seed % 4);
+    if (seed > 3) s.add_pixel_weights(2, seed);
     check_against_reference<double>(s, 1e-10);
   }
 }
@@ -54,6 +56,7 @@ TEST(RenderForward, MatchesBruteForceDouble) {
 TEST(RenderForward, MatchesBruteForceFloat) {
   for (uint32_t seed = 11; seed <= 16; ++seed) {
     Scene s = random_scene(60, 40, 36, seed, 0.95, 2);
+    if (seed % 2) s.add_pixel_weights(int(seed % 3) + 1, seed);
     check_against_reference<float>(s, 1e-5);
   }
 }

@@ -119,7 +119,7 @@ struct Raster2D {
   std::vector<int> radius;
   Binning bins;
   RasterWorkspace<double> ws;
-  std::vector<double> rgb, alpha, dep, ext, finalT;
+  std::vector<double> rgb, alpha, dep, ext, finalT, wsum;
   std::vector<int32_t> last;
 
   RasterInputs<double> inputs() const {
@@ -135,6 +135,8 @@ struct Raster2D {
     in.extra = C ? extra.data() : nullptr;
     in.num_extra = C;
     for (int k = 0; k < 3; ++k) in.background[k] = s->settings.background[k];
+    in.pixel_weights = s->num_weights ? s->pixel_weights.data() : nullptr;
+    in.num_weights = s->num_weights;
     return in;
   }
   void forward() {
@@ -146,7 +148,9 @@ struct Raster2D {
     ext.resize(size_t(W) * H * C);
     finalT.resize(size_t(W) * H);
     last.resize(size_t(W) * H);
+    wsum.resize(size_t(n) * s->num_weights);
     RasterOutputs<double> o;
+    o.weight_sums = wsum.data();
     o.rgb = rgb.data();
     o.alpha = alpha.data();
     o.depth = dep.data();
@@ -179,6 +183,7 @@ struct Raster2D {
 TEST(RenderGrad, RasterizeFiniteDifferences) {
   for (uint32_t seed : {21u, 22u}) {
     Scene s = random_scene(45, 40, 36, seed, 0.9, 2);
+    s.add_pixel_weights(2, seed);
     const auto P = ref_project(s);
     Raster2D r;
     r.s = &s;
@@ -197,10 +202,11 @@ TEST(RenderGrad, RasterizeFiniteDifferences) {
     const std::vector<double> wr = random_weights(r.rgb.size() + 40 * 36 * 3, rng);
     const std::vector<double> wa = random_weights(40 * 36, rng), wd = random_weights(40 * 36, rng);
     const std::vector<double> we = random_weights(40 * 36 * r.C, rng);
+    const std::vector<double> ww = random_weights(size_t(r.n) * s.num_weights, rng);
     auto eval = [&]() {
       r.forward();
       Eval e;
-      e.loss = dot(wr, r.rgb) + dot(wa, r.alpha) + dot(wd, r.dep) + dot(we, r.ext);
+      e.loss = dot(wr, r.rgb) + dot(wa, r.alpha) + dot(wd, r.dep) + dot(we, r.ext) + dot(ww, r.wsum);
       e.signature = r.signature();
       return e;
     };
@@ -211,6 +217,7 @@ TEST(RenderGrad, RasterizeFiniteDifferences) {
     g.d_alpha = wa.data();
     g.d_depth = wd.data();
     g.d_extra = we.data();
+    g.d_weight_sums = ww.data();
     g.mean2d = gm.data();
     g.conic = gc.data();
     g.opacity = go.data();
@@ -231,7 +238,7 @@ TEST(RenderGrad, RasterizeFiniteDifferences) {
 // Full pipeline.
 struct EndToEnd {
   Scene s;
-  std::vector<double> wr, wa, wd, we;
+  std::vector<double> wr, wa, wd, we, ww;
   RendererT<double> r;
   RenderOutputsT<double> out;
   std::vector<std::vector<double>> store;
@@ -243,8 +250,12 @@ struct EndToEnd {
     wa = random_weights(P, rng);
     wd = random_weights(P, rng);
     we = random_weights(P * s.num_extra, rng);
+    ww = random_weights(size_t(s.n) * s.num_weights, rng);
+    if (s.num_weights) s.settings.pixel_weights = s.pixel_weights.data();  // point at this copy
   }
-  double loss() { return dot(wr, out.rgb) + dot(wa, out.alpha) + dot(wd, out.depth) + dot(we, out.extra); }
+  double loss() {
+    return dot(wr, out.rgb) + dot(wa, out.alpha) + dot(wd, out.depth) + dot(we, out.extra) + dot(ww, out.weight_sums);
+  }
   Eval eval() {
     r.forward(s.cam, s.inputs<double>(store), s.settings, out);
     Eval e;
@@ -260,6 +271,7 @@ struct EndToEnd {
     d.alpha = wa.data();
     d.depth = wd.data();
     d.extra = s.num_extra ? we.data() : nullptr;
+    d.weight_sums = s.num_weights ? ww.data() : nullptr;
     r.backward(d, g);
     return g;
   }
@@ -302,6 +314,7 @@ TEST(RenderGrad, EndToEndShFiniteDifferences) {
 
 TEST(RenderGrad, EndToEndColoursNoDepthFiniteDifferences) {
   Scene sc = random_scene(40, 40, 36, 41, 0.9, 3);
+  sc.add_pixel_weights(3, 41);  // per-mask blending-weight sums (SCL pooling) are differentiated too
   sc.use_colors = true;
   sc.settings.want_depth = false;
   EndToEnd e(sc, 5);
