@@ -92,7 +92,9 @@ int positive_int(const json& obj, const char* key, const fs::path& file) {
 
 }  // namespace
 
-LerfFrameLabels load_lerf_frame(const fs::path& file, int expect_width, int expect_height) {
+LerfFrameLabels load_lerf_frame(const fs::path& file, int expect_width, int expect_height, int downscale) {
+  if (downscale < 1) fail("{}: downscale factor must be >= 1, got {}", file.string(), downscale);
+  const double inv = 1.0 / downscale;
   const std::string text = read_file_text(file);
   json j;
   try {
@@ -111,6 +113,12 @@ LerfFrameLabels load_lerf_frame(const fs::path& file, int expect_width, int expe
   L.image_name = info["name"].get<std::string>();
   L.width = positive_int(info, "width", file);
   L.height = positive_int(info, "height", file);
+  if (downscale > 1) {
+    if (L.width < downscale || L.height < downscale)
+      fail("{}: label size {}x{} is smaller than the downscale factor {}", file.string(), L.width, L.height, downscale);
+    L.width /= downscale;
+    L.height /= downscale;
+  }
   if ((expect_width > 0 || expect_height > 0) && (L.width != expect_width || L.height != expect_height))
     fail("{}: label size {}x{} does not match the image size {}x{}", file.string(), L.width, L.height, expect_width,
          expect_height);
@@ -131,8 +139,8 @@ LerfFrameLabels load_lerf_frame(const fs::path& file, int expect_width, int expe
     BBox box;
     const double b[4] = {number(bb[0], file, where + ".bbox[0]"), number(bb[1], file, where + ".bbox[1]"),
                          number(bb[2], file, where + ".bbox[2]"), number(bb[3], file, where + ".bbox[3]")};
-    box.x1 = std::min(b[0], b[2]); box.x2 = std::max(b[0], b[2]);
-    box.y1 = std::min(b[1], b[3]); box.y2 = std::max(b[1], b[3]);
+    box.x1 = std::min(b[0], b[2]) * inv; box.x2 = std::max(b[0], b[2]) * inv;
+    box.y1 = std::min(b[1], b[3]) * inv; box.y2 = std::max(b[1], b[3]) * inv;
     if (!ob.contains("segmentation")) fail("{}: {} (\"{}\"): missing key \"segmentation\"", file.string(), where, cat);
     const json& seg = ob["segmentation"];
     if (!seg.is_array()) fail("{}: {} (\"{}\"): segmentation must be a list of [x, y] points", file.string(), where, cat);
@@ -144,7 +152,7 @@ LerfFrameLabels load_lerf_frame(const fs::path& file, int expect_width, int expe
       const json& p = seg[k];
       const std::string pw = fmt::format("{}.segmentation[{}]", where, k);
       if (!p.is_array() || p.size() != 2) fail("{}: {} must be an [x, y] pair", file.string(), pw);
-      poly.push_back({number(p[0], file, pw + "[0]"), number(p[1], file, pw + "[1]")});
+      poly.push_back({number(p[0], file, pw + "[0]") * inv, number(p[1], file, pw + "[1]") * inv});
     }
     auto it = index.find(cat);
     if (it == index.end()) {
@@ -162,7 +170,8 @@ LerfFrameLabels load_lerf_frame(const fs::path& file, int expect_width, int expe
   return L;
 }
 
-std::vector<LerfFrameLabels> load_lerf_labels(const fs::path& scene, int expect_width, int expect_height) {
+std::vector<LerfFrameLabels> load_lerf_labels(const fs::path& scene, int expect_width, int expect_height,
+                                              int downscale) {
   const fs::path dir = scene / "label";
   if (!fs::is_directory(dir)) fail("{}: no LERF-OVS label folder", dir.string());
   std::vector<fs::path> files;
@@ -171,7 +180,7 @@ std::vector<LerfFrameLabels> load_lerf_labels(const fs::path& scene, int expect_
   if (files.empty()) fail("{}: no LERF-OVS label files (*.json)", dir.string());
   std::sort(files.begin(), files.end());
   std::vector<LerfFrameLabels> out;
-  for (auto& f : files) out.push_back(load_lerf_frame(f, expect_width, expect_height));
+  for (auto& f : files) out.push_back(load_lerf_frame(f, expect_width, expect_height, downscale));
   return out;
 }
 
@@ -227,23 +236,38 @@ OvsLabelSet open_3dovs_labels(const fs::path& scene) {
   return L;
 }
 
-OvsViewLabels load_3dovs_view(const OvsLabelSet& labels, size_t i, int expect_width, int expect_height) {
+OvsViewLabels load_3dovs_view(const OvsLabelSet& labels, size_t i, int expect_width, int expect_height,
+                              int downscale) {
+  if (downscale < 1) fail("{}: downscale factor must be >= 1, got {}", labels.dir.string(), downscale);
   if (i >= labels.views.size()) fail("{}: view {} out of range ({} labelled views)", labels.dir.string(), i, labels.views.size());
   const auto& v = labels.views[i];
   OvsViewLabels out;
   out.index = v.index;
-  out.width = expect_width;
-  out.height = expect_height;
+  int full_w = 0, full_h = 0;  // size of the first class PNG
   for (auto& c : labels.classes) {
     const fs::path p = v.dir / (c + ".png");
     if (!fs::is_regular_file(p)) fail("{}: missing class mask for \"{}\"", p.string(), c);
-    Image img = load_image(p, 1);
-    if (out.width <= 0 && out.height <= 0) { out.width = img.width; out.height = img.height; }
-    if (img.width != out.width || img.height != out.height)
-      fail("{}: mask size {}x{} does not match {} {}x{}", p.string(), img.width, img.height,
-           expect_width > 0 ? "the image size" : "the view's other masks", out.width, out.height);
-    Mask m(img.px.size());
-    for (size_t k = 0; k < m.size(); ++k) m[k] = img.px[k] * 255.f >= 254.5f ? 1 : 0;
+    const Image img = load_image(p, 1);
+    if (out.masks.empty()) {
+      full_w = img.width;
+      full_h = img.height;
+      if (full_w < downscale || full_h < downscale)
+        fail("{}: mask size {}x{} is smaller than the downscale factor {}", p.string(), full_w, full_h, downscale);
+      out.width = full_w / downscale;
+      out.height = full_h / downscale;
+      if ((expect_width > 0 || expect_height > 0) && (out.width != expect_width || out.height != expect_height))
+        fail("{}: mask size {}x{}{} does not match the image size {}x{}", p.string(), out.width, out.height,
+             downscale > 1 ? fmt::format(" (downscaled by {})", downscale) : "", expect_width, expect_height);
+    } else if (img.width != full_w || img.height != full_h) {
+      fail("{}: mask size {}x{} does not match the view's other masks {}x{}", p.string(), img.width, img.height, full_w,
+           full_h);
+    }
+    Mask m(size_t(out.width) * out.height);
+    const int off = downscale / 2;
+    for (int y = 0; y < out.height; ++y)
+      for (int x = 0; x < out.width; ++x)
+        m[size_t(y) * out.width + x] =
+            img.px[size_t(y * downscale + off) * full_w + x * downscale + off] * 255.f >= 254.5f ? 1 : 0;
     out.masks.push_back(std::move(m));
   }
   return out;

@@ -49,11 +49,14 @@ struct LerfFrameLabels {
   const LerfCategory* find(const std::string& name) const;
 };
 
-// Loads one label file. expect_width/height > 0: the label size must match (the image being evaluated).
-LerfFrameLabels load_lerf_frame(const std::filesystem::path& json_file, int expect_width = 0, int expect_height = 0);
+// Loads one label file. downscale F >= 1: labels for images downscaled by F (docs/formats.md): size
+// floor(W/F) x floor(H/F), polygon vertices and boxes divided by F before rasterising. expect_width/height > 0:
+// the (downscaled) label size must match (the image being evaluated).
+LerfFrameLabels load_lerf_frame(const std::filesystem::path& json_file, int expect_width = 0, int expect_height = 0,
+                                int downscale = 1);
 // Loads every SCENE/label/*.json, sorted by file name. Fails if the folder is missing or holds no .json file.
 std::vector<LerfFrameLabels> load_lerf_labels(const std::filesystem::path& scene, int expect_width = 0,
-                                              int expect_height = 0);
+                                              int expect_height = 0, int downscale = 1);
 
 // 3D-OVS label set of a scene: the sorted class list and the labelled views.
 struct OvsLabelSet {
@@ -73,7 +76,10 @@ struct OvsViewLabels {
   std::vector<Mask> masks;  // [C] masks [H, W] 0/1, in the order of OvsLabelSet::classes
 };
 // Loads the class masks of labels.views[i]. A pixel is inside iff its grey value is 255 (colour PNGs are
-// converted to grey first). Every class PNG must exist and all must have one size (expect_* > 0: that size).
-OvsViewLabels load_3dovs_view(const OvsLabelSet& labels, size_t i, int expect_width = 0, int expect_height = 0);
+// converted to grey first). Every class PNG must exist and all must have one size. downscale F >= 1: each
+// mask becomes floor(W/F) x floor(H/F), taking the centre pixel (F/2, F/2) of every F x F block, like
+// hgs::downscale_labels. expect_* > 0: the (downscaled) size must be that.
+OvsViewLabels load_3dovs_view(const OvsLabelSet& labels, size_t i, int expect_width = 0, int expect_height = 0,
+                              int downscale = 1);
 
 }  // namespace hgs::eval

@@ -147,6 +147,22 @@ TEST(EvalLerfLabels, LoadsAndMergesCategories) {
   EXPECT_EQ(load_lerf_frame(tmp / "scene/label/frame_00001.json").width, 6);
 }
 
+TEST(EvalLerfLabels, Downscale) {
+  hgs::test::TempDir tmp;
+  write(tmp / "f.json", R"({"info": {"name": "f.jpg", "width": 9, "height": 8},
+    "objects": [{"category": "a", "bbox": [2, 2, 6, 6], "segmentation": [[2, 2], [6, 2], [6, 6], [2, 6]]}]})");
+  // F = 2: 4x4 labels, the square becomes [1, 3]^2 -> pixels 1..2.
+  LerfFrameLabels L = load_lerf_frame(tmp / "f.json", 4, 4, 2);
+  EXPECT_EQ(L.width, 4);
+  EXPECT_EQ(L.height, 4);
+  EXPECT_EQ(L.categories[0].mask, ascii({"....", ".##.", ".##.", "...."}));
+  EXPECT_EQ(L.categories[0].bboxes[0].x2, 3.0);
+  expect_error([&] { load_lerf_frame(tmp / "f.json", 9, 8, 2); }, (tmp / "f.json").string(),
+               "label size 4x4 does not match the image size 9x8");
+  expect_error([&] { load_lerf_frame(tmp / "f.json", 0, 0, 0); }, (tmp / "f.json").string(), "downscale factor");
+  expect_error([&] { load_lerf_frame(tmp / "f.json", 0, 0, 10); }, (tmp / "f.json").string(), "smaller than the downscale");
+}
+
 TEST(EvalLerfLabels, MalformedFilesGiveClearErrors) {
   hgs::test::TempDir tmp;
   const fs::path f = tmp / "frame_00001.json";
@@ -219,6 +235,13 @@ TEST(EvalOvsLabels, LoadsSortedClassesAndViews) {
   for (int c = 0; c < 3; ++c) rgb.at(1, 1, c) = 1.f;
   save_png(seg / "0" / "apple.png", rgb);
   EXPECT_EQ(load_3dovs_view(L, 0).masks[0], ascii({"....", ".#..", "...."}));
+  // Downscale by 2 takes the centre pixel (1, 1) of each 2x2 block: 2x1 masks.
+  OvsViewLabels D = load_3dovs_view(L, 1, 2, 1, 2);
+  EXPECT_EQ(D.width, 2);
+  EXPECT_EQ(D.height, 1);
+  EXPECT_EQ(D.masks[0], ascii({".."}));  // apple: row 1 is empty
+  EXPECT_EQ(D.masks[2], ascii({".#"}));  // bear: (1,1) no, (3,1) yes
+  EXPECT_THROW(load_3dovs_view(L, 1, 4, 3, 2), Error);
 }
 
 TEST(EvalOvsLabels, MalformedInputsGiveClearErrors) {

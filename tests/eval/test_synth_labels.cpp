@@ -7,8 +7,10 @@
 #include <map>
 #include <nlohmann/json.hpp>
 
+#include "core/error.h"
 #include "core/fs.h"
 #include "core/image.h"
+#include "eval/instances.h"
 #include "eval/labels.h"
 #include "synth/synth.h"
 #include "test_util.h"
@@ -60,10 +62,7 @@ TEST(EvalSynthLabels, PolygonsAndSegmentationsMatchInstanceMasks) {
   const fs::path scene = tmp / "scene";
   synth::generate(scene, o);
 
-  std::map<int, std::string> names;
-  const nlohmann::json objects = nlohmann::json::parse(read_file_text(scene / "masks/objects.json"));
-  for (auto& [k, v] : objects.items())
-    names[std::stoi(k)] = v.get<std::string>();
+  const std::map<int, std::string> names = load_object_names(scene);
   ASSERT_EQ(names.size(), 4u);
   std::vector<std::string> views;
   for (auto& e : fs::directory_iterator(scene / "images")) views.push_back(e.path().filename().string());
@@ -74,12 +73,14 @@ TEST(EvalSynthLabels, PolygonsAndSegmentationsMatchInstanceMasks) {
   ASSERT_EQ(frames.size(), 2u);  // views 0 and 8 are held out
   int exact = 0, with_holes = 0, present = 0;
   for (auto& F : frames) {
-    const LabelMap inst = load_label_png(scene / "gt/instances" / F.image_name);
-    ASSERT_EQ(inst.width, o.width);
-    for (auto& [id, name] : names) {
-      Mask gt(inst.v.size());
+    const InstanceLabels inst = load_instance_masks(scene, F.image_name, names, o.width, o.height);
+    ASSERT_EQ(inst.ids.size(), 4u);
+    for (size_t k = 0; k < inst.ids.size(); ++k) {
+      const std::string& name = inst.names[k];
+      EXPECT_EQ(name, names.at(inst.ids[k]));
+      const Mask& gt = inst.masks[k];
       long n = 0;
-      for (size_t i = 0; i < gt.size(); ++i) n += gt[i] = inst.v[i] == id;
+      for (auto v : gt) n += v;
       const LerfCategory* c = F.find(name);
       if (n == 0) {
         EXPECT_EQ(c, nullptr) << F.stem << " " << name;
@@ -123,9 +124,50 @@ TEST(EvalSynthLabels, PolygonsAndSegmentationsMatchInstanceMasks) {
       int id = -1;
       for (auto& [k, name] : names)
         if (name == L.classes[c]) id = k;
+      ASSERT_GT(id, 0);
       Mask gt(inst.v.size());
       for (size_t i = 0; i < gt.size(); ++i) gt[i] = inst.v[i] == id;
       EXPECT_EQ(V.masks[c], gt) << "view " << V.index << " class " << L.classes[c];
     }
+    // Downscaled labels agree with the downscaled instance map.
+    OvsViewLabels D = load_3dovs_view(L, v, o.width / 2, o.height / 2, 2);
+    const InstanceLabels I2 = load_instance_masks(scene, views[V.index], names, o.width / 2, o.height / 2, 2);
+    for (size_t c = 0; c < L.classes.size(); ++c)
+      for (size_t k = 0; k < I2.names.size(); ++k)
+        if (I2.names[k] == L.classes[c]) EXPECT_EQ(D.masks[c], I2.masks[k]);
   }
+}
+
+TEST(EvalInstances, MalformedObjectNamesAndMissingMaps) {
+  hgs::test::TempDir tmp;
+  const fs::path f = tmp / "s/masks/objects.json";
+  fs::create_directories(f.parent_path());
+  auto err = [&](const std::string& text) {
+    atomic_write_text(f, text);
+    try {
+      load_object_names(tmp / "s");
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("(no error)");
+  };
+  EXPECT_NE(err("{").find(f.string() + ": invalid JSON"), std::string::npos);
+  EXPECT_NE(err("[]").find("expected an object"), std::string::npos);
+  EXPECT_NE(err("{}").find("no objects"), std::string::npos);
+  EXPECT_NE(err(R"({"x": "mug"})").find("key \"x\" is not an object id"), std::string::npos);
+  EXPECT_NE(err(R"({"0": "mug"})").find("key \"0\" is not an object id"), std::string::npos);
+  EXPECT_NE(err(R"({"1": 5})").find("name of object 1 must be a non-empty string"), std::string::npos);
+  EXPECT_NE(err(R"({"1": "a", "01": "b"})").find("object id 1 appears twice"), std::string::npos);
+  atomic_write_text(f, R"({"2": "mug", "1": "plate"})");
+  auto names = load_object_names(tmp / "s");
+  EXPECT_EQ(names.at(1), "plate");
+  EXPECT_THROW(load_instance_masks(tmp / "s", "frame_00001.png", names), Error);
+  LabelMap lm(3, 2, 0);
+  lm.at(2, 1) = 2;
+  save_label_png(tmp / "s/gt/instances/v.png", lm);
+  InstanceLabels I = load_instance_masks(tmp / "s", "v.png", names);
+  EXPECT_EQ(I.ids, (std::vector<int>{1, 2}));
+  EXPECT_EQ(I.masks[0], Mask(6, 0));
+  EXPECT_EQ(I.masks[1], (Mask{0, 0, 0, 0, 0, 1}));
+  EXPECT_THROW(load_instance_masks(tmp / "s", "v.png", names, 4, 2), Error);
 }

@@ -1,0 +1,72 @@
+// Instance ground truth of synthetic scenes: objects.json parsing with clear errors and per-object masks from
+// the instance label map.
+#include "eval/instances.h"
+
+#include <algorithm>
+#include <cctype>
+#include <nlohmann/json.hpp>
+
+#include "core/error.h"
+#include "core/fs.h"
+#include "core/image.h"
+
+namespace hgs::eval {
+
+namespace fs = std::filesystem;
+
+std::map<int, std::string> load_object_names(const fs::path& scene) {
+  const fs::path file = scene / "masks" / "objects.json";
+  if (!fs::is_regular_file(file)) fail("{}: file not found (object names)", file.string());
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(read_file_text(file));
+  } catch (const nlohmann::json::exception& e) {
+    std::string msg = e.what();
+    for (char& c : msg)
+      if (c == '\n' || c == '\r') c = ' ';
+    fail("{}: invalid JSON ({})", file.string(), msg);
+  }
+  if (!j.is_object()) fail("{}: expected an object {{\"id\": \"name\", ...}}", file.string());
+  std::map<int, std::string> names;
+  for (auto it = j.begin(); it != j.end(); ++it) {
+    const std::string& key = it.key();
+    const bool digits = !key.empty() && key.size() <= 5 &&
+                        std::all_of(key.begin(), key.end(), [](char c) { return std::isdigit(static_cast<unsigned char>(c)); });
+    const int id = digits ? std::stoi(key) : 0;
+    if (id < 1 || id > 65535) fail("{}: key \"{}\" is not an object id in 1..65535", file.string(), key);
+    if (!it.value().is_string() || it.value().get<std::string>().empty())
+      fail("{}: the name of object {} must be a non-empty string", file.string(), key);
+    if (!names.emplace(id, it.value().get<std::string>()).second)
+      fail("{}: object id {} appears twice", file.string(), id);
+  }
+  if (names.empty()) fail("{}: no objects", file.string());
+  return names;
+}
+
+InstanceLabels load_instance_masks(const fs::path& scene, const std::string& view_name,
+                                   const std::map<int, std::string>& names, int expect_width, int expect_height,
+                                   int downscale) {
+  const fs::path file = scene / "gt" / "instances" / view_name;
+  if (downscale < 1) fail("{}: downscale factor must be >= 1, got {}", file.string(), downscale);
+  if (!fs::is_regular_file(file)) fail("{}: file not found (instance map)", file.string());
+  LabelMap full = load_label_png(file);
+  if (full.width < downscale || full.height < downscale)
+    fail("{}: size {}x{} is smaller than the downscale factor {}", file.string(), full.width, full.height, downscale);
+  const LabelMap lm = downscale_labels(full, downscale);
+  if ((expect_width > 0 || expect_height > 0) && (lm.width != expect_width || lm.height != expect_height))
+    fail("{}: instance map size {}x{}{} does not match the image size {}x{}", file.string(), lm.width, lm.height,
+         downscale > 1 ? fmt::format(" (downscaled by {})", downscale) : "", expect_width, expect_height);
+  InstanceLabels out;
+  out.width = lm.width;
+  out.height = lm.height;
+  for (auto& [id, name] : names) {
+    Mask m(lm.v.size());
+    for (size_t i = 0; i < m.size(); ++i) m[i] = lm.v[i] == id ? 1 : 0;
+    out.ids.push_back(id);
+    out.names.push_back(name);
+    out.masks.push_back(std::move(m));
+  }
+  return out;
+}
+
+}  // namespace hgs::eval

@@ -1,0 +1,29 @@
+// Ground truth of synthetic scenes for the `instances` protocol: object names from SCENE/masks/objects.json
+// ({"1": "red mug", ...}) and the exact instance maps SCENE/gt/instances/<view name> (label PNG, 0 =
+// background, k = object k).
+#pragma once
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "eval/metrics.h"
+
+namespace hgs::eval {
+
+// id -> name. Keys must be integers in 1..65535, values non-empty strings.
+std::map<int, std::string> load_object_names(const std::filesystem::path& scene);
+
+struct InstanceLabels {
+  int width = 0, height = 0;
+  std::vector<int> ids;            // [K] object ids, ascending (every object of `names`)
+  std::vector<std::string> names;  // [K]
+  std::vector<Mask> masks;         // [K] masks [H, W] 0/1 (all zero when the object is not visible)
+};
+// Masks of every named object in one view. downscale F >= 1 takes the centre pixel of each F x F block
+// (hgs::downscale_labels); expect_* > 0: the (downscaled) size must match.
+InstanceLabels load_instance_masks(const std::filesystem::path& scene, const std::string& view_name,
+                                   const std::map<int, std::string>& names, int expect_width = 0,
+                                   int expect_height = 0, int downscale = 1);
+
+}  // namespace hgs::eval
