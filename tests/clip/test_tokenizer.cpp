@@ -5,9 +5,13 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "clip/assets.h"
 #include "clip/text_clean.h"
 #include "clip/tokenizer.h"
 #include "clip_test_util.h"
+#include "core/error.h"
+#include "core/fs.h"
+#include "test_util.h"
 
 using namespace hgs::clip;
 
@@ -78,4 +82,32 @@ TEST(ClipTokenizer, CleanText) {
   EXPECT_EQ(clean_text("\xE2\x80\x9Cq\xE2\x80\x9D \xEF\xAC\x81"), "\"q\" fi");
   EXPECT_EQ(clean_text("a\xC2\xA0" "b\xE3\x80\x80" "c"), "a b c");  // NBSP and ideographic space are whitespace
   EXPECT_EQ(clean_text("bad \xFF byte"), "bad \xEF\xBF\xBD byte");
+}
+
+TEST(ClipTokenizer, AssetLookupAndBadVocabulary) {
+  hgs::test::TempDir t;
+  std::filesystem::create_directories(t / "clip");
+  auto real = find_asset("clip/bpe_simple_vocab_16e6.txt.gz");
+  std::filesystem::copy_file(real, t / "clip" / "bpe_simple_vocab_16e6.txt.gz");
+  setenv("HGS_ASSETS", t.path.c_str(), 1);
+  EXPECT_EQ(find_asset("clip/bpe_simple_vocab_16e6.txt.gz"), t / "clip" / "bpe_simple_vocab_16e6.txt.gz");
+  setenv("HGS_ASSETS", (t / "nothing-here").c_str(), 1);  // falls back to the next locations
+  EXPECT_TRUE(std::filesystem::exists(find_asset("clip/bpe_simple_vocab_16e6.txt.gz")));
+  unsetenv("HGS_ASSETS");
+  try {
+    find_asset("clip/absent.txt");
+    ADD_FAILURE() << "expected an error";
+  } catch (const hgs::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("HGS_ASSETS"), std::string::npos) << e.what();
+  }
+  // A truncated gzip or a vocabulary with too few merges is a one-line error naming the file.
+  auto bytes = hgs::read_file_bytes(real);
+  hgs::atomic_write_bytes(t / "short.gz", bytes.data(), bytes.size() / 2);
+  EXPECT_THROW(Tokenizer(t / "short.gz"), hgs::Error);
+  try {
+    Tokenizer(t / "missing.gz");
+    ADD_FAILURE() << "expected an error";
+  } catch (const hgs::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("missing.gz"), std::string::npos) << e.what();
+  }
 }
