@@ -52,6 +52,7 @@ void run_embed_text(const EmbedTextArgs& a) {
   opt.activation = clip::parse_activation(a.act);
   clip::ClipModel m = clip::ClipModel::load(a.clip, opt);
   if (!m.has_text) fail("{}: the model has no text tower", a.clip);
+  fmt::print(stderr, "model: {}\n", m.describe());
   if (a.merge && !out.empty()) {
     auto first = out.begin();
     if (first->is_array() && int(first->size()) != m.embed_dim)

@@ -26,6 +26,7 @@ void run_features(const FeaturesArgs& a) {
   opt.activation = clip::parse_activation(a.act);
   clip::ClipModel m = clip::ClipModel::load(a.clip, opt);
   if (!m.has_vision) fail("{}: the model has no vision tower", a.clip);
+  if (!a.quiet) fmt::print(stderr, "model: {}\n", m.describe());
   clip::DenseOptions d;
   d.input_size = a.input_size;
   d.tile_size = a.tile;
