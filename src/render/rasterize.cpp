@@ -78,11 +78,21 @@ bool load_records(const RasterInputs<T>& in, const Binning& bins, const T* recor
   return true;
 }
 
+// Spreads the low 16 bits of x to the even bit positions.
+inline uint32_t spread_bits(uint32_t x) {
+  x = (x | (x << 8)) & 0x00FF00FFu;
+  x = (x | (x << 4)) & 0x0F0F0F0Fu;
+  x = (x | (x << 2)) & 0x33333333u;
+  x = (x | (x << 1)) & 0x55555555u;
+  return x;
+}
+
 // Builds the 32 batch lists of a tile into lists [32, n] / count [32]: for each of the 16 pixel rows the exact
 // x-interval where d^T conic d <= m (the alpha >= 1/255 region, with margin; binning.h) is computed in double
-// (4 rows per vector), and the Gaussian is listed in the 8-pixel batches that interval touches.
+// (4 rows per vector), and the Gaussian is listed in the 8-pixel batches that interval touches. masks [n] gets
+// the same information per Gaussian (bit bt set = listed in batch bt) for the Gaussian-major backward.
 template <class T>
-void build_lists(const Binning& bins, int tile, const TileData<T>& td, int* lists, int* count) {
+void build_lists(const Binning& bins, int tile, const TileData<T>& td, int* lists, int* count, uint32_t* masks) {
   typedef double v4d __attribute__((vector_size(32)));
   typedef int64_t v4l __attribute__((vector_size(32)));
   const int n = td.n;
@@ -98,6 +108,7 @@ void build_lists(const Binning& bins, int tile, const TileData<T>& td, int* list
     const T* r = td.rec + size_t(k) * kRecord;
     const double ey = double(r[kEy]);
     const double u = double(r[kMx]), v = double(r[kMy]);
+    masks[k] = 0;
     if (ey < 0 || v + ey - 0.5 < ty0 || v - ey - 0.5 > ty0 + kTileSize - 1) continue;
     const double a = double(r[kA]), b = double(r[kB]), c = double(r[kC]);
     const double m = double(r[kMahal]), ndet = b * b - a * c, am = a * m, ia = 1.0 / a;
@@ -118,9 +129,14 @@ void build_lists(const Binning& bins, int tile, const TileData<T>& td, int* list
       const v4d xr = u + (sq + b * dy) * ia - (0.5 - 1e-3);
       for (int h = 0; h < kBatchesPerRow; ++h) {
         const v4l hm = valid & (xl <= bx1[h]) & (xr >= bx0[h]);
+#if defined(__AVX__)
+        hit[h] |= uint32_t(_mm256_movemask_pd((__m256d)hm)) << (4 * q);
+#else
         for (int l = 0; l < 4; ++l) hit[h] |= uint32_t(hm[l] & 1) << (4 * q + l);
+#endif
       }
     }
+    masks[k] = spread_bits(hit[0]) | (spread_bits(hit[1]) << 1);  // bit row * 2 + h
     for (int h = 0; h < kBatchesPerRow; ++h) {
       uint32_t mbits = hit[h];
       while (mbits) {
@@ -136,7 +152,8 @@ void build_lists(const Binning& bins, int tile, const TileData<T>& td, int* list
 
 template <class T, bool kDepth, bool kExtra>
 void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typename RasterWorkspace<T>::PerThread& w,
-                  const T* records, int* ws_lists, int* ws_count, T* pair_w, const RasterOutputs<T>& out) {
+                  const T* records, int* ws_lists, int* ws_count, uint32_t* ws_masks, T* pair_w,
+                  const RasterOutputs<T>& out) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
   using I = typename std::remove_reference<decltype(M{}[0])>::type;
@@ -147,7 +164,7 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   if (any_g) {
     int* lists = ws_lists + size_t(kBatches) * bins.tile_start[tile];
     int* count = ws_count + size_t(kBatches) * tile;
-    build_lists(bins, tile, td, lists, count);
+    build_lists(bins, tile, td, lists, count, ws_masks + bins.tile_start[tile]);
     td.lists = lists;
     td.count = count;
   }
@@ -207,7 +224,7 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
         for (int jj = 0; jj < J; ++jj) wa[jj] += wgt * MW[jj];
       }
       Tr = acc ? testT : Tr;
-      lastp = acc ? M{} + I(j + 1) : lastp;
+      lastp = acc ? M{} + I(k + 1) : lastp;  // tile-local index + 1
       if (!simd::any(active)) break;
     }
     for (int l = 0; l < nvalid; ++l) {
@@ -231,11 +248,13 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   }
 }
 
+// Backward of one tile, Gaussian-major: the tile's Gaussians are walked back to front (k = n-1 .. 0); each visits
+// the batches its mask names, whose per-pixel state (T, S) lives in per-thread scratch, while its gradient
+// sums stay in registers and are stored once per (tile, Gaussian) pair.
 template <class T, bool kDepth, bool kExtra>
 void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
                    typename RasterWorkspace<T>::PerThread& w, const T* final_T, const int32_t* last,
-                   const RasterGrads<T>& g, const T* records, const int* ws_lists, const int* ws_count,
-                   T* pair_grad) {
+                   const RasterGrads<T>& g, const T* records, const uint32_t* ws_masks, T* pair_grad) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
   using I = typename std::remove_reference<decltype(M{}[0])>::type;
@@ -244,17 +263,9 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
   const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
   TileData<T> td;
   if (!load_records(in, bins, records, tile, w, td)) return;
-  td.lists = ws_lists + size_t(kBatches) * bins.tile_start[tile];
-  td.count = ws_count + size_t(kBatches) * tile;
   const int n = td.n;
-  if (w.acc.size() < size_t(n) * F) w.acc.resize(size_t(n) * F);
-  P* acc = w.acc.data();
-  std::fill(acc, acc + size_t(n) * F, P{});
-  if (kExtra && w.chan.size() < size_t(C)) w.chan.resize(size_t(C));
-  P* GE = w.chan.data();
+  const uint32_t* masks = ws_masks + bins.tile_start[tile];
   const int J = g.d_weight_sums ? in.num_weights : 0;
-  if (w.mw.size() < size_t(J)) w.mw.resize(size_t(J));
-  P* MW = w.mw.data();
   if (J > 0) {
     if (w.dw.size() < size_t(n) * J) w.dw.resize(size_t(n) * J);
     const int s0 = bins.tile_start[tile];
@@ -263,22 +274,32 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
         w.dw[size_t(k) * J + jj] = g.d_weight_sums[size_t(bins.tile_gauss[s0 + k]) * J + jj];
   }
   const T* DW = w.dw.data();
-  const P lane = simd::iota_pack<T>();
+  // per-batch state: [Tc, S, gr, gg, gb, gd, Tbg, GE[C], MW[J]]
+  enum { bT, bS, bR, bG, bB, bD, bBg, kBatchFixed };
+  const int BS = kBatchFixed + C + J;
+  if (w.bstate.size() < size_t(kBatches) * BS) w.bstate.resize(size_t(kBatches) * BS);
+  if (w.blast.size() < size_t(kBatches)) w.blast.resize(kBatches);
+  if (kExtra && w.chan.size() < size_t(C)) w.chan.resize(size_t(C));
+  P* bst = w.bstate.data();
+  M* blast = w.blast.data();
+  P* accE = w.chan.data();
+  int kmax[kBatches];
+  uint32_t live = 0;  // batches with at least one contributor
   const T bg0 = in.background[0], bg1 = in.background[1], bg2 = in.background[2];
   for (int bt = 0; bt < kBatches; ++bt) {
+    kmax[bt] = 0;
     const int py = ty0 + bt / kBatchesPerRow, px0 = tx0 + (bt % kBatchesPerRow) * kLanes;
     if (py >= H || px0 >= W) continue;
     const int nvalid = std::min(kLanes, W - px0);
+    P* st = bst + size_t(bt) * BS;
     P Tf = simd::splat(T(1)), gr = P{}, gg = P{}, gb = P{}, ga = P{}, gd = P{};
     M lastp = M{};
-    if (kExtra)
-      for (int c = 0; c < C; ++c) GE[c] = P{};
-    int jmax = 0;
+    for (int c = 0; c < C + J; ++c) st[kBatchFixed + c] = P{};
     for (int l = 0; l < nvalid; ++l) {
       const size_t p = size_t(py) * W + px0 + l;
       Tf[l] = final_T[p];
       lastp[l] = last[p];
-      jmax = std::max(jmax, int(last[p]));
+      kmax[bt] = std::max(kmax[bt], int(last[p]));
       if (g.d_rgb) {
         gr[l] = g.d_rgb[3 * p];
         gg[l] = g.d_rgb[3 * p + 1];
@@ -287,22 +308,39 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
       if (g.d_alpha) ga[l] = g.d_alpha[p];
       if (kDepth && g.d_depth) gd[l] = g.d_depth[p];
       if (kExtra && g.d_extra)
-        for (int c = 0; c < C; ++c) GE[c][l] = g.d_extra[p * C + c];
+        for (int c = 0; c < C; ++c) st[kBatchFixed + c][l] = g.d_extra[p * C + c];
+      for (int jj = 0; jj < J; ++jj) st[kBatchFixed + C + jj][l] = T(in.pixel_weights[p * J + jj]);
     }
-    for (int jj = 0; jj < J; ++jj) {
-      MW[jj] = P{};
-      for (int l = 0; l < nvalid; ++l) MW[jj][l] = T(in.pixel_weights[(size_t(py) * W + px0 + l) * J + jj]);
-    }
-    if (jmax == 0) continue;
-    const P Tbg = Tf * (gr * bg0 + gg * bg1 + gb * bg2 - ga);
-    const P fx = lane + (T(px0) + T(0.5));
-    const T fy = T(py) + T(0.5);
-    P S = P{}, Tc = Tf;
-    const int* list = td.lists + size_t(bt) * n;
-    for (int j = jmax - 1; j >= 0; --j) {
-      const int k = list[j];
-      const M inr = (M{} + I(j)) < lastp;
-      const T* rc = td.rec + size_t(k) * kRecord;
+    if (kmax[bt] == 0) continue;
+    live |= 1u << bt;
+    st[bT] = Tf;
+    st[bS] = P{};
+    st[bR] = gr;
+    st[bG] = gg;
+    st[bB] = gb;
+    st[bD] = gd;
+    st[bBg] = Tf * (gr * bg0 + gg * bg1 + gb * bg2 - ga);
+    blast[bt] = lastp;
+  }
+  const P lane = simd::iota_pack<T>();
+  const int s = bins.tile_start[tile];
+  for (int k = n - 1; k >= 0; --k) {
+    uint32_t mb = masks[k] & live;
+    T* o = pair_grad + size_t(bins.tile_pair[s + k]) * F;
+    P aMx = P{}, aMy = P{}, aA = P{}, aB = P{}, aC = P{}, aOp = P{}, aR = P{}, aG = P{}, aBl = P{}, aZ = P{};
+    if (kExtra)
+      for (int ch = 0; ch < C; ++ch) accE[ch] = P{};
+    const T* rc = td.rec + size_t(k) * kRecord;
+    const T* e = kExtra ? td.extra + size_t(k) * C : nullptr;
+    const T* dw = J > 0 ? DW + size_t(k) * J : nullptr;
+    while (mb) {
+      const int bt = __builtin_ctz(mb);
+      mb &= mb - 1;
+      if (k >= kmax[bt]) continue;
+      P* st = bst + size_t(bt) * BS;
+      const M inr = (M{} + I(k)) < blast[bt];
+      const T fy = T(ty0 + bt / kBatchesPerRow) + T(0.5);
+      const P fx = lane + (T(tx0 + (bt % kBatchesPerRow) * kLanes) + T(0.5));
       const T dy = rc[kMy] - fy;
       const P dx = rc[kMx] - fx;
       const T bdy = rc[kB] * dy, hcdy2 = rc[kHc] * dy * dy;
@@ -312,56 +350,48 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
       const P alpha = simd::vmin<T>(araw, simd::splat(T(0.99)));
       const M c = inr & (alpha >= T(1.0 / 255.0));
       if (!simd::any(c)) continue;
+      const P gr = st[bR], gg = st[bG], gb = st[bB];
       const P ioma = T(1) / (T(1) - alpha);
-      const P Ti = Tc * ioma;
+      const P Ti = st[bT] * ioma;
       const P wgt = alpha * Ti;
       P dot = rc[kCr] * gr + rc[kCg] * gg + rc[kCb] * gb;
-      if (kDepth) dot += rc[kZ] * gd;
-      const T* e = kExtra ? td.extra + size_t(k) * C : nullptr;
+      if (kDepth) dot += rc[kZ] * st[bD];
       if (kExtra)
-        for (int ch = 0; ch < C; ++ch) dot += e[ch] * GE[ch];
-      if (J > 0) {
-        const T* dw = DW + size_t(k) * J;
-        for (int jj = 0; jj < J; ++jj) dot += dw[jj] * MW[jj];
-      }
-      P dLda = Ti * dot - (S + Tbg) * ioma;
-      S = c ? S + wgt * dot : S;
-      Tc = c ? Ti : Tc;
+        for (int ch = 0; ch < C; ++ch) dot += e[ch] * st[kBatchFixed + ch];
+      for (int jj = 0; jj < J; ++jj) dot += dw[jj] * st[kBatchFixed + C + jj];
+      const P S = st[bS];
+      P dLda = Ti * dot - (S + st[bBg]) * ioma;
+      st[bS] = c ? S + wgt * dot : S;
+      st[bT] = c ? Ti : st[bT];
       const P wm = c ? wgt : P{};
-      P* a = acc + size_t(k) * F;
-      a[gR] += wm * gr;
-      a[gG] += wm * gg;
-      a[gBl] += wm * gb;
-      if (kDepth) a[gZ] += wm * gd;
+      aR += wm * gr;
+      aG += wm * gg;
+      aBl += wm * gb;
+      if (kDepth) aZ += wm * st[bD];
       if (kExtra)
-        for (int ch = 0; ch < C; ++ch) a[kNumGrads + ch] += wm * GE[ch];
+        for (int ch = 0; ch < C; ++ch) accE[ch] += wm * st[kBatchFixed + ch];
       dLda = (c & (araw < T(0.99))) ? dLda : P{};
-      a[gOp] += gauss * dLda;
+      aOp += gauss * dLda;
       const P pw = araw * dLda;  // dL/dpower
       const P pdx = pw * dx;
-      a[gMx] += rc[kA] * pdx + bdy * pw;
-      a[gMy] += rc[kB] * pdx + (rc[kC] * dy) * pw;
-      a[gA] += pdx * dx;
-      a[gB] += pdx * dy;
-      a[gC] += pw * (dy * dy);
+      aMx += rc[kA] * pdx + bdy * pw;
+      aMy += rc[kB] * pdx + (rc[kC] * dy) * pw;
+      aA += pdx * dx;
+      aB += pdx * dy;
+      aC += pw * (dy * dy);
     }
-  }
-  // per-pair results (dpower/dmx = -(a dx + b dy), dpower/da = -dx^2 / 2, dpower/db = -dx dy, ...)
-  const int s = bins.tile_start[tile];
-  for (int k = 0; k < n; ++k) {
-    const P* a = acc + size_t(k) * F;
-    T* o = pair_grad + size_t(bins.tile_pair[s + k]) * F;
-    o[gMx] = -simd::hsum<T>(a[gMx]);
-    o[gMy] = -simd::hsum<T>(a[gMy]);
-    o[gA] = T(-0.5) * simd::hsum<T>(a[gA]);
-    o[gB] = -simd::hsum<T>(a[gB]);
-    o[gC] = T(-0.5) * simd::hsum<T>(a[gC]);
-    o[gOp] = simd::hsum<T>(a[gOp]);
-    o[gR] = simd::hsum<T>(a[gR]);
-    o[gG] = simd::hsum<T>(a[gG]);
-    o[gBl] = simd::hsum<T>(a[gBl]);
-    o[gZ] = kDepth ? simd::hsum<T>(a[gZ]) : T(0);
-    for (int ch = 0; ch < C; ++ch) o[kNumGrads + ch] = simd::hsum<T>(a[kNumGrads + ch]);
+    // per-pair results (dpower/dmx = -(a dx + b dy), dpower/da = -dx^2 / 2, dpower/db = -dx dy, ...)
+    o[gMx] = -simd::hsum<T>(aMx);
+    o[gMy] = -simd::hsum<T>(aMy);
+    o[gA] = T(-0.5) * simd::hsum<T>(aA);
+    o[gB] = -simd::hsum<T>(aB);
+    o[gC] = T(-0.5) * simd::hsum<T>(aC);
+    o[gOp] = simd::hsum<T>(aOp);
+    o[gR] = simd::hsum<T>(aR);
+    o[gG] = simd::hsum<T>(aG);
+    o[gBl] = simd::hsum<T>(aBl);
+    o[gZ] = kDepth ? simd::hsum<T>(aZ) : T(0);
+    for (int ch = 0; ch < C; ++ch) o[kNumGrads + ch] = kExtra ? simd::hsum<T>(accE[ch]) : T(0);
   }
 }
 
@@ -382,6 +412,8 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
   ws.list_count.resize(size_t(kBatches) * bins.num_tiles);
   int* L = ws.lists.data();
   int* Cn = ws.list_count.data();
+  if (ws.masks.size() < size_t(bins.num_pairs)) ws.masks.resize(size_t(bins.num_pairs));
+  uint32_t* MK = ws.masks.data();
   if (ws.records.size() < size_t(in.n) * kRecord) ws.records.resize(size_t(in.n) * kRecord);
   build_records(in, bins, ws.records.data());
   const T* R = ws.records.data();
@@ -393,10 +425,10 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
     auto& w = ws.threads[omp_get_thread_num()];
 #pragma omp for schedule(dynamic, 1)
     for (int t = 0; t < bins.num_tiles; ++t) {
-      if (dep && ext) forward_tile<T, true, true>(in, bins, t, w, R, L, Cn, PW, out);
-      else if (dep) forward_tile<T, true, false>(in, bins, t, w, R, L, Cn, PW, out);
-      else if (ext) forward_tile<T, false, true>(in, bins, t, w, R, L, Cn, PW, out);
-      else forward_tile<T, false, false>(in, bins, t, w, R, L, Cn, PW, out);
+      if (dep && ext) forward_tile<T, true, true>(in, bins, t, w, R, L, Cn, MK, PW, out);
+      else if (dep) forward_tile<T, true, false>(in, bins, t, w, R, L, Cn, MK, PW, out);
+      else if (ext) forward_tile<T, false, true>(in, bins, t, w, R, L, Cn, MK, PW, out);
+      else forward_tile<T, false, false>(in, bins, t, w, R, L, Cn, MK, PW, out);
     }
     if (J > 0) {
 #pragma omp for schedule(static)
@@ -419,22 +451,17 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
   const bool ext = C > 0 && g.d_extra != nullptr;
   if (ws.pair_grad.size() < size_t(bins.num_pairs) * F) ws.pair_grad.resize(size_t(bins.num_pairs) * F);
   T* pg = ws.pair_grad.data();
-  const int* L = ws.lists.data();
-  const int* Cn = ws.list_count.data();
+  const uint32_t* MK = ws.masks.data();
   const T* R = ws.records.data();
-  if (!ext && C > 0) {
-    // extra slots are not written by the kernel in this case; keep them zero
-    std::fill(pg, pg + size_t(bins.num_pairs) * F, T(0));
-  }
 #pragma omp parallel
   {
     auto& w = ws.threads[omp_get_thread_num()];
 #pragma omp for schedule(dynamic, 1)
     for (int t = 0; t < bins.num_tiles; ++t) {
-      if (dep && ext) backward_tile<T, true, true>(in, bins, t, w, final_T, last, g, R, L, Cn, pg);
-      else if (dep) backward_tile<T, true, false>(in, bins, t, w, final_T, last, g, R, L, Cn, pg);
-      else if (ext) backward_tile<T, false, true>(in, bins, t, w, final_T, last, g, R, L, Cn, pg);
-      else backward_tile<T, false, false>(in, bins, t, w, final_T, last, g, R, L, Cn, pg);
+      if (dep && ext) backward_tile<T, true, true>(in, bins, t, w, final_T, last, g, R, MK, pg);
+      else if (dep) backward_tile<T, true, false>(in, bins, t, w, final_T, last, g, R, MK, pg);
+      else if (ext) backward_tile<T, false, true>(in, bins, t, w, final_T, last, g, R, MK, pg);
+      else backward_tile<T, false, false>(in, bins, t, w, final_T, last, g, R, MK, pg);
     }
     // reduce pair slots per Gaussian in a fixed order
 #pragma omp for schedule(static)

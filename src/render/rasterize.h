@@ -7,13 +7,13 @@
 // Layout for speed: each tile's Gaussians are loaded once into structure-of-arrays scratch; the tile is cut into
 // 32 batches of 8 pixels (half a row); per batch a list of the tile's Gaussians whose opacity box (binning.h)
 // touches it is built, so the inner loop runs 8 lanes (one AVX2 register for float) over exactly those.
-// Backward walks each batch list back to front from the per-pixel last contributor, rebuilds T_i = T_{i+1} /
+// Backward walks the tile's Gaussians back to front (Gaussian-major: each visits the batches it was listed in,
+// per-batch pixel state in scratch, its gradient sums in registers) from the per-pixel last contributor, rebuilds T_i = T_{i+1} /
 // (1 - alpha_i) from the saved final T, and keeps one scalar per pixel, S = sum_{j>i} w_j <value_j, dL/dout>,
 // so dL/dalpha_i = T_i <value_i, g> - (S + T_final (<bg, g_rgb> - g_alpha)) / (1 - alpha_i) for any number of
 // channels. Optional pixel-weight maps M_j give per-Gaussian sums a_{n,j} = sum_p M_j(p) alpha_n(p) T_n(p) (the
 // blending weight a Gaussian receives inside mask j); their gradient enters S / dot as the per-pixel value
-// sum_j dL/da_{n,j} M_j(p). Gradients of a (tile, Gaussian) pair are summed in vector registers per Gaussian over the tile and
-// stored in that pair's slot; slots are reduced per Gaussian in a fixed order, so the result is bitwise
+// sum_j dL/da_{n,j} M_j(p). Gradients of a (tile, Gaussian) pair are stored in that pair's slot; slots are reduced per Gaussian in a fixed order, so the result is bitwise
 // deterministic for any thread count and any schedule. Parallel over tiles with OpenMP (dynamic schedule).
 // Everything is templated on the scalar (float in production, double in the tests).
 #pragma once
@@ -47,7 +47,7 @@ struct RasterOutputs {
   T* depth = nullptr;       // [H, W] (needed when inputs.depth != null)
   T* extra = nullptr;       // [H, W, C]
   T* final_T = nullptr;     // [H, W] saved for backward
-  int32_t* last = nullptr;  // [H, W] saved for backward: batch-list entries up to the last accumulated one
+  int32_t* last = nullptr;  // [H, W] saved for backward: tile-local index + 1 of the last accumulated Gaussian
   T* weight_sums = nullptr; // [N, J] sum_p M_j(p) alpha_n(p) T_n(p) (when num_weights > 0)
 };
 
@@ -77,11 +77,14 @@ struct RasterWorkspace {
     std::vector<simd::Pack<T>> wacc;        // forward weight-sum accumulators [n, J]
     std::vector<simd::Pack<T>> mw;          // per-batch pixel-weight packs [J]
     std::vector<T> dw;                      // backward d(weight_sums) of the tile's Gaussians [n, J]
+    std::vector<simd::Pack<T>> bstate;      // backward per-batch state [32, 7 + C + J]
+    std::vector<simd::Mask<T>> blast;       // backward per-batch last contributor [32]
   };
   std::vector<PerThread> threads;
   std::vector<T> records;       // [N, 16] per-Gaussian records built by forward, reused by backward
   std::vector<int> lists;       // [32 * P] per-tile batch lists built by forward, reused by backward
   std::vector<int> list_count;  // [num_tiles, 32]
+  std::vector<uint32_t> masks;  // [P] per (tile, Gaussian) entry: bit b = listed in batch b
   std::vector<T> pair_grad;     // [P, F]
   std::vector<T> pair_w;        // [P, J] forward weight sums per pair
 };
