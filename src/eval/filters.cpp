@@ -1,6 +1,6 @@
-// Box filter: pad each row/column by reflection, then a running sum along rows and along columns (separable,
-// O(H W) whatever the window). Majority filter: a summed-area table of the mask gives each clipped window's
-// count of inside pixels in O(1).
+// Box filter: separable running sums, O(H W) whatever the window: along each row (padded by reflection),
+// then down the columns with one accumulator per column, updated row by row. Majority filter: a summed-area
+// table of the mask gives each clipped window's count of inside pixels in O(1).
 #include "eval/filters.h"
 
 #include <algorithm>
@@ -22,29 +22,35 @@ std::vector<float> box_filter(const std::vector<float>& v, int width, int height
     fail("eval: box filter input holds {} values, expected {}x{}", v.size(), width, height);
   if (k < 1) fail("eval: box filter size must be >= 1, got {}", k);
   const int a = k / 2, lo = -a, hi = k - 1 - a;
-  // Horizontal pass: row sums over the window.
+  // Horizontal pass: each row padded by reflection once, then a running window sum.
   std::vector<double> rows(v.size());
+  std::vector<double> pad(size_t(width) + k);
   for (int y = 0; y < height; ++y) {
     const float* src = &v[size_t(y) * width];
+    for (int j = 0; j < width + k - 1; ++j) pad[j] = src[reflect101(j + lo, width)];  // pad[j] = sample j + lo
     double s = 0;
-    for (int dx = lo; dx <= hi; ++dx) s += src[reflect101(dx, width)];
+    for (int j = 0; j < k; ++j) s += pad[j];
+    double* dst = &rows[size_t(y) * width];
     for (int x = 0; x < width; ++x) {
-      rows[size_t(y) * width + x] = s;
-      s += src[reflect101(x + hi + 1, width)] - src[reflect101(x + lo, width)];
+      dst[x] = s;
+      s += pad[x + k] - pad[x];
     }
   }
-  // Vertical pass over the row sums.
+  // Vertical pass: one running sum per column, updated a whole row at a time (contiguous memory).
   std::vector<float> out(v.size());
   const double inv = 1.0 / (double(k) * k);
-  std::vector<double> col(height);
-  for (int x = 0; x < width; ++x) {
-    for (int y = 0; y < height; ++y) col[y] = rows[size_t(y) * width + x];
-    double s = 0;
-    for (int dy = lo; dy <= hi; ++dy) s += col[reflect101(dy, height)];
-    for (int y = 0; y < height; ++y) {
-      out[size_t(y) * width + x] = static_cast<float>(s * inv);
-      s += col[reflect101(y + hi + 1, height)] - col[reflect101(y + lo, height)];
-    }
+  std::vector<double> acc(width, 0.0);
+  for (int dy = lo; dy <= hi; ++dy) {
+    const double* r = &rows[size_t(reflect101(dy, height)) * width];
+    for (int x = 0; x < width; ++x) acc[x] += r[x];
+  }
+  for (int y = 0; y < height; ++y) {
+    float* dst = &out[size_t(y) * width];
+    for (int x = 0; x < width; ++x) dst[x] = static_cast<float>(acc[x] * inv);
+    if (y + 1 == height) break;
+    const double* add = &rows[size_t(reflect101(y + hi + 1, height)) * width];
+    const double* sub = &rows[size_t(reflect101(y + lo, height)) * width];
+    for (int x = 0; x < width; ++x) acc[x] += add[x] - sub[x];
   }
   return out;
 }

@@ -1,7 +1,7 @@
 // Mask metrics. Erosion by a 3x3 square applied d times equals one erosion by a (2d+1) x (2d+1) square (with
 // the same constant value outside the image), which is separable: a pixel survives iff no zero lies within
 // distance d along its row, then along its column. Each pass keeps a running count of zeros in the sliding
-// window, so the cost is O(H W) whatever d is.
+// window (the column pass one counter per column, updated a row at a time), so the cost is O(H W) whatever d is.
 #include "eval/metrics.h"
 
 #include <algorithm>
@@ -81,9 +81,25 @@ Mask erode3x3(const Mask& m, int width, int height, int iterations, uint8_t outs
     uint8_t* dst = &tmp[size_t(y) * width];
     erode_line(width, r, outside_value, [&](int x) { return row[x] != 0; }, [&](int x, uint8_t v) { dst[x] = v; });
   }
-  for (int x = 0; x < width; ++x)
-    erode_line(height, r, outside_value, [&](int y) { return tmp[size_t(y) * width + x] != 0; },
-               [&](int y, uint8_t v) { out[size_t(y) * width + x] = v; });
+  // Vertical pass, row by row: zeros[x] = zero samples of column x in rows [y - r, y + r].
+  const int out_zero = outside_value ? 0 : 1;
+  std::vector<int> zeros(width, 0);
+  auto add_row = [&](int yy, int sign) {
+    if (yy < 0 || yy >= height) {
+      if (out_zero)
+        for (int x = 0; x < width; ++x) zeros[x] += sign;
+      return;
+    }
+    const uint8_t* row = &tmp[size_t(yy) * width];
+    for (int x = 0; x < width; ++x) zeros[x] += sign * (row[x] ? 0 : 1);
+  };
+  for (int yy = -r; yy <= r; ++yy) add_row(yy, 1);
+  for (int y = 0; y < height; ++y) {
+    uint8_t* dst = &out[size_t(y) * width];
+    for (int x = 0; x < width; ++x) dst[x] = zeros[x] == 0 ? 1 : 0;
+    add_row(y - r, -1);
+    add_row(y + r + 1, 1);
+  }
   return out;
 }
 

@@ -1,7 +1,9 @@
-// LERF relevancy. The map version normalises the query and canonical vectors once, then per row needs one
-// norm and (1 + #canonical) dot products; p_i uses the logistic form 1 / (1 + exp(T (s_i - s_q))), which
-// cannot overflow.
+// LERF relevancy. The map version normalises the query and canonical vectors once, then takes blocks of
+// 4096 rows: one float GEMM (rows x D times D x (1 + #canonical)) and the row norms give every cosine;
+// p_i uses the logistic form 1 / (1 + exp(T (s_i - s_q))), which cannot overflow.
 #include "eval/relevancy.h"
+
+#include <Eigen/Dense>
 
 #include <algorithm>
 #include <cmath>
@@ -60,26 +62,32 @@ float lerf_relevancy(const float* e, const float* query, const std::vector<std::
 std::vector<float> lerf_relevancy_map(const float* features, size_t n, int dim, const float* query,
                                       const std::vector<std::vector<float>>& canonical, float temperature) {
   check_canonical(canonical, dim);
-  const size_t m = canonical.size();
-  // Rows of `dirs`: the unit query, then the unit canonical vectors. [1 + m, D]
-  std::vector<float> dirs;
-  dirs.reserve((1 + m) * dim);
+  const int m = static_cast<int>(canonical.size());
+  // Columns of `dirs`: the unit query, then the unit canonical vectors. [D, 1 + m]
+  Eigen::MatrixXf dirs(dim, 1 + m);
   auto uq = unit(query, dim);
-  dirs.insert(dirs.end(), uq.begin(), uq.end());
-  for (auto& c : canonical) {
-    auto u = unit(c.data(), dim);
-    dirs.insert(dirs.end(), u.begin(), u.end());
+  dirs.col(0) = Eigen::Map<const Eigen::VectorXf>(uq.data(), dim);
+  for (int i = 0; i < m; ++i) {
+    auto u = unit(canonical[i].data(), dim);
+    dirs.col(1 + i) = Eigen::Map<const Eigen::VectorXf>(u.data(), dim);
   }
   std::vector<float> out(n);
-#pragma omp parallel
-  {
-    std::vector<double> s(1 + m);
-#pragma omp for schedule(static)
-    for (long long p = 0; p < static_cast<long long>(n); ++p) {
-      const float* e = features + size_t(p) * dim;
-      const double ne = std::sqrt(dot(e, e, dim));
-      for (size_t i = 0; i <= m; ++i) s[i] = ne > 0 ? dot(e, &dirs[i * dim], dim) / ne : 0.0;
-      out[p] = relevancy_from_cos(s[0], s.data() + 1, m, temperature);
+  // Blocks of rows: dots = F_block [B, D] x dirs [D, 1 + m] (float GEMM), norms in float.
+  constexpr size_t kBlock = 4096;
+  const long long nblocks = static_cast<long long>((n + kBlock - 1) / kBlock);
+#pragma omp parallel for schedule(dynamic)
+  for (long long blk = 0; blk < nblocks; ++blk) {
+    const size_t p0 = size_t(blk) * kBlock, rows = std::min(kBlock, n - p0);
+    Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> F(
+        features + p0 * dim, static_cast<Eigen::Index>(rows), dim);
+    const Eigen::MatrixXf dots = F * dirs;                   // [B, 1 + m]
+    const Eigen::VectorXf norms = F.rowwise().norm();       // [B]
+    std::vector<double> sc(m);
+    for (size_t r = 0; r < rows; ++r) {
+      const double ne = norms[r];
+      const double sq = ne > 0 ? dots(r, 0) / ne : 0.0;
+      for (int i = 0; i < m; ++i) sc[i] = ne > 0 ? dots(r, 1 + i) / ne : 0.0;
+      out[p0 + r] = relevancy_from_cos(sq, sc.data(), m, temperature);
     }
   }
   return out;
