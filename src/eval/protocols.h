@@ -9,6 +9,10 @@
 //   Localisation: the argmax of box_k(v) (the box filter alone) is a hit when it lies in any of the category's
 //   ground-truth boxes (pixel centre in the closed box); with tied maxima, any tied pixel may hit (as LangSplat).
 //   A constant map gives n = 0 everywhere, hence an empty mask.
+//   The queries of a frame are the categories of its label file (LangSplat sets the positives to them), the
+//   relevancy map is LERF's (relevancy.h) at the label resolution; scene mIoU = mean over (frame, query).
+//   LangSplat picks, per query, the best of 3 SAM-level feature maps by the max of v'; with one map per query
+//   that choice does not arise.
 //
 // 3D-OVS (the 3D-OVS paper's evaluation, re-implemented): per pixel the class with the largest relevancy
 //   (no background class; ties go to the lower class index), per image and class IoU with classes absent

@@ -23,10 +23,11 @@ struct Acc {
 };
 
 struct RowAcc {
-  Acc iou, biou, acc, loc;
+  Acc iou, biou, acc, loc, sec;
   size_t count = 0;
   void add(const QueryRecord& q) {
     ++count;
+    sec.add(q.seconds);
     iou.add(q.iou);
     biou.add(q.biou);
     acc.add(q.acc);
@@ -41,6 +42,7 @@ struct RowAcc {
     m.macc = acc.mean();
     m.loc_acc = loc.mean();
     m.loc_count = loc.n;
+    m.seconds = sec.mean();
     return m;
   }
 };
@@ -64,6 +66,7 @@ json num(double v) { return std::isnan(v) ? json(nullptr) : json(v); }
 json row_json(const MeanRow& m, const char* keyname) {
   json j = {{keyname, m.key}, {"count", m.count}, {"mIoU", num(m.miou)}, {"mBIoU", num(m.mbiou)}, {"mAcc", num(m.macc)}};
   if (m.loc_count) { j["loc_acc"] = num(m.loc_acc); j["loc_count"] = m.loc_count; }
+  if (!std::isnan(m.seconds)) j["mean_seconds"] = m.seconds;
   return j;
 }
 
@@ -81,6 +84,33 @@ std::string cell(const std::string& s) {
 }
 
 }  // namespace
+
+QueryRecord lerf_record(const std::string& frame, const std::string& query, const LerfQueryResult& r, double seconds) {
+  QueryRecord q;
+  q.frame = frame;
+  q.query = query;
+  q.iou = r.scores.iou;
+  q.biou = r.scores.biou;
+  q.acc = r.scores.acc;
+  q.loc = r.loc.hit ? 1 : 0;
+  q.seconds = seconds;
+  return q;
+}
+
+void add_3dovs_image(EvalReport& report, const std::string& frame, const std::vector<std::string>& classes,
+                     const OvsImageResult& r) {
+  if (classes.size() != r.iou.size())
+    fail("eval: {} class names for a 3D-OVS result with {} classes", classes.size(), r.iou.size());
+  for (size_t c = 0; c < classes.size(); ++c) {
+    QueryRecord q;
+    q.frame = frame;
+    q.query = classes[c];
+    q.iou = r.iou[c];
+    q.biou = r.biou[c];
+    report.records.push_back(q);
+  }
+  report.frame_accuracy[frame] = r.accuracy;
+}
 
 std::vector<MeanRow> frame_means(const EvalReport& r) {
   auto rows = group(r, [](const QueryRecord& q) { return q.frame; });
@@ -136,11 +166,13 @@ json report_json(const EvalReport& r) {
 
 std::string report_markdown(const std::vector<EvalReport>& reports) {
   std::string md = "# Evaluation report\n\nMetrics in percent; mIoU / mBIoU are means over (frame, query) pairs.\n\n";
-  md += "| protocol | scene | mode | pairs | mAcc | mIoU | mBIoU | loc. acc |\n|---|---|---|---:|---:|---:|---:|---:|\n";
+  md += "| protocol | scene | mode | pairs | mAcc | mIoU | mBIoU | loc. acc | ms/query |\n"
+        "|---|---|---|---:|---:|---:|---:|---:|---:|\n";
   for (auto& r : reports) {
     MeanRow s = scene_mean(r);
-    md += fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} |\n", cell(r.protocol), cell(r.scene), cell(r.mode),
-                      s.count, pct(s.macc), pct(s.miou), pct(s.mbiou), pct(s.loc_acc));
+    md += fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} | {} |\n", cell(r.protocol), cell(r.scene), cell(r.mode),
+                      s.count, pct(s.macc), pct(s.miou), pct(s.mbiou), pct(s.loc_acc),
+                      std::isnan(s.seconds) ? std::string("-") : fmt::format("{:.1f}", 1000 * s.seconds));
   }
   auto table = [&](const std::string& title, const char* keyname, const std::vector<MeanRow>& rows, const MeanRow& total) {
     md += fmt::format("\n### {}\n\n| {} | n | mAcc | mIoU | mBIoU | loc. acc |\n|---|---:|---:|---:|---:|---:|\n", title, keyname);

@@ -14,6 +14,8 @@
 #include <string>
 #include <vector>
 
+#include "eval/protocols.h"
+
 namespace hgs::eval {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
@@ -32,6 +34,7 @@ struct MeanRow {
   double miou = kNaN, mbiou = kNaN, macc = kNaN;
   double loc_acc = kNaN;
   size_t loc_count = 0;
+  double seconds = kNaN;  // mean of the records' timings (NaN when none has one)
 };
 
 struct EvalReport {
@@ -42,6 +45,13 @@ struct EvalReport {
   std::map<std::string, double> frame_accuracy;  // optional per-frame accuracy overriding the record mean
   nlohmann::json extra = nlohmann::json::object();  // free-form: options, timings, paths
 };
+
+// Record of one LERF-OVS (frame, query) evaluation (iou, biou, acc, localisation).
+QueryRecord lerf_record(const std::string& frame, const std::string& query, const LerfQueryResult& r,
+                        double seconds = kNaN);
+// Records of one 3D-OVS image: one per class (iou, biou; acc NaN) plus the image accuracy in frame_accuracy.
+void add_3dovs_image(EvalReport& report, const std::string& frame, const std::vector<std::string>& classes,
+                     const OvsImageResult& r);
 
 // Means per frame (in first-appearance order), per query (first-appearance order) and for the scene.
 std::vector<MeanRow> frame_means(const EvalReport& r);

@@ -83,6 +83,37 @@ void save_overlay_png(const std::filesystem::path& path, const Image& img, const
   save_png(path, overlay(img, pred, gt, style));
 }
 
+Rgb class_color(int c) {
+  double h = std::fmod(c * 0.6180339887498949, 1.0) * 6.0;
+  const double s = 0.75, v = (c % 2) ? 0.7 : 0.95;
+  const int i = static_cast<int>(h) % 6;
+  const double f = h - std::floor(h), p = v * (1 - s), q = v * (1 - s * f), t = v * (1 - s * (1 - f));
+  double r, g, b;
+  switch (i) {
+    case 0: r = v; g = t; b = p; break;
+    case 1: r = q; g = v; b = p; break;
+    case 2: r = p; g = v; b = t; break;
+    case 3: r = p; g = q; b = v; break;
+    case 4: r = t; g = p; b = v; break;
+    default: r = v; g = p; b = q; break;
+  }
+  return {float(r), float(g), float(b)};
+}
+
+Image class_overlay(const Image& img, const std::vector<uint16_t>& classes, float alpha) {
+  const size_t n = size_t(img.width) * img.height;
+  if (img.channels != 1 && img.channels != 3 && img.channels != 4)
+    fail("eval: class overlay needs a 1-, 3- or 4-channel image, got {}", img.channels);
+  if (classes.size() != n) fail("eval: class map holds {} pixels, expected {}x{}", classes.size(), img.width, img.height);
+  Image out(img.width, img.height, 3);
+  for (size_t i = 0; i < n; ++i) {
+    const Rgb c = class_color(classes[i]);
+    for (int k = 0; k < 3; ++k)
+      out.px[i * 3 + k] = (1.f - alpha) * img.px[i * img.channels + (img.channels == 1 ? 0 : k)] + alpha * c[k];
+  }
+  return out;
+}
+
 void save_mask_png(const std::filesystem::path& path, const Mask& m, int width, int height) {
   if (width <= 0 || height <= 0 || m.size() != size_t(width) * height)
     fail("eval: mask holds {} pixels, expected {}x{}", m.size(), width, height);

@@ -38,6 +38,13 @@ Image overlay(const Image& img, const Mask& pred, const Mask& gt, const OverlayS
 void save_overlay_png(const std::filesystem::path& path, const Image& img, const Mask& pred, const Mask& gt,
                       const OverlayStyle& style = {});
 
+// Colour of class c for segmentation maps: hue c * 0.618034 turns (golden-ratio steps, so neighbouring ids
+// differ strongly), saturation 0.75, value 0.95 alternating with 0.7 for odd c.
+Rgb class_color(int c);
+// The image (1/3/4 channels) blended with the colour of each pixel's class: out = (1 - alpha) img + alpha color.
+// classes: [H, W] class index per pixel (e.g. the 3D-OVS argmax). Returns RGB [H, W, 3].
+Image class_overlay(const Image& img, const std::vector<uint16_t>& classes, float alpha = 0.5f);
+
 // A binary mask as a grey PNG (255 = inside).
 void save_mask_png(const std::filesystem::path& path, const Mask& m, int width, int height);
 

@@ -65,6 +65,8 @@ TEST(EvalReport, Means) {
 TEST(EvalReport, WritesJsonAndMarkdown) {
   hgs::test::TempDir tmp;
   EvalReport a = sample(), b = sample();
+  a.records[0].seconds = 0.01;
+  a.records[1].seconds = 0.02;
   b.mode = "object";
   b.extra = {{"threshold", 0.4}};
   write_reports(tmp / "report.json", tmp / "report.md", {a, b});
@@ -80,10 +82,14 @@ TEST(EvalReport, WritesJsonAndMarkdown) {
   EXPECT_TRUE(r["records"][3]["biou"].is_null());
   EXPECT_FALSE(r["records"][3].contains("loc_hit"));
   EXPECT_EQ(r["records"][0]["loc_hit"], true);
+  EXPECT_NEAR(r["summary"]["mean_seconds"].get<double>(), 0.015, 1e-12);
+  EXPECT_EQ(r["records"][0]["seconds"], 0.01);
+  EXPECT_FALSE(r["records"][2].contains("seconds"));
+  EXPECT_FALSE(j["reports"][1]["summary"].contains("mean_seconds"));
   EXPECT_EQ(j["reports"][1]["mode"], "object");
   EXPECT_EQ(j["reports"][1]["extra"]["threshold"], 0.4);
   const std::string md = read_file_text(tmp / "report.md");
-  EXPECT_NE(md.find("| lerf-ovs | toy | pixel | 4 | 85.00 | 45.00 | 33.33 | 66.67 |"), std::string::npos) << md;
+  EXPECT_NE(md.find("| lerf-ovs | toy | pixel | 4 | 85.00 | 45.00 | 33.33 | 66.67 | 15.0 |"), std::string::npos) << md;
   EXPECT_NE(md.find("| lerf-ovs | toy | object |"), std::string::npos);
   EXPECT_NE(md.find("| mug | 2 | 85.00 | 25.00 | 12.50 | 100.00 |"), std::string::npos) << md;
   EXPECT_NE(md.find("| f2 | cup \\| big | 70.00 | 30.00 | - | - |"), std::string::npos) << md;
@@ -92,6 +98,37 @@ TEST(EvalReport, WritesJsonAndMarkdown) {
   atomic_write_text(tmp / "file", "x");
   EXPECT_THROW(write_reports(tmp / "r2.json", tmp / "file/r2.md", {a}), hgs::Error);
   EXPECT_FALSE(fs::exists(tmp / "r2.json"));
+}
+
+TEST(EvalReport, ProtocolGlue) {
+  // 3D-OVS: one record per class, the image accuracy as the frame accuracy.
+  OvsImageResult o;
+  o.iou = {0.5, 0.0};
+  o.biou = {0.25, 0.0};
+  o.accuracy = 0.8;
+  EvalReport r;
+  add_3dovs_image(r, "v0", {"a", "b"}, o);
+  o.iou = {1.0, 0.5};
+  o.biou = {1.0, 0.5};
+  o.accuracy = 0.6;
+  add_3dovs_image(r, "v8", {"a", "b"}, o);
+  ASSERT_EQ(r.records.size(), 4u);
+  EXPECT_TRUE(std::isnan(r.records[0].acc));
+  MeanRow s = scene_mean(r);
+  EXPECT_DOUBLE_EQ(s.miou, 0.5);  // mean of image mIoUs 0.25 and 0.75
+  EXPECT_DOUBLE_EQ(s.mbiou, (0.25 + 1.0 + 0.5) / 4);
+  EXPECT_DOUBLE_EQ(s.macc, 0.7);
+  EXPECT_THROW(add_3dovs_image(r, "v9", {"a"}, o), hgs::Error);
+  // LERF: scores and localisation copied over.
+  LerfQueryResult q;
+  q.scores = {0.5, 0.25, 0.9};
+  q.loc.hit = true;
+  QueryRecord rec = lerf_record("f", "mug", q, 0.003);
+  EXPECT_EQ(rec.iou, 0.5);
+  EXPECT_EQ(rec.biou, 0.25);
+  EXPECT_EQ(rec.acc, 0.9);
+  EXPECT_EQ(rec.loc, 1);
+  EXPECT_EQ(rec.seconds, 0.003);
 }
 
 TEST(EvalVisualize, TurboTable) {
@@ -151,4 +188,29 @@ TEST(EvalVisualize, HeatmapAndOverlayPngs) {
   LabelMap lm = load_label_png(tmp / "m.png");
   EXPECT_EQ(lm.at(3, 2), 255);
   EXPECT_EQ(lm.at(0, 0), 0);
+}
+
+TEST(EvalVisualize, ClassColoursAndOverlay) {
+  // The first 20 class colours are pairwise distinct (RGB distance > 0.1) and in [0, 1].
+  for (int a = 0; a < 20; ++a) {
+    const Rgb ca = class_color(a);
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_GE(ca[k], 0.f);
+      EXPECT_LE(ca[k], 1.f);
+    }
+    for (int b = 0; b < a; ++b) {
+      const Rgb cb = class_color(b);
+      const float d = std::sqrt((ca[0] - cb[0]) * (ca[0] - cb[0]) + (ca[1] - cb[1]) * (ca[1] - cb[1]) +
+                                (ca[2] - cb[2]) * (ca[2] - cb[2]));
+      EXPECT_GT(d, 0.1f) << a << " vs " << b;
+    }
+  }
+  // Class 0: hue 0 -> (v, v(1-s), v(1-s)) = (0.95, 0.2375, 0.2375).
+  EXPECT_NEAR(class_color(0)[0], 0.95f, 1e-6);
+  EXPECT_NEAR(class_color(0)[1], 0.2375f, 1e-6);
+  Image img(2, 1, 3, 0.2f);
+  Image o = class_overlay(img, {0, 3}, 0.5f);
+  EXPECT_NEAR(o.px[0], 0.5f * 0.2f + 0.5f * 0.95f, 1e-6);
+  EXPECT_NEAR(o.px[3 + 2], 0.5f * 0.2f + 0.5f * class_color(3)[2], 1e-6);
+  EXPECT_THROW(class_overlay(img, {0}, 0.5f), hgs::Error);
 }
