@@ -126,10 +126,10 @@ void BM_Binning(benchmark::State& state) {
 void BM_RasterizeForward(benchmark::State& state) {
   Stages& st = stages();
   for (auto _ : state) rasterize_forward(st.in, st.bins, st.ws, st.out);
-  // average number of batch-list entries walked per pixel up to its last contributor
+  // average (tile-local index + 1) of the last contributor per pixel: how deep into its tile list a pixel goes
   double s = 0;
   for (int32_t v : st.last) s += v;
-  state.counters["walked/px"] = s / st.last.size();
+  state.counters["depth/px"] = s / st.last.size();
 }
 
 void BM_RasterizeBackward(benchmark::State& state) {

@@ -26,8 +26,6 @@ struct TileData {
   int n = 0, C = 0;
   const T* rec = nullptr;      // [n, 16]
   const T* extra = nullptr;    // [n, C]
-  const int* lists = nullptr;  // [32, n] batch lists (tile-local indices, depth order)
-  const int* count = nullptr;  // [32]
 };
 
 template <class T>
@@ -87,18 +85,15 @@ inline uint32_t spread_bits(uint32_t x) {
   return x;
 }
 
-// Builds the 32 batch lists of a tile into lists [32, n] / count [32]: for each of the 16 pixel rows the exact
-// x-interval where d^T conic d <= m (the alpha >= 1/255 region, with margin; binning.h) is computed in double
-// (4 rows per vector), and the Gaussian is listed in the 8-pixel batches that interval touches. masks [n] gets
-// the same information per Gaussian (bit bt set = listed in batch bt) for the Gaussian-major backward.
+// Batch masks of a tile, masks [n]: bit (row * 2 + half) is set when the Gaussian can reach the 8-pixel batch
+// (half a row) with alpha >= 1/255. For each of the 16 pixel rows the exact x-interval where d^T conic d <= m
+// (the alpha >= 1/255 region, with margin; binning.h) is computed in double, 4 rows per vector.
 template <class T>
-void build_lists(const Binning& bins, int tile, const TileData<T>& td, int* lists, int* count, uint32_t* masks) {
+void build_masks(const Binning& bins, int tile, const TileData<T>& td, uint32_t* masks) {
   typedef double v4d __attribute__((vector_size(32)));
   typedef int64_t v4l __attribute__((vector_size(32)));
   const int n = td.n;
   const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
-  int cnt[kBatches];
-  for (int b = 0; b < kBatches; ++b) cnt[b] = 0;
   v4d rowc[4];  // pixel-centre y of the tile rows
   for (int q = 0; q < 4; ++q)
     for (int l = 0; l < 4; ++l) rowc[q][l] = ty0 + 4 * q + l + 0.5;
@@ -117,7 +112,7 @@ void build_lists(const Binning& bins, int tile, const TileData<T>& td, int* list
       const v4d dy = v - rowc[q];
       const v4d disc = dy * dy * ndet + am;
       const v4l valid = disc >= 0.0;
-      v4d dc = valid ? disc : v4d{} ;
+      v4d dc = valid ? disc : v4d{};
 #if defined(__AVX__)
       const v4d sq = (v4d)_mm256_sqrt_pd((__m256d)dc);
 #else
@@ -136,115 +131,130 @@ void build_lists(const Binning& bins, int tile, const TileData<T>& td, int* list
 #endif
       }
     }
-    masks[k] = spread_bits(hit[0]) | (spread_bits(hit[1]) << 1);  // bit row * 2 + h
-    for (int h = 0; h < kBatchesPerRow; ++h) {
-      uint32_t mbits = hit[h];
-      while (mbits) {
-        const int row = __builtin_ctz(mbits);
-        mbits &= mbits - 1;
-        const int bt = row * kBatchesPerRow + h;
-        lists[size_t(bt) * n + cnt[bt]++] = k;
-      }
-    }
+    masks[k] = spread_bits(hit[0]) | (spread_bits(hit[1]) << 1);
   }
-  for (int b = 0; b < kBatches; ++b) count[b] = cnt[b];
 }
 
+// Forward of one tile, Gaussian-major: the tile's Gaussians are walked front to back; each updates the batches
+// its mask names that still have a live pixel (per-batch accumulators in per-thread scratch); a batch drops out
+// when all its pixels hit the transmittance cut-off, the tile ends when no batch is left.
 template <class T, bool kDepth, bool kExtra>
 void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typename RasterWorkspace<T>::PerThread& w,
-                  const T* records, int* ws_lists, int* ws_count, uint32_t* ws_masks, T* pair_w,
-                  const RasterOutputs<T>& out) {
+                  const T* records, uint32_t* ws_masks, T* pair_w, const RasterOutputs<T>& out) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
   using I = typename std::remove_reference<decltype(M{}[0])>::type;
-  const int W = bins.width, H = bins.height, C = in.num_extra;
+  const int W = bins.width, H = bins.height, C = in.num_extra, J = in.num_weights;
   const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
   TileData<T> td;
   const bool any_g = load_records(in, bins, records, tile, w, td);
-  if (any_g) {
-    int* lists = ws_lists + size_t(kBatches) * bins.tile_start[tile];
-    int* count = ws_count + size_t(kBatches) * tile;
-    build_lists(bins, tile, td, lists, count, ws_masks + bins.tile_start[tile]);
-    td.lists = lists;
-    td.count = count;
-  }
-  if (kExtra && w.chan.size() < size_t(C)) w.chan.resize(size_t(C));
-  P* E = w.chan.data();
-  const int J = in.num_weights;
-  if (w.mw.size() < size_t(J)) w.mw.resize(size_t(J));
-  P* MW = w.mw.data();
-  if (J > 0 && w.wacc.size() < size_t(td.n) * J) w.wacc.resize(size_t(td.n) * J);
+  const int n = any_g ? td.n : 0;
+  uint32_t* masks = ws_masks + bins.tile_start[tile];
+  if (any_g) build_masks(bins, tile, td, masks);
+  // per-batch state: [T, R, G, B, D, E[C], MW[J]] + active / last masks
+  enum { bT, bR, bG, bB, bD, kBatchFixed };
+  const int BS = kBatchFixed + C + J;
+  if (w.bstate.size() < size_t(kBatches) * BS) w.bstate.resize(size_t(kBatches) * BS);
+  if (w.blast.size() < size_t(2) * kBatches) w.blast.resize(size_t(2) * kBatches);
+  if (J > 0 && w.wacc.size() < size_t(n) * J) w.wacc.resize(size_t(n) * J);
+  P* bst = w.bstate.data();
+  M* bact = w.blast.data();
+  M* blast = bact + kBatches;
   P* wacc = w.wacc.data();
-  if (J > 0) std::fill(wacc, wacc + size_t(td.n) * J, P{});
   const P lane = simd::iota_pack<T>();
-  M lane_i = __builtin_convertvector(lane, M);
-  const T bg0 = in.background[0], bg1 = in.background[1], bg2 = in.background[2];
+  const M lane_i = __builtin_convertvector(lane, M);
+  uint32_t alive = 0;
   for (int bt = 0; bt < kBatches; ++bt) {
     const int py = ty0 + bt / kBatchesPerRow, px0 = tx0 + (bt % kBatchesPerRow) * kLanes;
     if (py >= H || px0 >= W) continue;
     const int nvalid = std::min(kLanes, W - px0);
-    M active = lane_i < I(nvalid);
-    const P fx = lane + (T(px0) + T(0.5));
-    const T fy = T(py) + T(0.5);
-    P Tr = simd::splat(T(1)), R = P{}, G = P{}, B = P{}, D = P{};
-    M lastp = M{};
-    if (kExtra)
-      for (int c = 0; c < C; ++c) E[c] = P{};
-    if (J > 0)
-      for (int jj = 0; jj < J; ++jj) {
-        MW[jj] = P{};
-        for (int l = 0; l < nvalid; ++l) MW[jj][l] = T(in.pixel_weights[(size_t(py) * W + px0 + l) * J + jj]);
-      }
-    const int cnt = any_g ? td.count[bt] : 0;
-    const int* list = any_g ? td.lists + size_t(bt) * td.n : nullptr;
-    for (int j = 0; j < cnt; ++j) {
-      const int k = list[j];
-      const T* rc = td.rec + size_t(k) * kRecord;
+    alive |= 1u << bt;
+    P* st = bst + size_t(bt) * BS;
+    st[bT] = simd::splat(T(1));
+    for (int f = bR; f < BS; ++f) st[f] = P{};
+    for (int jj = 0; jj < J; ++jj)
+      for (int l = 0; l < nvalid; ++l)
+        st[kBatchFixed + C + jj][l] = T(in.pixel_weights[(size_t(py) * W + px0 + l) * J + jj]);
+    bact[bt] = lane_i < I(nvalid);
+    blast[bt] = M{};
+  }
+  const uint32_t all_batches = alive;
+  int kend = 0;  // Gaussians [kend, n) were never reached (all batches terminated)
+  for (int k = 0; k < n && alive; ++k) {
+    kend = k + 1;
+    uint32_t mb = masks[k] & alive;
+    if (!mb) {
+      if (J > 0)
+        for (int jj = 0; jj < J; ++jj) wacc[size_t(k) * J + jj] = P{};
+      continue;
+    }
+    const T* rc = td.rec + size_t(k) * kRecord;
+    const T* e = kExtra ? td.extra + size_t(k) * C : nullptr;
+    P* wa = J > 0 ? wacc + size_t(k) * J : nullptr;
+    for (int jj = 0; jj < J; ++jj) wa[jj] = P{};
+    const M kk = M{} + I(k + 1);
+    while (mb) {
+      const int bt = __builtin_ctz(mb);
+      mb &= mb - 1;
+      P* st = bst + size_t(bt) * BS;
+      const T fy = T(ty0 + bt / kBatchesPerRow) + T(0.5);
+      const P fx = lane + (T(tx0 + (bt % kBatchesPerRow) * kLanes) + T(0.5));
       const T dy = rc[kMy] - fy;
       const P dx = rc[kMx] - fx;
       const T bdy = rc[kB] * dy, hcdy2 = rc[kHc] * dy * dy;
       const P power = -(dx * (rc[kHa] * dx + bdy) + hcdy2);
       const P alpha = simd::vmin<T>(rc[kOp] * simd::vexp(power), simd::splat(T(0.99)));
+      M active = bact[bt];
       const M valid = active & (alpha >= T(1.0 / 255.0));
+      if (!simd::any(valid)) continue;
+      const P Tr = st[bT];
       const P testT = Tr * (T(1) - alpha);
       const M stop = valid & (testT < T(1e-4));
       active = active & ~stop;
       const M acc = valid & ~stop;
       const P wgt = acc ? alpha * Tr : P{};
-      R += wgt * rc[kCr];
-      G += wgt * rc[kCg];
-      B += wgt * rc[kCb];
-      if (kDepth) D += wgt * rc[kZ];
-      if (kExtra) {
-        const T* e = td.extra + size_t(k) * C;
-        for (int c = 0; c < C; ++c) E[c] += wgt * e[c];
-      }
-      if (J > 0) {
-        P* wa = wacc + size_t(k) * J;
-        for (int jj = 0; jj < J; ++jj) wa[jj] += wgt * MW[jj];
-      }
-      Tr = acc ? testT : Tr;
-      lastp = acc ? M{} + I(k + 1) : lastp;  // tile-local index + 1
-      if (!simd::any(active)) break;
+      st[bR] += wgt * rc[kCr];
+      st[bG] += wgt * rc[kCg];
+      st[bB] += wgt * rc[kCb];
+      if (kDepth) st[bD] += wgt * rc[kZ];
+      if (kExtra)
+        for (int c = 0; c < C; ++c) st[kBatchFixed + c] += wgt * e[c];
+      for (int jj = 0; jj < J; ++jj) wa[jj] += wgt * st[kBatchFixed + C + jj];
+      st[bT] = acc ? testT : Tr;
+      blast[bt] = acc ? kk : blast[bt];
+      bact[bt] = active;
+      if (!simd::any(active)) alive &= ~(1u << bt);
     }
+  }
+  const T bg0 = in.background[0], bg1 = in.background[1], bg2 = in.background[2];
+  for (int bt = 0; bt < kBatches; ++bt) {
+    if (!((all_batches >> bt) & 1)) continue;
+    const int py = ty0 + bt / kBatchesPerRow, px0 = tx0 + (bt % kBatchesPerRow) * kLanes;
+    const int nvalid = std::min(kLanes, W - px0);
+    const P* st = bst + size_t(bt) * BS;
     for (int l = 0; l < nvalid; ++l) {
       const size_t p = size_t(py) * W + px0 + l;
-      out.rgb[3 * p] = R[l] + Tr[l] * bg0;
-      out.rgb[3 * p + 1] = G[l] + Tr[l] * bg1;
-      out.rgb[3 * p + 2] = B[l] + Tr[l] * bg2;
-      out.alpha[p] = T(1) - Tr[l];
-      out.final_T[p] = Tr[l];
-      out.last[p] = int32_t(lastp[l]);
-      if (kDepth) out.depth[p] = D[l];
+      const T Tr = st[bT][l];
+      out.rgb[3 * p] = st[bR][l] + Tr * bg0;
+      out.rgb[3 * p + 1] = st[bG][l] + Tr * bg1;
+      out.rgb[3 * p + 2] = st[bB][l] + Tr * bg2;
+      out.alpha[p] = T(1) - Tr;
+      out.final_T[p] = Tr;
+      out.last[p] = int32_t(blast[bt][l]);
+      if (kDepth) out.depth[p] = st[bD][l];
       if (kExtra)
-        for (int c = 0; c < C; ++c) out.extra[p * C + c] = E[c][l];
+        for (int c = 0; c < C; ++c) out.extra[p * C + c] = st[kBatchFixed + c][l];
     }
   }
   if (J > 0 && any_g) {
     const int s = bins.tile_start[tile];
-    for (int k = 0; k < td.n; ++k)
-      for (int jj = 0; jj < J; ++jj)
-        pair_w[size_t(bins.tile_pair[s + k]) * J + jj] = simd::hsum<T>(wacc[size_t(k) * J + jj]);
+    for (int k = 0; k < n; ++k) {
+      T* o = pair_w + size_t(bins.tile_pair[s + k]) * J;
+      if (k < kend && (masks[k] & all_batches))
+        for (int jj = 0; jj < J; ++jj) o[jj] = simd::hsum<T>(wacc[size_t(k) * J + jj]);
+      else
+        for (int jj = 0; jj < J; ++jj) o[jj] = 0;
+    }
   }
 }
 
@@ -408,10 +418,6 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
                        const RasterOutputs<T>& out) {
   ensure_threads(ws);
   const bool dep = in.depth != nullptr, ext = in.num_extra > 0;
-  if (ws.lists.size() < size_t(kBatches) * bins.num_pairs) ws.lists.resize(size_t(kBatches) * bins.num_pairs);
-  ws.list_count.resize(size_t(kBatches) * bins.num_tiles);
-  int* L = ws.lists.data();
-  int* Cn = ws.list_count.data();
   if (ws.masks.size() < size_t(bins.num_pairs)) ws.masks.resize(size_t(bins.num_pairs));
   uint32_t* MK = ws.masks.data();
   if (ws.records.size() < size_t(in.n) * kRecord) ws.records.resize(size_t(in.n) * kRecord);
@@ -425,10 +431,10 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
     auto& w = ws.threads[omp_get_thread_num()];
 #pragma omp for schedule(dynamic, 1)
     for (int t = 0; t < bins.num_tiles; ++t) {
-      if (dep && ext) forward_tile<T, true, true>(in, bins, t, w, R, L, Cn, MK, PW, out);
-      else if (dep) forward_tile<T, true, false>(in, bins, t, w, R, L, Cn, MK, PW, out);
-      else if (ext) forward_tile<T, false, true>(in, bins, t, w, R, L, Cn, MK, PW, out);
-      else forward_tile<T, false, false>(in, bins, t, w, R, L, Cn, MK, PW, out);
+      if (dep && ext) forward_tile<T, true, true>(in, bins, t, w, R, MK, PW, out);
+      else if (dep) forward_tile<T, true, false>(in, bins, t, w, R, MK, PW, out);
+      else if (ext) forward_tile<T, false, true>(in, bins, t, w, R, MK, PW, out);
+      else forward_tile<T, false, false>(in, bins, t, w, R, MK, PW, out);
     }
     if (J > 0) {
 #pragma omp for schedule(static)

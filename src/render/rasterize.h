@@ -4,9 +4,12 @@
 //   d = mean2d - p, alpha = min(0.99, opacity * exp(-0.5 d^T conic d)); skip when alpha < 1/255;
 //   stop (without accumulating) when T * (1 - alpha) < 1e-4; otherwise w = alpha T, accumulate w * (colour,
 //   depth, extra) and T *= 1 - alpha. rgb = sum + T_final * background, alpha = 1 - T_final.
-// Layout for speed: each tile's Gaussians are loaded once into structure-of-arrays scratch; the tile is cut into
-// 32 batches of 8 pixels (half a row); per batch a list of the tile's Gaussians whose opacity box (binning.h)
-// touches it is built, so the inner loop runs 8 lanes (one AVX2 register for float) over exactly those.
+// Layout for speed: each tile's Gaussians are copied once into contiguous 16-scalar records; the tile is cut
+// into 32 batches of 8 pixels (half a row, one AVX2 register of floats) and every Gaussian gets a 32-bit mask
+// of the batches its alpha >= 1/255 region (exact per-row interval of the ellipse) touches. Forward walks the
+// Gaussians front to back (Gaussian-major), updating only the batches in its mask that still have a live pixel,
+// per-batch accumulators in per-thread scratch; a batch drops out when all 8 pixels stopped, the tile ends when
+// no batch is left. Pixel decisions are exactly the per-pixel 3DGS loop's.
 // Backward walks the tile's Gaussians back to front (Gaussian-major: each visits the batches it was listed in,
 // per-batch pixel state in scratch, its gradient sums in registers) from the per-pixel last contributor, rebuilds T_i = T_{i+1} /
 // (1 - alpha_i) from the saved final T, and keeps one scalar per pixel, S = sum_{j>i} w_j <value_j, dL/dout>,
@@ -75,15 +78,12 @@ struct RasterWorkspace {
     std::vector<simd::Pack<T>> acc;         // backward accumulators [n, F]
     std::vector<simd::Pack<T>> chan;        // per-batch extra-channel gradient packs [C]
     std::vector<simd::Pack<T>> wacc;        // forward weight-sum accumulators [n, J]
-    std::vector<simd::Pack<T>> mw;          // per-batch pixel-weight packs [J]
     std::vector<T> dw;                      // backward d(weight_sums) of the tile's Gaussians [n, J]
-    std::vector<simd::Pack<T>> bstate;      // backward per-batch state [32, 7 + C + J]
-    std::vector<simd::Mask<T>> blast;       // backward per-batch last contributor [32]
+    std::vector<simd::Pack<T>> bstate;      // per-batch state [32, 7 + C + J]
+    std::vector<simd::Mask<T>> blast;       // per-batch active / last-contributor masks [2, 32]
   };
   std::vector<PerThread> threads;
   std::vector<T> records;       // [N, 16] per-Gaussian records built by forward, reused by backward
-  std::vector<int> lists;       // [32 * P] per-tile batch lists built by forward, reused by backward
-  std::vector<int> list_count;  // [num_tiles, 32]
   std::vector<uint32_t> masks;  // [P] per (tile, Gaussian) entry: bit b = listed in batch b
   std::vector<T> pair_grad;     // [P, F]
   std::vector<T> pair_w;        // [P, J] forward weight sums per pair

@@ -23,6 +23,14 @@
 namespace hgs::render::test {
 namespace {
 
+// The finite-difference tests run thousands of tiny renders: one OpenMP thread keeps them fast even on a busy
+// machine (multi-threaded results are covered by the determinism test, which checks 1 vs 2 threads bitwise).
+struct SingleThread {
+  int saved = omp_get_max_threads();
+  SingleThread() { omp_set_num_threads(1); }
+  ~SingleThread() { omp_set_num_threads(saved); }
+};
+
 std::vector<double> random_weights(size_t n, std::mt19937& rng) {
   std::normal_distribution<double> N01(0, 1);
   std::vector<double> w(n);
@@ -181,6 +189,7 @@ struct Raster2D {
 };
 
 TEST(RenderGrad, RasterizeFiniteDifferences) {
+  SingleThread one_thread;
   for (uint32_t seed : {21u, 22u}) {
     Scene s = random_scene(45, 40, 36, seed, 0.9, 2);
     s.add_pixel_weights(2, seed);
@@ -278,6 +287,7 @@ struct EndToEnd {
 };
 
 TEST(RenderGrad, EndToEndShFiniteDifferences) {
+  SingleThread one_thread;
   Scene sc = random_scene(50, 40, 36, 31, 0.9, 2);
   {  // the scene covers the cases the comment above promises
     const auto P = ref_project(sc);
@@ -313,6 +323,7 @@ TEST(RenderGrad, EndToEndShFiniteDifferences) {
 }
 
 TEST(RenderGrad, EndToEndColoursNoDepthFiniteDifferences) {
+  SingleThread one_thread;
   Scene sc = random_scene(40, 40, 36, 41, 0.9, 3);
   sc.add_pixel_weights(3, 41);  // per-mask blending-weight sums (SCL pooling) are differentiated too
   sc.use_colors = true;
@@ -331,6 +342,7 @@ TEST(RenderGrad, EndToEndColoursNoDepthFiniteDifferences) {
 // dL/d(mean2d) reported by backward() is the derivative w.r.t. the projected centre with everything else
 // (conic, depth, colour, opacity) fixed: check by finite differences on the renderer's own projected arrays.
 TEST(RenderGrad, Mean2dIsTheProjectedCentreGradient) {
+  SingleThread one_thread;
   Scene sc = random_scene(50, 40, 36, 51, 0.9, 1);
   EndToEnd e(sc, 6);
   const GaussianGradsT<double> g = e.grads();
