@@ -1,0 +1,197 @@
+// Evaluation drivers: label iteration, frame <-> view matching, timing of the callbacks, PNG output.
+#include "eval/run.h"
+
+#include <cctype>
+#include <chrono>
+
+#include "core/error.h"
+#include "core/progress.h"
+#include "eval/instances.h"
+#include "eval/labels.h"
+#include "eval/visualize.h"
+
+namespace hgs::eval {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+int view_for_label(const Scene& scene, const LerfFrameLabels& L) {
+  for (auto& v : scene.views)
+    if (v.stem == L.stem) return v.index;
+  const std::string info_stem = fs::path(L.image_name).replace_extension().generic_string();
+  for (auto& v : scene.views)
+    if (v.name == L.image_name || v.stem == info_stem) return v.index;
+  fail("{}: no view of the scene is named {} (label stem) or {} (info.name)", L.file.string(), L.stem, L.image_name);
+}
+
+void check_size(const std::vector<float>& v, const View& view, const std::string& what) {
+  if (v.size() != size_t(view.width) * view.height)
+    fail("eval: {} for view {} holds {} values, expected {}x{}", what, view.name, v.size(), view.width, view.height);
+}
+
+void check_mask(const Mask& m, const View& view, const std::string& query) {
+  if (m.size() != size_t(view.width) * view.height)
+    fail("eval: predicted mask of \"{}\" for view {} holds {} pixels, expected {}x{}", query, view.name, m.size(),
+         view.width, view.height);
+}
+
+void write_pngs(const RunOptions& opt, const Scene& scene, const View& view, const Image* img, const std::string& query,
+                const Mask& pred, const Mask& gt, const std::vector<float>* heat) {
+  if (opt.overlay_dir.empty()) return;
+  const fs::path dir = opt.overlay_dir / view.stem;
+  const std::string q = safe_file_name(query);
+  save_overlay_png(dir / (q + ".overlay.png"), *img, pred, gt);
+  save_mask_png(dir / (q + ".mask.png"), pred, view.width, view.height);
+  if (heat && !heat->empty()) save_heatmap_png(dir / (q + ".heatmap.png"), *heat, view.width, view.height);
+}
+
+}  // namespace
+
+std::string safe_file_name(const std::string& s) {
+  std::string o;
+  for (char c : s) o += (std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_' || c == '.') ? c : '_';
+  if (o.empty() || o == "." || o == "..") o = "_" + o;
+  return o;
+}
+
+EvalReport run_lerf_ovs(const Scene& scene, const RelevancyFn& fn, const RunOptions& opt) {
+  auto frames = load_lerf_labels(scene.root, 0, 0, scene.downscale);
+  EvalReport rep;
+  rep.protocol = "lerf-ovs";
+  rep.scene = scene.root.filename().string();
+  rep.mode = "pixel";
+  rep.extra = {{"box", opt.lerf.box}, {"threshold", opt.lerf.threshold}, {"majority", opt.lerf.majority}};
+  Progress bar("eval lerf-ovs", static_cast<long>(frames.size()), opt.progress);
+  for (size_t f = 0; f < frames.size(); ++f) {
+    const LerfFrameLabels& L = frames[f];
+    const int vi = view_for_label(scene, L);
+    const View& view = scene.views[vi];
+    if (L.width != view.width || L.height != view.height)
+      fail("{}: label size {}x{} does not match view {} ({}x{})", L.file.string(), L.width, L.height, view.name,
+           view.width, view.height);
+    Image img;
+    if (!opt.overlay_dir.empty()) img = scene.load_image(vi);
+    for (auto& cat : L.categories) {
+      const auto t0 = Clock::now();
+      std::vector<float> rel = fn(vi, cat.name);
+      check_size(rel, view, "relevancy map of \"" + cat.name + "\"");
+      LerfQueryResult r = evaluate_lerf_query(rel, view.width, view.height, cat, opt.lerf);
+      rep.records.push_back(lerf_record(view.name, cat.name, r, since(t0)));
+      write_pngs(opt, scene, view, &img, cat.name, r.post.mask, cat.mask, &rel);
+    }
+    bar.update(static_cast<long>(f + 1));
+  }
+  bar.finish();
+  return rep;
+}
+
+EvalReport run_lerf_ovs_masks(const Scene& scene, const MaskFn& fn, const RunOptions& opt) {
+  auto frames = load_lerf_labels(scene.root, 0, 0, scene.downscale);
+  EvalReport rep;
+  rep.protocol = "lerf-ovs";
+  rep.scene = scene.root.filename().string();
+  rep.mode = "object";
+  Progress bar("eval lerf-ovs (object)", static_cast<long>(frames.size()), opt.progress);
+  for (size_t f = 0; f < frames.size(); ++f) {
+    const LerfFrameLabels& L = frames[f];
+    const int vi = view_for_label(scene, L);
+    const View& view = scene.views[vi];
+    if (L.width != view.width || L.height != view.height)
+      fail("{}: label size {}x{} does not match view {} ({}x{})", L.file.string(), L.width, L.height, view.name,
+           view.width, view.height);
+    Image img;
+    if (!opt.overlay_dir.empty()) img = scene.load_image(vi);
+    for (auto& cat : L.categories) {
+      const auto t0 = Clock::now();
+      std::vector<float> heat;
+      Mask pred = fn(vi, cat.name, &heat);
+      check_mask(pred, view, cat.name);
+      const double secs = since(t0);
+      MaskScores s = score_mask(cat.mask, pred, view.width, view.height, opt.lerf.boundary_d);
+      rep.records.push_back({view.name, cat.name, s.iou, s.biou, s.acc, -1, secs});
+      write_pngs(opt, scene, view, &img, cat.name, pred, cat.mask, &heat);
+    }
+    bar.update(static_cast<long>(f + 1));
+  }
+  bar.finish();
+  return rep;
+}
+
+EvalReport run_3dovs(const Scene& scene, const ClassRelevancyFn& fn, const RunOptions& opt) {
+  const OvsLabelSet labels = open_3dovs_labels(scene.root);
+  EvalReport rep;
+  rep.protocol = "3d-ovs";
+  rep.scene = scene.root.filename().string();
+  rep.mode = "pixel";
+  rep.extra = {{"classes", labels.classes}};
+  Progress bar("eval 3d-ovs", static_cast<long>(labels.views.size()), opt.progress);
+  for (size_t i = 0; i < labels.views.size(); ++i) {
+    const int vi = labels.views[i].index;
+    if (vi < 0 || vi >= static_cast<int>(scene.views.size()))
+      fail("{}: view index {} is out of range (the scene has {} views)", labels.views[i].dir.string(), vi,
+           scene.views.size());
+    const View& view = scene.views[vi];
+    const OvsViewLabels gt = load_3dovs_view(labels, i, view.width, view.height, scene.downscale);
+    const auto t0 = Clock::now();
+    auto rel = fn(vi, labels.classes);
+    if (rel.size() != labels.classes.size())
+      fail("eval: {} class relevancy maps for view {}, expected {}", rel.size(), view.name, labels.classes.size());
+    for (size_t c = 0; c < rel.size(); ++c) check_size(rel[c], view, "relevancy map of \"" + labels.classes[c] + "\"");
+    OvsImageResult r = evaluate_3dovs_image(rel, gt.masks, view.width, view.height, opt.lerf.boundary_d);
+    const double secs = since(t0);
+    const size_t first = rep.records.size();
+    add_3dovs_image(rep, view.name, labels.classes, r);
+    for (size_t k = first; k < rep.records.size(); ++k) rep.records[k].seconds = secs / double(labels.classes.size());
+    if (!opt.overlay_dir.empty()) {
+      const Image img = scene.load_image(vi);
+      save_png(opt.overlay_dir / view.stem / "classes.png", class_overlay(img, r.prediction));
+      for (size_t c = 0; c < labels.classes.size(); ++c) {
+        Mask pred(r.prediction.size());
+        for (size_t p = 0; p < pred.size(); ++p) pred[p] = r.prediction[p] == c;
+        write_pngs(opt, scene, view, &img, labels.classes[c], pred, gt.masks[c], &rel[c]);
+      }
+    }
+    bar.update(static_cast<long>(i + 1));
+  }
+  bar.finish();
+  return rep;
+}
+
+EvalReport run_instances(const Scene& scene, const MaskFn& fn, const RunOptions& opt) {
+  const auto names = load_object_names(scene.root);
+  const auto test = scene.test_indices();
+  if (test.empty()) fail("{}: the scene has no test views", scene.root.string());
+  EvalReport rep;
+  rep.protocol = "instances";
+  rep.scene = scene.root.filename().string();
+  rep.mode = "object";
+  Progress bar("eval instances", static_cast<long>(test.size()), opt.progress);
+  for (size_t i = 0; i < test.size(); ++i) {
+    const View& view = scene.views[test[i]];
+    const InstanceLabels gt = load_instance_masks(scene.root, view.name, names, view.width, view.height, scene.downscale);
+    Image img;
+    if (!opt.overlay_dir.empty()) img = scene.load_image(view.index);
+    for (size_t k = 0; k < gt.ids.size(); ++k) {
+      bool visible = false;
+      for (auto v : gt.masks[k]) visible |= v != 0;
+      if (!visible) continue;
+      const auto t0 = Clock::now();
+      std::vector<float> heat;
+      Mask pred = fn(view.index, gt.names[k], &heat);
+      check_mask(pred, view, gt.names[k]);
+      const double secs = since(t0);
+      MaskScores s = score_mask(gt.masks[k], pred, view.width, view.height, opt.lerf.boundary_d);
+      rep.records.push_back({view.name, gt.names[k], s.iou, s.biou, s.acc, -1, secs});
+      write_pngs(opt, scene, view, &img, gt.names[k], pred, gt.masks[k], &heat);
+    }
+    bar.update(static_cast<long>(i + 1));
+  }
+  bar.finish();
+  return rep;
+}
+
+}  // namespace hgs::eval

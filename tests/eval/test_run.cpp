@@ -1,0 +1,157 @@
+// The evaluation drivers end to end on a tiny synthetic scene, with the scene's own simulated 2D CLIP
+// features standing in for a trained model (a "2D features" baseline) and ground-truth oracles: the protocols
+// find the objects, frames and views are matched, reports and PNGs are written.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "core/error.h"
+#include "core/fs.h"
+#include "eval/instances.h"
+#include "eval/relevancy.h"
+#include "eval/run.h"
+#include "scene/scene.h"
+#include "synth/synth.h"
+#include "test_util.h"
+
+using namespace hgs;
+using namespace hgs::eval;
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Fixture {
+  hgs::test::TempDir tmp;
+  Scene scene;
+  std::vector<std::vector<float>> canonical;
+  Fixture() {
+    synth::SynthOptions o;
+    // 320x240: LERF's 30x30 box filter and the 16-px feature patches need objects of a realistic pixel size
+    // (at 96x72 the 2D baseline is meaningless); D = 256 keeps the random concept vectors nearly orthogonal.
+    o.views = 9;  // labelled views 0 and 8
+    o.width = 320;
+    o.height = 240;
+    o.objects = 4;
+    o.points = 500;
+    o.feature_dim = 256;
+    o.supersample = 1;
+    o.noise = "low";
+    o.progress = false;
+    synth::generate(tmp / "scene", o);
+    scene = load_scene(tmp / "scene");
+    for (const char* c : {"object", "things", "stuff", "texture"}) canonical.push_back(scene.text_embeddings.at(c));
+  }
+  std::vector<float> features(int view, int& dim) const { return *scene.load_features(view, dim); }
+};
+
+Fixture& fx() {
+  static Fixture f;
+  return f;
+}
+
+}  // namespace
+
+TEST(EvalRun, LerfOvsWithTwoDFeatures) {
+  Fixture& F = fx();
+  RelevancyFn fn = [&](int view, const std::string& q) {
+    int dim = 0;
+    auto feat = F.features(view, dim);
+    const auto& e = F.scene.text_embeddings.at(q);
+    return lerf_relevancy_map(feat.data(), feat.size() / dim, dim, e.data(), F.canonical);
+  };
+  RunOptions opt;
+  opt.progress = false;
+  opt.overlay_dir = F.tmp / "png";
+  EvalReport r = run_lerf_ovs(F.scene, fn, opt);
+  size_t expected = 0;
+  for (auto& L : load_lerf_labels(F.scene.root)) expected += L.categories.size();
+  ASSERT_EQ(r.records.size(), expected);
+  ASSERT_GE(expected, 4u);
+  EXPECT_EQ(r.records[0].frame, "frame_00001.png");
+  const MeanRow s = scene_mean(r);
+  std::printf("2D-feature LERF-OVS baseline (320x240, D 256, noise low): mIoU %.3f mBIoU %.3f mAcc %.3f loc %.3f\n", s.miou,
+              s.mbiou, s.macc, s.loc_acc);
+  // Measured 0.67 / 1.0 on this scene; a sign, scale or alignment error in the pipeline drops these near 0.
+  EXPECT_GT(s.miou, 0.5);
+  EXPECT_GE(s.loc_acc, 0.75);
+  EXPECT_EQ(s.loc_count, expected);
+  const fs::path stem = opt.overlay_dir / "frame_00001";
+  const std::string q = safe_file_name(r.records[0].query);
+  EXPECT_TRUE(fs::exists(stem / (q + ".overlay.png")));
+  EXPECT_TRUE(fs::exists(stem / (q + ".heatmap.png")));
+  EXPECT_TRUE(fs::exists(stem / (q + ".mask.png")));
+  EXPECT_EQ(load_image(stem / (q + ".overlay.png")).width, 320);
+  // Wrong-size output from the callback is a clear error.
+  RelevancyFn bad = [&](int, const std::string&) { return std::vector<float>(10, 0.f); };
+  opt.overlay_dir.clear();
+  EXPECT_THROW(run_lerf_ovs(F.scene, bad, opt), hgs::Error);
+}
+
+TEST(EvalRun, OraclesScorePerfectlyAndEmptyMasksScoreZero) {
+  Fixture& F = fx();
+  const auto names = load_object_names(F.scene.root);
+  MaskFn oracle = [&](int view, const std::string& q, std::vector<float>*) {
+    auto I = load_instance_masks(F.scene.root, F.scene.views[view].name, names);
+    for (size_t k = 0; k < I.names.size(); ++k)
+      if (I.names[k] == q) return I.masks[k];
+    return Mask(I.masks[0].size(), 0);
+  };
+  RunOptions opt;
+  opt.progress = false;
+  EvalReport r = run_instances(F.scene, oracle, opt);
+  ASSERT_FALSE(r.records.empty());
+  for (auto& q : r.records) {
+    EXPECT_EQ(q.iou, 1.0);
+    EXPECT_EQ(q.biou, 1.0);
+    EXPECT_EQ(q.acc, 1.0);
+  }
+  EXPECT_EQ(scene_mean(r).miou, 1.0);
+  MaskFn empty = [&](int view, const std::string&, std::vector<float>*) {
+    return Mask(size_t(F.scene.views[view].width) * F.scene.views[view].height, 0);
+  };
+  EvalReport e = run_lerf_ovs_masks(F.scene, empty, opt);
+  ASSERT_FALSE(e.records.empty());
+  EXPECT_EQ(scene_mean(e).miou, 0.0);
+  EXPECT_LT(scene_mean(e).macc, 1.0);
+  EXPECT_EQ(e.mode, "object");
+}
+
+TEST(EvalRun, ThreeDOvsWithTwoDFeatures) {
+  Fixture& F = fx();
+  ClassRelevancyFn fn = [&](int view, const std::vector<std::string>& classes) {
+    int dim = 0;
+    auto feat = F.features(view, dim);
+    const size_t n = feat.size() / dim;
+    std::vector<std::vector<float>> out;
+    for (auto& c : classes) {
+      const auto& e = F.scene.text_embeddings.at(c);
+      std::vector<float> m(n);
+      for (size_t p = 0; p < n; ++p) m[p] = cosine(&feat[p * dim], e.data(), dim);
+      out.push_back(std::move(m));
+    }
+    return out;
+  };
+  RunOptions opt;
+  opt.progress = false;
+  opt.overlay_dir = F.tmp / "png3d";
+  EvalReport r = run_3dovs(F.scene, fn, opt);
+  ASSERT_EQ(r.records.size(), 2u * 4u);  // 2 labelled views x 4 classes
+  ASSERT_EQ(r.frame_accuracy.size(), 2u);
+  const MeanRow s = scene_mean(r);
+  std::printf("2D-feature 3D-OVS baseline (320x240, D 256, noise low): mIoU %.3f mBIoU %.3f mAcc %.3f\n", s.miou, s.mbiou, s.macc);
+  // No background class: table pixels are always assigned to some object, so IoU is diluted and the
+  // accuracy (unlabelled pixels count as errors) is low.
+  EXPECT_GT(s.miou, 0.2);  // measured 0.33
+  EXPECT_GT(s.macc, 0.0);
+  EXPECT_LT(s.macc, 1.0);
+  EXPECT_TRUE(fs::exists(opt.overlay_dir / "frame_00001" / "classes.png"));
+  EXPECT_TRUE(fs::exists(opt.overlay_dir / "frame_00009" / "classes.png"));
+}
+
+TEST(EvalRun, SafeFileNames) {
+  EXPECT_EQ(safe_file_name("red mug"), "red_mug");
+  EXPECT_EQ(safe_file_name("a/b\\c"), "a_b_c");
+  EXPECT_EQ(safe_file_name(".."), "_..");
+  EXPECT_EQ(safe_file_name(""), "_");
+  EXPECT_EQ(safe_file_name("tea-cup_2.0"), "tea-cup_2.0");
+}
