@@ -53,17 +53,17 @@ void pooled_prediction_backward(int n, int D, int L, int J, const T* q, const T*
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
     const T* fi = f + size_t(i) * D;
-    T* dfi = df + size_t(i) * D;
+    T* dfi = df ? df + size_t(i) * D : nullptr;
     for (int j = 0; j < J; ++j) {
       const T* gj = &g[size_t(j) * D];
       const T ai = a[size_t(i) * J + j], qi = q[size_t(i) * L + objs[j]];
       T dot = 0;
       for (int d = 0; d < D; ++d) dot += fi[d] * gj[d];
-      da[size_t(i) * J + j] = qi * dot;
+      if (da) da[size_t(i) * J + j] = qi * dot;
       if (ai == T(0)) continue;
-      dq[size_t(i) * L + objs[j]] += ai * dot;
+      if (dq) dq[size_t(i) * L + objs[j]] += ai * dot;
       const T w = ai * qi;
-      if (w != T(0))
+      if (dfi && w != T(0))
         for (int d = 0; d < D; ++d) dfi[d] += w * gj[d];
     }
   }
