@@ -22,14 +22,58 @@ void Workspace::reserve(int n, int width, int mlp_width, int max_len) {
   scores.resize(size_t(max_len) * max_len);
 }
 
+namespace {
+
+// y [n, out] (+)= x [n, in] W^T + b for a few rows: each weight row is streamed from memory once and dotted
+// with every input row (memory-bound, like the weights themselves); rows of W are split over the thread pool.
+// For n this small OpenBLAS's packing and thread hand-offs cost more than the arithmetic.
+void linear_few_rows(const Linear& l, const float* x, int n, float* y, bool accumulate) {
+  const int in = l.in, out = l.out;
+  parallel_for(out, 64, [&](long r0, long r1) {
+    for (long r = r0; r < r1; ++r) {
+      const float* w = l.w.data() + size_t(r) * in;
+      auto put = [&](int i, float s) {
+        float& o = y[size_t(i) * out + r];
+        o = (accumulate ? o : 0.f) + s + l.b[r];
+      };
+      int i = 0;
+      for (; i + 4 <= n; i += 4) {  // four input rows per pass over the weight row
+        const float *x0 = x + size_t(i) * in, *x1 = x0 + in, *x2 = x1 + in, *x3 = x2 + in;
+        float s0 = 0.f, s1 = 0.f, s2 = 0.f, s3 = 0.f;
+#pragma omp simd reduction(+ : s0, s1, s2, s3)
+        for (int k = 0; k < in; ++k) {
+          s0 += w[k] * x0[k];
+          s1 += w[k] * x1[k];
+          s2 += w[k] * x2[k];
+          s3 += w[k] * x3[k];
+        }
+        put(i, s0), put(i + 1, s1), put(i + 2, s2), put(i + 3, s3);
+      }
+      for (; i < n; ++i) {
+        const float* xi = x + size_t(i) * in;
+        float s = 0.f;
+#pragma omp simd reduction(+ : s)
+        for (int k = 0; k < in; ++k) s += w[k] * xi[k];
+        put(i, s);
+      }
+    }
+  });
+}
+
+constexpr int kFewRows = 12;  // measured 2-4x faster than OpenBLAS up to 12 rows, on par at 16
+
+}  // namespace
+
 void linear(const Linear& l, const float* x, int n, float* y) {
   if (n <= 0) return;
+  if (n <= kFewRows) return linear_few_rows(l, x, n, y, false);
   for (int i = 0; i < n; ++i) std::copy(l.b.begin(), l.b.end(), y + size_t(i) * l.out);
   cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, n, l.out, l.in, 1.f, x, l.in, l.w.data(), l.in, 1.f, y, l.out);
 }
 
 void linear_add(const Linear& l, const float* x, int n, float* y) {
   if (n <= 0) return;
+  if (n <= kFewRows) return linear_few_rows(l, x, n, y, true);
   cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, n, l.out, l.in, 1.f, x, l.in, l.w.data(), l.in, 1.f, y, l.out);
   for (int i = 0; i < n; ++i) {
     float* r = y + size_t(i) * l.out;

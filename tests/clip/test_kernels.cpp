@@ -121,18 +121,40 @@ TEST(ClipKernels, BlockMatchesBruteForce) {
   b.out = rand_linear(w, w, 7);
   b.fc = rand_linear(w, 4 * w, 9);
   b.proj = rand_linear(4 * w, w, 11);
+  for (int nn : {n, 11})  // sgemm path and few-rows path
   for (bool causal : {false, true})
     for (Activation act : {Activation::GELU, Activation::QuickGELU}) {
-      std::vector<Segment> segs = causal ? std::vector<Segment>{{0, 120}, {120, 180}} : std::vector<Segment>{{0, n}};
-      auto x = randv(size_t(n) * w, 1.f, 13);
-      auto ref = ref_block(b, heads, act, segs, causal, x, n);
+      std::vector<Segment> segs = causal ? std::vector<Segment>{{0, nn * 2 / 5}, {nn * 2 / 5, nn - nn * 2 / 5}}
+                                         : std::vector<Segment>{{0, nn}};
+      auto x = randv(size_t(nn) * w, 1.f, 13);
+      auto ref = ref_block(b, heads, act, segs, causal, x, nn);
       Workspace ws;
-      ws.reserve(n, w, 4 * w, n);
-      block_forward(b, heads, act, segs, causal, x.data(), n, ws);
+      ws.reserve(nn, w, 4 * w, nn);
+      block_forward(b, heads, act, segs, causal, x.data(), nn, ws);
       double worst = 0;
       for (size_t i = 0; i < x.size(); ++i) worst = std::max(worst, std::fabs(x[i] - ref[i]) / (1 + std::fabs(ref[i])));
-      EXPECT_LT(worst, 2e-5) << "causal " << causal << " act " << int(act);
+      EXPECT_LT(worst, 2e-5) << "n " << nn << " causal " << causal << " act " << int(act);
     }
+}
+
+// linear / linear_add for few rows (own kernel) and many rows (sgemm) against a double loop.
+TEST(ClipKernels, LinearBothPaths) {
+  omp_set_num_threads(2);
+  Linear l = rand_linear(200, 300, 31);
+  for (int n : {1, 5, 12, 13, 80}) {
+    auto x = randv(size_t(n) * 200, 1.f, 33);
+    auto y0 = randv(size_t(n) * 300, 1.f, 35);
+    std::vector<float> y(size_t(n) * 300), ya = y0;
+    linear(l, x.data(), n, y.data());
+    linear_add(l, x.data(), n, ya.data());
+    for (int i = 0; i < n; ++i)
+      for (int r = 0; r < 300; ++r) {
+        double s = l.b[r];
+        for (int k = 0; k < 200; ++k) s += double(l.w[size_t(r) * 200 + k]) * x[size_t(i) * 200 + k];
+        ASSERT_NEAR(y[size_t(i) * 300 + r], s, 2e-5 * (1 + std::fabs(s))) << "n " << n;
+        ASSERT_NEAR(ya[size_t(i) * 300 + r], s + y0[size_t(i) * 300 + r], 2e-5 * (1 + std::fabs(s))) << "n " << n;
+      }
+  }
 }
 
 TEST(ClipKernels, LayerNormAndSoftmaxLarge) {
