@@ -134,25 +134,39 @@ LerfFrameLabels load_lerf_frame(const fs::path& file, int expect_width, int expe
     if (cat.empty()) fail("{}: {}: empty category name", file.string(), where);
     if (!ob.contains("bbox")) fail("{}: {} (\"{}\"): missing key \"bbox\"", file.string(), where, cat);
     const json& bb = ob["bbox"];
-    if (!bb.is_array() || bb.size() != 4)
-      fail("{}: {} (\"{}\"): bbox must be [x1, y1, x2, y2]", file.string(), where, cat);
+    double b[4];
+    if (bb.is_array() && bb.size() == 4) {
+      for (int k = 0; k < 4; ++k) b[k] = number(bb[k], file, fmt::format("{}.bbox[{}]", where, k));
+    } else if (bb.is_array() && bb.size() == 2 && bb[0].is_array() && bb[0].size() == 2 && bb[1].is_array() &&
+               bb[1].size() == 2) {  // [[x1, y1], [x2, y2]]
+      for (int k = 0; k < 4; ++k) b[k] = number(bb[k / 2][k % 2], file, fmt::format("{}.bbox[{}][{}]", where, k / 2, k % 2));
+    } else {
+      fail("{}: {} (\"{}\"): bbox must be [x1, y1, x2, y2] or [[x1, y1], [x2, y2]]", file.string(), where, cat);
+    }
     BBox box;
-    const double b[4] = {number(bb[0], file, where + ".bbox[0]"), number(bb[1], file, where + ".bbox[1]"),
-                         number(bb[2], file, where + ".bbox[2]"), number(bb[3], file, where + ".bbox[3]")};
     box.x1 = std::min(b[0], b[2]) * inv; box.x2 = std::max(b[0], b[2]) * inv;
     box.y1 = std::min(b[1], b[3]) * inv; box.y2 = std::max(b[1], b[3]) * inv;
     if (!ob.contains("segmentation")) fail("{}: {} (\"{}\"): missing key \"segmentation\"", file.string(), where, cat);
     const json& seg = ob["segmentation"];
     if (!seg.is_array()) fail("{}: {} (\"{}\"): segmentation must be a list of [x, y] points", file.string(), where, cat);
-    if (seg.size() < 3)
-      fail("{}: {} (\"{}\"): polygon has {} point(s), need at least 3", file.string(), where, cat, seg.size());
-    std::vector<Point2> poly;
-    poly.reserve(seg.size());
-    for (size_t k = 0; k < seg.size(); ++k) {
-      const json& p = seg[k];
-      const std::string pw = fmt::format("{}.segmentation[{}]", where, k);
-      if (!p.is_array() || p.size() != 2) fail("{}: {} must be an [x, y] pair", file.string(), pw);
-      poly.push_back({number(p[0], file, pw + "[0]") * inv, number(p[1], file, pw + "[1]") * inv});
+    // One polygon [[x, y], ...] or several [[[x, y], ...], ...].
+    const bool multi = !seg.empty() && seg[0].is_array() && !seg[0].empty() && seg[0][0].is_array();
+    std::vector<std::vector<Point2>> polys;
+    for (size_t pi = 0; pi < (multi ? seg.size() : 1); ++pi) {
+      const json& pts = multi ? seg[pi] : seg;
+      const std::string pwhere = multi ? fmt::format("{}.segmentation[{}]", where, pi) : where + ".segmentation";
+      if (!pts.is_array()) fail("{}: {} must be a list of [x, y] points", file.string(), pwhere);
+      if (pts.size() < 3)
+        fail("{}: {} (\"{}\"): polygon has {} point(s), need at least 3", file.string(), where, cat, pts.size());
+      std::vector<Point2> poly;
+      poly.reserve(pts.size());
+      for (size_t k = 0; k < pts.size(); ++k) {
+        const json& p = pts[k];
+        const std::string pw = fmt::format("{}[{}]", pwhere, k);
+        if (!p.is_array() || p.size() != 2) fail("{}: {} must be an [x, y] pair", file.string(), pw);
+        poly.push_back({number(p[0], file, pw + "[0]") * inv, number(p[1], file, pw + "[1]") * inv});
+      }
+      polys.push_back(std::move(poly));
     }
     auto it = index.find(cat);
     if (it == index.end()) {
@@ -163,9 +177,11 @@ LerfFrameLabels load_lerf_frame(const fs::path& file, int expect_width, int expe
       L.categories.push_back(std::move(c));
     }
     LerfCategory& c = L.categories[it->second];
-    fill_polygon(poly, L.width, L.height, c.mask);
+    for (auto& poly : polys) {
+      fill_polygon(poly, L.width, L.height, c.mask);  // several polygons of one object are OR-ed as well
+      c.polygons.push_back(std::move(poly));
+    }
     c.bboxes.push_back(box);
-    c.polygons.push_back(std::move(poly));
   }
   return L;
 }

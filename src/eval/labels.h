@@ -1,7 +1,8 @@
 // Ground-truth label loaders for the two open-vocabulary benchmarks (docs/formats.md):
 //  - LERF-OVS: SCENE/label/frame_XXXXX.json, labelme-like polygons per object, rasterised with the even-odd
 //    rule at pixel centres (x + 0.5, y + 0.5), vertices in pixel-corner units; objects sharing a category are
-//    OR-ed into one mask; each category keeps its bounding boxes for the localisation metric.
+//    OR-ed into one mask; each category keeps its bounding boxes for the localisation metric. Also accepted:
+//    "bbox": [[x1, y1], [x2, y2]] and "segmentation" as a list of polygons (each filled, then OR-ed).
 //  - 3D-OVS: SCENE/segmentations/classes.txt (one class per line; used sorted) and
 //    SCENE/segmentations/<view_index>/<class>.png (255 = inside) where <view_index> is the index of the view
 //    in the name-sorted view list (folder names may be zero-padded, "03" = 3).
@@ -36,7 +37,7 @@ struct LerfCategory {
   std::string name;
   Mask mask;                  // [H, W] 0/1: OR of every polygon of the category
   std::vector<BBox> bboxes;   // one per object entry, in file order
-  std::vector<std::vector<Point2>> polygons;  // the raw polygons, in file order
+  std::vector<std::vector<Point2>> polygons;  // the polygons (downscaled if asked), in file order
 };
 
 struct LerfFrameLabels {

@@ -147,6 +147,21 @@ TEST(EvalLerfLabels, LoadsAndMergesCategories) {
   EXPECT_EQ(load_lerf_frame(tmp / "scene/label/frame_00001.json").width, 6);
 }
 
+TEST(EvalLerfLabels, NestedBoxAndSeveralPolygonsPerObject) {
+  hgs::test::TempDir tmp;
+  write(tmp / "f.json", R"({"info": {"name": "f.jpg", "width": 5, "height": 2},
+    "objects": [{"category": "a", "bbox": [[4, 2], [0, 0]],
+                 "segmentation": [[[0, 0], [1, 0], [1, 2], [0, 2]], [[3, 0], [5, 0], [5, 1], [3, 1]]]}]})");
+  LerfFrameLabels L = load_lerf_frame(tmp / "f.json");
+  ASSERT_EQ(L.categories.size(), 1u);
+  EXPECT_EQ(L.categories[0].mask, ascii({"#..##", "#...."}));
+  EXPECT_EQ(L.categories[0].polygons.size(), 2u);
+  ASSERT_EQ(L.categories[0].bboxes.size(), 1u);
+  EXPECT_EQ(L.categories[0].bboxes[0].x1, 0.0);
+  EXPECT_EQ(L.categories[0].bboxes[0].x2, 4.0);
+  EXPECT_EQ(L.categories[0].bboxes[0].y2, 2.0);
+}
+
 TEST(EvalLerfLabels, Downscale) {
   hgs::test::TempDir tmp;
   write(tmp / "f.json", R"({"info": {"name": "f.jpg", "width": 9, "height": 8},
@@ -182,11 +197,18 @@ TEST(EvalLerfLabels, MalformedFilesGiveClearErrors) {
   check(head + R"({"bbox": [0,0,1,1], "segmentation": [[0,0],[1,0],[1,1]]}]})", "objects[0]: missing key \"category\"");
   check(head + R"({"category": "mug", "segmentation": [[0,0],[1,0],[1,1]]}]})", "missing key \"bbox\"");
   check(head + R"({"category": "mug", "bbox": [0,0,1], "segmentation": [[0,0],[1,0],[1,1]]}]})", "bbox must be");
+  check(head + R"({"category": "mug", "bbox": [[0,0],[1]], "segmentation": [[0,0],[1,0],[1,1]]}]})", "bbox must be");
+  check(head + R"({"category": "mug", "bbox": [[0,0],[1,"a"]], "segmentation": [[0,0],[1,0],[1,1]]}]})",
+        "objects[0].bbox[1][1] must be a number");
+  check(head + R"({"category": "mug", "bbox": [0,0,1,1], "segmentation": [[[0,0],[1,0],[1,1]], [[0,0],[1,0]]]}]})",
+        "polygon has 2 point(s), need at least 3");
+  check(head + R"({"category": "mug", "bbox": [0,0,1,1], "segmentation": [[[0,0],[1,0],[1,1]], [[0,0],[1,0],[1]]]}]})",
+        "objects[0].segmentation[1][2] must be an [x, y] pair");
   check(head + R"({"category": "mug", "bbox": [0,0,1,1]}]})", "missing key \"segmentation\"");
   check(head + R"({"category": "mug", "bbox": [0,0,1,1], "segmentation": [[0,0],[1,0]]}]})",
         "polygon has 2 point(s), need at least 3");
   check(head + R"({"category": "mug", "bbox": [0,0,1,1], "segmentation": [[0,0],[1,"x"],[1,1]]}]})",
-        "objects[0].segmentation[1][1] must be a number");
+        "objects[0].segmentation[1][1] must be a number");  // single polygon: segmentation[k] is point k
   check(head + R"({"category": "mug", "bbox": [0,0,1,1], "segmentation": [[0,0],[1],[1,1]]}]})",
         "objects[0].segmentation[1] must be an [x, y] pair");
   expect_error([&] { load_lerf_frame(tmp / "missing.json"); }, (tmp / "missing.json").string(), "");
