@@ -105,8 +105,10 @@ void layer_norm(const LayerNorm& ln, const float* x, int n, int c, float* y) {
 void activation(Activation a, float* x, size_t count) {
   parallel_for(long(count), 65536, [&](long b, long e) {
     if (a == Activation::GELU) {
+#pragma omp simd
       for (long i = b; i < e; ++i) x[i] = 0.5f * x[i] * (1.f + fast_erf(x[i] * 0.70710678118654752f));
     } else {
+#pragma omp simd
       for (long i = b; i < e; ++i) x[i] = x[i] / (1.f + fast_exp(-1.702f * x[i]));
     }
   });
@@ -118,11 +120,16 @@ void softmax_rows(float* s, int rows, int cols, bool causal, int row0) {
       float* r = s + size_t(i) * cols;
       const int m = causal ? std::min(cols, int(row0 + i + 1)) : cols;
       float mx = r[0];
+#pragma omp simd reduction(max : mx)
       for (int j = 1; j < m; ++j) mx = std::max(mx, r[j]);
-      for (int j = 0; j < m; ++j) r[j] = fast_exp(r[j] - mx);
       float sum = 0;
-      for (int j = 0; j < m; ++j) sum += r[j];
+#pragma omp simd reduction(+ : sum)
+      for (int j = 0; j < m; ++j) {
+        r[j] = fast_exp(r[j] - mx);
+        sum += r[j];
+      }
       const float inv = 1.f / sum;
+#pragma omp simd
       for (int j = 0; j < m; ++j) r[j] *= inv;
       for (int j = m; j < cols; ++j) r[j] = 0.f;
     }
