@@ -85,13 +85,21 @@ Pool& pool() {
 
 int pool_threads() { return std::clamp(omp_get_max_threads(), 1, 64); }
 
+// Set while a thread runs a pool job: a nested parallel_for then runs inline instead of deadlocking.
+thread_local bool tl_in_job = false;
+
 void parallel_for(long n, long min_parallel, const std::function<void(long, long)>& fn) {
   const int t = int(std::min<long>(pool_threads(), std::max<long>(n, 1)));
-  if (n < min_parallel || t <= 1) {
+  if (n < min_parallel || t <= 1 || tl_in_job) {
     if (n > 0) fn(0, n);
     return;
   }
-  pool().run(t, n, fn);
+  pool().run(t, n, [&](long b, long e) {
+    const bool prev = tl_in_job;
+    tl_in_job = true;
+    fn(b, e);
+    tl_in_job = prev;
+  });
 }
 
 }  // namespace hgs::clip

@@ -111,6 +111,16 @@ TEST(ClipKernels, ParallelForCoversRangeOnce) {
   }
 }
 
+TEST(ClipKernels, NestedParallelForRunsInline) {
+  omp_set_num_threads(2);
+  std::atomic<long> total{0};
+  parallel_for(8, 1, [&](long b, long e) {
+    for (long i = b; i < e; ++i)
+      parallel_for(1000, 1, [&](long b2, long e2) { total += e2 - b2; });
+  });
+  EXPECT_EQ(total.load(), 8000);
+}
+
 TEST(ClipKernels, BlockMatchesBruteForce) {
   omp_set_num_threads(2);  // make sure the pool path runs even on a 1-core machine
   const int w = 64, heads = 4, n = 300;
