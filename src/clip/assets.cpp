@@ -1,3 +1,4 @@
+// Asset lookup: see assets.h for the search order.
 #include "clip/assets.h"
 
 #include <cstdlib>

@@ -1,3 +1,4 @@
+// safetensors reader and writer: see safetensors.h (mmap + nlohmann-json header, bounds checks per tensor).
 #include "clip/safetensors.h"
 
 #include <fcntl.h>
