@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "core/error.h"
+#include "eval/relevancy.h"
 
 namespace hgs::query {
 
@@ -45,27 +46,12 @@ ObjectEmbeddings object_embeddings(const GaussianModel& m) {
   return oe;
 }
 
-float relevancy(const float* x, const float* q, const float* canon, int C, int D) {
-  double sq = 0;
-  for (int d = 0; d < D; ++d) sq += double(x[d]) * q[d];
-  float best = 1.f;
-  for (int c = 0; c < C; ++c) {
-    double sc = 0;
-    for (int d = 0; d < D; ++d) sc += double(x[d]) * canon[size_t(c) * D + d];
-    // exp(10 sq) / (exp(10 sq) + exp(10 sc)) = 1 / (1 + exp(10 (sc - sq)))
-    best = std::min(best, float(1.0 / (1.0 + std::exp(10.0 * (sc - sq)))));
-  }
-  return best;
-}
-
-std::vector<ObjectScore> score_objects(const ObjectEmbeddings& oe, const float* text, const float* canon, int C) {
+std::vector<ObjectScore> score_objects(const ObjectEmbeddings& oe, const float* text, const Canonical& canon) {
   std::vector<ObjectScore> out;
   for (int k = 1; k < oe.num_labels; ++k) {
     if (oe.weight[k] <= 0) continue;
     const float* e = &oe.e[size_t(k) * oe.dim];
-    double c = 0;
-    for (int d = 0; d < oe.dim; ++d) c += double(e[d]) * text[d];
-    out.push_back({k, float(c), relevancy(e, text, canon, C, oe.dim)});
+    out.push_back({k, eval::cosine(e, text, oe.dim), eval::lerf_relevancy(e, text, canon, oe.dim)});
   }
   std::sort(out.begin(), out.end(), [](const ObjectScore& a, const ObjectScore& b) {
     return a.relevancy != b.relevancy ? a.relevancy > b.relevancy : a.object < b.object;
@@ -105,7 +91,7 @@ std::vector<float> render_object_opacity(render::GaussianRenderer& r, const Gaus
 }
 
 std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
-                                    const float* text, const float* canon, int C) {
+                                    const float* text, const Canonical& canon) {
   const ExtraGroup* f = m.find_extra("lang");
   if (!f) fail("the model has no language embeddings (train it with --method hybrid)");
   const int D = f->dim;
@@ -116,18 +102,11 @@ std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianM
   rs.want_depth = false;
   render::RenderOutputs out;
   r.forward(cam, in, rs, out);
+  // Pixels where nothing is rendered have a zero feature: relevancy 0 there (not LERF's 0.5 for zero vectors).
   const size_t HW = size_t(cam.width) * cam.height;
-  std::vector<float> rel(HW, 0.f);
-#pragma omp parallel for schedule(static)
-  for (size_t p = 0; p < HW; ++p) {
-    float* x = &out.extra[p * D];
-    double s = 0;
-    for (int d = 0; d < D; ++d) s += double(x[d]) * x[d];
-    if (s <= 1e-20) continue;
-    const float inv = float(1.0 / std::sqrt(s));
-    for (int d = 0; d < D; ++d) x[d] *= inv;
-    rel[p] = relevancy(x, text, canon, C, D);
-  }
+  std::vector<float> rel = eval::lerf_relevancy_map(out.extra.data(), HW, D, text, canon);
+  for (size_t p = 0; p < HW; ++p)
+    if (out.alpha[p] < 1e-4f) rel[p] = 0.f;
   return rel;
 }
 

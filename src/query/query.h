@@ -28,16 +28,14 @@ struct ObjectEmbeddings {
 // Fails with a clear error when the model has no "obj"/"lang" groups (not a hybrid model).
 ObjectEmbeddings object_embeddings(const GaussianModel& m);
 
-// LERF relevancy of an embedding x (unit) for a query q (unit) against canonical phrases c_i (unit):
-// min_i exp(10 x.q) / (exp(10 x.q) + exp(10 x.c_i)). canon [C, D].
-float relevancy(const float* x, const float* q, const float* canon, int C, int D);
-
 struct ObjectScore {
   int object = 0;
   float cosine = 0, relevancy = 0;
 };
-// Scores of every foreground object (1..K with Gaussians), best first.
-std::vector<ObjectScore> score_objects(const ObjectEmbeddings& oe, const float* text, const float* canon, int C);
+using Canonical = std::vector<std::vector<float>>;  // canonical phrase embeddings, each [D]
+
+// Scores of every foreground object (1..K with Gaussians) by LERF relevancy (src/eval/relevancy.h), best first.
+std::vector<ObjectScore> score_objects(const ObjectEmbeddings& oe, const float* text, const Canonical& canon);
 
 // Gaussian inputs for rendering a model (SH colours at the model's degree).
 render::GaussianInputs model_inputs(const GaussianModel& m);
@@ -47,7 +45,7 @@ std::vector<float> render_object_opacity(render::GaussianRenderer& r, const Gaus
                                          const std::vector<int>& ks);
 // Per-pixel relevancy of the rendered language map for a query: [H, W] (0 where nothing is rendered).
 std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
-                                    const float* text, const float* canon, int C);
+                                    const float* text, const Canonical& canon);
 
 // Copy of the model keeping Gaussians whose hard id is in `objects` (or not in it when `remove`).
 GaussianModel select_objects(const GaussianModel& m, const std::vector<int>& objects, bool remove);

@@ -1,0 +1,69 @@
+#include "query/session.h"
+
+#include "core/error.h"
+#include "model/ply.h"
+
+namespace hgs::query {
+
+render::Camera camera_of(const View& v) {
+  render::Camera c;
+  c.width = v.width;
+  c.height = v.height;
+  c.fx = float(v.fx); c.fy = float(v.fy); c.cx = float(v.cx); c.cy = float(v.cy);
+  for (int r = 0; r < 3; ++r) {
+    for (int k = 0; k < 3; ++k) c.R[r * 3 + k] = float(v.R(r, k));
+    c.t[r] = float(v.t[r]);
+  }
+  return c;
+}
+
+Session::Session(const std::filesystem::path& scene, const std::filesystem::path& model_ply, int downscale,
+                 const std::filesystem::path& clip_path)
+    : scene_(load_scene(scene, {downscale, false})), model_(read_model_ply(model_ply)), text_(scene_, clip_path),
+      oe_(object_embeddings(model_)) {
+  if (oe_.dim != text_.dim())
+    fail("{}: the model's language embeddings have D = {} but the text embeddings have D = {}", model_ply.string(),
+         oe_.dim, text_.dim());
+}
+
+std::string Session::object_name(int id) const {
+  auto it = scene_.object_names.find(id);
+  return it != scene_.object_names.end() ? it->second : fmt::format("object {}", id);
+}
+
+ObjectAnswer Session::ask(const std::string& text, const QueryOptions& opt) {
+  ObjectAnswer a;
+  a.text = text;
+  const auto& e = text_.embed(text);
+  a.scores = score_objects(oe_, e.data(), text_.canonical());
+  if (a.scores.empty()) fail("the model has no foreground objects to answer \"{}\"", text);
+  a.chosen.push_back(a.scores[0].object);
+  if (opt.min_relevancy > 0)
+    for (size_t i = 1; i < a.scores.size(); ++i)
+      if (a.scores[i].relevancy >= opt.min_relevancy) a.chosen.push_back(a.scores[i].object);
+  return a;
+}
+
+std::vector<float> Session::object_opacity(int view, const std::vector<int>& objects) {
+  const View& v = scene_.views.at(view);
+  std::vector<float> A = render_object_opacity(renderer_, model_, camera_of(v), objects);
+  const size_t HW = size_t(v.width) * v.height, J = objects.size();
+  std::vector<float> sum(HW, 0.f);
+  for (size_t p = 0; p < HW; ++p)
+    for (size_t j = 0; j < J; ++j) sum[p] += A[p * J + j];
+  return sum;
+}
+
+eval::Mask Session::object_mask(int view, const std::vector<int>& objects, float threshold) {
+  std::vector<float> a = object_opacity(view, objects);
+  eval::Mask m(a.size());
+  for (size_t p = 0; p < a.size(); ++p) m[p] = a[p] > threshold;
+  return m;
+}
+
+std::vector<float> Session::pixel_relevancy(int view, const std::string& text) {
+  const auto& e = text_.embed(text);
+  return render_relevancy(renderer_, model_, camera_of(scene_.views.at(view)), e.data(), text_.canonical());
+}
+
+}  // namespace hgs::query

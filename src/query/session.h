@@ -1,0 +1,57 @@
+// A loaded scene + trained hybrid model ready for queries: the piece shared by `hgs query`, `hgs eval` and
+// the viewer. Object-level answers pick the objects whose embedding is most relevant to the text; masks are
+// their rendered opacity above a threshold. Pixel-level answers render the language map's relevancy.
+#pragma once
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "eval/metrics.h"
+#include "model/gaussian_model.h"
+#include "query/query.h"
+#include "query/text.h"
+#include "render/renderer.h"
+#include "scene/scene.h"
+
+namespace hgs::query {
+
+struct QueryOptions {
+  float min_relevancy = 0.f;   // > 0: every object at or above it is chosen (at least the best one)
+  float mask_threshold = 0.5f; // object mode: mask = sum of chosen objects' opacity > threshold
+};
+
+struct ObjectAnswer {
+  std::string text;
+  std::vector<ObjectScore> scores;  // every object, best first
+  std::vector<int> chosen;          // object ids
+};
+
+class Session {
+ public:
+  Session(const std::filesystem::path& scene, const std::filesystem::path& model_ply, int downscale,
+          const std::filesystem::path& clip_path);
+
+  const Scene& scene() const { return scene_; }
+  const GaussianModel& model() const { return model_; }
+  TextEmbedder& text() { return text_; }
+  const ObjectEmbeddings& objects() const { return oe_; }
+  std::string object_name(int id) const;  // masks/objects.json name, or "object <id>"
+
+  ObjectAnswer ask(const std::string& text, const QueryOptions& opt = {});
+  // Opacity of the chosen objects in a view, summed: [H, W] (heatmap of the object mode).
+  std::vector<float> object_opacity(int view, const std::vector<int>& objects);
+  eval::Mask object_mask(int view, const std::vector<int>& objects, float threshold);
+  // LERF relevancy of the rendered language map: [H, W].
+  std::vector<float> pixel_relevancy(int view, const std::string& text);
+
+ private:
+  Scene scene_;
+  GaussianModel model_;
+  TextEmbedder text_;
+  ObjectEmbeddings oe_;
+  render::GaussianRenderer renderer_;
+};
+
+render::Camera camera_of(const View& v);
+
+}  // namespace hgs::query
