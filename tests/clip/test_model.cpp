@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <random>
 #include <nlohmann/json.hpp>
 
 #include "clip/model.h"
@@ -12,6 +13,7 @@
 #include "clip/safetensors.h"
 #include "clip_test_util.h"
 #include "core/error.h"
+#include "core/fs.h"
 #include "core/half.h"
 #include "test_util.h"
 
@@ -234,4 +236,79 @@ TEST(ClipModel, LoadErrors) {
               std::string::npos)
         << e.what();
   }
+}
+
+// Architecture inference on other shapes (an L/14-like patch 14, head width 32 given by open_clip_config.json,
+// 3 layers, MLP ratio 4, D 24): a model written here with random weights loads with the right geometry, and
+// its outputs are unit vectors / finite on native and interpolated grids.
+TEST(ClipModel, OtherShapesLoad) {
+  test::TempDir t;
+  std::mt19937 rng(5);
+  std::normal_distribution<float> nd(0.f, 0.1f);
+  std::vector<std::vector<float>> store;
+  std::vector<TensorToWrite> tw;
+  auto add = [&](const std::string& name, std::vector<int64_t> shape) {
+    size_t n = 1;
+    for (auto d : shape) n *= size_t(d);
+    std::vector<float> v(n);
+    for (auto& x : v) x = nd(rng);
+    if (name.find("ln") != std::string::npos && name.find("weight") != std::string::npos) for (auto& x : v) x += 1.f;
+    store.push_back(std::move(v));
+    tw.push_back({name, shape, nullptr});
+  };
+  const int vw = 64, tw_ = 32, D = 24;
+  add("visual.conv1.weight", {vw, 3, 14, 14});
+  add("visual.class_embedding", {vw});
+  add("visual.positional_embedding", {2 * 2 + 1, vw});  // 28 px native
+  add("visual.ln_pre.weight", {vw}), add("visual.ln_pre.bias", {vw});
+  auto tower = [&](const std::string& p, int w, int L) {
+    for (int i = 0; i < L; ++i) {
+      std::string b = p + std::to_string(i) + ".";
+      add(b + "ln_1.weight", {w}), add(b + "ln_1.bias", {w});
+      add(b + "attn.in_proj_weight", {3 * w, w}), add(b + "attn.in_proj_bias", {3 * w});
+      add(b + "attn.out_proj.weight", {w, w}), add(b + "attn.out_proj.bias", {w});
+      add(b + "ln_2.weight", {w}), add(b + "ln_2.bias", {w});
+      add(b + "mlp.c_fc.weight", {4 * w, w}), add(b + "mlp.c_fc.bias", {4 * w});
+      add(b + "mlp.c_proj.weight", {w, 4 * w}), add(b + "mlp.c_proj.bias", {w});
+    }
+  };
+  tower("visual.transformer.resblocks.", vw, 3);
+  add("visual.ln_post.weight", {vw}), add("visual.ln_post.bias", {vw});
+  add("visual.proj", {vw, D});
+  add("token_embedding.weight", {49408, tw_});
+  add("positional_embedding", {20, tw_});  // context 20: longer phrases are truncated
+  tower("transformer.resblocks.", tw_, 1);
+  add("ln_final.weight", {tw_}), add("ln_final.bias", {tw_});
+  add("text_projection", {tw_, D});
+  for (size_t i = 0; i < tw.size(); ++i) tw[i].data = store[i].data();
+  write_safetensors(t / "m.safetensors", tw, StDType::BF16);
+  atomic_write_text(t / "open_clip_config.json",
+                    R"({"model_cfg": {"embed_dim": 24, "quick_gelu": true, "vision_cfg": {"width": 64, "head_width": 32},
+                        "text_cfg": {"heads": 4}}})");
+  ClipModel m = ClipModel::load(t / "m.safetensors");
+  EXPECT_EQ(m.vision.patch, 14);
+  EXPECT_EQ(m.image_size(), 28);
+  EXPECT_EQ(m.vision.tr.heads, 2);
+  EXPECT_EQ(m.vision.tr.blocks.size(), 3u);
+  EXPECT_EQ(m.text.tr.heads, 4);
+  EXPECT_EQ(m.text.context, 20);
+  EXPECT_EQ(m.embed_dim, D);
+  EXPECT_EQ(m.act, Activation::QuickGELU);
+  std::string long_text;
+  for (int i = 0; i < 40; ++i) long_text += "word ";
+  auto e = m.embed_text({"a photo of a cat", long_text});
+  ASSERT_EQ(e.size(), size_t(2 * D));
+  double n0 = 0;
+  for (int d = 0; d < D; ++d) n0 += e[d] * e[d];
+  EXPECT_NEAR(n0, 1.0, 1e-5);
+  Image img(70, 50, 3, 0.5f);
+  for (size_t i = 0; i < img.px.size(); ++i) img.px[i] = float(i % 97) / 97.f;
+  auto g = m.embed_image(img);
+  ASSERT_EQ(g.size(), size_t(D));
+  DenseOptions o;
+  o.input_size = 42;  // 50 x 70 -> grid 3 x round(70 * 42 / 50 / 14) = 4
+  DenseFeatures f = m.dense_features(img, o);
+  EXPECT_EQ(f.h, 3);
+  EXPECT_EQ(f.w, 4);
+  for (float v : f.data) ASSERT_TRUE(std::isfinite(v));
 }
