@@ -7,8 +7,8 @@
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
-#include "core/fs.h"
 #include "core/image.h"
+#include "eval/json_file.h"
 
 namespace hgs::eval {
 
@@ -17,15 +17,7 @@ namespace fs = std::filesystem;
 std::map<int, std::string> load_object_names(const fs::path& scene) {
   const fs::path file = scene / "masks" / "objects.json";
   if (!fs::is_regular_file(file)) fail("{}: file not found (object names)", file.string());
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(read_file_text(file));
-  } catch (const nlohmann::json::exception& e) {
-    std::string msg = e.what();
-    for (char& c : msg)
-      if (c == '\n' || c == '\r') c = ' ';
-    fail("{}: invalid JSON ({})", file.string(), msg);
-  }
+  const nlohmann::json j = read_json_file(file);
   if (!j.is_object()) fail("{}: expected an object {{\"id\": \"name\", ...}}", file.string());
   std::map<int, std::string> names;
   for (auto it = j.begin(); it != j.end(); ++it) {

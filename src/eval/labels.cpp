@@ -13,6 +13,7 @@
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/image.h"
+#include "eval/json_file.h"
 
 namespace hgs::eval {
 
@@ -69,14 +70,8 @@ const LerfCategory* LerfFrameLabels::find(const std::string& name) const {
 
 namespace {
 
-std::string one_line(std::string s) {
-  for (char& c : s)
-    if (c == '\n' || c == '\r') c = ' ';
-  return s;
-}
-
 double number(const json& v, const fs::path& file, const std::string& where) {
-  if (!v.is_number()) fail("{}: {} must be a number, found {}", file.string(), where, one_line(v.dump()));
+  if (!v.is_number()) fail("{}: {} must be a number, found {}", file.string(), where, v.dump());
   const double d = v.get<double>();
   if (!std::isfinite(d)) fail("{}: {} is not finite", file.string(), where);
   return d;
@@ -86,7 +81,7 @@ int positive_int(const json& obj, const char* key, const fs::path& file) {
   if (!obj.contains(key)) fail("{}: missing key info.{}", file.string(), key);
   const json& v = obj[key];
   if (!v.is_number_integer() || v.get<long long>() <= 0 || v.get<long long>() > 1000000)
-    fail("{}: info.{} must be a positive integer, found {}", file.string(), key, one_line(v.dump()));
+    fail("{}: info.{} must be a positive integer, found {}", file.string(), key, v.dump());
   return static_cast<int>(v.get<long long>());
 }
 
@@ -95,13 +90,7 @@ int positive_int(const json& obj, const char* key, const fs::path& file) {
 LerfFrameLabels load_lerf_frame(const fs::path& file, int expect_width, int expect_height, int downscale) {
   if (downscale < 1) fail("{}: downscale factor must be >= 1, got {}", file.string(), downscale);
   const double inv = 1.0 / downscale;
-  const std::string text = read_file_text(file);
-  json j;
-  try {
-    j = json::parse(text);
-  } catch (const json::exception& e) {
-    fail("{}: invalid JSON ({})", file.string(), one_line(e.what()));
-  }
+  const json j = read_json_file(file);
   if (!j.is_object()) fail("{}: expected a JSON object with keys \"info\" and \"objects\"", file.string());
   if (!j.contains("info") || !j["info"].is_object()) fail("{}: missing key \"info\" (an object)", file.string());
   if (!j.contains("objects") || !j["objects"].is_array()) fail("{}: missing key \"objects\" (an array)", file.string());

@@ -28,25 +28,41 @@ int view_for_label(const Scene& scene, const LerfFrameLabels& L) {
   fail("{}: no view of the scene is named {} (label stem) or {} (info.name)", L.file.string(), L.stem, L.image_name);
 }
 
-void check_size(const std::vector<float>& v, const View& view, const std::string& what) {
+// A callback's [H, W] output must match the view.
+template <typename T>
+void check_size(const std::vector<T>& v, const View& view, const std::string& what) {
   if (v.size() != size_t(view.width) * view.height)
     fail("eval: {} for view {} holds {} values, expected {}x{}", what, view.name, v.size(), view.width, view.height);
 }
 
-void check_mask(const Mask& m, const View& view, const std::string& query) {
-  if (m.size() != size_t(view.width) * view.height)
-    fail("eval: predicted mask of \"{}\" for view {} holds {} pixels, expected {}x{}", query, view.name, m.size(),
-         view.width, view.height);
+// Calls fn(view index, image (loaded only when PNGs are written), category) for every (frame, query) of the
+// LERF-OVS labels, with a progress bar.
+void for_each_lerf_query(const Scene& scene, const RunOptions& opt, const char* label,
+                         const std::function<void(int, const Image&, const LerfCategory&)>& fn) {
+  const auto frames = load_lerf_labels(scene.root, 0, 0, scene.downscale);
+  Progress bar(label, static_cast<long>(frames.size()), opt.progress);
+  for (size_t f = 0; f < frames.size(); ++f) {
+    const LerfFrameLabels& L = frames[f];
+    const int vi = view_for_label(scene, L);
+    const View& view = scene.views[vi];
+    if (L.width != view.width || L.height != view.height)
+      fail("{}: label size {}x{} does not match view {} ({}x{})", L.file.string(), L.width, L.height, view.name,
+           view.width, view.height);
+    const Image img = opt.overlay_dir.empty() ? Image() : scene.load_image(vi);
+    for (auto& cat : L.categories) fn(vi, img, cat);
+    bar.update(static_cast<long>(f + 1));
+  }
+  bar.finish();
 }
 
-void write_pngs(const RunOptions& opt, const Scene& scene, const View& view, const Image* img, const std::string& query,
-                const Mask& pred, const Mask& gt, const std::vector<float>* heat) {
+void write_pngs(const RunOptions& opt, const View& view, const Image& img, const std::string& query, const Mask& pred,
+                const Mask& gt, const std::vector<float>& heat) {
   if (opt.overlay_dir.empty()) return;
   const fs::path dir = opt.overlay_dir / view.stem;
   const std::string q = safe_file_name(query);
-  save_overlay_png(dir / (q + ".overlay.png"), *img, pred, gt);
+  save_overlay_png(dir / (q + ".overlay.png"), img, pred, gt);
   save_mask_png(dir / (q + ".mask.png"), pred, view.width, view.height);
-  if (heat && !heat->empty()) save_heatmap_png(dir / (q + ".heatmap.png"), *heat, view.width, view.height);
+  if (!heat.empty()) save_heatmap_png(dir / (q + ".heatmap.png"), heat, view.width, view.height);
 }
 
 }  // namespace
@@ -59,65 +75,39 @@ std::string safe_file_name(const std::string& s) {
 }
 
 EvalReport run_lerf_ovs(const Scene& scene, const RelevancyFn& fn, const RunOptions& opt) {
-  auto frames = load_lerf_labels(scene.root, 0, 0, scene.downscale);
   EvalReport rep;
   rep.protocol = "lerf-ovs";
   rep.scene = scene.root.filename().string();
   rep.mode = "pixel";
   rep.extra = {{"box", opt.lerf.box}, {"threshold", opt.lerf.threshold}, {"majority", opt.lerf.majority}};
-  Progress bar("eval lerf-ovs", static_cast<long>(frames.size()), opt.progress);
-  for (size_t f = 0; f < frames.size(); ++f) {
-    const LerfFrameLabels& L = frames[f];
-    const int vi = view_for_label(scene, L);
+  for_each_lerf_query(scene, opt, "eval lerf-ovs", [&](int vi, const Image& img, const LerfCategory& cat) {
     const View& view = scene.views[vi];
-    if (L.width != view.width || L.height != view.height)
-      fail("{}: label size {}x{} does not match view {} ({}x{})", L.file.string(), L.width, L.height, view.name,
-           view.width, view.height);
-    Image img;
-    if (!opt.overlay_dir.empty()) img = scene.load_image(vi);
-    for (auto& cat : L.categories) {
-      const auto t0 = Clock::now();
-      std::vector<float> rel = fn(vi, cat.name);
-      check_size(rel, view, "relevancy map of \"" + cat.name + "\"");
-      LerfQueryResult r = evaluate_lerf_query(rel, view.width, view.height, cat, opt.lerf);
-      rep.records.push_back(lerf_record(view.name, cat.name, r, since(t0)));
-      write_pngs(opt, scene, view, &img, cat.name, r.post.mask, cat.mask, &rel);
-    }
-    bar.update(static_cast<long>(f + 1));
-  }
-  bar.finish();
+    const auto t0 = Clock::now();
+    const std::vector<float> rel = fn(vi, cat.name);
+    check_size(rel, view, "relevancy map of \"" + cat.name + "\"");
+    const LerfQueryResult r = evaluate_lerf_query(rel, view.width, view.height, cat, opt.lerf);
+    rep.records.push_back(lerf_record(view.name, cat.name, r, since(t0)));
+    write_pngs(opt, view, img, cat.name, r.post.mask, cat.mask, rel);
+  });
   return rep;
 }
 
 EvalReport run_lerf_ovs_masks(const Scene& scene, const MaskFn& fn, const RunOptions& opt) {
-  auto frames = load_lerf_labels(scene.root, 0, 0, scene.downscale);
   EvalReport rep;
   rep.protocol = "lerf-ovs";
   rep.scene = scene.root.filename().string();
   rep.mode = "object";
-  Progress bar("eval lerf-ovs (object)", static_cast<long>(frames.size()), opt.progress);
-  for (size_t f = 0; f < frames.size(); ++f) {
-    const LerfFrameLabels& L = frames[f];
-    const int vi = view_for_label(scene, L);
+  for_each_lerf_query(scene, opt, "eval lerf-ovs (object)", [&](int vi, const Image& img, const LerfCategory& cat) {
     const View& view = scene.views[vi];
-    if (L.width != view.width || L.height != view.height)
-      fail("{}: label size {}x{} does not match view {} ({}x{})", L.file.string(), L.width, L.height, view.name,
-           view.width, view.height);
-    Image img;
-    if (!opt.overlay_dir.empty()) img = scene.load_image(vi);
-    for (auto& cat : L.categories) {
-      const auto t0 = Clock::now();
-      std::vector<float> heat;
-      Mask pred = fn(vi, cat.name, &heat);
-      check_mask(pred, view, cat.name);
-      const double secs = since(t0);
-      MaskScores s = score_mask(cat.mask, pred, view.width, view.height, opt.lerf.boundary_d);
-      rep.records.push_back({view.name, cat.name, s.iou, s.biou, s.acc, -1, secs});
-      write_pngs(opt, scene, view, &img, cat.name, pred, cat.mask, &heat);
-    }
-    bar.update(static_cast<long>(f + 1));
-  }
-  bar.finish();
+    const auto t0 = Clock::now();
+    std::vector<float> heat;
+    const Mask pred = fn(vi, cat.name, &heat);
+    check_size(pred, view, "predicted mask of \"" + cat.name + "\"");
+    const double secs = since(t0);
+    const MaskScores s = score_mask(cat.mask, pred, view.width, view.height, opt.lerf.boundary_d);
+    rep.records.push_back({view.name, cat.name, s.iou, s.biou, s.acc, -1, secs});
+    write_pngs(opt, view, img, cat.name, pred, cat.mask, heat);
+  });
   return rep;
 }
 
@@ -152,7 +142,7 @@ EvalReport run_3dovs(const Scene& scene, const ClassRelevancyFn& fn, const RunOp
       for (size_t c = 0; c < labels.classes.size(); ++c) {
         Mask pred(r.prediction.size());
         for (size_t p = 0; p < pred.size(); ++p) pred[p] = r.prediction[p] == c;
-        write_pngs(opt, scene, view, &img, labels.classes[c], pred, gt.masks[c], &rel[c]);
+        write_pngs(opt, view, img, labels.classes[c], pred, gt.masks[c], rel[c]);
       }
     }
     bar.update(static_cast<long>(i + 1));
@@ -173,8 +163,7 @@ EvalReport run_instances(const Scene& scene, const MaskFn& fn, const RunOptions&
   for (size_t i = 0; i < test.size(); ++i) {
     const View& view = scene.views[test[i]];
     const InstanceLabels gt = load_instance_masks(scene.root, view.name, names, view.width, view.height, scene.downscale);
-    Image img;
-    if (!opt.overlay_dir.empty()) img = scene.load_image(view.index);
+    const Image img = opt.overlay_dir.empty() ? Image() : scene.load_image(view.index);
     for (size_t k = 0; k < gt.ids.size(); ++k) {
       bool visible = false;
       for (auto v : gt.masks[k]) visible |= v != 0;
@@ -182,11 +171,11 @@ EvalReport run_instances(const Scene& scene, const MaskFn& fn, const RunOptions&
       const auto t0 = Clock::now();
       std::vector<float> heat;
       Mask pred = fn(view.index, gt.names[k], &heat);
-      check_mask(pred, view, gt.names[k]);
+      check_size(pred, view, "predicted mask of \"" + gt.names[k] + "\"");
       const double secs = since(t0);
       MaskScores s = score_mask(gt.masks[k], pred, view.width, view.height, opt.lerf.boundary_d);
       rep.records.push_back({view.name, gt.names[k], s.iou, s.biou, s.acc, -1, secs});
-      write_pngs(opt, scene, view, &img, gt.names[k], pred, gt.masks[k], &heat);
+      write_pngs(opt, view, img, gt.names[k], pred, gt.masks[k], heat);
     }
     bar.update(static_cast<long>(i + 1));
   }
