@@ -1,11 +1,32 @@
 // Differentiable CPU Gaussian splatting: the public, trainer-independent API of the render module.
 //
-// Pipeline (each stage has its own file with forward and backward):
+// Pipeline (each stage has its own file with forward and backward on plain arrays, templated on the scalar so
+// the tests run the same code in double; float is the production path):
 //   project.{h,cpp}   EWA projection of 3D Gaussians to 2D conics (+0.3 px low-pass), depth, radius
 //   sh.{h,cpp}        spherical-harmonics colour per view direction (degree 0..3), clamped at 0 as in 3DGS
 //   binning.{h,cpp}   16x16 tile binning, per-tile front-to-back depth order
 //   rasterize.{h,cpp} per-pixel front-to-back alpha compositing of RGB, alpha, depth and C extra channels
-// GaussianRenderer ties them together and keeps every buffer between calls (no allocation once warm).
+//   simd.h            8-lane packs (GCC vector extensions) and the fast exp used by the rasterizer
+// GaussianRenderer (= RendererT<float>) ties them together and keeps every buffer between calls.
+//
+// Data flow of forward() (arrays are [N, ...] per Gaussian unless noted; everything kept in State):
+//   mean, log_scale, quat --project_forward--> mean2d [N,2], conic [N,3], depth [N], radius [N] (0 = culled)
+//   opacity_logit --sigmoid--> opacity [N]
+//   sh (or the given colors) --sh_forward(view dir from the camera centre)--> colors [N,3]
+//   mean2d, conic, opacity, depth, radius --bin_gaussians--> per-tile lists sorted by (depth, index),
+//       Gaussian-major pair numbering, opacity-aware boxes
+//   --rasterize_forward--> rgb [H,W,3], alpha [H,W], depth [H,W], extra [H,W,C], weight_sums [N,J];
+//       saved: final T [H,W], last contributor [H,W], per-Gaussian records, batch masks
+// backward() runs the same chain in reverse:
+//   d rgb/alpha/depth/extra/weight_sums --rasterize_backward--> per (tile, Gaussian) pair slots, reduced per
+//       Gaussian in fixed order: d mean2d [N,2] (returned as the densification statistic), d conic, d opacity,
+//       d colors, d depth, d extra
+//   d opacity --sigmoid'--> d opacity_logit;  d colors --sh_backward--> d sh (+ d mean via the view direction)
+//   d mean2d, d conic, d depth --project_backward--> d mean, d log_scale, d quat
+// Results are bitwise deterministic for given inputs, independent of the OpenMP thread count.
+// The hybrid method can call the stages directly (sh_forward / sh_backward, precomputed `colors`, extra channels,
+// pixel-weight sums) or read the per-Gaussian intermediates through projected().
+// Note for densification: 3DGS thresholds the NDC-space gradient (2e-4); d/d(ndc) = d/d(pixel) * (W/2, H/2).
 //
 // Conventions
 // - Camera: world-to-camera rotation R (row-major 3x3) and translation t (x_cam = R x_world + t); pinhole
@@ -15,12 +36,17 @@
 //   gradient goes through the normalisation); opacity_logit [N] (opacity = sigmoid); sh [N, S, 3] with
 //   S = sh_stride >= (sh_degree + 1)^2 coefficients, coefficient-major then RGB (the 3DGS feature layout);
 //   colour = max(SH(dir) + 0.5, 0) with dir = normalise(mean - camera centre).
-// - Optional `colors` [N,3] replace the SH colour (used by object-conditioned rendering).
+// - Optional `colors` [N,3] replace the SH colour (used by object-conditioned rendering); colour is then used as
+//   given (no clamp), and its gradient is returned in GaussianGrads::colors.
 // - Extra channels: extra [N, C] per-Gaussian vectors, composited as sum_n v_n alpha_n T_n (no background).
 // - Outputs: rgb [H,W,3] = sum c alpha T + T_final * background; alpha [H,W] = 1 - T_final;
 //   depth [H,W] = sum z_n alpha_n T_n (expected depth, not divided by alpha); extra [H,W,C].
-// - 3DGS cut-offs: skip a Gaussian at a pixel when alpha < 1/255; alpha clamped to 0.99; stop when the
-//   transmittance would drop below 1e-4.
+// - 3DGS cut-offs: skip a Gaussian at a pixel when alpha < 1/255; alpha clamped to 0.99 (no gradient through
+//   the clamp); stop when the transmittance would drop below 1e-4 (T * (1 - alpha) < 1e-4 is tested before
+//   accumulating, so that Gaussian is not composited). A Gaussian only reaches the tiles its 3-sigma square
+//   touches (3DGS truncation); binning additionally drops tiles where alpha < 1/255 everywhere (same image).
+// - Projection: the Jacobian uses x/z, y/z clamped to 1.3 tan(half FOV) (3DGS); the gradient is the exact one of
+//   that function (zero w.r.t. x, y when clamped; 3DGS's own backward has a 2x factor on the z term there).
 #pragma once
 #include <cstdint>
 #include <vector>
@@ -119,7 +145,8 @@ class RendererT {
   RendererT(const RendererT&) = delete;
   RendererT& operator=(const RendererT&) = delete;
 
-  // Renders one view and keeps what backward() needs. The input arrays must stay alive until backward().
+  // Renders one view and keeps what backward() needs. The input arrays (and settings.pixel_weights) must stay
+  // alive and unchanged until backward(). Bad input (camera, degrees, missing arrays) throws hgs::Error.
   void forward(const Camera& cam, const GaussianInputsT<T>& g, const RenderSettings& s, RenderOutputsT<T>& out);
   // Exact gradients of the last forward() for the given output gradients.
   void backward(const OutputGradsT<T>& dout, GaussianGradsT<T>& grads);
