@@ -85,13 +85,16 @@ GaussianModel init_from_points(const std::vector<Eigen::Vector3f>& points, const
   return m;
 }
 
-float scene_extent(const Scene& scene) {
-  if (scene.views.empty()) return 1.f;
+float scene_extent(const Scene& scene, const std::vector<int>& views) {
+  std::vector<int> idx = views;
+  if (idx.empty())
+    for (auto& v : scene.views) idx.push_back(v.index);
+  if (idx.empty()) return 1.f;
   Eigen::Vector3d c = Eigen::Vector3d::Zero();
-  for (auto& v : scene.views) c += v.camera_center();
-  c /= double(scene.views.size());
+  for (int i : idx) c += scene.views[i].camera_center();
+  c /= double(idx.size());
   double r = 0;
-  for (auto& v : scene.views) r = std::max(r, (v.camera_center() - c).norm());
+  for (int i : idx) r = std::max(r, (scene.views[i].camera_center() - c).norm());
   if (r <= 0) r = 1.0 / 1.1;  // a single camera: unit extent
   return float(r * 1.1);
 }

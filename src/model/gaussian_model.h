@@ -62,7 +62,8 @@ GaussianModel init_from_points(const std::vector<Eigen::Vector3f>& points,      
                                const std::vector<Eigen::Vector3f>& colors,      // [P, 3] in [0, 1]
                                int sh_degree);
 
-// 3DGS's "cameras extent": 1.1 x the largest distance of a camera centre from the mean camera centre.
-float scene_extent(const Scene& scene);
+// 3DGS's "cameras extent": 1.1 x the largest distance of a camera centre from the mean camera centre, over
+// the given views (all views when `views` is empty).
+float scene_extent(const Scene& scene, const std::vector<int>& views = {});
 
 }  // namespace hgs

@@ -1,0 +1,48 @@
+// TrainConfig: every hyper-parameter of RGB Gaussian training, with the 3DGS defaults for a 30k-iteration run,
+// JSON (de)serialisation for MODEL/config.json and checkpoints, and the proportional schedule scaling to
+// another iteration count.
+#pragma once
+#include <cstdint>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "train/densify.h"
+
+namespace hgs::train {
+
+constexpr int kMinDensifyEvery = 50;
+
+struct TrainConfig {
+  std::string method = "rgb";
+  int iters = 30000;
+  int sh_degree = 3;  // maximum SH degree
+  bool densify = true;
+  bool white_bg = false;
+  uint64_t seed = 0;
+  float lambda_dssim = 0.2f;
+  // Learning rates (3DGS). Positions are scaled by the scene extent and decay log-linearly over `iters`.
+  float lr_position_init = 1.6e-4f, lr_position_final = 1.6e-6f;
+  float lr_sh_dc = 2.5e-3f, lr_sh_rest = 2.5e-3f / 20.f;
+  float lr_opacity = 0.05f, lr_scaling = 5e-3f, lr_rotation = 1e-3f;
+  int sh_increase_every = 1000;
+  // Densification schedule (the 30k values; see scaled_to).
+  int densify_from = 500, densify_until = 15000, densify_every = 100, opacity_reset_every = 3000;
+  float screen_limit = 20.f;  // px, used after the first opacity reset
+  DensifyConfig densify_cfg;
+  int save_every = 0;  // checkpoint + PLY every N iterations (0 = never during training)
+
+  // Copy with the densification schedule (from, until, every, opacity reset) multiplied by iters / 30000
+  // (rounded) and `iters` set, with two floors for short runs: the interval stays >= kMinDensifyEvery so the
+  // averaged gradient covers several views, and densification starts no earlier than min(500, iters / 10)
+  // so the initial Gaussians settle first (starting at 500 x iters / 30000 densifies the unconverged
+  // initialisation and multiplies the count tenfold within a few hundred iterations). The SH schedule stays
+  // at one degree per `sh_increase_every`.
+  TrainConfig scaled_to(int iterations) const;
+  // Position learning rate at 1-based iteration `it` for a scene of the given extent.
+  float position_lr(int it, float extent) const;
+
+  nlohmann::json to_json() const;
+  static TrainConfig from_json(const nlohmann::json& j, const std::string& where);
+};
+
+}  // namespace hgs::train

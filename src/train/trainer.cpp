@@ -1,0 +1,138 @@
+// Trainer::step: the per-iteration glue between renderer, loss, Adam and densification. Buffers live in the
+// trainer and are reused, so a step allocates nothing unless the Gaussian count changed.
+#include "train/trainer.h"
+
+#include <algorithm>
+#include <chrono>
+
+#include "core/error.h"
+
+namespace hgs::train {
+
+render::Camera make_camera(const View& v) {
+  render::Camera c;
+  c.width = v.width;
+  c.height = v.height;
+  c.fx = float(v.fx); c.fy = float(v.fy); c.cx = float(v.cx); c.cy = float(v.cy);
+  for (int r = 0; r < 3; ++r) {
+    for (int k = 0; k < 3; ++k) c.R[r * 3 + k] = float(v.R(r, k));
+    c.t[r] = float(v.t[r]);
+  }
+  return c;
+}
+
+Trainer::Trainer(const TrainConfig& cfg, GaussianModel model, std::vector<TrainView> views, float extent)
+    : cfg_(cfg), model_(std::move(model)), views_(std::move(views)), extent_(extent), rng_(cfg.seed),
+      loss_(cfg.lambda_dssim) {
+  if (views_.empty()) fail("train: no training views");
+  if (model_.n == 0) fail("train: the model has no Gaussians");
+  if (cfg_.sh_degree > model_.sh_degree) cfg_.sh_degree = model_.sh_degree;
+  model_.validate("train");
+  for (auto& v : views_)
+    if (v.image.width != v.cam.width || v.image.height != v.cam.height || v.image.channels != 3)
+      fail("train: view '{}' image {}x{}x{} does not match its camera {}x{}", v.name, v.image.width, v.image.height,
+           v.image.channels, v.cam.width, v.cam.height);
+  adam_.add("mean", 3, model_.n, cfg_.lr_position_init * extent_);
+  adam_.add("log_scale", 3, model_.n, cfg_.lr_scaling);
+  adam_.add("quat", 4, model_.n, cfg_.lr_rotation);
+  adam_.add("opacity", 1, model_.n, cfg_.lr_opacity);
+  AdamParam& sh = adam_.add("sh", model_.sh_stride() * 3, model_.n, cfg_.lr_sh_rest);
+  for (int c = 0; c < 3; ++c) sh.lr[c] = cfg_.lr_sh_dc;
+  stats_.reset(model_.n);
+}
+
+void Trainer::add_trainable_extra(const std::string& name, float lr) {
+  ExtraGroup* g = model_.find_extra(name);
+  if (!g) fail("train: no extra channel group '{}' in the model", name);
+  adam_.add(name, g->dim, model_.n, lr);
+  extra_grads_[name].assign(size_t(model_.n) * g->dim, 0.f);
+}
+
+std::vector<float>& Trainer::extra_grad(const std::string& name) {
+  auto it = extra_grads_.find(name);
+  if (it == extra_grads_.end()) fail("train: extra group '{}' is not trainable", name);
+  return it->second;
+}
+
+int Trainer::active_sh_degree() const {
+  int d = cfg_.sh_increase_every > 0 ? it_ / cfg_.sh_increase_every : cfg_.sh_degree;
+  return std::min(d, cfg_.sh_degree);
+}
+
+int Trainer::next_view() {
+  if (order_pos_ >= order_.size()) {
+    order_.resize(views_.size());
+    for (size_t i = 0; i < order_.size(); ++i) order_[i] = int(i);
+    std::shuffle(order_.begin(), order_.end(), rng_);
+    order_pos_ = 0;
+  }
+  return order_[order_pos_++];
+}
+
+StepInfo Trainer::step() {
+  auto t0 = std::chrono::steady_clock::now();
+  if (model_.n == 0) fail("train: every Gaussian was pruned by iteration {}", it_);
+  const int it = ++it_;  // 1-based, as in 3DGS
+  StepInfo info;
+  adam_.get("mean").set_lr(cfg_.position_lr(it, extent_));
+  const TrainView& v = views_[next_view()];
+  const int W = v.cam.width, H = v.cam.height;
+
+  render::GaussianInputs in;
+  in.n = model_.n;
+  in.mean = model_.mean.data();
+  in.log_scale = model_.log_scale.data();
+  in.quat = model_.quat.data();
+  in.opacity_logit = model_.opacity_logit.data();
+  in.sh = model_.sh.data();
+  in.sh_stride = model_.sh_stride();
+  // 3DGS raises the degree at iterations 1000, 2000, ... before rendering.
+  in.sh_degree = std::min(cfg_.sh_degree, cfg_.sh_increase_every > 0 ? it / cfg_.sh_increase_every : cfg_.sh_degree);
+  render::RenderSettings rs;
+  const float bg = cfg_.white_bg ? 1.f : 0.f;
+  rs.background[0] = rs.background[1] = rs.background[2] = bg;
+  rs.want_depth = false;
+  prepare_inputs(v, in, rs);
+  renderer_.forward(v.cam, in, rs, out_);
+
+  d_rgb_.resize(size_t(W) * H * 3);
+  info.loss = loss_(out_.rgb.data(), v.image.px.data(), H, W, d_rgb_.data());
+  info.psnr = psnr_from_mse(info.loss.mse);
+  render::OutputGrads dout;
+  dout.rgb = d_rgb_.data();
+  info.loss.total += extra_loss(v, out_, d_rgb_.data(), dout);
+  for (auto& [name, g] : extra_grads_) {
+    g.resize(size_t(model_.n) * model_.find_extra(name)->dim);
+    std::fill(g.begin(), g.end(), 0.f);
+  }
+  renderer_.backward(dout, grads_);
+  extra_param_grads(grads_);
+
+  // Adam.
+  adam_.begin_step();
+  adam_.update(adam_.get("mean"), model_.mean.data(), grads_.mean.data(), model_.n);
+  adam_.update(adam_.get("log_scale"), model_.log_scale.data(), grads_.log_scale.data(), model_.n);
+  adam_.update(adam_.get("quat"), model_.quat.data(), grads_.quat.data(), model_.n);
+  adam_.update(adam_.get("opacity"), model_.opacity_logit.data(), grads_.opacity_logit.data(), model_.n);
+  adam_.update(adam_.get("sh"), model_.sh.data(), grads_.sh.data(), model_.n);
+  for (auto& [name, g] : extra_grads_)
+    adam_.update(adam_.get(name), model_.find_extra(name)->data.data(), g.data(), model_.n);
+
+  // Densification (3DGS schedule; statistics are gathered until densify_until).
+  if (cfg_.densify && it < cfg_.densify_until) {
+    stats_.add(grads_.mean2d.data(), renderer_.radii().data(), model_.n, W, H);
+    if (it > cfg_.densify_from && it % cfg_.densify_every == 0) {
+      float screen = it > cfg_.opacity_reset_every ? cfg_.screen_limit : 0.f;
+      info.densify = densify_and_prune(model_, adam_, stats_, cfg_.densify_cfg, extent_, screen, rng_);
+      info.densified = true;
+    }
+    if (it % cfg_.opacity_reset_every == 0 || (cfg_.white_bg && it == cfg_.densify_from))
+      reset_opacity(model_, adam_, 0.01f);
+  }
+  info.num_gaussians = model_.n;
+  after_step(info);
+  info.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  return info;
+}
+
+}  // namespace hgs::train
