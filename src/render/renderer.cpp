@@ -160,7 +160,9 @@ void RendererT<T>::backward(const OutputGradsT<T>& dout, GaussianGradsT<T>& grad
   T* gcolor;
   if (g.colors) {
     grads.colors.resize(size_t(n) * 3);
-    grads.sh.clear();
+    // SH given too (a caller that made the colours from SH itself): zeros it can accumulate into
+    if (g.sh) grads.sh.assign(size_t(n) * g.sh_stride * 3, T(0));
+    else grads.sh.clear();
     gcolor = grads.colors.data();
   } else {
     grads.colors.clear();

@@ -117,7 +117,9 @@ struct GaussianGradsT {
   std::vector<T> log_scale;      // [N, 3]
   std::vector<T> quat;           // [N, 4]
   std::vector<T> opacity_logit;  // [N]
-  std::vector<T> sh;             // [N, sh_stride, 3] (zero beyond the active degree; empty if colours given)
+  std::vector<T> sh;             // [N, sh_stride, 3] (zero beyond the active degree); when colours were given:
+                                 // zeros if `sh` was also passed (for callers that run sh_backward themselves),
+                                 // else empty
   std::vector<T> colors;         // [N, 3] when precomputed colours were given
   std::vector<T> extra;          // [N, C]
   std::vector<T> mean2d;         // [N, 2] dL/d(projected centre) in pixels (densification statistic)

@@ -121,3 +121,38 @@ TEST(RenderForward, BadInputIsAnError) {
 
 }  // namespace
 }  // namespace hgs::render::test
+
+namespace hgs::render::test {
+namespace {
+
+// Precomputed colours win over SH; when both are passed, grads.sh is zeros of the SH shape (for callers that
+// derived the colours from SH themselves and accumulate into it) and grads.colors carries the gradient.
+TEST(RenderForward, ColoursTakePrecedenceOverSh) {
+  Scene s = random_scene(30, 40, 36, 8);
+  std::vector<std::vector<float>> store;
+  GaussianInputs g = s.inputs<float>(store);
+  std::vector<float> cols(s.colors.begin(), s.colors.end());
+  GaussianRenderer r1, r2;
+  RenderOutputs o1, o2;
+  g.colors = cols.data();
+  r1.forward(s.cam, g, s.settings, o1);
+  s.use_colors = true;
+  std::vector<std::vector<float>> store2;  // g's arrays must stay alive until r1.backward()
+  GaussianInputs g2 = s.inputs<float>(store2);
+  r2.forward(s.cam, g2, s.settings, o2);
+  EXPECT_EQ(o1.rgb, o2.rgb);
+  std::vector<float> w(o1.rgb.size(), 1.f);
+  OutputGrads d;
+  d.rgb = w.data();
+  GaussianGrads gr;
+  r1.backward(d, gr);
+  ASSERT_EQ(gr.sh.size(), size_t(30 * 16 * 3));
+  for (float v : gr.sh) EXPECT_EQ(v, 0.f);
+  ASSERT_EQ(gr.colors.size(), size_t(30 * 3));
+  float sum = 0;
+  for (float v : gr.colors) sum += v;
+  EXPECT_GT(sum, 0.f);
+}
+
+}  // namespace
+}  // namespace hgs::render::test
