@@ -155,3 +155,41 @@ TEST(EvalRun, SafeFileNames) {
   EXPECT_EQ(safe_file_name(""), "_");
   EXPECT_EQ(safe_file_name("tea-cup_2.0"), "tea-cup_2.0");
 }
+
+TEST(EvalRun, LabelsThatMatchNoViewAreClearErrors) {
+  Fixture& F = fx();
+  hgs::test::TempDir tmp;
+  fs::copy(F.scene.root, tmp / "scene", fs::copy_options::recursive);
+  // A LERF label for a frame the scene does not have.
+  atomic_write_text(tmp / "scene/label/frame_00077.json",
+                    R"({"info": {"name": "frame_00077.png", "width": 320, "height": 240}, "objects": []})");
+  Scene s = load_scene(tmp / "scene");
+  RunOptions opt;
+  opt.progress = false;
+  RelevancyFn zero = [&](int, const std::string&) { return std::vector<float>(320 * 240, 0.f); };
+  try {
+    run_lerf_ovs(s, zero, opt);
+    FAIL() << "expected an error";
+  } catch (const Error& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("frame_00077.json: no view of the scene is named frame_00077"), std::string::npos) << msg;
+  }
+  // A 3D-OVS folder whose view index is past the end of the view list.
+  fs::copy(tmp / "scene/segmentations/8", tmp / "scene/segmentations/42", fs::copy_options::recursive);
+  ClassRelevancyFn cls = [&](int, const std::vector<std::string>& c) {
+    return std::vector<std::vector<float>>(c.size(), std::vector<float>(320 * 240, 0.f));
+  };
+  try {
+    run_3dovs(s, cls, opt);
+    FAIL() << "expected an error";
+  } catch (const Error& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("view index 42 is out of range (the scene has 9 views)"), std::string::npos) << msg;
+  }
+  // A callback returning the wrong number of class maps.
+  fs::remove_all(tmp / "scene/segmentations/42");
+  ClassRelevancyFn few = [&](int, const std::vector<std::string>&) {
+    return std::vector<std::vector<float>>(1, std::vector<float>(320 * 240, 0.f));
+  };
+  EXPECT_THROW(run_3dovs(s, few, opt), Error);
+}
