@@ -47,11 +47,12 @@ Localisation lerf_localise(const std::vector<float>& boxed, int width, int heigh
       if (boxed[size_t(y) * width + x] != mx) continue;
       if (L.x < 0) { L.x = x; L.y = y; }
       for (auto& b : bboxes)
-        if (b.contains_pixel(x, y)) {
-          if (!L.hit) { L.x = x; L.y = y; }  // report the tied maximum that hits
+        if (b.contains_pixel(x, y)) {  // report the tied maximum that hits
+          L.x = x;
+          L.y = y;
           L.hit = true;
+          return L;
         }
-      if (L.hit) return L;
     }
   return L;
 }

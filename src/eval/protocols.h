@@ -49,7 +49,7 @@ LerfPost lerf_postprocess(const std::vector<float>& relevancy, int width, int he
                           const LerfOptions& opt = {});
 
 struct Localisation {
-  int x = -1, y = -1;  // first maximum of box_k(v) in raster order
+  int x = -1, y = -1;  // the first tied maximum of box_k(v) inside a box if any hits, else the first in raster order
   float score = 0;     // box_k(v) there
   bool hit = false;
 };
