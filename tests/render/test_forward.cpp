@@ -9,12 +9,29 @@
 namespace hgs::render::test {
 namespace {
 
+// Pixels whose error exceeds tol. In double the pipeline makes exactly the reference's decisions, so every
+// pixel must match. In float a Gaussian whose alpha at some pixel sits within float error of 1/255 (or whose
+// T * (1 - alpha) sits at 1e-4) can legitimately fall on the other side of the cut-off (float conics of thin
+// Gaussians carry ~1e-5 relative error): such a flip moves that pixel by up to ~alpha_threshold * T, so for
+// float a handful of pixels (<= 0.5%) may differ by at most 1e-2 (times the value scale), all others must match
+// to tol.
 template <class T>
-double max_abs_diff(const std::vector<T>& a, const std::vector<double>& b) {
-  EXPECT_EQ(a.size(), b.size());
-  double m = 0;
-  for (size_t i = 0; i < std::min(a.size(), b.size()); ++i) m = std::max(m, std::abs(double(a[i]) - b[i]));
-  return m;
+void expect_match(const char* what, const std::vector<T>& a, const std::vector<double>& b, double tol) {
+  ASSERT_EQ(a.size(), b.size()) << what;
+  size_t bad = 0;
+  double worst = 0, scale = 1;
+  for (double v : b) scale = std::max(scale, std::abs(v));
+  for (size_t i = 0; i < a.size(); ++i) {
+    const double e = std::abs(double(a[i]) - b[i]);
+    bad += e > tol;
+    worst = std::max(worst, e);
+  }
+  if (sizeof(T) == sizeof(double)) {
+    EXPECT_LT(worst, tol) << what;
+  } else {
+    EXPECT_LE(bad * 200, a.size()) << what << ": " << bad << " of " << a.size() << " values off by > " << tol;
+    EXPECT_LT(worst, 1e-2 * scale) << what;
+  }
 }
 
 template <class T>
@@ -25,12 +42,12 @@ void check_against_reference(const Scene& s, double tol) {
   RenderOutputsT<T> out;
   r.forward(s.cam, g, s.settings, out);
   const RefImage ref = ref_render(s, s.settings.want_depth);
-  EXPECT_LT(max_abs_diff(out.rgb, ref.rgb), tol);
-  EXPECT_LT(max_abs_diff(out.alpha, ref.alpha), tol);
-  if (s.settings.want_depth) EXPECT_LT(max_abs_diff(out.depth, ref.depth), tol * 10);  // depths are ~5
+  expect_match("rgb", out.rgb, ref.rgb, tol);
+  expect_match("alpha", out.alpha, ref.alpha, tol);
+  if (s.settings.want_depth) expect_match("depth", out.depth, ref.depth, tol * 10);  // depths are ~5
   else EXPECT_TRUE(out.depth.empty());
-  EXPECT_LT(max_abs_diff(out.extra, ref.extra), tol * 4);
-  EXPECT_LT(max_abs_diff(out.weight_sums, ref.weight_sums), tol * 20);  // sums over up to ~100 pixels
+  expect_match("extra", out.extra, ref.extra, tol * 4);
+  expect_match("weight_sums", out.weight_sums, ref.weight_sums, tol * 20);  // sums over up to ~100 pixels
   // the scene really exercises compositing: some pixels are covered, some not fully
   double amax = 0, amin = 1;
   for (double a : ref.alpha) amax = std::max(amax, a), amin = std::min(amin, a);
