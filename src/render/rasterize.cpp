@@ -56,22 +56,26 @@ void build_records(const RasterInputs<T>& in, const Binning& bins, T* records) {
 
 // Copies the tile's records (and extras) into per-thread scratch. Returns false for an empty tile.
 template <class T>
-bool load_records(const RasterInputs<T>& in, const Binning& bins, const T* records, int tile,
-                  typename RasterWorkspace<T>::PerThread& w, TileData<T>& td) {
+bool load_records(const RasterInputs<T>& in, const Binning& bins, const T* records, T* tile_records, bool gather,
+                  int tile, typename RasterWorkspace<T>::PerThread& w, TileData<T>& td) {
   const int s = bins.tile_start[tile], e = bins.tile_start[tile + 1];
   const int n = e - s, C = in.num_extra;
   td.n = n;
   td.C = C;
   if (n == 0) return false;
-  if (w.soa.size() < size_t(n) * (kRecord + C)) w.soa.resize(size_t(n) * (kRecord + C));
-  T* rec = w.soa.data();
-  T* ex = rec + size_t(n) * kRecord;
+  T* rec = tile_records + size_t(s) * kRecord;  // [n, 16], written by forward, read again by backward
   td.rec = rec;
-  td.extra = ex;
-  for (int k = 0; k < n; ++k) {
-    const int g = bins.tile_gauss[s + k];
-    std::memcpy(rec + size_t(k) * kRecord, records + size_t(g) * kRecord, sizeof(T) * kRecord);
-    for (int c2 = 0; c2 < C; ++c2) ex[size_t(k) * C + c2] = in.extra[size_t(g) * C + c2];
+  if (gather)
+    for (int k = 0; k < n; ++k)
+      std::memcpy(rec + size_t(k) * kRecord, records + size_t(bins.tile_gauss[s + k]) * kRecord, sizeof(T) * kRecord);
+  if (C > 0) {
+    if (w.soa.size() < size_t(n) * C) w.soa.resize(size_t(n) * C);
+    T* ex = w.soa.data();
+    td.extra = ex;
+    for (int k = 0; k < n; ++k) {
+      const int g = bins.tile_gauss[s + k];
+      for (int c2 = 0; c2 < C; ++c2) ex[size_t(k) * C + c2] = in.extra[size_t(g) * C + c2];
+    }
   }
   return true;
 }
@@ -140,14 +144,15 @@ void build_masks(const Binning& bins, int tile, const TileData<T>& td, uint32_t*
 // when all its pixels hit the transmittance cut-off, the tile ends when no batch is left.
 template <class T, bool kDepth, bool kExtra>
 void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typename RasterWorkspace<T>::PerThread& w,
-                  const T* records, uint32_t* ws_masks, T* pair_w, const RasterOutputs<T>& out) {
+                  const T* records, T* tile_records, uint32_t* ws_masks, T* pair_w,
+                  const RasterOutputs<T>& out) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
   using I = typename std::remove_reference<decltype(M{}[0])>::type;
   const int W = bins.width, H = bins.height, C = in.num_extra, J = in.num_weights;
   const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
   TileData<T> td;
-  const bool any_g = load_records(in, bins, records, tile, w, td);
+  const bool any_g = load_records(in, bins, records, tile_records, true, tile, w, td);
   const int n = any_g ? td.n : 0;
   uint32_t* masks = ws_masks + bins.tile_start[tile];
   if (any_g) build_masks(bins, tile, td, masks);
@@ -264,7 +269,8 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
 template <class T, bool kDepth, bool kExtra>
 void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
                    typename RasterWorkspace<T>::PerThread& w, const T* final_T, const int32_t* last,
-                   const RasterGrads<T>& g, const T* records, const uint32_t* ws_masks, T* pair_grad) {
+                   const RasterGrads<T>& g, const T* records, T* tile_records, const uint32_t* ws_masks,
+                   T* pair_grad) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
   using I = typename std::remove_reference<decltype(M{}[0])>::type;
@@ -272,7 +278,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
   const int F = kNumGrads + C;
   const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
   TileData<T> td;
-  if (!load_records(in, bins, records, tile, w, td)) return;
+  if (!load_records(in, bins, records, tile_records, false, tile, w, td)) return;
   const int n = td.n;
   const uint32_t* masks = ws_masks + bins.tile_start[tile];
   const int J = g.d_weight_sums ? in.num_weights : 0;
@@ -423,6 +429,8 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
   if (ws.records.size() < size_t(in.n) * kRecord) ws.records.resize(size_t(in.n) * kRecord);
   build_records(in, bins, ws.records.data());
   const T* R = ws.records.data();
+  if (ws.tile_records.size() < size_t(bins.num_pairs) * kRecord) ws.tile_records.resize(size_t(bins.num_pairs) * kRecord);
+  T* TR = ws.tile_records.data();
   const int J = in.num_weights;
   if (J > 0 && ws.pair_w.size() < size_t(bins.num_pairs) * J) ws.pair_w.resize(size_t(bins.num_pairs) * J);
   T* PW = ws.pair_w.data();
@@ -431,10 +439,10 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
     auto& w = ws.threads[omp_get_thread_num()];
 #pragma omp for schedule(dynamic, 1)
     for (int t = 0; t < bins.num_tiles; ++t) {
-      if (dep && ext) forward_tile<T, true, true>(in, bins, t, w, R, MK, PW, out);
-      else if (dep) forward_tile<T, true, false>(in, bins, t, w, R, MK, PW, out);
-      else if (ext) forward_tile<T, false, true>(in, bins, t, w, R, MK, PW, out);
-      else forward_tile<T, false, false>(in, bins, t, w, R, MK, PW, out);
+      if (dep && ext) forward_tile<T, true, true>(in, bins, t, w, R, TR, MK, PW, out);
+      else if (dep) forward_tile<T, true, false>(in, bins, t, w, R, TR, MK, PW, out);
+      else if (ext) forward_tile<T, false, true>(in, bins, t, w, R, TR, MK, PW, out);
+      else forward_tile<T, false, false>(in, bins, t, w, R, TR, MK, PW, out);
     }
     if (J > 0) {
 #pragma omp for schedule(static)
@@ -459,15 +467,16 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
   T* pg = ws.pair_grad.data();
   const uint32_t* MK = ws.masks.data();
   const T* R = ws.records.data();
+  T* TR = ws.tile_records.data();
 #pragma omp parallel
   {
     auto& w = ws.threads[omp_get_thread_num()];
 #pragma omp for schedule(dynamic, 1)
     for (int t = 0; t < bins.num_tiles; ++t) {
-      if (dep && ext) backward_tile<T, true, true>(in, bins, t, w, final_T, last, g, R, MK, pg);
-      else if (dep) backward_tile<T, true, false>(in, bins, t, w, final_T, last, g, R, MK, pg);
-      else if (ext) backward_tile<T, false, true>(in, bins, t, w, final_T, last, g, R, MK, pg);
-      else backward_tile<T, false, false>(in, bins, t, w, final_T, last, g, R, MK, pg);
+      if (dep && ext) backward_tile<T, true, true>(in, bins, t, w, final_T, last, g, R, TR, MK, pg);
+      else if (dep) backward_tile<T, true, false>(in, bins, t, w, final_T, last, g, R, TR, MK, pg);
+      else if (ext) backward_tile<T, false, true>(in, bins, t, w, final_T, last, g, R, TR, MK, pg);
+      else backward_tile<T, false, false>(in, bins, t, w, final_T, last, g, R, TR, MK, pg);
     }
     // reduce pair slots per Gaussian in a fixed order
 #pragma omp for schedule(static)

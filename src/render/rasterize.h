@@ -74,7 +74,7 @@ struct RasterGrads {
 template <class T>
 struct RasterWorkspace {
   struct PerThread {
-    std::vector<T> soa;                     // per-tile Gaussian records [n, 16] then extras [n, C]
+    std::vector<T> soa;                     // per-tile extras [n, C]
     std::vector<simd::Pack<T>> acc;         // backward accumulators [n, F]
     std::vector<simd::Pack<T>> chan;        // per-batch extra-channel gradient packs [C]
     std::vector<simd::Pack<T>> wacc;        // forward weight-sum accumulators [n, J]
@@ -84,6 +84,7 @@ struct RasterWorkspace {
   };
   std::vector<PerThread> threads;
   std::vector<T> records;       // [N, 16] per-Gaussian records built by forward, reused by backward
+  std::vector<T> tile_records;  // [P, 16] records in tile order (forward gathers, backward reuses)
   std::vector<uint32_t> masks;  // [P] per (tile, Gaussian) entry: bit b = listed in batch b
   std::vector<T> pair_grad;     // [P, F]
   std::vector<T> pair_w;        // [P, J] forward weight sums per pair
