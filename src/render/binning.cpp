@@ -137,6 +137,7 @@ void bin_gaussians(int width, int height, int n, const T* mean2d, const T* conic
 
   // 3. per-tile lists: chunks of tile rows in parallel, each scanning the sorted Gaussians
   b.tile_start.assign(size_t(b.num_tiles) + 1, 0);
+  b.cursor.resize(size_t(b.num_tiles));
   b.tile_gauss.resize(size_t(total));
   b.tile_pair.resize(size_t(total));
   const int m = int(b.order.size());
@@ -157,8 +158,8 @@ void bin_gaussians(int width, int height, int n, const T* mean2d, const T* conic
     {
       for (int t = 0; t < b.num_tiles; ++t) start[t + 1] += start[t];
     }
-    // cursor per tile of this chunk: reuse a local vector (rows r0..r1 only)
-    std::vector<int> cursor(size_t(std::max(0, r1 - r0)) * b.tiles_x);
+    // write cursors of this chunk's tiles (each thread owns its rows of the shared cursor array)
+    int* cursor = b.cursor.data() + size_t(r0) * b.tiles_x;
     for (int ty = r0; ty < r1; ++ty)
       for (int tx = 0; tx < b.tiles_x; ++tx) cursor[size_t(ty - r0) * b.tiles_x + tx] = start[ty * b.tiles_x + tx];
     for (int k = 0; k < m; ++k) {

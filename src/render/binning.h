@@ -29,7 +29,7 @@ struct Binning {
   std::vector<int> tile_pair;    // [P] pair id of the same entry
   // scratch kept between calls
   std::vector<uint64_t> keys, keys_tmp;
-  std::vector<int> order, order_tmp, counts;
+  std::vector<int> order, order_tmp, counts, cursor;
 };
 
 // Bins N projected Gaussians (radius[i] == 0 means culled) for an image of width x height.

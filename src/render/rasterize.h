@@ -10,14 +10,16 @@
 // Gaussians front to back (Gaussian-major), updating only the batches in its mask that still have a live pixel,
 // per-batch accumulators in per-thread scratch; a batch drops out when all 8 pixels stopped, the tile ends when
 // no batch is left. Pixel decisions are exactly the per-pixel 3DGS loop's.
-// Backward walks the tile's Gaussians back to front (Gaussian-major: each visits the batches it was listed in,
-// per-batch pixel state in scratch, its gradient sums in registers) from the per-pixel last contributor, rebuilds T_i = T_{i+1} /
-// (1 - alpha_i) from the saved final T, and keeps one scalar per pixel, S = sum_{j>i} w_j <value_j, dL/dout>,
-// so dL/dalpha_i = T_i <value_i, g> - (S + T_final (<bg, g_rgb> - g_alpha)) / (1 - alpha_i) for any number of
-// channels. Optional pixel-weight maps M_j give per-Gaussian sums a_{n,j} = sum_p M_j(p) alpha_n(p) T_n(p) (the
-// blending weight a Gaussian receives inside mask j); their gradient enters S / dot as the per-pixel value
-// sum_j dL/da_{n,j} M_j(p). Gradients of a (tile, Gaussian) pair are stored in that pair's slot; slots are reduced per Gaussian in a fixed order, so the result is bitwise
-// deterministic for any thread count and any schedule. Parallel over tiles with OpenMP (dynamic schedule).
+// Backward walks the tile's Gaussians back to front (Gaussian-major again: each visits the batches of its mask,
+// per-batch pixel state in scratch, its gradient sums in registers), starting at each pixel's last contributor.
+// It rebuilds T_i = T_{i+1} / (1 - alpha_i) from the saved final T and keeps one scalar per pixel,
+// S = sum_{j>i} w_j <value_j, dL/dout>, so dL/dalpha_i = T_i <value_i, g> - (S + T_final (<bg, g_rgb> - g_alpha))
+// / (1 - alpha_i) for any number of channels. Optional pixel-weight maps M_j give per-Gaussian sums
+// a_{n,j} = sum_p M_j(p) alpha_n(p) T_n(p) (the blending weight a Gaussian receives inside mask j); their
+// gradient enters S and <value, g> as the per-pixel value sum_j dL/da_{n,j} M_j(p).
+// Gradients of a (tile, Gaussian) pair are stored in that pair's slot and the slots are reduced per Gaussian in a
+// fixed order, so results are bitwise deterministic for any thread count and schedule. Parallel over tiles with
+// OpenMP (dynamic schedule); all scratch lives in RasterWorkspace (no allocation once warm).
 // Everything is templated on the scalar (float in production, double in the tests).
 #pragma once
 #include <cstdint>
