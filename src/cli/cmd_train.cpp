@@ -1,4 +1,4 @@
-// `hgs train SCENE --out MODEL --method rgb`: 3DGS training on a scene's training views. Writes
+// `hgs train SCENE --out MODEL [--method hybrid|rgb]`: Hybrid Gaussians (default) or plain 3DGS training. Writes
 // MODEL/point_cloud.ply (3DGS layout), MODEL/config.json, MODEL/train_stats.json and, with --save-every,
 // MODEL/checkpoints/iter_<N>.ckpt (+ the final one) for --resume.
 #include <omp.h>
@@ -14,13 +14,17 @@
 #include "core/progress.h"
 #include "model/ply.h"
 #include "scene/scene.h"
+#include "hybrid/setup.h"
+#include "hybrid/trainer.h"
 #include "train/trainer.h"
 
 namespace hgs::cli {
 namespace {
 
 struct TrainArgs {
-  std::string scene, out, method = "rgb", resume;
+  std::string scene, out, method = "hybrid", resume;
+  hybrid::HybridConfig hybrid;
+  bool no_of = false, no_scl = false, no_bro = false;
   int iters = 30000, downscale = 1, threads = 0, sh_degree = 3, save_every = 0;
   uint64_t seed = 0;
   bool no_densify = false, white_bg = false, quiet = false;
@@ -32,34 +36,8 @@ double peak_rss_mb() {
   return double(u.ru_maxrss) / 1024.0;  // ru_maxrss is in KiB on Linux
 }
 
-// Loads the training images (downscaled by the scene) in parallel.
-std::vector<train::TrainView> load_views(const Scene& scene, const std::vector<int>& idx, bool progress) {
-  std::vector<train::TrainView> views(idx.size());
-  Progress bar("load", long(idx.size()), progress);
-  std::atomic<long> done{0};
-  std::string error;
-#pragma omp parallel for schedule(dynamic)
-  for (size_t i = 0; i < idx.size(); ++i) {
-    try {
-      const View& v = scene.views[idx[i]];
-      views[i].name = v.name;
-      views[i].cam = train::make_camera(v);
-      views[i].image = scene.load_image(idx[i]);
-    } catch (const std::exception& e) {
-#pragma omp critical
-      if (error.empty()) error = e.what();
-    }
-    long d = ++done;
-    if (omp_get_thread_num() == 0) bar.update(d);
-  }
-  if (!error.empty()) throw Error(error);
-  bar.finish();
-  return views;
-}
-
 void run_train(const TrainArgs& a) {
   set_threads(a.threads);
-  if (a.method != "rgb") fail("--method {}: only 'rgb' is implemented by hgs train so far", a.method);
   Scene scene = load_scene(a.scene, {a.downscale, false});
   std::vector<int> train_idx = scene.train_indices();
   if (train_idx.empty()) fail("{}: the scene has no training views", a.scene);
@@ -76,11 +54,16 @@ void run_train(const TrainArgs& a) {
   cfg.white_bg = a.white_bg;
   cfg.save_every = a.save_every;
 
-  auto views = load_views(scene, train_idx, progress);
-  const float extent = scene_extent(scene, train_idx);
-  GaussianModel init = init_from_points(scene.points, scene.point_colors, a.sh_degree);
-  const int init_points = init.n;
-  train::Trainer trainer(cfg, std::move(init), std::move(views), extent);
+  std::optional<hybrid::HybridConfig> hc;
+  if (a.method == "hybrid") {
+    hc = a.hybrid;
+    hc->use_of = !a.no_of;
+    hc->use_scl = !a.no_scl;
+    hc->use_bro = !a.no_bro;
+  }
+  auto trainer_ptr = hybrid::make_trainer(scene, train_idx, cfg, hc, progress);
+  train::Trainer& trainer = *trainer_ptr;
+  const int init_points = trainer.model().n;
   if (!a.resume.empty()) {
     trainer.load_checkpoint(a.resume);
     if (trainer.iteration() >= a.iters)
@@ -94,6 +77,7 @@ void run_train(const TrainArgs& a) {
   config["train_views"] = train_idx.size();
   config["init_points"] = init_points;
   config["split"] = scene.split_source;
+  if (hc) config["hybrid"] = hc->to_json();
   if (!a.resume.empty()) config["resumed_from"] = a.resume;
   atomic_write_text(out / "config.json", config.dump(2) + "\n");
 
@@ -145,11 +129,27 @@ void run_train(const TrainArgs& a) {
                (out / "point_cloud.ply").string());
 }
 
-CommandRegistration reg({"train", "Optimise Gaussians on a scene's training views (3DGS RGB training)", 20, [](CLI::App& sub) {
+CommandRegistration reg({"train", "Optimise Hybrid Gaussians (or plain 3DGS with --method rgb) on a scene's training views", 20, [](CLI::App& sub) {
   auto a = std::make_shared<TrainArgs>();
   sub.add_option("SCENE", a->scene, "Scene folder (images/, sparse/0/, ...)")->required();
   sub.add_option("--out", a->out, "Output model folder")->required();
-  sub.add_option("--method", a->method, "Training method (rgb = plain 3DGS)")->capture_default_str();
+  sub.add_option("--method", a->method, "hybrid (Hybrid Gaussians: objects + language) or rgb (plain 3DGS)")
+      ->check(CLI::IsMember({"hybrid", "rgb"}))->capture_default_str();
+  auto& h = a->hybrid;
+  sub.add_flag("--no-of", a->no_of, "Ablation: single-view hard association instead of Observation Fusion");
+  sub.add_flag("--no-scl", a->no_scl, "Ablation: per-pixel cosine semantic loss instead of Semantic Contrastive Learning");
+  sub.add_flag("--no-bro", a->no_bro, "Ablation: no Boundary Reconstruction Optimization (lambda_bro = 0)");
+  sub.add_option("--lambda-rgb", h.lambda_rgb, "Weight of the full-image photometric loss (0 = eq. 15 alone)")->capture_default_str();
+  sub.add_option("--lambda-app", h.lambda_app, "Weight of the object-conditioned appearance loss (eq. 6)")->capture_default_str();
+  sub.add_option("--lambda-sem", h.lambda_sem, "Weight of the semantic loss (eq. 10)")->capture_default_str();
+  sub.add_option("--lambda-bro", h.lambda_bro, "Weight of the boundary loss (eq. 14)")->capture_default_str();
+  sub.add_option("--tau1", h.tau1, "Mask confidence threshold (eq. 2)")->capture_default_str();
+  sub.add_option("--fusion-temperature", h.temperature, "Temperature T of the association softmax (eq. 5)")->capture_default_str();
+  sub.add_option("--tau2", h.tau2, "InfoNCE temperature (eq. 10)")->capture_default_str();
+  sub.add_option("--fusion-every", h.fusion_every, "Rebuild the observation table every R iterations")->capture_default_str();
+  sub.add_option("--bro-kernel", h.bro_kernel, "Side of the square structuring element of BRO")->check(CLI::Range(1, 63))->capture_default_str();
+  sub.add_option("--lr-lang", h.lr_lang, "Adam learning rate of the language embeddings")->capture_default_str();
+  sub.add_option("--lr-view", h.lr_view, "Adam learning rate of the view reliability logits")->capture_default_str();
   sub.add_option("--iters", a->iters, "Iterations (the 30k densification schedule is scaled to this)")
       ->check(CLI::Range(1, 10000000))->capture_default_str();
   sub.add_option("--downscale", a->downscale, "Integer image downscale factor")->check(CLI::Range(1, 64))->capture_default_str();

@@ -30,6 +30,7 @@ void pooled_prediction(int n, int D, int L, int J, const T* q, const T* f, const
         const T w = a[size_t(i) * J + j] * q[size_t(i) * L + objs[j]];
         if (w == T(0)) continue;  // most Gaussians do not touch most masks
         T* o = &local[size_t(j) * D];
+#pragma omp simd
         for (int d = 0; d < D; ++d) o[d] += w * fi[d];
       }
     }
@@ -57,14 +58,22 @@ void pooled_prediction_backward(int n, int D, int L, int J, const T* q, const T*
     for (int j = 0; j < J; ++j) {
       const T* gj = &g[size_t(j) * D];
       const T ai = a[size_t(i) * J + j], qi = q[size_t(i) * L + objs[j]];
+      // A Gaussian with a = 0 covers no pixel of mask j, so the renderer never reads its da (the pixel-weighted
+      // sum's gradient only reaches pixels where M_j != 0): skip the dot product for it.
+      if (ai == T(0)) {
+        if (da) da[size_t(i) * J + j] = 0;
+        continue;
+      }
       T dot = 0;
+#pragma omp simd reduction(+ : dot)
       for (int d = 0; d < D; ++d) dot += fi[d] * gj[d];
       if (da) da[size_t(i) * J + j] = qi * dot;
-      if (ai == T(0)) continue;
       if (dq) dq[size_t(i) * L + objs[j]] += ai * dot;
       const T w = ai * qi;
-      if (dfi && w != T(0))
+      if (dfi && w != T(0)) {
+#pragma omp simd
         for (int d = 0; d < D; ++d) dfi[d] += w * gj[d];
+      }
     }
   }
 }

@@ -26,7 +26,8 @@ void pooled_prediction(int n, int D, int L, int J, const T* q, const T* f, const
                        T eps, T* P);
 
 // Backward of pooled_prediction: dP [J, D] -> dq [N, L] (added), df [N, D] (added), da [N, J] (overwritten);
-// any of dq, df, da may be null to skip it.
+// any of dq, df, da may be null to skip it. da is 0 where a = 0: such a Gaussian covers no pixel of the mask,
+// so the rasterizer never reads that entry (its pixel-weighted-sum gradient only reaches pixels with M != 0).
 template <class T>
 void pooled_prediction_backward(int n, int D, int L, int J, const T* q, const T* f, const T* a, const int* objs,
                                 const T* mass, T eps, const T* dP, T* dq, T* df, T* da);

@@ -1,0 +1,48 @@
+#include "hybrid/setup.h"
+
+#include <omp.h>
+
+#include <atomic>
+
+#include "core/error.h"
+#include "core/progress.h"
+#include "hybrid/trainer.h"
+
+namespace hgs::hybrid {
+
+std::vector<train::TrainView> load_train_views(const Scene& scene, const std::vector<int>& idx, bool progress) {
+  std::vector<train::TrainView> views(idx.size());
+  Progress bar("load images", long(idx.size()), progress);
+  std::atomic<long> done{0};
+  std::string error;
+#pragma omp parallel for schedule(dynamic)
+  for (size_t i = 0; i < idx.size(); ++i) {
+    try {
+      const View& v = scene.views[idx[i]];
+      views[i].name = v.name;
+      views[i].cam = train::make_camera(v);
+      views[i].image = scene.load_image(idx[i]);
+    } catch (const std::exception& e) {
+#pragma omp critical
+      if (error.empty()) error = e.what();
+    }
+    long d = ++done;
+    if (omp_get_thread_num() == 0) bar.update(d);
+  }
+  if (!error.empty()) throw Error(error);
+  bar.finish();
+  return views;
+}
+
+std::unique_ptr<train::Trainer> make_trainer(const Scene& scene, const std::vector<int>& idx, const train::TrainConfig& cfg,
+                                             const std::optional<HybridConfig>& hybrid, bool progress) {
+  if (idx.empty()) fail("{}: the scene has no training views", scene.root.string());
+  auto views = load_train_views(scene, idx, progress);
+  const float extent = scene_extent(scene, idx);
+  GaussianModel init = init_from_points(scene.points, scene.point_colors, cfg.sh_degree);
+  if (!hybrid) return std::make_unique<train::Trainer>(cfg, std::move(init), std::move(views), extent);
+  HybridData data = load_hybrid_data(scene, idx, *hybrid, progress);
+  return std::make_unique<HybridTrainer>(cfg, *hybrid, std::move(init), std::move(views), std::move(data), extent);
+}
+
+}  // namespace hgs::hybrid

@@ -1,0 +1,274 @@
+#include "hybrid/trainer.h"
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+
+#include "core/error.h"
+#include "hybrid/assign.h"
+#include "hybrid/bro.h"
+#include "hybrid/object_channels.h"
+#include "hybrid/scl.h"
+#include "render/sh.h"
+
+namespace hgs::hybrid {
+
+HybridTrainer::HybridTrainer(const train::TrainConfig& cfg, const HybridConfig& hcfg, GaussianModel model,
+                             std::vector<train::TrainView> views, HybridData data, float extent)
+    : Trainer(cfg, std::move(model), std::move(views), extent), hc_(hcfg), data_(std::move(data)),
+      app_loss_(hcfg.lambda_dssim) {
+  L_ = data_.num_labels;
+  D_ = data_.dim;
+  const int U = static_cast<int>(views_.size());
+  if (int(data_.masks.size()) != U || int(data_.views.size()) != U)
+    fail("hybrid: {} training views but masks/features for {}", U, data_.masks.size());
+  ExtraGroup* q = model_.find_extra("obj");
+  if (!q) {
+    q = &model_.add_extra("obj", L_, 0.f);
+    for (int i = 0; i < model_.n; ++i) q->data[size_t(i) * L_] = 1.f;  // background until observed
+  } else if (q->dim != L_) {
+    fail("hybrid: the model has {} object channels but the masks have {} labels", q->dim, L_);
+  }
+  if (!model_.find_extra("obj_id")) model_.add_extra("obj_id", 1, 0.f);
+  ExtraGroup* f = model_.find_extra("lang");
+  if (!f) {
+    f = &model_.add_extra("lang", D_, 0.f);
+    std::mt19937_64 rng(cfg.seed ^ 0x1A96ULL);
+    std::normal_distribution<float> nd(0.f, hc_.lang_init_std);
+    for (auto& x : f->data) x = nd(rng);
+  } else if (f->dim != D_) {
+    fail("hybrid: the model's language embeddings have D = {} but the features have D = {}", f->dim, D_);
+  }
+  add_trainable_extra("lang", hc_.lr_lang);
+  logits_.assign(U, 0.f);
+  w_.assign(U, 1.f / U);
+  lm_.assign(U, 0.f);
+  lv_.assign(U, 0.f);
+  refresh_observations();
+}
+
+void HybridTrainer::fuse_now() {
+  const int n = model_.n;
+  s_.resize(size_t(n) * L_);
+  valid_.resize(n);
+  softmax(logits_.data(), int(logits_.size()), w_.data());
+  FusionParams p{L_, hc_.temperature, hc_.fusion_eps};
+  fuse(obs_, w_.data(), p, model_.find_extra("obj")->data.data(), s_.data(), valid_.data());
+}
+
+void HybridTrainer::refresh_observations() {
+  observe(model_.mean.data(), model_.n, data_.masks, obs_);
+  if (hc_.use_of) fuse_now();
+  else single_view_assignment(obs_, L_, model_.find_extra("obj")->data.data());
+  update_hard_ids();
+}
+
+void HybridTrainer::update_hard_ids() {
+  std::vector<uint16_t> z(model_.n);
+  hard_ids(model_.find_extra("obj")->data.data(), model_.n, L_, z.data());
+  auto& zid = model_.find_extra("obj_id")->data;
+  for (int i = 0; i < model_.n; ++i) zid[i] = float(z[i]);
+}
+
+void HybridTrainer::prepare_inputs(const train::TrainView& view, render::GaussianInputs& in, render::RenderSettings& rs) {
+  view_ = static_cast<int>(&view - views_.data());
+  const int n = model_.n;
+  const HybridView& hv = data_.views[view_];
+  if (hc_.use_of) fuse_now();
+  dq_.assign(size_t(n) * L_, 0.f);
+  // Colours by SH (all Gaussians; the renderer then takes them as precomputed colours).
+  const float* R = view.cam.R;
+  const float* t = view.cam.t;
+  for (int c = 0; c < 3; ++c) campos_[c] = -(R[c] * t[0] + R[3 + c] * t[1] + R[6 + c] * t[2]);
+  active_degree_ = in.sh_degree;
+  colors_.resize(size_t(n) * 3);
+  render::sh_forward(n, in.sh_degree, in.sh_stride, in.sh, in.mean, campos_, (const int*)nullptr, colors_.data());
+  in.colors = colors_.data();
+  // Object channels (+ the full semantic render for the no-SCL ablation).
+  objs_ = hv.present;
+  fg_ = (hc_.use_scl && hc_.lambda_sem > 0) ? hv.fg : std::vector<int>{};
+  const int J = static_cast<int>(objs_.size());
+  const int sem = hc_.use_scl ? 0 : D_;
+  C_ = kChannelsPerObject * J + sem;
+  extra_.resize(size_t(n) * C_);
+  const float* q = model_.find_extra("obj")->data.data();
+  object_channels(n, L_, J, objs_.data(), q, colors_.data(), C_, extra_.data());
+  if (sem) {
+    const float* f = model_.find_extra("lang")->data.data();
+    for (int i = 0; i < n; ++i) std::copy(f + size_t(i) * D_, f + size_t(i + 1) * D_, &extra_[size_t(i) * C_ + 4 * J]);
+  }
+  in.extra = extra_.data();
+  in.num_extra = C_;
+  // Pixel weights M_k of the SCL anchors: the rasterizer returns a_{n,k} = sum_p M_k(p) alpha_n T_n.
+  const int W = view.cam.width, H = view.cam.height, Jf = static_cast<int>(fg_.size());
+  if (Jf > 0) {
+    const LabelMap& lab = data_.masks[view_].labels;
+    pixel_w_.assign(size_t(W) * H * Jf, 0.f);
+    for (size_t p = 0; p < lab.v.size(); ++p)
+      for (int j = 0; j < Jf; ++j) pixel_w_[p * Jf + j] = lab.v[p] == fg_[j] ? 1.f : 0.f;
+    rs.pixel_weights = pixel_w_.data();
+    rs.num_pixel_weights = Jf;
+  }
+}
+
+float HybridTrainer::appearance_and_bro(const train::TrainView& view, const render::RenderOutputs& out) {
+  const int W = view.cam.width, H = view.cam.height, J = static_cast<int>(objs_.size());
+  const size_t HW = size_t(W) * H;
+  const LabelMap& lab = data_.masks[view_].labels;
+  img_pred_.resize(HW * 3);
+  img_gt_.resize(HW * 3);
+  img_grad_.resize(HW * 3);
+  mask_f_.resize(HW);
+  std::vector<float> A(HW);
+  band_.resize(HW);
+  double app = 0, bro = 0;
+  for (int j = 0; j < J; ++j) {
+    const int k = objs_[j];
+    for (size_t p = 0; p < HW; ++p) {
+      const float* e = &out.extra[p * C_ + 4 * j];
+      const float m = lab.v[p] == k ? 1.f : 0.f;
+      mask_f_[p] = m;
+      A[p] = e[3];
+      for (int c = 0; c < 3; ++c) {
+        img_pred_[p * 3 + c] = e[c];
+        img_gt_[p * 3 + c] = view.image.px[p * 3 + c] * m;
+      }
+    }
+    train::LossValues lv = app_loss_(img_pred_.data(), img_gt_.data(), H, W, img_grad_.data());
+    app += lv.total;
+    const float s_app = hc_.lambda_app / J;
+    for (auto& g : img_grad_) g *= s_app;
+    if (hc_.use_bro && hc_.lambda_bro > 0) {
+      // B is built from the rendered opacity but treated as a constant: no gradient through the morphology.
+      boundary_band(A.data(), mask_f_.data(), H, W, hc_.bro_kernel, band_.data(), morph_tmp_);
+      bro += bro_loss(img_pred_.data(), img_gt_.data(), 3, 3, band_.data(), H, W, hc_.bro_eps, img_grad_.data(),
+                      hc_.lambda_bro / J);
+    }
+    for (size_t p = 0; p < HW; ++p)
+      for (int c = 0; c < 3; ++c) d_extra_[p * C_ + 4 * j + c] += img_grad_[p * 3 + c];
+  }
+  last_.app = J ? float(app / J) : 0.f;
+  last_.bro = J ? float(bro / J) : 0.f;
+  return hc_.lambda_app * last_.app + (hc_.use_bro ? hc_.lambda_bro * last_.bro : 0.f);
+}
+
+float HybridTrainer::semantic_contrastive(const render::RenderOutputs& out) {
+  const int Jf = static_cast<int>(fg_.size()), n = model_.n;
+  last_.anchors = 0;
+  if (Jf == 0) return 0.f;
+  if (int(out.weight_sums.size()) != n * Jf) fail("hybrid: the renderer returned no pixel-weighted sums");
+  const HybridView& hv = data_.views[view_];
+  std::vector<float> mass(Jf);
+  for (int j = 0; j < Jf; ++j) mass[j] = hv.area[fg_[j]];
+  P_.resize(size_t(Jf) * D_);
+  dP_.assign(size_t(Jf) * D_, 0.f);
+  const float* q = model_.find_extra("obj")->data.data();
+  float* f = model_.find_extra("lang")->data.data();
+  pooled_prediction(n, D_, L_, Jf, q, f, out.weight_sums.data(), fg_.data(), mass.data(), 1e-6f, P_.data());
+  // Anchor k in view u: positive from a random other view v whose mask holds k; negatives: v's other objects.
+  struct Anchor { int j, v; };
+  std::vector<Anchor> anchors;
+  for (int j = 0; j < Jf; ++j) {
+    std::vector<int> cand;
+    for (int v = 0; v < int(data_.views.size()); ++v) {
+      if (v == view_) continue;
+      const auto& fv = data_.views[v].fg;
+      if (std::find(fv.begin(), fv.end(), fg_[j]) != fv.end()) cand.push_back(v);
+    }
+    if (cand.empty()) continue;
+    anchors.push_back({j, cand[std::uniform_int_distribution<size_t>(0, cand.size() - 1)(rng_)]});
+  }
+  last_.anchors = static_cast<int>(anchors.size());
+  if (anchors.empty()) return 0.f;
+  double loss = 0;
+  const float scale = hc_.lambda_sem / anchors.size();
+  std::vector<float> refs;
+  for (auto [j, v] : anchors) {
+    const HybridView& o = data_.views[v];
+    refs.resize(o.fg.size() * D_);
+    int pos = 0;
+    for (size_t r = 0; r < o.fg.size(); ++r) {
+      std::copy(&o.zref[size_t(o.fg[r]) * D_], &o.zref[size_t(o.fg[r] + 1) * D_], &refs[r * D_]);
+      if (o.fg[r] == fg_[j]) pos = int(r);
+    }
+    loss += info_nce(&P_[size_t(j) * D_], D_, refs.data(), int(o.fg.size()), pos, hc_.tau2, &dP_[size_t(j) * D_], scale);
+  }
+  d_wsum_.resize(size_t(n) * Jf);
+  // dq and da now (da feeds the renderer's backward); df after backward (the Trainer zeroes it before).
+  pooled_prediction_backward(n, D_, L_, Jf, q, f, out.weight_sums.data(), fg_.data(), mass.data(), 1e-6f, dP_.data(),
+                             dq_.data(), (float*)nullptr, d_wsum_.data());
+  scl_mass_ = mass;
+  last_.sem = float(loss / anchors.size());
+  return hc_.lambda_sem * last_.sem;
+}
+
+float HybridTrainer::semantic_cosine(const render::RenderOutputs& out) {
+  // Full-scene semantic learning: mean over pixels of 1 - cos(S(p), S_ref(p)), S = sum_n f_n alpha T.
+  const train::TrainView& view = views_[view_];
+  const int W = view.cam.width, H = view.cam.height, J = static_cast<int>(objs_.size());
+  const HybridView& hv = data_.views[view_];
+  sref_ = upsample_bilinear(hv.patch_features.data(), hv.ph, hv.pw, D_, H, W);
+  const size_t HW = size_t(W) * H;
+  const float loss = cosine_loss(&out.extra[4 * J], C_, sref_.data(), HW, D_, &d_extra_[4 * J], hc_.lambda_sem);
+  last_.sem = loss;
+  last_.anchors = 0;
+  return hc_.lambda_sem * last_.sem;
+}
+
+float HybridTrainer::extra_loss(const train::TrainView& view, const render::RenderOutputs& out, float* d_rgb,
+                                render::OutputGrads& dout) {
+  const int W = view.cam.width, H = view.cam.height;
+  const size_t HW = size_t(W) * H;
+  if (hc_.lambda_rgb != 1.f)
+    for (size_t i = 0; i < HW * 3; ++i) d_rgb[i] *= hc_.lambda_rgb;
+  d_extra_.assign(HW * C_, 0.f);
+  float total = appearance_and_bro(view, out);
+  if (hc_.lambda_sem > 0) total += hc_.use_scl ? semantic_contrastive(out) : semantic_cosine(out);
+  dout.extra = d_extra_.data();
+  if (!fg_.empty() && last_.anchors > 0) dout.weight_sums = d_wsum_.data();
+  return total;
+}
+
+void HybridTrainer::extra_param_grads(render::GaussianGrads& g) {
+  const int n = model_.n, J = static_cast<int>(objs_.size());
+  const float* q = model_.find_extra("obj")->data.data();
+  // Object channels -> dq and dc (added to the RGB path's colour gradient), then SH.
+  object_channels_backward(n, L_, J, objs_.data(), q, colors_.data(), C_, g.extra.data(), dq_.data(), g.colors.data());
+  g.sh.resize(size_t(n) * model_.sh_stride() * 3);
+  render::sh_backward(n, active_degree_, model_.sh_stride(), model_.sh.data(), model_.mean.data(), campos_,
+                      (const int*)nullptr, g.colors.data(), g.sh.data(), g.mean.data());
+  if (last_.anchors > 0) {
+    pooled_prediction_backward(n, D_, L_, int(fg_.size()), q, model_.find_extra("lang")->data.data(), out_.weight_sums.data(),
+                               fg_.data(), scl_mass_.data(), 1e-6f, dP_.data(), (float*)nullptr, extra_grad("lang").data(),
+                               (float*)nullptr);
+  }
+  if (!hc_.use_scl && hc_.lambda_sem > 0) {
+    float* df = extra_grad("lang").data();
+    for (int i = 0; i < n; ++i)
+      for (int d = 0; d < D_; ++d) df[size_t(i) * D_ + d] += g.extra[size_t(i) * C_ + 4 * J + d];
+  }
+  if (hc_.use_of) {
+    // dq -> view logits through eqs. 4-5 and the softmax over views; Adam on the logits.
+    const int U = static_cast<int>(logits_.size());
+    FusionParams p{L_, hc_.temperature, hc_.fusion_eps};
+    dw_.resize(U);
+    dlogits_.resize(U);
+    fuse_backward(obs_, w_.data(), p, s_.data(), q, valid_.data(), dq_.data(), dw_.data());
+    softmax_backward(w_.data(), dw_.data(), U, dlogits_.data());
+    ++view_steps_;
+    const float b1 = 0.9f, b2 = 0.999f, eps = 1e-8f;
+    const float c1 = 1.f - std::pow(b1, float(view_steps_)), c2 = 1.f - std::pow(b2, float(view_steps_));
+    for (int u = 0; u < U; ++u) {
+      lm_[u] = b1 * lm_[u] + (1 - b1) * dlogits_[u];
+      lv_[u] = b2 * lv_[u] + (1 - b2) * dlogits_[u] * dlogits_[u];
+      logits_[u] -= hc_.lr_view * (lm_[u] / c1) / (std::sqrt(lv_[u] / c2) + eps);
+    }
+  }
+}
+
+void HybridTrainer::after_step(train::StepInfo& info) {
+  if (info.densified || (hc_.fusion_every > 0 && iteration() % hc_.fusion_every == 0)) refresh_observations();
+  else update_hard_ids();
+}
+
+}  // namespace hgs::hybrid

@@ -1,0 +1,122 @@
+// The hybrid trainer on a tiny synthetic scene: it runs, learns associations that match the ground truth,
+// moves the view weights, and its objects answer text queries.
+#include <gtest/gtest.h>
+
+#include <map>
+
+#include "hybrid/trainer.h"
+#include "model/ply.h"
+#include "query/query.h"
+#include "scene/scene.h"
+#include "synth/synth.h"
+#include "test_util.h"
+
+using namespace hgs;
+
+namespace {
+
+struct Tiny {
+  test::TempDir tmp;
+  Scene scene;
+  std::vector<int> train;
+  Tiny() {
+    synth::SynthOptions o;
+    o.seed = 3;
+    o.views = 16;
+    o.width = 96;
+    o.height = 72;
+    o.objects = 4;
+    o.points = 3000;
+    o.noise = "low";
+    o.feature_dim = 32;
+    o.supersample = 1;
+    o.progress = false;
+    synth::generate(tmp / "s", o);
+    scene = load_scene(tmp / "s");
+    train = scene.train_indices();
+  }
+  std::unique_ptr<hybrid::HybridTrainer> trainer(const hybrid::HybridConfig& hc, int iters) {
+    std::vector<train::TrainView> views;
+    for (int i : train) views.push_back({scene.views[i].name, train::make_camera(scene.views[i]), scene.load_image(i)});
+    train::TrainConfig cfg = train::TrainConfig{}.scaled_to(iters);
+    cfg.sh_degree = 1;
+    hybrid::HybridData data = hybrid::load_hybrid_data(scene, train, hc, false);
+    GaussianModel m = init_from_points(scene.points, scene.point_colors, 1);
+    return std::make_unique<hybrid::HybridTrainer>(cfg, hc, std::move(m), std::move(views), std::move(data),
+                                                   scene_extent(scene, train));
+  }
+};
+
+// Fraction of Gaussians within `r` of an object's centre whose hard id is that object.
+double association_accuracy(const GaussianModel& m, const std::filesystem::path& synth_json_dir, const Scene& s) {
+  (void)synth_json_dir;
+  (void)s;
+  const ExtraGroup* z = m.find_extra("obj_id");
+  int ok = 0, n = 0;
+  // Objects sit on the table near z = 0..0.15; the table top is below z = 0.
+  for (int i = 0; i < m.n; ++i) {
+    if (m.mean[3 * i + 2] < -0.01f) {  // under the table top: background
+      ++n;
+      ok += z->data[i] == 0;
+    }
+  }
+  return n ? double(ok) / n : 0;
+}
+
+}  // namespace
+
+TEST(HybridTrainer, LearnsAssociationsAndLanguage) {
+  Tiny t;
+  hybrid::HybridConfig hc;
+  auto tr = t.trainer(hc, 300);
+  const std::vector<float> w0 = tr->view_weights();
+  float first_app = 0, last_app = 0;
+  for (int it = 0; it < 300; ++it) {
+    train::StepInfo s = tr->step();
+    ASSERT_TRUE(std::isfinite(s.loss.total));
+    if (it < 20) first_app += tr->last_losses().app;
+    if (it >= 280) last_app += tr->last_losses().app;
+  }
+  EXPECT_LT(last_app, 0.7f * first_app) << "object-conditioned loss did not decrease";
+  // The view weights moved away from uniform.
+  double moved = 0;
+  for (size_t u = 0; u < w0.size(); ++u) moved += std::abs(tr->view_weights()[u] - w0[u]);
+  EXPECT_GT(moved, 1e-4);
+  const GaussianModel& m = tr->model();
+  ASSERT_TRUE(m.find_extra("obj") && m.find_extra("obj_id") && m.find_extra("lang"));
+  EXPECT_GT(association_accuracy(m, t.tmp / "s", t.scene), 0.9);
+  // Each object's aggregated embedding is closest to its own class name among the scene's objects.
+  query::ObjectEmbeddings oe = query::object_embeddings(m);
+  int right = 0;
+  for (auto& [id, name] : t.scene.object_names) {
+    const auto& text = t.scene.text_embeddings.at(name);
+    int best = -1;
+    double bs = -2;
+    for (int k = 1; k < oe.num_labels; ++k) {
+      double c = 0;
+      for (int d = 0; d < oe.dim; ++d) c += oe.e[size_t(k) * oe.dim + d] * text[d];
+      if (c > bs) { bs = c; best = k; }
+    }
+    right += best == id;
+  }
+  EXPECT_GE(right, 3) << "of 4 objects matched their names";
+  // The PLY keeps everything.
+  write_model_ply(t.tmp / "m.ply", m);
+  GaussianModel back = read_model_ply(t.tmp / "m.ply");
+  ASSERT_TRUE(back.find_extra("lang"));
+  EXPECT_EQ(back.find_extra("lang")->data, m.find_extra("lang")->data);
+  EXPECT_EQ(back.find_extra("obj")->data, m.find_extra("obj")->data);
+}
+
+TEST(HybridTrainer, AblationsRun) {
+  Tiny t;
+  for (int mask = 0; mask < 8; ++mask) {
+    hybrid::HybridConfig hc;
+    hc.use_of = mask & 1;
+    hc.use_scl = mask & 2;
+    hc.use_bro = mask & 4;
+    auto tr = t.trainer(hc, 20);
+    for (int it = 0; it < 20; ++it) ASSERT_TRUE(std::isfinite(tr->step().loss.total)) << "ablation " << mask;
+    if (!hc.use_of) EXPECT_EQ(tr->view_weights()[0], tr->view_weights()[1]);  // no view weights learned
+  }
+}
