@@ -64,13 +64,20 @@ async function loadSplats(url) {
     pose = { position: state.viewer.camera.position.clone(), target: state.viewer.controls.target.clone() };
     const old = state.viewer;
     state.viewer = null;
-    await old.dispose();
-    $('stage').replaceChildren();
+    try {
+      await old.dispose();
+    } catch (e) {
+      console.warn(`splat viewer dispose: ${e.message}`);
+    }
+    old.hgsRoot.remove();
   }
   if (!pose) pose = viewPose(state.scene.views[state.view]);
   const up = sceneUp(state.scene.views);
+  const root = document.createElement('div');
+  root.className = 'splats';
+  $('stage').appendChild(root);
   const viewer = new GS.Viewer({
-    rootElement: $('stage'),
+    rootElement: root,
     cameraUp: up.toArray(),
     initialCameraPosition: pose.position.toArray(),
     initialCameraLookAt: pose.target.toArray(),
@@ -80,6 +87,7 @@ async function loadSplats(url) {
     antialiased: true,
     logLevel: GS.LogLevel.None,
   });
+  viewer.hgsRoot = root;
   state.viewer = viewer;
   await viewer.addSplatScene(url, { format: GS.SceneFormat.Ply, showLoadingUI: false, progressiveLoad: false,
     splatAlphaRemovalThreshold: 1 });

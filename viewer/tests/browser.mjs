@@ -86,7 +86,10 @@ try {
   const page = await browser.newPage({ viewport: { width: 1100, height: 700 } });
   const errors = [];
   page.on('pageerror', (e) => errors.push(String(e)));
-  page.on('console', (m) => { if (m.type() === 'error') errors.push(m.text()); });
+  page.on('console', (m) => {
+    if (m.type() === 'error') errors.push(m.text());
+    if (process.env.HGS_BROWSER_VERBOSE) console.log(`console.${m.type()}: ${m.text()}`);
+  });
   await page.goto(url);
   await settle(page);
   const stage = page.locator('#stage');
@@ -147,6 +150,17 @@ try {
   await page.waitForTimeout(1500);
   await page.screenshot({ path: path.join(args.out, '5-camera-5.png') });
   check(errors.length === 0, `no page errors (${errors.join(' | ').slice(0, 300)})`);
+} catch (e) {
+  failures++;
+  console.log(`FAIL ${e.message.split('\n')[0]}`);
+  try {
+    const pg = browser.contexts()[0]?.pages()[0];
+    if (pg) {
+      console.log('page state:', JSON.stringify(await pg.evaluate(() => ({ ...document.body.dataset,
+        status: document.getElementById('status').textContent }))));
+      await pg.screenshot({ path: path.join(args.out, 'failure.png') });
+    }
+  } catch (e2) { /* page gone */ }
 } finally {
   await browser.close();
   proc.kill('SIGTERM');
