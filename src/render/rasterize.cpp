@@ -367,7 +367,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
       const M c = inr & (alpha >= T(1.0 / 255.0));
       if (!simd::any(c)) continue;
       const P gr = st[bR], gg = st[bG], gb = st[bB];
-      const P ioma = T(1) / (T(1) - alpha);
+      const P ioma = simd::vrecip(T(1) - alpha);
       const P Ti = st[bT] * ioma;
       const P wgt = alpha * Ti;
       P dot = rc[kCr] * gr + rc[kCg] * gg + rc[kCb] * gb;
