@@ -13,10 +13,10 @@ TrainConfig TrainConfig::scaled_to(int iterations) const {
   const double f = double(iterations) / 30000.0;
   auto sc = [&](int v) { return std::max(1, int(std::lround(v * f))); };
   c.iters = iterations;
-  c.densify_from = std::max(sc(densify_from), std::min(densify_from, iterations / 10));
   c.densify_until = sc(densify_until);
-  c.densify_every = std::max(std::min(densify_every, kMinDensifyEvery), sc(densify_every));
-  c.opacity_reset_every = sc(opacity_reset_every);
+  c.densify_every = std::max(sc(densify_every), densify_every);
+  c.densify_from = std::max(sc(densify_from), std::min(densify_from, iterations / 10));
+  c.opacity_reset_every = std::max(sc(opacity_reset_every), 10 * c.densify_every);
   return c;
 }
 

@@ -10,8 +10,6 @@
 
 namespace hgs::train {
 
-constexpr int kMinDensifyEvery = 50;
-
 struct TrainConfig {
   std::string method = "rgb";
   int iters = 30000;
@@ -31,12 +29,14 @@ struct TrainConfig {
   DensifyConfig densify_cfg;
   int save_every = 0;  // checkpoint + PLY every N iterations (0 = never during training)
 
-  // Copy with the densification schedule (from, until, every, opacity reset) multiplied by iters / 30000
-  // (rounded) and `iters` set, with two floors for short runs: the interval stays >= kMinDensifyEvery so the
-  // averaged gradient covers several views, and densification starts no earlier than min(500, iters / 10)
-  // so the initial Gaussians settle first (starting at 500 x iters / 30000 densifies the unconverged
-  // initialisation and multiplies the count tenfold within a few hundred iterations). The SH schedule stays
-  // at one degree per `sh_increase_every`.
+  // Copy for a run of `iterations` with the 30k densification schedule scaled by f = iterations / 30000:
+  // densify_until = 15000 f; for short runs (f < 1) three floors keep the 3DGS dynamics, because compressing
+  // the schedule densifies unconverged Gaussians every few steps and multiplies the count tenfold (measured):
+  //   densify_every = max(100 f, 100)   (the averaged gradient covers ~100 steps, as in 3DGS)
+  //   densify_from  = max(500 f, min(500, iterations / 10))
+  //   opacity_reset_every = max(3000 f, 10 x densify_every)
+  // For f >= 1 everything is plainly proportional. The SH schedule stays at one degree per
+  // `sh_increase_every` iterations.
   TrainConfig scaled_to(int iterations) const;
   // Position learning rate at 1-based iteration `it` for a scene of the given extent.
   float position_lr(int it, float extent) const;

@@ -25,11 +25,12 @@ TEST(TrainConfig, ScaledSchedule) {
   EXPECT_EQ(s.iters, 7000);
   EXPECT_EQ(s.densify_from, 500);  // floor min(500, 700)
   EXPECT_EQ(s.densify_until, 3500);
-  EXPECT_EQ(s.densify_every, 50);  // 23 raised to the floor
-  EXPECT_EQ(s.opacity_reset_every, 700);
+  EXPECT_EQ(s.densify_every, 100);  // 23 raised to the floor
+  EXPECT_EQ(s.opacity_reset_every, 1000);  // 700 raised to 10 intervals
   s = c.scaled_to(60000);
   EXPECT_EQ(s.densify_from, 1000);
   EXPECT_EQ(s.densify_every, 200);
+  EXPECT_EQ(s.opacity_reset_every, 6000);
   s = c.scaled_to(1000);
   EXPECT_EQ(s.densify_from, 100);
   EXPECT_EQ(s.densify_until, 500);
