@@ -316,6 +316,12 @@ int Server::start() {
     port_ = opt_.port;
   }
   thread_ = std::thread([this] { http_->listen_after_bind(); });
+  // Wait until the accept loop runs: a stop() before that would be lost and join() would hang.
+  for (int i = 0; i < 10000 && !http_->is_running(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  if (!http_->is_running()) {
+    stop();
+    fail("the HTTP server on {}:{} did not start", opt_.host, port_);
+  }
   return port_;
 }
 
