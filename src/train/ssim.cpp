@@ -46,11 +46,17 @@ void conv_same(const T* in, T* out, T* tmp, int H, int W, int C) {
         }
         o[j] = s;
       }
-      for (int j = lo; j < hi; ++j) {
-        T s = 0;
-#pragma omp simd reduction(+ : s)
-        for (int k = 0; k < kWin; ++k) s += w[k] * r[j + (k - kHalf) * C];
-        o[j] = s;
+      // Interior: taps outer, pixels inner (contiguous, vectorised over j).
+      if (hi > lo) {
+        const T w0 = w[0];
+#pragma omp simd
+        for (int j = lo; j < hi; ++j) o[j] = w0 * r[j - kHalf * C];
+        for (int k = 1; k < kWin; ++k) {
+          const T wk = w[k];
+          const T* rk = r + (k - kHalf) * C;
+#pragma omp simd
+          for (int j = lo; j < hi; ++j) o[j] += wk * rk[j];
+        }
       }
       for (int j = std::max(hi, lo); j < L; ++j) {
         T s = 0;
