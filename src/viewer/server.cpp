@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 #include <httplib.h>
+#include <sys/socket.h>
 
 #include <algorithm>
 #include <chrono>
@@ -254,6 +255,11 @@ Server::Server(query::Session& session, ServerOptions opt)
   };
 
   svr.set_payload_max_length(opt_.max_body);
+  // SO_REUSEADDR only: httplib's default SO_REUSEPORT would let a second server share a port in use.
+  svr.set_socket_options([](socket_t sock) {
+    int yes = 1;
+    ::setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, reinterpret_cast<void*>(&yes), sizeof yes);
+  });
   svr.set_error_handler([](const httplib::Request& req, httplib::Response& res) {
     if (!res.body.empty()) return;
     std::string msg = res.status == 413 ? "request body too large"

@@ -2,6 +2,7 @@
 // synthetic scene with a hand-built hybrid model (fixture.h): queries, exports, 2D panels, bad requests and
 // path-traversal attempts against the static folder.
 // Project headers (Eigen) come before httplib.h: <resolv.h> defines a `_res` macro that breaks Eigen.
+#include "core/error.h"
 #include "core/fs.h"
 #include "core/image.h"
 #include "eval/visualize.h"
@@ -139,6 +140,19 @@ TEST_F(ViewerApi, DefaultsBindLoopback) {
   EXPECT_EQ(o.host, "127.0.0.1");
   EXPECT_EQ(server_->address(), "http://127.0.0.1:" + std::to_string(port_) + "/");
   EXPECT_TRUE(server_->has_front_end());
+}
+
+TEST_F(ViewerApi, PortInUseFailsClearly) {
+  viewer::ServerOptions o;
+  o.port = port_;
+  viewer::Server second(*session_, o);
+  try {
+    second.start();
+    FAIL() << "a second server bound the port in use";
+  } catch (const hgs::Error& e) {
+    EXPECT_NE(std::string(e.what()).find(std::to_string(port_)), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(get_json("/api/objects")["objects"].size(), get_json("/api/scene")["objects"].size());
 }
 
 TEST_F(ViewerApi, SceneInfoHasCamerasAndObjects) {
