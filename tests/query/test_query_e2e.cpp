@@ -17,7 +17,7 @@ TEST(QueryEndToEnd, TrainQueryExportEval) {
   auto r = test::run_hgs("synth --out " + s + " --views 16 --width 128 --height 96 --objects 4 --points 3000 --noise low "
                          "--feature-dim 32 --supersample 1 --seed 5 --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  r = test::run_hgs("train " + s + " --out " + m + " --iters 400 --sh-degree 1 --quiet");
+  r = test::run_hgs("train " + s + " --out " + m + " --iters 800 --sh-degree 1 --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   auto objects = nlohmann::json::parse(read_file_text(tmp / "s" / "masks" / "objects.json"));
   int right = 0;
@@ -43,9 +43,9 @@ TEST(QueryEndToEnd, TrainQueryExportEval) {
   r = test::run_hgs("eval " + s + " " + m + " --protocol instances --out " + (tmp / "e" / "report.json").string() + " --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   auto rep = nlohmann::json::parse(read_file_text(tmp / "e" / "report.json"));
-  const double miou = rep["reports"][0]["summary"]["miou"].get<double>();
-  std::printf("tiny scene, 400 iterations: object-mode mIoU %.3f\n", miou);
-  EXPECT_GT(miou, 0.3);
+  const double miou = rep["reports"][0]["summary"]["mIoU"].get<double>();
+  std::printf("tiny scene, 800 iterations: object-mode mIoU %.3f\n", miou);
+  EXPECT_GT(miou, 0.3);  // measured 0.44 (objects are only a few hundred pixels at 128x96)
   EXPECT_TRUE(fs::exists(tmp / "e" / "report.md"));
   // Bad input: a model without object data.
   r = test::run_hgs("train " + s + " --out " + (tmp / "rgb").string() + " --method rgb --iters 20 --quiet");
