@@ -2,20 +2,9 @@
 
 #include "core/error.h"
 #include "model/ply.h"
+#include "train/trainer.h"
 
 namespace hgs::query {
-
-render::Camera camera_of(const View& v) {
-  render::Camera c;
-  c.width = v.width;
-  c.height = v.height;
-  c.fx = float(v.fx); c.fy = float(v.fy); c.cx = float(v.cx); c.cy = float(v.cy);
-  for (int r = 0; r < 3; ++r) {
-    for (int k = 0; k < 3; ++k) c.R[r * 3 + k] = float(v.R(r, k));
-    c.t[r] = float(v.t[r]);
-  }
-  return c;
-}
 
 Session::Session(const std::filesystem::path& scene, const std::filesystem::path& model_ply, int downscale,
                  const std::filesystem::path& clip_path)
@@ -46,7 +35,7 @@ ObjectAnswer Session::ask(const std::string& text, const QueryOptions& opt) {
 
 std::vector<float> Session::object_opacity(int view, const std::vector<int>& objects) {
   const View& v = scene_.views.at(view);
-  std::vector<float> A = render_object_opacity(renderer_, model_, camera_of(v), objects);
+  std::vector<float> A = render_object_opacity(renderer_, model_, train::make_camera(v), objects);
   const size_t HW = size_t(v.width) * v.height, J = objects.size();
   std::vector<float> sum(HW, 0.f);
   for (size_t p = 0; p < HW; ++p)
@@ -63,7 +52,7 @@ eval::Mask Session::object_mask(int view, const std::vector<int>& objects, float
 
 std::vector<float> Session::pixel_relevancy(int view, const std::string& text) {
   const auto& e = text_.embed(text);
-  return render_relevancy(renderer_, model_, camera_of(scene_.views.at(view)), e.data(), text_.canonical());
+  return render_relevancy(renderer_, model_, train::make_camera(scene_.views.at(view)), e.data(), text_.canonical());
 }
 
 }  // namespace hgs::query

@@ -52,6 +52,4 @@ class Session {
   render::GaussianRenderer renderer_;
 };
 
-render::Camera camera_of(const View& v);
-
 }  // namespace hgs::query
