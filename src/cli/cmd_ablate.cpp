@@ -65,12 +65,7 @@ void run_ablate(const AblateArgs& a) {
     eval::RunOptions opt;
     opt.progress = false;
     auto object_fn = [&](int view, const std::string& q, std::vector<float>* heat) {
-      auto ans = s.ask(q);
-      std::vector<float> A = s.object_opacity(view, {ans.chosen[0]});
-      eval::Mask m(A.size());
-      for (size_t p = 0; p < A.size(); ++p) m[p] = A[p] > 0.5f;
-      if (heat) *heat = std::move(A);
-      return m;
+      return s.answer_mask(view, q, 0.5f, heat);
     };
     eval::EvalReport r = instances ? eval::run_instances(s.scene(), object_fn, opt)
                                    : eval::run_lerf_ovs_masks(s.scene(), object_fn, opt);

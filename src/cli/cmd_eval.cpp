@@ -39,12 +39,7 @@ void run_eval(const EvalArgs& a) {
   eval::RunOptions opt;
   opt.progress = !a.quiet;
   auto object_fn = [&](int view, const std::string& q, std::vector<float>* heat) {
-    auto ans = s.ask(q);
-    std::vector<float> A = s.object_opacity(view, {ans.chosen[0]});
-    eval::Mask m(A.size());
-    for (size_t p = 0; p < A.size(); ++p) m[p] = A[p] > a.mask_threshold;
-    if (heat) *heat = std::move(A);
-    return m;
+    return s.answer_mask(view, q, a.mask_threshold, heat);
   };
   auto pixel_fn = [&](int view, const std::string& q) { return s.pixel_relevancy(view, q); };
   auto pixel_mask_fn = [&](int view, const std::string& q, std::vector<float>* heat) {

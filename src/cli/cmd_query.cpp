@@ -91,9 +91,7 @@ void run_query(const QueryArgs& a) {
       std::vector<float> heat;
       eval::Mask mask;
       if (a.mode == "object") {
-        heat = session.object_opacity(vi, ans.chosen);
-        mask.resize(heat.size());
-        for (size_t p = 0; p < heat.size(); ++p) mask[p] = heat[p] > a.mask_threshold;
+        mask = session.object_mask(vi, ans.chosen, a.mask_threshold, &heat);
       } else {
         heat = session.pixel_relevancy(vi, text);
         mask = eval::lerf_postprocess(heat, v.width, v.height).mask;

@@ -56,15 +56,7 @@ void run_render(const RenderArgs& a) {
   ensure_dir(out / "compare");
   render::GaussianRenderer renderer;
   render::RenderOutputs ro;
-  render::GaussianInputs in;
-  in.n = model.n;
-  in.mean = model.mean.data();
-  in.log_scale = model.log_scale.data();
-  in.quat = model.quat.data();
-  in.opacity_logit = model.opacity_logit.data();
-  in.sh = model.sh.data();
-  in.sh_stride = model.sh_stride();
-  in.sh_degree = model.sh_degree;
+  render::GaussianInputs in = render_inputs(model);
   render::RenderSettings rs;
   rs.want_depth = false;
   rs.background[0] = rs.background[1] = rs.background[2] = white ? 1.f : 0.f;

@@ -1,12 +1,10 @@
 #include "hybrid/data.h"
 
 #include <algorithm>
-#include <atomic>
-#include <omp.h>
 
 #include "core/error.h"
 #include "core/npy.h"
-#include "core/progress.h"
+#include "core/parallel.h"
 #include "hybrid/assign.h"
 
 namespace hgs::hybrid {
@@ -24,49 +22,37 @@ HybridData load_hybrid_data(const Scene& scene, const std::vector<int>& idx, con
     if (!v.feature_path) fail("{}: view '{}' has no language features (features/{}.npy); run `hgs features` first", scene.root.string(), v.name, v.stem);
   }
   d.dim = static_cast<int>(read_npy_header(*scene.views[idx[0]].feature_path).shape.back());
-  Progress bar("load masks+features", long(idx.size()), progress);
-  std::atomic<long> done{0};
-  std::string error;
-#pragma omp parallel for schedule(dynamic)
-  for (size_t j = 0; j < idx.size(); ++j) {
-    try {
-      const View& v = scene.views[idx[j]];
-      MaskView& mv = d.masks[j];
-      mv.width = v.width;
-      mv.height = v.height;
-      mv.fx = v.fx; mv.fy = v.fy; mv.cx = v.cx; mv.cy = v.cy;
-      for (int r = 0; r < 3; ++r) {
-        for (int c = 0; c < 3; ++c) mv.R[3 * r + c] = v.R(r, c);
-        mv.t[r] = v.t[r];
-      }
-      mv.labels = *scene.load_mask(idx[j]);
-      if (auto conf = scene.load_confidence(idx[j])) apply_confidence(mv.labels, *conf, cfg.tau1);
-      HybridView& hv = d.views[j];
-      int D = 0;
-      auto feat = scene.load_features(idx[j], D);
-      if (D != d.dim) fail("{}: feature dimension {} differs from the first view's {}", v.feature_path->string(), D, d.dim);
-      hv.zref.assign(size_t(d.num_labels) * D, 0.f);
-      hv.area.assign(d.num_labels, 0.f);
-      pool_reference(feat->data(), mv.labels, D, d.num_labels, hv.zref.data(), hv.area.data());
-      for (int l = 0; l < d.num_labels; ++l) {
-        if (hv.area[l] > 0) hv.present.push_back(l);
-        if (l > 0 && hv.area[l] >= cfg.min_mask_pixels) hv.fg.push_back(l);
-      }
-      if (!cfg.use_scl) {
-        NpyArray raw = read_npy(*v.feature_path);
-        hv.ph = static_cast<int>(raw.shape[0]);
-        hv.pw = static_cast<int>(raw.shape[1]);
-        hv.patch_features = raw.to_float();
-      }
-    } catch (const std::exception& e) {
-#pragma omp critical
-      if (error.empty()) error = e.what();
+  parallel_for_progress("load masks+features", long(idx.size()), progress, [&](long j) {
+    const View& v = scene.views[idx[j]];
+    MaskView& mv = d.masks[j];
+    mv.width = v.width;
+    mv.height = v.height;
+    mv.fx = v.fx; mv.fy = v.fy; mv.cx = v.cx; mv.cy = v.cy;
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) mv.R[3 * r + c] = v.R(r, c);
+      mv.t[r] = v.t[r];
     }
-    long n = ++done;
-    if (omp_get_thread_num() == 0) bar.update(n);
-  }
-  if (!error.empty()) throw Error(error);
-  bar.finish();
+    mv.labels = *scene.load_mask(idx[j]);
+    if (auto conf = scene.load_confidence(idx[j])) apply_confidence(mv.labels, *conf, cfg.tau1);
+    HybridView& hv = d.views[j];
+    int D = 0, gh = 0, gw = 0;
+    std::vector<float> grid = *scene.load_feature_grid(idx[j], gh, gw, D);  // read once, used twice below
+    if (D != d.dim) fail("{}: feature dimension {} differs from the first view's {}", v.feature_path->string(), D, d.dim);
+    const std::vector<float> feat =
+        (gh == v.height && gw == v.width) ? grid : upsample_bilinear(grid.data(), gh, gw, D, v.height, v.width);
+    hv.zref.assign(size_t(d.num_labels) * D, 0.f);
+    hv.area.assign(d.num_labels, 0.f);
+    pool_reference(feat.data(), mv.labels, D, d.num_labels, hv.zref.data(), hv.area.data());
+    for (int l = 0; l < d.num_labels; ++l) {
+      if (hv.area[l] > 0) hv.present.push_back(l);
+      if (l > 0 && hv.area[l] >= cfg.min_mask_pixels) hv.fg.push_back(l);
+    }
+    if (!cfg.use_scl) {
+      hv.ph = gh;
+      hv.pw = gw;
+      hv.patch_features = std::move(grid);
+    }
+  });
   return d;
 }
 

@@ -1,36 +1,19 @@
 #include "hybrid/setup.h"
 
-#include <omp.h>
-
-#include <atomic>
-
 #include "core/error.h"
-#include "core/progress.h"
+#include "core/parallel.h"
 #include "hybrid/trainer.h"
 
 namespace hgs::hybrid {
 
 std::vector<train::TrainView> load_train_views(const Scene& scene, const std::vector<int>& idx, bool progress) {
   std::vector<train::TrainView> views(idx.size());
-  Progress bar("load images", long(idx.size()), progress);
-  std::atomic<long> done{0};
-  std::string error;
-#pragma omp parallel for schedule(dynamic)
-  for (size_t i = 0; i < idx.size(); ++i) {
-    try {
-      const View& v = scene.views[idx[i]];
-      views[i].name = v.name;
-      views[i].cam = train::make_camera(v);
-      views[i].image = scene.load_image(idx[i]);
-    } catch (const std::exception& e) {
-#pragma omp critical
-      if (error.empty()) error = e.what();
-    }
-    long d = ++done;
-    if (omp_get_thread_num() == 0) bar.update(d);
-  }
-  if (!error.empty()) throw Error(error);
-  bar.finish();
+  parallel_for_progress("load images", long(idx.size()), progress, [&](long i) {
+    const View& v = scene.views[idx[i]];
+    views[i].name = v.name;
+    views[i].cam = train::make_camera(v);
+    views[i].image = scene.load_image(idx[i]);
+  });
   return views;
 }
 

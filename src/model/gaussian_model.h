@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "render/renderer.h"
 #include "scene/scene.h"
 
 namespace hgs {
@@ -48,6 +49,9 @@ struct GaussianModel {
   // Checks every array has the size implied by n, dim and sh_degree (throws hgs::Error naming `where`).
   void validate(const std::string& where) const;
 };
+
+// Read-only renderer inputs for the model (SH colours at the model's full degree; no extra channels).
+render::GaussianInputs render_inputs(const GaussianModel& m);
 
 constexpr float kSH_C0 = 0.28209479177387814f;
 inline float rgb_to_sh(float c) { return (c - 0.5f) / kSH_C0; }

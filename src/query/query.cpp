@@ -59,19 +59,6 @@ std::vector<ObjectScore> score_objects(const ObjectEmbeddings& oe, const float* 
   return out;
 }
 
-render::GaussianInputs model_inputs(const GaussianModel& m) {
-  render::GaussianInputs in;
-  in.n = m.n;
-  in.mean = m.mean.data();
-  in.log_scale = m.log_scale.data();
-  in.quat = m.quat.data();
-  in.opacity_logit = m.opacity_logit.data();
-  in.sh = m.sh.data();
-  in.sh_stride = m.sh_stride();
-  in.sh_degree = m.sh_degree;
-  return in;
-}
-
 std::vector<float> render_object_opacity(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
                                          const std::vector<int>& ks) {
   const ExtraGroup* q = m.find_extra("obj");
@@ -80,7 +67,7 @@ std::vector<float> render_object_opacity(render::GaussianRenderer& r, const Gaus
   std::vector<float> ch(size_t(m.n) * J);
   for (int i = 0; i < m.n; ++i)
     for (int j = 0; j < J; ++j) ch[size_t(i) * J + j] = (ks[j] >= 0 && ks[j] < L) ? q->data[size_t(i) * L + ks[j]] : 0.f;
-  render::GaussianInputs in = model_inputs(m);
+  render::GaussianInputs in = render_inputs(m);
   in.extra = ch.data();
   in.num_extra = J;
   render::RenderSettings rs;
@@ -95,7 +82,7 @@ std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianM
   const ExtraGroup* f = m.find_extra("lang");
   if (!f) fail("the model has no language embeddings (train it with --method hybrid)");
   const int D = f->dim;
-  render::GaussianInputs in = model_inputs(m);
+  render::GaussianInputs in = render_inputs(m);
   in.extra = f->data.data();
   in.num_extra = D;
   render::RenderSettings rs;

@@ -37,9 +37,6 @@ using Canonical = std::vector<std::vector<float>>;  // canonical phrase embeddin
 // Scores of every foreground object (1..K with Gaussians) by LERF relevancy (src/eval/relevancy.h), best first.
 std::vector<ObjectScore> score_objects(const ObjectEmbeddings& oe, const float* text, const Canonical& canon);
 
-// Gaussian inputs for rendering a model (SH colours at the model's degree).
-render::GaussianInputs model_inputs(const GaussianModel& m);
-
 // Opacity render of objects `ks` (channel j = A_{ks[j]}). Returns [H, W, J].
 std::vector<float> render_object_opacity(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
                                          const std::vector<int>& ks);

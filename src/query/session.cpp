@@ -43,11 +43,16 @@ std::vector<float> Session::object_opacity(int view, const std::vector<int>& obj
   return sum;
 }
 
-eval::Mask Session::object_mask(int view, const std::vector<int>& objects, float threshold) {
+eval::Mask Session::object_mask(int view, const std::vector<int>& objects, float threshold, std::vector<float>* opacity) {
   std::vector<float> a = object_opacity(view, objects);
   eval::Mask m(a.size());
   for (size_t p = 0; p < a.size(); ++p) m[p] = a[p] > threshold;
+  if (opacity) *opacity = std::move(a);
   return m;
+}
+
+eval::Mask Session::answer_mask(int view, const std::string& text, float threshold, std::vector<float>* opacity) {
+  return object_mask(view, {ask(text).chosen[0]}, threshold, opacity);
 }
 
 std::vector<float> Session::pixel_relevancy(int view, const std::string& text) {

@@ -40,7 +40,11 @@ class Session {
   ObjectAnswer ask(const std::string& text, const QueryOptions& opt = {});
   // Opacity of the chosen objects in a view, summed: [H, W] (heatmap of the object mode).
   std::vector<float> object_opacity(int view, const std::vector<int>& objects);
-  eval::Mask object_mask(int view, const std::vector<int>& objects, float threshold);
+  // Mask of the chosen objects: their summed opacity > threshold; `opacity` (optional) receives that sum.
+  eval::Mask object_mask(int view, const std::vector<int>& objects, float threshold,
+                         std::vector<float>* opacity = nullptr);
+  // Object-level answer in one view: the best object for `text`, its mask and (optionally) its opacity.
+  eval::Mask answer_mask(int view, const std::string& text, float threshold, std::vector<float>* opacity = nullptr);
   // LERF relevancy of the rendered language map: [H, W].
   std::vector<float> pixel_relevancy(int view, const std::string& text);
 

@@ -212,17 +212,25 @@ std::optional<std::vector<float>> Scene::load_confidence(int vi) const {
 }
 
 std::optional<std::vector<float>> Scene::load_features(int vi, int& dim) const {
+  int h = 0, w = 0;
+  auto f = load_feature_grid(vi, h, w, dim);
+  if (!f) return std::nullopt;
+  const View& v = views.at(vi);
+  if (h == v.height && w == v.width) return f;
+  return upsample_bilinear(f->data(), h, w, dim, v.height, v.width);
+}
+
+std::optional<std::vector<float>> Scene::load_feature_grid(int vi, int& h, int& w, int& dim) const {
   const View& v = views.at(vi);
   if (!v.feature_path) return std::nullopt;
   NpyArray a = read_npy(*v.feature_path);
   if (a.shape.size() != 3) fail("{}: features must be a 3-D [h, w, D] array, found {} dimensions", v.feature_path->string(), a.shape.size());
   if (a.dtype != DType::F32 && a.dtype != DType::F16) fail("{}: features must be float16 or float32", v.feature_path->string());
-  int h = static_cast<int>(a.shape[0]), w = static_cast<int>(a.shape[1]);
+  h = static_cast<int>(a.shape[0]);
+  w = static_cast<int>(a.shape[1]);
   dim = static_cast<int>(a.shape[2]);
   if (h == 0 || w == 0 || dim == 0) fail("{}: empty feature array", v.feature_path->string());
-  std::vector<float> f = a.to_float();
-  if (h == v.height && w == v.width) return f;
-  return upsample_bilinear(f.data(), h, w, dim, v.height, v.width);
+  return a.to_float();
 }
 
 int Scene::num_objects() const {

@@ -58,6 +58,8 @@ struct Scene {
   std::optional<std::vector<float>> load_confidence(int view) const;  // [H, W]
   // Dense features bilinearly upsampled to the image: [H, W, D] (D returned in `dim`).
   std::optional<std::vector<float>> load_features(int view, int& dim) const;
+  // The stored feature grid as it is on disk (checked): [h, w, D].
+  std::optional<std::vector<float>> load_feature_grid(int view, int& h, int& w, int& dim) const;
   // Largest object id over all masks (reads every mask once, then cached).
   int num_objects() const;
 

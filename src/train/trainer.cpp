@@ -78,14 +78,7 @@ StepInfo Trainer::step() {
   const TrainView& v = views_[next_view()];
   const int W = v.cam.width, H = v.cam.height;
 
-  render::GaussianInputs in;
-  in.n = model_.n;
-  in.mean = model_.mean.data();
-  in.log_scale = model_.log_scale.data();
-  in.quat = model_.quat.data();
-  in.opacity_logit = model_.opacity_logit.data();
-  in.sh = model_.sh.data();
-  in.sh_stride = model_.sh_stride();
+  render::GaussianInputs in = render_inputs(model_);
   // 3DGS raises the degree at iterations 1000, 2000, ... before rendering.
   in.sh_degree = std::min(cfg_.sh_degree, cfg_.sh_increase_every > 0 ? it / cfg_.sh_increase_every : cfg_.sh_degree);
   render::RenderSettings rs;
