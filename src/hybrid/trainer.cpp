@@ -40,6 +40,9 @@ HybridTrainer::HybridTrainer(const train::TrainConfig& cfg, const HybridConfig& 
     fail("hybrid: the model's language embeddings have D = {} but the features have D = {}", f->dim, D_);
   }
   add_trainable_extra("lang", hc_.lr_lang);
+  views_with_.assign(L_, {});
+  for (int v = 0; v < int(data_.views.size()); ++v)
+    for (int l : data_.views[v].fg) views_with_[l].push_back(v);
   logits_.assign(U, 0.f);
   w_.assign(U, 1.f / U);
   lm_.assign(U, 0.f);
@@ -119,7 +122,7 @@ float HybridTrainer::appearance_and_bro(const train::TrainView& view, const rend
   img_gt_.resize(HW * 3);
   img_grad_.resize(HW * 3);
   mask_f_.resize(HW);
-  std::vector<float> A(HW);
+  opac_.resize(HW);
   band_.resize(HW);
   double app = 0, bro = 0;
   for (int j = 0; j < J; ++j) {
@@ -128,7 +131,7 @@ float HybridTrainer::appearance_and_bro(const train::TrainView& view, const rend
       const float* e = &out.extra[p * C_ + 4 * j];
       const float m = lab.v[p] == k ? 1.f : 0.f;
       mask_f_[p] = m;
-      A[p] = e[3];
+      opac_[p] = e[3];
       for (int c = 0; c < 3; ++c) {
         img_pred_[p * 3 + c] = e[c];
         img_gt_[p * 3 + c] = view.image.px[p * 3 + c] * m;
@@ -140,7 +143,7 @@ float HybridTrainer::appearance_and_bro(const train::TrainView& view, const rend
     for (auto& g : img_grad_) g *= s_app;
     if (hc_.use_bro && hc_.lambda_bro > 0) {
       // B is built from the rendered opacity but treated as a constant: no gradient through the morphology.
-      boundary_band(A.data(), mask_f_.data(), H, W, hc_.bro_kernel, band_.data(), morph_tmp_);
+      boundary_band(opac_.data(), mask_f_.data(), H, W, hc_.bro_kernel, band_.data(), morph_tmp_);
       bro += bro_loss(img_pred_.data(), img_gt_.data(), 3, 3, band_.data(), H, W, hc_.bro_eps, img_grad_.data(),
                       hc_.lambda_bro / J);
     }
@@ -169,22 +172,20 @@ float HybridTrainer::semantic_contrastive(const render::RenderOutputs& out) {
   struct Anchor { int j, v; };
   std::vector<Anchor> anchors;
   for (int j = 0; j < Jf; ++j) {
-    std::vector<int> cand;
-    for (int v = 0; v < int(data_.views.size()); ++v) {
-      if (v == view_) continue;
-      const auto& fv = data_.views[v].fg;
-      if (std::find(fv.begin(), fv.end(), fg_[j]) != fv.end()) cand.push_back(v);
-    }
-    if (cand.empty()) continue;
-    anchors.push_back({j, cand[std::uniform_int_distribution<size_t>(0, cand.size() - 1)(rng_)]});
+    // Views holding fg_[j] other than this one (view_ itself is in the list, so draw among the others).
+    const std::vector<int>& cand = views_with_[fg_[j]];
+    if (cand.size() < 2) continue;
+    size_t pick = std::uniform_int_distribution<size_t>(0, cand.size() - 2)(rng_);
+    if (cand[pick] >= view_) ++pick;
+    anchors.push_back({j, cand[pick]});
   }
   last_.anchors = static_cast<int>(anchors.size());
   if (anchors.empty()) return 0.f;
   double loss = 0;
   const float scale = hc_.lambda_sem / anchors.size();
-  std::vector<float> refs;
   for (auto [j, v] : anchors) {
     const HybridView& o = data_.views[v];
+    std::vector<float>& refs = refs_;
     refs.resize(o.fg.size() * D_);
     int pos = 0;
     for (size_t r = 0; r < o.fg.size(); ++r) {

@@ -71,10 +71,12 @@ class HybridTrainer : public train::Trainer {
   std::vector<float> pixel_w_;                               // [H, W, Jf]
   std::vector<float> d_wsum_;                                // [N, Jf]
   std::vector<float> img_pred_, img_gt_, img_grad_;          // [H, W, 3 J] packed object images
-  std::vector<float> band_, mask_f_, morph_tmp_;             // [H, W]
+  std::vector<float> band_, mask_f_, opac_, morph_tmp_;      // [H, W]
   std::vector<float> sref_;                                  // [H, W, D] (no-SCL ablation)
   std::vector<float> P_, dP_;                                // [Jf, D]
   std::vector<float> scl_mass_;                              // [Jf]
+  std::vector<float> refs_;                                  // [R, D] InfoNCE candidates of one anchor
+  std::vector<std::vector<int>> views_with_;                 // [L] training views whose SCL objects include l
   train::PhotometricLoss app_loss_;
   int view_ = 0, C_ = 0;
   std::vector<int> objs_, fg_;
