@@ -32,6 +32,28 @@ template <class T>
 void pooled_prediction_backward(int n, int D, int L, int J, const T* q, const T* f, const T* a, const int* objs,
                                 const T* mass, T eps, const T* dP, T* dq, T* df, T* da);
 
+// Row i of pooled_prediction_backward's df without a [N, D] buffer (the lazy Adam update of f_n calls it per
+// row): df_i = sum_j q_{i,objs[j]} a_{i,j} G_j with G = dP / (mass + eps) [J, D]. Returns false, leaving df_i
+// unwritten, when every term is zero (the Gaussian touches none of the masks).
+template <class T>
+bool pooled_df_row(long i, int D, int L, int J, const T* q, const T* a, const int* objs, const T* G, T* df_i) {
+  bool any = false;
+  for (int j = 0; j < J; ++j) {
+    const T w = a[size_t(i) * J + j] * q[size_t(i) * L + objs[j]];
+    if (w == T(0)) continue;
+    const T* gj = G + size_t(j) * D;
+    if (!any) {
+#pragma omp simd
+      for (int d = 0; d < D; ++d) df_i[d] = w * gj[d];
+      any = true;
+    } else {
+#pragma omp simd
+      for (int d = 0; d < D; ++d) df_i[d] += w * gj[d];
+    }
+  }
+  return any;
+}
+
 // InfoNCE of one anchor. p: unnormalised prediction [D]; refs: the candidates' unit reference vectors
 // [R, D]; positive: index of the positive among them. dp (may be null) receives scale * dL/dp.
 template <class T>

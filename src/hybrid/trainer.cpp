@@ -1,5 +1,7 @@
 #include "hybrid/trainer.h"
 
+#include <omp.h>
+
 #include <algorithm>
 #include <cmath>
 #include <random>
@@ -15,8 +17,7 @@ namespace hgs::hybrid {
 
 HybridTrainer::HybridTrainer(const train::TrainConfig& cfg, const HybridConfig& hcfg, GaussianModel model,
                              std::vector<train::TrainView> views, HybridData data, float extent)
-    : Trainer(cfg, std::move(model), std::move(views), extent), hc_(hcfg), data_(std::move(data)),
-      app_loss_(hcfg.lambda_dssim) {
+    : Trainer(cfg, std::move(model), std::move(views), extent), hc_(hcfg), data_(std::move(data)) {
   L_ = data_.num_labels;
   D_ = data_.dim;
   const int U = static_cast<int>(views_.size());
@@ -39,7 +40,8 @@ HybridTrainer::HybridTrainer(const train::TrainConfig& cfg, const HybridConfig& 
   } else if (f->dim != D_) {
     fail("hybrid: the model's language embeddings have D = {} but the features have D = {}", f->dim, D_);
   }
-  add_trainable_extra("lang", hc_.lr_lang);
+  // f_n is optimised by a row-sparse Adam without a gradient buffer (method_update), moments in bf16 by default.
+  adam_.add("lang", D_, model_.n, hc_.lr_lang, hc_.lang_bf16);
   views_with_.assign(L_, {});
   for (int v = 0; v < int(data_.views.size()); ++v)
     for (int l : data_.views[v].fg) views_with_[l].push_back(v);
@@ -118,37 +120,51 @@ float HybridTrainer::appearance_and_bro(const train::TrainView& view, const rend
   const int W = view.cam.width, H = view.cam.height, J = static_cast<int>(objs_.size());
   const size_t HW = size_t(W) * H;
   const LabelMap& lab = data_.masks[view_].labels;
-  img_pred_.resize(HW * 3);
-  img_gt_.resize(HW * 3);
-  img_grad_.resize(HW * 3);
-  mask_f_.resize(HW);
-  opac_.resize(HW);
-  band_.resize(HW);
-  double app = 0, bro = 0;
+  const bool bro_on = hc_.use_bro && hc_.lambda_bro > 0;
+  obj_app_.assign(J, 0.0);
+  obj_bro_.assign(J, 0.0);
+  // One object per thread (each object's SSIM and BRO run single-threaded in that thread's scratch): no
+  // parallel-region overhead per convolution and each object's images stay in one core's cache. Objects write
+  // disjoint channels of d_extra, and the loss values are summed in object order (deterministic).
+  const size_t threads = size_t(std::max(1, omp_get_max_threads()));
+  if (scratch_.size() < threads) scratch_.resize(threads, ObjectScratch(hc_.lambda_dssim));
+#pragma omp parallel for schedule(dynamic, 1)
   for (int j = 0; j < J; ++j) {
+    ObjectScratch& w = scratch_[omp_get_thread_num()];
+    w.pred.resize(HW * 3);
+    w.gt.resize(HW * 3);
+    w.grad.resize(HW * 3);
+    w.mask.resize(HW);
+    w.opac.resize(HW);
+    w.band.resize(HW);
     const int k = objs_[j];
     for (size_t p = 0; p < HW; ++p) {
       const float* e = &out.extra[p * C_ + 4 * j];
       const float m = lab.v[p] == k ? 1.f : 0.f;
-      mask_f_[p] = m;
-      opac_[p] = e[3];
+      w.mask[p] = m;
+      w.opac[p] = e[3];
       for (int c = 0; c < 3; ++c) {
-        img_pred_[p * 3 + c] = e[c];
-        img_gt_[p * 3 + c] = view.image.px[p * 3 + c] * m;
+        w.pred[p * 3 + c] = e[c];
+        w.gt[p * 3 + c] = view.image.px[p * 3 + c] * m;
       }
     }
-    train::LossValues lv = app_loss_(img_pred_.data(), img_gt_.data(), H, W, img_grad_.data());
-    app += lv.total;
+    train::LossValues lv = w.loss(w.pred.data(), w.gt.data(), H, W, w.grad.data());
+    obj_app_[j] = lv.total;
     const float s_app = hc_.lambda_app / J;
-    for (auto& g : img_grad_) g *= s_app;
-    if (hc_.use_bro && hc_.lambda_bro > 0) {
+    for (auto& g : w.grad) g *= s_app;
+    if (bro_on) {
       // B is built from the rendered opacity but treated as a constant: no gradient through the morphology.
-      boundary_band(opac_.data(), mask_f_.data(), H, W, hc_.bro_kernel, band_.data(), morph_tmp_);
-      bro += bro_loss(img_pred_.data(), img_gt_.data(), 3, 3, band_.data(), H, W, hc_.bro_eps, img_grad_.data(),
-                      hc_.lambda_bro / J);
+      boundary_band(w.opac.data(), w.mask.data(), H, W, hc_.bro_kernel, w.band.data(), w.morph);
+      obj_bro_[j] = bro_loss(w.pred.data(), w.gt.data(), 3, 3, w.band.data(), H, W, hc_.bro_eps, w.grad.data(),
+                             hc_.lambda_bro / J);
     }
     for (size_t p = 0; p < HW; ++p)
-      for (int c = 0; c < 3; ++c) d_extra_[p * C_ + 4 * j + c] += img_grad_[p * 3 + c];
+      for (int c = 0; c < 3; ++c) d_extra_[p * C_ + 4 * j + c] += w.grad[p * 3 + c];
+  }
+  double app = 0, bro = 0;
+  for (int j = 0; j < J; ++j) {
+    app += obj_app_[j];
+    bro += obj_bro_[j];
   }
   last_.app = J ? float(app / J) : 0.f;
   last_.bro = J ? float(bro / J) : 0.f;
@@ -198,7 +214,10 @@ float HybridTrainer::semantic_contrastive(const render::RenderOutputs& out) {
   // dq and da now (da feeds the renderer's backward); df after backward (the Trainer zeroes it before).
   pooled_prediction_backward(n, D_, L_, Jf, q, f, out.weight_sums.data(), fg_.data(), mass.data(), 1e-6f, dP_.data(),
                              dq_.data(), (float*)nullptr, d_wsum_.data());
-  scl_mass_ = mass;
+  // df rows are formed in method_update from G = dP / (m + eps).
+  G_.resize(size_t(Jf) * D_);
+  for (int j = 0; j < Jf; ++j)
+    for (int d = 0; d < D_; ++d) G_[size_t(j) * D_ + d] = dP_[size_t(j) * D_ + d] / (mass[j] + 1e-6f);
   last_.sem = float(loss / anchors.size());
   return hc_.lambda_sem * last_.sem;
 }
@@ -238,16 +257,6 @@ void HybridTrainer::extra_param_grads(render::GaussianGrads& g) {
   g.sh.resize(size_t(n) * model_.sh_stride() * 3);
   render::sh_backward(n, active_degree_, model_.sh_stride(), model_.sh.data(), model_.mean.data(), campos_,
                       (const int*)nullptr, g.colors.data(), g.sh.data(), g.mean.data());
-  if (last_.anchors > 0) {
-    pooled_prediction_backward(n, D_, L_, int(fg_.size()), q, model_.find_extra("lang")->data.data(), out_.weight_sums.data(),
-                               fg_.data(), scl_mass_.data(), 1e-6f, dP_.data(), (float*)nullptr, extra_grad("lang").data(),
-                               (float*)nullptr);
-  }
-  if (!hc_.use_scl && hc_.lambda_sem > 0) {
-    float* df = extra_grad("lang").data();
-    for (int i = 0; i < n; ++i)
-      for (int d = 0; d < D_; ++d) df[size_t(i) * D_ + d] += g.extra[size_t(i) * C_ + 4 * J + d];
-  }
   if (hc_.use_of) {
     // dq -> view logits through eqs. 4-5 and the softmax over views; Adam on the logits.
     const int U = static_cast<int>(logits_.size());
@@ -265,6 +274,51 @@ void HybridTrainer::extra_param_grads(render::GaussianGrads& g) {
       logits_[u] -= hc_.lr_view * (lm_[u] / c1) / (std::sqrt(lv_[u] / c2) + eps);
     }
   }
+}
+
+void HybridTrainer::method_update() {
+  // Row-sparse Adam on f_n: only Gaussians with a semantic gradient this step are updated.
+  const int n = model_.n, J = static_cast<int>(objs_.size()), D = D_;
+  float* f = model_.find_extra("lang")->data.data();
+  train::AdamParam& p = adam_.get("lang");
+  if (hc_.use_scl && last_.anchors > 0) {
+    const float* q = model_.find_extra("obj")->data.data();
+    const float* a = out_.weight_sums.data();
+    const int Jf = static_cast<int>(fg_.size());
+    adam_.update_rows(p, f, n, [&](long i, float* g) { return pooled_df_row(i, D, L_, Jf, q, a, fg_.data(), G_.data(), g); });
+  } else if (!hc_.use_scl && hc_.lambda_sem > 0) {
+    // Full-scene semantic render: df_n is the gradient of its D extra channels.
+    const float* ge = grads_.extra.data();
+    adam_.update_rows(p, f, n, [&](long i, float* g) {
+      const float* src = ge + size_t(i) * C_ + 4 * J;
+      bool any = false;
+      for (int d = 0; d < D; ++d) any |= (g[d] = src[d]) != 0.f;
+      return any;
+    });
+  }
+}
+
+std::vector<std::pair<std::string, std::vector<float>*>> HybridTrainer::method_state() {
+  // Saved: the view logits and their Adam state, and the observation table (it reflects the centres of the
+  // last refresh, so a resumed run continues bit for bit). Values are exact in float32.
+  ckpt_steps_.assign(1, float(view_steps_));
+  ckpt_table_.assign(obs_.label.begin(), obs_.label.end());
+  return {{"view_logits", &logits_}, {"view_adam_m", &lm_}, {"view_adam_v", &lv_}, {"view_adam_step", &ckpt_steps_},
+          {"observations", &ckpt_table_}};
+}
+
+void HybridTrainer::method_state_loaded(const std::string& where) {
+  const size_t U = views_.size();
+  if (logits_.size() != U || lm_.size() != U || lv_.size() != U || ckpt_steps_.size() != 1 ||
+      ckpt_table_.size() != size_t(model_.n) * U)
+    fail("{}: the hybrid state does not match {} training views and {} Gaussians", where, U, model_.n);
+  view_steps_ = long(ckpt_steps_[0]);
+  obs_.n = model_.n;
+  obs_.num_views = int(U);
+  obs_.label.assign(ckpt_table_.begin(), ckpt_table_.end());
+  softmax(logits_.data(), int(U), w_.data());
+  ckpt_steps_.clear();
+  ckpt_table_ = {};
 }
 
 void HybridTrainer::after_step(train::StepInfo& info) {

@@ -11,7 +11,8 @@
 //     of (1 - lambda) L1 + lambda (1 - SSIM) of I_k against I * M_k (eq. 6) + lambda_bro x mean over objects of
 //     eq. 14 + lambda_sem x mean over anchors of InfoNCE (eq. 10) on pooled predictions (eq. 9).
 //  4. Backward: renderer gradients, then object channels -> dq, dc; SH backward for dc; SCL -> df, dq, da;
-//     dq -> view logits through the fusion; Adam for everything (f_n through the Trainer's extra groups).
+//     dq -> view logits through the fusion; Adam for everything (f_n row-sparse, rows formed on the fly, see
+//     method_update).
 // Ablations: without OF q is the single-view hard assignment (fixed); without SCL f_n is learned by a per-pixel
 // cosine loss between the full semantic render sum f alpha T and the upsampled reference features.
 // Model extra groups: "obj" [N, K+1] = q, "obj_id" [N, 1] = z, "lang" [N, D] = f.
@@ -49,7 +50,10 @@ class HybridTrainer : public train::Trainer {
   float extra_loss(const train::TrainView& view, const render::RenderOutputs& out, float* d_rgb,
                    render::OutputGrads& dout) override;
   void extra_param_grads(render::GaussianGrads& g) override;
+  void method_update() override;
   void after_step(train::StepInfo& info) override;
+  std::vector<std::pair<std::string, std::vector<float>*>> method_state() override;
+  void method_state_loaded(const std::string& where) override;
 
  private:
   void fuse_now();
@@ -70,14 +74,20 @@ class HybridTrainer : public train::Trainer {
   std::vector<float> d_extra_;                               // [H, W, C]
   std::vector<float> pixel_w_;                               // [H, W, Jf]
   std::vector<float> d_wsum_;                                // [N, Jf]
-  std::vector<float> img_pred_, img_gt_, img_grad_;          // [H, W, 3 J] packed object images
-  std::vector<float> band_, mask_f_, opac_, morph_tmp_;      // [H, W]
+  struct ObjectScratch {  // per-thread buffers of the object-conditioned losses of one object
+    explicit ObjectScratch(float lambda_dssim) : loss(lambda_dssim) {}
+    train::PhotometricLoss loss;
+    std::vector<float> pred, gt, grad;  // [H, W, 3]
+    std::vector<float> mask, opac, band, morph;  // [H, W]
+  };
+  std::vector<ObjectScratch> scratch_;                       // [threads]
+  std::vector<double> obj_app_, obj_bro_;                    // [J]
   std::vector<float> sref_;                                  // [H, W, D] (no-SCL ablation)
   std::vector<float> P_, dP_;                                // [Jf, D]
-  std::vector<float> scl_mass_;                              // [Jf]
+  std::vector<float> G_;                                     // [Jf, D] dP / (m + eps)
+  std::vector<float> ckpt_steps_, ckpt_table_;               // [1], [N, U]: view_steps_ and obs_ as floats
   std::vector<float> refs_;                                  // [R, D] InfoNCE candidates of one anchor
   std::vector<std::vector<int>> views_with_;                 // [L] training views whose SCL objects include l
-  train::PhotometricLoss app_loss_;
   int view_ = 0, C_ = 0;
   std::vector<int> objs_, fg_;
   float campos_[3] = {0, 0, 0};

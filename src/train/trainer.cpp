@@ -110,6 +110,7 @@ StepInfo Trainer::step() {
   adam_.update(adam_.get("sh"), model_.sh.data(), grads_.sh.data(), model_.n);
   for (auto& [name, g] : extra_grads_)
     adam_.update(adam_.get(name), model_.find_extra(name)->data.data(), g.data(), model_.n);
+  method_update();
 
   // Densification (3DGS schedule; statistics are gathered until densify_until).
   if (cfg_.densify && it < cfg_.densify_until) {

@@ -73,8 +73,15 @@ class Trainer {
                            render::OutputGrads& dout) { return 0.f; }
   // Called after backward: fill the gradients of trainable extra groups (extra_grad(name)) from `g`.
   virtual void extra_param_grads(render::GaussianGrads& g) {}
+  // Called after the built-in Adam updates, before densification: parameters the method optimises itself.
+  virtual void method_update() {}
   // Called at the end of every step (after Adam and densification).
   virtual void after_step(StepInfo& info) {}
+  // Named float arrays of the method's own state that checkpoints save and restore. On load they are
+  // resized to the saved counts and replaced, then method_state_loaded() checks the sizes and rebuilds what
+  // derives from them (it may throw hgs::Error naming `where`).
+  virtual std::vector<std::pair<std::string, std::vector<float>*>> method_state() { return {}; }
+  virtual void method_state_loaded(const std::string& where) {}
 
   // Registers model extra group `name` as trainable with learning rate `lr` (Adam state follows densification).
   void add_trainable_extra(const std::string& name, float lr);

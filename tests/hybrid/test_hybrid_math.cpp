@@ -184,6 +184,21 @@ TEST(Scl, PooledPredictionAndInfoNceGradients) {
     return loss();
   };
   check_grad(a_rest, loss_rest, da_rest);
+  // The trainer forms df one row at a time (pooled_df_row, for the row-sparse Adam): the same rows, and
+  // "no gradient" exactly for a Gaussian that touches no mask.
+  std::vector<double> G(J * D);
+  for (int j = 0; j < J; ++j)
+    for (int d = 0; d < D; ++d) G[j * D + d] = dP[j * D + d] / (mass[j] + 1e-6);
+  a[3 * J] = a[3 * J + 1] = 0;
+  std::fill(df.begin(), df.end(), 0.0);
+  pooled_prediction_backward(N, D, L, J, q.data(), f.data(), a.data(), objs, mass, 1e-6, dP.data(), (double*)nullptr,
+                             df.data(), (double*)nullptr);
+  for (int i = 0; i < N; ++i) {
+    std::vector<double> row(D, -7.0);
+    const bool any = pooled_df_row(i, D, L, J, q.data(), a.data(), objs, G.data(), row.data());
+    EXPECT_EQ(any, i != 3) << "row " << i;
+    for (int d = 0; d < D; ++d) EXPECT_NEAR(any ? row[d] : 0.0, df[i * D + d], 1e-12) << "row " << i;
+  }
 }
 
 TEST(Scl, InfoNceValue) {

@@ -2,7 +2,12 @@
 // Gaussians, with Adam moments following their rows; opacity reset.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <random>
+
+#include "core/error.h"
+#include "core/half.h"
 
 #include "train/adam.h"
 #include "train/densify.h"
@@ -43,6 +48,126 @@ TEST(Adam, MatchesHandComputation) {
   EXPECT_NEAR(y[0], 0.95f, 1e-6f);
   EXPECT_NEAR(y[1], 2.05f, 1e-6f);
   EXPECT_FLOAT_EQ(y[3], 4.f);  // zero gradient, zero moments: no move
+}
+
+// Random gradients [n, d] for a few steps; row r has no gradient in steps where (step + r) % 3 == 0.
+struct RowSteps {
+  int n, d;
+  std::vector<std::vector<float>> g;
+  RowSteps(int n_, int d_, int steps, unsigned seed) : n(n_), d(d_) {
+    std::mt19937 rng(seed);
+    std::normal_distribution<float> N(0, 1);
+    for (int s = 0; s < steps; ++s) {
+      g.emplace_back(size_t(n) * d);
+      for (int r = 0; r < n; ++r)
+        for (int c = 0; c < d; ++c) g[s][size_t(r) * d + c] = (s + r) % 3 == 0 ? 0.f : N(rng) * (1 + c % 5);
+    }
+  }
+  bool has(int s, long r) const { return (s + r) % 3 != 0; }
+};
+
+TEST(Adam, RowUpdateMatchesDenseOnRowsWithGradient) {
+  // float32 moments: update_rows is the dense update on the rows that have a gradient, and leaves the others.
+  const int n = 5, d = 40;
+  RowSteps rs(n, d, 6, 11);
+  Adam dense, rows;
+  AdamParam& pd = dense.add("x", d, n, 0.01f);
+  AdamParam& pr = rows.add("x", d, n, 0.01f);
+  std::vector<float> xd(size_t(n) * d, 0.5f), xr = xd;
+  for (int s = 0; s < 6; ++s) {
+    dense.begin_step();
+    rows.begin_step();
+    // Dense reference per row: the rows without a gradient are skipped by hand.
+    std::vector<float> before = xd, mb = pd.m, vb = pd.v;
+    dense.update(pd, xd.data(), rs.g[s].data(), n);
+    for (int r = 0; r < n; ++r)
+      if (!rs.has(s, r))
+        for (int c = 0; c < d; ++c) {
+          const size_t i = size_t(r) * d + c;
+          xd[i] = before[i], pd.m[i] = mb[i], pd.v[i] = vb[i];
+        }
+    int calls = 0;
+    rows.update_rows(pr, xr.data(), n, [&](long r, float* g) {
+#pragma omp atomic
+      ++calls;
+      if (!rs.has(s, r)) return false;
+      std::copy_n(&rs.g[s][size_t(r) * d], d, g);
+      return true;
+    });
+    EXPECT_EQ(calls, n);
+  }
+  for (size_t i = 0; i < xd.size(); ++i) {
+    EXPECT_NEAR(xr[i], xd[i], 1e-6f) << i;
+    EXPECT_NEAR(pr.m[i], pd.m[i], 1e-6f) << i;
+  }
+}
+
+TEST(Adam, Bf16MomentsTrackFloat32) {
+  // bfloat16 moments (vector path for columns 0..31, scalar tail 32..39) follow the float32 run closely.
+  const int n = 4, d = 40, steps = 200;
+  RowSteps rs(n, d, steps, 5);
+  Adam a32, a16;
+  AdamParam& p32 = a32.add("x", d, n, 1e-3f);
+  AdamParam& p16 = a16.add("x", d, n, 1e-3f, true);
+  EXPECT_TRUE(p16.m.empty());
+  EXPECT_EQ(p16.m16.size(), size_t(n) * d);
+  std::vector<float> x32(size_t(n) * d, 0.f), x16 = x32;
+  for (int s = 0; s < steps; ++s) {
+    a32.begin_step();
+    a16.begin_step();
+    auto grad = [&](long r, float* g) {
+      if (!rs.has(s, r)) return false;
+      std::copy_n(&rs.g[s][size_t(r) * d], d, g);
+      return true;
+    };
+    a32.update_rows(p32, x32.data(), n, grad);
+    a16.update_rows(p16, x16.data(), n, grad);
+  }
+  // Each step moves a value by about lr = 1e-3; after 200 steps the two runs agree to a few steps' worth.
+  double worst = 0, moved = 0;
+  for (size_t i = 0; i < x32.size(); ++i) {
+    worst = std::max(worst, double(std::abs(x16[i] - x32[i])));
+    moved = std::max(moved, double(std::abs(x32[i])));
+    // Stochastic rounding adds an unbiased error of up to one bf16 unit per step, which the moving averages
+    // accumulate as a random walk: for gradient scale s (1..5 by column), m (std ~0.23 s, memory ~10 steps)
+    // stays within ~4e-3 s and v (~s^2, memory ~1000 steps) within a few percent of s^2.
+    const double sc = 1 + (i % d) % 5;
+    EXPECT_NEAR(bf16_to_float(p16.m16[i]), p32.m[i], 6e-3 * sc) << i;
+    EXPECT_NEAR(bf16_to_float(p16.v16[i]), p32.v[i], 0.08 * sc * sc) << i;
+  }
+  EXPECT_GT(moved, 0.02);
+  EXPECT_LT(worst, 5e-3) << "bf16 moments drifted from the float32 run";
+}
+
+TEST(Adam, Bf16SecondMomentDecaysUnderStochasticRounding) {
+  // v = 0.999 v per step is a 0.1% change, below half a bf16 unit: round-to-nearest would keep v = 1 forever.
+  // Stochastic rounding follows 0.999^t in expectation. Zero gradients through update_row (all columns).
+  const int d = 64;
+  Adam a;
+  AdamParam& p = a.add("x", d, 1, 1e-3f, true);
+  std::fill(p.v16.begin(), p.v16.end(), float_to_bf16(1.f));
+  std::vector<float> x(d, 0.f), g(d, 0.f);
+  for (int s = 0; s < 1000; ++s) {
+    a.begin_step();
+    a.update_row(p, x.data(), 0, g.data());
+  }
+  double mean = 0;
+  for (int c = 0; c < d; ++c) mean += bf16_to_float(p.v16[c]) / d;
+  EXPECT_NEAR(mean, std::pow(0.999, 1000), 0.02);
+  EXPECT_EQ(float_to_bf16(1.f + 1e-3f), float_to_bf16(1.f));  // what round-to-nearest would do
+}
+
+TEST(Adam, Bf16GatherAndReset) {
+  Adam adam;
+  AdamParam& p = adam.add("x", 2, 3, 0.1f, true);
+  for (int i = 0; i < 6; ++i) p.m16[i] = uint16_t(i), p.v16[i] = uint16_t(10 + i);
+  adam.gather({2, 0, 2}, {0, 0, 1});
+  EXPECT_EQ(p.m16, (std::vector<uint16_t>{4, 5, 0, 1, 0, 0}));
+  EXPECT_EQ(p.v16, (std::vector<uint16_t>{14, 15, 10, 11, 0, 0}));
+  adam.reset_moments("x");
+  EXPECT_EQ(p.v16, std::vector<uint16_t>(6, 0));
+  std::vector<float> x(6), g(6);
+  EXPECT_THROW(adam.update(p, x.data(), g.data(), 3), Error);  // bf16 moments need update_rows
 }
 
 TEST(Adam, GatherCarriesMoments) {
