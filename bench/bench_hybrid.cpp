@@ -4,9 +4,12 @@
 // bench_train (SH degree 3, 320x240, fx = fy = 300) seen by two cameras 0.2 apart; K = 8 objects laid out as a
 // 4 x 2 grid of mask cells with a 16-pixel background border, D = 512 random unit reference features per
 // object. Densification off; the observation table is rebuilt every R = 100 steps as in training.
-// Also times the parts of a hybrid step separately (fusion, object channels, SCL pooling) for profiling.
+// Also times the parts of a hybrid step separately (fusion, object channels, SCL pooling) for profiling, and
+// measures the peak memory of a 300k-Gaussian hybrid step (BM_HybridStepMemory300k, run alone).
 //   build/bench_hybrid --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
 #include <benchmark/benchmark.h>
+
+#include <sys/resource.h>
 
 #include <cmath>
 #include <random>
@@ -37,18 +40,24 @@ render::Camera bench_camera(int v) {
   return c;
 }
 
-GaussianModel bench_model(unsigned seed) {
+double peak_rss_mb() {
+  rusage ru;
+  getrusage(RUSAGE_SELF, &ru);
+  return ru.ru_maxrss / 1024.0;
+}
+
+GaussianModel bench_model(unsigned seed, int n = kN, float scale = 1.f) {
   GaussianModel m;
   m.sh_degree = 3;
-  m.resize(kN);
+  m.resize(n);
   std::mt19937 rng(seed);
   std::uniform_real_distribution<float> U(0, 1);
   std::normal_distribution<float> N(0, 1);
-  for (int i = 0; i < kN; ++i) {
+  for (int i = 0; i < n; ++i) {
     float box[3] = {-2.5f + 5 * U(rng), -1.9f + 3.8f * U(rng), 3 + 4 * U(rng)};
     for (int k = 0; k < 3; ++k) {
       m.mean[i * 3 + k] = box[k];
-      m.log_scale[i * 3 + k] = std::log(0.01f) + (std::log(0.06f) - std::log(0.01f)) * U(rng);
+      m.log_scale[i * 3 + k] = std::log(0.01f * scale) + (std::log(0.06f) - std::log(0.01f)) * U(rng);
     }
     for (int k = 0; k < 4; ++k) m.quat[i * 4 + k] = N(rng);
     m.opacity_logit[i] = inverse_sigmoid(0.05f + 0.9f * U(rng));
@@ -143,6 +152,26 @@ void BM_HybridStep(benchmark::State& st) {
   st.counters["loss"] = loss;
 }
 
+// Memory: the same step with 300k Gaussians (scales / 10^(1/3) so the box is covered alike), D = 512, with
+// densification every other step. Reports
+// the process's peak resident set size; run it alone so the other benchmarks do not count:
+//   build/bench_hybrid --benchmark_filter=Memory300k
+void BM_HybridStepMemory300k(benchmark::State& st) {
+  const int n = 300000;
+  GaussianModel m = bench_model(99, n, 1.f / std::cbrt(10.f));
+  auto& s = setup();
+  // Densification every other step (row gathers of the model and the Adam moments are the transient peak).
+  train::TrainConfig cfg = bench_config();
+  cfg.densify = true;
+  cfg.densify_from = 1;
+  cfg.densify_every = 2;
+  hybrid::HybridTrainer trainer(cfg, hybrid::HybridConfig{}, std::move(m), s.views, s.data, 5.f);
+  for (int i = 0; i < 2; ++i) trainer.step();
+  for (auto _ : st) benchmark::DoNotOptimize(trainer.step().loss.total);
+  st.counters["gaussians"] = trainer.model().n;
+  st.counters["peak_rss_MB"] = peak_rss_mb();
+}
+
 // Parts of the step, for profiling.
 void BM_Fuse(benchmark::State& st) {
   auto& s = setup();
@@ -155,11 +184,12 @@ void BM_Fuse(benchmark::State& st) {
 }
 
 void BM_ObjectChannels(benchmark::State& st) {
-  const int L = kK + 1, C = 4 * L;
-  std::vector<float> q(size_t(kN) * L, 0.1f), col(size_t(kN) * 3, 0.5f), extra(size_t(kN) * C);
+  const int L = kK + 1;
+  const hybrid::ObjectLayout lay{L, 0};
+  std::vector<float> q(size_t(kN) * L, 0.1f), col(size_t(kN) * 3, 0.5f), extra(size_t(kN) * lay.total());
   std::vector<int> objs(L);
   for (int l = 0; l < L; ++l) objs[l] = l;
-  for (auto _ : st) hybrid::object_channels(kN, L, L, objs.data(), q.data(), col.data(), C, extra.data());
+  for (auto _ : st) hybrid::object_channels(kN, L, lay, objs.data(), q.data(), col.data(), extra.data());
 }
 
 void BM_PooledPrediction(benchmark::State& st) {
@@ -176,8 +206,8 @@ void BM_PooledPrediction(benchmark::State& st) {
     hybrid::pooled_prediction(kN, kD, L, kK, q.data(), f.data(), a.data(), objs.data(), mass.data(), 1e-6f, P.data());
 }
 
-// Render forward + backward with 4 channels per present object (9 with the background) and the 8 pixel-weight
-// sums of the SCL anchors (arg 1), or the plain RGB render (arg 0).
+// Render forward + backward with 4 channels per present object (9 with the background; the opacity channels
+// forward-only) and the 8 pixel-weight sums of the SCL anchors (arg 1), or the plain RGB render (arg 0).
 void BM_RenderObjects(benchmark::State& st) {
   auto& s = setup();
   const bool objects = st.range(0) != 0;
@@ -200,6 +230,7 @@ void BM_RenderObjects(benchmark::State& st) {
   render::OutputGrads dout;
   dout.rgb = d_rgb.data();
   dout.extra = C ? d_extra.data() : nullptr;
+  dout.extra_grad_channels = objects ? 3 * L : -1;  // the opacities are forward-only, as in training
   dout.weight_sums = J ? d_ws.data() : nullptr;
   for (auto _ : st) {
     r.forward(s.views[0].cam, in, rs, out);
@@ -233,6 +264,7 @@ BENCHMARK(BM_RenderObjects)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseR
 BENCHMARK(BM_ObjectSsim)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_RgbStep)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_HybridStep)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_HybridStepMemory300k)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
 BENCHMARK(BM_Fuse)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_ObjectChannels)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_PooledPrediction)->Unit(benchmark::kMillisecond)->UseRealTime();

@@ -1,49 +1,68 @@
 // Object-conditioned channels for one view (paper eqs. 6 and 11), composited by the engine in one pass.
 //
-// For the J objects present in the view, objs[j] in 0..K, every Gaussian gets 4 J extra channels
-//   (q_{n,k} c_n^r, q_{n,k} c_n^g, q_{n,k} c_n^b, q_{n,k}),   k = objs[j],
+// For the J objects present in the view, objs[j] in 0..K, every Gaussian gets 4 J extra channels,
+//   q_{n,k} c_n (3 colour channels) and q_{n,k} (opacity),   k = objs[j],
 // so one rasterization yields every object render I^pred_{u,k} = sum_n q_{n,k} c_n alpha T and its opacity
 // A^pred_{u,k} = sum_n q_{n,k} alpha T, instead of K + 1 separate rasterizations. Objects absent from the
 // view's mask are skipped.
+//
+// Channel layout (ObjectLayout), with S further channels that carry gradient (the no-SCL ablation's semantic
+// render) between them:
+//   [0, 3J)            colours, object j at 3j .. 3j+2
+//   [3J, 3J+S)         the S other channels
+//   [3J+S, 4J+S)       opacities, object j at 3J+S+j
+// The opacities come last because training uses them only through BRO's band, a constant: the renderer's
+// backward is told that only the first grad_channels() carry gradient and skips the rest.
 #pragma once
 #include <cstddef>
 
 namespace hgs::hybrid {
 
-constexpr int kChannelsPerObject = 4;
+struct ObjectLayout {
+  int J = 0;  // objects
+  int S = 0;  // other channels with gradient
+  int color(int j) const { return 3 * j; }
+  int other() const { return 3 * J; }
+  int opacity(int j) const { return 3 * J + S + j; }
+  int grad_channels() const { return 3 * J + S; }
+  int total() const { return 4 * J + S; }
+};
 
-// q [N, L], color [N, 3] -> extra [N, stride] (channels 4j..4j+3 written; stride >= 4 J).
+// q [N, L], color [N, 3] -> extra [N, lay.total()] (the colour and opacity channels; the S others untouched).
 template <class T>
-void object_channels(int n, int L, int J, const int* objs, const T* q, const T* color, int stride, T* extra) {
+void object_channels(int n, int L, const ObjectLayout& lay, const int* objs, const T* q, const T* color, T* extra) {
+  const int C = lay.total(), J = lay.J;
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
-    T* e = extra + size_t(i) * stride;
+    T* e = extra + size_t(i) * C;
     const T* c = color + size_t(i) * 3;
     for (int j = 0; j < J; ++j) {
       const T w = q[size_t(i) * L + objs[j]];
-      e[4 * j] = w * c[0];
-      e[4 * j + 1] = w * c[1];
-      e[4 * j + 2] = w * c[2];
-      e[4 * j + 3] = w;
+      e[lay.color(j)] = w * c[0];
+      e[lay.color(j) + 1] = w * c[1];
+      e[lay.color(j) + 2] = w * c[2];
+      e[lay.opacity(j)] = w;
     }
   }
 }
 
-// d_extra [N, stride] -> dq [N, L] (added), dcolor [N, 3] (added).
+// d_extra [N, lay.total()] -> dq [N, L] (added), dcolor [N, 3] (added).
 template <class T>
-void object_channels_backward(int n, int L, int J, const int* objs, const T* q, const T* color, int stride,
+void object_channels_backward(int n, int L, const ObjectLayout& lay, const int* objs, const T* q, const T* color,
                               const T* d_extra, T* dq, T* dcolor) {
+  const int C = lay.total(), J = lay.J;
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
-    const T* g = d_extra + size_t(i) * stride;
+    const T* g = d_extra + size_t(i) * C;
     const T* c = color + size_t(i) * 3;
     T* dc = dcolor + size_t(i) * 3;
     for (int j = 0; j < J; ++j) {
       const T w = q[size_t(i) * L + objs[j]];
-      dq[size_t(i) * L + objs[j]] += g[4 * j] * c[0] + g[4 * j + 1] * c[1] + g[4 * j + 2] * c[2] + g[4 * j + 3];
-      dc[0] += g[4 * j] * w;
-      dc[1] += g[4 * j + 1] * w;
-      dc[2] += g[4 * j + 2] * w;
+      const T* gc = g + lay.color(j);
+      dq[size_t(i) * L + objs[j]] += gc[0] * c[0] + gc[1] * c[1] + gc[2] * c[2] + g[lay.opacity(j)];
+      dc[0] += gc[0] * w;
+      dc[1] += gc[1] * w;
+      dc[2] += gc[2] * w;
     }
   }
 }

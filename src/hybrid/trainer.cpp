@@ -93,14 +93,16 @@ void HybridTrainer::prepare_inputs(const train::TrainView& view, render::Gaussia
   objs_ = hv.present;
   fg_ = (hc_.use_scl && hc_.lambda_sem > 0) ? hv.fg : std::vector<int>{};
   const int J = static_cast<int>(objs_.size());
-  const int sem = hc_.use_scl ? 0 : D_;
-  C_ = kChannelsPerObject * J + sem;
+  const int sem = (!hc_.use_scl && hc_.lambda_sem > 0) ? D_ : 0;
+  lay_ = ObjectLayout{J, sem};
+  C_ = lay_.total();
   extra_.resize(size_t(n) * C_);
   const float* q = model_.find_extra("obj")->data.data();
-  object_channels(n, L_, J, objs_.data(), q, colors_.data(), C_, extra_.data());
+  object_channels(n, L_, lay_, objs_.data(), q, colors_.data(), extra_.data());
   if (sem) {
     const float* f = model_.find_extra("lang")->data.data();
-    for (int i = 0; i < n; ++i) std::copy(f + size_t(i) * D_, f + size_t(i + 1) * D_, &extra_[size_t(i) * C_ + 4 * J]);
+#pragma omp parallel for schedule(static)
+    for (int i = 0; i < n; ++i) std::copy(f + size_t(i) * D_, f + size_t(i + 1) * D_, &extra_[size_t(i) * C_ + lay_.other()]);
   }
   in.extra = extra_.data();
   in.num_extra = C_;
@@ -139,10 +141,10 @@ float HybridTrainer::appearance_and_bro(const train::TrainView& view, const rend
     w.band.resize(HW);
     const int k = objs_[j];
     for (size_t p = 0; p < HW; ++p) {
-      const float* e = &out.extra[p * C_ + 4 * j];
+      const float* e = &out.extra[p * C_ + lay_.color(j)];
       const float m = lab.v[p] == k ? 1.f : 0.f;
       w.mask[p] = m;
-      w.opac[p] = e[3];
+      w.opac[p] = out.extra[p * C_ + lay_.opacity(j)];
       for (int c = 0; c < 3; ++c) {
         w.pred[p * 3 + c] = e[c];
         w.gt[p * 3 + c] = view.image.px[p * 3 + c] * m;
@@ -159,7 +161,7 @@ float HybridTrainer::appearance_and_bro(const train::TrainView& view, const rend
                              hc_.lambda_bro / J);
     }
     for (size_t p = 0; p < HW; ++p)
-      for (int c = 0; c < 3; ++c) d_extra_[p * C_ + 4 * j + c] += w.grad[p * 3 + c];
+      for (int c = 0; c < 3; ++c) d_extra_[p * C_ + lay_.color(j) + c] += w.grad[p * 3 + c];
   }
   double app = 0, bro = 0;
   for (int j = 0; j < J; ++j) {
@@ -225,11 +227,12 @@ float HybridTrainer::semantic_contrastive(const render::RenderOutputs& out) {
 float HybridTrainer::semantic_cosine(const render::RenderOutputs& out) {
   // Full-scene semantic learning: mean over pixels of 1 - cos(S(p), S_ref(p)), S = sum_n f_n alpha T.
   const train::TrainView& view = views_[view_];
-  const int W = view.cam.width, H = view.cam.height, J = static_cast<int>(objs_.size());
+  const int W = view.cam.width, H = view.cam.height;
   const HybridView& hv = data_.views[view_];
   sref_ = upsample_bilinear(hv.patch_features.data(), hv.ph, hv.pw, D_, H, W);
   const size_t HW = size_t(W) * H;
-  const float loss = cosine_loss(&out.extra[4 * J], C_, sref_.data(), HW, D_, &d_extra_[4 * J], hc_.lambda_sem);
+  const int o = lay_.other();
+  const float loss = cosine_loss(&out.extra[o], C_, sref_.data(), HW, D_, &d_extra_[o], hc_.lambda_sem);
   last_.sem = loss;
   last_.anchors = 0;
   return hc_.lambda_sem * last_.sem;
@@ -245,15 +248,16 @@ float HybridTrainer::extra_loss(const train::TrainView& view, const render::Rend
   float total = appearance_and_bro(view, out);
   if (hc_.lambda_sem > 0) total += hc_.use_scl ? semantic_contrastive(out) : semantic_cosine(out);
   dout.extra = d_extra_.data();
+  dout.extra_grad_channels = lay_.grad_channels();  // the opacity channels only shape BRO's constant band
   if (!fg_.empty() && last_.anchors > 0) dout.weight_sums = d_wsum_.data();
   return total;
 }
 
 void HybridTrainer::extra_param_grads(render::GaussianGrads& g) {
-  const int n = model_.n, J = static_cast<int>(objs_.size());
+  const int n = model_.n;
   const float* q = model_.find_extra("obj")->data.data();
   // Object channels -> dq and dc (added to the RGB path's colour gradient), then SH.
-  object_channels_backward(n, L_, J, objs_.data(), q, colors_.data(), C_, g.extra.data(), dq_.data(), g.colors.data());
+  object_channels_backward(n, L_, lay_, objs_.data(), q, colors_.data(), g.extra.data(), dq_.data(), g.colors.data());
   g.sh.resize(size_t(n) * model_.sh_stride() * 3);
   render::sh_backward(n, active_degree_, model_.sh_stride(), model_.sh.data(), model_.mean.data(), campos_,
                       (const int*)nullptr, g.colors.data(), g.sh.data(), g.mean.data());
@@ -278,7 +282,7 @@ void HybridTrainer::extra_param_grads(render::GaussianGrads& g) {
 
 void HybridTrainer::method_update() {
   // Row-sparse Adam on f_n: only Gaussians with a semantic gradient this step are updated.
-  const int n = model_.n, J = static_cast<int>(objs_.size()), D = D_;
+  const int n = model_.n, D = D_;
   float* f = model_.find_extra("lang")->data.data();
   train::AdamParam& p = adam_.get("lang");
   if (hc_.use_scl && last_.anchors > 0) {
@@ -290,7 +294,7 @@ void HybridTrainer::method_update() {
     // Full-scene semantic render: df_n is the gradient of its D extra channels.
     const float* ge = grads_.extra.data();
     adam_.update_rows(p, f, n, [&](long i, float* g) {
-      const float* src = ge + size_t(i) * C_ + 4 * J;
+      const float* src = ge + size_t(i) * C_ + lay_.other();
       bool any = false;
       for (int d = 0; d < D; ++d) any |= (g[d] = src[d]) != 0.f;
       return any;

@@ -22,6 +22,7 @@
 #include "hybrid/config.h"
 #include "hybrid/data.h"
 #include "hybrid/fusion.h"
+#include "hybrid/object_channels.h"
 #include "train/trainer.h"
 
 namespace hgs::hybrid {
@@ -89,6 +90,7 @@ class HybridTrainer : public train::Trainer {
   std::vector<float> refs_;                                  // [R, D] InfoNCE candidates of one anchor
   std::vector<std::vector<int>> views_with_;                 // [L] training views whose SCL objects include l
   int view_ = 0, C_ = 0;
+  ObjectLayout lay_;
   std::vector<int> objs_, fg_;
   float campos_[3] = {0, 0, 0};
   int active_degree_ = 0;

@@ -59,7 +59,7 @@ template <class T>
 bool load_records(const RasterInputs<T>& in, const Binning& bins, const T* records, T* tile_records, bool gather,
                   int tile, typename RasterWorkspace<T>::PerThread& w, TileData<T>& td) {
   const int s = bins.tile_start[tile], e = bins.tile_start[tile + 1];
-  const int n = e - s, C = in.num_extra;
+  const int n = e - s, C = in.num_extra, XS = in.extra_stride > 0 ? in.extra_stride : C;
   td.n = n;
   td.C = C;
   if (n == 0) return false;
@@ -74,7 +74,7 @@ bool load_records(const RasterInputs<T>& in, const Binning& bins, const T* recor
     td.extra = ex;
     for (int k = 0; k < n; ++k) {
       const int g = bins.tile_gauss[s + k];
-      for (int c2 = 0; c2 < C; ++c2) ex[size_t(k) * C + c2] = in.extra[size_t(g) * C + c2];
+      for (int c2 = 0; c2 < C; ++c2) ex[size_t(k) * C + c2] = in.extra[size_t(g) * XS + c2];
     }
   }
   return true;
@@ -274,7 +274,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
   using I = typename std::remove_reference<decltype(M{}[0])>::type;
-  const int W = bins.width, H = bins.height, C = in.num_extra;
+  const int W = bins.width, H = bins.height, C = in.num_extra, XS = in.extra_stride > 0 ? in.extra_stride : C;
   const int F = kNumGrads + C;
   const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
   TileData<T> td;
@@ -324,7 +324,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
       if (g.d_alpha) ga[l] = g.d_alpha[p];
       if (kDepth && g.d_depth) gd[l] = g.d_depth[p];
       if (kExtra && g.d_extra)
-        for (int c = 0; c < C; ++c) st[kBatchFixed + c][l] = g.d_extra[p * C + c];
+        for (int c = 0; c < C; ++c) st[kBatchFixed + c][l] = g.d_extra[p * XS + c];
       for (int jj = 0; jj < J; ++jj) st[kBatchFixed + C + jj][l] = T(in.pixel_weights[p * J + jj]);
     }
     if (kmax[bt] == 0) continue;
@@ -460,7 +460,7 @@ template <class T>
 void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws, const T* final_T,
                         const int32_t* last, const RasterGrads<T>& g) {
   ensure_threads(ws);
-  const int C = in.num_extra, F = kNumGrads + C;
+  const int C = in.num_extra, F = kNumGrads + C, XS = in.extra_stride > 0 ? in.extra_stride : C;
   const bool dep = in.depth != nullptr && g.d_depth != nullptr;
   const bool ext = C > 0 && g.d_extra != nullptr;
   if (ws.pair_grad.size() < size_t(bins.num_pairs) * F) ws.pair_grad.resize(size_t(bins.num_pairs) * F);
@@ -482,9 +482,9 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
 #pragma omp for schedule(static)
     for (int i = 0; i < in.n; ++i) {
       T s[kNumGrads] = {};
-      T* gex = g.extra ? g.extra + size_t(i) * C : nullptr;
+      T* gex = g.extra ? g.extra + size_t(i) * XS : nullptr;
       if (gex)
-        for (int ch = 0; ch < C; ++ch) gex[ch] = 0;
+        for (int ch = 0; ch < XS; ++ch) gex[ch] = 0;  // channels [C, XS) carry no gradient
       for (int p = bins.pair_offset[i]; p < bins.pair_offset[i + 1]; ++p) {
         const T* o = pg + size_t(p) * F;
         for (int f = 0; f < kNumGrads; ++f) s[f] += o[f];

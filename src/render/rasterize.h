@@ -38,8 +38,10 @@ struct RasterInputs {
   const T* opacity = nullptr;  // [N] in (0, 1)
   const T* color = nullptr;    // [N, 3]
   const T* depth = nullptr;    // [N] camera-space depth; null = no depth channel
-  const T* extra = nullptr;    // [N, C]; null when num_extra = 0
-  int num_extra = 0;
+  const T* extra = nullptr;    // [N, XS]; null when num_extra = 0
+  int num_extra = 0;           // C: channels composited (forward) or differentiated (backward)
+  int extra_stride = 0;        // XS >= C: row stride of extra, d_extra and the extra gradient (0 = C); backward
+                               // writes zero gradients for channels [C, XS)
   T background[3] = {0, 0, 0};
   const float* pixel_weights = nullptr;  // [H, W, J] optional per-pixel weight maps M_j
   int num_weights = 0;                   // J

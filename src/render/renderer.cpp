@@ -179,8 +179,11 @@ void RendererT<T>::backward(const OutputGradsT<T>& dout, GaussianGradsT<T>& grad
   ri.opacity = st.opacity.data();
   ri.color = st.color_ptr;
   ri.depth = want_depth ? st.depth.data() : nullptr;
+  const int Cg = dout.extra_grad_channels < 0 ? C : dout.extra_grad_channels;
+  if (Cg > C) fail("render: {} extra channels carry gradient but there are only {}", Cg, C);
   ri.extra = C > 0 ? g.extra : nullptr;
-  ri.num_extra = C;
+  ri.num_extra = dout.extra ? Cg : 0;
+  ri.extra_stride = C;
   for (int k = 0; k < 3; ++k) ri.background[k] = st.s.background[k];
   ri.pixel_weights = st.s.num_pixel_weights > 0 ? st.s.pixel_weights : nullptr;
   ri.num_weights = st.s.num_pixel_weights;

@@ -107,6 +107,9 @@ struct OutputGradsT {
   const T* depth = nullptr;  // [H, W]
   const T* extra = nullptr;  // [H, W, C]
   const T* weight_sums = nullptr;  // [N, J]
+  // Only channels [0, extra_grad_channels) of `extra` carry gradient; the others are forward-only (e.g. an
+  // opacity render used as a constant) and backward skips them (their input gradient is 0). -1 = all.
+  int extra_grad_channels = -1;
 };
 using OutputGrads = OutputGradsT<float>;
 

@@ -130,20 +130,30 @@ TEST(ObservationFusion, HandMadeCases) {
 
 TEST(ObjectChannels, GradientToQAndColour) {
   std::mt19937 rng(2);
-  const int N = 7, L = 5, J = 3, stride = 13;
+  const int N = 7, L = 5, J = 3;
+  const ObjectLayout lay{J, 2};  // 2 other channels between the colours and the opacities
+  const int stride = lay.total();
+  ASSERT_EQ(stride, 14);
+  EXPECT_EQ(lay.opacity(0), 11);
+  EXPECT_EQ(lay.grad_channels(), 11);
   const int objs[J] = {0, 2, 4};
   std::vector<double> q = randv(N * L, rng, 0, 1), c = randv(N * 3, rng, 0, 1), up = randv(N * stride, rng);
   auto loss = [&] {
     std::vector<double> e(N * stride, 0.0);
-    object_channels(N, L, J, objs, q.data(), c.data(), stride, e.data());
+    object_channels(N, L, lay, objs, q.data(), c.data(), e.data());
     double l = 0;
     for (int i = 0; i < N * stride; ++i) l += up[i] * e[i];
     return l;
   };
+  // The other channels are not written, so their upstream gradient must not matter.
+  for (int i = 0; i < N; ++i) up[i * stride + 9] = up[i * stride + 10] = 0;
+  std::vector<double> e(N * stride, -1.0);
+  object_channels(N, L, lay, objs, q.data(), c.data(), e.data());
+  EXPECT_EQ(e[9], -1.0);
+  EXPECT_EQ(e[lay.opacity(1)], q[2]);            // Gaussian 0, object 2
+  EXPECT_EQ(e[lay.color(2) + 1], q[4] * c[1]);   // Gaussian 0, object 4, green
   std::vector<double> dq(N * L, 0.0), dc(N * 3, 0.0);
-  // channels beyond 4J are not written, so their upstream gradient must not matter
-  for (int i = 0; i < N; ++i) up[i * stride + 12] = 0;
-  object_channels_backward(N, L, J, objs, q.data(), c.data(), stride, up.data(), dq.data(), dc.data());
+  object_channels_backward(N, L, lay, objs, q.data(), c.data(), up.data(), dq.data(), dc.data());
   check_grad(q, loss, dq);
   check_grad(c, loss, dc);
 }

@@ -94,7 +94,9 @@ TEST(HybridRender, ObjectConditionedLossToViewLogitsAndColours) {
   Scene sc;
   const int HW = sc.W * sc.H;
   const std::vector<int> objs = {0, 1, 2};
-  const int J = 3, C = 4 * J;
+  const int J = 3;
+  const ObjectLayout lay{J, 0};
+  const int C = lay.total();
   std::mt19937 rng(3);
   std::vector<double> logits(sc.U);
   for (auto& l : logits) l = std::uniform_real_distribution<double>(-1, 1)(rng);
@@ -108,7 +110,7 @@ TEST(HybridRender, ObjectConditionedLossToViewLogitsAndColours) {
     std::vector<uint8_t> valid(sc.N);
     softmax(logits.data(), sc.U, w.data());
     fuse(sc.tab, w.data(), fp, q.data(), s.data(), valid.data());
-    object_channels(sc.N, sc.L, J, objs.data(), q.data(), sc.colors.data(), C, extra.data());
+    object_channels(sc.N, sc.L, lay, objs.data(), q.data(), sc.colors.data(), extra.data());
     render::RendererT<double> r;
     auto in = sc.inputs();
     in.extra = extra.data();
@@ -121,7 +123,7 @@ TEST(HybridRender, ObjectConditionedLossToViewLogitsAndColours) {
       bands.resize(size_t(J) * HW);
       std::vector<float> A(HW), M(HW), tmp;
       for (int j = 0; j < J; ++j) {
-        for (int p = 0; p < HW; ++p) { A[p] = float(out.extra[p * C + 4 * j + 3]); M[p] = sc.labels.v[p] == objs[j]; }
+        for (int p = 0; p < HW; ++p) { A[p] = float(out.extra[p * C + lay.opacity(j)]); M[p] = sc.labels.v[p] == objs[j]; }
         boundary_band(A.data(), M.data(), sc.H, sc.W, 5, &bands[size_t(j) * HW], tmp);
       }
     }
@@ -131,7 +133,7 @@ TEST(HybridRender, ObjectConditionedLossToViewLogitsAndColours) {
     for (int j = 0; j < J; ++j) {
       for (int p = 0; p < HW; ++p)
         for (int c = 0; c < 3; ++c) {
-          pred[p * 3 + c] = out.extra[p * C + 4 * j + c];
+          pred[p * 3 + c] = out.extra[p * C + lay.color(j) + c];
           gtm[p * 3 + c] = sc.gt[p * 3 + c] * (sc.labels.v[p] == objs[j]);
         }
       std::fill(g.begin(), g.end(), 0.0);
@@ -141,16 +143,17 @@ TEST(HybridRender, ObjectConditionedLossToViewLogitsAndColours) {
       const double bro = bro_loss(pred.data(), gtm.data(), 3, 3, &bands[size_t(j) * HW], sc.H, sc.W, 1e-6, g.data(), 1.0 / J);
       loss += (0.8 * l1 + 0.2 * (1 - ss) + bro) / J;
       for (int p = 0; p < HW; ++p)
-        for (int c = 0; c < 3; ++c) d_extra[p * C + 4 * j + c] = g[p * 3 + c];
+        for (int c = 0; c < 3; ++c) d_extra[p * C + lay.color(j) + c] = g[p * 3 + c];
     }
     if (dlogits) {
       render::OutputGradsT<double> dout;
       dout.extra = d_extra.data();
+      dout.extra_grad_channels = lay.grad_channels();  // the opacities feed only the (constant) bands
       render::GaussianGradsT<double> grads;
       r.backward(dout, grads);
       std::vector<double> dq(sc.N * sc.L, 0.0), dw(sc.U);
       *dcolors = grads.colors;
-      object_channels_backward(sc.N, sc.L, J, objs.data(), q.data(), sc.colors.data(), C, grads.extra.data(), dq.data(),
+      object_channels_backward(sc.N, sc.L, lay, objs.data(), q.data(), sc.colors.data(), grads.extra.data(), dq.data(),
                                dcolors->data());
       fuse_backward(sc.tab, w.data(), fp, s.data(), q.data(), valid.data(), dq.data(), dw.data());
       dlogits->resize(sc.U);

@@ -12,6 +12,7 @@
 
 #include <cstring>
 
+#include "core/error.h"
 #include "fd_util.h"
 #include "render/binning.h"
 #include "render/project.h"
@@ -337,6 +338,42 @@ TEST(RenderGrad, EndToEndColoursNoDepthFiniteDifferences) {
   fd_check("e2e extra", e.s.extra, all_indices(e.s.extra.size()), g.extra, ev);
   fd_check("e2e mean", e.s.mean, all_indices(e.s.mean.size()), g.mean, ev);
   fd_check("e2e opacity_logit", e.s.opacity_logit, all_indices(e.s.opacity_logit.size()), g.opacity_logit, ev);
+}
+
+// Forward-only extra channels: backward with extra_grad_channels = G ignores the upstream gradient of channels
+// [G, C) and gives exactly the gradients of a full backward whose trailing upstream gradients are zero.
+TEST(RenderGrad, ForwardOnlyExtraChannelsAreSkippedExactly) {
+  Scene sc = random_scene(40, 40, 36, 43, 0.9, 5);
+  ASSERT_EQ(sc.num_extra, 5);
+  sc.add_pixel_weights(2, 43);
+  EndToEnd full(sc, 6), part(sc, 6);
+  const size_t P = size_t(sc.cam.width) * sc.cam.height;
+  for (size_t p = 0; p < P; ++p)
+    for (int c = 3; c < 5; ++c) full.we[p * 5 + c] = 0;  // part keeps non-zero values there: they must be ignored
+  const GaussianGradsT<double> a = full.grads();
+  part.eval();
+  GaussianGradsT<double> b;
+  OutputGradsT<double> d;
+  d.rgb = part.wr.data();
+  d.alpha = part.wa.data();
+  d.depth = part.wd.data();
+  d.extra = part.we.data();
+  d.weight_sums = part.ww.data();
+  d.extra_grad_channels = 3;
+  part.r.backward(d, b);
+  EXPECT_EQ(a.mean, b.mean);
+  EXPECT_EQ(a.log_scale, b.log_scale);
+  EXPECT_EQ(a.quat, b.quat);
+  EXPECT_EQ(a.opacity_logit, b.opacity_logit);
+  EXPECT_EQ(a.sh, b.sh);
+  ASSERT_EQ(b.extra.size(), size_t(sc.n) * 5);
+  for (int i = 0; i < sc.n; ++i)
+    for (int c = 0; c < 5; ++c) EXPECT_EQ(b.extra[i * 5 + c], c < 3 ? a.extra[i * 5 + c] : 0.0) << i << " " << c;
+  double any = 0;
+  for (double v : a.extra) any += std::abs(v);
+  EXPECT_GT(any, 0);
+  d.extra_grad_channels = 6;
+  EXPECT_THROW(part.r.backward(d, b), hgs::Error);
 }
 
 // dL/d(mean2d) reported by backward() is the derivative w.r.t. the projected centre with everything else
