@@ -6,23 +6,34 @@
 namespace hgs::hybrid {
 namespace {
 
+// Separable max (kMax) or min filter over the window [x - r, x + r2] clipped to the image. Each pass is a
+// max/min of whole shifted rows, so the inner loops are contiguous and vectorise.
 template <bool kMax>
 void filter(const float* in, int H, int W, int s, float* out, std::vector<float>& row) {
   const int r = s / 2, r2 = s - 1 - r;  // window [x - r, x + r2] (centred for odd s)
   row.resize(size_t(H) * W);
   auto pick = [](float a, float b) { return kMax ? std::max(a, b) : std::min(a, b); };
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      float v = in[size_t(y) * W + x];
-      for (int d = std::max(0, x - r); d <= std::min(W - 1, x + r2); ++d) v = pick(v, in[size_t(y) * W + d]);
-      row[size_t(y) * W + x] = v;
+  for (int y = 0; y < H; ++y) {
+    const float* src = in + size_t(y) * W;
+    float* dst = row.data() + size_t(y) * W;
+    std::copy(src, src + W, dst);
+    for (int d = -r; d <= r2; ++d) {
+      if (d == 0) continue;
+      const int x0 = std::max(0, -d), x1 = std::min(W, W - d);  // x + d inside [0, W)
+#pragma omp simd
+      for (int x = x0; x < x1; ++x) dst[x] = pick(dst[x], src[x + d]);
     }
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      float v = row[size_t(y) * W + x];
-      for (int d = std::max(0, y - r); d <= std::min(H - 1, y + r2); ++d) v = pick(v, row[size_t(d) * W + x]);
-      out[size_t(y) * W + x] = v;
+  }
+  for (int y = 0; y < H; ++y) {
+    float* dst = out + size_t(y) * W;
+    std::copy(row.data() + size_t(y) * W, row.data() + size_t(y + 1) * W, dst);
+    for (int d = std::max(0, y - r); d <= std::min(H - 1, y + r2); ++d) {
+      if (d == y) continue;
+      const float* src = row.data() + size_t(d) * W;
+#pragma omp simd
+      for (int x = 0; x < W; ++x) dst[x] = pick(dst[x], src[x]);
     }
+  }
 }
 
 }  // namespace
@@ -49,8 +60,73 @@ void boundary_band(const float* A, const float* M, int H, int W, int s, float* B
   for (size_t i = 0; i < n; ++i) B[i] = std::clamp(B[i] + d[i] - e[i], 0.f, 1.f);
 }
 
+// Contiguous channels (cs == C): the pairs of both directions are differences of whole shifted rows, computed
+// branch-free with the per-pixel weight spread over the channels (same sums as the generic loop below, which
+// serves strided layouts).
+template <class T>
+T bro_loss_contiguous(const T* pred, const T* gt, int C, const float* B, int H, int W, T eps, T* grad, T scale) {
+  const int L = W * C;
+  std::vector<T> wx(L), wy(L), g(L);
+  double wsum = 0;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const float b = B[size_t(y) * W + x];
+      if (x + 1 < W) wsum += std::max(b, B[size_t(y) * W + x + 1]);
+      if (y + 1 < H) wsum += std::max(b, B[size_t(y + 1) * W + x]);
+    }
+  const T den = T(C * wsum) + eps;
+  const T gs = scale / den;
+  double num = 0;
+  for (int y = 0; y < H; ++y) {
+    const float* b = B + size_t(y) * W;
+    for (int x = 0; x < W; ++x)
+      for (int c = 0; c < C; ++c) {
+        wx[size_t(x) * C + c] = x + 1 < W ? T(std::max(b[x], b[x + 1])) : T(0);
+        wy[size_t(x) * C + c] = y + 1 < H ? T(std::max(b[x], b[x + W])) : T(0);
+      }
+    const T* p = pred + size_t(y) * L;
+    const T* q = gt + size_t(y) * L;
+    // x direction: element i pairs with i + C in the same row.
+    double sx = 0;
+#pragma omp simd reduction(+ : sx)
+    for (int i = 0; i < L - C; ++i) {
+      const T r = (p[i + C] - p[i]) - (q[i + C] - q[i]);
+      const T w = wx[i];
+      sx += double(w * std::abs(r));
+      g[i] = gs * w * T((r > 0) - (r < 0));
+    }
+    num += sx;
+    if (grad) {
+      T* gr = grad + size_t(y) * L;
+      for (int i = 0; i < L - C; ++i) gr[i] -= g[i];
+      for (int i = 0; i < L - C; ++i) gr[i + C] += g[i];
+    }
+    if (y + 1 >= H) continue;
+    // y direction: element i pairs with the same element of the next row.
+    double sy = 0;
+#pragma omp simd reduction(+ : sy)
+    for (int i = 0; i < L; ++i) {
+      const T r = (p[i + L] - p[i]) - (q[i + L] - q[i]);
+      const T w = wy[i];
+      sy += double(w * std::abs(r));
+      g[i] = gs * w * T((r > 0) - (r < 0));
+    }
+    num += sy;
+    if (grad) {
+      T* gr = grad + size_t(y) * L;
+#pragma omp simd
+      for (int i = 0; i < L; ++i) {
+        gr[i] -= g[i];
+        gr[i + L] += g[i];
+      }
+    }
+  }
+  return T(num) / den;
+}
+
 template <class T>
 T bro_loss(const T* pred, const T* gt, int cs, int C, const float* B, int H, int W, T eps, T* grad, T scale) {
+  if (cs == C) return bro_loss_contiguous(pred, gt, C, B, H, W, eps, grad, scale);
   // Weight total first (it is the normaliser of every term).
   double wsum = 0;
   for (int y = 0; y < H; ++y)

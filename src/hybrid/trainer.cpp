@@ -125,43 +125,53 @@ float HybridTrainer::appearance_and_bro(const train::TrainView& view, const rend
   const bool bro_on = hc_.use_bro && hc_.lambda_bro > 0;
   obj_app_.assign(J, 0.0);
   obj_bro_.assign(J, 0.0);
+  // Object images to planar [J][H, W, 3] (+ opacities [J][H, W]) in one pass over the interleaved render.
+  obj_pred_.resize(size_t(J) * HW * 3);
+  obj_grad_.resize(size_t(J) * HW * 3);
+  obj_opac_.resize(size_t(J) * HW);
+#pragma omp parallel for schedule(static)
+  for (long p = 0; p < long(HW); ++p) {
+    const float* e = &out.extra[size_t(p) * C_];
+    for (int j = 0; j < J; ++j) {
+      for (int c = 0; c < 3; ++c) obj_pred_[(size_t(j) * HW + p) * 3 + c] = e[lay_.color(j) + c];
+      obj_opac_[size_t(j) * HW + p] = e[lay_.opacity(j)];
+    }
+  }
   // One object per thread (each object's SSIM and BRO run single-threaded in that thread's scratch): no
-  // parallel-region overhead per convolution and each object's images stay in one core's cache. Objects write
-  // disjoint channels of d_extra, and the loss values are summed in object order (deterministic).
+  // parallel-region overhead per convolution and each object's images stay in one core's cache. Loss values
+  // are summed in object order (deterministic).
   const size_t threads = size_t(std::max(1, omp_get_max_threads()));
   if (scratch_.size() < threads) scratch_.resize(threads, ObjectScratch(hc_.lambda_dssim));
 #pragma omp parallel for schedule(dynamic, 1)
   for (int j = 0; j < J; ++j) {
     ObjectScratch& w = scratch_[omp_get_thread_num()];
-    w.pred.resize(HW * 3);
     w.gt.resize(HW * 3);
-    w.grad.resize(HW * 3);
     w.mask.resize(HW);
-    w.opac.resize(HW);
     w.band.resize(HW);
+    const float* pred = &obj_pred_[size_t(j) * HW * 3];
+    float* grad = &obj_grad_[size_t(j) * HW * 3];
     const int k = objs_[j];
     for (size_t p = 0; p < HW; ++p) {
-      const float* e = &out.extra[p * C_ + lay_.color(j)];
       const float m = lab.v[p] == k ? 1.f : 0.f;
       w.mask[p] = m;
-      w.opac[p] = out.extra[p * C_ + lay_.opacity(j)];
-      for (int c = 0; c < 3; ++c) {
-        w.pred[p * 3 + c] = e[c];
-        w.gt[p * 3 + c] = view.image.px[p * 3 + c] * m;
-      }
+      for (int c = 0; c < 3; ++c) w.gt[p * 3 + c] = view.image.px[p * 3 + c] * m;
     }
-    train::LossValues lv = w.loss(w.pred.data(), w.gt.data(), H, W, w.grad.data());
+    train::LossValues lv = w.loss(pred, w.gt.data(), H, W, grad);
     obj_app_[j] = lv.total;
     const float s_app = hc_.lambda_app / J;
-    for (auto& g : w.grad) g *= s_app;
+    for (size_t i = 0; i < HW * 3; ++i) grad[i] *= s_app;
     if (bro_on) {
       // B is built from the rendered opacity but treated as a constant: no gradient through the morphology.
-      boundary_band(w.opac.data(), w.mask.data(), H, W, hc_.bro_kernel, w.band.data(), w.morph);
-      obj_bro_[j] = bro_loss(w.pred.data(), w.gt.data(), 3, 3, w.band.data(), H, W, hc_.bro_eps, w.grad.data(),
-                             hc_.lambda_bro / J);
+      boundary_band(&obj_opac_[size_t(j) * HW], w.mask.data(), H, W, hc_.bro_kernel, w.band.data(), w.morph);
+      obj_bro_[j] = bro_loss(pred, w.gt.data(), 3, 3, w.band.data(), H, W, hc_.bro_eps, grad, hc_.lambda_bro / J);
     }
-    for (size_t p = 0; p < HW; ++p)
-      for (int c = 0; c < 3; ++c) d_extra_[p * C_ + lay_.color(j) + c] += w.grad[p * 3 + c];
+  }
+  // Gradients back to the interleaved layout (the colour channels of a pixel are contiguous).
+#pragma omp parallel for schedule(static)
+  for (long p = 0; p < long(HW); ++p) {
+    float* d = &d_extra_[size_t(p) * C_];
+    for (int j = 0; j < J; ++j)
+      for (int c = 0; c < 3; ++c) d[lay_.color(j) + c] += obj_grad_[(size_t(j) * HW + p) * 3 + c];
   }
   double app = 0, bro = 0;
   for (int j = 0; j < J; ++j) {

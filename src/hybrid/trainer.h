@@ -78,10 +78,12 @@ class HybridTrainer : public train::Trainer {
   struct ObjectScratch {  // per-thread buffers of the object-conditioned losses of one object
     explicit ObjectScratch(float lambda_dssim) : loss(lambda_dssim) {}
     train::PhotometricLoss loss;
-    std::vector<float> pred, gt, grad;  // [H, W, 3]
-    std::vector<float> mask, opac, band, morph;  // [H, W]
+    std::vector<float> gt;                 // [H, W, 3]
+    std::vector<float> mask, band, morph;  // [H, W]
   };
   std::vector<ObjectScratch> scratch_;                       // [threads]
+  std::vector<float> obj_pred_, obj_grad_;                   // [J, H, W, 3] planar object renders / gradients
+  std::vector<float> obj_opac_;                              // [J, H, W]
   std::vector<double> obj_app_, obj_bro_;                    // [J]
   std::vector<float> sref_;                                  // [H, W, D] (no-SCL ablation)
   std::vector<float> P_, dP_;                                // [Jf, D]

@@ -9,6 +9,9 @@
 //   dL/dx = w*(g d_mu) + 2 x w*(g d_exx) + y w*(g d_exy).
 #include "train/ssim.h"
 
+#include <omp.h>
+
+#include <algorithm>
 #include <cmath>
 
 namespace hgs::train {
@@ -26,63 +29,156 @@ struct Window {
   }
 };
 
-// out = w (x) w convolution of `in` [H, W*C] along rows (stride C) and columns; `tmp` [H, W*C].
+// Horizontal 11-tap pass of one row `r` [W*C] (channel stride C, zero padding) into `o`.
 template <typename T>
-void conv_same(const T* in, T* out, T* tmp, int H, int W, int C) {
+void conv_row(const T* r, T* o, int W, int C) {
   const T* w = ssim_window<T>();
-  const int L = W * C;
-#pragma omp parallel
-  {
-#pragma omp for schedule(static)
-    for (int y = 0; y < H; ++y) {
-      const T* r = in + size_t(y) * L;
-      T* o = tmp + size_t(y) * L;
-      const int lo = kHalf * C, hi = L - kHalf * C;
-      for (int j = 0; j < std::min(lo, L); ++j) {
-        T s = 0;
-        for (int k = 0; k < kWin; ++k) {
-          int q = j + (k - kHalf) * C;
-          if (q >= 0 && q < L) s += w[k] * r[q];
-        }
-        o[j] = s;
-      }
-      // Interior: taps outer, pixels inner (contiguous, vectorised over j).
-      if (hi > lo) {
-        const T w0 = w[0];
-#pragma omp simd
-        for (int j = lo; j < hi; ++j) o[j] = w0 * r[j - kHalf * C];
-        for (int k = 1; k < kWin; ++k) {
-          const T wk = w[k];
-          const T* rk = r + (k - kHalf) * C;
-#pragma omp simd
-          for (int j = lo; j < hi; ++j) o[j] += wk * rk[j];
-        }
-      }
-      for (int j = std::max(hi, lo); j < L; ++j) {
-        T s = 0;
-        for (int k = 0; k < kWin; ++k) {
-          int q = j + (k - kHalf) * C;
-          if (q >= 0 && q < L) s += w[k] * r[q];
-        }
-        o[j] = s;
-      }
+  const int L = W * C, lo = kHalf * C, hi = L - kHalf * C;
+  for (int j = 0; j < std::min(lo, L); ++j) {
+    T s = 0;
+    for (int k = 0; k < kWin; ++k) {
+      int q = j + (k - kHalf) * C;
+      if (q >= 0 && q < L) s += w[k] * r[q];
     }
-#pragma omp for schedule(static)
-    for (int y = 0; y < H; ++y) {
-      T* o = out + size_t(y) * L;
-      int k0 = std::max(0, kHalf - y), k1 = std::min(kWin, H + kHalf - y);
-      {
-        const T* r = tmp + size_t(y + k0 - kHalf) * L;
-        const T wk = w[k0];
+    o[j] = s;
+  }
+  // Interior: vectorised over j, the 11 taps unrolled and summed in registers (one store per output).
+  if (hi > lo) {
+    T wk[kWin];
+    for (int k = 0; k < kWin; ++k) wk[k] = w[k];
+    const T* r0 = r - kHalf * C;
 #pragma omp simd
-        for (int j = 0; j < L; ++j) o[j] = wk * r[j];
-      }
-      for (int k = k0 + 1; k < k1; ++k) {
-        const T* r = tmp + size_t(y + k - kHalf) * L;
-        const T wk = w[k];
+    for (int j = lo; j < hi; ++j) {
+      T acc = wk[0] * r0[j];
+#pragma GCC unroll 11
+      for (int k = 1; k < kWin; ++k) acc += wk[k] * r0[j + k * C];
+      o[j] = acc;
+    }
+  }
+  for (int j = std::max(hi, lo); j < L; ++j) {
+    T s = 0;
+    for (int k = 0; k < kWin; ++k) {
+      int q = j + (k - kHalf) * C;
+      if (q >= 0 && q < L) s += w[k] * r[q];
+    }
+    o[j] = s;
+  }
+}
+
+// Vertical 11-tap pass for output row y of an H-row image whose horizontally filtered rows live in a ring of
+// kWin rows (`ring(row)` returns the row's buffer): o = sum_k w[k] ring(y + k - 5) over rows inside [0, H).
+template <typename T, class Ring>
+void conv_col(Ring&& ring, int y, int H, int L, T* o) {
+  const T* w = ssim_window<T>();
+  const int k0 = std::max(0, kHalf - y), k1 = std::min(kWin, H + kHalf - y);
+  if (k0 == 0 && k1 == kWin) {
+    // Full window: the 11 rows summed in registers, one store per output.
+    const T* rr[kWin];
+    T wk[kWin];
+    for (int k = 0; k < kWin; ++k) rr[k] = ring(y + k - kHalf), wk[k] = w[k];
 #pragma omp simd
-        for (int j = 0; j < L; ++j) o[j] += wk * r[j];
+    for (int j = 0; j < L; ++j) {
+      T acc = wk[0] * rr[0][j];
+#pragma GCC unroll 11
+      for (int k = 1; k < kWin; ++k) acc += wk[k] * rr[k][j];
+      o[j] = acc;
+    }
+    return;
+  }
+  {
+    const T* r = ring(y + k0 - kHalf);
+    const T wk = w[k0];
+#pragma omp simd
+    for (int j = 0; j < L; ++j) o[j] = wk * r[j];
+  }
+  for (int k = k0 + 1; k < k1; ++k) {
+    const T* r = ring(y + k - kHalf);
+    const T wk = w[k];
+#pragma omp simd
+    for (int j = 0; j < L; ++j) o[j] += wk * r[j];
+  }
+}
+
+// SSIM of output rows [y0, y1) as a line-buffer pipeline, so every intermediate row stays in cache:
+//   product rows (x, y, xx, yy, xy) -> horizontal pass -> ring P (11 rows)
+//   moment row m (vertical pass over P rows m-5..m+5) -> map (summed into row_sum[m] for m in [y0, y1)) and the
+//   three backward coefficients -> horizontal pass -> ring Q (11 rows)
+//   gradient row y = m - 5 (vertical pass over Q rows y-5..y+5).
+// Moment rows are computed for [y0 - 5, y1 + 5) and product rows for [y0 - 10, y1 + 10) (clipped), so a band
+// needs nothing from its neighbours; every value is computed with the same arithmetic whatever the banding.
+template <typename T>
+void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, T* grad_x, double* row_sum,
+               std::vector<T>& buf) {
+  const int L = W * C;
+  const T C1 = T(0.01 * 0.01), C2 = T(0.03 * 0.03);
+  const T g = T(1) / T(size_t(H) * L);
+  const bool back = grad_x != nullptr;
+  buf.resize(size_t(kWin) * 8 * L + size_t(8) * L);
+  T* P = buf.data();                       // [11][5][L]
+  T* Q = P + size_t(kWin) * 5 * L;         // [11][3][L]
+  T* tmp = Q + size_t(kWin) * 3 * L;       // [8][L]: products, moments
+  auto prow = [&](int row, int map) { return P + (size_t(row % kWin) * 5 + map) * L; };
+  auto qrow = [&](int row, int map) { return Q + (size_t(row % kWin) * 3 + map) * L; };
+  const int ma = back ? std::max(0, y0 - kHalf) : y0, mb = back ? std::min(H, y1 + kHalf) : y1;
+  int next_p = std::max(0, ma - kHalf);  // next product row to compute
+  for (int m = ma; m < mb; ++m) {
+    for (; next_p <= std::min(H - 1, m + kHalf); ++next_p) {
+      const T* xr = x + size_t(next_p) * L;
+      const T* yr = y + size_t(next_p) * L;
+      T *pxx = tmp, *pyy = tmp + L, *pxy = tmp + 2 * L;
+#pragma omp simd
+      for (int j = 0; j < L; ++j) {
+        pxx[j] = xr[j] * xr[j];
+        pyy[j] = yr[j] * yr[j];
+        pxy[j] = xr[j] * yr[j];
       }
+      conv_row(xr, prow(next_p, 0), W, C);
+      conv_row(yr, prow(next_p, 1), W, C);
+      conv_row(pxx, prow(next_p, 2), W, C);
+      conv_row(pyy, prow(next_p, 3), W, C);
+      conv_row(pxy, prow(next_p, 4), W, C);
+    }
+    T* mom[5];
+    for (int k = 0; k < 5; ++k) {
+      mom[k] = tmp + size_t(3 + k) * L;
+      conv_col<T>([&](int r) { return prow(r, k); }, m, H, L, mom[k]);
+    }
+    T *dmu = qrow(m, 0), *dxx = qrow(m, 1), *dxy = qrow(m, 2);
+    double total = 0;
+#pragma omp simd reduction(+ : total)
+    for (int j = 0; j < L; ++j) {
+      const T mu1 = mom[0][j], mu2 = mom[1][j];
+      const T s11 = mom[2][j] - mu1 * mu1, s22 = mom[3][j] - mu2 * mu2, s12 = mom[4][j] - mu1 * mu2;
+      const T A1 = 2 * mu1 * mu2 + C1, A2 = 2 * s12 + C2, B1 = mu1 * mu1 + mu2 * mu2 + C1, B2 = s11 + s22 + C2;
+      const T inv = T(1) / (B1 * B2);
+      const T map = A1 * A2 * inv;
+      total += map;
+      // g d/dmu_x, g d/dE[xx], g d/dE[xy] (see the top of the file)
+      dmu[j] = g * (2 * mu2 * (A2 - A1) * inv - map * (2 * mu1 / B1 - 2 * mu1 / B2));
+      dxx[j] = -g * map / B2;
+      dxy[j] = g * 2 * A1 * inv;
+    }
+    if (m >= y0 && m < y1) row_sum[m] = total;
+    if (!back) continue;
+    // Horizontal pass of the coefficients, in place through a scratch row.
+    for (int k = 0; k < 3; ++k) {
+      T* q = qrow(m, k);
+      std::copy(q, q + L, tmp);
+      conv_row(tmp, q, W, C);
+    }
+    // Gradient rows whose Q window is complete: y = m - 5, or every remaining row at the last moment row.
+    const int ylo = m == mb - 1 ? std::max(y0, m - kHalf) : m - kHalf, yhi = m == mb - 1 ? y1 - 1 : m - kHalf;
+    for (int yy = std::max(ylo, y0); yy <= yhi && yy < y1; ++yy) {
+      T* v[3];
+      for (int k = 0; k < 3; ++k) {
+        v[k] = tmp + size_t(3 + k) * L;
+        conv_col<T>([&](int r) { return qrow(r, k); }, yy, H, L, v[k]);
+      }
+      const T* xr = x + size_t(yy) * L;
+      const T* yr = y + size_t(yy) * L;
+      T* gr = grad_x + size_t(yy) * L;
+#pragma omp simd
+      for (int j = 0; j < L; ++j) gr[j] = v[0][j] + 2 * xr[j] * v[1][j] + yr[j] * v[2][j];
     }
   }
 }
@@ -97,49 +193,18 @@ const T* ssim_window() {
 
 template <typename T>
 T ssim(const T* x, const T* y, int H, int W, int C, T* grad_x, SsimWorkspace<T>& ws) {
-  const size_t n = size_t(H) * W * C;
-  const T C1 = T(0.01 * 0.01), C2 = T(0.03 * 0.03);
-  for (auto* v : {&ws.mx, &ws.my, &ws.exx, &ws.eyy, &ws.exy, &ws.tmp})
-    if (v->size() != n) v->resize(n);
-  // Products (into the output buffers, then convolved in place through tmp).
-  T *mx = ws.mx.data(), *my = ws.my.data(), *exx = ws.exx.data(), *eyy = ws.eyy.data(), *exy = ws.exy.data();
-  T* tmp = ws.tmp.data();
-#pragma omp parallel for simd schedule(static)
-  for (size_t i = 0; i < n; ++i) {
-    exx[i] = x[i] * x[i];
-    eyy[i] = y[i] * y[i];
-    exy[i] = x[i] * y[i];
-  }
-  conv_same(x, mx, tmp, H, W, C);
-  conv_same(y, my, tmp, H, W, C);
-  conv_same(exx, exx, tmp, H, W, C);
-  conv_same(eyy, eyy, tmp, H, W, C);
-  conv_same(exy, exy, tmp, H, W, C);
-  const T g = T(1) / T(n);
+  // Bands of rows, one per thread (one band when called inside a parallel region); per-row sums added in row
+  // order, so the value and the gradient are bitwise independent of the thread count.
+  ws.row_sum.assign(size_t(H), 0.0);
+  const int bands = omp_in_parallel() ? 1 : std::max(1, std::min(omp_get_max_threads(), H / (2 * kWin)));
+  if (ws.band.size() < size_t(bands)) ws.band.resize(bands);
+#pragma omp parallel for schedule(static, 1) num_threads(bands) if (bands > 1)
+  for (int b = 0; b < bands; ++b)
+    ssim_band(x, y, H, W, C, int(long(H) * b / bands), int(long(H) * (b + 1) / bands), grad_x, ws.row_sum.data(),
+              ws.band[b]);
   double total = 0;
-#pragma omp parallel for simd reduction(+ : total) schedule(static)
-  for (size_t i = 0; i < n; ++i) {
-    T mu1 = mx[i], mu2 = my[i];
-    T s11 = exx[i] - mu1 * mu1, s22 = eyy[i] - mu2 * mu2, s12 = exy[i] - mu1 * mu2;
-    T A1 = 2 * mu1 * mu2 + C1, A2 = 2 * s12 + C2, B1 = mu1 * mu1 + mu2 * mu2 + C1, B2 = s11 + s22 + C2;
-    T inv = T(1) / (B1 * B2);
-    T map = A1 * A2 * inv;
-    total += map;
-    if (grad_x) {
-      // Reuse the buffers: mx <- g d/dmu_x, exx <- g d/dE[xx], exy <- g d/dE[xy].
-      mx[i] = g * (2 * mu2 * (A2 - A1) * inv - map * (2 * mu1 / B1 - 2 * mu1 / B2));
-      exx[i] = -g * map / B2;
-      exy[i] = g * 2 * A1 * inv;
-    }
-  }
-  if (grad_x) {
-    conv_same(mx, mx, tmp, H, W, C);
-    conv_same(exx, exx, tmp, H, W, C);
-    conv_same(exy, exy, tmp, H, W, C);
-#pragma omp parallel for simd schedule(static)
-    for (size_t i = 0; i < n; ++i) grad_x[i] = mx[i] + 2 * x[i] * exx[i] + y[i] * exy[i];
-  }
-  return T(total / double(n));
+  for (int r = 0; r < H; ++r) total += ws.row_sum[r];
+  return T(total / (double(H) * W * C));
 }
 
 template float ssim<float>(const float*, const float*, int, int, int, float*, SsimWorkspace<float>&);

@@ -8,11 +8,13 @@ namespace hgs::train {
 
 template <typename T>
 struct SsimWorkspace {
-  std::vector<T> mx, my, exx, eyy, exy, tmp;  // [H, W, C] each; reused between calls (no allocation once warm)
+  std::vector<std::vector<T>> band;  // per row band: line buffers (19 rows of W*C); reused between calls
+  std::vector<double> row_sum;       // [H] SSIM-map sum of each row
 };
 
 // Mean SSIM of images x and y, both [H, W, C] (channel-interleaved). When `grad_x` is not null it receives
-// d(mean SSIM)/dx, [H, W, C] (overwritten). Uses OpenMP over rows; deterministic.
+// d(mean SSIM)/dx, [H, W, C] (overwritten). Uses OpenMP over bands of rows (a single band inside a parallel
+// region); deterministic and independent of the thread count.
 template <typename T>
 T ssim(const T* x, const T* y, int H, int W, int C, T* grad_x, SsimWorkspace<T>& ws);
 

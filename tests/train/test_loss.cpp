@@ -1,6 +1,7 @@
 // SSIM and L1: forward against a direct 2D brute-force SSIM, gradients against central finite differences
 // in double precision, the float path against the double path, and the combined loss's gradient.
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <cmath>
 #include <random>
@@ -84,6 +85,48 @@ TEST(Ssim, GradientMatchesFiniteDifferences) {
     EXPECT_GT(max_g, 1e-4);
     EXPECT_LT(max_err, 1e-7 * max_g) << "max |grad| " << max_g;
   }
+}
+
+TEST(Ssim, RowBandsAreExactAndThreadIndependent) {
+  // Tall enough for several row bands (one per thread): the same value and gradient bitwise for 1, 2 and 3
+  // threads, the value equal to the brute force, the gradient to finite differences around band borders.
+  const int H = 70, W = 17, C = 3;
+  auto x = random_image(H, W, C, 7), y = random_image(H, W, C, 8);
+  for (size_t i = 0; i < y.size(); ++i) y[i] = 0.6 * x[i] + 0.4 * y[i];
+  const int saved = omp_get_max_threads();
+  std::vector<std::vector<double>> grads;
+  std::vector<double> values;
+  for (int t : {1, 2, 3}) {
+    omp_set_num_threads(t);
+    SsimWorkspace<double> ws;
+    std::vector<double> g(x.size());
+    values.push_back(ssim(x.data(), y.data(), H, W, C, g.data(), ws));
+    grads.push_back(g);
+  }
+  omp_set_num_threads(saved);
+  EXPECT_EQ(values[0], values[1]);
+  EXPECT_EQ(values[0], values[2]);
+  EXPECT_EQ(grads[0], grads[1]);
+  EXPECT_EQ(grads[0], grads[2]);
+  EXPECT_NEAR(values[0], brute_ssim(x, y, H, W, C), 1e-12);
+  omp_set_num_threads(std::max(2, saved));
+  SsimWorkspace<double> ws;
+  const double h = 1e-4;  // gradients here are ~1e-3 (1/(HWC) scale): a larger step keeps rounding noise small
+  double max_err = 0, max_g = 0;
+  for (int row : {0, 22, 23, 24, 34, 35, 36, 46, 47, 69})
+    for (int j = 0; j < W * C; j += 4) {
+      const size_t i = size_t(row) * W * C + j;
+      auto xp = x, xm = x;
+      xp[i] += h;
+      xm[i] -= h;
+      const double fd = (ssim(xp.data(), y.data(), H, W, C, (double*)nullptr, ws) -
+                         ssim(xm.data(), y.data(), H, W, C, (double*)nullptr, ws)) / (2 * h);
+      max_err = std::max(max_err, std::abs(fd - grads[0][i]));
+      max_g = std::max(max_g, std::abs(grads[0][i]));
+    }
+  omp_set_num_threads(saved);
+  EXPECT_GT(max_g, 1e-5);
+  EXPECT_LT(max_err, 1e-7 * max_g);
 }
 
 TEST(Ssim, FloatMatchesDouble) {
