@@ -4,8 +4,9 @@
 // values back to back in header order: model fields, Adam m and v per parameter (bfloat16 moments are widened
 // to float32, which is exact), densification statistics, then the method's own state ("method/<name>", e.g.
 // the hybrid method's view logits).
+#include <cstdio>
 #include <cstring>
-#include <deque>
+#include <memory>
 #include <sstream>
 
 #include "core/error.h"
@@ -16,28 +17,40 @@
 namespace hgs::train {
 namespace {
 constexpr char kMagic[8] = {'H', 'G', 'S', 'C', 'K', 'P', 'T', '1'};
+constexpr size_t kChunk = size_t(1) << 20;  // values converted per chunk for bfloat16 arrays
+
+struct FileCloser {
+  void operator()(FILE* f) const { std::fclose(f); }
+};
 }
 
 void Trainer::save_checkpoint(const std::filesystem::path& path) const {
   using nlohmann::json;
   auto& m = const_cast<GaussianModel&>(model_);
-  std::vector<std::pair<std::string, const std::vector<float>*>> arrays;
-  std::deque<std::vector<float>> widened;  // float32 copies of bfloat16 moments
-  auto widen = [&](const std::vector<uint16_t>& b) {
-    widened.emplace_back(b.size());
-    for (size_t i = 0; i < b.size(); ++i) widened.back()[i] = bf16_to_float(b[i]);
-    return &widened.back();
+  // Arrays to write: float32 data, or bfloat16 moments widened chunk by chunk while writing (no full copy).
+  struct Out {
+    std::string name;
+    size_t count;
+    const float* f32;
+    const uint16_t* b16;
   };
-  for (auto& f : m.fields()) arrays.push_back({"model/" + f.name, f.data});
+  std::vector<Out> arrays;
+  auto add = [&](const std::string& name, const std::vector<float>* v) { arrays.push_back({name, v->size(), v->data(), nullptr}); };
+  for (auto& f : m.fields()) add("model/" + f.name, f.data);
   for (auto& p : adam_.params) {
-    arrays.push_back({"adam_m/" + p.name, p.bf16 ? widen(p.m16) : &p.m});
-    arrays.push_back({"adam_v/" + p.name, p.bf16 ? widen(p.v16) : &p.v});
+    if (p.bf16) {
+      arrays.push_back({"adam_m/" + p.name, p.m16.size(), nullptr, p.m16.data()});
+      arrays.push_back({"adam_v/" + p.name, p.v16.size(), nullptr, p.v16.data()});
+    } else {
+      add("adam_m/" + p.name, &p.m);
+      add("adam_v/" + p.name, &p.v);
+    }
   }
   std::vector<float> counts(stats_.count.begin(), stats_.count.end());
-  arrays.push_back({"stats/grad_accum", &stats_.grad_accum});
-  arrays.push_back({"stats/count", &counts});
-  arrays.push_back({"stats/max_radius", &stats_.max_radius});
-  for (auto& [name, a] : const_cast<Trainer*>(this)->method_state()) arrays.push_back({"method/" + name, a});
+  add("stats/grad_accum", &stats_.grad_accum);
+  add("stats/count", &counts);
+  add("stats/max_radius", &stats_.max_radius);
+  for (auto& [name, a] : const_cast<Trainer*>(this)->method_state()) add("method/" + name, a);
   json h;
   h["config"] = cfg_.to_json();
   h["iteration"] = it_;
@@ -56,7 +69,7 @@ void Trainer::save_checkpoint(const std::filesystem::path& path) const {
   h["order"] = order_;
   h["order_pos"] = order_pos_;
   h["arrays"] = json::array();
-  for (auto& [name, a] : arrays) h["arrays"].push_back({{"name", name}, {"count", a->size()}});
+  for (auto& a : arrays) h["arrays"].push_back({{"name", a.name}, {"count", a.count}});
   std::string hs = h.dump();
   atomic_write(path, [&](const std::filesystem::path& tmp) {
     FILE* f = std::fopen(tmp.c_str(), "wb");
@@ -64,7 +77,19 @@ void Trainer::save_checkpoint(const std::filesystem::path& path) const {
     uint64_t len = hs.size();
     bool ok = std::fwrite(kMagic, 1, 8, f) == 8 && std::fwrite(&len, 8, 1, f) == 1 &&
               std::fwrite(hs.data(), 1, hs.size(), f) == hs.size();
-    for (auto& [name, a] : arrays) ok = ok && std::fwrite(a->data(), 4, a->size(), f) == a->size();
+    std::vector<float> chunk;
+    for (auto& a : arrays) {
+      if (a.f32) {
+        ok = ok && std::fwrite(a.f32, 4, a.count, f) == a.count;
+        continue;
+      }
+      for (size_t i = 0; ok && i < a.count; i += kChunk) {
+        const size_t c = std::min(kChunk, a.count - i);
+        chunk.resize(c);
+        for (size_t k = 0; k < c; ++k) chunk[k] = bf16_to_float(a.b16[i + k]);
+        ok = std::fwrite(chunk.data(), 4, c, f) == c;
+      }
+    }
     ok = (std::fclose(f) == 0) && ok;
     if (!ok) fail("{}: write failed (disk full?)", path.string());
   });
@@ -73,14 +98,19 @@ void Trainer::save_checkpoint(const std::filesystem::path& path) const {
 void Trainer::load_checkpoint(const std::filesystem::path& path) {
   using nlohmann::json;
   const std::string where = path.string();
-  std::vector<uint8_t> bytes = read_file_bytes(path);
-  if (bytes.size() < 16 || std::memcmp(bytes.data(), kMagic, 8) != 0) fail("{}: not an hgs checkpoint", where);
-  uint64_t len;
-  std::memcpy(&len, bytes.data() + 8, 8);
-  if (len > bytes.size() - 16) fail("{}: truncated checkpoint header", where);
+  // Streamed from the file (a 300k x 512 checkpoint is ~2 GB: never held in memory as a whole).
+  std::unique_ptr<FILE, FileCloser> file(std::fopen(path.c_str(), "rb"));
+  if (!file) fail("{}: cannot open checkpoint", where);
+  FILE* fp = file.get();
+  char magic[8];
+  uint64_t len = 0;
+  if (std::fread(magic, 1, 8, fp) != 8 || std::memcmp(magic, kMagic, 8) != 0) fail("{}: not an hgs checkpoint", where);
+  if (std::fread(&len, 8, 1, fp) != 1 || len > (uint64_t(1) << 32)) fail("{}: truncated checkpoint header", where);
+  std::string hs(len, '\0');
+  if (std::fread(hs.data(), 1, len, fp) != len) fail("{}: truncated checkpoint header", where);
   json h;
   try {
-    h = json::parse(bytes.begin() + 16, bytes.begin() + 16 + len);
+    h = json::parse(hs);
   } catch (const std::exception& e) {
     fail("{}: corrupt checkpoint header", where);
   }
@@ -105,12 +135,12 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
     st.reset(m.n);
     std::vector<float> counts(m.n);
     std::map<std::string, std::vector<float>*> dst;
+    std::map<std::string, std::vector<uint16_t>*> dst16;  // bfloat16 moments, stored as float32 in the file
     for (auto& f : m.fields()) dst["model/" + f.name] = f.data;
-    std::map<std::string, std::vector<float>> narrow;  // bfloat16 moments, read as float32
     for (auto& p : a.params) {
       if (p.bf16) {
-        dst["adam_m/" + p.name] = &(narrow["m/" + p.name] = std::vector<float>(p.m16.size()));
-        dst["adam_v/" + p.name] = &(narrow["v/" + p.name] = std::vector<float>(p.v16.size()));
+        dst16["adam_m/" + p.name] = &p.m16;
+        dst16["adam_v/" + p.name] = &p.v16;
       } else {
         dst["adam_m/" + p.name] = &p.m;
         dst["adam_v/" + p.name] = &p.v;
@@ -122,29 +152,32 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
     dst["stats/grad_accum"] = &st.grad_accum;
     dst["stats/count"] = &counts;
     dst["stats/max_radius"] = &st.max_radius;
-    size_t off = 16 + len;
     size_t seen = 0;
+    std::vector<float> chunk;
     for (auto& ar : h.at("arrays")) {
       std::string name = ar.at("name").get<std::string>();
       size_t count = ar.at("count").get<size_t>();
       auto it = dst.find(name);
-      if (it == dst.end()) fail("{}: unexpected array '{}'", where, name);
-      if (name.rfind("method/", 0) == 0) it->second->resize(count);  // sizes checked by method_state_loaded
-      if (it->second->size() != count) fail("{}: array '{}' has {} values, expected {}", where, name, count, it->second->size());
-      if (bytes.size() - off < count * 4) fail("{}: truncated checkpoint (array '{}')", where, name);
-      std::memcpy(it->second->data(), bytes.data() + off, count * 4);
-      off += count * 4;
+      auto it16 = dst16.find(name);
+      if (it == dst.end() && it16 == dst16.end()) fail("{}: unexpected array '{}'", where, name);
+      if (it != dst.end()) {
+        if (name.rfind("method/", 0) == 0) it->second->resize(count);  // sizes checked by method_state_loaded
+        if (it->second->size() != count) fail("{}: array '{}' has {} values, expected {}", where, name, count, it->second->size());
+        if (std::fread(it->second->data(), 4, count, fp) != count) fail("{}: truncated checkpoint (array '{}')", where, name);
+      } else {
+        std::vector<uint16_t>& d = *it16->second;
+        if (d.size() != count) fail("{}: array '{}' has {} values, expected {}", where, name, count, d.size());
+        for (size_t i = 0; i < count; i += kChunk) {
+          const size_t c = std::min(kChunk, count - i);
+          chunk.resize(c);
+          if (std::fread(chunk.data(), 4, c, fp) != c) fail("{}: truncated checkpoint (array '{}')", where, name);
+          for (size_t k = 0; k < c; ++k) d[i + k] = float_to_bf16(chunk[k]);  // exact: written from bfloat16
+        }
+      }
       ++seen;
     }
-    if (seen != dst.size()) fail("{}: checkpoint holds {} arrays, expected {}", where, seen, dst.size());
+    if (seen != dst.size() + dst16.size()) fail("{}: checkpoint holds {} arrays, expected {}", where, seen, dst.size() + dst16.size());
     for (int i = 0; i < m.n; ++i) st.count[i] = int(counts[i]);
-    for (auto& p : a.params) {
-      if (!p.bf16) continue;
-      const auto& fm = narrow["m/" + p.name];
-      const auto& fv = narrow["v/" + p.name];
-      for (size_t i = 0; i < fm.size(); ++i) p.m16[i] = float_to_bf16(fm[i]);  // exact: written from bfloat16
-      for (size_t i = 0; i < fv.size(); ++i) p.v16[i] = float_to_bf16(fv[i]);
-    }
     std::istringstream rs(h.at("rng").get<std::string>());
     std::mt19937_64 rng;
     rs >> rng;
