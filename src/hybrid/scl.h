@@ -32,16 +32,30 @@ template <class T>
 void pooled_prediction_backward(int n, int D, int L, int J, const T* q, const T* f, const T* a, const int* objs,
                                 const T* mass, T eps, const T* dP, T* dq, T* df, T* da);
 
-// Row i of pooled_prediction_backward's df without a [N, D] buffer (the lazy Adam update of f_n calls it per
-// row): df_i = sum_j q_{i,objs[j]} a_{i,j} G_j with G = dP / (mass + eps) [J, D]. Returns false, leaving df_i
-// unwritten, when every term is zero (the Gaussian touches none of the masks).
+// Row i of pooled_prediction_backward, for the trainer's single pass over the Gaussians (the row-sparse Adam
+// step of f_n runs right after it on the same row, so f is read once): with G = dP / (mass + eps) [J, D],
+//   da_i [J] (overwritten; 0 where a = 0), dq_i [L] (added), df_i = sum_j q_{i,objs[j]} a_{i,j} G_j [D].
+// Returns false, leaving df_i unwritten, when every q a term is zero (the Gaussian touches none of the masks).
+// dq or da may be null.
 template <class T>
-bool pooled_df_row(long i, int D, int L, int J, const T* q, const T* a, const int* objs, const T* G, T* df_i) {
+bool pooled_backward_row(long i, int D, int L, int J, const T* q, const T* f, const T* a, const int* objs, const T* G,
+                         T* dq, T* da, T* df_i) {
+  const T* fi = f + size_t(i) * D;
   bool any = false;
   for (int j = 0; j < J; ++j) {
-    const T w = a[size_t(i) * J + j] * q[size_t(i) * L + objs[j]];
-    if (w == T(0)) continue;
+    const T ai = a[size_t(i) * J + j], qi = q[size_t(i) * L + objs[j]];
+    if (ai == T(0)) {
+      if (da) da[size_t(i) * J + j] = 0;
+      continue;
+    }
     const T* gj = G + size_t(j) * D;
+    T dot = 0;
+#pragma omp simd reduction(+ : dot)
+    for (int d = 0; d < D; ++d) dot += fi[d] * gj[d];
+    if (da) da[size_t(i) * J + j] = qi * dot;
+    if (dq) dq[size_t(i) * L + objs[j]] += ai * dot;
+    const T w = ai * qi;
+    if (w == T(0)) continue;
     if (!any) {
 #pragma omp simd
       for (int d = 0; d < D; ++d) df_i[d] = w * gj[d];

@@ -222,14 +222,18 @@ float HybridTrainer::semantic_contrastive(const render::RenderOutputs& out) {
     }
     loss += info_nce(&P_[size_t(j) * D_], D_, refs.data(), int(o.fg.size()), pos, hc_.tau2, &dP_[size_t(j) * D_], scale);
   }
+  // One pass over the Gaussians: da (the renderer's backward needs it) and dq from the dot products with the
+  // current f_n, then f_n's row-sparse Adam step on the same row, whose gradient df_n = sum_j q a G_j needs no
+  // other part of the step (f enters no render here). Adam's step count for this iteration is step_count + 1
+  // (begin_step() runs later in Trainer::step).
   d_wsum_.resize(size_t(n) * Jf);
-  // dq and da now (da feeds the renderer's backward); df after backward (the Trainer zeroes it before).
-  pooled_prediction_backward(n, D_, L_, Jf, q, f, out.weight_sums.data(), fg_.data(), mass.data(), 1e-6f, dP_.data(),
-                             dq_.data(), (float*)nullptr, d_wsum_.data());
-  // df rows are formed in method_update from G = dP / (m + eps).
   G_.resize(size_t(Jf) * D_);
   for (int j = 0; j < Jf; ++j)
     for (int d = 0; d < D_; ++d) G_[size_t(j) * D_ + d] = dP_[size_t(j) * D_ + d] / (mass[j] + 1e-6f);
+  const float* a = out.weight_sums.data();
+  adam_.update_rows(adam_.get("lang"), f, n, [&](long i, float* g) {
+    return pooled_backward_row(i, D_, L_, Jf, q, f, a, fg_.data(), G_.data(), dq_.data(), d_wsum_.data(), g);
+  }, adam_.step_count + 1);
   last_.sem = float(loss / anchors.size());
   return hc_.lambda_sem * last_.sem;
 }
@@ -291,16 +295,12 @@ void HybridTrainer::extra_param_grads(render::GaussianGrads& g) {
 }
 
 void HybridTrainer::method_update() {
-  // Row-sparse Adam on f_n: only Gaussians with a semantic gradient this step are updated.
+  // Row-sparse Adam on f_n for the no-SCL ablation: only Gaussians with a semantic gradient are updated.
   const int n = model_.n, D = D_;
   float* f = model_.find_extra("lang")->data.data();
   train::AdamParam& p = adam_.get("lang");
-  if (hc_.use_scl && last_.anchors > 0) {
-    const float* q = model_.find_extra("obj")->data.data();
-    const float* a = out_.weight_sums.data();
-    const int Jf = static_cast<int>(fg_.size());
-    adam_.update_rows(p, f, n, [&](long i, float* g) { return pooled_df_row(i, D, L_, Jf, q, a, fg_.data(), G_.data(), g); });
-  } else if (!hc_.use_scl && hc_.lambda_sem > 0) {
+  // (With SCL, f_n was updated in semantic_contrastive.)
+  if (!hc_.use_scl && hc_.lambda_sem > 0) {
     // Full-scene semantic render: df_n is the gradient of its D extra channels.
     const float* ge = grads_.extra.data();
     adam_.update_rows(p, f, n, [&](long i, float* g) {

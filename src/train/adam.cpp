@@ -90,9 +90,10 @@ void Adam::check_rows(const AdamParam& p, int n) const {
   if (p.dim > kMaxRowUpdateDim) fail("adam: parameter '{}' is {} wide (row updates take at most {})", p.name, p.dim, kMaxRowUpdateDim);
 }
 
-void Adam::update_row(AdamParam& p, float* value, long row, const float* g) const {
+void Adam::update_row(AdamParam& p, float* value, long row, const float* g, long step_t) const {
   const int d = p.dim;
-  const double t = double(std::max(1L, step_count));
+  const long ts = step_t > 0 ? step_t : step_count;
+  const double t = double(std::max(1L, ts));
   const float step = p.lr[0] / float(1.0 - std::pow(double(beta1), t));
   const float inv_sqrt_bc2 = float(1.0 / std::sqrt(1.0 - std::pow(double(beta2), t)));
   const float b1 = beta1, b2 = beta2, e = eps;
@@ -113,7 +114,7 @@ void Adam::update_row(AdamParam& p, float* value, long row, const float* g) cons
   uint16_t* m = p.m16.data() + size_t(row) * d;
   uint16_t* v = p.v16.data() + size_t(row) * d;
   // Random bits: a hash of (element, step); the low half rounds m, the high half v.
-  const uint32_t base = uint32_t(size_t(row) * d) * 0x9E3779B9u ^ uint32_t(step_count) * 0x7FEB352Du;
+  const uint32_t base = uint32_t(size_t(row) * d) * 0x9E3779B9u ^ uint32_t(ts) * 0x7FEB352Du;
   int c = 0;
 #if defined(__AVX2__)
   // The same arithmetic 8 columns at a time (GCC does not vectorise the bit casts of the scalar loop).

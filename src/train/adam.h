@@ -38,12 +38,14 @@ class Adam {
   void update(AdamParam& p, float* value, const float* grad, int n) const;
   // Row-sparse ("lazy") update of `value` [N, dim], as torch.optim.SparseAdam: only rows that have a gradient
   // this step are touched; the other rows keep their value and moments. row_grad(i, g) writes row i's
-  // gradient into g [dim] and returns false when the row has none. Uses the parameter's first learning rate;
-  // works with float32 or bfloat16 moments. Parallel (OpenMP over rows), no allocation, deterministic.
+  // gradient into g [dim] and returns false when the row has none (it is called once for every row, in
+  // parallel, so it may also do other per-row work). Uses the parameter's first learning rate; works with
+  // float32 or bfloat16 moments. `t` is the step for the bias correction (0 = step_count; a caller that updates
+  // before begin_step() passes step_count + 1). Parallel (OpenMP over rows), no allocation, deterministic.
   template <class RowGrad>
-  void update_rows(AdamParam& p, float* value, int n, RowGrad&& row_grad) const;
+  void update_rows(AdamParam& p, float* value, int n, RowGrad&& row_grad, long t = 0) const;
   // The per-row kernel of update_rows (g [dim] is the row's gradient).
-  void update_row(AdamParam& p, float* value, long row, const float* g) const;
+  void update_row(AdamParam& p, float* value, long row, const float* g, long t = 0) const;
   // Row i of every moment array becomes old row src[i], or zeros when fresh[i] (fresh may be empty = none).
   void gather(const std::vector<int>& src, const std::vector<char>& fresh);
   // Zeroes both moments of one parameter (3DGS does this when it resets opacities).
@@ -56,14 +58,14 @@ class Adam {
 constexpr int kMaxRowUpdateDim = 4096;
 
 template <class RowGrad>
-void Adam::update_rows(AdamParam& p, float* value, int n, RowGrad&& row_grad) const {
+void Adam::update_rows(AdamParam& p, float* value, int n, RowGrad&& row_grad, long t) const {
   check_rows(p, n);
 #pragma omp parallel
   {
     alignas(64) float g[kMaxRowUpdateDim];
 #pragma omp for schedule(dynamic, 64)
     for (long i = 0; i < n; ++i)
-      if (row_grad(i, g)) update_row(p, value, i, g);
+      if (row_grad(i, g)) update_row(p, value, i, g, t);
   }
 }
 

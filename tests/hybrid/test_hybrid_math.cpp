@@ -194,21 +194,26 @@ TEST(Scl, PooledPredictionAndInfoNceGradients) {
     return loss();
   };
   check_grad(a_rest, loss_rest, da_rest);
-  // The trainer forms df one row at a time (pooled_df_row, for the row-sparse Adam): the same rows, and
-  // "no gradient" exactly for a Gaussian that touches no mask.
+  // The trainer runs the backward one row at a time (pooled_backward_row, followed by the row-sparse Adam
+  // step of f): the same dq, da and df, and "no gradient" exactly for a Gaussian that touches no mask.
   std::vector<double> G(J * D);
   for (int j = 0; j < J; ++j)
     for (int d = 0; d < D; ++d) G[j * D + d] = dP[j * D + d] / (mass[j] + 1e-6);
   a[3 * J] = a[3 * J + 1] = 0;
   std::fill(df.begin(), df.end(), 0.0);
-  pooled_prediction_backward(N, D, L, J, q.data(), f.data(), a.data(), objs, mass, 1e-6, dP.data(), (double*)nullptr,
-                             df.data(), (double*)nullptr);
+  std::fill(dq.begin(), dq.end(), 0.0);
+  pooled_prediction_backward(N, D, L, J, q.data(), f.data(), a.data(), objs, mass, 1e-6, dP.data(), dq.data(),
+                             df.data(), da.data());
+  std::vector<double> dq_rows(N * L, 0.0), da_rows(N * J, -3.0);
   for (int i = 0; i < N; ++i) {
     std::vector<double> row(D, -7.0);
-    const bool any = pooled_df_row(i, D, L, J, q.data(), a.data(), objs, G.data(), row.data());
+    const bool any = pooled_backward_row(i, D, L, J, q.data(), f.data(), a.data(), objs, G.data(), dq_rows.data(),
+                                         da_rows.data(), row.data());
     EXPECT_EQ(any, i != 3) << "row " << i;
     for (int d = 0; d < D; ++d) EXPECT_NEAR(any ? row[d] : 0.0, df[i * D + d], 1e-12) << "row " << i;
   }
+  for (int k = 0; k < N * L; ++k) EXPECT_NEAR(dq_rows[k], dq[k], 1e-12) << k;
+  for (int k = 0; k < N * J; ++k) EXPECT_NEAR(da_rows[k], da[k], 1e-12) << k;
 }
 
 TEST(Scl, InfoNceValue) {
