@@ -312,6 +312,12 @@ void HybridTrainer::method_update() {
   }
 }
 
+void HybridTrainer::release_step_buffers() {
+  Trainer::release_step_buffers();
+  for (auto* v : {&s_, &dq_, &colors_, &extra_, &d_extra_, &pixel_w_, &d_wsum_, &obj_pred_, &obj_grad_, &obj_opac_})
+    std::vector<float>().swap(*v);
+}
+
 std::vector<std::pair<std::string, std::vector<float>*>> HybridTrainer::method_state() {
   // Saved: the view logits and their Adam state, and the observation table (it reflects the centres of the
   // last refresh, so a resumed run continues bit for bit). Values are exact in float32.

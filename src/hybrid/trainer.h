@@ -52,6 +52,7 @@ class HybridTrainer : public train::Trainer {
                    render::OutputGrads& dout) override;
   void extra_param_grads(render::GaussianGrads& g) override;
   void method_update() override;
+  void release_step_buffers() override;
   void after_step(train::StepInfo& info) override;
   std::vector<std::pair<std::string, std::vector<float>*>> method_state() override;
   void method_state_loaded(const std::string& where) override;

@@ -43,7 +43,26 @@ const ExtraGroup* GaussianModel::find_extra(const std::string& name) const {
   return nullptr;
 }
 
+bool is_compaction(const std::vector<int>& src, int n) {
+  if (src.size() > size_t(n)) return false;
+  for (size_t i = 0; i < src.size(); ++i)
+    if (src[i] < int(i) || src[i] >= n || (i > 0 && src[i] <= src[i - 1])) return false;
+  return true;
+}
+
 void GaussianModel::gather(const std::vector<int>& src) {
+  if (is_compaction(src, n)) {
+    // Pruning: rows move only towards the front, so the arrays are compacted in place (no second copy of the
+    // language embeddings, which dominate memory; the capacity is kept for later growth).
+    for (auto& f : fields()) {
+      float* d = f.data->data();
+      for (size_t i = 0; i < src.size(); ++i)
+        if (src[i] != int(i)) std::copy_n(d + size_t(src[i]) * f.dim, f.dim, d + i * f.dim);
+      f.data->resize(src.size() * f.dim);
+    }
+    n = int(src.size());
+    return;
+  }
   std::vector<float> tmp;
   for (auto& f : fields()) {
     tmp.resize(src.size() * f.dim);

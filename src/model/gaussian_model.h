@@ -45,10 +45,15 @@ struct GaussianModel {
   ExtraGroup* find_extra(const std::string& name);
   const ExtraGroup* find_extra(const std::string& name) const;
   // Replaces the model by rows `src` of itself: row i of the result is old row src[i] (rows may repeat).
+  // A compaction (src strictly increasing, as pruning gives) runs in place.
   void gather(const std::vector<int>& src);
   // Checks every array has the size implied by n, dim and sh_degree (throws hgs::Error naming `where`).
   void validate(const std::string& where) const;
 };
+
+// True when gathering rows `src` of an n-row array only moves rows towards the front (src strictly increasing,
+// src[i] >= i): the gather can then run in place.
+bool is_compaction(const std::vector<int>& src, int n);
 
 // Read-only renderer inputs for the model (SH colours at the model's full degree; no extra channels).
 render::GaussianInputs render_inputs(const GaussianModel& m);

@@ -37,6 +37,12 @@ RendererT<T>::~RendererT() {
 }
 
 template <class T>
+void RendererT<T>::release() {
+  delete st_;
+  st_ = new State;
+}
+
+template <class T>
 const std::vector<int>& RendererT<T>::radii() const {
   return st_->radius;
 }

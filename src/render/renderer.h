@@ -156,6 +156,9 @@ class RendererT {
   // Exact gradients of the last forward() for the given output gradients.
   void backward(const OutputGradsT<T>& dout, GaussianGradsT<T>& grads);
 
+  // Frees every buffer (the next forward() allocates them again); backward() needs a new forward() first.
+  void release();
+
   // Per-Gaussian visibility of the last forward: radius in pixels (0 = culled). [N]
   const std::vector<int>& radii() const;
   // Per-Gaussian intermediate results of the last forward.

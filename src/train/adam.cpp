@@ -9,6 +9,7 @@
 
 #include "core/error.h"
 #include "core/half.h"
+#include "model/gaussian_model.h"
 
 namespace hgs::train {
 
@@ -168,6 +169,13 @@ void Adam::update_row(AdamParam& p, float* value, long row, const float* g, long
 namespace {
 template <class V>
 void gather_rows(V& a, int d, const std::vector<int>& src, const std::vector<char>& fresh) {
+  const bool any_fresh = std::find(fresh.begin(), fresh.end(), char(1)) != fresh.end();
+  if (!any_fresh && is_compaction(src, int(a.size() / size_t(d)))) {  // pruning: in place
+    for (size_t i = 0; i < src.size(); ++i)
+      if (src[i] != int(i)) std::copy_n(a.data() + size_t(src[i]) * d, d, a.data() + i * d);
+    a.resize(src.size() * d);
+    return;
+  }
   V t(src.size() * d, 0);
   for (size_t i = 0; i < src.size(); ++i)
     if (fresh.empty() || !fresh[i]) std::copy_n(a.data() + size_t(src[i]) * d, d, t.data() + i * d);

@@ -69,6 +69,13 @@ int Trainer::next_view() {
   return order_[order_pos_++];
 }
 
+void Trainer::release_step_buffers() {
+  renderer_.release();
+  grads_ = render::GaussianGrads{};
+  out_ = render::RenderOutputs{};
+  for (auto& [name, g] : extra_grads_) std::vector<float>().swap(g);
+}
+
 StepInfo Trainer::step() {
   auto t0 = std::chrono::steady_clock::now();
   if (model_.n == 0) fail("train: every Gaussian was pruned by iteration {}", it_);
@@ -116,6 +123,7 @@ StepInfo Trainer::step() {
   if (cfg_.densify && it < cfg_.densify_until) {
     stats_.add(grads_.mean2d.data(), renderer_.radii().data(), model_.n, W, H);
     if (it > cfg_.densify_from && it % cfg_.densify_every == 0) {
+      release_step_buffers();
       float screen = it > cfg_.opacity_reset_every ? cfg_.screen_limit : 0.f;
       info.densify = densify_and_prune(model_, adam_, stats_, cfg_.densify_cfg, extent_, screen, rng_);
       info.densified = true;

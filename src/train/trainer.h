@@ -77,6 +77,9 @@ class Trainer {
   virtual void method_update() {}
   // Called at the end of every step (after Adam and densification).
   virtual void after_step(StepInfo& info) {}
+  // Frees the per-step buffers (renderer workspace, gradients, outputs) before densification, so that the row
+  // gathers of a large model do not stack on top of them; methods add their own and call this one.
+  virtual void release_step_buffers();
   // Named float arrays of the method's own state that checkpoints save and restore. On load they are
   // resized to the saved counts and replaced, then method_state_loaded() checks the sizes and rebuilds what
   // derives from them (it may throw hgs::Error naming `where`).
