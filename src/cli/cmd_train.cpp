@@ -25,7 +25,7 @@ struct TrainArgs {
   std::string scene, out, method = "hybrid", resume;
   hybrid::HybridConfig hybrid;
   bool no_of = false, no_scl = false, no_bro = false;
-  std::string lang_moments = "bf16";
+  std::string lang_storage = "half";
   int iters = 30000, downscale = 1, threads = 0, sh_degree = 3, save_every = 0;
   uint64_t seed = 0;
   bool no_densify = false, white_bg = false, quiet = false;
@@ -61,7 +61,7 @@ void run_train(const TrainArgs& a) {
     hc->use_of = !a.no_of;
     hc->use_scl = !a.no_scl;
     hc->use_bro = !a.no_bro;
-    hc->lang_bf16 = a.lang_moments == "bf16";
+    hc->lang_half = a.lang_storage == "half";
   }
   auto trainer_ptr = hybrid::make_trainer(scene, train_idx, cfg, hc, progress);
   train::Trainer& trainer = *trainer_ptr;
@@ -151,8 +151,9 @@ CommandRegistration reg({"train", "Optimise Hybrid Gaussians (or plain 3DGS with
   sub.add_option("--fusion-every", h.fusion_every, "Rebuild the observation table every R iterations")->capture_default_str();
   sub.add_option("--bro-kernel", h.bro_kernel, "Side of the square structuring element of BRO")->check(CLI::Range(1, 63))->capture_default_str();
   sub.add_option("--lr-lang", h.lr_lang, "Adam learning rate of the language embeddings")->capture_default_str();
-  sub.add_option("--lang-moments", a->lang_moments, "Storage of the language embeddings' Adam moments (bf16 halves their memory)")
-      ->check(CLI::IsMember({"bf16", "f32"}))->capture_default_str();
+  sub.add_option("--lang-storage", a->lang_storage,
+                 "Language embeddings in half precision with bfloat16 Adam moments (half), or all float32 (f32)")
+      ->check(CLI::IsMember({"half", "f32"}))->capture_default_str();
   sub.add_option("--lr-view", h.lr_view, "Adam learning rate of the view reliability logits")->capture_default_str();
   sub.add_option("--iters", a->iters, "Iterations (the 30k densification schedule is scaled to this)")
       ->check(CLI::Range(1, 10000000))->capture_default_str();

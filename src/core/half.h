@@ -26,6 +26,16 @@ inline uint16_t float_to_bf16_stochastic(float f, uint32_t r) {
   return static_cast<uint16_t>((u + (r & 0xFFFFu)) >> 16);
 }
 
+// float -> IEEE half with stochastic rounding: `r` supplies the 13 bits a half drops below a float's
+// mantissa (added before rounding toward zero), so E[half(x)] = x in the normal half range.
+inline uint16_t float_to_half_stochastic(float f, uint32_t r) {
+  uint32_t u;
+  __builtin_memcpy(&u, &f, 4);
+  u += r & 0x1FFFu;
+  __builtin_memcpy(&f, &u, 4);
+  return _cvtss_sh(f, _MM_FROUND_TO_ZERO | _MM_FROUND_NO_EXC);
+}
+
 // float -> bfloat16, round to nearest even (finite inputs).
 inline uint16_t float_to_bf16(float f) {
   uint32_t u;

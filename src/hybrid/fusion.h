@@ -13,6 +13,8 @@
 //             valid view pass no gradient: their q is a constant).
 // Templated on the scalar so the tests check the gradient in double precision.
 #pragma once
+#include <omp.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -104,9 +106,13 @@ void fuse_backward(const ObservationTable& tab, const T* w, const FusionParams& 
                    const uint8_t* valid, const T* dq, T* dw) {
   const int L = p.num_labels, U = tab.num_views;
   std::fill(dw, dw + U, T(0));
+  // Per-thread partial sums, added in thread order (deterministic for a given thread count).
+  std::vector<std::vector<T>> partial(size_t(std::max(1, omp_get_max_threads())));
 #pragma omp parallel
   {
-    std::vector<T> dw_local(U, T(0)), ds(L);
+    std::vector<T>& dw_local = partial[omp_get_thread_num()];
+    dw_local.assign(U, T(0));
+    std::vector<T> ds(L);
 #pragma omp for schedule(static)
     for (int n = 0; n < tab.n; ++n) {
       if (!valid[n]) continue;
@@ -131,9 +137,9 @@ void fuse_backward(const ObservationTable& tab, const T* w, const FusionParams& 
         dw_local[u] += g * inv;
       }
     }
-#pragma omp critical
-    for (int u = 0; u < U; ++u) dw[u] += dw_local[u];
   }
+  for (const auto& part : partial)
+    for (int u = 0; u < U; ++u) dw[u] += part[u];
 }
 
 // z_n = argmax_k q_{n,k} (first maximum). q [N, K+1] -> z [N]

@@ -19,28 +19,7 @@ T normalize(T* v, int D) {
 template <class T>
 void pooled_prediction(int n, int D, int L, int J, const T* q, const T* f, const T* a, const int* objs, const T* mass,
                        T eps, T* P) {
-  std::fill(P, P + size_t(J) * D, T(0));
-#pragma omp parallel
-  {
-    std::vector<T> local(size_t(J) * D, T(0));
-#pragma omp for schedule(static)
-    for (int i = 0; i < n; ++i) {
-      const T* fi = f + size_t(i) * D;
-      for (int j = 0; j < J; ++j) {
-        const T w = a[size_t(i) * J + j] * q[size_t(i) * L + objs[j]];
-        if (w == T(0)) continue;  // most Gaussians do not touch most masks
-        T* o = &local[size_t(j) * D];
-#pragma omp simd
-        for (int d = 0; d < D; ++d) o[d] += w * fi[d];
-      }
-    }
-#pragma omp critical
-    for (size_t k = 0; k < local.size(); ++k) P[k] += local[k];
-  }
-  for (int j = 0; j < J; ++j) {
-    const T inv = T(1) / (mass[j] + eps);
-    for (int d = 0; d < D; ++d) P[size_t(j) * D + d] *= inv;
-  }
+  pooled_prediction_rows(n, D, L, J, q, [&](long i, T*) { return f + size_t(i) * D; }, a, objs, mass, eps, P);
 }
 
 template <class T>

@@ -13,6 +13,9 @@
 // references of the other foreground objects present in view v. sim = cosine, temperature tau2.
 //   L = -log( exp(sim(a, r_k)/tau2) / sum_{k' in F_v} exp(sim(a, r_k')/tau2) )
 #pragma once
+#include <omp.h>
+
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -25,6 +28,40 @@ template <class T>
 void pooled_prediction(int n, int D, int L, int J, const T* q, const T* f, const T* a, const int* objs, const T* mass,
                        T eps, T* P);
 
+// pooled_prediction with the rows of f produced by row(i, buf) -> const T* [D] (which may widen a half-precision
+// row into buf [D]), so the embeddings can be stored in any format.
+template <class T, class RowFn>
+void pooled_prediction_rows(int n, int D, int L, int J, const T* q, RowFn&& row, const T* a, const int* objs,
+                            const T* mass, T eps, T* P) {
+  std::fill(P, P + size_t(J) * D, T(0));
+  // Per-thread partial sums, added in thread order (deterministic for a given thread count).
+  std::vector<std::vector<T>> partial(size_t(std::max(1, omp_get_max_threads())));
+#pragma omp parallel
+  {
+    std::vector<T>& local = partial[omp_get_thread_num()];
+    local.assign(size_t(J) * D, T(0));
+    std::vector<T> buf(D);
+#pragma omp for schedule(static)
+    for (int i = 0; i < n; ++i) {
+      const T* fi = nullptr;
+      for (int j = 0; j < J; ++j) {
+        const T w = a[size_t(i) * J + j] * q[size_t(i) * L + objs[j]];
+        if (w == T(0)) continue;  // most Gaussians do not touch most masks
+        if (!fi) fi = row(long(i), buf.data());
+        T* o = &local[size_t(j) * D];
+#pragma omp simd
+        for (int d = 0; d < D; ++d) o[d] += w * fi[d];
+      }
+    }
+  }
+  for (const auto& local : partial)
+    for (size_t k = 0; k < local.size(); ++k) P[k] += local[k];
+  for (int j = 0; j < J; ++j) {
+    const T inv = T(1) / (mass[j] + eps);
+    for (int d = 0; d < D; ++d) P[size_t(j) * D + d] *= inv;
+  }
+}
+
 // Backward of pooled_prediction: dP [J, D] -> dq [N, L] (added), df [N, D] (added), da [N, J] (overwritten);
 // any of dq, df, da may be null to skip it. da is 0 where a = 0: such a Gaussian covers no pixel of the mask,
 // so the rasterizer never reads that entry (its pixel-weighted-sum gradient only reaches pixels with M != 0).
@@ -33,14 +70,14 @@ void pooled_prediction_backward(int n, int D, int L, int J, const T* q, const T*
                                 const T* mass, T eps, const T* dP, T* dq, T* df, T* da);
 
 // Row i of pooled_prediction_backward, for the trainer's single pass over the Gaussians (the row-sparse Adam
-// step of f_n runs right after it on the same row, so f is read once): with G = dP / (mass + eps) [J, D],
+// step of f_n runs right after it on the same row, so f is read once). fi = f_i [D]; with G = dP / (mass + eps)
+// [J, D],
 //   da_i [J] (overwritten; 0 where a = 0), dq_i [L] (added), df_i = sum_j q_{i,objs[j]} a_{i,j} G_j [D].
 // Returns false, leaving df_i unwritten, when every q a term is zero (the Gaussian touches none of the masks).
 // dq or da may be null.
 template <class T>
-bool pooled_backward_row(long i, int D, int L, int J, const T* q, const T* f, const T* a, const int* objs, const T* G,
+bool pooled_backward_row(long i, int D, int L, int J, const T* q, const T* fi, const T* a, const int* objs, const T* G,
                          T* dq, T* da, T* df_i) {
-  const T* fi = f + size_t(i) * D;
   bool any = false;
   for (int j = 0; j < J; ++j) {
     const T ai = a[size_t(i) * J + j], qi = q[size_t(i) * L + objs[j]];

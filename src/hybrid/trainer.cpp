@@ -7,6 +7,7 @@
 #include <random>
 
 #include "core/error.h"
+#include "core/half.h"
 #include "hybrid/assign.h"
 #include "hybrid/bro.h"
 #include "hybrid/object_channels.h"
@@ -33,15 +34,30 @@ HybridTrainer::HybridTrainer(const train::TrainConfig& cfg, const HybridConfig& 
   if (!model_.find_extra("obj_id")) model_.add_extra("obj_id", 1, 0.f);
   ExtraGroup* f = model_.find_extra("lang");
   if (!f) {
-    f = &model_.add_extra("lang", D_, 0.f);
+    f = &model_.add_extra("lang", D_, 0.f, hc_.lang_half);
     std::mt19937_64 rng(cfg.seed ^ 0x1A96ULL);
     std::normal_distribution<float> nd(0.f, hc_.lang_init_std);
-    for (auto& x : f->data) x = nd(rng);
+    if (f->f16)
+      for (auto& x : f->half) x = float_to_half(nd(rng));
+    else
+      for (auto& x : f->data) x = nd(rng);
   } else if (f->dim != D_) {
     fail("hybrid: the model's language embeddings have D = {} but the features have D = {}", f->dim, D_);
+  } else if (f->f16 != hc_.lang_half) {  // e.g. a float32 PLY trained further in half precision
+    std::vector<float> v = f->to_float();
+    f->f16 = hc_.lang_half;
+    if (f->f16) {
+      f->half.resize(v.size());
+      for (size_t k = 0; k < v.size(); ++k) f->half[k] = float_to_half(v[k]);
+      std::vector<float>().swap(f->data);
+    } else {
+      f->data = std::move(v);
+      std::vector<uint16_t>().swap(f->half);
+    }
   }
-  // f_n is optimised by a row-sparse Adam without a gradient buffer (method_update), moments in bf16 by default.
-  adam_.add("lang", D_, model_.n, hc_.lr_lang, hc_.lang_bf16);
+  // f_n is optimised by a row-sparse Adam without a gradient buffer (semantic_contrastive / method_update);
+  // by default f_n is stored in half precision and its moments in bfloat16.
+  adam_.add("lang", D_, model_.n, hc_.lr_lang, hc_.lang_half);
   views_with_.assign(L_, {});
   for (int v = 0; v < int(data_.views.size()); ++v)
     for (int l : data_.views[v].fg) views_with_[l].push_back(v);
@@ -100,9 +116,9 @@ void HybridTrainer::prepare_inputs(const train::TrainView& view, render::Gaussia
   const float* q = model_.find_extra("obj")->data.data();
   object_channels(n, L_, lay_, objs_.data(), q, colors_.data(), extra_.data());
   if (sem) {
-    const float* f = model_.find_extra("lang")->data.data();
+    const ExtraGroup& f = *model_.find_extra("lang");
 #pragma omp parallel for schedule(static)
-    for (int i = 0; i < n; ++i) std::copy(f + size_t(i) * D_, f + size_t(i + 1) * D_, &extra_[size_t(i) * C_ + lay_.other()]);
+    for (int i = 0; i < n; ++i) f.row(i, &extra_[size_t(i) * C_ + lay_.other()]);
   }
   in.extra = extra_.data();
   in.num_extra = C_;
@@ -194,8 +210,13 @@ float HybridTrainer::semantic_contrastive(const render::RenderOutputs& out) {
   P_.resize(size_t(Jf) * D_);
   dP_.assign(size_t(Jf) * D_, 0.f);
   const float* q = model_.find_extra("obj")->data.data();
-  float* f = model_.find_extra("lang")->data.data();
-  pooled_prediction(n, D_, L_, Jf, q, f, out.weight_sums.data(), fg_.data(), mass.data(), 1e-6f, P_.data());
+  ExtraGroup& lang = *model_.find_extra("lang");
+  auto lang_row = [&](long i, float* buf) -> const float* {  // f_i as float32 (widened from half storage)
+    if (!lang.f16) return lang.data.data() + size_t(i) * D_;
+    lang.row(size_t(i), buf);
+    return buf;
+  };
+  pooled_prediction_rows(n, D_, L_, Jf, q, lang_row, out.weight_sums.data(), fg_.data(), mass.data(), 1e-6f, P_.data());
   // Anchor k in view u: positive from a random other view v whose mask holds k; negatives: v's other objects.
   struct Anchor { int j, v; };
   std::vector<Anchor> anchors;
@@ -231,9 +252,14 @@ float HybridTrainer::semantic_contrastive(const render::RenderOutputs& out) {
   for (int j = 0; j < Jf; ++j)
     for (int d = 0; d < D_; ++d) G_[size_t(j) * D_ + d] = dP_[size_t(j) * D_ + d] / (mass[j] + 1e-6f);
   const float* a = out.weight_sums.data();
-  adam_.update_rows(adam_.get("lang"), f, n, [&](long i, float* g) {
-    return pooled_backward_row(i, D_, L_, Jf, q, f, a, fg_.data(), G_.data(), dq_.data(), d_wsum_.data(), g);
-  }, adam_.step_count + 1);
+  auto rows = [&](long i, float* g) {
+    alignas(64) float buf[train::kMaxRowUpdateDim];
+    return pooled_backward_row(i, D_, L_, Jf, q, lang_row(i, buf), a, fg_.data(), G_.data(), dq_.data(),
+                               d_wsum_.data(), g);
+  };
+  train::AdamParam& p = adam_.get("lang");
+  if (lang.f16) adam_.update_rows(p, lang.half.data(), n, rows, adam_.step_count + 1);
+  else adam_.update_rows(p, lang.data.data(), n, rows, adam_.step_count + 1);
   last_.sem = float(loss / anchors.size());
   return hc_.lambda_sem * last_.sem;
 }
@@ -297,18 +323,20 @@ void HybridTrainer::extra_param_grads(render::GaussianGrads& g) {
 void HybridTrainer::method_update() {
   // Row-sparse Adam on f_n for the no-SCL ablation: only Gaussians with a semantic gradient are updated.
   const int n = model_.n, D = D_;
-  float* f = model_.find_extra("lang")->data.data();
+  ExtraGroup& lang = *model_.find_extra("lang");
   train::AdamParam& p = adam_.get("lang");
   // (With SCL, f_n was updated in semantic_contrastive.)
   if (!hc_.use_scl && hc_.lambda_sem > 0) {
     // Full-scene semantic render: df_n is the gradient of its D extra channels.
     const float* ge = grads_.extra.data();
-    adam_.update_rows(p, f, n, [&](long i, float* g) {
+    auto rows = [&](long i, float* g) {
       const float* src = ge + size_t(i) * C_ + lay_.other();
       bool any = false;
       for (int d = 0; d < D; ++d) any |= (g[d] = src[d]) != 0.f;
       return any;
-    });
+    };
+    if (lang.f16) adam_.update_rows(p, lang.half.data(), n, rows);
+    else adam_.update_rows(p, lang.data.data(), n, rows);
   }
 }
 

@@ -3,10 +3,36 @@
 
 #include <algorithm>
 
+#include <immintrin.h>
+
 #include "core/error.h"
+#include "core/half.h"
 #include "model/knn.h"
 
 namespace hgs {
+
+float ExtraGroup::value(size_t k) const { return f16 ? half_to_float(half[k]) : data[k]; }
+
+void ExtraGroup::row(size_t i, float* out) const {
+  const size_t o = i * size_t(dim);
+  if (!f16) {
+    std::copy_n(data.data() + o, dim, out);
+    return;
+  }
+  int c = 0;
+  for (; c + 8 <= dim; c += 8)
+    _mm256_storeu_ps(out + c, _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(half.data() + o + c))));
+  for (; c < dim; ++c) out[c] = half_to_float(half[o + c]);
+}
+
+std::vector<float> ExtraGroup::to_float() const {
+  if (!f16) return data;
+  std::vector<float> out(half.size());
+  const size_t rows = dim > 0 ? half.size() / size_t(dim) : 0;
+#pragma omp parallel for schedule(static)
+  for (long i = 0; i < long(rows); ++i) row(size_t(i), out.data() + size_t(i) * dim);
+  return out;
+}
 
 std::vector<Field> GaussianModel::fields() {
   std::vector<Field> f = {{"mean", 3, &mean},
@@ -14,20 +40,29 @@ std::vector<Field> GaussianModel::fields() {
                           {"quat", 4, &quat},
                           {"opacity", 1, &opacity_logit},
                           {"sh", sh_stride() * 3, &sh}};
-  for (auto& e : extras) f.push_back({e.name, e.dim, &e.data});
+  for (auto& e : extras)
+    if (!e.f16) f.push_back({e.name, e.dim, &e.data});
   return f;
 }
 
 void GaussianModel::resize(int count) {
   n = count;
   for (auto& f : fields()) f.data->assign(size_t(count) * f.dim, 0.f);
+  for (auto& e : extras)
+    if (e.f16) e.half.assign(size_t(count) * e.dim, 0);
   for (int i = 0; i < count; ++i) quat[size_t(i) * 4] = 1.f;
 }
 
-ExtraGroup& GaussianModel::add_extra(const std::string& name, int dim, float fill) {
+ExtraGroup& GaussianModel::add_extra(const std::string& name, int dim, float fill, bool f16) {
   if (find_extra(name)) fail("model: extra channel group '{}' already exists", name);
   if (dim < 1) fail("model: extra channel group '{}' needs dim >= 1", name);
-  extras.push_back({name, dim, std::vector<float>(size_t(n) * dim, fill)});
+  ExtraGroup e;
+  e.name = name;
+  e.dim = dim;
+  e.f16 = f16;
+  if (f16) e.half.assign(size_t(n) * dim, float_to_half(fill));
+  else e.data.assign(size_t(n) * dim, fill);
+  extras.push_back(std::move(e));
   return extras.back();
 }
 
@@ -50,27 +85,28 @@ bool is_compaction(const std::vector<int>& src, int n) {
   return true;
 }
 
-void GaussianModel::gather(const std::vector<int>& src) {
-  if (is_compaction(src, n)) {
-    // Pruning: rows move only towards the front, so the arrays are compacted in place (no second copy of the
-    // language embeddings, which dominate memory; the capacity is kept for later growth).
-    for (auto& f : fields()) {
-      float* d = f.data->data();
-      for (size_t i = 0; i < src.size(); ++i)
-        if (src[i] != int(i)) std::copy_n(d + size_t(src[i]) * f.dim, f.dim, d + i * f.dim);
-      f.data->resize(src.size() * f.dim);
-    }
-    n = int(src.size());
+namespace {
+// Row gather of one [n, d] array; a compaction (pruning: rows move only towards the front) runs in place, so
+// the language embeddings, which dominate memory, are never held twice (the capacity is kept for growth).
+template <class V>
+void gather_array(V& a, int d, const std::vector<int>& src, bool compaction) {
+  if (compaction) {
+    for (size_t i = 0; i < src.size(); ++i)
+      if (src[i] != int(i)) std::copy_n(a.data() + size_t(src[i]) * d, d, a.data() + i * d);
+    a.resize(src.size() * d);
     return;
   }
-  std::vector<float> tmp;
-  for (auto& f : fields()) {
-    tmp.resize(src.size() * f.dim);
-    const float* s = f.data->data();
-    for (size_t i = 0; i < src.size(); ++i)
-      std::copy_n(s + size_t(src[i]) * f.dim, f.dim, tmp.data() + i * f.dim);
-    f.data->swap(tmp);
-  }
+  V t(src.size() * d);
+  for (size_t i = 0; i < src.size(); ++i) std::copy_n(a.data() + size_t(src[i]) * d, d, t.data() + i * d);
+  a.swap(t);
+}
+}  // namespace
+
+void GaussianModel::gather(const std::vector<int>& src) {
+  const bool compaction = is_compaction(src, n);
+  for (auto& f : fields()) gather_array(*f.data, f.dim, src, compaction);
+  for (auto& e : extras)
+    if (e.f16) gather_array(e.half, e.dim, src, compaction);
   n = int(src.size());
 }
 
@@ -80,6 +116,9 @@ void GaussianModel::validate(const std::string& where) const {
   for (auto& f : self.fields())
     if (f.data->size() != size_t(n) * f.dim)
       fail("{}: array '{}' has {} values, expected {} x {}", where, f.name, f.data->size(), n, f.dim);
+  for (auto& e : extras)
+    if (e.f16 && (e.half.size() != size_t(n) * e.dim || !e.data.empty()))
+      fail("{}: half-precision array '{}' has {} values, expected {} x {}", where, e.name, e.half.size(), n, e.dim);
 }
 
 GaussianModel init_from_points(const std::vector<Eigen::Vector3f>& points, const std::vector<Eigen::Vector3f>& colors,

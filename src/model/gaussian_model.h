@@ -4,6 +4,7 @@
 // and checkpoint writers handle extra groups without knowing them.
 #pragma once
 #include <cmath>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -15,7 +16,17 @@ namespace hgs {
 struct ExtraGroup {
   std::string name;         // lower-case [a-z0-9_], e.g. "obj", "obj_id", "lang" (see docs/formats.md)
   int dim = 1;
-  std::vector<float> data;  // [N, dim]
+  std::vector<float> data;  // [N, dim] (empty when f16)
+  // Half-precision storage: the values live in `half` (IEEE binary16) instead of `data`. The hybrid trainer
+  // keeps the language embeddings so (300k x 512 is 300 MB instead of 600 MB); readers that do not know the
+  // group use value() / row(), and files always hold float32.
+  bool f16 = false;
+  std::vector<uint16_t> half;  // [N, dim] when f16
+
+  size_t size() const { return f16 ? half.size() : data.size(); }
+  float value(size_t k) const;           // element k, either storage
+  void row(size_t i, float* out) const;  // row i as float32 [dim]
+  std::vector<float> to_float() const;   // every value as float32 [N, dim]
 };
 
 // A named per-Gaussian array: `data` has N * dim floats.
@@ -36,12 +47,13 @@ struct GaussianModel {
   std::vector<ExtraGroup> extras;
 
   int sh_stride() const { return (sh_degree + 1) * (sh_degree + 1); }
-  // Base fields "mean", "log_scale", "quat", "opacity", "sh", then one per extra group (by its name).
+  // Base fields "mean", "log_scale", "quat", "opacity", "sh", then one per float32 extra group (by its name);
+  // half-precision groups are not fields (resize, gather, validate, PLY and checkpoints handle them).
   std::vector<Field> fields();
   // Allocates every array for `count` Gaussians (zero-filled; quaternions identity).
   void resize(int count);
-  // Adds an extra group filled with `fill`; fails if the name exists.
-  ExtraGroup& add_extra(const std::string& name, int dim, float fill = 0.f);
+  // Adds an extra group filled with `fill` (half precision when f16); fails if the name exists.
+  ExtraGroup& add_extra(const std::string& name, int dim, float fill = 0.f, bool f16 = false);
   ExtraGroup* find_extra(const std::string& name);
   const ExtraGroup* find_extra(const std::string& name) const;
   // Replaces the model by rows `src` of itself: row i of the result is old row src[i] (rows may repeat).

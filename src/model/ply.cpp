@@ -103,8 +103,10 @@ void write_model_ply(const std::filesystem::path& path, const GaussianModel& m) 
     r[k++] = m.opacity_logit[i];
     for (int c = 0; c < 3; ++c) r[k++] = m.log_scale[i * 3 + c];
     for (int c = 0; c < 4; ++c) r[k++] = m.quat[i * 4 + c];
-    for (auto& e : m.extras)
-      for (int c = 0; c < e.dim; ++c) r[k++] = e.data[size_t(i) * e.dim + c];
+    for (auto& e : m.extras) {
+      e.row(i, r + k);  // half-precision groups are widened: files hold float32
+      k += e.dim;
+    }
   }
   static_assert(sizeof(float) == 4);
   atomic_write(path, [&](const std::filesystem::path& tmp) {

@@ -22,9 +22,11 @@ ObjectEmbeddings object_embeddings(const GaussianModel& m) {
   std::vector<double> acc(size_t(L) * D, 0.0);
   oe.weight.assign(L, 0.f);
   oe.count.assign(L, 0);
+  std::vector<float> frow(D);
   for (int i = 0; i < m.n; ++i) {
     const float op = sigmoid(m.opacity_logit[i]);
-    const float* fi = &f->data[size_t(i) * D];
+    f->row(i, frow.data());  // float32 or half storage
+    const float* fi = frow.data();
     const int zi = static_cast<int>(z->data[i]);
     if (zi >= 0 && zi < L) oe.count[zi]++;
     for (int k = 0; k < L; ++k) {
@@ -83,7 +85,9 @@ std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianM
   if (!f) fail("the model has no language embeddings (train it with --method hybrid)");
   const int D = f->dim;
   render::GaussianInputs in = render_inputs(m);
-  in.extra = f->data.data();
+  std::vector<float> widened;
+  if (f->f16) widened = f->to_float();  // the renderer composites float32 channels
+  in.extra = f->f16 ? widened.data() : f->data.data();
   in.num_extra = D;
   render::RenderSettings rs;
   rs.want_depth = false;

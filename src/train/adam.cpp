@@ -91,31 +91,44 @@ void Adam::check_rows(const AdamParam& p, int n) const {
   if (p.dim > kMaxRowUpdateDim) fail("adam: parameter '{}' is {} wide (row updates take at most {})", p.name, p.dim, kMaxRowUpdateDim);
 }
 
-void Adam::update_row(AdamParam& p, float* value, long row, const float* g, long step_t) const {
+namespace {
+
+// Parameter values stored as float32 (X = float) or IEEE half (X = uint16_t, written back with stochastic
+// rounding so that steps below half a unit are not lost: unbiased, like the bfloat16 moments).
+inline float load_x(const float* x, int c) { return x[c]; }
+inline float load_x(const uint16_t* x, int c) { return half_to_float(x[c]); }
+inline void store_x(float* x, int c, float v, uint32_t) { x[c] = v; }
+inline void store_x(uint16_t* x, int c, float v, uint32_t r) { x[c] = float_to_half_stochastic(v, r); }
+inline uint32_t x_bits(uint32_t r) { return (r * 0x9E3779B1u) >> 19; }  // 13 bits decorrelated from m's and v's
+
+#if defined(__AVX2__)
+inline __m256 load_x8(const float* x) { return _mm256_loadu_ps(x); }
+inline __m256 load_x8(const uint16_t* x) { return _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(x))); }
+inline void store_x8(float* x, __m256 v, __m256i) { _mm256_storeu_ps(x, v); }
+inline void store_x8(uint16_t* x, __m256 v, __m256i r) {
+  const __m256i bits = _mm256_srli_epi32(_mm256_mullo_epi32(r, _mm256_set1_epi32(int(0x9E3779B1u))), 19);
+  const __m256 j = _mm256_castsi256_ps(_mm256_add_epi32(_mm256_castps_si256(v), bits));
+  _mm_storeu_si128(reinterpret_cast<__m128i*>(x), _mm256_cvtps_ph(j, _MM_FROUND_TO_ZERO | _MM_FROUND_NO_EXC));
+}
+#endif
+
+template <class X>
+void adam_row(const AdamParam& p, X* x, const float* g, float* m32, float* v32, uint16_t* m, uint16_t* v, float b1,
+              float b2, float e, float step, float inv_sqrt_bc2, uint32_t base) {
   const int d = p.dim;
-  const long ts = step_t > 0 ? step_t : step_count;
-  const double t = double(std::max(1L, ts));
-  const float step = p.lr[0] / float(1.0 - std::pow(double(beta1), t));
-  const float inv_sqrt_bc2 = float(1.0 / std::sqrt(1.0 - std::pow(double(beta2), t)));
-  const float b1 = beta1, b2 = beta2, e = eps;
-  float* x = value + size_t(row) * d;
-  if (!p.bf16) {
-    float* m = p.m.data() + size_t(row) * d;
-    float* v = p.v.data() + size_t(row) * d;
+  if (m32) {
 #pragma omp simd
     for (int c = 0; c < d; ++c) {
-      const float mi = b1 * m[c] + (1 - b1) * g[c];
-      const float vi = b2 * v[c] + (1 - b2) * g[c] * g[c];
-      m[c] = mi;
-      v[c] = vi;
-      x[c] -= step * mi / (std::sqrt(vi) * inv_sqrt_bc2 + e);
+      const float mi = b1 * m32[c] + (1 - b1) * g[c];
+      const float vi = b2 * v32[c] + (1 - b2) * g[c] * g[c];
+      m32[c] = mi;
+      v32[c] = vi;
+      store_x(x, c, load_x(x, c) - step * mi / (std::sqrt(vi) * inv_sqrt_bc2 + e),
+              x_bits(hash32(base + uint32_t(c) * 0x9E3779B9u)));
     }
     return;
   }
-  uint16_t* m = p.m16.data() + size_t(row) * d;
-  uint16_t* v = p.v16.data() + size_t(row) * d;
-  // Random bits: a hash of (element, step); the low half rounds m, the high half v.
-  const uint32_t base = uint32_t(size_t(row) * d) * 0x9E3779B9u ^ uint32_t(ts) * 0x7FEB352Du;
+  // bfloat16 moments. Random bits: a hash of (element, step); the low half rounds m, the high half v.
   int c = 0;
 #if defined(__AVX2__)
   // The same arithmetic 8 columns at a time (GCC does not vectorise the bit casts of the scalar loop).
@@ -124,12 +137,12 @@ void Adam::update_row(AdamParam& p, float* value, long row, const float* g, long
                veps = _mm256_set1_ps(e);
   const __m256i lane = _mm256_mullo_epi32(_mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), _mm256_set1_epi32(int(0x9E3779B9u)));
   const __m256i low16 = _mm256_set1_epi32(0xFFFF);
-  auto hash8 = [](__m256i x) {
-    x = _mm256_xor_si256(x, _mm256_srli_epi32(x, 16));
-    x = _mm256_mullo_epi32(x, _mm256_set1_epi32(int(0x85EBCA6Bu)));
-    x = _mm256_xor_si256(x, _mm256_srli_epi32(x, 13));
-    x = _mm256_mullo_epi32(x, _mm256_set1_epi32(int(0xC2B2AE35u)));
-    return _mm256_xor_si256(x, _mm256_srli_epi32(x, 16));
+  auto hash8 = [](__m256i h) {
+    h = _mm256_xor_si256(h, _mm256_srli_epi32(h, 16));
+    h = _mm256_mullo_epi32(h, _mm256_set1_epi32(int(0x85EBCA6Bu)));
+    h = _mm256_xor_si256(h, _mm256_srli_epi32(h, 13));
+    h = _mm256_mullo_epi32(h, _mm256_set1_epi32(int(0xC2B2AE35u)));
+    return _mm256_xor_si256(h, _mm256_srli_epi32(h, 16));
   };
   auto narrow = [](__m256i a, __m256i b) {  // the high halves of 2 x 8 floats -> 16 bf16 in order
     return _mm256_permute4x64_epi64(_mm256_packus_epi32(_mm256_srli_epi32(a, 16), _mm256_srli_epi32(b, 16)), 0xD8);
@@ -150,7 +163,7 @@ void Adam::update_row(AdamParam& p, float* value, long row, const float* g, long
       mo[h] = _mm256_add_epi32(_mm256_castps_si256(mi), _mm256_and_si256(r, low16));
       vo[h] = _mm256_add_epi32(_mm256_castps_si256(vi), _mm256_srli_epi32(r, 16));
       const __m256 den = _mm256_fmadd_ps(_mm256_sqrt_ps(vi), vbc2, veps);
-      _mm256_storeu_ps(x + cc, _mm256_sub_ps(_mm256_loadu_ps(x + cc), _mm256_div_ps(_mm256_mul_ps(vstep, mi), den)));
+      store_x8(x + cc, _mm256_sub_ps(load_x8(x + cc), _mm256_div_ps(_mm256_mul_ps(vstep, mi), den)), r);
     }
     _mm256_storeu_si256(reinterpret_cast<__m256i*>(m + c), narrow(mo[0], mo[1]));
     _mm256_storeu_si256(reinterpret_cast<__m256i*>(v + c), narrow(vo[0], vo[1]));
@@ -162,9 +175,31 @@ void Adam::update_row(AdamParam& p, float* value, long row, const float* g, long
     const uint32_t r = hash32(base + uint32_t(c) * 0x9E3779B9u);
     m[c] = float_to_bf16_stochastic(mi, r);
     v[c] = float_to_bf16_stochastic(vi, r >> 16);
-    x[c] -= step * mi / (std::sqrt(vi) * inv_sqrt_bc2 + e);
+    store_x(x, c, load_x(x, c) - step * mi / (std::sqrt(vi) * inv_sqrt_bc2 + e), x_bits(r));
   }
 }
+
+}  // namespace
+
+template <class X>
+void Adam::update_row(AdamParam& p, X* value, long row, const float* g, long step_t) const {
+  const int d = p.dim;
+  const long ts = step_t > 0 ? step_t : step_count;
+  const double t = double(std::max(1L, ts));
+  const float step = p.lr[0] / float(1.0 - std::pow(double(beta1), t));
+  const float inv_sqrt_bc2 = float(1.0 / std::sqrt(1.0 - std::pow(double(beta2), t)));
+  const size_t o = size_t(row) * d;
+  const uint32_t base = uint32_t(o) * 0x9E3779B9u ^ uint32_t(ts) * 0x7FEB352Du;
+  if (p.bf16)
+    adam_row(p, value + o, g, nullptr, nullptr, p.m16.data() + o, p.v16.data() + o, beta1, beta2, eps, step,
+             inv_sqrt_bc2, base);
+  else
+    adam_row(p, value + o, g, p.m.data() + o, p.v.data() + o, nullptr, nullptr, beta1, beta2, eps, step, inv_sqrt_bc2,
+             base);
+}
+
+template void Adam::update_row<float>(AdamParam&, float*, long, const float*, long) const;
+template void Adam::update_row<uint16_t>(AdamParam&, uint16_t*, long, const float*, long) const;
 
 namespace {
 template <class V>

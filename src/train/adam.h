@@ -42,10 +42,12 @@ class Adam {
   // parallel, so it may also do other per-row work). Uses the parameter's first learning rate; works with
   // float32 or bfloat16 moments. `t` is the step for the bias correction (0 = step_count; a caller that updates
   // before begin_step() passes step_count + 1). Parallel (OpenMP over rows), no allocation, deterministic.
-  template <class RowGrad>
-  void update_rows(AdamParam& p, float* value, int n, RowGrad&& row_grad, long t = 0) const;
-  // The per-row kernel of update_rows (g [dim] is the row's gradient).
-  void update_row(AdamParam& p, float* value, long row, const float* g, long t = 0) const;
+  // `value` is float32 or IEEE half (uint16_t; written back with stochastic rounding, see core/half.h).
+  template <class X, class RowGrad>
+  void update_rows(AdamParam& p, X* value, int n, RowGrad&& row_grad, long t = 0) const;
+  // The per-row kernel of update_rows (g [dim] is the row's gradient). X = float or uint16_t (half).
+  template <class X>
+  void update_row(AdamParam& p, X* value, long row, const float* g, long t = 0) const;
   // Row i of every moment array becomes old row src[i], or zeros when fresh[i] (fresh may be empty = none).
   void gather(const std::vector<int>& src, const std::vector<char>& fresh);
   // Zeroes both moments of one parameter (3DGS does this when it resets opacities).
@@ -57,8 +59,8 @@ class Adam {
 
 constexpr int kMaxRowUpdateDim = 4096;
 
-template <class RowGrad>
-void Adam::update_rows(AdamParam& p, float* value, int n, RowGrad&& row_grad, long t) const {
+template <class X, class RowGrad>
+void Adam::update_rows(AdamParam& p, X* value, int n, RowGrad&& row_grad, long t) const {
   check_rows(p, n);
 #pragma omp parallel
   {

@@ -1,8 +1,8 @@
 // Trainer checkpoints. Layout: the 8 bytes "HGSCKPT1", a little-endian uint64 header length, a JSON header
 // {config, iteration, extent, n, sh_degree, extras [{name, dim}], adam {step, params [{name, dim, lr, bf16}]},
 // rng (text state of std::mt19937_64), order, order_pos, arrays [{name, count}]}, then the arrays' float32
-// values back to back in header order: model fields, Adam m and v per parameter (bfloat16 moments are widened
-// to float32, which is exact), densification statistics, then the method's own state ("method/<name>", e.g.
+// values back to back in header order: model fields (half-precision extra groups widened, exact), Adam m and
+// v per parameter (bfloat16 moments widened, exact), densification statistics, then the method's own state ("method/<name>", e.g.
 // the hybrid method's view logits).
 #include <cstdio>
 #include <cstring>
@@ -32,15 +32,20 @@ void Trainer::save_checkpoint(const std::filesystem::path& path) const {
     std::string name;
     size_t count;
     const float* f32;
-    const uint16_t* b16;
+    const uint16_t* h16;  // 16-bit storage widened while writing
+    bool fp16;            // h16 is IEEE half (else bfloat16)
   };
   std::vector<Out> arrays;
-  auto add = [&](const std::string& name, const std::vector<float>* v) { arrays.push_back({name, v->size(), v->data(), nullptr}); };
+  auto add = [&](const std::string& name, const std::vector<float>* v) {
+    arrays.push_back({name, v->size(), v->data(), nullptr, false});
+  };
   for (auto& f : m.fields()) add("model/" + f.name, f.data);
+  for (auto& e : m.extras)
+    if (e.f16) arrays.push_back({"model/" + e.name, e.half.size(), nullptr, e.half.data(), true});
   for (auto& p : adam_.params) {
     if (p.bf16) {
-      arrays.push_back({"adam_m/" + p.name, p.m16.size(), nullptr, p.m16.data()});
-      arrays.push_back({"adam_v/" + p.name, p.v16.size(), nullptr, p.v16.data()});
+      arrays.push_back({"adam_m/" + p.name, p.m16.size(), nullptr, p.m16.data(), false});
+      arrays.push_back({"adam_v/" + p.name, p.v16.size(), nullptr, p.v16.data(), false});
     } else {
       add("adam_m/" + p.name, &p.m);
       add("adam_v/" + p.name, &p.v);
@@ -59,7 +64,7 @@ void Trainer::save_checkpoint(const std::filesystem::path& path) const {
   h["sh_degree"] = model_.sh_degree;
   h["num_views"] = views_.size();
   h["extras"] = json::array();
-  for (auto& e : model_.extras) h["extras"].push_back({{"name", e.name}, {"dim", e.dim}});
+  for (auto& e : model_.extras) h["extras"].push_back({{"name", e.name}, {"dim", e.dim}, {"f16", e.f16}});
   h["adam"]["step"] = adam_.step_count;
   h["adam"]["params"] = json::array();
   for (auto& p : adam_.params) h["adam"]["params"].push_back({{"name", p.name}, {"dim", p.dim}, {"lr", p.lr}, {"bf16", p.bf16}});
@@ -86,7 +91,7 @@ void Trainer::save_checkpoint(const std::filesystem::path& path) const {
       for (size_t i = 0; ok && i < a.count; i += kChunk) {
         const size_t c = std::min(kChunk, a.count - i);
         chunk.resize(c);
-        for (size_t k = 0; k < c; ++k) chunk[k] = bf16_to_float(a.b16[i + k]);
+        for (size_t k = 0; k < c; ++k) chunk[k] = a.fp16 ? half_to_float(a.h16[i + k]) : bf16_to_float(a.h16[i + k]);
         ok = std::fwrite(chunk.data(), 4, c, f) == c;
       }
     }
@@ -123,7 +128,8 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
     GaussianModel m;
     m.sh_degree = h.at("sh_degree").get<int>();
     m.resize(h.at("n").get<int>());
-    for (auto& e : h.at("extras")) m.add_extra(e.at("name").get<std::string>(), e.at("dim").get<int>());
+    for (auto& e : h.at("extras"))
+      m.add_extra(e.at("name").get<std::string>(), e.at("dim").get<int>(), 0.f, e.value("f16", false));
     Adam a;
     a.step_count = h.at("adam").at("step").get<long>();
     for (auto& p : h.at("adam").at("params")) {
@@ -135,12 +141,15 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
     st.reset(m.n);
     std::vector<float> counts(m.n);
     std::map<std::string, std::vector<float>*> dst;
-    std::map<std::string, std::vector<uint16_t>*> dst16;  // bfloat16 moments, stored as float32 in the file
+    // 16-bit arrays (half-precision extras, bfloat16 moments), stored as float32 in the file: {array, is fp16}
+    std::map<std::string, std::pair<std::vector<uint16_t>*, bool>> dst16;
     for (auto& f : m.fields()) dst["model/" + f.name] = f.data;
+    for (auto& e : m.extras)
+      if (e.f16) dst16["model/" + e.name] = {&e.half, true};
     for (auto& p : a.params) {
       if (p.bf16) {
-        dst16["adam_m/" + p.name] = &p.m16;
-        dst16["adam_v/" + p.name] = &p.v16;
+        dst16["adam_m/" + p.name] = {&p.m16, false};
+        dst16["adam_v/" + p.name] = {&p.v16, false};
       } else {
         dst["adam_m/" + p.name] = &p.m;
         dst["adam_v/" + p.name] = &p.v;
@@ -165,13 +174,15 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
         if (it->second->size() != count) fail("{}: array '{}' has {} values, expected {}", where, name, count, it->second->size());
         if (std::fread(it->second->data(), 4, count, fp) != count) fail("{}: truncated checkpoint (array '{}')", where, name);
       } else {
-        std::vector<uint16_t>& d = *it16->second;
+        std::vector<uint16_t>& d = *it16->second.first;
+        const bool fp16 = it16->second.second;
         if (d.size() != count) fail("{}: array '{}' has {} values, expected {}", where, name, count, d.size());
         for (size_t i = 0; i < count; i += kChunk) {
           const size_t c = std::min(kChunk, count - i);
           chunk.resize(c);
           if (std::fread(chunk.data(), 4, c, fp) != c) fail("{}: truncated checkpoint (array '{}')", where, name);
-          for (size_t k = 0; k < c; ++k) d[i + k] = float_to_bf16(chunk[k]);  // exact: written from bfloat16
+          for (size_t k = 0; k < c; ++k)  // exact: the values were written from these 16-bit formats
+            d[i + k] = fp16 ? float_to_half(chunk[k]) : float_to_bf16(chunk[k]);
         }
       }
       ++seen;

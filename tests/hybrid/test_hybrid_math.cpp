@@ -207,8 +207,8 @@ TEST(Scl, PooledPredictionAndInfoNceGradients) {
   std::vector<double> dq_rows(N * L, 0.0), da_rows(N * J, -3.0);
   for (int i = 0; i < N; ++i) {
     std::vector<double> row(D, -7.0);
-    const bool any = pooled_backward_row(i, D, L, J, q.data(), f.data(), a.data(), objs, G.data(), dq_rows.data(),
-                                         da_rows.data(), row.data());
+    const bool any = pooled_backward_row(i, D, L, J, q.data(), f.data() + i * D, a.data(), objs, G.data(),
+                                         dq_rows.data(), da_rows.data(), row.data());
     EXPECT_EQ(any, i != 3) << "row " << i;
     for (int d = 0; d < D; ++d) EXPECT_NEAR(any ? row[d] : 0.0, df[i * D + d], 1e-12) << "row " << i;
   }

@@ -7,6 +7,7 @@
 
 #include "core/error.h"
 #include "core/fs.h"
+#include "core/half.h"
 #include "model/ply.h"
 #include "test_util.h"
 
@@ -67,6 +68,45 @@ TEST(Ply, RoundTripExtras) {
     EXPECT_EQ(r.extras[g].data, m.extras[g].data);
   }
   EXPECT_EQ(r.sh, m.sh);
+}
+
+TEST(Model, HalfPrecisionExtraGroup) {
+  // A half-precision group is not a float field; resize, gather (growth and in-place compaction), validate,
+  // row access and the PLY writer (float32, exact widening) all handle it.
+  test::TempDir dir;
+  GaussianModel m = random_model(6, 0, 3);
+  auto& f = m.add_extra("lang", 10, 0.f, true);
+  EXPECT_TRUE(f.data.empty());
+  ASSERT_EQ(f.half.size(), 60u);
+  for (size_t k = 0; k < 60; ++k) f.half[k] = float_to_half(float(k) * 0.5f - 7.f);  // exact in half
+  EXPECT_EQ(m.fields().size(), 5u);  // the base fields only
+  m.validate("test");
+  std::vector<float> row(10);
+  m.find_extra("lang")->row(4, row.data());
+  EXPECT_EQ(row[3], 43 * 0.5f - 7.f);
+  EXPECT_EQ(m.find_extra("lang")->value(59), 59 * 0.5f - 7.f);
+  m.gather({5, 0, 0, 2, 1, 3, 4});  // growth
+  EXPECT_EQ(m.n, 7);
+  EXPECT_EQ(m.find_extra("lang")->value(0), 50 * 0.5f - 7.f);
+  EXPECT_EQ(m.find_extra("lang")->value(20), 0 * 0.5f - 7.f);
+  const std::vector<float> before = m.find_extra("lang")->to_float();
+  m.gather({1, 3, 6});  // pruning: in place
+  EXPECT_EQ(m.n, 3);
+  const std::vector<float> after = m.find_extra("lang")->to_float();
+  for (int c = 0; c < 10; ++c) {
+    EXPECT_EQ(after[c], before[10 + c]);
+    EXPECT_EQ(after[10 + c], before[30 + c]);
+    EXPECT_EQ(after[20 + c], before[60 + c]);
+  }
+  EXPECT_EQ(m.mean.size(), 9u);
+  m.validate("test");
+  write_model_ply(dir / "m.ply", m);
+  GaussianModel r = read_model_ply(dir / "m.ply");
+  ASSERT_EQ(r.extras.size(), 1u);
+  EXPECT_FALSE(r.extras[0].f16);
+  EXPECT_EQ(r.extras[0].data, after);
+  m.find_extra("lang")->half.pop_back();
+  EXPECT_THROW(m.validate("test"), Error);
 }
 
 TEST(Ply, StandardLayoutIsChannelMajor) {

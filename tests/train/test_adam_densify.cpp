@@ -139,6 +139,49 @@ TEST(Adam, Bf16MomentsTrackFloat32) {
   EXPECT_LT(worst, 5e-3) << "bf16 moments drifted from the float32 run";
 }
 
+TEST(Adam, HalfValuesTrackFloat32) {
+  // Values stored in IEEE half (the hybrid method's f_n) with bfloat16 moments follow the all-float32 run; a
+  // step far below half a unit still moves the value on average (stochastic rounding).
+  const int n = 4, d = 40, steps = 200;
+  RowSteps rs(n, d, steps, 9);
+  Adam a32, a16;
+  AdamParam& p32 = a32.add("x", d, n, 1e-3f);
+  AdamParam& p16 = a16.add("x", d, n, 1e-3f, true);
+  std::vector<float> x32(size_t(n) * d, 0.25f);
+  std::vector<uint16_t> x16(x32.size(), float_to_half(0.25f));
+  for (int s = 0; s < steps; ++s) {
+    a32.begin_step();
+    a16.begin_step();
+    auto grad = [&](long r, float* g) {
+      if (!rs.has(s, r)) return false;
+      std::copy_n(&rs.g[s][size_t(r) * d], d, g);
+      return true;
+    };
+    a32.update_rows(p32, x32.data(), n, grad);
+    a16.update_rows(p16, x16.data(), n, grad);
+  }
+  double worst = 0, moved = 0;
+  for (size_t i = 0; i < x32.size(); ++i) {
+    worst = std::max(worst, double(std::abs(half_to_float(x16[i]) - x32[i])));
+    moved = std::max(moved, double(std::abs(x32[i] - 0.25f)));
+  }
+  EXPECT_GT(moved, 0.02);
+  // Half units near 0.25 are 2.4e-4; stochastic rounding adds an unbiased random walk of that size per step.
+  EXPECT_LT(worst, 4e-3) << "half-precision values drifted from the float32 run";
+  // Tiny steps: lr 1e-5 on values near 1 (half unit 9.8e-4); 1000 steps of a constant gradient move x by 0.01.
+  Adam at;
+  AdamParam& pt = at.add("x", 64, 1, 1e-5f, true);
+  std::vector<uint16_t> xt(64, float_to_half(1.f));
+  std::vector<float> g(64, 1.f);
+  for (int s = 0; s < 1000; ++s) {
+    at.begin_step();
+    at.update_row(pt, xt.data(), 0, g.data());
+  }
+  double mean = 0;
+  for (uint16_t h : xt) mean += half_to_float(h) / 64;
+  EXPECT_NEAR(mean, 0.99, 2e-3);
+}
+
 TEST(Adam, Bf16SecondMomentDecaysUnderStochasticRounding) {
   // v = 0.999 v per step is a 0.1% change, below half a bf16 unit: round-to-nearest would keep v = 1 forever.
   // Stochastic rounding follows 0.999^t in expectation. Zero gradients through update_row (all columns).
