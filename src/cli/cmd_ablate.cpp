@@ -37,10 +37,13 @@ void run_ablate(const AblateArgs& a) {
   ensure_dir(a.out);
   nlohmann::json rows = nlohmann::json::array();
   std::string md = "| OF | SCL | BRO | mAcc | mIoU | mBIoU | train s |\n|---|---|---|---|---|---|---|\n";
+  if (a.rows != "all" && a.rows != "ends") fail("--rows: all or ends");
+  const int total = a.rows == "ends" ? 2 : 8;
+  int done = 0;
   for (int row = 0; row < 8; ++row) {
     const bool of = row & 1, scl = row & 2, bro = row & 4;
-    if (a.rows != "all" && a.rows != "ends") fail("--rows: all or ends");
     if (a.rows == "ends" && row != 0 && row != 7) continue;
+    ++done;
     const std::string name = fmt::format("of{}_scl{}_bro{}", int(of), int(scl), int(bro));
     hybrid::HybridConfig hc;
     hc.use_of = of;
@@ -51,7 +54,7 @@ void run_ablate(const AblateArgs& a) {
     cfg.seed = a.seed;
     auto t0 = std::chrono::steady_clock::now();
     auto trainer = hybrid::make_trainer(scene, scene.train_indices(), cfg, hc, false);
-    Progress bar(fmt::format("ablate {} ({}/8)", name, row + 1), a.iters, !a.quiet);
+    Progress bar(fmt::format("ablate {} ({}/{})", name, done, total), a.iters, !a.quiet);
     while (trainer->iteration() < a.iters) {
       auto s = trainer->step();
       bar.update(trainer->iteration(), fmt::format("loss {:.4f} N {}", s.loss.total, s.num_gaussians));

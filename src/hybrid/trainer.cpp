@@ -346,27 +346,43 @@ void HybridTrainer::release_step_buffers() {
     std::vector<float>().swap(*v);
 }
 
-std::vector<std::pair<std::string, std::vector<float>*>> HybridTrainer::method_state() {
+std::vector<std::pair<std::string, std::vector<float>>> HybridTrainer::method_state() const {
   // Saved: the view logits and their Adam state, and the observation table (it reflects the centres of the
   // last refresh, so a resumed run continues bit for bit). Values are exact in float32.
-  ckpt_steps_.assign(1, float(view_steps_));
-  ckpt_table_.assign(obs_.label.begin(), obs_.label.end());
-  return {{"view_logits", &logits_}, {"view_adam_m", &lm_}, {"view_adam_v", &lv_}, {"view_adam_step", &ckpt_steps_},
-          {"observations", &ckpt_table_}};
+  return {{"view_logits", logits_},
+          {"view_adam_m", lm_},
+          {"view_adam_v", lv_},
+          {"view_adam_step", {float(view_steps_)}},
+          {"observations", std::vector<float>(obs_.label.begin(), obs_.label.end())}};
 }
 
-void HybridTrainer::method_state_loaded(const std::string& where) {
+void HybridTrainer::method_state_loaded(const std::string& where, const nlohmann::json& config, int n,
+                                        std::map<std::string, std::vector<float>>& arrays) {
+  // The checkpoint's hybrid options replace the current ones (as its TrainConfig does), except that SCL on or
+  // off must agree: the no-SCL ablation needs the raw feature grids, loaded (or not) before the checkpoint.
+  HybridConfig c = hc_;
+  if (!config.is_null()) {
+    c = HybridConfig::from_json(config);
+    if (c.use_scl != hc_.use_scl)
+      fail("{}: the checkpoint was trained {} --no-scl; resume with the same option", where, c.use_scl ? "without" : "with");
+  }
   const size_t U = views_.size();
-  if (logits_.size() != U || lm_.size() != U || lv_.size() != U || ckpt_steps_.size() != 1 ||
-      ckpt_table_.size() != size_t(model_.n) * U)
-    fail("{}: the hybrid state does not match {} training views and {} Gaussians", where, U, model_.n);
-  view_steps_ = long(ckpt_steps_[0]);
-  obs_.n = model_.n;
+  const auto& lg = arrays["view_logits"];
+  const auto& table = arrays["observations"];
+  if (lg.size() != U || arrays["view_adam_m"].size() != U || arrays["view_adam_v"].size() != U ||
+      arrays["view_adam_step"].size() != 1 || table.size() != size_t(n) * U)
+    fail("{}: the hybrid state does not match {} training views and {} Gaussians", where, U, n);
+  // Checked: take it.
+  hc_ = c;
+  scratch_.clear();  // its losses carry lambda_dssim
+  logits_ = std::move(arrays["view_logits"]);
+  lm_ = std::move(arrays["view_adam_m"]);
+  lv_ = std::move(arrays["view_adam_v"]);
+  view_steps_ = long(arrays["view_adam_step"][0]);
+  obs_.n = n;
   obs_.num_views = int(U);
-  obs_.label.assign(ckpt_table_.begin(), ckpt_table_.end());
+  obs_.label.assign(table.begin(), table.end());
   softmax(logits_.data(), int(U), w_.data());
-  ckpt_steps_.clear();
-  ckpt_table_ = {};
 }
 
 void HybridTrainer::after_step(train::StepInfo& info) {

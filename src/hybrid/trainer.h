@@ -54,8 +54,10 @@ class HybridTrainer : public train::Trainer {
   void method_update() override;
   void release_step_buffers() override;
   void after_step(train::StepInfo& info) override;
-  std::vector<std::pair<std::string, std::vector<float>*>> method_state() override;
-  void method_state_loaded(const std::string& where) override;
+  std::vector<std::pair<std::string, std::vector<float>>> method_state() const override;
+  nlohmann::json method_config() const override { return hc_.to_json(); }
+  void method_state_loaded(const std::string& where, const nlohmann::json& config, int n,
+                           std::map<std::string, std::vector<float>>& arrays) override;
 
  private:
   void fuse_now();
@@ -89,7 +91,6 @@ class HybridTrainer : public train::Trainer {
   std::vector<float> sref_;                                  // [H, W, D] (no-SCL ablation)
   std::vector<float> P_, dP_;                                // [Jf, D]
   std::vector<float> G_;                                     // [Jf, D] dP / (m + eps)
-  std::vector<float> ckpt_steps_, ckpt_table_;               // [1], [N, U]: view_steps_ and obs_ as floats
   std::vector<float> refs_;                                  // [R, D] InfoNCE candidates of one anchor
   std::vector<std::vector<int>> views_with_;                 // [L] training views whose SCL objects include l
   int view_ = 0, C_ = 0;

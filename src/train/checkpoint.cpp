@@ -1,9 +1,10 @@
 // Trainer checkpoints. Layout: the 8 bytes "HGSCKPT1", a little-endian uint64 header length, a JSON header
-// {config, iteration, extent, n, sh_degree, extras [{name, dim}], adam {step, params [{name, dim, lr, bf16}]},
-// rng (text state of std::mt19937_64), order, order_pos, arrays [{name, count}]}, then the arrays' float32
-// values back to back in header order: model fields (half-precision extra groups widened, exact), Adam m and
-// v per parameter (bfloat16 moments widened, exact), densification statistics, then the method's own state ("method/<name>", e.g.
-// the hybrid method's view logits).
+// {config, iteration, extent, n, sh_degree, extras [{name, dim, f16}], adam {step, params [{name, dim, lr,
+// bf16}]}, rng (text state of std::mt19937_64), order, order_pos, arrays [{name, count}]}, then the arrays'
+// float32 values back to back in header order: model fields (half-precision extra groups widened, exact), Adam
+// m and v per parameter (bfloat16 moments widened, exact), densification statistics, then the method's own
+// state ("method/<name>", e.g. the hybrid method's view logits). Read and written in streams (no whole-file
+// buffer).
 #include <cstdio>
 #include <cstring>
 #include <memory>
@@ -55,9 +56,11 @@ void Trainer::save_checkpoint(const std::filesystem::path& path) const {
   add("stats/grad_accum", &stats_.grad_accum);
   add("stats/count", &counts);
   add("stats/max_radius", &stats_.max_radius);
-  for (auto& [name, a] : const_cast<Trainer*>(this)->method_state()) add("method/" + name, a);
+  const auto method = method_state();  // copies, alive until the file is written
+  for (auto& [name, a] : method) add("method/" + name, &a);
   json h;
   h["config"] = cfg_.to_json();
+  if (nlohmann::json mc = method_config(); !mc.is_null()) h["method_config"] = mc;
   h["iteration"] = it_;
   h["extent"] = extent_;
   h["n"] = model_.n;
@@ -155,9 +158,9 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
         dst["adam_v/" + p.name] = &p.v;
       }
     }
-    // The method's own state is read into copies (sized by the file) and committed with the rest.
+    // The method's own state is read into copies (sized by the file) and handed to method_state_loaded.
     std::map<std::string, std::vector<float>> method;
-    for (auto& [name, arr] : method_state()) dst["method/" + name] = &(method[name] = std::vector<float>(arr->size()));
+    for (auto& [name, arr] : method_state()) dst["method/" + name] = &(method[name] = std::vector<float>(arr.size()));
     dst["stats/grad_accum"] = &st.grad_accum;
     dst["stats/count"] = &counts;
     dst["stats/max_radius"] = &st.max_radius;
@@ -196,14 +199,13 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
     std::vector<int> order = h.at("order").get<std::vector<int>>();
     for (int o : order)
       if (o < 0 || o >= int(views_.size())) fail("{}: corrupt view order", where);
-    // Everything parsed: commit. Trainable extras keep a gradient buffer.
-    for (auto& [name, g] : extra_grads_) {
-      const ExtraGroup* e = m.find_extra(name);
-      if (!e) fail("{}: the checkpoint has no '{}' channels", where, name);
-      g.assign(size_t(m.n) * e->dim, 0.f);
-    }
-    for (auto& [name, arr] : method_state()) *arr = std::move(method[name]);
-    method_state_loaded(where);
+    m.validate(where);
+    for (auto& [name, g] : extra_grads_)
+      if (!m.find_extra(name)) fail("{}: the checkpoint has no '{}' channels", where, name);
+    // Everything parsed and checked: commit (the method checks its own state before it takes it). Trainable
+    // extras keep a gradient buffer.
+    method_state_loaded(where, h.value("method_config", json(nullptr)), m.n, method);
+    for (auto& [name, g] : extra_grads_) g.assign(size_t(m.n) * m.find_extra(name)->dim, 0.f);
     cfg_ = c;
     model_ = std::move(m);
     adam_ = std::move(a);
@@ -213,7 +215,6 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
     order_pos_ = h.at("order_pos").get<size_t>();
     it_ = h.at("iteration").get<int>();
     extent_ = h.at("extent").get<float>();
-    model_.validate(where);
   } catch (const json::exception& e) {
     fail("{}: malformed checkpoint header ({})", where, e.what());
   }

@@ -80,11 +80,14 @@ class Trainer {
   // Frees the per-step buffers (renderer workspace, gradients, outputs) before densification, so that the row
   // gathers of a large model do not stack on top of them; methods add their own and call this one.
   virtual void release_step_buffers();
-  // Named float arrays of the method's own state that checkpoints save and restore. On load they are
-  // resized to the saved counts and replaced, then method_state_loaded() checks the sizes and rebuilds what
-  // derives from them (it may throw hgs::Error naming `where`).
-  virtual std::vector<std::pair<std::string, std::vector<float>*>> method_state() { return {}; }
-  virtual void method_state_loaded(const std::string& where) {}
+  // The method's own state for checkpoints: its options (JSON, null = none) and named float arrays (saved as
+  // they are). On load, method_state_loaded() gets the saved options, the checkpoint's Gaussian count and the
+  // arrays read by name (sized by the file); it checks them, throwing hgs::Error naming `where` before it
+  // changes anything, then takes them and rebuilds what derives from them.
+  virtual nlohmann::json method_config() const { return nullptr; }
+  virtual std::vector<std::pair<std::string, std::vector<float>>> method_state() const { return {}; }
+  virtual void method_state_loaded(const std::string& where, const nlohmann::json& config, int n,
+                                   std::map<std::string, std::vector<float>>& arrays) {}
 
   // Registers model extra group `name` as trainable with learning rate `lr` (Adam state follows densification).
   void add_trainable_extra(const std::string& name, float lr);

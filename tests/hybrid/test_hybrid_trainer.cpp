@@ -4,6 +4,7 @@
 
 #include <map>
 
+#include "core/error.h"
 #include "hybrid/trainer.h"
 #include "model/ply.h"
 #include "query/query.h"
@@ -35,11 +36,16 @@ struct Tiny {
     scene = load_scene(tmp / "s");
     train = scene.train_indices();
   }
-  std::unique_ptr<hybrid::HybridTrainer> trainer(const hybrid::HybridConfig& hc, int iters) {
+  std::unique_ptr<hybrid::HybridTrainer> trainer(const hybrid::HybridConfig& hc, int iters, int densify_every = 0) {
     std::vector<train::TrainView> views;
     for (int i : train) views.push_back({scene.views[i].name, train::make_camera(scene.views[i]), scene.load_image(i)});
     train::TrainConfig cfg = train::TrainConfig{}.scaled_to(iters);
     cfg.sh_degree = 1;
+    if (densify_every > 0) {
+      cfg.densify_from = 1;
+      cfg.densify_every = densify_every;
+      cfg.densify_cfg.grad_threshold = 1e-6f;  // so that clones and splits happen in a few steps
+    }
     hybrid::HybridData data = hybrid::load_hybrid_data(scene, train, hc, false);
     GaussianModel m = init_from_points(scene.points, scene.point_colors, 1);
     return std::make_unique<hybrid::HybridTrainer>(cfg, hc, std::move(m), std::move(views), std::move(data),
@@ -128,17 +134,34 @@ TEST(HybridTrainer, CheckpointResumesBitForBit) {
   Tiny t;
   hybrid::HybridConfig hc;
   hc.fusion_every = 7;  // a table rebuild between the checkpoint and the end
-  auto a = t.trainer(hc, 40);
+  hc.lambda_bro = 0.7f;  // a non-default option: the checkpoint's options are the ones that continue
+  auto a = t.trainer(hc, 40, 5);  // densification at 5, 10, 15, 20: the Gaussian count changes
+  const int n0 = a->model().n;
   for (int it = 0; it < 12; ++it) a->step();
+  EXPECT_NE(a->model().n, n0);
   a->save_checkpoint(t.tmp / "h.ckpt");
   for (int it = 0; it < 10; ++it) a->step();
-  auto b = t.trainer(hc, 40);
+  hybrid::HybridConfig other;
+  auto b = t.trainer(other, 40, 5);
   b->load_checkpoint(t.tmp / "h.ckpt");
   EXPECT_EQ(b->iteration(), 12);
+  EXPECT_EQ(b->hybrid_config().lambda_bro, 0.7f);
   for (int it = 0; it < 10; ++it) b->step();
   EXPECT_EQ(a->view_logits(), b->view_logits());
   for (const char* g : {"obj", "obj_id"}) EXPECT_EQ(a->model().find_extra(g)->data, b->model().find_extra(g)->data) << g;
   EXPECT_EQ(a->model().find_extra("lang")->half, b->model().find_extra("lang")->half);
   EXPECT_FALSE(a->model().find_extra("lang")->half.empty());
   EXPECT_EQ(a->model().mean, b->model().mean);
+  // A checkpoint trained with SCL cannot continue as the no-SCL ablation (its feature grids were not loaded).
+  hybrid::HybridConfig no_scl;
+  no_scl.use_scl = false;
+  auto c = t.trainer(no_scl, 40);
+  try {
+    c->load_checkpoint(t.tmp / "h.ckpt");
+    FAIL() << "no error";
+  } catch (const hgs::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("h.ckpt: the checkpoint was trained without --no-scl"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_EQ(c->iteration(), 0);
 }
