@@ -1,10 +1,10 @@
 // Trainer checkpoints. Layout: the 8 bytes "HGSCKPT1", a little-endian uint64 header length, a JSON header
 // {config, iteration, extent, n, sh_degree, extras [{name, dim, f16}], adam {step, params [{name, dim, lr,
-// bf16}]}, rng (text state of std::mt19937_64), order, order_pos, arrays [{name, count}]}, then the arrays'
-// float32 values back to back in header order: model fields (half-precision extra groups widened, exact), Adam
-// m and v per parameter (bfloat16 moments widened, exact), densification statistics, then the method's own
-// state ("method/<name>", e.g. the hybrid method's view logits). Read and written in streams (no whole-file
-// buffer).
+// bf16}]}, rng (text state of std::mt19937_64), order, order_pos, method_config (optional), arrays [{name,
+// count}]}, then the arrays' float32 values back to back in header order: model fields (half-precision extra
+// groups widened, exact), Adam m and v per parameter (bfloat16 moments widened, exact), densification
+// statistics, then the method's own state ("method/<name>", e.g. the hybrid method's view logits). Read and
+// written in streams (no whole-file buffer).
 #include <cstdio>
 #include <cstring>
 #include <memory>
