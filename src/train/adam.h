@@ -3,8 +3,8 @@
 // parameter is a per-Gaussian array [N, dim] with a learning rate per column (SH DC and rest differ), so the
 // moments can follow Gaussians through densification (`gather`).
 // Wide per-Gaussian embeddings (the hybrid method's f_n, D = 512) use update_rows instead: row-sparse, the
-// gradient of a row is produced on the fly (no [N, D] gradient buffer), and the moments may be stored in
-// bfloat16 (half the memory; stochastic rounding keeps them unbiased, see core/half.h).
+// gradient of a row is produced on the fly (no [N, D] gradient buffer), the moments may be stored in bfloat16
+// and the values in IEEE half (half the memory each; stochastic rounding keeps them unbiased, see core/half.h).
 #pragma once
 #include <cstdint>
 #include <string>
