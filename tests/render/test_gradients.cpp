@@ -343,7 +343,7 @@ TEST(RenderGrad, EndToEndColoursNoDepthFiniteDifferences) {
 // Forward-only extra channels: backward with extra_grad_channels = G ignores the upstream gradient of channels
 // [G, C) and gives the gradients of a full backward whose trailing upstream gradients are zero (to rounding:
 // the channel sums are grouped differently), with exact zeros for the skipped channels.
-TEST(RenderGrad, ForwardOnlyExtraChannelsAreSkippedExactly) {
+TEST(RenderGrad, ForwardOnlyExtraChannelsAreSkipped) {
   Scene sc = random_scene(40, 40, 36, 43, 0.9, 5);
   ASSERT_EQ(sc.num_extra, 5);
   sc.add_pixel_weights(2, 43);
