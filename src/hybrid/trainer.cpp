@@ -8,6 +8,7 @@
 
 #include "core/error.h"
 #include "core/half.h"
+#include "core/parallel.h"
 #include "hybrid/assign.h"
 #include "hybrid/bro.h"
 #include "hybrid/object_channels.h"
@@ -85,10 +86,14 @@ void HybridTrainer::refresh_observations() {
 }
 
 void HybridTrainer::update_hard_ids() {
-  std::vector<uint16_t> z(model_.n);
-  hard_ids(model_.find_extra("obj")->data.data(), model_.n, L_, z.data());
-  auto& zid = model_.find_extra("obj_id")->data;
-  for (int i = 0; i < model_.n; ++i) zid[i] = float(z[i]);
+  const float* q = model_.find_extra("obj")->data.data();
+  float* zid = model_.find_extra("obj_id")->data.data();
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < model_.n; ++i) {
+    uint16_t z;
+    hard_ids(q + size_t(i) * L_, 1, L_, &z);
+    zid[i] = float(z);
+  }
 }
 
 void HybridTrainer::prepare_inputs(const train::TrainView& view, render::GaussianInputs& in, render::RenderSettings& rs) {
@@ -96,7 +101,8 @@ void HybridTrainer::prepare_inputs(const train::TrainView& view, render::Gaussia
   const int n = model_.n;
   const HybridView& hv = data_.views[view_];
   if (hc_.use_of) fuse_now();
-  dq_.assign(size_t(n) * L_, 0.f);
+  dq_.resize(size_t(n) * L_);
+  parallel_fill(dq_, 0.f);
   // Colours by SH (all Gaussians; the renderer then takes them as precomputed colours).
   const float* R = view.cam.R;
   const float* t = view.cam.t;
@@ -126,7 +132,8 @@ void HybridTrainer::prepare_inputs(const train::TrainView& view, render::Gaussia
   const int W = view.cam.width, H = view.cam.height, Jf = static_cast<int>(fg_.size());
   if (Jf > 0) {
     const LabelMap& lab = data_.masks[view_].labels;
-    pixel_w_.assign(size_t(W) * H * Jf, 0.f);
+    pixel_w_.resize(size_t(W) * H * Jf);
+#pragma omp parallel for schedule(static)
     for (size_t p = 0; p < lab.v.size(); ++p)
       for (int j = 0; j < Jf; ++j) pixel_w_[p * Jf + j] = lab.v[p] == fg_[j] ? 1.f : 0.f;
     rs.pixel_weights = pixel_w_.data();
@@ -284,7 +291,8 @@ float HybridTrainer::extra_loss(const train::TrainView& view, const render::Rend
   const size_t HW = size_t(W) * H;
   if (hc_.lambda_rgb != 1.f)
     for (size_t i = 0; i < HW * 3; ++i) d_rgb[i] *= hc_.lambda_rgb;
-  d_extra_.assign(HW * C_, 0.f);
+  d_extra_.resize(HW * C_);
+  parallel_fill(d_extra_, 0.f);
   float total = appearance_and_bro(view, out);
   if (hc_.lambda_sem > 0) total += hc_.use_scl ? semantic_contrastive(out) : semantic_cosine(out);
   dout.extra = d_extra_.data();
