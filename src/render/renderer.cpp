@@ -38,8 +38,9 @@ RendererT<T>::~RendererT() {
 
 template <class T>
 void RendererT<T>::release() {
+  State* fresh = new State;
   delete st_;
-  st_ = new State;
+  st_ = fresh;
 }
 
 template <class T>

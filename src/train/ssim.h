@@ -8,7 +8,7 @@ namespace hgs::train {
 
 template <typename T>
 struct SsimWorkspace {
-  std::vector<std::vector<T>> band;  // per row band: line buffers (19 rows of W*C); reused between calls
+  std::vector<std::vector<T>> band;  // per row band: line buffers (96 rows of W*C); reused between calls
   std::vector<double> row_sum;       // [H] SSIM-map sum of each row
 };
 
