@@ -14,6 +14,7 @@
 #include <cmath>
 #include <random>
 
+#include "bench_scene.h"
 #include "hybrid/fusion.h"
 #include "hybrid/object_channels.h"
 #include "hybrid/scl.h"
@@ -27,43 +28,17 @@ using namespace hgs;
 
 namespace {
 
-constexpr int kW = 320, kH = 240, kN = 30000, kK = 8, kD = 512, kViews = 2;
-
-render::Camera bench_camera(int v) {
-  render::Camera c;
-  c.width = kW;
-  c.height = kH;
-  c.fx = c.fy = 300;
-  c.cx = 160;
-  c.cy = 120;
-  c.t[0] = 0.2f * v;
-  return c;
-}
+using bench::bench_camera;
+using bench::bench_model;
+using bench::kH;
+using bench::kN;
+using bench::kW;
+constexpr int kK = 8, kD = 512, kViews = 2;
 
 double peak_rss_mb() {
   rusage ru;
   getrusage(RUSAGE_SELF, &ru);
   return ru.ru_maxrss / 1024.0;
-}
-
-GaussianModel bench_model(unsigned seed, int n = kN, float scale = 1.f) {
-  GaussianModel m;
-  m.sh_degree = 3;
-  m.resize(n);
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> U(0, 1);
-  std::normal_distribution<float> N(0, 1);
-  for (int i = 0; i < n; ++i) {
-    float box[3] = {-2.5f + 5 * U(rng), -1.9f + 3.8f * U(rng), 3 + 4 * U(rng)};
-    for (int k = 0; k < 3; ++k) {
-      m.mean[i * 3 + k] = box[k];
-      m.log_scale[i * 3 + k] = std::log(0.01f * scale) + (std::log(0.06f) - std::log(0.01f)) * U(rng);
-    }
-    for (int k = 0; k < 4; ++k) m.quat[i * 4 + k] = N(rng);
-    m.opacity_logit[i] = inverse_sigmoid(0.05f + 0.9f * U(rng));
-    for (int k = 0; k < 48; ++k) m.sh[i * 48 + k] = (k < 3 ? 0.5f : 0.1f) * N(rng);
-  }
-  return m;
 }
 
 LabelMap grid_labels() {
@@ -90,7 +65,7 @@ struct Setup {
     for (int v = 0; v < kViews; ++v) {
       train::TrainView tv;
       tv.name = "bench" + std::to_string(v);
-      tv.cam = bench_camera(v);
+      tv.cam = bench_camera(0.2f * v);
       r.forward(tv.cam, in, {}, out);
       tv.image = Image(kW, kH, 3);
       tv.image.px = out.rgb;

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <random>
 
+#include "bench_scene.h"
 #include "model/gaussian_model.h"
 #include "render/renderer.h"
 #include "train/adam.h"
@@ -22,37 +23,11 @@ using namespace hgs;
 
 namespace {
 
-constexpr int kW = 320, kH = 240, kN = 30000;
-
-render::Camera bench_camera() {
-  render::Camera c;
-  c.width = kW;
-  c.height = kH;
-  c.fx = c.fy = 300;
-  c.cx = 160;
-  c.cy = 120;
-  return c;
-}
-
-GaussianModel bench_model(unsigned seed) {
-  GaussianModel m;
-  m.sh_degree = 3;
-  m.resize(kN);
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> U(0, 1);
-  std::normal_distribution<float> N(0, 1);
-  for (int i = 0; i < kN; ++i) {
-    float box[3] = {-2.5f + 5 * U(rng), -1.9f + 3.8f * U(rng), 3 + 4 * U(rng)};
-    for (int k = 0; k < 3; ++k) {
-      m.mean[i * 3 + k] = box[k];
-      m.log_scale[i * 3 + k] = std::log(0.01f) + (std::log(0.06f) - std::log(0.01f)) * U(rng);
-    }
-    for (int k = 0; k < 4; ++k) m.quat[i * 4 + k] = N(rng);
-    m.opacity_logit[i] = inverse_sigmoid(0.05f + 0.9f * U(rng));
-    for (int k = 0; k < 48; ++k) m.sh[i * 48 + k] = (k < 3 ? 0.5f : 0.1f) * N(rng);
-  }
-  return m;
-}
+using bench::bench_camera;
+using bench::bench_model;
+using bench::kH;
+using bench::kN;
+using bench::kW;
 
 // Ground truth from the unperturbed model; the trained model has its DC colours perturbed.
 struct BenchData {
