@@ -1,7 +1,7 @@
 // One hybrid training step (paper eq. 15: photometric + object-conditioned appearance + SCL + BRO, with
 // Observation Fusion and Adam on q's view logits and on f) against one plain RGB step on the same scene, so the
 // ratio asked of the hybrid method (<= 1.6x the RGB step) is read off one run. Scene: the 30k-Gaussian box of
-// bench_train (SH degree 3, 320x240, fx = fy = 300) seen by two cameras 0.2 apart; K = 8 objects laid out as a
+// bench_scene.h (SH degree 3, 320x240, fx = fy = 300) seen by two cameras 0.2 apart; K = 8 objects laid out as a
 // 4 x 2 grid of mask cells with a 16-pixel background border, D = 512 random unit reference features per
 // object. Densification off; the observation table is rebuilt every R = 100 steps as in training.
 // Also times the parts of a hybrid step separately (fusion, object channels, SCL pooling) for profiling, and
