@@ -60,13 +60,10 @@ void boundary_band(const float* A, const float* M, int H, int W, int s, float* B
   for (size_t i = 0; i < n; ++i) B[i] = std::clamp(B[i] + d[i] - e[i], 0.f, 1.f);
 }
 
-// Contiguous channels (cs == C): the pairs of both directions are differences of whole shifted rows, computed
-// branch-free with the per-pixel weight spread over the channels (same sums as the generic loop below, which
-// serves strided layouts).
-template <class T>
-T bro_loss_contiguous(const T* pred, const T* gt, int C, const float* B, int H, int W, T eps, T* grad, T scale) {
-  const int L = W * C;
-  std::vector<T> wx(L), wy(L), g(L);
+namespace {
+
+// sum_d ||W^d||_1 of eq. 14 (the normaliser of every term): W^x and W^y summed over the differences' supports.
+double band_weight_total(const float* B, int H, int W) {
   double wsum = 0;
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
@@ -74,7 +71,17 @@ T bro_loss_contiguous(const T* pred, const T* gt, int C, const float* B, int H, 
       if (x + 1 < W) wsum += std::max(b, B[size_t(y) * W + x + 1]);
       if (y + 1 < H) wsum += std::max(b, B[size_t(y + 1) * W + x]);
     }
-  const T den = T(C * wsum) + eps;
+  return wsum;
+}
+
+// Contiguous channels (cs == C): the pairs of both directions are differences of whole shifted rows, computed
+// branch-free with the per-pixel weight spread over the channels (same sums as the generic loop below, which
+// serves strided layouts).
+template <class T>
+T bro_loss_contiguous(const T* pred, const T* gt, int C, const float* B, int H, int W, T eps, T* grad, T scale) {
+  const int L = W * C;
+  std::vector<T> wx(L), wy(L), g(L);
+  const T den = T(C * band_weight_total(B, H, W)) + eps;
   const T gs = scale / den;
   double num = 0;
   for (int y = 0; y < H; ++y) {
@@ -124,18 +131,12 @@ T bro_loss_contiguous(const T* pred, const T* gt, int C, const float* B, int H, 
   return T(num) / den;
 }
 
+}  // namespace
+
 template <class T>
 T bro_loss(const T* pred, const T* gt, int cs, int C, const float* B, int H, int W, T eps, T* grad, T scale) {
   if (cs == C) return bro_loss_contiguous(pred, gt, C, B, H, W, eps, grad, scale);
-  // Weight total first (it is the normaliser of every term).
-  double wsum = 0;
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      const float b = B[size_t(y) * W + x];
-      if (x + 1 < W) wsum += std::max(b, B[size_t(y) * W + x + 1]);
-      if (y + 1 < H) wsum += std::max(b, B[size_t(y + 1) * W + x]);
-    }
-  const T den = T(C * wsum) + eps;
+  const T den = T(C * band_weight_total(B, H, W)) + eps;
   double num = 0;
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
