@@ -25,34 +25,18 @@ void pooled_prediction(int n, int D, int L, int J, const T* q, const T* f, const
 template <class T>
 void pooled_prediction_backward(int n, int D, int L, int J, const T* q, const T* f, const T* a, const int* objs,
                                 const T* mass, T eps, const T* dP, T* dq, T* df, T* da) {
-  std::vector<T> g(size_t(J) * D);  // dP / (m + eps)
-  for (int j = 0; j < J; ++j) {
-    const T inv = T(1) / (mass[j] + eps);
-    for (int d = 0; d < D; ++d) g[size_t(j) * D + d] = dP[size_t(j) * D + d] * inv;
-  }
-#pragma omp parallel for schedule(static)
-  for (int i = 0; i < n; ++i) {
-    const T* fi = f + size_t(i) * D;
-    T* dfi = df ? df + size_t(i) * D : nullptr;
-    for (int j = 0; j < J; ++j) {
-      const T* gj = &g[size_t(j) * D];
-      const T ai = a[size_t(i) * J + j], qi = q[size_t(i) * L + objs[j]];
-      // A Gaussian with a = 0 covers no pixel of mask j, so the renderer never reads its da (the pixel-weighted
-      // sum's gradient only reaches pixels where M_j != 0): skip the dot product for it.
-      if (ai == T(0)) {
-        if (da) da[size_t(i) * J + j] = 0;
+  std::vector<T> g(size_t(J) * D);
+  pooled_row_factors(J, D, dP, mass, eps, g.data());
+  // Row by row (pooled_backward_row, which the trainer also calls); df is added here.
+#pragma omp parallel
+  {
+    std::vector<T> row(D);
+#pragma omp for schedule(static)
+    for (int i = 0; i < n; ++i) {
+      if (!pooled_backward_row(long(i), D, L, J, q, f + size_t(i) * D, a, objs, g.data(), dq, da, row.data()) || !df)
         continue;
-      }
-      T dot = 0;
-#pragma omp simd reduction(+ : dot)
-      for (int d = 0; d < D; ++d) dot += fi[d] * gj[d];
-      if (da) da[size_t(i) * J + j] = qi * dot;
-      if (dq) dq[size_t(i) * L + objs[j]] += ai * dot;
-      const T w = ai * qi;
-      if (dfi && w != T(0)) {
-#pragma omp simd
-        for (int d = 0; d < D; ++d) dfi[d] += w * gj[d];
-      }
+      T* dfi = df + size_t(i) * D;
+      for (int d = 0; d < D; ++d) dfi[d] += row[d];
     }
   }
 }

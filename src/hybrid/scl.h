@@ -69,6 +69,15 @@ template <class T>
 void pooled_prediction_backward(int n, int D, int L, int J, const T* q, const T* f, const T* a, const int* objs,
                                 const T* mass, T eps, const T* dP, T* dq, T* df, T* da);
 
+// G = dP / (mass + eps): dP [J, D], mass [J] -> G [J, D], the per-object factor of every backward row below.
+template <class T>
+void pooled_row_factors(int J, int D, const T* dP, const T* mass, T eps, T* G) {
+  for (int j = 0; j < J; ++j) {
+    const T inv = T(1) / (mass[j] + eps);
+    for (int d = 0; d < D; ++d) G[size_t(j) * D + d] = dP[size_t(j) * D + d] * inv;
+  }
+}
+
 // Row i of pooled_prediction_backward, for the trainer's single pass over the Gaussians (the row-sparse Adam
 // step of f_n runs right after it on the same row, so f is read once). fi = f_i [D]; with G = dP / (mass + eps)
 // [J, D],

@@ -256,8 +256,7 @@ float HybridTrainer::semantic_contrastive(const render::RenderOutputs& out) {
   // (begin_step() runs later in Trainer::step).
   d_wsum_.resize(size_t(n) * Jf);
   G_.resize(size_t(Jf) * D_);
-  for (int j = 0; j < Jf; ++j)
-    for (int d = 0; d < D_; ++d) G_[size_t(j) * D_ + d] = dP_[size_t(j) * D_ + d] / (mass[j] + 1e-6f);
+  pooled_row_factors(Jf, D_, dP_.data(), mass.data(), 1e-6f, G_.data());
   const float* a = out.weight_sums.data();
   auto rows = [&](long i, float* g) {
     alignas(64) float buf[train::kMaxRowUpdateDim];
