@@ -200,12 +200,8 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
     for (int o : order)
       if (o < 0 || o >= int(views_.size())) fail("{}: corrupt view order", where);
     m.validate(where);
-    for (auto& [name, g] : extra_grads_)
-      if (!m.find_extra(name)) fail("{}: the checkpoint has no '{}' channels", where, name);
-    // Everything parsed and checked: commit (the method checks its own state before it takes it). Trainable
-    // extras keep a gradient buffer.
+    // Everything parsed and checked: commit (the method checks its own state before it takes it).
     method_state_loaded(where, h.value("method_config", json(nullptr)), m.n, method);
-    for (auto& [name, g] : extra_grads_) g.assign(size_t(m.n) * m.find_extra(name)->dim, 0.f);
     cfg_ = c;
     model_ = std::move(m);
     adam_ = std::move(a);

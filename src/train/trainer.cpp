@@ -41,19 +41,6 @@ Trainer::Trainer(const TrainConfig& cfg, GaussianModel model, std::vector<TrainV
   stats_.reset(model_.n);
 }
 
-void Trainer::add_trainable_extra(const std::string& name, float lr) {
-  ExtraGroup* g = model_.find_extra(name);
-  if (!g) fail("train: no extra channel group '{}' in the model", name);
-  adam_.add(name, g->dim, model_.n, lr);
-  extra_grads_[name].assign(size_t(model_.n) * g->dim, 0.f);
-}
-
-std::vector<float>& Trainer::extra_grad(const std::string& name) {
-  auto it = extra_grads_.find(name);
-  if (it == extra_grads_.end()) fail("train: extra group '{}' is not trainable", name);
-  return it->second;
-}
-
 int Trainer::active_sh_degree() const {
   int d = cfg_.sh_increase_every > 0 ? it_ / cfg_.sh_increase_every : cfg_.sh_degree;
   return std::min(d, cfg_.sh_degree);
@@ -73,7 +60,6 @@ void Trainer::release_step_buffers() {
   renderer_.release();
   grads_ = render::GaussianGrads{};
   out_ = render::RenderOutputs{};
-  for (auto& [name, g] : extra_grads_) std::vector<float>().swap(g);
 }
 
 StepInfo Trainer::step() {
@@ -101,10 +87,6 @@ StepInfo Trainer::step() {
   render::OutputGrads dout;
   dout.rgb = d_rgb_.data();
   info.loss.total += extra_loss(v, out_, d_rgb_.data(), dout);
-  for (auto& [name, g] : extra_grads_) {
-    g.resize(size_t(model_.n) * model_.find_extra(name)->dim);
-    std::fill(g.begin(), g.end(), 0.f);
-  }
   renderer_.backward(dout, grads_);
   extra_param_grads(grads_);
 
@@ -115,8 +97,6 @@ StepInfo Trainer::step() {
   adam_.update(adam_.get("quat"), model_.quat.data(), grads_.quat.data(), model_.n);
   adam_.update(adam_.get("opacity"), model_.opacity_logit.data(), grads_.opacity_logit.data(), model_.n);
   adam_.update(adam_.get("sh"), model_.sh.data(), grads_.sh.data(), model_.n);
-  for (auto& [name, g] : extra_grads_)
-    adam_.update(adam_.get(name), model_.find_extra(name)->data.data(), g.data(), model_.n);
   method_update();
 
   // Densification (3DGS schedule; statistics are gathered until densify_until).

@@ -71,9 +71,10 @@ class Trainer {
   // output gradients in `dout` (pointers must stay valid until backward). Returns the added loss value.
   virtual float extra_loss(const TrainView& view, const render::RenderOutputs& out, float* d_rgb,
                            render::OutputGrads& dout) { return 0.f; }
-  // Called after backward: fill the gradients of trainable extra groups (extra_grad(name)) from `g`.
+  // Called after backward with the renderer's gradients (the method adds its own parameters' chain rule).
   virtual void extra_param_grads(render::GaussianGrads& g) {}
-  // Called after the built-in Adam updates, before densification: parameters the method optimises itself.
+  // Called after the built-in Adam updates, before densification: parameters the method optimises itself
+  // (registered in adam_ so that their moments follow densification and checkpoints).
   virtual void method_update() {}
   // Called at the end of every step (after Adam and densification).
   virtual void after_step(StepInfo& info) {}
@@ -88,10 +89,6 @@ class Trainer {
   virtual std::vector<std::pair<std::string, std::vector<float>>> method_state() const { return {}; }
   virtual void method_state_loaded(const std::string& where, const nlohmann::json& config, int n,
                                    std::map<std::string, std::vector<float>>& arrays) {}
-
-  // Registers model extra group `name` as trainable with learning rate `lr` (Adam state follows densification).
-  void add_trainable_extra(const std::string& name, float lr);
-  std::vector<float>& extra_grad(const std::string& name);  // [N, dim], zeroed before every backward
 
   TrainConfig cfg_;
   GaussianModel model_;
@@ -108,7 +105,6 @@ class Trainer {
   render::GaussianGrads grads_;
   PhotometricLoss loss_;
   std::vector<float> d_rgb_;  // [H, W, 3]
-  std::map<std::string, std::vector<float>> extra_grads_;
 
  private:
   int next_view();
