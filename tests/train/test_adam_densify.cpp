@@ -64,6 +64,21 @@ struct RowSteps {
     }
   }
   bool has(int s, long r) const { return (s + r) % 3 != 0; }
+  // Every step on two optimisers side by side: float32 values x32 and values x (float32 or half) under `a`.
+  template <class X>
+  void run(Adam& a32, AdamParam& p32, float* x32, Adam& a, AdamParam& p, X* x) const {
+    for (size_t s = 0; s < g.size(); ++s) {
+      a32.begin_step();
+      a.begin_step();
+      auto grad = [&](long r, float* out) {
+        if (!has(int(s), r)) return false;
+        std::copy_n(&g[s][size_t(r) * d], d, out);
+        return true;
+      };
+      a32.update_rows(p32, x32, n, grad);
+      a.update_rows(p, x, n, grad);
+    }
+  }
 };
 
 TEST(Adam, RowUpdateMatchesDenseOnRowsWithGradient) {
@@ -112,17 +127,7 @@ TEST(Adam, Bf16MomentsTrackFloat32) {
   EXPECT_TRUE(p16.m.empty());
   EXPECT_EQ(p16.m16.size(), size_t(n) * d);
   std::vector<float> x32(size_t(n) * d, 0.f), x16 = x32;
-  for (int s = 0; s < steps; ++s) {
-    a32.begin_step();
-    a16.begin_step();
-    auto grad = [&](long r, float* g) {
-      if (!rs.has(s, r)) return false;
-      std::copy_n(&rs.g[s][size_t(r) * d], d, g);
-      return true;
-    };
-    a32.update_rows(p32, x32.data(), n, grad);
-    a16.update_rows(p16, x16.data(), n, grad);
-  }
+  rs.run(a32, p32, x32.data(), a16, p16, x16.data());
   // Each step moves a value by about lr = 1e-3; after 200 steps the two runs agree to a few steps' worth.
   double worst = 0, moved = 0;
   for (size_t i = 0; i < x32.size(); ++i) {
@@ -149,17 +154,7 @@ TEST(Adam, HalfValuesTrackFloat32) {
   AdamParam& p16 = a16.add("x", d, n, 1e-3f, true);
   std::vector<float> x32(size_t(n) * d, 0.25f);
   std::vector<uint16_t> x16(x32.size(), float_to_half(0.25f));
-  for (int s = 0; s < steps; ++s) {
-    a32.begin_step();
-    a16.begin_step();
-    auto grad = [&](long r, float* g) {
-      if (!rs.has(s, r)) return false;
-      std::copy_n(&rs.g[s][size_t(r) * d], d, g);
-      return true;
-    };
-    a32.update_rows(p32, x32.data(), n, grad);
-    a16.update_rows(p16, x16.data(), n, grad);
-  }
+  rs.run(a32, p32, x32.data(), a16, p16, x16.data());
   double worst = 0, moved = 0;
   for (size_t i = 0; i < x32.size(); ++i) {
     worst = std::max(worst, double(std::abs(half_to_float(x16[i]) - x32[i])));
