@@ -23,7 +23,6 @@ struct ExtraGroup {
   bool f16 = false;
   std::vector<uint16_t> half;  // [N, dim] when f16
 
-  size_t size() const { return f16 ? half.size() : data.size(); }
   float value(size_t k) const;           // element k, either storage
   void row(size_t i, float* out) const;  // row i as float32 [dim]
   std::vector<float> to_float() const;   // every value as float32 [N, dim]
