@@ -85,28 +85,11 @@ bool is_compaction(const std::vector<int>& src, int n) {
   return true;
 }
 
-namespace {
-// Row gather of one [n, d] array; a compaction (pruning: rows move only towards the front) runs in place, so
-// the language embeddings, which dominate memory, are never held twice (the capacity is kept for growth).
-template <class V>
-void gather_array(V& a, int d, const std::vector<int>& src, bool compaction) {
-  if (compaction) {
-    for (size_t i = 0; i < src.size(); ++i)
-      if (src[i] != int(i)) std::copy_n(a.data() + size_t(src[i]) * d, d, a.data() + i * d);
-    a.resize(src.size() * d);
-    return;
-  }
-  V t(src.size() * d);
-  for (size_t i = 0; i < src.size(); ++i) std::copy_n(a.data() + size_t(src[i]) * d, d, t.data() + i * d);
-  a.swap(t);
-}
-}  // namespace
 
 void GaussianModel::gather(const std::vector<int>& src) {
-  const bool compaction = is_compaction(src, n);
-  for (auto& f : fields()) gather_array(*f.data, f.dim, src, compaction);
+  for (auto& f : fields()) gather_rows(*f.data, f.dim, src);
   for (auto& e : extras)
-    if (e.f16) gather_array(e.half, e.dim, src, compaction);
+    if (e.f16) gather_rows(e.half, e.dim, src);
   n = int(src.size());
 }
 

@@ -3,6 +3,7 @@
 // embeddings). Every per-Gaussian array is reachable through `fields()`, so densification, Adam and the PLY
 // and checkpoint writers handle extra groups without knowing them.
 #pragma once
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <string>
@@ -65,6 +66,24 @@ struct GaussianModel {
 // True when gathering rows `src` of an n-row array only moves rows towards the front (src strictly increasing,
 // src[i] >= i): the gather can then run in place.
 bool is_compaction(const std::vector<int>& src, int n);
+
+// Row gather of one [n, d] array (model fields, Adam moments): row i becomes old row src[i], or zeros when
+// fresh[i] (fresh may be empty = none). A compaction (pruning) runs in place, so the largest arrays are never
+// held twice (the capacity is kept for later growth).
+template <class V>
+void gather_rows(V& a, int d, const std::vector<int>& src, const std::vector<char>& fresh = {}) {
+  const bool any_fresh = std::find(fresh.begin(), fresh.end(), char(1)) != fresh.end();
+  if (!any_fresh && is_compaction(src, int(a.size() / size_t(d)))) {
+    for (size_t i = 0; i < src.size(); ++i)
+      if (src[i] != int(i)) std::copy_n(a.data() + size_t(src[i]) * d, d, a.data() + i * d);
+    a.resize(src.size() * d);
+    return;
+  }
+  V t(src.size() * d, 0);
+  for (size_t i = 0; i < src.size(); ++i)
+    if (fresh.empty() || !fresh[i]) std::copy_n(a.data() + size_t(src[i]) * d, d, t.data() + i * d);
+  a.swap(t);
+}
 
 // Read-only renderer inputs for the model (SH colours at the model's full degree; no extra channels).
 render::GaussianInputs render_inputs(const GaussianModel& m);

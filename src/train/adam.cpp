@@ -201,23 +201,6 @@ void Adam::update_row(AdamParam& p, X* value, long row, const float* g, long ste
 template void Adam::update_row<float>(AdamParam&, float*, long, const float*, long) const;
 template void Adam::update_row<uint16_t>(AdamParam&, uint16_t*, long, const float*, long) const;
 
-namespace {
-template <class V>
-void gather_rows(V& a, int d, const std::vector<int>& src, const std::vector<char>& fresh) {
-  const bool any_fresh = std::find(fresh.begin(), fresh.end(), char(1)) != fresh.end();
-  if (!any_fresh && is_compaction(src, int(a.size() / size_t(d)))) {  // pruning: in place
-    for (size_t i = 0; i < src.size(); ++i)
-      if (src[i] != int(i)) std::copy_n(a.data() + size_t(src[i]) * d, d, a.data() + i * d);
-    a.resize(src.size() * d);
-    return;
-  }
-  V t(src.size() * d, 0);
-  for (size_t i = 0; i < src.size(); ++i)
-    if (fresh.empty() || !fresh[i]) std::copy_n(a.data() + size_t(src[i]) * d, d, t.data() + i * d);
-  a.swap(t);
-}
-}  // namespace
-
 void Adam::gather(const std::vector<int>& src, const std::vector<char>& fresh) {
   for (auto& p : params) {
     if (p.bf16) {
