@@ -23,9 +23,8 @@ enum Grad { gMx, gMy, gA, gB, gC, gOp, gR, gG, gBl, gZ, kNumGrads };
 
 template <class T>
 struct TileData {
-  int n = 0, C = 0;
+  int n = 0;
   const T* rec = nullptr;      // [n, 16]
-  const T* extra = nullptr;    // [n, C]
 };
 
 template <class T>
@@ -54,29 +53,19 @@ void build_records(const RasterInputs<T>& in, const Binning& bins, T* records) {
   }
 }
 
-// Copies the tile's records (and extras) into per-thread scratch. Returns false for an empty tile.
+// Copies the tile's records into per-thread scratch. Returns false for an empty tile. (Extra channels are read
+// in place: a Gaussian's C values are one contiguous row of the input.)
 template <class T>
-bool load_records(const RasterInputs<T>& in, const Binning& bins, const T* records, T* tile_records, bool gather,
-                  int tile, typename RasterWorkspace<T>::PerThread& w, TileData<T>& td) {
+bool load_records(const Binning& bins, const T* records, T* tile_records, bool gather, int tile, TileData<T>& td) {
   const int s = bins.tile_start[tile], e = bins.tile_start[tile + 1];
-  const int n = e - s, C = in.num_extra, XS = in.extra_stride > 0 ? in.extra_stride : C;
+  const int n = e - s;
   td.n = n;
-  td.C = C;
   if (n == 0) return false;
   T* rec = tile_records + size_t(s) * kRecord;  // [n, 16], written by forward, read again by backward
   td.rec = rec;
   if (gather)
     for (int k = 0; k < n; ++k)
       std::memcpy(rec + size_t(k) * kRecord, records + size_t(bins.tile_gauss[s + k]) * kRecord, sizeof(T) * kRecord);
-  if (C > 0) {
-    if (w.soa.size() < size_t(n) * C) w.soa.resize(size_t(n) * C);
-    T* ex = w.soa.data();
-    td.extra = ex;
-    for (int k = 0; k < n; ++k) {
-      const int g = bins.tile_gauss[s + k];
-      for (int c2 = 0; c2 < C; ++c2) ex[size_t(k) * C + c2] = in.extra[size_t(g) * XS + c2];
-    }
-  }
   return true;
 }
 
@@ -87,6 +76,97 @@ inline uint32_t spread_bits(uint32_t x) {
   x = (x | (x << 2)) & 0x33333333u;
   x = (x | (x << 1)) & 0x55555555u;
   return x;
+}
+
+// Per-batch visit lists of a tile: offsets [33] into one flat array sized by the batch bits of the masks of
+// Gaussians [0, n) (an upper bound on the visits of every batch).
+inline int batch_offsets(const uint32_t* masks, int n, uint32_t batches, int* off) {
+  int cnt[kBatches] = {};
+  for (int k = 0; k < n; ++k)
+    for (uint32_t mb = masks[k] & batches; mb; mb &= mb - 1) ++cnt[__builtin_ctz(mb)];
+  off[0] = 0;
+  for (int b = 0; b < kBatches; ++b) off[b + 1] = off[b] + cnt[b];
+  return off[kBatches];
+}
+
+// Extra channels of one batch, forward: dst[c] = sum_v w_v extra_{g_v}[c] over the batch's visits in walk order
+// (g_v the Gaussian's index, ex [N, XS] the input rows),
+// CH channels at a time in registers. The walk itself would read-modify-write every channel of the batch state
+// per visit (bound by loads and stores); here a visit costs one weight load and CH broadcast FMAs. The sums run
+// in the same order as a per-visit accumulation, so the values are the same.
+template <class T, int CH>
+inline __attribute__((always_inline)) void composite_chunk(const int* vk, const simd::Pack<T>* vw, int cnt,
+                                                           const T* ex, int XS, int c0, simd::Pack<T>* dst) {
+  using P = simd::Pack<T>;
+  P acc[CH];
+  for (int i = 0; i < CH; ++i) acc[i] = P{};
+  for (int v = 0; v < cnt; ++v) {
+    const P wv = vw[v];
+    const T* e = ex + size_t(vk[v]) * XS + c0;
+    for (int i = 0; i < CH; ++i) acc[i] += wv * e[i];
+  }
+  for (int i = 0; i < CH; ++i) dst[c0 + i] = acc[i];
+}
+
+template <class T>
+void composite_extras(const int* vk, const simd::Pack<T>* vw, int cnt, const T* ex, int C, int XS, simd::Pack<T>* dst) {
+  int c0 = 0;
+  for (; c0 + 12 <= C; c0 += 12) composite_chunk<T, 12>(vk, vw, cnt, ex, XS, c0, dst);
+  for (; c0 + 4 <= C; c0 += 4) composite_chunk<T, 4>(vk, vw, cnt, ex, XS, c0, dst);
+  for (; c0 < C; ++c0) composite_chunk<T, 1>(vk, vw, cnt, ex, XS, c0, dst);
+}
+
+// Extra channels of one batch, backward: dot[v] = <extra_{g_v}, g> for the batch's visits, g [C] (the batch's
+// upstream gradient packs) held in registers CH channels at a time.
+template <class T, int CH>
+inline __attribute__((always_inline)) void dot_chunk(const int* vk, int cnt, const T* ex, int XS, int c0,
+                                                     const simd::Pack<T>* g, simd::Pack<T>* dot) {
+  using P = simd::Pack<T>;
+  P gc[CH];
+  for (int i = 0; i < CH; ++i) gc[i] = g[c0 + i];
+  for (int v = 0; v < cnt; ++v) {
+    const T* e = ex + size_t(vk[v]) * XS + c0;
+    P d0 = P{}, d1 = P{};
+    for (int i = 0; i + 1 < CH; i += 2) {
+      d0 += e[i] * gc[i];
+      d1 += e[i + 1] * gc[i + 1];
+    }
+    if (CH % 2) d0 += e[CH - 1] * gc[CH - 1];
+    dot[v] += d0 + d1;
+  }
+}
+
+template <class T>
+void extra_dots(const int* vk, int cnt, const T* ex, int C, int XS, const simd::Pack<T>* g, simd::Pack<T>* dot) {
+  for (int v = 0; v < cnt; ++v) dot[v] = simd::Pack<T>{};
+  int c0 = 0;
+  for (; c0 + 12 <= C; c0 += 12) dot_chunk<T, 12>(vk, cnt, ex, XS, c0, g, dot);
+  for (; c0 + 4 <= C; c0 += 4) dot_chunk<T, 4>(vk, cnt, ex, XS, c0, g, dot);
+  for (; c0 < C; ++c0) dot_chunk<T, 1>(vk, cnt, ex, XS, c0, g, dot);
+}
+
+// Extra-channel gradient of one (tile, Gaussian) pair: o[c] = sum over its visits v of hsum(w_v * g_{b_v}[c]),
+// g_b the gradient packs of batch b (stride BS from base), CH channels at a time in registers.
+template <class T, int CH>
+inline __attribute__((always_inline)) void grad_chunk(const int* vb, const simd::Pack<T>* vw, int cnt,
+                                                      const simd::Pack<T>* base, int BS, int c0, T* o) {
+  using P = simd::Pack<T>;
+  P acc[CH];
+  for (int i = 0; i < CH; ++i) acc[i] = P{};
+  for (int v = 0; v < cnt; ++v) {
+    const P wv = vw[v];
+    const P* g = base + size_t(vb[v]) * BS + c0;
+    for (int i = 0; i < CH; ++i) acc[i] += wv * g[i];
+  }
+  for (int i = 0; i < CH; ++i) o[c0 + i] = simd::hsum<T>(acc[i]);
+}
+
+template <class T>
+void extra_grads(const int* vb, const simd::Pack<T>* vw, int cnt, const simd::Pack<T>* base, int BS, int C, T* o) {
+  int c0 = 0;
+  for (; c0 + 12 <= C; c0 += 12) grad_chunk<T, 12>(vb, vw, cnt, base, BS, c0, o);
+  for (; c0 + 4 <= C; c0 += 4) grad_chunk<T, 4>(vb, vw, cnt, base, BS, c0, o);
+  for (; c0 < C; ++c0) grad_chunk<T, 1>(vb, vw, cnt, base, BS, c0, o);
 }
 
 // Batch masks of a tile, masks [n]: bit (row * 2 + half) is set when the Gaussian can reach the 8-pixel batch
@@ -150,9 +230,10 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   using M = simd::Mask<T>;
   using I = typename std::remove_reference<decltype(M{}[0])>::type;
   const int W = bins.width, H = bins.height, C = in.num_extra, J = in.num_weights;
+  const int XS = in.extra_stride > 0 ? in.extra_stride : C;
   const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
   TileData<T> td;
-  const bool any_g = load_records(in, bins, records, tile_records, true, tile, w, td);
+  const bool any_g = load_records(bins, records, tile_records, true, tile, td);
   const int n = any_g ? td.n : 0;
   uint32_t* masks = ws_masks + bins.tile_start[tile];
   if (any_g) build_masks(bins, tile, td, masks);
@@ -169,7 +250,9 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   const P lane = simd::iota_pack<T>();
   const M lane_i = __builtin_convertvector(lane, M);
   uint32_t alive = 0;
+  uint32_t jmask[kBatches];  // pixel-weight maps that are non-zero somewhere in the batch (J <= 32)
   for (int bt = 0; bt < kBatches; ++bt) {
+    jmask[bt] = 0;
     const int py = ty0 + bt / kBatchesPerRow, px0 = tx0 + (bt % kBatchesPerRow) * kLanes;
     if (py >= H || px0 >= W) continue;
     const int nvalid = std::min(kLanes, W - px0);
@@ -178,12 +261,26 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
     st[bT] = simd::splat(T(1));
     for (int f = bR; f < BS; ++f) st[f] = P{};
     for (int jj = 0; jj < J; ++jj)
-      for (int l = 0; l < nvalid; ++l)
+      for (int l = 0; l < nvalid; ++l) {
         st[kBatchFixed + C + jj][l] = T(in.pixel_weights[(size_t(py) * W + px0 + l) * J + jj]);
+        if (st[kBatchFixed + C + jj][l] != T(0)) jmask[bt] |= jj < 32 ? 1u << jj : 0u;
+      }
     bact[bt] = lane_i < I(nvalid);
     blast[bt] = M{};
   }
   const uint32_t all_batches = alive;
+  // Extra channels: the walk records each batch's visits (Gaussian, weight pack); composite_extras sums them
+  // afterwards, batch by batch.
+  int voff[kBatches + 1], vcnt[kBatches] = {};
+  int* vk = nullptr;
+  P* vw = nullptr;
+  if (kExtra && n > 0) {
+    const size_t nv = size_t(batch_offsets(masks, n, all_batches, voff));
+    if (w.vk.size() < nv) w.vk.resize(nv);
+    if (w.vw.size() < nv) w.vw.resize(nv);
+    vk = w.vk.data();
+    vw = w.vw.data();
+  }
   int kend = 0;  // Gaussians [kend, n) were never reached (all batches terminated)
   for (int k = 0; k < n && alive; ++k) {
     kend = k + 1;
@@ -194,7 +291,6 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
       continue;
     }
     const T* rc = td.rec + size_t(k) * kRecord;
-    const T* e = kExtra ? td.extra + size_t(k) * C : nullptr;
     P* wa = J > 0 ? wacc + size_t(k) * J : nullptr;
     for (int jj = 0; jj < J; ++jj) wa[jj] = P{};
     const M kk = M{} + I(k + 1);
@@ -223,10 +319,18 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
       st[bB] += wgt * rc[kCb];
       if (kDepth) st[bD] += wgt * rc[kZ];
       if (kExtra) {
-#pragma GCC unroll 4
-        for (int c = 0; c < C; ++c) st[kBatchFixed + c] += wgt * e[c];
+        const int v = voff[bt] + vcnt[bt]++;
+        vk[v] = bins.tile_gauss[bins.tile_start[tile] + k];
+        vw[v] = wgt;
       }
-      for (int jj = 0; jj < J; ++jj) wa[jj] += wgt * st[kBatchFixed + C + jj];
+      if (J <= 32) {
+        for (uint32_t jm = jmask[bt]; jm; jm &= jm - 1) {
+          const int jj = __builtin_ctz(jm);
+          wa[jj] += wgt * st[kBatchFixed + C + jj];
+        }
+      } else {
+        for (int jj = 0; jj < J; ++jj) wa[jj] += wgt * st[kBatchFixed + C + jj];
+      }
       st[bT] = acc ? testT : Tr;
       blast[bt] = acc ? kk : blast[bt];
       bact[bt] = active;
@@ -238,7 +342,8 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
     if (!((all_batches >> bt) & 1)) continue;
     const int py = ty0 + bt / kBatchesPerRow, px0 = tx0 + (bt % kBatchesPerRow) * kLanes;
     const int nvalid = std::min(kLanes, W - px0);
-    const P* st = bst + size_t(bt) * BS;
+    P* st = bst + size_t(bt) * BS;
+    if (kExtra && vcnt[bt] > 0) composite_extras<T>(vk + voff[bt], vw + voff[bt], vcnt[bt], in.extra, C, XS, st + kBatchFixed);
     for (int l = 0; l < nvalid; ++l) {
       const size_t p = size_t(py) * W + px0 + l;
       const T Tr = st[bT][l];
@@ -280,7 +385,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
   const int F = kNumGrads + C;
   const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
   TileData<T> td;
-  if (!load_records(in, bins, records, tile_records, false, tile, w, td)) return;
+  if (!load_records(bins, records, tile_records, false, tile, td)) return;
   const int n = td.n;
   const uint32_t* masks = ws_masks + bins.tile_start[tile];
   const int J = g.d_weight_sums ? in.num_weights : 0;
@@ -297,15 +402,15 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
   const int BS = kBatchFixed + C + J;
   if (w.bstate.size() < size_t(kBatches) * BS) w.bstate.resize(size_t(kBatches) * BS);
   if (w.blast.size() < size_t(kBatches)) w.blast.resize(kBatches);
-  if (kExtra && w.chan.size() < size_t(C)) w.chan.resize(size_t(C));
   P* bst = w.bstate.data();
   M* blast = w.blast.data();
-  P* accE = w.chan.data();
   int kmax[kBatches];
+  uint32_t jmask[kBatches];  // pixel-weight maps that are non-zero somewhere in the batch (J <= 32)
   uint32_t live = 0;  // batches with at least one contributor
   const T bg0 = in.background[0], bg1 = in.background[1], bg2 = in.background[2];
   for (int bt = 0; bt < kBatches; ++bt) {
     kmax[bt] = 0;
+    jmask[bt] = 0;
     const int py = ty0 + bt / kBatchesPerRow, px0 = tx0 + (bt % kBatchesPerRow) * kLanes;
     if (py >= H || px0 >= W) continue;
     const int nvalid = std::min(kLanes, W - px0);
@@ -327,7 +432,10 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
       if (kDepth && g.d_depth) gd[l] = g.d_depth[p];
       if (kExtra && g.d_extra)
         for (int c = 0; c < C; ++c) st[kBatchFixed + c][l] = g.d_extra[p * XS + c];
-      for (int jj = 0; jj < J; ++jj) st[kBatchFixed + C + jj][l] = T(in.pixel_weights[p * J + jj]);
+      for (int jj = 0; jj < J; ++jj) {
+        st[kBatchFixed + C + jj][l] = T(in.pixel_weights[p * J + jj]);
+        if (st[kBatchFixed + C + jj][l] != T(0)) jmask[bt] |= jj < 32 ? 1u << jj : 0u;
+      }
     }
     if (kmax[bt] == 0) continue;
     live |= 1u << bt;
@@ -340,21 +448,46 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
     st[bBg] = Tf * (gr * bg0 + gg * bg1 + gb * bg2 - ga);
     blast[bt] = lastp;
   }
+  // Extra channels: <extra_k, g> of every (Gaussian, batch) visit is computed before the walk, batch by batch
+  // (extra_dots, the batch's gradient packs in registers); the walk keeps each Gaussian's visits (batch, masked
+  // weight) and extra_grads sums its channel gradients from them once it is done.
+  int voff[kBatches + 1], vcur[kBatches];
+  int* vk = nullptr;
+  P* vdot = nullptr;
+  if (kExtra) {
+    int vcnt[kBatches] = {};
+    const size_t nv = size_t(batch_offsets(masks, n, live, voff));
+    if (w.vk.size() < nv) w.vk.resize(nv);
+    if (w.vw.size() < nv) w.vw.resize(nv);
+    vk = w.vk.data();
+    vdot = w.vw.data();
+    for (int k = 0; k < n; ++k)
+      for (uint32_t mb = masks[k] & live; mb; mb &= mb - 1) {
+        const int bt = __builtin_ctz(mb);
+        if (k < kmax[bt]) vk[voff[bt] + vcnt[bt]++] = bins.tile_gauss[bins.tile_start[tile] + k];
+      }
+    for (int bt = 0; bt < kBatches; ++bt) {
+      vcur[bt] = vcnt[bt];
+      if (vcnt[bt] > 0)
+        extra_dots<T>(vk + voff[bt], vcnt[bt], in.extra, C, XS, bst + size_t(bt) * BS + kBatchFixed, vdot + voff[bt]);
+    }
+  }
+  int kvb[kBatches];  // this Gaussian's visits with a contribution: batch, masked weight
+  P kvw[kBatches];
   const P lane = simd::iota_pack<T>();
   const int s = bins.tile_start[tile];
   for (int k = n - 1; k >= 0; --k) {
     uint32_t mb = masks[k] & live;
     T* o = pair_grad + size_t(bins.tile_pair[s + k]) * F;
     P aMx = P{}, aMy = P{}, aA = P{}, aB = P{}, aC = P{}, aOp = P{}, aR = P{}, aG = P{}, aBl = P{}, aZ = P{};
-    if (kExtra)
-      for (int ch = 0; ch < C; ++ch) accE[ch] = P{};
+    int nkv = 0;
     const T* rc = td.rec + size_t(k) * kRecord;
-    const T* e = kExtra ? td.extra + size_t(k) * C : nullptr;
     const T* dw = J > 0 ? DW + size_t(k) * J : nullptr;
     while (mb) {
       const int bt = __builtin_ctz(mb);
       mb &= mb - 1;
       if (k >= kmax[bt]) continue;
+      const int vi = kExtra ? voff[bt] + --vcur[bt] : 0;  // this visit in the batch's list (walked backwards)
       P* st = bst + size_t(bt) * BS;
       const M inr = (M{} + I(k)) < blast[bt];
       const T fy = T(ty0 + bt / kBatchesPerRow) + T(0.5);
@@ -374,30 +507,20 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
       const P wgt = alpha * Ti;
       P dot = rc[kCr] * gr + rc[kCg] * gg + rc[kCb] * gb;
       if (kDepth) dot += rc[kZ] * st[bD];
-      if (kExtra || J > 0) {
-        // Extra channels and pixel-weight sums: four partial sums, so the FMAs do not wait on one another.
-        P d0 = P{}, d1 = P{}, d2 = P{}, d3 = P{};
-        const P* se = st + kBatchFixed;
-        int ch = 0;
-        if (kExtra) {
-          for (; ch + 4 <= C; ch += 4) {
-            d0 += e[ch] * se[ch];
-            d1 += e[ch + 1] * se[ch + 1];
-            d2 += e[ch + 2] * se[ch + 2];
-            d3 += e[ch + 3] * se[ch + 3];
-          }
-          for (; ch < C; ++ch) d0 += e[ch] * se[ch];
-        }
+      if (kExtra) dot += vdot[vi];
+      if (J > 0) {
+        // Pixel-weight sums: only the maps that are non-zero in this batch (one, inside a hard object mask).
         const P* sw = st + kBatchFixed + C;
-        int jj = 0;
-        for (; jj + 4 <= J; jj += 4) {
-          d0 += dw[jj] * sw[jj];
-          d1 += dw[jj + 1] * sw[jj + 1];
-          d2 += dw[jj + 2] * sw[jj + 2];
-          d3 += dw[jj + 3] * sw[jj + 3];
+        P d0 = P{};
+        if (J <= 32) {
+          for (uint32_t jm = jmask[bt]; jm; jm &= jm - 1) {
+            const int jj = __builtin_ctz(jm);
+            d0 += dw[jj] * sw[jj];
+          }
+        } else {
+          for (int jj = 0; jj < J; ++jj) d0 += dw[jj] * sw[jj];
         }
-        for (; jj < J; ++jj) d1 += dw[jj] * sw[jj];
-        dot += (d0 + d1) + (d2 + d3);
+        dot += d0;
       }
       const P S = st[bS];
       P dLda = Ti * dot - (S + st[bBg]) * ioma;
@@ -409,8 +532,8 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
       aBl += wm * gb;
       if (kDepth) aZ += wm * st[bD];
       if (kExtra) {
-#pragma GCC unroll 4
-        for (int ch = 0; ch < C; ++ch) accE[ch] += wm * st[kBatchFixed + ch];
+        kvb[nkv] = bt;
+        kvw[nkv++] = wm;
       }
       dLda = (c & (araw < T(0.99))) ? dLda : P{};
       aOp += gauss * dLda;
@@ -433,7 +556,9 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
     o[gG] = simd::hsum<T>(aG);
     o[gBl] = simd::hsum<T>(aBl);
     o[gZ] = kDepth ? simd::hsum<T>(aZ) : T(0);
-    for (int ch = 0; ch < C; ++ch) o[kNumGrads + ch] = kExtra ? simd::hsum<T>(accE[ch]) : T(0);
+    if (kExtra) extra_grads<T>(kvb, kvw, nkv, bst + kBatchFixed, BS, C, o + kNumGrads);
+    else
+      for (int ch = 0; ch < C; ++ch) o[kNumGrads + ch] = T(0);
   }
 }
 

@@ -17,6 +17,12 @@
 // / (1 - alpha_i) for any number of channels. Optional pixel-weight maps M_j give per-Gaussian sums
 // a_{n,j} = sum_p M_j(p) alpha_n(p) T_n(p) (the blending weight a Gaussian receives inside mask j); their
 // gradient enters S and <value, g> as the per-pixel value sum_j dL/da_{n,j} M_j(p).
+// Extra channels (C of them, e.g. the hybrid method's 4 per object) are kept out of the walks, which would
+// read-modify-write C packs of batch state per visit: forward records each batch's visits (Gaussian, weight
+// pack) and then sums w * extra per batch, 12 channels at a time in registers; backward computes every visit's
+// <extra, dL/dextra> batch by batch before its walk (the walk needs it only as one number per pixel) and, after
+// each Gaussian's visits, its channel gradients sum_visits w * dL/dextra the same way. Pixel-weight maps are
+// visited only where they are non-zero in a batch (with hard object masks, one map per batch).
 // Gradients of a (tile, Gaussian) pair are stored in that pair's slot and the slots are reduced per Gaussian in a
 // fixed order, so results are bitwise deterministic for any thread count and schedule. Parallel over tiles with
 // OpenMP (dynamic schedule); all scratch lives in RasterWorkspace (no allocation once warm).
@@ -78,9 +84,9 @@ struct RasterGrads {
 template <class T>
 struct RasterWorkspace {
   struct PerThread {
-    std::vector<T> soa;                     // per-tile extras [n, C]
     std::vector<simd::Pack<T>> acc;         // backward accumulators [n, F]
-    std::vector<simd::Pack<T>> chan;        // per-batch extra-channel gradient packs [C]
+    std::vector<int> vk;                    // per-batch visit lists of a tile: Gaussian [visits]
+    std::vector<simd::Pack<T>> vw;          // ... and its weight (forward) or extra-channel dot (backward)
     std::vector<simd::Pack<T>> wacc;        // forward weight-sum accumulators [n, J]
     std::vector<T> dw;                      // backward d(weight_sums) of the tile's Gaussians [n, J]
     std::vector<simd::Pack<T>> bstate;      // per-batch state [32, 7 + C + J]

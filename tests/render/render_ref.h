@@ -36,6 +36,20 @@ struct Scene {
     settings.num_pixel_weights = J;
   }
 
+  // Hard masks, as the hybrid method passes them: pixel p has weight 1 in map label(p) - 1 and 0 in the others
+  // (label 0 = none), the labels being vertical stripes, so most 8-pixel batches see one map and some two.
+  void add_label_weights(int J, int stripe) {
+    num_weights = J;
+    pixel_weights.assign(size_t(cam.width) * cam.height * J, 0.f);
+    for (int y = 0; y < cam.height; ++y)
+      for (int x = 0; x < cam.width; ++x) {
+        const int label = (x / stripe + y / 16) % (J + 1);
+        if (label > 0) pixel_weights[(size_t(y) * cam.width + x) * J + label - 1] = 1.f;
+      }
+    settings.pixel_weights = pixel_weights.data();
+    settings.num_pixel_weights = J;
+  }
+
   template <class T>
   GaussianInputsT<T> inputs(std::vector<std::vector<T>>& store) const {
     store.clear();

@@ -340,6 +340,35 @@ TEST(RenderGrad, EndToEndColoursNoDepthFiniteDifferences) {
   fd_check("e2e opacity_logit", e.s.opacity_logit, all_indices(e.s.opacity_logit.size()), g.opacity_logit, ev);
 }
 
+// The hybrid method's case: many extra channels (29: the register chunks of 12, 12, 4 and 1), hard label masks
+// as pixel weights (most batches see one map) and a forward-only tail (extra_grad_channels = 25).
+TEST(RenderGrad, ManyChannelsHardMasksFiniteDifferences) {
+  SingleThread one_thread;
+  Scene sc = random_scene(30, 40, 36, 61, 0.9, 29);
+  sc.add_label_weights(4, 5);
+  sc.use_colors = true;
+  sc.settings.want_depth = false;
+  EndToEnd e(sc, 7);
+  e.wd.clear();
+  const size_t P = size_t(sc.cam.width) * sc.cam.height;
+  for (size_t p = 0; p < P; ++p)
+    for (int c = 25; c < 29; ++c) e.we[p * 29 + c] = 0;  // what the loss sees of the forward-only channels
+  e.eval();
+  GaussianGradsT<double> g;
+  OutputGradsT<double> d;
+  d.rgb = e.wr.data();
+  d.alpha = e.wa.data();
+  d.extra = e.we.data();
+  d.weight_sums = e.ww.data();
+  d.extra_grad_channels = 25;
+  e.r.backward(d, g);
+  auto ev = [&]() { return e.eval(); };
+  fd_check("many extra", e.s.extra, all_indices(e.s.extra.size()), g.extra, ev);
+  fd_check("many colors", e.s.colors, all_indices(e.s.colors.size()), g.colors, ev);
+  fd_check("many mean", e.s.mean, all_indices(e.s.mean.size()), g.mean, ev);
+  fd_check("many opacity_logit", e.s.opacity_logit, all_indices(e.s.opacity_logit.size()), g.opacity_logit, ev);
+}
+
 // Forward-only extra channels: backward with extra_grad_channels = G ignores the upstream gradient of channels
 // [G, C) and gives the gradients of a full backward whose trailing upstream gradients are zero (to rounding:
 // the channel sums are grouped differently), with exact zeros for the skipped channels.
