@@ -111,11 +111,34 @@ train::TrainConfig bench_config() {
   return cfg;
 }
 
+// Mean wall time of each part of the step (ms) as counters, so a run shows where the time goes.
+struct PartTimes {
+  train::StepTimes sum;
+  double app = 0, sem = 0;
+  long n = 0;
+  void add(const train::StepInfo& info) {
+    train::StepTimes::each([&](const char*, double train::StepTimes::*m) { sum.*m += info.times.*m; });
+    ++n;
+  }
+  void report(benchmark::State& st) const {
+    if (n == 0) return;
+    train::StepTimes::each([&](const char* name, double train::StepTimes::*m) {
+      st.counters[std::string("ms_") + name] = sum.*m / n;
+    });
+    if (app > 0 || sem > 0) {
+      st.counters["ms_method_loss_objects"] = app / n;
+      st.counters["ms_method_loss_semantic"] = sem / n;
+    }
+  }
+};
+
 void BM_RgbStep(benchmark::State& st) {
   auto& s = setup();
   train::Trainer trainer(bench_config(), s.model, s.views, 5.f);
   for (int i = 0; i < 3; ++i) trainer.step();
-  for (auto _ : st) benchmark::DoNotOptimize(trainer.step().loss.total);
+  PartTimes parts;
+  for (auto _ : st) parts.add(trainer.step());
+  parts.report(st);
 }
 
 void BM_HybridStep(benchmark::State& st) {
@@ -123,8 +146,16 @@ void BM_HybridStep(benchmark::State& st) {
   hybrid::HybridTrainer trainer(bench_config(), hybrid::HybridConfig{}, s.model, s.views, s.data, 5.f);
   for (int i = 0; i < 3; ++i) trainer.step();
   double loss = 0;
-  for (auto _ : st) loss = trainer.step().loss.total;
+  PartTimes parts;
+  for (auto _ : st) {
+    const train::StepInfo info = trainer.step();
+    loss = info.loss.total;
+    parts.add(info);
+    parts.app += trainer.last_losses().ms_app;
+    parts.sem += trainer.last_losses().ms_sem;
+  }
   st.counters["loss"] = loss;
+  parts.report(st);
 }
 
 // Memory: the same step with 300k Gaussians (scales / 10^(1/3) so the box is covered alike), D = 512, with

@@ -88,10 +88,12 @@ void run_train(const TrainArgs& a) {
   ms.reserve(a.iters - start);
   Progress bar("train", a.iters - start, progress);
   double ema_loss = 0, ema_psnr = 0;
+  train::StepTimes parts;  // summed over the steps of this run
   auto t0 = std::chrono::steady_clock::now();
   while (trainer.iteration() < a.iters) {
     train::StepInfo s = trainer.step();
     ms.push_back(float(s.ms));
+    train::StepTimes::each([&](const char*, double train::StepTimes::*m) { parts.*m += s.times.*m; });
     bool first = ms.size() == 1;
     ema_loss = first ? s.loss.total : 0.4 * s.loss.total + 0.6 * ema_loss;
     ema_psnr = first ? s.psnr : 0.4 * s.psnr + 0.6 * ema_psnr;
@@ -124,11 +126,20 @@ void run_train(const TrainArgs& a) {
                           {"final_train_loss_ema", ema_loss},
                           {"final_train_psnr_ema", ema_psnr},
                           {"threads", omp_get_max_threads()}};
+  nlohmann::json part_ms = nlohmann::json::object();
+  std::string part_line;
+  train::StepTimes::each([&](const char* name, double train::StepTimes::*m) {
+    const double v = ms.empty() ? 0.0 : parts.*m / ms.size();
+    part_ms[name] = v;
+    part_line += fmt::format("{}{} {:.1f}", part_line.empty() ? "" : ", ", name, v);
+  });
+  stats["mean_ms_per_part"] = part_ms;
   atomic_write_text(out / "train_stats.json", stats.dump(2) + "\n");
   if (progress)
     fmt::print("trained {} iterations in {} ({:.1f} ms/it median), {} Gaussians -> {}\n", trainer.iteration() - start,
                format_duration(wall), stats["median_ms_per_iter"].get<double>(), trainer.model().n,
                (out / "point_cloud.ply").string());
+  if (progress) fmt::print("mean ms per step: {}\n", part_line);
 }
 
 CommandRegistration reg({"train", "Optimise Hybrid Gaussians (or plain 3DGS with --method rgb) on a scene's training views", 20, [](CLI::App& sub) {

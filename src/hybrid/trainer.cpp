@@ -3,6 +3,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <random>
 
@@ -292,8 +293,13 @@ float HybridTrainer::extra_loss(const train::TrainView& view, const render::Rend
     for (size_t i = 0; i < HW * 3; ++i) d_rgb[i] *= hc_.lambda_rgb;
   d_extra_.resize(HW * C_);
   parallel_fill(d_extra_, 0.f);
+  const auto t0 = std::chrono::steady_clock::now();
   float total = appearance_and_bro(view, out);
+  const auto t1 = std::chrono::steady_clock::now();
   if (hc_.lambda_sem > 0) total += hc_.use_scl ? semantic_contrastive(out) : semantic_cosine(out);
+  const auto t2 = std::chrono::steady_clock::now();
+  last_.ms_app = std::chrono::duration<double, std::milli>(t1 - t0).count();
+  last_.ms_sem = std::chrono::duration<double, std::milli>(t2 - t1).count();
   dout.extra = d_extra_.data();
   dout.extra_grad_channels = lay_.grad_channels();  // the opacity channels only shape BRO's constant band
   if (!fg_.empty() && last_.anchors > 0) dout.weight_sums = d_wsum_.data();

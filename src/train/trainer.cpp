@@ -64,9 +64,14 @@ void Trainer::release_step_buffers() {
 
 StepInfo Trainer::step() {
   auto t0 = std::chrono::steady_clock::now();
+  StepInfo info;
+  auto tick = [&, tp = t0](double& part) mutable {  // adds the time since the previous tick to `part`
+    const auto now = std::chrono::steady_clock::now();
+    part += std::chrono::duration<double, std::milli>(now - tp).count();
+    tp = now;
+  };
   if (model_.n == 0) fail("train: every Gaussian was pruned by iteration {}", it_);
   const int it = ++it_;  // 1-based, as in 3DGS
-  StepInfo info;
   adam_.get("mean").set_lr(cfg_.position_lr(it, extent_));
   const TrainView& v = views_[next_view()];
   const int W = v.cam.width, H = v.cam.height;
@@ -79,16 +84,22 @@ StepInfo Trainer::step() {
   rs.background[0] = rs.background[1] = rs.background[2] = bg;
   rs.want_depth = false;
   prepare_inputs(v, in, rs);
+  tick(info.times.prepare);
   renderer_.forward(v.cam, in, rs, out_);
+  tick(info.times.forward);
 
   d_rgb_.resize(size_t(W) * H * 3);
   info.loss = loss_(out_.rgb.data(), v.image.px.data(), H, W, d_rgb_.data());
   info.psnr = psnr_from_mse(info.loss.mse);
   render::OutputGrads dout;
   dout.rgb = d_rgb_.data();
+  tick(info.times.loss);
   info.loss.total += extra_loss(v, out_, d_rgb_.data(), dout);
+  tick(info.times.method_loss);
   renderer_.backward(dout, grads_);
+  tick(info.times.backward);
   extra_param_grads(grads_);
+  tick(info.times.param_grads);
 
   // Adam.
   adam_.begin_step();
@@ -98,6 +109,7 @@ StepInfo Trainer::step() {
   adam_.update(adam_.get("opacity"), model_.opacity_logit.data(), grads_.opacity_logit.data(), model_.n);
   adam_.update(adam_.get("sh"), model_.sh.data(), grads_.sh.data(), model_.n);
   method_update();
+  tick(info.times.update);
 
   // Densification (3DGS schedule; statistics are gathered until densify_until).
   if (cfg_.densify && it < cfg_.densify_until) {
@@ -113,6 +125,7 @@ StepInfo Trainer::step() {
   }
   info.num_gaussians = model_.n;
   after_step(info);
+  tick(info.times.densify);
   info.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return info;
 }

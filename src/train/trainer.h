@@ -29,11 +29,34 @@ struct TrainView {
 // Pinhole camera of a scene view for the renderer.
 render::Camera make_camera(const View& v);
 
+// Wall time of the parts of one step (ms), in step order.
+struct StepTimes {
+  double prepare = 0;      // the method's per-view inputs (prepare_inputs)
+  double forward = 0;      // render forward
+  double loss = 0;         // photometric loss and its gradient
+  double method_loss = 0;  // the method's losses (extra_loss)
+  double backward = 0;     // render backward
+  double param_grads = 0;  // the method's chain rule to its parameters (extra_param_grads)
+  double update = 0;       // Adam and the method's own updates (method_update)
+  double densify = 0;      // densification, opacity reset and after_step
+  template <class F> static void each(F&& f) {  // f(name, member pointer) for every part
+    f("prepare", &StepTimes::prepare);
+    f("forward", &StepTimes::forward);
+    f("loss", &StepTimes::loss);
+    f("method_loss", &StepTimes::method_loss);
+    f("backward", &StepTimes::backward);
+    f("param_grads", &StepTimes::param_grads);
+    f("update", &StepTimes::update);
+    f("densify", &StepTimes::densify);
+  }
+};
+
 struct StepInfo {
   LossValues loss;
   float psnr = 0;   // of this step's training view
   int num_gaussians = 0;
   double ms = 0;    // wall time of the step
+  StepTimes times;  // ... and of its parts
   bool densified = false;
   DensifyResult densify;
 };

@@ -39,7 +39,7 @@ TEST_F(TrainCli, RgbConvergesAndWritesOutputs) {
   auto r = test::run_hgs("train " + scene() + " --method rgb --out " + (out / "m").string() + " --iters 1000 --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   auto stats = read_json(out / "m" / "train_stats.json");
-  for (auto key : {"iterations", "median_ms_per_iter", "peak_rss_mb", "num_gaussians", "wall_time_s"})
+  for (auto key : {"iterations", "median_ms_per_iter", "peak_rss_mb", "num_gaussians", "wall_time_s", "mean_ms_per_part"})
     EXPECT_TRUE(stats.contains(key)) << key;
   EXPECT_EQ(stats["iterations"], 1000);
   auto cfg = read_json(out / "m" / "config.json");

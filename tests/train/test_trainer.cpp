@@ -114,6 +114,15 @@ TEST(Trainer, OverfitsTinyProblemWithFixedCount) {
     EXPECT_EQ(s.num_gaussians, 40);
   }
   EXPECT_EQ(tr.iteration(), 300);
+  // The step's parts are timed one after another inside it: none is negative and together they fit in it.
+  const StepInfo s = tr.step();
+  double parts = 0;
+  StepTimes::each([&](const char* name, double StepTimes::*m) {
+    EXPECT_GE(s.times.*m, 0.0) << name;
+    parts += s.times.*m;
+  });
+  EXPECT_GT(s.times.forward, 0.0);
+  EXPECT_LE(parts, s.ms + 1e-6);
   EXPECT_LT(last, 0.5 * first) << "loss did not halve: " << first / 3 << " -> " << last / 3;
 }
 
