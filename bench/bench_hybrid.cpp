@@ -5,8 +5,9 @@
 // 4 x 2 grid of mask cells with a 16-pixel background border, D = 512 random unit reference features per
 // object. Densification off; the observation table is rebuilt every R = 100 steps as in training.
 // Both steps report the mean time of each part of the step as counters (ms_forward, ms_method_loss, ...; the
-// hybrid step also ms_method_loss_objects / _semantic). Also times the parts of a hybrid step separately (fusion, object channels, SCL pooling) for profiling, and
-// measures the peak memory of a 300k-Gaussian hybrid step (BM_HybridStepMemory300k, run alone).
+// hybrid step also ms_method_loss_objects / _semantic). Also times the parts of a hybrid step separately
+// (fusion, object channels, SCL pooling) for profiling, and measures the peak memory of a 300k-Gaussian hybrid
+// step (BM_HybridStepMemory300k, run alone).
 //   build/bench_hybrid --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
 #include <benchmark/benchmark.h>
 
