@@ -89,84 +89,71 @@ inline int batch_offsets(const uint32_t* masks, int n, uint32_t batches, int* of
   return off[kBatches];
 }
 
-// Extra channels of one batch, forward: dst[c] = sum_v w_v extra_{g_v}[c] over the batch's visits in walk order
-// (g_v the Gaussian's index, ex [N, XS] the input rows),
-// CH channels at a time in registers. The walk itself would read-modify-write every channel of the batch state
-// per visit (bound by loads and stores); here a visit costs one weight load and CH broadcast FMAs. The sums run
-// in the same order as a per-visit accumulation, so the values are the same.
-template <class T, int CH>
-inline __attribute__((always_inline)) void composite_chunk(const int* vk, const simd::Pack<T>* vw, int cnt,
-                                                           const T* ex, int XS, int c0, simd::Pack<T>* dst) {
-  using P = simd::Pack<T>;
-  P acc[CH];
+// Runs chunk.template operator()<CH>(c0) over channels [0, C) in register-sized chunks of 12, 4 and 1.
+template <class Chunk>
+inline __attribute__((always_inline)) void for_channel_chunks(int C, Chunk&& chunk) {
+  int c0 = 0;
+  for (; c0 + 12 <= C; c0 += 12) chunk.template operator()<12>(c0);
+  for (; c0 + 4 <= C; c0 += 4) chunk.template operator()<4>(c0);
+  for (; c0 < C; ++c0) chunk.template operator()<1>(c0);
+}
+
+// acc[i] = sum_v w_v * row(v)[c0 + i], i < CH, over a visit list in order, the CH sums in registers. row(v) gives
+// scalars (broadcast to the lanes) or packs (lane by lane).
+template <int CH, class P, class Row>
+inline __attribute__((always_inline)) void weighted_rows(const P* vw, int cnt, Row&& row, int c0, P* acc) {
   for (int i = 0; i < CH; ++i) acc[i] = P{};
   for (int v = 0; v < cnt; ++v) {
     const P wv = vw[v];
-    const T* e = ex + size_t(vk[v]) * XS + c0;
-    for (int i = 0; i < CH; ++i) acc[i] += wv * e[i];
+    const auto* r = row(v) + c0;
+    for (int i = 0; i < CH; ++i) acc[i] += wv * r[i];
   }
-  for (int i = 0; i < CH; ++i) dst[c0 + i] = acc[i];
 }
 
+// Extra channels of one batch, forward: dst[c] = sum_v w_v extra_{g_v}[c] over the batch's visits in walk order
+// (g_v the Gaussian's index, ex [N, XS] the input rows). The walk itself would read-modify-write every channel
+// of the batch state per visit (bound by loads and stores); here a visit costs one weight load and one
+// broadcast FMA per channel. The sums run in the same order as a per-visit accumulation: the same values.
 template <class T>
 void composite_extras(const int* vk, const simd::Pack<T>* vw, int cnt, const T* ex, int C, int XS, simd::Pack<T>* dst) {
-  int c0 = 0;
-  for (; c0 + 12 <= C; c0 += 12) composite_chunk<T, 12>(vk, vw, cnt, ex, XS, c0, dst);
-  for (; c0 + 4 <= C; c0 += 4) composite_chunk<T, 4>(vk, vw, cnt, ex, XS, c0, dst);
-  for (; c0 < C; ++c0) composite_chunk<T, 1>(vk, vw, cnt, ex, XS, c0, dst);
+  for_channel_chunks(C, [&]<int CH>(int c0) {
+    simd::Pack<T> acc[CH];  // local, so the sums stay in registers
+    weighted_rows<CH>(vw, cnt, [&](int v) { return ex + size_t(vk[v]) * XS; }, c0, acc);
+    for (int i = 0; i < CH; ++i) dst[c0 + i] = acc[i];
+  });
 }
 
 // Extra channels of one batch, backward: dot[v] = <extra_{g_v}, g> for the batch's visits, g [C] (the batch's
-// upstream gradient packs) held in registers CH channels at a time.
-template <class T, int CH>
-inline __attribute__((always_inline)) void dot_chunk(const int* vk, int cnt, const T* ex, int XS, int c0,
-                                                     const simd::Pack<T>* g, simd::Pack<T>* dot) {
-  using P = simd::Pack<T>;
-  P gc[CH];
-  for (int i = 0; i < CH; ++i) gc[i] = g[c0 + i];
-  for (int v = 0; v < cnt; ++v) {
-    const T* e = ex + size_t(vk[v]) * XS + c0;
-    P d0 = P{}, d1 = P{};
-    for (int i = 0; i + 1 < CH; i += 2) {
-      d0 += e[i] * gc[i];
-      d1 += e[i + 1] * gc[i + 1];
-    }
-    if (CH % 2) d0 += e[CH - 1] * gc[CH - 1];
-    dot[v] += d0 + d1;
-  }
-}
-
+// upstream gradient packs) held in registers a chunk at a time.
 template <class T>
 void extra_dots(const int* vk, int cnt, const T* ex, int C, int XS, const simd::Pack<T>* g, simd::Pack<T>* dot) {
-  for (int v = 0; v < cnt; ++v) dot[v] = simd::Pack<T>{};
-  int c0 = 0;
-  for (; c0 + 12 <= C; c0 += 12) dot_chunk<T, 12>(vk, cnt, ex, XS, c0, g, dot);
-  for (; c0 + 4 <= C; c0 += 4) dot_chunk<T, 4>(vk, cnt, ex, XS, c0, g, dot);
-  for (; c0 < C; ++c0) dot_chunk<T, 1>(vk, cnt, ex, XS, c0, g, dot);
+  using P = simd::Pack<T>;
+  for (int v = 0; v < cnt; ++v) dot[v] = P{};
+  for_channel_chunks(C, [&]<int CH>(int c0) {
+    P gc[CH];
+    for (int i = 0; i < CH; ++i) gc[i] = g[c0 + i];
+    for (int v = 0; v < cnt; ++v) {
+      const T* e = ex + size_t(vk[v]) * XS + c0;
+      P d0 = P{}, d1 = P{};
+      for (int i = 0; i + 1 < CH; i += 2) {
+        d0 += e[i] * gc[i];
+        d1 += e[i + 1] * gc[i + 1];
+      }
+      if (CH % 2) d0 += e[CH - 1] * gc[CH - 1];
+      dot[v] += d0 + d1;
+    }
+  });
 }
 
 // Extra-channel gradient of one (tile, Gaussian) pair: o[c] = sum over its visits v of hsum(w_v * g_{b_v}[c]),
-// g_b the gradient packs of batch b (stride BS from base), CH channels at a time in registers.
-template <class T, int CH>
-inline __attribute__((always_inline)) void grad_chunk(const int* vb, const simd::Pack<T>* vw, int cnt,
-                                                      const simd::Pack<T>* base, int BS, int c0, T* o) {
-  using P = simd::Pack<T>;
-  P acc[CH];
-  for (int i = 0; i < CH; ++i) acc[i] = P{};
-  for (int v = 0; v < cnt; ++v) {
-    const P wv = vw[v];
-    const P* g = base + size_t(vb[v]) * BS + c0;
-    for (int i = 0; i < CH; ++i) acc[i] += wv * g[i];
-  }
-  for (int i = 0; i < CH; ++i) o[c0 + i] = simd::hsum<T>(acc[i]);
-}
-
+// g_b the gradient packs of batch b (stride BS from base).
 template <class T>
 void extra_grads(const int* vb, const simd::Pack<T>* vw, int cnt, const simd::Pack<T>* base, int BS, int C, T* o) {
-  int c0 = 0;
-  for (; c0 + 12 <= C; c0 += 12) grad_chunk<T, 12>(vb, vw, cnt, base, BS, c0, o);
-  for (; c0 + 4 <= C; c0 += 4) grad_chunk<T, 4>(vb, vw, cnt, base, BS, c0, o);
-  for (; c0 < C; ++c0) grad_chunk<T, 1>(vb, vw, cnt, base, BS, c0, o);
+  for_channel_chunks(C, [&]<int CH>(int c0) {
+    simd::Pack<T> acc[CH];
+    weighted_rows<CH>(vw, cnt, [&](int v) { return base + size_t(vb[v]) * BS; }, c0, acc);
+    for (int i = 0; i < CH; ++i) o[c0 + i] = simd::hsum<T>(acc[i]);
+  });
 }
 
 // Batch masks of a tile, masks [n]: bit (row * 2 + half) is set when the Gaussian can reach the 8-pixel batch

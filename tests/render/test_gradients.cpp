@@ -273,7 +273,8 @@ struct EndToEnd {
     e.signature = ref_render(s).signature;
     return e;
   }
-  GaussianGradsT<double> grads() {
+  // Backward of loss(); extra_grad_channels >= 0 makes the extra channels past it forward-only.
+  GaussianGradsT<double> grads(int extra_grad_channels = -1) {
     eval();
     GaussianGradsT<double> g;
     OutputGradsT<double> d;
@@ -282,6 +283,7 @@ struct EndToEnd {
     d.depth = wd.data();
     d.extra = s.num_extra ? we.data() : nullptr;
     d.weight_sums = s.num_weights ? ww.data() : nullptr;
+    d.extra_grad_channels = extra_grad_channels;
     r.backward(d, g);
     return g;
   }
@@ -353,15 +355,7 @@ TEST(RenderGrad, ManyChannelsHardMasksFiniteDifferences) {
   const size_t P = size_t(sc.cam.width) * sc.cam.height;
   for (size_t p = 0; p < P; ++p)
     for (int c = 25; c < 29; ++c) e.we[p * 29 + c] = 0;  // what the loss sees of the forward-only channels
-  e.eval();
-  GaussianGradsT<double> g;
-  OutputGradsT<double> d;
-  d.rgb = e.wr.data();
-  d.alpha = e.wa.data();
-  d.extra = e.we.data();
-  d.weight_sums = e.ww.data();
-  d.extra_grad_channels = 25;
-  e.r.backward(d, g);
+  const GaussianGradsT<double> g = e.grads(25);
   auto ev = [&]() { return e.eval(); };
   fd_check("many extra", e.s.extra, all_indices(e.s.extra.size()), g.extra, ev);
   fd_check("many colors", e.s.colors, all_indices(e.s.colors.size()), g.colors, ev);
@@ -381,16 +375,7 @@ TEST(RenderGrad, ForwardOnlyExtraChannelsAreSkipped) {
   for (size_t p = 0; p < P; ++p)
     for (int c = 3; c < 5; ++c) full.we[p * 5 + c] = 0;  // part keeps non-zero values there: they must be ignored
   const GaussianGradsT<double> a = full.grads();
-  part.eval();
-  GaussianGradsT<double> b;
-  OutputGradsT<double> d;
-  d.rgb = part.wr.data();
-  d.alpha = part.wa.data();
-  d.depth = part.wd.data();
-  d.extra = part.we.data();
-  d.weight_sums = part.ww.data();
-  d.extra_grad_channels = 3;
-  part.r.backward(d, b);
+  const GaussianGradsT<double> b = part.grads(3);
   auto near = [](const std::vector<double>& x, const std::vector<double>& y, const char* what) {
     ASSERT_EQ(x.size(), y.size()) << what;
     for (size_t i = 0; i < x.size(); ++i) EXPECT_NEAR(x[i], y[i], 1e-12 * (1 + std::abs(x[i]))) << what << " " << i;
@@ -409,8 +394,7 @@ TEST(RenderGrad, ForwardOnlyExtraChannelsAreSkipped) {
   double any = 0;
   for (double v : a.extra) any += std::abs(v);
   EXPECT_GT(any, 0);
-  d.extra_grad_channels = 6;
-  EXPECT_THROW(part.r.backward(d, b), hgs::Error);
+  EXPECT_THROW(part.grads(6), hgs::Error);
 }
 
 // dL/d(mean2d) reported by backward() is the derivative w.r.t. the projected centre with everything else
