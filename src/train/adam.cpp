@@ -134,8 +134,7 @@ void adam_row(const AdamParam& p, X* x, const float* g, float* m32, float* v32, 
   // The same arithmetic 8 columns at a time (GCC does not vectorise the bit casts of the scalar loop).
   const __m256 vb1 = _mm256_set1_ps(b1), vb1c = _mm256_set1_ps(1 - b1), vb2 = _mm256_set1_ps(b2),
                vb2c = _mm256_set1_ps(1 - b2), vstep = _mm256_set1_ps(step), vbc2 = _mm256_set1_ps(inv_sqrt_bc2),
-               veps = _mm256_set1_ps(e), vhalf = _mm256_set1_ps(0.5f), vthree = _mm256_set1_ps(3.f),
-               vtwo = _mm256_set1_ps(2.f);
+               veps = _mm256_set1_ps(e);
   const __m256i lane = _mm256_mullo_epi32(_mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), _mm256_set1_epi32(int(0x9E3779B9u)));
   const __m256i low16 = _mm256_set1_epi32(0xFFFF);
   auto hash8 = [](__m256i h) {
@@ -163,16 +162,8 @@ void adam_row(const AdamParam& p, X* x, const float* g, float* m32, float* v32, 
       const __m256i r = hash8(seed);
       mo[h] = _mm256_add_epi32(_mm256_castps_si256(mi), _mm256_and_si256(r, low16));
       vo[h] = _mm256_add_epi32(_mm256_castps_si256(vi), _mm256_srli_epi32(r, 16));
-      // step m / (sqrt(v) c + eps) with the hardware estimates of 1/sqrt and 1/x, each refined by one Newton
-      // step (~1e-7 relative, like the exact operations to within an ulp or two), instead of vsqrtps and vdivps,
-      // whose throughput bounds this loop otherwise. v = 0 gives sqrt 0 (not 0 * inf).
-      __m256 rs = _mm256_rsqrt_ps(vi);
-      rs = _mm256_mul_ps(_mm256_mul_ps(vhalf, rs), _mm256_fnmadd_ps(_mm256_mul_ps(vi, rs), rs, vthree));
-      const __m256 sq = _mm256_and_ps(_mm256_mul_ps(vi, rs), _mm256_cmp_ps(vi, _mm256_setzero_ps(), _CMP_GT_OQ));
-      const __m256 den = _mm256_fmadd_ps(sq, vbc2, veps);
-      __m256 inv = _mm256_rcp_ps(den);
-      inv = _mm256_mul_ps(inv, _mm256_fnmadd_ps(den, inv, vtwo));
-      store_x8(x + cc, _mm256_fnmadd_ps(_mm256_mul_ps(vstep, mi), inv, load_x8(x + cc)), r);
+      const __m256 den = _mm256_fmadd_ps(_mm256_sqrt_ps(vi), vbc2, veps);
+      store_x8(x + cc, _mm256_sub_ps(load_x8(x + cc), _mm256_div_ps(_mm256_mul_ps(vstep, mi), den)), r);
     }
     _mm256_storeu_si256(reinterpret_cast<__m256i*>(m + c), narrow(mo[0], mo[1]));
     _mm256_storeu_si256(reinterpret_cast<__m256i*>(v + c), narrow(vo[0], vo[1]));
