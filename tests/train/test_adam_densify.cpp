@@ -144,6 +144,30 @@ TEST(Adam, Bf16MomentsTrackFloat32) {
   EXPECT_LT(worst, 5e-3) << "bf16 moments drifted from the float32 run";
 }
 
+TEST(Adam, TinyGradientsStayFinite) {
+  // Gradients whose squares are float denormals (or zero) must give finite, bounded steps on both the vector
+  // path (columns 0..31) and the scalar tail, with float32 and bfloat16 moments: an estimate-based 1/sqrt, for
+  // one, treats a denormal v as 0 and turns the step into NaN.
+  const int n = 4, d = 40;
+  const float tiny[n] = {1e-20f, 1e-30f, 3e-23f, 0.f};
+  for (bool bf16 : {false, true}) {
+    Adam a;
+    AdamParam& p = a.add("x", d, n, 1e-3f, bf16);
+    std::vector<float> x(size_t(n) * d, 1.f);
+    for (int t = 1; t <= 5; ++t) {
+      a.begin_step();
+      a.update_rows(p, x.data(), n, [&](long i, float* g) {
+        for (int c = 0; c < d; ++c) g[c] = (t == 1 && i == 3) ? 1.f : tiny[i] * float(1 + c % 3);
+        return true;
+      });
+    }
+    for (size_t k = 0; k < x.size(); ++k) {
+      ASSERT_TRUE(std::isfinite(x[k])) << (bf16 ? "bf16 " : "f32 ") << k;
+      EXPECT_LE(std::abs(x[k] - 1.f), 5 * 5e-3f) << k;  // 5 steps of at most a few lr each
+    }
+  }
+}
+
 TEST(Adam, HalfValuesTrackFloat32) {
   // Values stored in IEEE half (the hybrid method's f_n) with bfloat16 moments follow the all-float32 run; a
   // step far below half a unit still moves the value on average (stochastic rounding).
