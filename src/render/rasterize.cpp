@@ -348,7 +348,7 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   if (J > 0 && any_g) {
     const int s = bins.tile_start[tile];
     for (int k = 0; k < n; ++k) {
-      T* o = pair_w + size_t(s + k) * J;  // tile order: written sequentially
+      T* o = pair_w + size_t(bins.tile_pair[s + k]) * J;
       if (k < kend && (masks[k] & all_batches))
         for (int jj = 0; jj < J; ++jj) o[jj] = simd::hsum<T>(wacc[size_t(k) * J + jj]);
       else
@@ -465,7 +465,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
   const int s = bins.tile_start[tile];
   for (int k = n - 1; k >= 0; --k) {
     uint32_t mb = masks[k] & live;
-    T* o = pair_grad + size_t(s + k) * F;  // tile order: written sequentially
+    T* o = pair_grad + size_t(bins.tile_pair[s + k]) * F;
     P aMx = P{}, aMy = P{}, aA = P{}, aB = P{}, aC = P{}, aOp = P{}, aR = P{}, aG = P{}, aBl = P{}, aZ = P{};
     int nkv = 0;
     const T* rc = td.rec + size_t(k) * kRecord;
@@ -572,13 +572,9 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
   const int J = in.num_weights;
   if (J > 0 && ws.pair_w.size() < size_t(bins.num_pairs) * J) ws.pair_w.resize(size_t(bins.num_pairs) * J);
   T* PW = ws.pair_w.data();
-  if (ws.pair_pos.size() < size_t(bins.num_pairs)) ws.pair_pos.resize(size_t(bins.num_pairs));
-  int* pos = ws.pair_pos.data();
 #pragma omp parallel
   {
     auto& w = ws.threads[omp_get_thread_num()];
-#pragma omp for schedule(static)
-    for (int x = 0; x < bins.num_pairs; ++x) pos[bins.tile_pair[x]] = x;
 #pragma omp for schedule(dynamic, 1)
     for (int t = 0; t < bins.num_tiles; ++t) {
       if (dep && ext) forward_tile<T, true, true>(in, bins, t, w, R, TR, MK, PW, out);
@@ -592,7 +588,7 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
         T* o = out.weight_sums + size_t(i) * J;
         for (int jj = 0; jj < J; ++jj) o[jj] = 0;
         for (int p = bins.pair_offset[i]; p < bins.pair_offset[i + 1]; ++p)
-          for (int jj = 0; jj < J; ++jj) o[jj] += PW[size_t(pos[p]) * J + jj];
+          for (int jj = 0; jj < J; ++jj) o[jj] += PW[size_t(p) * J + jj];
       }
     }
   }
@@ -628,7 +624,7 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
       if (gex)
         for (int ch = 0; ch < XS; ++ch) gex[ch] = 0;  // channels [C, XS) carry no gradient
       for (int p = bins.pair_offset[i]; p < bins.pair_offset[i + 1]; ++p) {
-        const T* o = pg + size_t(ws.pair_pos[p]) * F;
+        const T* o = pg + size_t(p) * F;
         for (int f = 0; f < kNumGrads; ++f) s[f] += o[f];
         if (gex)
           for (int ch = 0; ch < C; ++ch) gex[ch] += o[kNumGrads + ch];

@@ -23,10 +23,9 @@
 // <extra, dL/dextra> batch by batch before its walk (the walk needs it only as one number per pixel) and, after
 // each Gaussian's visits, its channel gradients sum_visits w * dL/dextra the same way. Pixel-weight maps are
 // visited only where they are non-zero in a batch (with hard object masks, one map per batch).
-// Gradients of a (tile, Gaussian) pair are stored in that pair's slot (in tile-list order, so each tile writes
-// its slots sequentially) and the slots are reduced per Gaussian in a fixed order, so results are bitwise
-// deterministic for any thread count and schedule. Parallel over tiles with OpenMP (dynamic schedule); all
-// scratch lives in RasterWorkspace (no allocation once warm).
+// Gradients of a (tile, Gaussian) pair are stored in that pair's slot and the slots are reduced per Gaussian in a
+// fixed order, so results are bitwise deterministic for any thread count and schedule. Parallel over tiles with
+// OpenMP (dynamic schedule); all scratch lives in RasterWorkspace (no allocation once warm).
 // Everything is templated on the scalar (float in production, double in the tests).
 #pragma once
 #include <cstdint>
@@ -97,9 +96,8 @@ struct RasterWorkspace {
   std::vector<T> records;       // [N, 16] per-Gaussian records built by forward, reused by backward
   std::vector<T> tile_records;  // [P, 16] records in tile order (forward gathers, backward reuses)
   std::vector<uint32_t> masks;  // [P] per (tile, Gaussian) entry: bit b = listed in batch b
-  std::vector<T> pair_grad;     // [P, F] per tile-list entry (tile order, so tiles write them sequentially)
-  std::vector<T> pair_w;        // [P, J] forward weight sums per tile-list entry
-  std::vector<int> pair_pos;    // [P] tile-list position of each Gaussian-major pair (the reductions read by it)
+  std::vector<T> pair_grad;     // [P, F]
+  std::vector<T> pair_w;        // [P, J] forward weight sums per pair
 };
 
 template <class T>
