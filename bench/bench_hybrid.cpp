@@ -157,6 +157,7 @@ void BM_HybridStep(benchmark::State& st) {
     parts.sem += trainer.last_losses().ms_sem;
   }
   st.counters["loss"] = loss;
+  if (!std::isfinite(loss)) st.SkipWithError("the hybrid step's loss is not finite");  // timing NaNs is no figure
   parts.report(st);
 }
 
