@@ -85,19 +85,31 @@ std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianM
   if (!f) fail("the model has no language embeddings (train it with --method hybrid)");
   const int D = f->dim;
   render::GaussianInputs in = render_inputs(m);
-  std::vector<float> widened;
-  if (f->f16) widened = f->to_float();  // the renderer composites float32 channels
-  in.extra = f->f16 ? widened.data() : f->data.data();
-  in.num_extra = D;
+  // Channels [0, D): the language map sum_n f_n alpha T; channel D: the foreground opacity
+  // sum_n (1 - q_{n,0}) alpha T. Background Gaussians get no language supervision (SCL's anchors are the
+  // foreground objects), so their f_n stay near the random init: the relevancy is weighted by the foreground
+  // opacity, which is ~0 where background is seen (and 1 everywhere for a model without object data).
+  const ExtraGroup* q = m.find_extra("obj");
+  const int C = D + 1;
+  std::vector<float> ch(size_t(m.n) * C);
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < m.n; ++i) {
+    f->row(size_t(i), &ch[size_t(i) * C]);  // float32 channels for the renderer
+    ch[size_t(i) * C + D] = q && q->dim > 0 ? 1.f - q->data[size_t(i) * q->dim] : 1.f;
+  }
+  in.extra = ch.data();
+  in.num_extra = C;
   render::RenderSettings rs;
   rs.want_depth = false;
   render::RenderOutputs out;
   r.forward(cam, in, rs, out);
-  // Pixels where nothing is rendered have a zero feature: relevancy 0 there (not LERF's 0.5 for zero vectors).
   const size_t HW = size_t(cam.width) * cam.height;
-  std::vector<float> rel = eval::lerf_relevancy_map(out.extra.data(), HW, D, text, canon);
-  for (size_t p = 0; p < HW; ++p)
-    if (out.alpha[p] < 1e-4f) rel[p] = 0.f;
+  std::vector<float> feat(HW * D);
+#pragma omp parallel for schedule(static)
+  for (long p = 0; p < long(HW); ++p) std::copy_n(&out.extra[size_t(p) * C], D, &feat[size_t(p) * D]);
+  std::vector<float> rel = eval::lerf_relevancy_map(feat.data(), HW, D, text, canon);
+  // Pixels where nothing is rendered have a zero feature: relevancy 0 there (not LERF's 0.5 for zero vectors).
+  for (size_t p = 0; p < HW; ++p) rel[p] = out.alpha[p] < 1e-4f ? 0.f : rel[p] * std::clamp(out.extra[p * C + D], 0.f, 1.f);
   return rel;
 }
 

@@ -4,7 +4,8 @@
 //   e_k = normalise( sum_n q_{n,k} sigmoid(o_n) f_n )
 // and is scored against the text with LERF's relevancy rule against the canonical phrases. Its mask in a view
 // is its rendered opacity A_k = sum_n q_{n,k} alpha T, thresholded (default 0.5).
-// Pixel level (LERF / LangSplat style): the language map sum_n f_n alpha T is rendered and scored per pixel.
+// Pixel level (LERF / LangSplat style): the foreground language map sum_n (1 - q_{n,0}) f_n alpha T is rendered
+// and scored per pixel (background Gaussians carry no language supervision: SCL anchors are foreground objects).
 // 3D selection: the Gaussians whose hard id z_n is one of the chosen objects (or all others, for removal).
 #pragma once
 #include <map>
@@ -40,7 +41,8 @@ std::vector<ObjectScore> score_objects(const ObjectEmbeddings& oe, const float* 
 // Opacity render of objects `ks` (channel j = A_{ks[j]}). Returns [H, W, J].
 std::vector<float> render_object_opacity(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
                                          const std::vector<int>& ks);
-// Per-pixel relevancy of the rendered language map for a query: [H, W] (0 where nothing is rendered).
+// Per-pixel relevancy of the rendered foreground language map for a query: [H, W] (0 where nothing is
+// rendered).
 std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
                                     const float* text, const Canonical& canon);
 

@@ -1,0 +1,72 @@
+// Pixel-level relevancy of a hybrid model (query::render_relevancy): the rendered language map scored by LERF's
+// rule and weighted by the rendered foreground opacity sum_n (1 - q_{n,0}) alpha T, so background Gaussians,
+// whose f_n get no language supervision, cannot light up a query.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "query/query.h"
+
+namespace hgs {
+namespace {
+
+// Two opaque Gaussians side by side in front of the camera: the left one in object 1, the right one in the
+// background (object 0). Their embeddings are e_d(0) and e_d(1) (unit axes) unless given.
+struct TwoBlobs {
+  GaussianModel m;
+  render::Camera cam;
+  static constexpr int D = 4;
+  explicit TwoBlobs(float q0_right = 1.f) {
+    m.sh_degree = 0;
+    m.resize(2);
+    for (int i = 0; i < 2; ++i) {
+      m.mean[3 * i] = i == 0 ? -0.5f : 0.5f;
+      m.mean[3 * i + 2] = 3.f;
+      for (int a = 0; a < 3; ++a) m.log_scale[3 * i + a] = std::log(0.15f);
+      m.opacity_logit[i] = 4.f;
+    }
+    ExtraGroup& q = m.add_extra("obj", 2);
+    q.data = {0.f, 1.f, q0_right, 1.f - q0_right};
+    ExtraGroup& f = m.add_extra("lang", D);
+    f.data = {1, 0, 0, 0, 0, 1, 0, 0};
+    cam.width = 64;
+    cam.height = 32;
+    cam.fx = cam.fy = 60;
+    cam.cx = 32;
+    cam.cy = 16;
+  }
+  int left() const { return 16 * cam.width + 22; }   // pixel of the left blob's centre
+  int right() const { return 16 * cam.width + 42; }  // ... and of the right one's
+};
+
+query::Canonical canonical() {  // two unit directions away from the axes the blobs and texts use
+  return {{0, 0, 1, 0}, {0, 0, 0.6f, 0.8f}};
+}
+
+TEST(Relevancy, BackgroundGaussiansDoNotMatchAQuery) {
+  TwoBlobs s;
+  render::GaussianRenderer r;
+  const float text_right[TwoBlobs::D] = {0, 1, 0, 0}, text_left[TwoBlobs::D] = {1, 0, 0, 0};
+  const std::vector<float> rel_r = query::render_relevancy(r, s.m, s.cam, text_right, canonical());
+  const std::vector<float> rel_l = query::render_relevancy(r, s.m, s.cam, text_left, canonical());
+  ASSERT_EQ(rel_r.size(), size_t(s.cam.width) * s.cam.height);
+  // The query that matches the background blob's embedding finds nothing there...
+  EXPECT_LT(rel_r[s.right()], 0.01f);
+  // ... while the foreground blob's matching query gets LERF's high relevancy (> 0.5) at its centre.
+  EXPECT_GT(rel_l[s.left()], 0.5f);
+  EXPECT_LT(rel_l[s.right()], 0.01f);
+  EXPECT_EQ(rel_l[0], 0.f);  // nothing rendered in the corner
+}
+
+TEST(Relevancy, ForegroundBlobKeepsItsRelevancy) {
+  // The same right blob as foreground (q_0 = 0): now its embedding answers the query.
+  TwoBlobs s(0.f);
+  render::GaussianRenderer r;
+  const float text_right[TwoBlobs::D] = {0, 1, 0, 0};
+  const std::vector<float> rel = query::render_relevancy(r, s.m, s.cam, text_right, canonical());
+  EXPECT_GT(rel[s.right()], 0.9f);  // LERF relevancy of a feature equal to the text (cosine 1 against 0)
+  EXPECT_LT(rel[s.left()], 0.6f);   // ... and of an orthogonal one (about 0.5)
+}
+
+}  // namespace
+}  // namespace hgs
