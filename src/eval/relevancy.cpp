@@ -60,7 +60,10 @@ float lerf_relevancy(const float* e, const float* query, const std::vector<std::
 }
 
 std::vector<float> lerf_relevancy_map(const float* features, size_t n, int dim, const float* query,
-                                      const std::vector<std::vector<float>>& canonical, float temperature) {
+                                      const std::vector<std::vector<float>>& canonical, float temperature,
+                                      int stride) {
+  if (stride == 0) stride = dim;
+  if (stride < dim) fail("eval: relevancy row stride {} is below the feature dimension {}", stride, dim);
   check_canonical(canonical, dim);
   const int m = static_cast<int>(canonical.size());
   // Columns of `dirs`: the unit query, then the unit canonical vectors. [D, 1 + m]
@@ -78,8 +81,8 @@ std::vector<float> lerf_relevancy_map(const float* features, size_t n, int dim, 
 #pragma omp parallel for schedule(dynamic)
   for (long long blk = 0; blk < nblocks; ++blk) {
     const size_t p0 = size_t(blk) * kBlock, rows = std::min(kBlock, n - p0);
-    Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> F(
-        features + p0 * dim, static_cast<Eigen::Index>(rows), dim);
+    Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>, 0, Eigen::OuterStride<>> F(
+        features + p0 * stride, static_cast<Eigen::Index>(rows), dim, Eigen::OuterStride<>(stride));
     const Eigen::MatrixXf dots = F * dirs;                   // [B, 1 + m]
     const Eigen::VectorXf norms = F.rowwise().norm();       // [B]
     std::vector<double> sc(m);

@@ -19,9 +19,10 @@ float cosine(const float* a, const float* b, int dim);
 float lerf_relevancy(const float* e, const float* query, const std::vector<std::vector<float>>& canonical, int dim,
                      float temperature = kLerfTemperature);
 
-// The same for a whole map: features [N, D] (e.g. N = H * W) -> relevancy [N]. Multi-threaded (OpenMP).
+// The same for a whole map: features [N, stride] whose first D columns are the embeddings (stride 0 = D; e.g.
+// N = H * W) -> relevancy [N]. Multi-threaded (OpenMP).
 std::vector<float> lerf_relevancy_map(const float* features, size_t n, int dim, const float* query,
                                       const std::vector<std::vector<float>>& canonical,
-                                      float temperature = kLerfTemperature);
+                                      float temperature = kLerfTemperature, int stride = 0);
 
 }  // namespace hgs::eval

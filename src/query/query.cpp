@@ -104,10 +104,7 @@ std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianM
   render::RenderOutputs out;
   r.forward(cam, in, rs, out);
   const size_t HW = size_t(cam.width) * cam.height;
-  std::vector<float> feat(HW * D);
-#pragma omp parallel for schedule(static)
-  for (long p = 0; p < long(HW); ++p) std::copy_n(&out.extra[size_t(p) * C], D, &feat[size_t(p) * D]);
-  std::vector<float> rel = eval::lerf_relevancy_map(feat.data(), HW, D, text, canon);
+  std::vector<float> rel = eval::lerf_relevancy_map(out.extra.data(), HW, D, text, canon, eval::kLerfTemperature, C);
   // Pixels where nothing is rendered have a zero feature: relevancy 0 there (not LERF's 0.5 for zero vectors).
   for (size_t p = 0; p < HW; ++p) rel[p] = out.alpha[p] < 1e-4f ? 0.f : rel[p] * std::clamp(out.extra[p * C + D], 0.f, 1.f);
   return rel;

@@ -78,15 +78,30 @@ inline uint32_t spread_bits(uint32_t x) {
   return x;
 }
 
-// Per-batch visit lists of a tile: offsets [33] into one flat array sized by the batch bits of the masks of
-// Gaussians [0, n) (an upper bound on the visits of every batch).
-inline int batch_offsets(const uint32_t* masks, int n, uint32_t batches, int* off) {
+// Per-batch visit lists of a tile in the thread's scratch (w.vk, w.vw): offsets [33] into one flat array sized
+// by the bits `batches` of the masks of Gaussians [0, n) (an upper bound on the visits of every batch).
+template <class PerThread>
+void size_visit_lists(PerThread& w, const uint32_t* masks, int n, uint32_t batches, int* off) {
   int cnt[kBatches] = {};
   for (int k = 0; k < n; ++k)
     for (uint32_t mb = masks[k] & batches; mb; mb &= mb - 1) ++cnt[__builtin_ctz(mb)];
   off[0] = 0;
   for (int b = 0; b < kBatches; ++b) off[b + 1] = off[b] + cnt[b];
-  return off[kBatches];
+  const size_t nv = size_t(off[kBatches]);
+  if (w.vk.size() < nv) w.vk.resize(nv);
+  if (w.vw.size() < nv) w.vw.resize(nv);
+}
+
+// Pixel-weight maps of a batch: bit j of `present` is set when map j is non-zero at one of its pixels
+// (map_bit), and f(j) runs for those maps only (for every map when there are more than 32).
+inline uint32_t map_bit(int j, bool nonzero) { return nonzero && j < 32 ? 1u << j : 0u; }
+template <class F>
+inline __attribute__((always_inline)) void for_batch_maps(uint32_t present, int J, F&& f) {
+  if (J > 32) {
+    for (int j = 0; j < J; ++j) f(j);
+    return;
+  }
+  for (; present; present &= present - 1) f(__builtin_ctz(present));
 }
 
 // Runs chunk.template operator()<CH>(c0) over channels [0, C) in register-sized chunks of 12, 4 and 1.
@@ -237,7 +252,7 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   const P lane = simd::iota_pack<T>();
   const M lane_i = __builtin_convertvector(lane, M);
   uint32_t alive = 0;
-  uint32_t jmask[kBatches];  // pixel-weight maps that are non-zero somewhere in the batch (J <= 32)
+  uint32_t jmask[kBatches];  // pixel-weight maps present in each batch (for_batch_maps)
   for (int bt = 0; bt < kBatches; ++bt) {
     jmask[bt] = 0;
     const int py = ty0 + bt / kBatchesPerRow, px0 = tx0 + (bt % kBatchesPerRow) * kLanes;
@@ -250,7 +265,7 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
     for (int jj = 0; jj < J; ++jj)
       for (int l = 0; l < nvalid; ++l) {
         st[kBatchFixed + C + jj][l] = T(in.pixel_weights[(size_t(py) * W + px0 + l) * J + jj]);
-        if (st[kBatchFixed + C + jj][l] != T(0)) jmask[bt] |= jj < 32 ? 1u << jj : 0u;
+        jmask[bt] |= map_bit(jj, st[kBatchFixed + C + jj][l] != T(0));
       }
     bact[bt] = lane_i < I(nvalid);
     blast[bt] = M{};
@@ -262,9 +277,7 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   int* vk = nullptr;
   P* vw = nullptr;
   if (kExtra && n > 0) {
-    const size_t nv = size_t(batch_offsets(masks, n, all_batches, voff));
-    if (w.vk.size() < nv) w.vk.resize(nv);
-    if (w.vw.size() < nv) w.vw.resize(nv);
+    size_visit_lists(w, masks, n, all_batches, voff);
     vk = w.vk.data();
     vw = w.vw.data();
   }
@@ -310,14 +323,7 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
         vk[v] = bins.tile_gauss[bins.tile_start[tile] + k];
         vw[v] = wgt;
       }
-      if (J <= 32) {
-        for (uint32_t jm = jmask[bt]; jm; jm &= jm - 1) {
-          const int jj = __builtin_ctz(jm);
-          wa[jj] += wgt * st[kBatchFixed + C + jj];
-        }
-      } else {
-        for (int jj = 0; jj < J; ++jj) wa[jj] += wgt * st[kBatchFixed + C + jj];
-      }
+      for_batch_maps(jmask[bt], J, [&](int jj) { wa[jj] += wgt * st[kBatchFixed + C + jj]; });
       st[bT] = acc ? testT : Tr;
       blast[bt] = acc ? kk : blast[bt];
       bact[bt] = active;
@@ -392,7 +398,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
   P* bst = w.bstate.data();
   M* blast = w.blast.data();
   int kmax[kBatches];
-  uint32_t jmask[kBatches];  // pixel-weight maps that are non-zero somewhere in the batch (J <= 32)
+  uint32_t jmask[kBatches];  // pixel-weight maps present in each batch (for_batch_maps)
   uint32_t live = 0;  // batches with at least one contributor
   const T bg0 = in.background[0], bg1 = in.background[1], bg2 = in.background[2];
   for (int bt = 0; bt < kBatches; ++bt) {
@@ -421,7 +427,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
         for (int c = 0; c < C; ++c) st[kBatchFixed + c][l] = g.d_extra[p * XS + c];
       for (int jj = 0; jj < J; ++jj) {
         st[kBatchFixed + C + jj][l] = T(in.pixel_weights[p * J + jj]);
-        if (st[kBatchFixed + C + jj][l] != T(0)) jmask[bt] |= jj < 32 ? 1u << jj : 0u;
+        jmask[bt] |= map_bit(jj, st[kBatchFixed + C + jj][l] != T(0));
       }
     }
     if (kmax[bt] == 0) continue;
@@ -443,9 +449,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
   P* vdot = nullptr;
   if (kExtra) {
     int vcnt[kBatches] = {};
-    const size_t nv = size_t(batch_offsets(masks, n, live, voff));
-    if (w.vk.size() < nv) w.vk.resize(nv);
-    if (w.vw.size() < nv) w.vw.resize(nv);
+    size_visit_lists(w, masks, n, live, voff);
     vk = w.vk.data();
     vdot = w.vw.data();
     for (int k = 0; k < n; ++k)
@@ -499,14 +503,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
         // Pixel-weight sums: only the maps that are non-zero in this batch (one, inside a hard object mask).
         const P* sw = st + kBatchFixed + C;
         P d0 = P{};
-        if (J <= 32) {
-          for (uint32_t jm = jmask[bt]; jm; jm &= jm - 1) {
-            const int jj = __builtin_ctz(jm);
-            d0 += dw[jj] * sw[jj];
-          }
-        } else {
-          for (int jj = 0; jj < J; ++jj) d0 += dw[jj] * sw[jj];
-        }
+        for_batch_maps(jmask[bt], J, [&](int jj) { d0 += dw[jj] * sw[jj]; });
         dot += d0;
       }
       const P S = st[bS];

@@ -197,4 +197,10 @@ TEST(EvalRelevancy, MapMatchesScalarAndExpForm) {
     ASSERT_NEAR(map[p], lerf_relevancy(e, q.data(), canon, D), 1e-6) << p;
   }
   EXPECT_FLOAT_EQ(map[0], 0.5f);
+  // Rows with trailing columns (a render's further channels) give the same map; the extra columns are ignored.
+  const int S = D + 3;
+  std::vector<float> wide(size_t(N) * S, 7.f);
+  for (int p = 0; p < N; ++p) std::copy_n(&feat[size_t(p) * D], D, &wide[size_t(p) * S]);
+  EXPECT_EQ(lerf_relevancy_map(wide.data(), N, D, q.data(), canon, kLerfTemperature, S), map);
+  EXPECT_THROW(lerf_relevancy_map(wide.data(), N, D, q.data(), canon, kLerfTemperature, D - 1), hgs::Error);
 }
