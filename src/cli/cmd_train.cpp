@@ -25,7 +25,7 @@ struct TrainArgs {
   std::string scene, out, method = "hybrid", resume;
   hybrid::HybridConfig hybrid;
   bool no_of = false, no_scl = false, no_bro = false;
-  std::string lang_storage = "half";
+  std::string lang_storage = "half", bro_gradient = "scale-invariant";
   int iters = 30000, downscale = 1, threads = 0, sh_degree = 3, save_every = 0;
   uint64_t seed = 0;
   bool no_densify = false, white_bg = false, quiet = false;
@@ -62,6 +62,7 @@ void run_train(const TrainArgs& a) {
     hc->use_scl = !a.no_scl;
     hc->use_bro = !a.no_bro;
     hc->lang_half = a.lang_storage == "half";
+    hc->bro_scale_invariant = a.bro_gradient == "scale-invariant";
   }
   auto trainer_ptr = hybrid::make_trainer(scene, train_idx, cfg, hc, progress);
   train::Trainer& trainer = *trainer_ptr;
@@ -161,6 +162,11 @@ CommandRegistration reg({"train", "Optimise Hybrid Gaussians (or plain 3DGS with
   sub.add_option("--tau2", h.tau2, "InfoNCE temperature (eq. 10)")->capture_default_str();
   sub.add_option("--fusion-every", h.fusion_every, "Rebuild the observation table every R iterations")->capture_default_str();
   sub.add_option("--bro-kernel", h.bro_kernel, "Side of the square structuring element of BRO")->check(CLI::Range(1, 63))->capture_default_str();
+  sub.add_option("--bro-gradient", a->bro_gradient,
+                 "scale-invariant (BRO cannot fade a whole object; see hybrid/bro.h) or plain (eq. 14's own gradient)")
+      ->check(CLI::IsMember({"scale-invariant", "plain"}))->capture_default_str();
+  sub.add_flag("--sem-geometry", h.sem_geometry,
+               "Let the semantic loss (eq. 10) move opacities and geometry too (default: it trains f and q only)");
   sub.add_option("--lr-lang", h.lr_lang, "Adam learning rate of the language embeddings")->capture_default_str();
   sub.add_option("--lang-storage", a->lang_storage,
                  "Language embeddings in half precision with bfloat16 Adam moments (half), or all float32 (f32)")

@@ -161,6 +161,20 @@ T bro_loss(const T* pred, const T* gt, int cs, int C, const float* B, int H, int
   return T(num) / den;
 }
 
+template <class T>
+void remove_scale_component(const T* p, size_t n, T* g) {
+  double gp = 0, pp = 0;
+  for (size_t i = 0; i < n; ++i) {
+    gp += double(g[i]) * double(p[i]);
+    pp += double(p[i]) * double(p[i]);
+  }
+  if (!(pp > 0)) return;
+  const T a = T(gp / pp);
+  for (size_t i = 0; i < n; ++i) g[i] -= a * p[i];
+}
+
+template void remove_scale_component<float>(const float*, size_t, float*);
+template void remove_scale_component<double>(const double*, size_t, double*);
 template float bro_loss<float>(const float*, const float*, int, int, const float*, int, int, float, float*, float);
 template double bro_loss<double>(const double*, const double*, int, int, const float*, int, int, double, double*, double);
 

@@ -9,7 +9,21 @@
 //   L = sum_d || W^d (Dd I^pred - Dd I^gt) ||_1 / (C sum_d ||W^d||_1 + eps).
 // B is treated as a constant: no gradient flows through the morphology or into A^pred (the band only
 // selects where the loss looks), so the gradient goes to I^pred alone.
+//
+// Scale-invariant gradient (HybridConfig::bro_scale_invariant, on by default; see docs/results.md). Eq. 14 is an
+// L1 on finite differences. Where the view's mask edge and the rendered edge do not coincide (SAM2-style masks
+// jitter by a few pixels, swap or merge ids, miss objects, and eq. 2 drops their low-confidence rim), every
+// misaligned pair of edges costs |edge_pred| + |edge_gt|, so lowering the whole object render lowers the loss:
+// on noisy masks eq. 14 decreases monotonically as I^pred_{u,k} is scaled towards 0 (measured on a trained
+// model: scaling every q_{n,k} by 0.5 lowers eq. 14 for 8 of 10 objects, 4x more than it raises eq. 6), and
+// since eq. 14 is normalised by the band (not the image, as eq. 6 is) that pull dominates for small objects.
+// Trained this way objects fade below the mask threshold (the view logits learn to favour views whose masks
+// miss them). We therefore take the gradient of eq. 14 at the render rescaled to a fixed norm,
+//   L_bro( p * sg(||p||) / ||p|| ),  p = I^pred_{u,k} [H, W, C] as one vector, sg = stop-gradient,
+// whose value is eq. 14 unchanged and whose gradient is g - (<g, p> / <p, p>) p (g = eq. 14's gradient): BRO
+// may move and sharpen the object's edges but cannot make the object as a whole fainter or brighter.
 #pragma once
+#include <cstddef>
 #include <vector>
 
 namespace hgs::hybrid {
@@ -27,5 +41,10 @@ void boundary_band(const float* A, const float* M, int H, int W, int s, float* B
 // [H, W, cstride]. Returns L.
 template <class T>
 T bro_loss(const T* pred, const T* gt, int cstride, int C, const float* B, int H, int W, T eps, T* grad, T scale);
+
+// The scale-invariant gradient above: g -= (<g, p> / <p, p>) p over n values (unchanged when p = 0).
+// p, g: [n]
+template <class T>
+void remove_scale_component(const T* p, size_t n, T* g);
 
 }  // namespace hgs::hybrid

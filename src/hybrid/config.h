@@ -13,11 +13,21 @@ struct HybridConfig {
   float lambda_app = 1.0f, lambda_sem = 0.1f, lambda_bro = 1.0f;
   float lambda_dssim = 0.2f;  // lambda of eq. 6
   float tau1 = 0.5f;          // mask confidence threshold (eq. 2)
-  float temperature = 0.1f;   // T of eq. 5
+  // T of eq. 5. s_{n,k} is a (weighted) fraction of views, so q_k / q_j = exp((s_k - s_j) / T): at T = 0.1 a label
+  // that wins by 20 % of the views still leaves q_k ~ 0.88 and, under heavy mask noise, objects render below
+  // the 0.5 mask threshold. 0.05 measured better on three scenes of both presets (docs/results.md).
+  float temperature = 0.05f;
   float fusion_eps = 1e-6f;   // epsilon of eq. 4
   float tau2 = 0.1f;          // InfoNCE temperature (eq. 10)
+  // The semantic loss (eq. 10 through the pooled weights a_{n,k} = sum_p M_k alpha T) also moves opacities and
+  // geometry. Off by default: SCL then trains f and (through q) the view weights only. With it, opacities of the
+  // demo objects halve and objects fall below the mask threshold (docs/results.md); true = the full gradient.
+  bool sem_geometry = false;
   int fusion_every = 100;     // R: rebuild the observation table every R iterations (and after densification)
   int bro_kernel = 5;         // square structuring element of D and E (eq. 12)
+  // BRO's gradient without the component that scales a whole object render (bro.h): eq. 14's own gradient
+  // fades objects on noisy masks. false = eq. 14's plain gradient.
+  bool bro_scale_invariant = true;
   float bro_eps = 1e-6f;
   int min_mask_pixels = 16;   // objects smaller than this in a view are not SCL anchors/candidates
   float lr_lang = 2.5e-3f;    // Adam learning rate of f_n

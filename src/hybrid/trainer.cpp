@@ -187,7 +187,15 @@ float HybridTrainer::appearance_and_bro(const train::TrainView& view, const rend
     if (bro_on) {
       // B is built from the rendered opacity but treated as a constant: no gradient through the morphology.
       boundary_band(&obj_opac_[size_t(j) * HW], w.mask.data(), H, W, hc_.bro_kernel, w.band.data(), w.morph);
-      obj_bro_[j] = bro_loss(pred, w.gt.data(), 3, 3, w.band.data(), H, W, hc_.bro_eps, grad, hc_.lambda_bro / J);
+      if (!hc_.bro_scale_invariant) {  // eq. 14's own gradient
+        obj_bro_[j] = bro_loss(pred, w.gt.data(), 3, 3, w.band.data(), H, W, hc_.bro_eps, grad, hc_.lambda_bro / J);
+      } else {  // the same value; its gradient without the component that scales the whole render (bro.h)
+        w.bgrad.assign(HW * 3, 0.f);
+        obj_bro_[j] =
+            bro_loss(pred, w.gt.data(), 3, 3, w.band.data(), H, W, hc_.bro_eps, w.bgrad.data(), hc_.lambda_bro / J);
+        remove_scale_component(pred, HW * 3, w.bgrad.data());
+        for (size_t i = 0; i < HW * 3; ++i) grad[i] += w.bgrad[i];
+      }
     }
   }
   // Gradients back to the interleaved layout (the colour channels of a pixel are contiguous).
@@ -302,7 +310,7 @@ float HybridTrainer::extra_loss(const train::TrainView& view, const render::Rend
   last_.ms_sem = std::chrono::duration<double, std::milli>(t2 - t1).count();
   dout.extra = d_extra_.data();
   dout.extra_grad_channels = lay_.grad_channels();  // the opacity channels only shape BRO's constant band
-  if (!fg_.empty() && last_.anchors > 0) dout.weight_sums = d_wsum_.data();
+  if (!fg_.empty() && last_.anchors > 0 && hc_.sem_geometry) dout.weight_sums = d_wsum_.data();
   return total;
 }
 

@@ -85,6 +85,7 @@ class HybridTrainer : public train::Trainer {
     train::PhotometricLoss loss;
     std::vector<float> gt;                 // [H, W, 3]
     std::vector<float> mask, band, morph;  // [H, W]
+    std::vector<float> bgrad;              // [H, W, 3] BRO's gradient before its scale component is removed
   };
   std::vector<ObjectScratch> scratch_;                       // [threads]
   std::vector<float> obj_pred_, obj_grad_;                   // [J, H, W, 3] planar object renders / gradients

@@ -56,7 +56,7 @@ std::vector<ObjectScore> score_objects(const ObjectEmbeddings& oe, const float* 
     out.push_back({k, eval::cosine(e, text, oe.dim), eval::lerf_relevancy(e, text, canon, oe.dim)});
   }
   std::sort(out.begin(), out.end(), [](const ObjectScore& a, const ObjectScore& b) {
-    return a.relevancy != b.relevancy ? a.relevancy > b.relevancy : a.object < b.object;
+    return a.cosine != b.cosine ? a.cosine > b.cosine : a.object < b.object;
   });
   return out;
 }

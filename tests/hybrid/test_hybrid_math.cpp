@@ -331,3 +331,74 @@ TEST(Scl, NoSclCosineLossGradient) {
   std::vector<double> A = {1, 2, 3}, B = {2, 4, 6};
   EXPECT_NEAR(cosine_loss(A.data(), 3, B.data(), 1, 3, (double*)nullptr, 1.0), 0.0, 1e-12);
 }
+
+TEST(Bro, ScaleInvariantGradientIsTheGradientAtAFixedNorm) {
+  // remove_scale_component(p, g) is the exact gradient of L(p * c / ||p||) at p with c = ||p|| held constant
+  // (hybrid/bro.h); the loss value there is eq. 14 unchanged.
+  std::mt19937 rng(12);
+  const int H = 6, W = 8, C = 3;
+  std::vector<double> pred = randv(H * W * C, rng, 0, 1), gt = randv(H * W * C, rng, 0, 1);
+  std::vector<float> B(H * W);
+  for (auto& b : B) b = (rng() % 3) * 0.5f;
+  const size_t n = pred.size();
+  double c = 0;
+  for (double v : pred) c += v * v;
+  c = std::sqrt(c);
+  auto loss = [&] {
+    double nrm = 0;
+    for (double v : pred) nrm += v * v;
+    std::vector<double> p(n);
+    for (size_t i = 0; i < n; ++i) p[i] = pred[i] * c / std::sqrt(nrm);
+    return bro_loss(p.data(), gt.data(), C, C, B.data(), H, W, 1e-6, (double*)nullptr, 1.0);
+  };
+  std::vector<double> g(n, 0.0);
+  const double l = bro_loss(pred.data(), gt.data(), C, C, B.data(), H, W, 1e-6, g.data(), 1.0);
+  EXPECT_NEAR(loss(), l, 1e-12);
+  remove_scale_component(pred.data(), n, g.data());
+  double gp = 0;
+  for (size_t i = 0; i < n; ++i) gp += g[i] * pred[i];
+  EXPECT_NEAR(gp, 0.0, 1e-12);  // no first-order change when the whole render is scaled
+  check_grad(pred, loss, g);
+  // A zero render has no scale direction: the gradient is left as it is.
+  std::vector<double> zero(n, 0.0), g2(n, 1.0);
+  remove_scale_component(zero.data(), n, g2.data());
+  for (double v : g2) EXPECT_EQ(v, 1.0);
+}
+
+TEST(Bro, PlainGradientFadesAnObjectWhoseMaskEdgeIsMisaligned) {
+  // The failure the scale-invariant gradient removes (hybrid/bro.h): an object rendered as a 6x6 square of
+  // value 0.8 against a view mask eroded by one pixel on every side (the image inside the mask is the same
+  // 0.8). Eq. 14's own gradient points towards a fainter object (<g, p> > 0: gradient descent lowers the
+  // render as a whole); the scale-invariant gradient has no such component and still moves the edges.
+  const int H = 12, W = 12, C = 3;
+  std::vector<double> pred(H * W * C, 0.0), gt(H * W * C, 0.0);
+  std::vector<float> A(H * W, 0.f), M(H * W, 0.f), B(H * W);
+  for (int y = 3; y < 9; ++y)
+    for (int x = 3; x < 9; ++x) {
+      A[y * W + x] = 1.f;
+      const bool in_mask = y >= 4 && y < 8 && x >= 4 && x < 8;
+      M[y * W + x] = in_mask ? 1.f : 0.f;
+      for (int c = 0; c < C; ++c) {
+        pred[(y * W + x) * C + c] = 0.8;
+        gt[(y * W + x) * C + c] = in_mask ? 0.8 : 0.0;
+      }
+    }
+  std::vector<float> tmp;
+  boundary_band(A.data(), M.data(), H, W, 5, B.data(), tmp);
+  std::vector<double> g(pred.size(), 0.0);
+  bro_loss(pred.data(), gt.data(), C, C, B.data(), H, W, 1e-6, g.data(), 1.0);
+  double gp = 0;
+  for (size_t i = 0; i < g.size(); ++i) gp += g[i] * pred[i];
+  EXPECT_GT(gp, 0.0) << "eq. 14's gradient should favour fading on a misaligned mask";
+  // Fading the render lowers eq. 14 here (the failure mode measured on trained models).
+  std::vector<double> half = pred;
+  for (auto& v : half) v *= 0.5;
+  EXPECT_LT(bro_loss(half.data(), gt.data(), C, C, B.data(), H, W, 1e-6, (double*)nullptr, 1.0),
+            bro_loss(pred.data(), gt.data(), C, C, B.data(), H, W, 1e-6, (double*)nullptr, 1.0));
+  remove_scale_component(pred.data(), pred.size(), g.data());
+  gp = 0;
+  double norm = 0;
+  for (size_t i = 0; i < g.size(); ++i) gp += g[i] * pred[i], norm += g[i] * g[i];
+  EXPECT_NEAR(gp, 0.0, 1e-12);
+  EXPECT_GT(norm, 1e-6);  // the edges still get a gradient
+}
