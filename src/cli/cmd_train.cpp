@@ -25,7 +25,7 @@ struct TrainArgs {
   std::string scene, out, method = "hybrid", resume;
   hybrid::HybridConfig hybrid;
   bool no_of = false, no_scl = false, no_bro = false;
-  std::string lang_storage = "half", bro_gradient = "scale-invariant";
+  std::string lang_storage = "half", bro_gradient = "scale-invariant", bro_norm = "image";
   int iters = 30000, downscale = 1, threads = 0, sh_degree = 3, save_every = 0;
   uint64_t seed = 0;
   bool no_densify = false, white_bg = false, quiet = false;
@@ -63,6 +63,7 @@ void run_train(const TrainArgs& a) {
     hc->use_bro = !a.no_bro;
     hc->lang_half = a.lang_storage == "half";
     hc->bro_scale_invariant = a.bro_gradient == "scale-invariant";
+    hc->bro_image_norm = a.bro_norm == "image";
   }
   auto trainer_ptr = hybrid::make_trainer(scene, train_idx, cfg, hc, progress);
   train::Trainer& trainer = *trainer_ptr;
@@ -165,6 +166,10 @@ CommandRegistration reg({"train", "Optimise Hybrid Gaussians (or plain 3DGS with
   sub.add_option("--bro-gradient", a->bro_gradient,
                  "scale-invariant (BRO cannot fade a whole object; see hybrid/bro.h) or plain (eq. 14's own gradient)")
       ->check(CLI::IsMember({"scale-invariant", "plain"}))->capture_default_str();
+  sub.add_option("--bro-norm", a->bro_norm,
+                 "image (eq. 14 weighted by its band's share of the image, like eq. 6; see hybrid/bro.h) or band "
+                 "(eq. 14 as written)")
+      ->check(CLI::IsMember({"image", "band"}))->capture_default_str();
   sub.add_flag("--sem-geometry", h.sem_geometry,
                "Let the semantic loss (eq. 10) move opacities and geometry too (default: it trains f and q only)");
   sub.add_option("--lr-lang", h.lr_lang, "Adam learning rate of the language embeddings")->capture_default_str();

@@ -60,8 +60,6 @@ void boundary_band(const float* A, const float* M, int H, int W, int s, float* B
   for (size_t i = 0; i < n; ++i) B[i] = std::clamp(B[i] + d[i] - e[i], 0.f, 1.f);
 }
 
-namespace {
-
 // sum_d ||W^d||_1 of eq. 14 (the normaliser of every term): W^x and W^y summed over the differences' supports.
 double band_weight_total(const float* B, int H, int W) {
   double wsum = 0;
@@ -73,6 +71,8 @@ double band_weight_total(const float* B, int H, int W) {
     }
   return wsum;
 }
+
+namespace {
 
 // Contiguous channels (cs == C): the pairs of both directions are differences of whole shifted rows, computed
 // branch-free with the per-pixel weight spread over the channels (same sums as the generic loop below, which

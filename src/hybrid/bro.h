@@ -22,6 +22,14 @@
 //   L_bro( p * sg(||p||) / ||p|| ),  p = I^pred_{u,k} [H, W, C] as one vector, sg = stop-gradient,
 // whose value is eq. 14 unchanged and whose gradient is g - (<g, p> / <p, p>) p (g = eq. 14's gradient): BRO
 // may move and sharpen the object's edges but cannot make the object as a whole fainter or brighter.
+//
+// Scale rule (HybridConfig::bro_image_norm, on by default). Eq. 14 is a mean over its band; eq. 6 a mean over the
+// image. With equal lambdas a band pixel then weighs HW / |band| times an image pixel of eq. 6 (20-50x for the
+// objects of a 160x120 view, growing with resolution and shrinking objects), and on noisy masks the rim of every
+// object is pulled down harder than eq. 6 and the RGB loss hold it (an object has no Gaussians outside its edge
+// to raise, so removing a misaligned edge can only lower its rim). We weight each (u, k) term by its band's share
+// of the image, sum_d ||W^d||_1 / (2 H W): BRO becomes, like eq. 6, a mean over the image, the same at every
+// resolution. Measured in docs/results.md (without the rule: the full row falls below the no-BRO row).
 #pragma once
 #include <cstddef>
 #include <vector>
@@ -41,6 +49,9 @@ void boundary_band(const float* A, const float* M, int H, int W, int s, float* B
 // [H, W, cstride]. Returns L.
 template <class T>
 T bro_loss(const T* pred, const T* gt, int cstride, int C, const float* B, int H, int W, T eps, T* grad, T scale);
+
+// sum_d ||W^d||_1 of eq. 14 for the band B [H, W] (at most about 2 H W).
+double band_weight_total(const float* B, int H, int W);
 
 // The scale-invariant gradient above: g -= (<g, p> / <p, p>) p over n values (unchanged when p = 0).
 // p, g: [n]

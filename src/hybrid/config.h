@@ -28,6 +28,10 @@ struct HybridConfig {
   // BRO's gradient without the component that scales a whole object render (bro.h): eq. 14's own gradient
   // fades objects on noisy masks. false = eq. 14's plain gradient.
   bool bro_scale_invariant = true;
+  // Scale rule of eq. 14 (bro.h): each object's term weighted by its band's share of the image, sum_d ||W^d||_1 /
+  // (2 H W), so that BRO, like eq. 6, is a mean over the image and its weight against eq. 6 does not grow with
+  // HW / |band| (smaller objects, higher resolution). false = eq. 14 as written (a mean over the band).
+  bool bro_image_norm = true;
   float bro_eps = 1e-6f;
   int min_mask_pixels = 16;   // objects smaller than this in a view are not SCL anchors/candidates
   float lr_lang = 2.5e-3f;    // Adam learning rate of f_n

@@ -187,12 +187,13 @@ float HybridTrainer::appearance_and_bro(const train::TrainView& view, const rend
     if (bro_on) {
       // B is built from the rendered opacity but treated as a constant: no gradient through the morphology.
       boundary_band(&obj_opac_[size_t(j) * HW], w.mask.data(), H, W, hc_.bro_kernel, w.band.data(), w.morph);
+      const float f = hc_.bro_image_norm ? float(band_weight_total(w.band.data(), H, W) / (2.0 * HW)) : 1.f;
       if (!hc_.bro_scale_invariant) {  // eq. 14's own gradient
-        obj_bro_[j] = bro_loss(pred, w.gt.data(), 3, 3, w.band.data(), H, W, hc_.bro_eps, grad, hc_.lambda_bro / J);
+        obj_bro_[j] = bro_loss(pred, w.gt.data(), 3, 3, w.band.data(), H, W, hc_.bro_eps, grad, f * hc_.lambda_bro / J);
       } else {  // the same value; its gradient without the component that scales the whole render (bro.h)
         w.bgrad.assign(HW * 3, 0.f);
         obj_bro_[j] =
-            bro_loss(pred, w.gt.data(), 3, 3, w.band.data(), H, W, hc_.bro_eps, w.bgrad.data(), hc_.lambda_bro / J);
+            bro_loss(pred, w.gt.data(), 3, 3, w.band.data(), H, W, hc_.bro_eps, w.bgrad.data(), f * hc_.lambda_bro / J);
         remove_scale_component(pred, HW * 3, w.bgrad.data());
         for (size_t i = 0; i < HW * 3; ++i) grad[i] += w.bgrad[i];
       }

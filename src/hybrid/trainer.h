@@ -9,7 +9,8 @@
 //     for every foreground object (pixel-weighted sums).
 //  3. Losses: lambda_rgb x 3DGS photometric loss on the image (see HybridConfig) + lambda_app x mean over objects
 //     of (1 - lambda) L1 + lambda (1 - SSIM) of I_k against I * M_k (eq. 6) + lambda_bro x mean over objects of
-//     eq. 14 + lambda_sem x mean over anchors of InfoNCE (eq. 10) on pooled predictions (eq. 9).
+//     eq. 14 (weighted by its band's share of the image, with a scale-invariant gradient: hybrid/bro.h) +
+//     lambda_sem x mean over anchors of InfoNCE (eq. 10) on pooled predictions (eq. 9).
 //  4. Backward: renderer gradients, then object channels -> dq, dc; SH backward for dc; SCL -> df, dq, da;
 //     dq -> view logits through the fusion; Adam for everything (f_n row-sparse, rows formed on the fly, see
 //     method_update).
