@@ -193,21 +193,51 @@ TEST(HybridTrainer, BoundaryLossDoesNotFadeObjectsOnNoisyMasks) {
   // High mask noise (jitter, swaps, misses, merges, low-confidence rims): with eq. 14 as written (a mean over the
   // band, its plain gradient) the objects' rendered opacity inside their true masks (2 px from the edge, BRO's
   // band half-width) falls well below the run without BRO; with the defaults (scale rule and scale-invariant
-  // gradient, hybrid/bro.h) BRO does not lower it. The whole-mask means are printed too.
+  // gradient, hybrid/bro.h) BRO lowers it neither there nor over the whole masks.
   Tiny t("high", 6, 5);
+  struct Opacity {
+    double mask, inside;
+  };
   auto opacity_after = [&](bool bro, bool fixed) {
     hybrid::HybridConfig hc;
     hc.use_bro = bro;
     hc.bro_scale_invariant = hc.bro_image_norm = fixed;
     auto tr = t.trainer(hc, 300);
     for (int it = 0; it < 300; ++it) tr->step();
+    const Opacity o{mean_opacity_inside_objects(tr->model(), t.scene),
+                    mean_opacity_inside_objects(tr->model(), t.scene, 2)};
     std::printf("  BRO %s: mean object opacity in the true masks %.4f, 2 px inside them %.4f\n",
-                bro ? (fixed ? "default" : "as written") : "off",
-                mean_opacity_inside_objects(tr->model(), t.scene),
-                mean_opacity_inside_objects(tr->model(), t.scene, 2));
-    return mean_opacity_inside_objects(tr->model(), t.scene, 2);
+                bro ? (fixed ? "default" : "as written") : "off", o.mask, o.inside);
+    return o;
   };
-  const double none = opacity_after(false, true), fixed = opacity_after(true, true), plain = opacity_after(true, false);
-  EXPECT_GT(fixed, none - 0.01);
-  EXPECT_LT(plain, none - 0.03) << "eq. 14 as written no longer fades objects: revisit hybrid/bro.h";
+  const Opacity none = opacity_after(false, true), fixed = opacity_after(true, true), plain = opacity_after(true, false);
+  EXPECT_GT(fixed.inside, none.inside - 0.01);
+  EXPECT_GT(fixed.mask, none.mask - 0.01);
+  EXPECT_LT(plain.inside, none.inside - 0.03) << "eq. 14 as written no longer fades objects: revisit hybrid/bro.h";
+  EXPECT_LT(plain.mask, none.mask - 0.05);
+}
+
+TEST(HybridTrainer, SemanticLossMovesGeometryOnlyWhenAsked) {
+  // With only the SCL loss (eq. 10) in the objective, the default trains f but leaves opacities and centres as
+  // they are; sem_geometry = true lets eq. 10 reach them through the pooled weights a_{n,k}.
+  Tiny t;
+  for (bool geometry : {false, true}) {
+    hybrid::HybridConfig hc;
+    hc.lambda_rgb = hc.lambda_app = 0.f;
+    hc.use_bro = false;
+    hc.use_of = false;
+    hc.sem_geometry = geometry;
+    auto tr = t.trainer(hc, 300);
+    const std::vector<float> o0 = tr->model().opacity_logit, m0 = tr->model().mean;
+    const std::vector<float> f0 = tr->model().find_extra("lang")->to_float();
+    int anchors = 0;
+    for (int it = 0; it < 3; ++it) {
+      tr->step();
+      anchors += tr->last_losses().anchors;
+    }
+    ASSERT_GT(anchors, 0);
+    EXPECT_NE(tr->model().find_extra("lang")->to_float(), f0) << "f not trained";
+    EXPECT_EQ(tr->model().opacity_logit == o0, !geometry);
+    EXPECT_EQ(tr->model().mean == m0, !geometry);
+  }
 }
