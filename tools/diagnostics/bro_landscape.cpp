@@ -14,6 +14,7 @@
 #include "hybrid/bro.h"
 #include "hybrid/data.h"
 #include "model/ply.h"
+#include "object_stats.h"
 #include "render/renderer.h"
 #include "render/sh.h"
 #include "scene/scene.h"
@@ -28,6 +29,8 @@ int main(int argc, char** argv) try {
   Scene sc = load_scene(argv[1]);
   GaussianModel m = read_model_ply(std::string(argv[2]) + "/point_cloud.ply");
   std::string mode = argc > 3 ? argv[3] : "noisy";
+  if (mode != "noisy" && mode != "noconf" && mode != "exact" && mode != "exactconf")
+    throw std::runtime_error("mode must be noisy, noconf, exact or exactconf");
   bool exact = mode == "exact" || mode == "exactconf";
   int kernel = argc > 4 ? atoi(argv[4]) : 5;
   auto names = eval::load_object_names(sc.root);
@@ -49,11 +52,9 @@ int main(int argc, char** argv) try {
     Image img = sc.load_image(idx[vi]);
     LabelMap lab = data.masks[vi].labels;
     if (exact) {
-      auto gt = eval::load_instance_masks(sc.root, v.name, names, v.width, v.height);
-      std::fill(lab.v.begin(), lab.v.end(), 0);
-      for (size_t j = 0; j < gt.ids.size(); ++j)
-        for (size_t p = 0; p < lab.v.size(); ++p) if (gt.masks[j][p]) lab.v[p] = gt.ids[j];
-      if (mode == "exactconf") if (auto conf = sc.load_confidence(idx[vi])) hybrid::apply_confidence(lab, *conf, 0.5f);
+      lab = diag::exact_labels(sc, v, names);
+      if (mode == "exactconf")
+        if (auto conf = sc.load_confidence(idx[vi])) hybrid::apply_confidence(lab, *conf, 0.5f);
     }
     float campos[3];
     for (int c = 0; c < 3; ++c) campos[c] = -(cam.R[c] * cam.t[0] + cam.R[3 + c] * cam.t[1] + cam.R[6 + c] * cam.t[2]);

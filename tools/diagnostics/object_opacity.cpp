@@ -7,8 +7,8 @@
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
-#include "eval/instances.h"
 #include "model/ply.h"
+#include "object_stats.h"
 #include "query/query.h"
 #include "render/renderer.h"
 #include "scene/scene.h"
@@ -26,33 +26,18 @@ int main(int argc, char** argv) try {
   const ExtraGroup* z = m.find_extra("obj_id");
   if (!q || !z) throw std::runtime_error(std::string(argv[2]) + ": not a hybrid model (no obj / obj_id)");
   int L = q->dim;
-  std::vector<int> ks; for (int k = 1; k < L; ++k) ks.push_back(k);
-  std::vector<double> in_sum(L, 0), in_cnt(L, 0), out_sum(L, 0), iou_i(L,0), iou_u(L,0);
   render::GaussianRenderer r;
-  for (int vi : sc.test_indices()) {
-    const View& v = sc.views[vi];
-    auto A = query::render_object_opacity(r, m, train::make_camera(v), ks);
-    auto gt = eval::load_instance_masks(sc.root, v.name, names, v.width, v.height);
-    size_t HW = size_t(v.width) * v.height;
-    for (size_t j = 0; j < gt.ids.size(); ++j) {
-      int k = gt.ids[j];
-      for (size_t p = 0; p < HW; ++p) {
-        float a = A[p * ks.size() + (k - 1)];
-        bool g = gt.masks[j][p] != 0;
-        if (g) { in_sum[k] += a; in_cnt[k] += 1; } else out_sum[k] += a;
-        iou_i[k] += g && a > 0.5f; iou_u[k] += g || a > 0.5f;
-      }
-    }
-  }
+  const diag::ObjectMaskStats st = diag::object_mask_stats(sc, m, L, names, r);
   // Gaussian stats by hard id
   std::vector<double> cnt(L, 0), qk(L, 0), op(L, 0);
   for (int i = 0; i < m.n; ++i) {
-    int k = int(z->data[i]);
+    const int k = int(z->data[i]);
+    if (k < 0 || k >= L) continue;
     cnt[k]++; qk[k] += q->data[size_t(i) * L + k]; op[k] += 1 / (1 + std::exp(-m.opacity_logit[i]));
   }
   printf("%-24s %8s %8s %8s %6s %8s %6s %6s\n", "object", "A_in", "px_in", "A_out", "IoU", "gauss", "q_k", "sig(o)");
   for (int k = 1; k < L; ++k)
-    printf("%-24s %8.3f %8.0f %8.0f %6.1f %8.0f %6.3f %6.3f\n", names.count(k) ? names[k].c_str() : "?", in_cnt[k] ? in_sum[k] / in_cnt[k] : 0, in_cnt[k], out_sum[k], 100 * iou_i[k] / std::max(1.0, iou_u[k]), cnt[k], cnt[k] ? qk[k] / cnt[k] : 0, cnt[k] ? op[k] / cnt[k] : 0);
+    printf("%-24s %8.3f %8.0f %8.0f %6.1f %8.0f %6.3f %6.3f\n", names.count(k) ? names[k].c_str() : "?", st.a_in(k), st.in_count[k], st.out_sum[k], 100 * st.iou(k), cnt[k], cnt[k] ? qk[k] / cnt[k] : 0, cnt[k] ? op[k] / cnt[k] : 0);
   printf("background gauss %.0f q0 %.3f\n", cnt[0], cnt[0] ? qk[0] / cnt[0] : 0);
   return 0;
 } catch (const std::exception& e) {

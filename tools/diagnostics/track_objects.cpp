@@ -9,9 +9,9 @@
 #include <cstring>
 #include <stdexcept>
 #include <string>
-#include "eval/instances.h"
 #include "hybrid/setup.h"
 #include "hybrid/trainer.h"
+#include "object_stats.h"
 #include "query/query.h"
 #include "scene/scene.h"
 using namespace hgs;
@@ -52,32 +52,20 @@ int main(int argc, char** argv) try {
     const ExtraGroup* q = m.find_extra("obj");
     const ExtraGroup* z = m.find_extra("obj_id");
     int L = q->dim;
-    std::vector<int> ks; for (int k = 1; k < L; ++k) ks.push_back(k);
-    std::vector<double> in_sum(L, 0), in_cnt(L, 0), ii(L, 0), uu(L, 0);
-    for (int vi : sc.test_indices()) {
-      const View& v = sc.views[vi];
-      auto A = query::render_object_opacity(r, m, train::make_camera(v), ks);
-      auto gt = eval::load_instance_masks(sc.root, v.name, names, v.width, v.height);
-      size_t HW = size_t(v.width) * v.height;
-      for (size_t j = 0; j < gt.ids.size(); ++j) {
-        int k = gt.ids[j];
-        for (size_t p = 0; p < HW; ++p) {
-          float a = A[p * ks.size() + (k - 1)];
-          bool g = gt.masks[j][p] != 0;
-          if (g) { in_sum[k] += a; in_cnt[k] += 1; }
-          ii[k] += g && a > 0.5f; uu[k] += g || a > 0.5f;
-        }
-      }
-    }
+    const diag::ObjectMaskStats st = diag::object_mask_stats(sc, m, L, names, r);
     std::vector<int> cnt(L, 0);
-    for (int i = 0; i < m.n; ++i) cnt[int(z->data[i])]++;
+    for (int i = 0; i < m.n; ++i)
+      if (int(z->data[i]) < L) cnt[int(z->data[i])]++;
     const auto& w = ht.view_weights();
     double wmax = 0, wmin = 1, ent = 0;
     for (float x : w) { wmax = std::max<double>(wmax, x); wmin = std::min<double>(wmin, x); ent -= x > 0 ? x * std::log(x) : 0; }
     const auto& ls = ht.last_losses();
     printf("it %5d N %6d app %.4f bro %.4f sem %.3f | w %.4f..%.4f H/Hmax %.3f | A_in:", it, m.n, ls.app, ls.bro, ls.sem, wmin, wmax, ent / std::log(double(w.size())));
     double miou = 0;
-    for (int k = 1; k < L; ++k) { printf(" %.2f", in_cnt[k] ? in_sum[k] / in_cnt[k] : 0); miou += uu[k] ? ii[k] / uu[k] : 0; }
+    for (int k = 1; k < L; ++k) {
+      printf(" %.2f", st.a_in(k));
+      miou += st.iou(k);
+    }
     printf(" | nz:");
     for (int k = 1; k < L; ++k) printf(" %d", cnt[k]);
     printf(" | IoU %.1f\n", 100 * miou / (L - 1));

@@ -1,0 +1,62 @@
+// diag_fused_evidence: Observation Fusion's evidence for one object's Gaussians. For the Gaussians whose hard id
+// is K in a trained model, the mean of s_{n,l} (eq. 4 with uniform view weights) over every label l, and how
+// many of them each label would win (argmax), from the scene's masks filtered at TAU1, or from the exact
+// ground-truth masks (gt/instances) with `exact`.
+//
+//   diag_fused_evidence SCENE MODEL_DIR K [TAU1] [exact]
+#include <cstdio>
+#include <stdexcept>
+#include <string>
+#include "hybrid/data.h"
+#include "eval/instances.h"
+#include "hybrid/fusion.h"
+#include "model/ply.h"
+#include "object_stats.h"
+#include "scene/scene.h"
+using namespace hgs;
+int main(int argc, char** argv) try {
+  if (argc < 4) {
+    std::fprintf(stderr, "usage: diag_fused_evidence SCENE MODEL_DIR K [TAU1] [exact]\n");
+    return 2;
+  }
+  Scene sc = load_scene(argv[1]);
+  GaussianModel m = read_model_ply(std::string(argv[2]) + "/point_cloud.ply");
+  int k = atoi(argv[3]);
+  float tau1 = argc > 4 ? atof(argv[4]) : 0.5f;
+  hybrid::HybridConfig hc; hc.tau1 = tau1;
+  auto idx = sc.train_indices();
+  auto data = hybrid::load_hybrid_data(sc, idx, hc, false);
+  if (argc > 5) {
+    if (std::string(argv[5]) != "exact") throw std::runtime_error("the 5th argument must be 'exact'");
+    const auto names = eval::load_object_names(sc.root);
+    for (size_t j = 0; j < idx.size(); ++j) data.masks[j].labels = diag::exact_labels(sc, sc.views[idx[j]], names);
+  }
+  hybrid::ObservationTable tab;
+  hybrid::observe(m.mean.data(), m.n, data.masks, tab);
+  int L = data.num_labels, U = tab.num_views;
+  const ExtraGroup* z = m.find_extra("obj_id");
+  if (!z) throw std::runtime_error(std::string(argv[2]) + ": not a hybrid model (no obj_id)");
+  std::vector<double> s(L, 0); int cnt = 0; std::vector<int> win(L, 0); double nv = 0;
+  for (int i = 0; i < m.n; ++i) {
+    if (int(z->data[i]) != k) continue;
+    std::vector<double> si(L, 0); double den = 0;
+    for (int u = 0; u < U; ++u) { auto l = tab.label[size_t(i) * U + u]; if (l == hybrid::kNoObservation) continue; den++; si[l]++; }
+    if (den == 0) continue;
+    cnt++; nv += den;
+    int best = 0; for (int l = 0; l < L; ++l) { s[l] += si[l] / den; if (si[l] > si[best]) best = l; }
+    win[best]++;
+  }
+  if (cnt == 0) {
+    printf("object %d: no Gaussian has this hard id\n", k);
+    return 0;
+  }
+  printf("object %d: %d Gaussians, mean valid views %.1f\n  mean s:", k, cnt, nv / cnt);
+  for (int l = 0; l < L; ++l) printf(" %d:%.3f", l, s[l] / cnt);
+  printf("\n  argmax:");
+  for (int l = 0; l < L; ++l) printf(" %d:%d", l, win[l]);
+  printf("\n");
+  return 0;
+} catch (const std::exception& e) {
+  std::fprintf(stderr, "error: %s\n", e.what());
+  return 1;
+}
