@@ -20,8 +20,9 @@ struct HybridConfig {
   float fusion_eps = 1e-6f;   // epsilon of eq. 4
   float tau2 = 0.1f;          // InfoNCE temperature (eq. 10)
   // The semantic loss (eq. 10 through the pooled weights a_{n,k} = sum_p M_k alpha T) also moves opacities and
-  // geometry. Off by default: SCL then trains f and (through q) the view weights only. With it, opacities of the
-  // demo objects halve and objects fall below the mask threshold (docs/results.md); true = the full gradient.
+  // geometry. Off by default: SCL then trains f and (through q) the view weights only. With it, the opacities of a
+  // high-noise scene's objects halved and objects fell below the mask threshold (docs/results.md); true = the full
+  // gradient.
   bool sem_geometry = false;
   int fusion_every = 100;     // R: rebuild the observation table every R iterations (and after densification)
   int bro_kernel = 5;         // square structuring element of D and E (eq. 12)

@@ -197,6 +197,7 @@ float HybridTrainer::appearance_and_bro(const train::TrainView& view, const rend
         remove_scale_component(pred, HW * 3, w.bgrad.data());
         for (size_t i = 0; i < HW * 3; ++i) grad[i] += w.bgrad[i];
       }
+      obj_bro_[j] *= f;  // the term as optimised
     }
   }
   // Gradients back to the interleaved layout (the colour channels of a pixel are contiguous).

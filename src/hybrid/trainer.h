@@ -29,7 +29,7 @@
 namespace hgs::hybrid {
 
 struct HybridLossValues {
-  float rgb = 0, app = 0, sem = 0, bro = 0;
+  float rgb = 0, app = 0, sem = 0, bro = 0;  // bro: mean of eq. 14 over the objects, with the scale rule's weights
   int anchors = 0;
   // Wall time of the object-conditioned losses (+ BRO) and of the semantic pass (+ f's Adam step with SCL).
   double ms_app = 0, ms_sem = 0;
