@@ -15,8 +15,9 @@
 // jitter by a few pixels, swap or merge ids, miss objects, and eq. 2 drops their low-confidence rim), every
 // misaligned pair of edges costs |edge_pred| + |edge_gt|, so lowering the whole object render lowers the loss:
 // on noisy masks eq. 14 decreases monotonically as I^pred_{u,k} is scaled towards 0 (measured on a trained
-// model: scaling every q_{n,k} by 0.5 lowers eq. 14 for 9 of 10 objects, for most by several times what it raises eq. 6), and
-// since eq. 14 is normalised by the band (not the image, as eq. 6 is) that pull dominates for small objects.
+// model: scaling every q_{n,k} by 0.5 lowers eq. 14 for 9 of 10 objects, for most by several times what it
+// raises eq. 6), and since eq. 14 is normalised by the band (not the image, as eq. 6 is) that pull dominates for
+// small objects.
 // Trained this way objects fade below the mask threshold (the view logits learn to favour views whose masks
 // miss them). We therefore take the gradient of eq. 14 at the render rescaled to a fixed norm,
 //   L_bro( p * sg(||p||) / ||p|| ),  p = I^pred_{u,k} [H, W, C] as one vector, sg = stop-gradient,
