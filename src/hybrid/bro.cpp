@@ -78,10 +78,11 @@ namespace {
 // branch-free with the per-pixel weight spread over the channels (same sums as the generic loop below, which
 // serves strided layouts).
 template <class T>
-T bro_loss_contiguous(const T* pred, const T* gt, int C, const float* B, int H, int W, T eps, T* grad, T scale) {
+T bro_loss_contiguous(const T* pred, const T* gt, int C, const float* B, int H, int W, T eps, T* grad, T scale,
+                      double band_total) {
   const int L = W * C;
   std::vector<T> wx(L), wy(L), g(L);
-  const T den = T(C * band_weight_total(B, H, W)) + eps;
+  const T den = T(C * band_total) + eps;
   const T gs = scale / den;
   double num = 0;
   for (int y = 0; y < H; ++y) {
@@ -134,9 +135,11 @@ T bro_loss_contiguous(const T* pred, const T* gt, int C, const float* B, int H, 
 }  // namespace
 
 template <class T>
-T bro_loss(const T* pred, const T* gt, int cs, int C, const float* B, int H, int W, T eps, T* grad, T scale) {
-  if (cs == C) return bro_loss_contiguous(pred, gt, C, B, H, W, eps, grad, scale);
-  const T den = T(C * band_weight_total(B, H, W)) + eps;
+T bro_loss(const T* pred, const T* gt, int cs, int C, const float* B, int H, int W, T eps, T* grad, T scale,
+           double band_total) {
+  if (band_total < 0) band_total = band_weight_total(B, H, W);
+  if (cs == C) return bro_loss_contiguous(pred, gt, C, B, H, W, eps, grad, scale, band_total);
+  const T den = T(C * band_total) + eps;
   double num = 0;
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
@@ -175,7 +178,9 @@ void remove_scale_component(const T* p, size_t n, T* g) {
 
 template void remove_scale_component<float>(const float*, size_t, float*);
 template void remove_scale_component<double>(const double*, size_t, double*);
-template float bro_loss<float>(const float*, const float*, int, int, const float*, int, int, float, float*, float);
-template double bro_loss<double>(const double*, const double*, int, int, const float*, int, int, double, double*, double);
+template float bro_loss<float>(const float*, const float*, int, int, const float*, int, int, float, float*, float,
+                               double);
+template double bro_loss<double>(const double*, const double*, int, int, const float*, int, int, double, double*,
+                                 double, double);
 
 }  // namespace hgs::hybrid

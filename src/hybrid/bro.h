@@ -47,9 +47,11 @@ void boundary_band(const float* A, const float* M, int H, int W, int s, float* B
 
 // Eq. 14 for images with C channels. pred, gt: [H, W, C] (channel stride `cstride` >= C, channels at
 // offset 0 of each pixel block), B: [H, W]. grad (may be null) receives scale * dL/dpred added into
-// [H, W, cstride]. Returns L.
+// [H, W, cstride]. band_total: sum_d ||W^d||_1 of B when the caller has it (band_weight_total), < 0 = computed
+// here. Returns L.
 template <class T>
-T bro_loss(const T* pred, const T* gt, int cstride, int C, const float* B, int H, int W, T eps, T* grad, T scale);
+T bro_loss(const T* pred, const T* gt, int cstride, int C, const float* B, int H, int W, T eps, T* grad, T scale,
+           double band_total = -1);
 
 // sum_d ||W^d||_1 of eq. 14 for the band B [H, W] (at most about 2 H W).
 double band_weight_total(const float* B, int H, int W);

@@ -187,13 +187,15 @@ float HybridTrainer::appearance_and_bro(const train::TrainView& view, const rend
     if (bro_on) {
       // B is built from the rendered opacity but treated as a constant: no gradient through the morphology.
       boundary_band(&obj_opac_[size_t(j) * HW], w.mask.data(), H, W, hc_.bro_kernel, w.band.data(), w.morph);
-      const float f = hc_.bro_image_norm ? float(band_weight_total(w.band.data(), H, W) / (2.0 * HW)) : 1.f;
+      const double band_total = band_weight_total(w.band.data(), H, W);
+      const float f = hc_.bro_image_norm ? float(band_total / (2.0 * HW)) : 1.f;
+      const float s_bro = f * hc_.lambda_bro / J;
       if (!hc_.bro_scale_invariant) {  // eq. 14's own gradient
-        obj_bro_[j] = bro_loss(pred, w.gt.data(), 3, 3, w.band.data(), H, W, hc_.bro_eps, grad, f * hc_.lambda_bro / J);
+        obj_bro_[j] = bro_loss(pred, w.gt.data(), 3, 3, w.band.data(), H, W, hc_.bro_eps, grad, s_bro, band_total);
       } else {  // the same value; its gradient without the component that scales the whole render (bro.h)
         w.bgrad.assign(HW * 3, 0.f);
         obj_bro_[j] =
-            bro_loss(pred, w.gt.data(), 3, 3, w.band.data(), H, W, hc_.bro_eps, w.bgrad.data(), f * hc_.lambda_bro / J);
+            bro_loss(pred, w.gt.data(), 3, 3, w.band.data(), H, W, hc_.bro_eps, w.bgrad.data(), s_bro, band_total);
         remove_scale_component(pred, HW * 3, w.bgrad.data());
         for (size_t i = 0; i < HW * 3; ++i) grad[i] += w.bgrad[i];
       }
@@ -261,18 +263,21 @@ float HybridTrainer::semantic_contrastive(const render::RenderOutputs& out) {
     }
     loss += info_nce(&P_[size_t(j) * D_], D_, refs.data(), int(o.fg.size()), pos, hc_.tau2, &dP_[size_t(j) * D_], scale);
   }
-  // One pass over the Gaussians: da (the renderer's backward needs it) and dq from the dot products with the
-  // current f_n, then f_n's row-sparse Adam step on the same row, whose gradient df_n = sum_j q a G_j needs no
-  // other part of the step (f enters no render here). Adam's step count for this iteration is step_count + 1
-  // (begin_step() runs later in Trainer::step).
-  d_wsum_.resize(size_t(n) * Jf);
+  // One pass over the Gaussians: da (the renderer's backward needs it, with sem_geometry only) and dq from the
+  // dot products with the current f_n, then f_n's row-sparse Adam step on the same row, whose gradient
+  // df_n = sum_j q a G_j needs no other part of the step (f enters no render here). Adam's step count for this
+  // iteration is step_count + 1 (begin_step() runs later in Trainer::step).
+  float* da = nullptr;
+  if (hc_.sem_geometry) {
+    d_wsum_.resize(size_t(n) * Jf);
+    da = d_wsum_.data();
+  }
   G_.resize(size_t(Jf) * D_);
   pooled_row_factors(Jf, D_, dP_.data(), mass.data(), 1e-6f, G_.data());
   const float* a = out.weight_sums.data();
   auto rows = [&](long i, float* g) {
     alignas(64) float buf[train::kMaxRowUpdateDim];
-    return pooled_backward_row(i, D_, L_, Jf, q, lang_row(i, buf), a, fg_.data(), G_.data(), dq_.data(),
-                               d_wsum_.data(), g);
+    return pooled_backward_row(i, D_, L_, Jf, q, lang_row(i, buf), a, fg_.data(), G_.data(), dq_.data(), da, g);
   };
   train::AdamParam& p = adam_.get("lang");
   if (lang.f16) adam_.update_rows(p, lang.half.data(), n, rows, adam_.step_count + 1);

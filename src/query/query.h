@@ -5,8 +5,8 @@
 // and the objects are ranked by the cosine of e_k with the text (their LERF relevancy against the canonical
 // phrases is reported too). Relevancy is a per-pixel calibration, not a ranking of objects: it favours an
 // embedding that is unlike "object" / "things" / "stuff" / "texture" over one that is like the text, and SCL's
-// contrastive loss (eq. 10) leaves that offset free, so ranking by relevancy picked the wrong object for 2 of 10
-// names on a trained model whose cosine ranking was right for all 10 (docs/results.md). Its mask in a view
+// contrastive loss (eq. 10) leaves that offset free, so ranking by relevancy picked the wrong object for 2 of 9
+// names on a trained model whose cosine ranking was right for all 9 (docs/results.md). Its mask in a view
 // is its rendered opacity A_k = sum_n q_{n,k} alpha T, thresholded (default 0.5).
 // Pixel level (LERF / LangSplat style): the foreground language map sum_n (1 - q_{n,0}) f_n alpha T is rendered
 // and scored per pixel (background Gaussians carry no language supervision: SCL anchors are foreground objects).
