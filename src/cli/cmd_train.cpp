@@ -25,7 +25,7 @@ struct TrainArgs {
   std::string scene, out, method = "hybrid", resume;
   hybrid::HybridConfig hybrid;
   bool no_of = false, no_scl = false, no_bro = false;
-  std::string lang_storage = "half", bro_gradient = "scale-invariant", bro_norm = "image";
+  std::string lang_storage = "half", bro_gradient = "scale-invariant", bro_norm = "image", unconfident = "unobserved";
   int iters = 30000, downscale = 1, threads = 0, sh_degree = 3, save_every = 0;
   uint64_t seed = 0;
   bool no_densify = false, white_bg = false, quiet = false;
@@ -64,6 +64,7 @@ void run_train(const TrainArgs& a) {
     hc->lang_half = a.lang_storage == "half";
     hc->bro_scale_invariant = a.bro_gradient == "scale-invariant";
     hc->bro_image_norm = a.bro_norm == "image";
+    hc->unconfident_unobserved = a.unconfident == "unobserved";
   }
   auto trainer_ptr = hybrid::make_trainer(scene, train_idx, cfg, hc, progress);
   train::Trainer& trainer = *trainer_ptr;
@@ -163,6 +164,10 @@ CommandRegistration reg({"train", "Optimise Hybrid Gaussians (or plain 3DGS with
   sub.add_option("--tau2", h.tau2, "InfoNCE temperature (eq. 10)")->capture_default_str();
   sub.add_option("--fusion-every", h.fusion_every, "Rebuild the observation table every R iterations")->capture_default_str();
   sub.add_option("--bro-kernel", h.bro_kernel, "Side of the square structuring element of BRO")->check(CLI::Range(1, 63))->capture_default_str();
+  sub.add_option("--unconfident", a->unconfident,
+                 "What a mask pixel below --tau1 tells Observation Fusion: unobserved (nothing; see hybrid/fusion.h) "
+                 "or background (eq. 2 as written)")
+      ->check(CLI::IsMember({"unobserved", "background"}))->capture_default_str();
   sub.add_option("--bro-gradient", a->bro_gradient,
                  "scale-invariant (BRO cannot fade a whole object; see hybrid/bro.h) or plain (eq. 14's own gradient)")
       ->check(CLI::IsMember({"scale-invariant", "plain"}))->capture_default_str();

@@ -13,6 +13,10 @@ struct HybridConfig {
   float lambda_app = 1.0f, lambda_sem = 0.1f, lambda_bro = 1.0f;
   float lambda_dssim = 0.2f;  // lambda of eq. 6
   float tau1 = 0.5f;          // mask confidence threshold (eq. 2)
+  // Observation Fusion counts a pixel below tau1 as no observation (V_{n,u} = 0) instead of background
+  // (fusion.h); false = eq. 2 as written (every unconfident pixel is background evidence). The masks of eqs. 6
+  // and 14 keep M_{u,0} = 1 - OR_k M_{u,k} either way.
+  bool unconfident_unobserved = true;
   // T of eq. 5. s_{n,k} is a (weighted) fraction of views, so q_k / q_j = exp((s_k - s_j) / T): at T = 0.1 a label
   // that wins by 20 % of the views still leaves q_k ~ 0.88 and, under heavy mask noise, objects render below
   // the 0.5 mask threshold. 0.05 measured better on three scenes of both presets (docs/results.md).

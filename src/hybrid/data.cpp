@@ -33,7 +33,10 @@ HybridData load_hybrid_data(const Scene& scene, const std::vector<int>& idx, con
       mv.t[r] = v.t[r];
     }
     mv.labels = *scene.load_mask(idx[j]);
-    if (auto conf = scene.load_confidence(idx[j])) apply_confidence(mv.labels, *conf, cfg.tau1);
+    if (auto conf = scene.load_confidence(idx[j])) {
+      apply_confidence(mv.labels, *conf, cfg.tau1);
+      if (cfg.unconfident_unobserved) mv.observed = confident_pixels(*conf, cfg.tau1);
+    }
     HybridView& hv = d.views[j];
     int D = 0, gh = 0, gw = 0;
     std::vector<float> grid = *scene.load_feature_grid(idx[j], gh, gw, D);  // read once, used twice below

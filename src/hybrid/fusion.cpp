@@ -10,6 +10,12 @@ void apply_confidence(LabelMap& labels, const std::vector<float>& conf, float ta
     if (conf[i] < tau1) labels.v[i] = 0;
 }
 
+std::vector<uint8_t> confident_pixels(const std::vector<float>& conf, float tau1) {
+  std::vector<uint8_t> ok(conf.size());
+  for (size_t i = 0; i < conf.size(); ++i) ok[i] = conf[i] >= tau1;
+  return ok;
+}
+
 void observe(const float* means, int n, const std::vector<MaskView>& views, ObservationTable& table) {
   const int U = static_cast<int>(views.size());
   table.n = n;
@@ -27,7 +33,9 @@ void observe(const float* means, int n, const std::vector<MaskView>& views, Obse
       const double y = R[3] * X + R[4] * Y + R[5] * Z + v.t[1];
       const double px = v.fx * x / z + v.cx, py = v.fy * y / z + v.cy;
       if (!(px >= 0 && py >= 0 && px < v.width && py < v.height)) continue;
-      table.label[size_t(i) * U + u] = v.labels.at(static_cast<int>(px), static_cast<int>(py));
+      const int ix = static_cast<int>(px), iy = static_cast<int>(py);
+      if (!v.observed.empty() && !v.observed[size_t(iy) * v.width + ix]) continue;
+      table.label[size_t(i) * U + u] = v.labels.at(ix, iy);
     }
   }
 }

@@ -5,6 +5,11 @@
 //             image (V_{n,u} = 0). Masks are the confidence-filtered label maps, so M_{u,k}(p) = [label = k] and
 //             M_{u,0} = 1 - OR_k M_{u,k} holds by construction. The table is rebuilt every R iterations and after
 //             densification; it does not depend on the view weights.
+//             Deviation (HybridConfig::unconfident_unobserved, on by default): a pixel whose confidence is below
+//             tau1 is no observation (V_{n,u} = 0) rather than background. As written, eq. 2 turns every
+//             unconfident pixel into background evidence, and SAM2's confidence is lowest on object rims and on
+//             small objects, so under noise the background out-votes the object for many of its own Gaussians
+//             (docs/results.md, "Observation Fusion under noise"); an unconfident pixel says nothing about either.
 // fuse():     w = softmax(view logits) ("learnable normalised reliability"),
 //             s_{n,k} = sum_u w_u V_{n,u} M_{u,k}(p_{n,u}) / (sum_u w_u V_{n,u} + eps)        (eq. 4)
 //             q_n = softmax(s_n / T), z_n = argmax_k q_{n,k}                                  (eq. 5)
@@ -33,10 +38,13 @@ struct MaskView {
   double R[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};  // world -> camera, row-major
   double t[3] = {0, 0, 0};
   LabelMap labels;  // [H, W] in 0..K
+  std::vector<uint8_t> observed;  // [H, W] 0 where the pixel is no observation (V = 0); empty = every pixel
 };
 
 // labels[k] = 0 wherever confidence < tau1 (conf may be empty: no filtering). [H, W]
 void apply_confidence(LabelMap& labels, const std::vector<float>& conf, float tau1);
+// observed[p] = conf[p] >= tau1 ([H, W]; empty when conf is empty).
+std::vector<uint8_t> confident_pixels(const std::vector<float>& conf, float tau1);
 
 struct ObservationTable {
   int n = 0, num_views = 0;

@@ -128,6 +128,43 @@ TEST(ObservationFusion, HandMadeCases) {
   EXPECT_EQ(z[3], 0);  // kept q = (1, 0, 0)
 }
 
+TEST(ObservationFusion, UnconfidentPixelsAreNoObservationNotBackground) {
+  // Three identical cameras see one object (label 1) over the whole 10x10 image. In two of them the pixel under
+  // the Gaussian has confidence below tau1 (a rim pixel of SAM2's mask). Eq. 2 as written makes those pixels
+  // background, so the background wins 2:1; as no observation, the one confident view decides.
+  MaskView v;
+  v.width = v.height = 10;
+  v.fx = v.fy = 10;
+  v.cx = v.cy = 5;
+  v.labels = LabelMap(10, 10, 1);
+  std::vector<float> conf(100, 0.9f);
+  std::vector<float> rim = conf;
+  rim[5 * 10 + 5] = 0.3f;  // the pixel (5, 5) the Gaussian projects to
+  const float means[] = {0.f, 0.f, 1.f, 0.3f, 0.3f, 1.f};  // Gaussian 1 projects to (8, 8), confident everywhere
+  FusionParams p{2, 0.05, 1e-9};
+  const float w[] = {1.f / 3, 1.f / 3, 1.f / 3};
+  for (bool unobserved : {false, true}) {
+    std::vector<MaskView> views(3, v);
+    for (int u = 0; u < 3; ++u) {
+      const std::vector<float>& c = u < 2 ? rim : conf;
+      apply_confidence(views[u].labels, c, 0.5f);
+      if (unobserved) views[u].observed = confident_pixels(c, 0.5f);
+    }
+    ObservationTable tab;
+    observe(means, 2, views, tab);
+    std::vector<float> q(4, 0.5f), s(4);
+    std::vector<uint8_t> valid(2);
+    fuse(tab, w, p, q.data(), s.data(), valid.data());
+    SCOPED_TRACE(unobserved ? "unobserved" : "background");
+    EXPECT_EQ(tab.label[0], unobserved ? kNoObservation : 0);
+    EXPECT_EQ(tab.label[2], 1);
+    EXPECT_NEAR(s[1], unobserved ? 1.f : 1.f / 3, 1e-5);  // s_{0,1}
+    EXPECT_EQ(q[1] > q[0], unobserved);                   // object wins only when rims are no observation
+    EXPECT_NEAR(s[3], 1.f, 1e-5);                         // Gaussian 1: confident in every view either way
+  }
+  EXPECT_EQ(confident_pixels({}, 0.5f).size(), 0u);
+}
+
 TEST(ObjectChannels, GradientToQAndColour) {
   std::mt19937 rng(2);
   const int N = 7, L = 5, J = 3;

@@ -1,9 +1,10 @@
 // diag_fused_evidence: Observation Fusion's evidence for one object's Gaussians. For the Gaussians whose hard id
 // is K in a trained model, the mean of s_{n,l} (eq. 4 with uniform view weights) over every label l, and how
-// many of them each label would win (argmax), from the scene's masks filtered at TAU1, or from the exact
+// many of them each label would win (argmax), from the scene's masks filtered at TAU1 (`background`: eq. 2 as
+// written, pixels below TAU1 are background; `unobserved`: they are no observation), or from the exact
 // ground-truth masks (gt/instances) with `exact`.
 //
-//   diag_fused_evidence SCENE MODEL_DIR K [TAU1] [exact]
+//   diag_fused_evidence SCENE MODEL_DIR K [TAU1] [background|unobserved|exact]
 #include <cstdio>
 #include <stdexcept>
 #include <string>
@@ -16,7 +17,7 @@
 using namespace hgs;
 int main(int argc, char** argv) try {
   if (argc < 4) {
-    std::fprintf(stderr, "usage: diag_fused_evidence SCENE MODEL_DIR K [TAU1] [exact]\n");
+    std::fprintf(stderr, "usage: diag_fused_evidence SCENE MODEL_DIR K [TAU1] [background|unobserved|exact]\n");
     return 2;
   }
   Scene sc = load_scene(argv[1]);
@@ -25,9 +26,12 @@ int main(int argc, char** argv) try {
   float tau1 = argc > 4 ? atof(argv[4]) : 0.5f;
   hybrid::HybridConfig hc; hc.tau1 = tau1;
   auto idx = sc.train_indices();
+  const std::string mode = argc > 5 ? argv[5] : "background";
+  if (mode != "background" && mode != "unobserved" && mode != "exact")
+    throw std::runtime_error("the 5th argument must be background, unobserved or exact");
+  hc.unconfident_unobserved = mode == "unobserved";
   auto data = hybrid::load_hybrid_data(sc, idx, hc, false);
-  if (argc > 5) {
-    if (std::string(argv[5]) != "exact") throw std::runtime_error("the 5th argument must be 'exact'");
+  if (mode == "exact") {
     const auto names = eval::load_object_names(sc.root);
     for (size_t j = 0; j < idx.size(); ++j) data.masks[j].labels = diag::exact_labels(sc, sc.views[idx[j]], names);
   }
