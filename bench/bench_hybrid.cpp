@@ -20,7 +20,7 @@
 #include "hybrid/fusion.h"
 #include "hybrid/object_channels.h"
 #include "hybrid/scl.h"
-#include "hybrid/trainer.h"
+#include "hybrid/method.h"
 #include "model/gaussian_model.h"
 #include "render/renderer.h"
 #include "train/ssim.h"
@@ -145,16 +145,18 @@ void BM_RgbStep(benchmark::State& st) {
 
 void BM_HybridStep(benchmark::State& st) {
   auto& s = setup();
-  hybrid::HybridTrainer trainer(bench_config(), hybrid::HybridConfig{}, s.model, s.views, s.data, 5.f);
+  auto method = std::make_unique<hybrid::HybridMethod>(hybrid::HybridConfig{}, s.data, bench_config().seed);
+  const hybrid::HybridMethod& hm = *method;
+  train::Trainer trainer(bench_config(), s.model, s.views, 5.f, std::move(method));
   for (int i = 0; i < 3; ++i) trainer.step();
   double loss = 0;
   PartTimes parts;
   for (auto _ : st) {
     const train::StepInfo info = trainer.step();
-    loss = info.loss.total;
+    loss = info.total;
     parts.add(info);
-    parts.app += trainer.last_losses().ms_app;
-    parts.sem += trainer.last_losses().ms_sem;
+    parts.app += hm.last_losses().ms_app;
+    parts.sem += hm.last_losses().ms_sem;
   }
   st.counters["loss"] = loss;
   if (!std::isfinite(loss)) st.SkipWithError("the hybrid step's loss is not finite");  // timing NaNs is no figure
@@ -174,9 +176,10 @@ void BM_HybridStepMemory300k(benchmark::State& st) {
   cfg.densify = true;
   cfg.densify_from = 1;
   cfg.densify_every = 2;
-  hybrid::HybridTrainer trainer(cfg, hybrid::HybridConfig{}, std::move(m), s.views, s.data, 5.f);
+  train::Trainer trainer(cfg, std::move(m), s.views, 5.f,
+                         std::make_unique<hybrid::HybridMethod>(hybrid::HybridConfig{}, s.data, cfg.seed));
   for (int i = 0; i < 2; ++i) trainer.step();
-  for (auto _ : st) benchmark::DoNotOptimize(trainer.step().loss.total);
+  for (auto _ : st) benchmark::DoNotOptimize(trainer.step().total);
   st.counters["gaussians"] = trainer.model().n;
   st.counters["peak_rss_MB"] = peak_rss_mb();
 }

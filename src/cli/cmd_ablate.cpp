@@ -57,7 +57,7 @@ void run_ablate(const AblateArgs& a) {
     Progress bar(fmt::format("ablate {} ({}/{})", name, done, total), a.iters, !a.quiet);
     while (trainer->iteration() < a.iters) {
       auto s = trainer->step();
-      bar.update(trainer->iteration(), fmt::format("loss {:.4f} N {}", s.loss.total, s.num_gaussians));
+      bar.update(trainer->iteration(), fmt::format("loss {:.4f} N {}", s.total, s.num_gaussians));
     }
     bar.finish();
     const double train_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

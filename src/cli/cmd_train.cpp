@@ -15,7 +15,6 @@
 #include "model/ply.h"
 #include "scene/scene.h"
 #include "hybrid/setup.h"
-#include "hybrid/trainer.h"
 #include "train/trainer.h"
 
 namespace hgs::cli {
@@ -90,7 +89,8 @@ void run_train(const TrainArgs& a) {
   std::vector<float> ms;
   ms.reserve(a.iters - start);
   Progress bar("train", a.iters - start, progress);
-  double ema_loss = 0, ema_psnr = 0;
+  double ema_loss = 0, ema_psnr = 0;  // of the optimised total and the training view's PSNR
+  std::vector<std::pair<std::string, double>> ema_terms;  // each weighted term, in the objective's order
   train::StepTimes parts;  // summed over the steps of this run
   auto t0 = std::chrono::steady_clock::now();
   while (trainer.iteration() < a.iters) {
@@ -98,7 +98,13 @@ void run_train(const TrainArgs& a) {
     ms.push_back(float(s.ms));
     train::StepTimes::each([&](const char*, double train::StepTimes::*m) { parts.*m += s.times.*m; });
     bool first = ms.size() == 1;
-    ema_loss = first ? s.loss.total : 0.4 * s.loss.total + 0.6 * ema_loss;
+    ema_loss = first ? s.total : 0.4 * s.total + 0.6 * ema_loss;
+    if (first || ema_terms.size() != s.terms.size()) {
+      ema_terms.clear();
+      for (const auto& t : s.terms) ema_terms.push_back({t.name, t.weighted()});
+    } else {
+      for (size_t k = 0; k < s.terms.size(); ++k) ema_terms[k].second = 0.4 * s.terms[k].weighted() + 0.6 * ema_terms[k].second;
+    }
     ema_psnr = first ? s.psnr : 0.4 * s.psnr + 0.6 * ema_psnr;
     const int it = trainer.iteration();
     if (a.save_every > 0 && it % a.save_every == 0 && it < a.iters) {
@@ -106,9 +112,14 @@ void run_train(const TrainArgs& a) {
       trainer.save_checkpoint(out / "checkpoints" / fmt::format("iter_{}.ckpt", it));
       write_model_ply(out / fmt::format("point_cloud_iter_{}.ply", it), trainer.model());
     }
-    if (progress)
-      bar.update(it - start, fmt::format("loss {:.4f} psnr {:.2f} N {} {:.1f} ms/it", ema_loss, ema_psnr,
+    if (progress) {
+      std::string terms;
+      if (ema_terms.size() > 1)
+        for (const auto& [name, v] : ema_terms) terms += fmt::format("{}{} {:.4f}", terms.empty() ? " (" : " ", name, v);
+      if (!terms.empty()) terms += ")";
+      bar.update(it - start, fmt::format("loss {:.4f}{} psnr {:.2f} N {} {:.1f} ms/it", ema_loss, terms, ema_psnr,
                                          s.num_gaussians, s.ms));
+    }
   }
   double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   bar.finish(fmt::format("loss {:.4f} psnr {:.2f} N {}", ema_loss, ema_psnr, trainer.model().n));
@@ -127,6 +138,11 @@ void run_train(const TrainArgs& a) {
                           {"num_gaussians", trainer.model().n},
                           {"wall_time_s", wall},
                           {"final_train_loss_ema", ema_loss},
+                          {"final_train_loss_terms_ema", [&] {
+                             nlohmann::json j = nlohmann::json::object();  // weighted: they sum to the total
+                             for (const auto& [name, v] : ema_terms) j[name] = v;
+                             return j;
+                           }()},
                           {"final_train_psnr_ema", ema_psnr},
                           {"threads", omp_get_max_threads()}};
   nlohmann::json part_ms = nlohmann::json::object();

@@ -2,7 +2,7 @@
 
 #include "core/error.h"
 #include "core/parallel.h"
-#include "hybrid/trainer.h"
+#include "hybrid/method.h"
 
 namespace hgs::hybrid {
 
@@ -23,9 +23,9 @@ std::unique_ptr<train::Trainer> make_trainer(const Scene& scene, const std::vect
   auto views = load_train_views(scene, idx, progress);
   const float extent = scene_extent(scene, idx);
   GaussianModel init = init_from_points(scene.points, scene.point_colors, cfg.sh_degree);
-  if (!hybrid) return std::make_unique<train::Trainer>(cfg, std::move(init), std::move(views), extent);
-  HybridData data = load_hybrid_data(scene, idx, *hybrid, progress);
-  return std::make_unique<HybridTrainer>(cfg, *hybrid, std::move(init), std::move(views), std::move(data), extent);
+  std::unique_ptr<train::Method> method;
+  if (hybrid) method = std::make_unique<HybridMethod>(*hybrid, load_hybrid_data(scene, idx, *hybrid, progress), cfg.seed);
+  return std::make_unique<train::Trainer>(cfg, std::move(init), std::move(views), extent, std::move(method));
 }
 
 }  // namespace hgs::hybrid

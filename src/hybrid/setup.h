@@ -1,5 +1,5 @@
 // Building a trainer for a scene: loads the training images (and, for the hybrid method, masks and
-// features), initialises Gaussians from the SfM points and returns the Trainer (RGB) or HybridTrainer.
+// features), initialises Gaussians from the SfM points and returns the Trainer with the RGB or the hybrid method.
 #pragma once
 #include <memory>
 #include <optional>

@@ -31,6 +31,13 @@ AdamParam& Adam::add(const std::string& name, int dim, int n, float lr, bool bf1
   return params.back();
 }
 
+AdamParam& Adam::add_array(const std::string& name, int dim, int rows, float lr, float eps) {
+  AdamParam& p = add(name, dim, rows, lr);
+  p.scope = ParamScope::Array;
+  p.eps = eps;
+  return p;
+}
+
 AdamParam* Adam::find(const std::string& name) {
   for (auto& p : params)
     if (p.name == name) return &p;
@@ -47,10 +54,10 @@ void Adam::update(AdamParam& p, float* value, const float* grad, int n) const {
   const size_t total = size_t(n) * p.dim;
   if (p.bf16) fail("adam: parameter '{}' has bfloat16 moments; update it with update_rows", p.name);
   if (p.m.size() != total) fail("adam: parameter '{}' has moments for {} values, got {}", p.name, p.m.size(), total);
-  const double t = double(std::max(1L, step_count));
+  const double t = double(++p.step);
   const float bc1 = float(1.0 - std::pow(double(beta1), t));
   const float inv_sqrt_bc2 = float(1.0 / std::sqrt(1.0 - std::pow(double(beta2), t)));
-  const float b1 = beta1, b2 = beta2, e = eps;
+  const float b1 = beta1, b2 = beta2, e = p.eps;
   float* m = p.m.data();
   float* v = p.v.data();
   bool uniform = std::all_of(p.lr.begin(), p.lr.end(), [&](float l) { return l == p.lr[0]; });
@@ -182,27 +189,35 @@ void adam_row(const AdamParam& p, X* x, const float* g, float* m32, float* v32, 
 }  // namespace
 
 template <class X>
-void Adam::update_row(AdamParam& p, X* value, long row, const float* g, long step_t) const {
+void Adam::update_row(AdamParam& p, X* value, long row, const float* g) const {
+  check_rows(p, int(p.rows()));
+  row_kernel(p, value, row, g, ++p.step);
+}
+
+template <class X>
+void Adam::row_kernel(AdamParam& p, X* value, long row, const float* g, long ts) const {
   const int d = p.dim;
-  const long ts = step_t > 0 ? step_t : step_count;
   const double t = double(std::max(1L, ts));
   const float step = p.lr[0] / float(1.0 - std::pow(double(beta1), t));
   const float inv_sqrt_bc2 = float(1.0 / std::sqrt(1.0 - std::pow(double(beta2), t)));
   const size_t o = size_t(row) * d;
   const uint32_t base = uint32_t(o) * 0x9E3779B9u ^ uint32_t(ts) * 0x7FEB352Du;
   if (p.bf16)
-    adam_row(p, value + o, g, nullptr, nullptr, p.m16.data() + o, p.v16.data() + o, beta1, beta2, eps, step,
+    adam_row(p, value + o, g, nullptr, nullptr, p.m16.data() + o, p.v16.data() + o, beta1, beta2, p.eps, step,
              inv_sqrt_bc2, base);
   else
-    adam_row(p, value + o, g, p.m.data() + o, p.v.data() + o, nullptr, nullptr, beta1, beta2, eps, step, inv_sqrt_bc2,
-             base);
+    adam_row(p, value + o, g, p.m.data() + o, p.v.data() + o, nullptr, nullptr, beta1, beta2, p.eps, step,
+             inv_sqrt_bc2, base);
 }
 
-template void Adam::update_row<float>(AdamParam&, float*, long, const float*, long) const;
-template void Adam::update_row<uint16_t>(AdamParam&, uint16_t*, long, const float*, long) const;
+template void Adam::update_row<float>(AdamParam&, float*, long, const float*) const;
+template void Adam::update_row<uint16_t>(AdamParam&, uint16_t*, long, const float*) const;
+template void Adam::row_kernel<float>(AdamParam&, float*, long, const float*, long) const;
+template void Adam::row_kernel<uint16_t>(AdamParam&, uint16_t*, long, const float*, long) const;
 
 void Adam::gather(const std::vector<int>& src, const std::vector<char>& fresh) {
   for (auto& p : params) {
+    if (p.scope != ParamScope::PerGaussian) continue;
     if (p.bf16) {
       gather_rows(p.m16, p.dim, src, fresh);
       gather_rows(p.v16, p.dim, src, fresh);

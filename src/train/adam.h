@@ -1,20 +1,39 @@
-// Adam as in torch.optim.Adam (which 3DGS uses): per-parameter first/second moments, one shared step count,
-// bias-corrected update p -= lr / (1 - b1^t) * m / (sqrt(v) / sqrt(1 - b2^t) + eps), eps = 1e-15. Every
-// parameter is a per-Gaussian array [N, dim] with a learning rate per column (SH DC and rest differ), so the
-// moments can follow Gaussians through densification (`gather`).
+// Adam as in torch.optim.Adam (which 3DGS uses): per-parameter first/second moments and step count t (each
+// update of a parameter advances its own t), bias-corrected update
+// p -= lr / (1 - b1^t) * m / (sqrt(v) / sqrt(1 - b2^t) + eps), eps = 1e-15 unless the parameter says otherwise,
+// with a learning rate per column (SH DC and rest differ).
+// One optimiser, two scopes: a per-Gaussian parameter is an array [N, dim] whose moment rows follow the
+// Gaussians through densification (`gather`); an array parameter is any other array [rows, dim] (the hybrid
+// method's view logits) that densification leaves alone. Every parameter knows where its values live
+// (`values`), so checkpoints save and restore values and moments of every registered parameter generically.
 // Wide per-Gaussian embeddings (the hybrid method's f_n, D = 512) use update_rows instead: row-sparse, the
 // gradient of a row is produced on the fly (no [N, D] gradient buffer), the moments may be stored in bfloat16
 // and the values in IEEE half (half the memory each; stochastic rounding keeps them unbiased, see core/half.h).
 #pragma once
 #include <cstdint>
+#include <deque>
+#include <functional>
 #include <string>
 #include <vector>
 
 namespace hgs::train {
 
+// Where a parameter's values live (not owned): float32 or IEEE half storage. A function, because the arrays it
+// names may be reallocated (densification, checkpoint loads).
+struct ParamValues {
+  std::vector<float>* f32 = nullptr;
+  std::vector<uint16_t>* f16 = nullptr;
+};
+
+enum class ParamScope { PerGaussian, Array };
+
 struct AdamParam {
   std::string name;
   int dim = 1;
+  ParamScope scope = ParamScope::PerGaussian;
+  long step = 0;            // t of this parameter's last update
+  float eps = 1e-15f;
+  std::function<ParamValues()> values;  // null = not saved by checkpoints
   std::vector<float> lr;    // [dim] learning rate of each column (changed by schedules)
   std::vector<float> m, v;  // [N, dim] (float32 moments)
   bool bf16 = false;        // moments stored in m16 / v16 instead of m / v
@@ -25,30 +44,35 @@ struct AdamParam {
 
 class Adam {
  public:
-  float beta1 = 0.9f, beta2 = 0.999f, eps = 1e-15f;
-  long step_count = 0;  // t of the last update
-  std::vector<AdamParam> params;
+  float beta1 = 0.9f, beta2 = 0.999f;
+  std::deque<AdamParam> params;  // a deque: references returned by add() stay valid
 
+  // A per-Gaussian parameter [n, dim] (moments zero).
   AdamParam& add(const std::string& name, int dim, int n, float lr, bool bf16 = false);
+  // An array parameter [rows, dim] (not touched by densification).
+  AdamParam& add_array(const std::string& name, int dim, int rows, float lr, float eps = 1e-15f);
   AdamParam& get(const std::string& name);  // throws if absent
   AdamParam* find(const std::string& name);
-  // Advances t; call once per iteration before the update()s.
-  void begin_step() { ++step_count; }
-  // One update of `value` [N, dim] with gradient `grad` [N, dim]. Parallel (OpenMP), no allocation.
+  // One update of `value` [N, dim] with gradient `grad` [N, dim] (advances p.step). Parallel (OpenMP), no
+  // allocation.
   void update(AdamParam& p, float* value, const float* grad, int n) const;
   // Row-sparse ("lazy") update of `value` [N, dim], as torch.optim.SparseAdam: only rows that have a gradient
   // this step are touched; the other rows keep their value and moments. row_grad(i, g) writes row i's
   // gradient into g [dim] and returns false when the row has none (it is called once for every row, in
   // parallel, so it may also do other per-row work). Uses the parameter's first learning rate; works with
-  // float32 or bfloat16 moments. `t` is the step for the bias correction (0 = step_count; a caller that updates
-  // before begin_step() passes step_count + 1). Parallel (OpenMP over rows), no allocation, deterministic.
+  // float32 or bfloat16 moments. Advances p.step once (the bias correction of every row uses it). Parallel
+  // (OpenMP over rows), no allocation, deterministic.
   // `value` is float32 or IEEE half (uint16_t; written back with stochastic rounding, see core/half.h).
   template <class X, class RowGrad>
-  void update_rows(AdamParam& p, X* value, int n, RowGrad&& row_grad, long t = 0) const;
-  // The per-row kernel of update_rows (g [dim] is the row's gradient). X = float or uint16_t (half).
+  void update_rows(AdamParam& p, X* value, int n, RowGrad&& row_grad) const;
+  // One step that updates a single row (g [dim] is its gradient; advances p.step). X = float or uint16_t.
   template <class X>
-  void update_row(AdamParam& p, X* value, long row, const float* g, long t = 0) const;
-  // Row i of every moment array becomes old row src[i], or zeros when fresh[i] (fresh may be empty = none).
+  void update_row(AdamParam& p, X* value, long row, const float* g) const;
+  // The per-row kernel at step t (does not advance p.step).
+  template <class X>
+  void row_kernel(AdamParam& p, X* value, long row, const float* g, long t) const;
+  // Row i of every per-Gaussian moment array becomes old row src[i], or zeros when fresh[i] (fresh may be
+  // empty = none). Array parameters are left alone.
   void gather(const std::vector<int>& src, const std::vector<char>& fresh);
   // Zeroes both moments of one parameter (3DGS does this when it resets opacities).
   void reset_moments(const std::string& name);
@@ -60,14 +84,15 @@ class Adam {
 constexpr int kMaxRowUpdateDim = 4096;
 
 template <class X, class RowGrad>
-void Adam::update_rows(AdamParam& p, X* value, int n, RowGrad&& row_grad, long t) const {
+void Adam::update_rows(AdamParam& p, X* value, int n, RowGrad&& row_grad) const {
   check_rows(p, n);
+  const long t = ++p.step;
 #pragma omp parallel
   {
     alignas(64) float g[kMaxRowUpdateDim];
 #pragma omp for schedule(dynamic, 64)
     for (long i = 0; i < n; ++i)
-      if (row_grad(i, g)) update_row(p, value, i, g, t);
+      if (row_grad(i, g)) row_kernel(p, value, i, g, t);
   }
 }
 

@@ -1,10 +1,12 @@
 // Trainer checkpoints. Layout: the 8 bytes "HGSCKPT1", a little-endian uint64 header length, a JSON header
-// {config, iteration, extent, n, sh_degree, extras [{name, dim, f16}], adam {step, params [{name, dim, lr,
-// bf16}]}, rng (text state of std::mt19937_64), order, order_pos, method_config (optional), arrays [{name,
-// count}]}, then the arrays' float32 values back to back in header order: model fields (half-precision extra
-// groups widened, exact), Adam m and v per parameter (bfloat16 moments widened, exact), densification
-// statistics, then the method's own state ("method/<name>", e.g. the hybrid method's view logits). Read and
-// written in streams (no whole-file buffer).
+// {config, iteration, extent, n, sh_degree, extras [{name, dim, f16}], adam {params [{name, dim, lr, bf16,
+// scope, step, eps}]}, rng (text state of std::mt19937_64), order, order_pos, method, method_config (optional),
+// arrays [{name, count}]}, then the arrays' float32 values back to back in header order: model fields
+// (half-precision extra groups widened, exact), for every registered optimiser parameter its values when they
+// do not live in the model ("param/<name>", e.g. the hybrid method's view logits) and its Adam m and v
+// (bfloat16 moments widened, exact), densification statistics, then the method's non-parameter state
+// ("method/<name>", e.g. the hybrid method's observation table). No per-method code: every parameter the method
+// registered is saved and restored by name. Read and written in streams (no whole-file buffer).
 #include <cstdio>
 #include <cstring>
 #include <memory>
@@ -44,6 +46,10 @@ void Trainer::save_checkpoint(const std::filesystem::path& path) const {
   for (auto& e : m.extras)
     if (e.f16) arrays.push_back({"model/" + e.name, e.half.size(), nullptr, e.half.data(), true});
   for (auto& p : adam_.params) {
+    if (p.scope == ParamScope::Array) {
+      if (!p.values || !p.values().f32) fail("checkpoint: array parameter '{}' has no float32 values to save", p.name);
+      add("param/" + p.name, p.values().f32);
+    }
     if (p.bf16) {
       arrays.push_back({"adam_m/" + p.name, p.m16.size(), nullptr, p.m16.data(), false});
       arrays.push_back({"adam_v/" + p.name, p.v16.size(), nullptr, p.v16.data(), false});
@@ -56,11 +62,12 @@ void Trainer::save_checkpoint(const std::filesystem::path& path) const {
   add("stats/grad_accum", &stats_.grad_accum);
   add("stats/count", &counts);
   add("stats/max_radius", &stats_.max_radius);
-  const auto method = method_state();  // copies, alive until the file is written
+  const auto method = method_->state();  // copies, alive until the file is written
   for (auto& [name, a] : method) add("method/" + name, &a);
   json h;
   h["config"] = cfg_.to_json();
-  if (nlohmann::json mc = method_config(); !mc.is_null()) h["method_config"] = mc;
+  h["method"] = method_->name();
+  if (nlohmann::json mc = method_->config(); !mc.is_null()) h["method_config"] = mc;
   h["iteration"] = it_;
   h["extent"] = extent_;
   h["n"] = model_.n;
@@ -68,9 +75,10 @@ void Trainer::save_checkpoint(const std::filesystem::path& path) const {
   h["num_views"] = views_.size();
   h["extras"] = json::array();
   for (auto& e : model_.extras) h["extras"].push_back({{"name", e.name}, {"dim", e.dim}, {"f16", e.f16}});
-  h["adam"]["step"] = adam_.step_count;
   h["adam"]["params"] = json::array();
-  for (auto& p : adam_.params) h["adam"]["params"].push_back({{"name", p.name}, {"dim", p.dim}, {"lr", p.lr}, {"bf16", p.bf16}});
+  for (auto& p : adam_.params)
+    h["adam"]["params"].push_back({{"name", p.name}, {"dim", p.dim}, {"lr", p.lr}, {"bf16", p.bf16}, {"step", p.step},
+                                   {"eps", p.eps}, {"scope", p.scope == ParamScope::Array ? "array" : "gaussian"}});
   std::ostringstream rs;
   rs << rng_;
   h["rng"] = rs.str();
@@ -133,12 +141,45 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
     m.resize(h.at("n").get<int>());
     for (auto& e : h.at("extras"))
       m.add_extra(e.at("name").get<std::string>(), e.at("dim").get<int>(), 0.f, e.value("f16", false));
-    Adam a;
-    a.step_count = h.at("adam").at("step").get<long>();
-    for (auto& p : h.at("adam").at("params")) {
-      AdamParam& ap = a.add(p.at("name").get<std::string>(), p.at("dim").get<int>(), m.n, 0.f, p.value("bf16", false));
+    if (h.value("method", std::string("rgb")) != method_->name())
+      fail("{}: the checkpoint was trained with the {} method, not {}", where, h.value("method", std::string("rgb")),
+           method_->name());
+    // The optimiser's parameters are read into copies of the registered ones (same names, same kind), so that
+    // their value bindings stay; per-Gaussian ones are sized by the checkpoint's Gaussian count.
+    const json& hp = h.at("adam").at("params");
+    if (hp.size() != adam_.params.size())
+      fail("{}: the checkpoint holds {} optimiser parameters, this trainer has {}", where, hp.size(), adam_.params.size());
+    std::deque<AdamParam> a;
+    std::map<std::string, std::vector<float>> values;  // param/<name> of array parameters
+    for (size_t i = 0; i < hp.size(); ++i) {
+      const json& p = hp[i];
+      const AdamParam& cur = adam_.params[i];
+      const std::string name = p.at("name").get<std::string>();
+      const bool array = p.value("scope", std::string("gaussian")) == "array";
+      if (name != cur.name || p.at("dim").get<int>() != cur.dim || array != (cur.scope == ParamScope::Array) ||
+          p.value("bf16", false) != cur.bf16)
+        fail("{}: optimiser parameter {} is '{}' [{}], this trainer's is '{}' [{}]", where, i, name, p.at("dim").get<int>(),
+             cur.name, cur.dim);
+      AdamParam ap;
+      ap.name = cur.name;
+      ap.dim = cur.dim;
+      ap.scope = cur.scope;
+      ap.bf16 = cur.bf16;
+      ap.values = cur.values;
+      ap.step = p.contains("step") ? p.at("step").get<long>() : h.at("adam").at("step").get<long>();
+      ap.eps = p.value("eps", cur.eps);
       ap.lr = p.at("lr").get<std::vector<float>>();
       if (int(ap.lr.size()) != ap.dim) fail("{}: parameter '{}' has {} learning rates for {} columns", where, ap.name, ap.lr.size(), ap.dim);
+      const size_t rows = array ? cur.rows() : size_t(m.n);
+      if (ap.bf16) {
+        ap.m16.resize(rows * ap.dim);
+        ap.v16.resize(rows * ap.dim);
+      } else {
+        ap.m.resize(rows * ap.dim);
+        ap.v.resize(rows * ap.dim);
+      }
+      if (array) values["param/" + ap.name].resize(rows * ap.dim);
+      a.push_back(std::move(ap));
     }
     DensifyStats st;
     st.reset(m.n);
@@ -149,7 +190,8 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
     for (auto& f : m.fields()) dst["model/" + f.name] = f.data;
     for (auto& e : m.extras)
       if (e.f16) dst16["model/" + e.name] = {&e.half, true};
-    for (auto& p : a.params) {
+    for (auto& [name, v] : values) dst[name] = &v;
+    for (auto& p : a) {
       if (p.bf16) {
         dst16["adam_m/" + p.name] = {&p.m16, false};
         dst16["adam_v/" + p.name] = {&p.v16, false};
@@ -160,7 +202,7 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
     }
     // The method's own state is read into copies (sized by the file) and handed to method_state_loaded.
     std::map<std::string, std::vector<float>> method;
-    for (auto& [name, arr] : method_state()) dst["method/" + name] = &(method[name] = std::vector<float>(arr.size()));
+    for (auto& [name, arr] : method_->state()) dst["method/" + name] = &(method[name] = std::vector<float>(arr.size()));
     dst["stats/grad_accum"] = &st.grad_accum;
     dst["stats/count"] = &counts;
     dst["stats/max_radius"] = &st.max_radius;
@@ -201,10 +243,14 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
       if (o < 0 || o >= int(views_.size())) fail("{}: corrupt view order", where);
     m.validate(where);
     // Everything parsed and checked: commit (the method checks its own state before it takes it).
-    method_state_loaded(where, h.value("method_config", json(nullptr)), m.n, method);
+    method_->state_loaded(where, h.value("method_config", json(nullptr)), m.n, method);
     cfg_ = c;
     model_ = std::move(m);
-    adam_ = std::move(a);
+    for (size_t i = 0; i < a.size(); ++i) {
+      AdamParam& p = adam_.params[i];
+      p = std::move(a[i]);
+      if (p.scope == ParamScope::Array) *p.values().f32 = std::move(values["param/" + p.name]);
+    }
     stats_ = std::move(st);
     rng_ = rng;
     order_ = std::move(order);

@@ -1,5 +1,5 @@
-// Trainer::step: the per-iteration glue between renderer, loss, Adam and densification. Buffers live in the
-// trainer and are reused, so a step allocates nothing unless the Gaussian count changed.
+// Trainer::step: the per-iteration glue between renderer, method, loss, Adam and densification. Buffers live in
+// the trainer and are reused, so a step allocates nothing unless the Gaussian count changed.
 #include "train/trainer.h"
 
 #include <algorithm>
@@ -21,9 +21,12 @@ render::Camera make_camera(const View& v) {
   return c;
 }
 
-Trainer::Trainer(const TrainConfig& cfg, GaussianModel model, std::vector<TrainView> views, float extent)
+Trainer::~Trainer() = default;
+
+Trainer::Trainer(const TrainConfig& cfg, GaussianModel model, std::vector<TrainView> views, float extent,
+                 std::unique_ptr<Method> method)
     : cfg_(cfg), model_(std::move(model)), views_(std::move(views)), extent_(extent), rng_(cfg.seed),
-      loss_(cfg.lambda_dssim) {
+      loss_(cfg.lambda_dssim), method_(method ? std::move(method) : std::make_unique<RgbMethod>()) {
   if (views_.empty()) fail("train: no training views");
   if (model_.n == 0) fail("train: the model has no Gaussians");
   if (cfg_.sh_degree > model_.sh_degree) cfg_.sh_degree = model_.sh_degree;
@@ -38,7 +41,12 @@ Trainer::Trainer(const TrainConfig& cfg, GaussianModel model, std::vector<TrainV
   adam_.add("opacity", 1, model_.n, cfg_.lr_opacity);
   AdamParam& sh = adam_.add("sh", model_.sh_stride() * 3, model_.n, cfg_.lr_sh_rest);
   for (int c = 0; c < 3; ++c) sh.lr[c] = cfg_.lr_sh_dc;
+  for (auto [name, f] : std::initializer_list<std::pair<const char*, std::vector<float> GaussianModel::*>>{
+           {"mean", &GaussianModel::mean}, {"log_scale", &GaussianModel::log_scale}, {"quat", &GaussianModel::quat},
+           {"opacity", &GaussianModel::opacity_logit}, {"sh", &GaussianModel::sh}})
+    adam_.get(name).values = [this, f = f] { return ParamValues{&(model_.*f), nullptr}; };
   stats_.reset(model_.n);
+  method_->attach(model_, adam_, views_);
 }
 
 int Trainer::active_sh_degree() const {
@@ -60,6 +68,7 @@ void Trainer::release_step_buffers() {
   renderer_.release();
   grads_ = render::GaussianGrads{};
   out_ = render::RenderOutputs{};
+  method_->release();
 }
 
 StepInfo Trainer::step() {
@@ -73,7 +82,8 @@ StepInfo Trainer::step() {
   if (model_.n == 0) fail("train: every Gaussian was pruned by iteration {}", it_);
   const int it = ++it_;  // 1-based, as in 3DGS
   adam_.get("mean").set_lr(cfg_.position_lr(it, extent_));
-  const TrainView& v = views_[next_view()];
+  const int vi = next_view();
+  const TrainView& v = views_[vi];
   const int W = v.cam.width, H = v.cam.height;
 
   render::GaussianInputs in = render_inputs(model_);
@@ -83,33 +93,54 @@ StepInfo Trainer::step() {
   const float bg = cfg_.white_bg ? 1.f : 0.f;
   rs.background[0] = rs.background[1] = rs.background[2] = bg;
   rs.want_depth = false;
-  prepare_inputs(v, in, rs);
+  render::OutputGrads dout;
+  objective_.clear();
+  StepContext c;
+  c.iteration = it;
+  c.view_index = vi;
+  c.view = &v;
+  c.model = &model_;
+  c.optim = &adam_;
+  c.rng = &rng_;
+  c.inputs = &in;
+  c.settings = &rs;
+  c.dout = &dout;
+  c.grads = &grads_;
+  c.objective = &objective_;
+  c.sh_degree = in.sh_degree;
+  method_->prepare(c);
   tick(info.times.prepare);
   renderer_.forward(v.cam, in, rs, out_);
+  c.out = &out_;
   tick(info.times.forward);
 
   d_rgb_.resize(size_t(W) * H * 3);
   info.loss = loss_(out_.rgb.data(), v.image.px.data(), H, W, d_rgb_.data());
   info.psnr = psnr_from_mse(info.loss.mse);
-  render::OutputGrads dout;
+  const float w_rgb = method_->rgb_weight();
+  if (w_rgb != 1.f)
+    for (float& g : d_rgb_) g *= w_rgb;
+  objective_.add("rgb", w_rgb, info.loss.total);
   dout.rgb = d_rgb_.data();
+  c.d_rgb = d_rgb_.data();
   tick(info.times.loss);
-  info.loss.total += extra_loss(v, out_, d_rgb_.data(), dout);
+  method_->losses(c);
   tick(info.times.method_loss);
   renderer_.backward(dout, grads_);
   tick(info.times.backward);
-  extra_param_grads(grads_);
+  method_->backward(c);
   tick(info.times.param_grads);
 
   // Adam.
-  adam_.begin_step();
   adam_.update(adam_.get("mean"), model_.mean.data(), grads_.mean.data(), model_.n);
   adam_.update(adam_.get("log_scale"), model_.log_scale.data(), grads_.log_scale.data(), model_.n);
   adam_.update(adam_.get("quat"), model_.quat.data(), grads_.quat.data(), model_.n);
   adam_.update(adam_.get("opacity"), model_.opacity_logit.data(), grads_.opacity_logit.data(), model_.n);
   adam_.update(adam_.get("sh"), model_.sh.data(), grads_.sh.data(), model_.n);
-  method_update();
+  method_->update(c);
   tick(info.times.update);
+  info.terms = objective_.terms();
+  info.total = objective_.total();
 
   // Densification (3DGS schedule; statistics are gathered until densify_until).
   if (cfg_.densify && it < cfg_.densify_until) {
@@ -124,7 +155,7 @@ StepInfo Trainer::step() {
       reset_opacity(model_, adam_, 0.01f);
   }
   info.num_gaussians = model_.n;
-  after_step(info);
+  method_->after_step(c, info.densified);
   tick(info.times.densify);
   info.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return info;

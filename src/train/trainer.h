@@ -1,11 +1,15 @@
-// Trainer: the 3DGS optimisation loop for one GaussianModel over a set of posed training images. One call to
-// step() = pick the next view of a seeded shuffled order, render, L = 0.8 L1 + 0.2 (1 - SSIM), backward, Adam
-// (lrs of TrainConfig, position lr decaying with the iteration), SH degree schedule, densification and opacity
-// resets. Methods that add per-Gaussian parameters or losses (the hybrid method) subclass it and use the
-// hooks; checkpoints hold everything needed to resume bit-for-bit (model, Adam, statistics, RNG, view order).
+// Trainer: the 3DGS optimisation loop for one GaussianModel over a set of posed training images, with a Method
+// (train/method.h) plugged in by composition. One call to step() = pick the next view of a seeded shuffled
+// order, method.prepare, render, photometric loss L = 0.8 L1 + 0.2 (1 - SSIM) (weighted by the method's
+// rgb_weight), method.losses, render backward, method.backward, Adam on the 3DGS parameters (lrs of
+// TrainConfig, position lr decaying with the iteration), method.update, SH degree schedule, densification and
+// opacity resets, method.after_step. The trainer owns the model, the optimiser registry (the method registers
+// its parameters there), the renderer and the schedule; checkpoints hold everything needed to resume
+// bit-for-bit (model, every registered parameter and its moments, statistics, RNG, view order, method state).
 #pragma once
 #include <filesystem>
 #include <map>
+#include <memory>
 #include <random>
 #include <string>
 #include <vector>
@@ -17,27 +21,23 @@
 #include "train/config.h"
 #include "train/densify.h"
 #include "train/loss.h"
+#include "train/method.h"
+#include "train/objective.h"
 
 namespace hgs::train {
-
-struct TrainView {
-  std::string name;
-  render::Camera cam;
-  Image image;  // [H, W, 3]
-};
 
 // Pinhole camera of a scene view for the renderer.
 render::Camera make_camera(const View& v);
 
 // Wall time of the parts of one step (ms), in step order.
 struct StepTimes {
-  double prepare = 0;      // the method's per-view inputs (prepare_inputs)
+  double prepare = 0;      // the method's per-view inputs (Method::prepare)
   double forward = 0;      // render forward
   double loss = 0;         // photometric loss and its gradient
-  double method_loss = 0;  // the method's losses (extra_loss)
+  double method_loss = 0;  // the method's losses (Method::losses)
   double backward = 0;     // render backward
-  double param_grads = 0;  // the method's chain rule to its parameters (extra_param_grads)
-  double update = 0;       // Adam and the method's own updates (method_update)
+  double param_grads = 0;  // the method's chain rule to its parameters (Method::backward)
+  double update = 0;       // Adam and the method's own updates (Method::update)
   double densify = 0;      // densification, opacity reset and after_step
   template <class F> static void each(F&& f) {  // f(name, member pointer) for every part
     f("prepare", &StepTimes::prepare);
@@ -52,7 +52,9 @@ struct StepTimes {
 };
 
 struct StepInfo {
-  LossValues loss;
+  LossValues loss;  // of the photometric term (total = its unweighted value)
+  double total = 0;  // the optimised objective: sum of the weighted terms
+  std::vector<LossTerm> terms;
   float psnr = 0;   // of this step's training view
   int num_gaussians = 0;
   double ms = 0;    // wall time of the step
@@ -63,8 +65,10 @@ struct StepInfo {
 
 class Trainer {
  public:
-  Trainer(const TrainConfig& cfg, GaussianModel model, std::vector<TrainView> views, float extent);
-  virtual ~Trainer() = default;
+  // method null = plain 3DGS (RgbMethod).
+  Trainer(const TrainConfig& cfg, GaussianModel model, std::vector<TrainView> views, float extent,
+          std::unique_ptr<Method> method = nullptr);
+  ~Trainer();
   Trainer(const Trainer&) = delete;
   Trainer& operator=(const Trainer&) = delete;
 
@@ -77,6 +81,8 @@ class Trainer {
   float extent() const { return extent_; }
   const Adam& adam() const { return adam_; }
   const std::vector<TrainView>& views() const { return views_; }
+  Method& method() { return *method_; }
+  const Method& method() const { return *method_; }
 
   // Binary checkpoint (see checkpoint.cpp for the layout). Writes atomically.
   void save_checkpoint(const std::filesystem::path& path) const;
@@ -85,34 +91,7 @@ class Trainer {
   // and `save_every`, so a run can be extended.
   void load_checkpoint(const std::filesystem::path& path);
 
- protected:
-  // Hooks for derived methods (all default to nothing).
-  // Called before forward with the view about to be rendered: may set extra channels or colours on `in` and
-  // change the render settings (background, pixel weights, ...).
-  virtual void prepare_inputs(const TrainView& view, render::GaussianInputs& in, render::RenderSettings& rs) {}
-  // Called after the photometric loss: may add loss terms, accumulate into `d_rgb` [H, W, 3] and set other
-  // output gradients in `dout` (pointers must stay valid until backward). Returns the added loss value.
-  virtual float extra_loss(const TrainView& view, const render::RenderOutputs& out, float* d_rgb,
-                           render::OutputGrads& dout) { return 0.f; }
-  // Called after backward with the renderer's gradients (the method adds its own parameters' chain rule).
-  virtual void extra_param_grads(render::GaussianGrads& g) {}
-  // Called after the built-in Adam updates, before densification: parameters the method optimises itself
-  // (registered in adam_ so that their moments follow densification and checkpoints).
-  virtual void method_update() {}
-  // Called at the end of every step (after Adam and densification).
-  virtual void after_step(StepInfo& info) {}
-  // Frees the per-step buffers (renderer workspace, gradients, outputs) before densification, so that the row
-  // gathers of a large model do not stack on top of them; methods add their own and call this one.
-  virtual void release_step_buffers();
-  // The method's own state for checkpoints: its options (JSON, null = none) and named float arrays (saved as
-  // they are). On load, method_state_loaded() gets the saved options, the checkpoint's Gaussian count and the
-  // arrays read by name (sized by the file); it checks them, throwing hgs::Error naming `where` before it
-  // changes anything, then takes them and rebuilds what derives from them.
-  virtual nlohmann::json method_config() const { return nullptr; }
-  virtual std::vector<std::pair<std::string, std::vector<float>>> method_state() const { return {}; }
-  virtual void method_state_loaded(const std::string& where, const nlohmann::json& config, int n,
-                                   std::map<std::string, std::vector<float>>& arrays) {}
-
+ private:
   TrainConfig cfg_;
   GaussianModel model_;
   std::vector<TrainView> views_;
@@ -128,9 +107,11 @@ class Trainer {
   render::GaussianGrads grads_;
   PhotometricLoss loss_;
   std::vector<float> d_rgb_;  // [H, W, 3]
+  Objective objective_;
+  std::unique_ptr<Method> method_;
 
- private:
   int next_view();
+  void release_step_buffers();
 };
 
 }  // namespace hgs::train

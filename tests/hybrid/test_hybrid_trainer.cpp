@@ -7,7 +7,8 @@
 #include "core/error.h"
 #include "eval/instances.h"
 #include "hybrid/bro.h"
-#include "hybrid/trainer.h"
+#include "hybrid/method.h"
+#include "train/trainer.h"
 #include "model/ply.h"
 #include "query/query.h"
 #include "scene/scene.h"
@@ -38,7 +39,7 @@ struct Tiny {
     scene = load_scene(tmp / "s");
     train = scene.train_indices();
   }
-  std::unique_ptr<hybrid::HybridTrainer> trainer(const hybrid::HybridConfig& hc, int iters, int densify_every = 0) {
+  std::unique_ptr<train::Trainer> trainer(const hybrid::HybridConfig& hc, int iters, int densify_every = 0) {
     std::vector<train::TrainView> views;
     for (int i : train) views.push_back({scene.views[i].name, train::make_camera(scene.views[i]), scene.load_image(i)});
     train::TrainConfig cfg = train::TrainConfig{}.scaled_to(iters);
@@ -50,10 +51,12 @@ struct Tiny {
     }
     hybrid::HybridData data = hybrid::load_hybrid_data(scene, train, hc, false);
     GaussianModel m = init_from_points(scene.points, scene.point_colors, 1);
-    return std::make_unique<hybrid::HybridTrainer>(cfg, hc, std::move(m), std::move(views), std::move(data),
-                                                   scene_extent(scene, train));
+    return std::make_unique<train::Trainer>(cfg, std::move(m), std::move(views), scene_extent(scene, train),
+                                            std::make_unique<hybrid::HybridMethod>(hc, std::move(data), cfg.seed));
   }
 };
+
+hybrid::HybridMethod& hm(train::Trainer& t) { return dynamic_cast<hybrid::HybridMethod&>(t.method()); }
 
 // Fraction of Gaussians within `r` of an object's centre whose hard id is that object.
 double association_accuracy(const GaussianModel& m, const std::filesystem::path& synth_json_dir, const Scene& s) {
@@ -98,18 +101,18 @@ TEST(HybridTrainer, LearnsAssociationsAndLanguage) {
   Tiny t;
   hybrid::HybridConfig hc;
   auto tr = t.trainer(hc, 300);
-  const std::vector<float> w0 = tr->view_weights();
+  const std::vector<float> w0 = hm(*tr).view_weights();
   float first_app = 0, last_app = 0;
   for (int it = 0; it < 300; ++it) {
     train::StepInfo s = tr->step();
     ASSERT_TRUE(std::isfinite(s.loss.total));
-    if (it < 20) first_app += tr->last_losses().app;
-    if (it >= 280) last_app += tr->last_losses().app;
+    if (it < 20) first_app += hm(*tr).last_losses().app;
+    if (it >= 280) last_app += hm(*tr).last_losses().app;
   }
   EXPECT_LT(last_app, 0.7f * first_app) << "object-conditioned loss did not decrease";
   // The view weights moved away from uniform.
   double moved = 0;
-  for (size_t u = 0; u < w0.size(); ++u) moved += std::abs(tr->view_weights()[u] - w0[u]);
+  for (size_t u = 0; u < w0.size(); ++u) moved += std::abs(hm(*tr).view_weights()[u] - w0[u]);
   EXPECT_GT(moved, 1e-4);
   const GaussianModel& m = tr->model();
   ASSERT_TRUE(m.find_extra("obj") && m.find_extra("obj_id") && m.find_extra("lang"));
@@ -146,8 +149,8 @@ TEST(HybridTrainer, AblationsRun) {
     hc.use_scl = mask & 2;
     hc.use_bro = mask & 4;
     auto tr = t.trainer(hc, 20);
-    for (int it = 0; it < 20; ++it) ASSERT_TRUE(std::isfinite(tr->step().loss.total)) << "ablation " << mask;
-    if (!hc.use_of) EXPECT_EQ(tr->view_weights()[0], tr->view_weights()[1]);  // no view weights learned
+    for (int it = 0; it < 20; ++it) ASSERT_TRUE(std::isfinite(tr->step().total)) << "ablation " << mask;
+    if (!hc.use_of) EXPECT_EQ(hm(*tr).view_weights()[0], hm(*tr).view_weights()[1]);  // no view weights learned
   }
 }
 
@@ -168,9 +171,9 @@ TEST(HybridTrainer, CheckpointResumesBitForBit) {
   auto b = t.trainer(other, 40, 5);
   b->load_checkpoint(t.tmp / "h.ckpt");
   EXPECT_EQ(b->iteration(), 12);
-  EXPECT_EQ(b->hybrid_config().lambda_bro, 0.7f);
+  EXPECT_EQ(hm(*b).hybrid_config().lambda_bro, 0.7f);
   for (int it = 0; it < 10; ++it) b->step();
-  EXPECT_EQ(a->view_logits(), b->view_logits());
+  EXPECT_EQ(hm(*a).view_logits(), hm(*b).view_logits());
   for (const char* g : {"obj", "obj_id"}) EXPECT_EQ(a->model().find_extra(g)->data, b->model().find_extra(g)->data) << g;
   EXPECT_EQ(a->model().find_extra("lang")->half, b->model().find_extra("lang")->half);
   EXPECT_FALSE(a->model().find_extra("lang")->half.empty());
@@ -233,7 +236,7 @@ TEST(HybridTrainer, SemanticLossMovesGeometryOnlyWhenAsked) {
     int anchors = 0;
     for (int it = 0; it < 3; ++it) {
       tr->step();
-      anchors += tr->last_losses().anchors;
+      anchors += hm(*tr).last_losses().anchors;
     }
     ASSERT_GT(anchors, 0);
     EXPECT_NE(tr->model().find_extra("lang")->to_float(), f0) << "f not trained";

@@ -21,13 +21,11 @@ TEST(Adam, MatchesHandComputation) {
   p.lr = {0.1f, 0.01f};  // per-column rates
   std::vector<float> x = {1.f, -2.f};
   // Step 1, g = (0.5, -3): m = 0.1 g, v = 0.001 g^2, mhat = g, vhat = g^2 -> x -= lr * sign(g) (eps tiny).
-  adam.begin_step();
   std::vector<float> g = {0.5f, -3.f};
   adam.update(p, x.data(), g.data(), 1);
   EXPECT_NEAR(x[0], 1.f - 0.1f, 1e-6f);
   EXPECT_NEAR(x[1], -2.f + 0.01f, 1e-6f);
   // Step 2, g = (-1, 1), in double by hand.
-  adam.begin_step();
   g = {-1.f, 1.f};
   adam.update(p, x.data(), g.data(), 1);
   double m0 = 0.9 * 0.05 + 0.1 * -1, v0 = 0.999 * 0.001 * 0.25 + 0.001 * 1;
@@ -43,7 +41,6 @@ TEST(Adam, MatchesHandComputation) {
   Adam a2;
   AdamParam& q = a2.add("y", 3, 2, 0.05f);
   std::vector<float> y = {1, 2, 3, 4, 5, 6}, gy = {0.1f, -0.2f, 0.3f, 0, 1, -1};
-  a2.begin_step();
   a2.update(q, y.data(), gy.data(), 2);
   EXPECT_NEAR(y[0], 0.95f, 1e-6f);
   EXPECT_NEAR(y[1], 2.05f, 1e-6f);
@@ -68,8 +65,6 @@ struct RowSteps {
   template <class X>
   void run(Adam& a32, AdamParam& p32, float* x32, Adam& a, AdamParam& p, X* x) const {
     for (size_t s = 0; s < g.size(); ++s) {
-      a32.begin_step();
-      a.begin_step();
       auto grad = [&](long r, float* out) {
         if (!has(int(s), r)) return false;
         std::copy_n(&g[s][size_t(r) * d], d, out);
@@ -90,8 +85,6 @@ TEST(Adam, RowUpdateMatchesDenseOnRowsWithGradient) {
   AdamParam& pr = rows.add("x", d, n, 0.01f);
   std::vector<float> xd(size_t(n) * d, 0.5f), xr = xd;
   for (int s = 0; s < 6; ++s) {
-    dense.begin_step();
-    rows.begin_step();
     // Dense reference per row: the rows without a gradient are skipped by hand.
     std::vector<float> before = xd, mb = pd.m, vb = pd.v;
     dense.update(pd, xd.data(), rs.g[s].data(), n);
@@ -155,7 +148,6 @@ TEST(Adam, TinyGradientsStayFinite) {
     AdamParam& p = a.add("x", d, n, 1e-3f, bf16);
     std::vector<float> x(size_t(n) * d, 1.f);
     for (int t = 1; t <= 5; ++t) {
-      a.begin_step();
       a.update_rows(p, x.data(), n, [&](long i, float* g) {
         for (int c = 0; c < d; ++c) g[c] = (t == 1 && i == 3) ? 1.f : tiny[i] * float(1 + c % 3);
         return true;
@@ -193,7 +185,6 @@ TEST(Adam, HalfValuesTrackFloat32) {
   std::vector<uint16_t> xt(64, float_to_half(1.f));
   std::vector<float> g(64, 1.f);
   for (int s = 0; s < 1000; ++s) {
-    at.begin_step();
     at.update_row(pt, xt.data(), 0, g.data());
   }
   double mean = 0;
@@ -210,7 +201,6 @@ TEST(Adam, Bf16SecondMomentDecaysUnderStochasticRounding) {
   std::fill(p.v16.begin(), p.v16.end(), float_to_bf16(1.f));
   std::vector<float> x(d, 0.f), g(d, 0.f);
   for (int s = 0; s < 1000; ++s) {
-    a.begin_step();
     a.update_row(p, x.data(), 0, g.data());
   }
   double mean = 0;

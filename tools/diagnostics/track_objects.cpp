@@ -10,7 +10,7 @@
 #include <stdexcept>
 #include <string>
 #include "hybrid/setup.h"
-#include "hybrid/trainer.h"
+#include "hybrid/method.h"
 #include "object_stats.h"
 #include "query/query.h"
 #include "scene/scene.h"
@@ -42,7 +42,7 @@ int main(int argc, char** argv) try {
   }
   if (iters < 1 || every < 1) throw std::runtime_error("ITERS and EVERY must be positive");
   auto tr = hybrid::make_trainer(sc, sc.train_indices(), cfg, hc, false);
-  auto& ht = dynamic_cast<hybrid::HybridTrainer&>(*tr);
+  auto& ht = dynamic_cast<hybrid::HybridMethod&>(tr->method());
   auto names = eval::load_object_names(sc.root);
   render::GaussianRenderer r;
   for (int it = 1; it <= iters; ++it) {

@@ -1,0 +1,68 @@
+#include "hybrid/association.h"
+
+#include "core/error.h"
+#include "hybrid/assign.h"
+
+namespace hgs::hybrid {
+
+ObjectAssociation::ObjectAssociation(const HybridConfig& cfg, const std::vector<MaskView>* masks, int num_labels)
+    : cfg_(cfg), masks_(masks), L_(num_labels) {
+  const size_t U = masks_->size();
+  logits_.assign(U, 0.f);
+  w_.assign(U, 1.f / float(U));
+}
+
+void ObjectAssociation::attach(train::Adam& optim) {
+  train::AdamParam& p = optim.add_array(kLogits, 1, int(logits_.size()), cfg_.lr_view, 1e-8f);
+  p.values = [this] { return train::ParamValues{&logits_, nullptr}; };
+}
+
+void ObjectAssociation::fuse(int n, HybridFields& h) {
+  s_.resize(size_t(n) * L_);
+  valid_.resize(n);
+  softmax(logits_.data(), int(logits_.size()), w_.data());
+  FusionParams p{L_, cfg_.temperature, cfg_.fusion_eps};
+  hybrid::fuse(table_, w_.data(), p, h.q->data.data(), s_.data(), valid_.data());
+}
+
+const std::vector<float>& ObjectAssociation::weights() const {
+  softmax(logits_.data(), int(logits_.size()), w_.data());
+  return w_;
+}
+
+void ObjectAssociation::refresh(GaussianModel& m, HybridFields& h) {
+  observe(m.mean.data(), m.n, *masks_, table_);
+  if (cfg_.use_of) fuse(m.n, h);
+  else single_view_assignment(table_, L_, h.q->data.data());
+  update_hard_ids(m.n, h);
+}
+
+void ObjectAssociation::update_hard_ids(int n, HybridFields& h) const {
+  const float* q = h.q->data.data();
+  float* zid = h.z->data.data();
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i) {
+    uint16_t z;
+    hard_ids(q + size_t(i) * L_, 1, L_, &z);
+    zid[i] = float(z);
+  }
+}
+
+void ObjectAssociation::backward_and_update(int n, const HybridFields& h, const float* dq, train::Adam& optim) {
+  if (!cfg_.use_of) return;
+  const int U = static_cast<int>(logits_.size());
+  FusionParams p{L_, cfg_.temperature, cfg_.fusion_eps};
+  dw_.resize(U);
+  dlogits_.resize(U);
+  fuse_backward(table_, w_.data(), p, s_.data(), h.q->data.data(), valid_.data(), dq, dw_.data());
+  softmax_backward(w_.data(), dw_.data(), U, dlogits_.data());
+  optim.update(optim.get(kLogits), logits_.data(), dlogits_.data(), U);
+}
+
+void ObjectAssociation::restore_table(int n, std::vector<uint16_t> labels) {
+  table_.n = n;
+  table_.num_views = int(logits_.size());
+  table_.label = std::move(labels);
+}
+
+}  // namespace hgs::hybrid

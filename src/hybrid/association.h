@@ -1,0 +1,52 @@
+// ObjectAssociation: the training-time state of Observation Fusion (paper eqs. 2-5, kernels in fusion.h) for
+// one model: the observation table, the view reliability logits (registered in the optimiser as the array
+// parameter "view_logits" [U], so their Adam state and checkpointing are the shared ones), w = softmax(logits),
+// the fused evidence s and which Gaussians have a valid view. Without OF (the ablation), q is the single-view
+// hard assignment (assign.h) and there are no view weights to learn.
+#pragma once
+#include <cstdint>
+#include <vector>
+
+#include "hybrid/config.h"
+#include "hybrid/fields.h"
+#include "hybrid/fusion.h"
+#include "train/adam.h"
+
+namespace hgs::hybrid {
+
+class ObjectAssociation {
+ public:
+  static constexpr const char* kLogits = "view_logits";
+
+  ObjectAssociation(const HybridConfig& cfg, const std::vector<MaskView>* masks, int num_labels);
+  // Registers the view logits in `optim` (eps 1e-8, torch's default: the 3DGS eps of 1e-15 is for its own
+  // parameters' scales).
+  void attach(train::Adam& optim);
+  void set_config(const HybridConfig& cfg) { cfg_ = cfg; }
+  // Rebuilds the observation table from the current centres, then q (fused or single-view) and z.
+  void refresh(GaussianModel& m, HybridFields& h);
+  // q = softmax(s(w) / T) from the current table and logits (OF only).
+  void fuse(int n, HybridFields& h);
+  // z = argmax q.
+  void update_hard_ids(int n, HybridFields& h) const;
+  // dq [N, L] -> view logits through eqs. 4-5 and the softmax over views, then their Adam step (OF only).
+  void backward_and_update(int n, const HybridFields& h, const float* dq, train::Adam& optim);
+
+  const std::vector<float>& weights() const;  // [U] softmax of the current logits
+  const std::vector<float>& logits() const { return logits_; }  // [U]
+  const ObservationTable& table() const { return table_; }
+  // Restores a saved table (checked by the caller).
+  void restore_table(int n, std::vector<uint16_t> labels);
+
+ private:
+  HybridConfig cfg_;
+  const std::vector<MaskView>* masks_;
+  int L_;
+  ObservationTable table_;
+  std::vector<float> logits_, dw_, dlogits_;  // [U]
+  mutable std::vector<float> w_;              // [U] softmax(logits_)
+  std::vector<float> s_;                          // [N, L]
+  std::vector<uint8_t> valid_;                    // [N]
+};
+
+}  // namespace hgs::hybrid

@@ -1,0 +1,204 @@
+#include "hybrid/method.h"
+
+#include <chrono>
+#include <random>
+
+#include "core/error.h"
+#include "core/half.h"
+#include "core/parallel.h"
+#include "render/sh.h"
+
+namespace hgs::hybrid {
+
+HybridMethod::HybridMethod(const HybridConfig& cfg, HybridData data, uint64_t seed)
+    : cfg_(cfg), data_(std::move(data)), seed_(seed), assoc_(cfg, &data_.masks, data_.num_labels),
+      object_losses_(cfg), semantic_(cfg, &data_) {}
+
+void HybridMethod::attach(GaussianModel& model, train::Adam& optim, const std::vector<train::TrainView>& views) {
+  const int L = data_.num_labels, D = data_.dim;
+  if (data_.masks.size() != views.size() || data_.views.size() != views.size())
+    fail("hybrid: {} training views but masks/features for {}", views.size(), data_.masks.size());
+  model_ = &model;
+  ExtraGroup* q = model.find_extra(kAssociationGroup);
+  if (!q) {
+    q = &model.add_extra(kAssociationGroup, L, 0.f);
+    for (int i = 0; i < model.n; ++i) q->data[size_t(i) * L] = 1.f;  // background until observed
+  } else if (q->dim != L) {
+    fail("hybrid: the model has {} object channels but the masks have {} labels", q->dim, L);
+  }
+  if (!model.find_extra(kHardIdGroup)) model.add_extra(kHardIdGroup, 1, 0.f);
+  ExtraGroup* f = model.find_extra(kLanguageGroup);
+  if (!f) {
+    f = &model.add_extra(kLanguageGroup, D, 0.f, cfg_.lang_half);
+    std::mt19937_64 rng(seed_ ^ 0x1A96ULL);
+    std::normal_distribution<float> nd(0.f, cfg_.lang_init_std);
+    if (f->f16)
+      for (auto& x : f->half) x = float_to_half(nd(rng));
+    else
+      for (auto& x : f->data) x = nd(rng);
+  } else if (f->dim != D) {
+    fail("hybrid: the model's language embeddings have D = {} but the features have D = {}", f->dim, D);
+  } else if (f->f16 != cfg_.lang_half) {  // e.g. a float32 PLY trained further in half precision
+    std::vector<float> v = f->to_float();
+    f->f16 = cfg_.lang_half;
+    if (f->f16) {
+      f->half.resize(v.size());
+      for (size_t k = 0; k < v.size(); ++k) f->half[k] = float_to_half(v[k]);
+      std::vector<float>().swap(f->data);
+    } else {
+      f->data = std::move(v);
+      std::vector<uint16_t>().swap(f->half);
+    }
+  }
+  // f_n: a per-Gaussian parameter optimised row-sparse without a gradient buffer (semantic.h); by default stored
+  // in half precision with bfloat16 moments. Its values live in the model (checkpoints save them there).
+  train::AdamParam& p = optim.add(SemanticPass::kParam, D, model.n, cfg_.lr_lang, cfg_.lang_half);
+  p.values = [this] {
+    ExtraGroup* g = model_->find_extra(kLanguageGroup);
+    return g->f16 ? train::ParamValues{nullptr, &g->half} : train::ParamValues{&g->data, nullptr};
+  };
+  assoc_.attach(optim);
+  fields_ = HybridFields::bind(model, "hybrid");
+  assoc_.refresh(model, fields_);
+}
+
+void HybridMethod::prepare(train::StepContext& c) {
+  GaussianModel& m = *c.model;
+  fields_ = HybridFields::bind(m, "hybrid");  // the model's groups may have moved (checkpoint load)
+  const int n = m.n, u = c.view_index, L = data_.num_labels;
+  render::GaussianInputs& in = *c.inputs;
+  if (cfg_.use_of) assoc_.fuse(n, fields_);
+  dq_.resize(size_t(n) * L);
+  parallel_fill(dq_, 0.f);
+  // Colours by SH (all Gaussians; the renderer then takes them as precomputed colours).
+  const float* R = c.view->cam.R;
+  const float* t = c.view->cam.t;
+  for (int k = 0; k < 3; ++k) campos_[k] = -(R[k] * t[0] + R[3 + k] * t[1] + R[6 + k] * t[2]);
+  colors_.resize(size_t(n) * 3);
+  render::sh_forward(n, in.sh_degree, in.sh_stride, in.sh, in.mean, campos_, (const int*)nullptr, colors_.data());
+  in.colors = colors_.data();
+  // Object channels (+ the full semantic render for the no-SCL ablation).
+  objects_ = data_.views[u].present;
+  const std::vector<int>& anchors = semantic_.anchors_of(u);
+  const int J = static_cast<int>(objects_.size());
+  const int sem = (!cfg_.use_scl && cfg_.lambda_sem > 0) ? data_.dim : 0;
+  layout_ = ObjectLayout{J, sem};
+  const int C = layout_.total();
+  channels_.resize(size_t(n) * C);
+  object_channels(n, L, layout_, objects_.data(), fields_.q->data.data(), colors_.data(), channels_.data());
+  if (sem) {
+    const ExtraGroup& f = *fields_.f;
+#pragma omp parallel for schedule(static)
+    for (int i = 0; i < n; ++i) f.row(i, &channels_[size_t(i) * C + layout_.other()]);
+  }
+  in.extra = channels_.data();
+  in.num_extra = C;
+  // Pixel weights M_k of the SCL anchors: the rasterizer returns a_{n,k} = sum_p M_k(p) alpha_n T_n.
+  if (!anchors.empty()) {
+    c.settings->pixel_weights = semantic_.pixel_weights(u);
+    c.settings->num_pixel_weights = static_cast<int>(anchors.size());
+  }
+}
+
+void HybridMethod::losses(train::StepContext& c) {
+  const train::TrainView& view = *c.view;
+  const render::RenderOutputs& out = *c.out;
+  const int W = view.cam.width, H = view.cam.height, C = layout_.total(), u = c.view_index, n = c.model->n;
+  d_channels_.resize(size_t(W) * H * C);
+  parallel_fill(d_channels_, 0.f);
+  const auto t0 = std::chrono::steady_clock::now();
+  const ObjectLossValues ov = object_losses_(view.image, data_.masks[u].labels, out.extra.data(), layout_, objects_,
+                                             d_channels_.data());
+  last_.app = float(ov.app);
+  last_.bro = float(ov.bro);
+  c.objective->add("app", cfg_.lambda_app, ov.app);
+  c.objective->add("bro", cfg_.use_bro ? cfg_.lambda_bro : 0.f, ov.bro);
+  const auto t1 = std::chrono::steady_clock::now();
+  SemanticValues sv;
+  const int Jf = c.settings->num_pixel_weights;
+  if (cfg_.lambda_sem > 0) {
+    if (cfg_.use_scl) {
+      float* da = nullptr;
+      if (cfg_.sem_geometry && Jf > 0) {
+        d_wsum_.resize(size_t(n) * Jf);
+        da = d_wsum_.data();
+      }
+      sv = semantic_.contrastive(u, n, fields_, Jf > 0 ? out.weight_sums.data() : nullptr, dq_.data(), da, *c.rng,
+                                 *c.optim);
+      if (da && sv.anchors > 0) c.dout->weight_sums = da;
+    } else {
+      sv = semantic_.cosine(u, W, H, out.extra.data(), C, layout_.other(), d_channels_.data());
+    }
+  }
+  last_.sem = float(sv.loss);
+  last_.anchors = sv.anchors;
+  c.objective->add("sem", cfg_.lambda_sem, sv.loss);
+  const auto t2 = std::chrono::steady_clock::now();
+  last_.ms_app = std::chrono::duration<double, std::milli>(t1 - t0).count();
+  last_.ms_sem = std::chrono::duration<double, std::milli>(t2 - t1).count();
+  c.dout->extra = d_channels_.data();
+  c.dout->extra_grad_channels = layout_.grad_channels();  // the opacity channels only shape BRO's constant band
+}
+
+void HybridMethod::backward(train::StepContext& c) {
+  GaussianModel& m = *c.model;
+  render::GaussianGrads& g = *c.grads;
+  const int n = m.n;
+  // Object channels -> dq and dc (added to the RGB path's colour gradient), then SH.
+  object_channels_backward(n, data_.num_labels, layout_, objects_.data(), fields_.q->data.data(), colors_.data(),
+                           g.extra.data(), dq_.data(), g.colors.data());
+  g.sh.resize(size_t(n) * m.sh_stride() * 3);
+  render::sh_backward(n, c.sh_degree, m.sh_stride(), m.sh.data(), m.mean.data(), campos_, (const int*)nullptr,
+                      g.colors.data(), g.sh.data(), g.mean.data());
+  assoc_.backward_and_update(n, fields_, dq_.data(), *c.optim);
+}
+
+void HybridMethod::update(train::StepContext& c) {
+  // (With SCL, f was updated in the semantic pass.)
+  if (!cfg_.use_scl && cfg_.lambda_sem > 0)
+    semantic_.update_from_channels(c.model->n, fields_, c.grads->extra.data(), layout_.total(), layout_.other(),
+                                   *c.optim);
+}
+
+void HybridMethod::after_step(train::StepContext& c, bool densified) {
+  fields_ = HybridFields::bind(*c.model, "hybrid");
+  if (densified || (cfg_.fusion_every > 0 && c.iteration % cfg_.fusion_every == 0)) assoc_.refresh(*c.model, fields_);
+  else assoc_.update_hard_ids(c.model->n, fields_);
+}
+
+void HybridMethod::release() {
+  object_losses_.release();
+  semantic_.release();
+  for (auto* v : {&dq_, &colors_, &channels_, &d_channels_, &d_wsum_}) std::vector<float>().swap(*v);
+}
+
+std::vector<std::pair<std::string, std::vector<float>>> HybridMethod::state() const {
+  // The observation table reflects the centres of the last refresh, so a resumed run continues bit for bit
+  // (the view logits and f are registered parameters: the trainer saves them). Values are exact in float32.
+  const auto& t = assoc_.table().label;
+  return {{"observations", std::vector<float>(t.begin(), t.end())}};
+}
+
+void HybridMethod::state_loaded(const std::string& where, const nlohmann::json& config, int n,
+                                std::map<std::string, std::vector<float>>& arrays) {
+  // The checkpoint's hybrid options replace the current ones (as its TrainConfig does), except that SCL on or
+  // off must agree: the no-SCL ablation needs the raw feature grids, loaded (or not) before the checkpoint.
+  HybridConfig c = cfg_;
+  if (!config.is_null()) {
+    c = HybridConfig::from_json(config);
+    if (c.use_scl != cfg_.use_scl)
+      fail("{}: the checkpoint was trained {} --no-scl; resume with the same option", where, c.use_scl ? "without" : "with");
+  }
+  const size_t U = data_.masks.size();
+  const auto& table = arrays["observations"];
+  if (table.size() != size_t(n) * U)
+    fail("{}: the hybrid state does not match {} training views and {} Gaussians", where, U, n);
+  // Checked: take it.
+  cfg_ = c;
+  assoc_.set_config(c);
+  semantic_.set_config(c);
+  object_losses_ = ObjectLosses(c);  // its losses carry lambda_dssim
+  assoc_.restore_table(n, std::vector<uint16_t>(table.begin(), table.end()));
+}
+
+}  // namespace hgs::hybrid

@@ -1,0 +1,58 @@
+// The semantic term of one view. With SCL (eqs. 9-10): pooled object predictions P_k = sum_n q f a / m from
+// the renderer's pixel-weighted sums a_{n,k} = sum_p M_k alpha T, InfoNCE of each anchor object against the
+// pooled references of another view holding it (positive) and that view's other objects (negatives); one pass
+// over the Gaussians then forms dq, da (with sem_geometry only) and df_n = sum_j q a G_j row by row, and takes
+// f's row-sparse Adam step on the same row (no [N, D] gradient buffer; "lang" is a registered per-Gaussian
+// parameter with its own step count). Without SCL (the ablation): 1 - cos between the full semantic render
+// sum f alpha T (extra channels) and the upsampled reference features, f updated from the renderer's channel
+// gradients after backward.
+#pragma once
+#include <random>
+#include <vector>
+
+#include "hybrid/config.h"
+#include "hybrid/data.h"
+#include "hybrid/fields.h"
+#include "hybrid/object_channels.h"
+#include "train/adam.h"
+
+namespace hgs::hybrid {
+
+struct SemanticValues {
+  double loss = 0;  // mean InfoNCE over the anchors, or the mean cosine loss
+  int anchors = 0;
+};
+
+class SemanticPass {
+ public:
+  static constexpr const char* kParam = "lang";  // f's optimiser parameter
+
+  SemanticPass(const HybridConfig& cfg, const HybridData* data);
+  void set_config(const HybridConfig& cfg) { cfg_ = cfg; }
+  // SCL anchors of view u (empty when SCL is off or lambda_sem = 0) and their pixel-weight maps [H, W, Jf].
+  const std::vector<int>& anchors_of(int u);
+  const float* pixel_weights(int u);
+  // SCL. weight_sums [N, Jf]; adds lambda_sem * d/dq to dq [N, L]; da [N, Jf] (null = no gradient to the
+  // pooled weights); f is updated in place.
+  SemanticValues contrastive(int u, int n, HybridFields& h, const float* weight_sums, float* dq, float* da,
+                             std::mt19937_64& rng, train::Adam& optim);
+  // No-SCL ablation: loss on the render's channels [o, o + D) of extra [H, W, C]; writes lambda_sem * d/d
+  // into the same channels of d_extra.
+  SemanticValues cosine(int u, int W, int H, const float* extra, int C, int o, float* d_extra);
+  // No-SCL ablation: f's row-sparse Adam step from the renderer's gradient of its channels (grad_extra [N, C]).
+  void update_from_channels(int n, HybridFields& h, const float* grad_extra, int C, int o, train::Adam& optim);
+  void release() { std::vector<float>().swap(pixel_w_); }
+
+ private:
+  HybridConfig cfg_;
+  const HybridData* data_;
+  int L_, D_;
+  std::vector<std::vector<int>> views_with_;  // [L] training views whose SCL objects include l
+  std::vector<int> fg_;
+  std::vector<float> pixel_w_;                // [H, W, Jf]
+  std::vector<float> P_, dP_, G_;             // [Jf, D] predictions, their gradient, dP / (m + eps)
+  std::vector<float> refs_;                   // [R, D] InfoNCE candidates of one anchor
+  std::vector<float> sref_;                   // [H, W, D] (no-SCL ablation)
+};
+
+}  // namespace hgs::hybrid
