@@ -44,6 +44,12 @@ AdamParam* Adam::find(const std::string& name) {
   return nullptr;
 }
 
+const AdamParam* Adam::find(const std::string& name) const {
+  for (auto& p : params)
+    if (p.name == name) return &p;
+  return nullptr;
+}
+
 AdamParam& Adam::get(const std::string& name) {
   AdamParam* p = find(name);
   if (!p) fail("adam: no parameter '{}'", name);

@@ -53,6 +53,7 @@ class Adam {
   AdamParam& add_array(const std::string& name, int dim, int rows, float lr, float eps = 1e-15f);
   AdamParam& get(const std::string& name);  // throws if absent
   AdamParam* find(const std::string& name);
+  const AdamParam* find(const std::string& name) const;
   // One update of `value` [N, dim] with gradient `grad` [N, dim] (advances p.step). Parallel (OpenMP), no
   // allocation.
   void update(AdamParam& p, float* value, const float* grad, int n) const;

@@ -1,8 +1,10 @@
 // Trainer: schedule scaling and the position learning rate, a tiny overfitting run that must reduce the loss,
 // --no-densify keeping N, densification growing N, and checkpoint resume reproducing an uninterrupted run
-// exactly (same thread count).
+// exactly (same thread count); the Method seam: hook order, weighted terms in the objective, a method's
+// registered parameters (per-Gaussian and array) through densification and checkpoints.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -178,6 +180,116 @@ TEST(Trainer, CheckpointResumeIsExact) {
   atomic_write_text(dir / "bad.ckpt", "hello");
   EXPECT_THROW(c.load_checkpoint(dir / "bad.ckpt"), Error);
   EXPECT_EQ(c.iteration(), 0);  // failed loads leave the trainer untouched
+}
+
+}  // namespace
+}  // namespace hgs::train
+
+namespace hgs::train {
+namespace {
+
+// A method that records the order of its calls, owns a per-Gaussian parameter "probe" (model extra group,
+// pulled towards 1) and an array parameter "bias" [2] (pulled towards (3, -2)), both in the trainer's optimiser.
+struct Probe : Method {
+  std::vector<std::string> calls;
+  std::vector<float> bias = {0.f, 0.f}, dbias, dprobe;
+  GaussianModel* model = nullptr;
+  double last_value = 0;
+  std::string name() const override { return "probe"; }
+  void attach(GaussianModel& m, Adam& optim, const std::vector<TrainView>& views) override {
+    model = &m;
+    ExtraGroup& g = m.add_extra("probe", 1, 0.f);
+    for (int i = 0; i < m.n; ++i) g.data[i] = float(i);
+    optim.add("probe", 1, m.n, 0.1f).values = [this] { return ParamValues{&model->find_extra("probe")->data, nullptr}; };
+    optim.add_array("bias", 1, 2, 0.1f).values = [this] { return ParamValues{&bias, nullptr}; };
+  }
+  float rgb_weight() const override { return 0.5f; }
+  void prepare(StepContext& c) override { calls.push_back("prepare"); }
+  void losses(StepContext& c) override {
+    calls.push_back("losses");
+    const float t[2] = {3.f, -2.f};
+    double v = 0;
+    dbias.resize(2);
+    for (int k = 0; k < 2; ++k) {
+      v += double(bias[k] - t[k]) * (bias[k] - t[k]);
+      dbias[k] = 0.25f * 2 * (bias[k] - t[k]);  // weight 0.25
+    }
+    const std::vector<float>& p = c.model->find_extra("probe")->data;
+    dprobe.resize(p.size());
+    for (size_t i = 0; i < p.size(); ++i) dprobe[i] = p[i] - 1.f;
+    last_value = v;
+    c.objective->add("probe", 0.25f, v);
+  }
+  void backward(StepContext& c) override { calls.push_back("backward"); }
+  void update(StepContext& c) override {
+    calls.push_back("update");
+    c.optim->update(c.optim->get("bias"), bias.data(), dbias.data(), 2);
+    c.optim->update(c.optim->get("probe"), c.model->find_extra("probe")->data.data(), dprobe.data(), c.model->n);
+  }
+  void after_step(StepContext& c, bool densified) override { calls.push_back(densified ? "densified" : "after_step"); }
+};
+
+TEST(Method, HooksRunInOrderAndTheirTermsAreOptimised) {
+  Tiny t;
+  TrainConfig cfg = TrainConfig().scaled_to(100);
+  cfg.densify = false;
+  auto probe = std::make_unique<Probe>();
+  Probe& p = *probe;
+  Trainer tr(cfg, t.model, t.views, 1.f, std::move(probe));
+  StepInfo s = tr.step();
+  EXPECT_EQ(p.calls, (std::vector<std::string>{"prepare", "losses", "backward", "update", "after_step"}));
+  ASSERT_EQ(s.terms.size(), 2u);
+  EXPECT_EQ(s.terms[0].name, "rgb");
+  EXPECT_EQ(s.terms[0].weight, 0.5f);
+  EXPECT_EQ(s.terms[0].value, s.loss.total);
+  EXPECT_EQ(s.terms[1].name, "probe");
+  EXPECT_DOUBLE_EQ(s.total, 0.5 * s.loss.total + 0.25 * p.last_value);
+  for (int i = 0; i < 200; ++i) tr.step();
+  EXPECT_NEAR(p.bias[0], 3.f, 0.05f);  // the method's array parameter is optimised by the shared Adam
+  EXPECT_NEAR(p.bias[1], -2.f, 0.05f);
+  EXPECT_EQ(tr.adam().params.back().step, 201);  // its own step count
+}
+
+TEST(Method, RegisteredParametersFollowDensificationAndCheckpoints) {
+  Tiny t(true);
+  TrainConfig cfg = TrainConfig().scaled_to(60);
+  cfg.densify_from = 5;
+  cfg.densify_every = 10;
+  cfg.densify_cfg.grad_threshold = 1e-5f;
+  cfg.seed = 3;
+  test::TempDir dir;
+  auto make = [&] { return std::make_unique<Trainer>(cfg, t.model, t.views, 1.f, std::make_unique<Probe>()); };
+  auto a = make();
+  auto& pa = dynamic_cast<Probe&>(a->method());
+  for (int i = 0; i < 23; ++i) a->step();
+  EXPECT_NE(a->model().n, 40);  // densified
+  EXPECT_NE(std::find(pa.calls.begin(), pa.calls.end(), "densified"), pa.calls.end());
+  const AdamParam& probe = *a->adam().find("probe");
+  const AdamParam& bias = *a->adam().find("bias");
+  EXPECT_EQ(probe.m.size(), size_t(a->model().n));  // per-Gaussian moments follow the Gaussians
+  EXPECT_EQ(bias.m.size(), 2u);                      // the array parameter is left alone
+  EXPECT_EQ(a->model().find_extra("probe")->data.size(), size_t(a->model().n));
+  a->save_checkpoint(dir / "p.ckpt");
+  for (int i = 0; i < 20; ++i) a->step();
+  auto b = make();
+  auto& pb = dynamic_cast<Probe&>(b->method());
+  b->load_checkpoint(dir / "p.ckpt");
+  EXPECT_NE(pb.bias[0], 0.f);  // restored from the checkpoint without per-method code
+  for (int i = 0; i < 20; ++i) b->step();
+  EXPECT_EQ(pa.bias, pb.bias);
+  EXPECT_EQ(a->model().find_extra("probe")->data, b->model().find_extra("probe")->data);
+  for (size_t k = 0; k < a->adam().params.size(); ++k) {
+    EXPECT_EQ(a->adam().params[k].step, b->adam().params[k].step) << a->adam().params[k].name;
+    EXPECT_EQ(a->adam().params[k].v, b->adam().params[k].v) << a->adam().params[k].name;
+  }
+  // A plain 3DGS trainer cannot load it (and says why).
+  Trainer c(cfg, t.model, t.views, 1.f);
+  try {
+    c.load_checkpoint(dir / "p.ckpt");
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("trained with the probe method, not rgb"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace
