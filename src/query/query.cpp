@@ -5,16 +5,15 @@
 
 #include "core/error.h"
 #include "eval/relevancy.h"
+#include "hybrid/fields.h"
 
 namespace hgs::query {
 
 const char* const kCanonicalPhrases[4] = {"object", "things", "stuff", "texture"};
 
 ObjectEmbeddings object_embeddings(const GaussianModel& m) {
-  const ExtraGroup* q = m.find_extra("obj");
-  const ExtraGroup* f = m.find_extra("lang");
-  const ExtraGroup* z = m.find_extra("obj_id");
-  if (!q || !f || !z) fail("the model has no object associations / language embeddings (train it with --method hybrid)");
+  const auto h = hybrid::ConstHybridFields::bind(m, "query");
+  const ExtraGroup *q = h.q, *f = h.f, *z = h.z;
   ObjectEmbeddings oe;
   oe.num_labels = q->dim;
   oe.dim = f->dim;
@@ -63,8 +62,7 @@ std::vector<ObjectScore> score_objects(const ObjectEmbeddings& oe, const float* 
 
 std::vector<float> render_object_opacity(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
                                          const std::vector<int>& ks) {
-  const ExtraGroup* q = m.find_extra("obj");
-  if (!q) fail("the model has no object associations (train it with --method hybrid)");
+  const ExtraGroup* q = hybrid::ConstHybridFields::bind(m, "query").q;
   const int J = static_cast<int>(ks.size()), L = q->dim;
   std::vector<float> ch(size_t(m.n) * J);
   for (int i = 0; i < m.n; ++i)
@@ -81,21 +79,20 @@ std::vector<float> render_object_opacity(render::GaussianRenderer& r, const Gaus
 
 std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
                                     const float* text, const Canonical& canon) {
-  const ExtraGroup* f = m.find_extra("lang");
-  if (!f) fail("the model has no language embeddings (train it with --method hybrid)");
+  const auto h = hybrid::ConstHybridFields::bind(m, "query");
+  const ExtraGroup *f = h.f, *q = h.q;
   const int D = f->dim;
   render::GaussianInputs in = render_inputs(m);
   // Channels [0, D): the language map sum_n f_n alpha T; channel D: the foreground opacity
   // sum_n (1 - q_{n,0}) alpha T. Background Gaussians get no language supervision (SCL's anchors are the
   // foreground objects), so their f_n stay near the random init: the relevancy is weighted by the foreground
-  // opacity, which is ~0 where background is seen (and 1 everywhere for a model without object data).
-  const ExtraGroup* q = m.find_extra("obj");
+  // opacity, which is ~0 where background is seen.
   const int C = D + 1;
   std::vector<float> ch(size_t(m.n) * C);
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < m.n; ++i) {
     f->row(size_t(i), &ch[size_t(i) * C]);  // float32 channels for the renderer
-    ch[size_t(i) * C + D] = q && q->dim > 0 ? 1.f - q->data[size_t(i) * q->dim] : 1.f;
+    ch[size_t(i) * C + D] = 1.f - q->data[size_t(i) * q->dim];
   }
   in.extra = ch.data();
   in.num_extra = C;
@@ -111,8 +108,7 @@ std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianM
 }
 
 GaussianModel select_objects(const GaussianModel& m, const std::vector<int>& objects, bool remove) {
-  const ExtraGroup* z = m.find_extra("obj_id");
-  if (!z) fail("the model has no object ids (train it with --method hybrid)");
+  const ExtraGroup* z = hybrid::ConstHybridFields::bind(m, "query").z;
   std::vector<int> keep;
   for (int i = 0; i < m.n; ++i) {
     const bool hit = std::find(objects.begin(), objects.end(), static_cast<int>(z->data[i])) != objects.end();

@@ -30,7 +30,7 @@ struct ObjectEmbeddings {
   std::vector<int> count;     // [L] Gaussians whose hard id is k
 };
 
-// Fails with a clear error when the model has no "obj"/"lang" groups (not a hybrid model).
+// Fails with a clear error when the model has no hybrid fields (hybrid/fields.h: not a hybrid model).
 ObjectEmbeddings object_embeddings(const GaussianModel& m);
 
 struct ObjectScore {

@@ -9,6 +9,7 @@
 #include "core/error.h"
 #include "core/fs.h"
 #include "model/ply.h"
+#include "hybrid/fields.h"
 #include "query/query.h"
 
 namespace hgs::viewer {
@@ -18,8 +19,7 @@ GaussianModel display_model(const GaussianModel& m, const DisplayOptions& opt) {
   GaussianModel out = m;
   if (opt.show != Show::all) out = query::select_objects(m, opt.objects, opt.show == Show::remove);
   if (opt.tint && !opt.objects.empty() && opt.show != Show::remove) {
-    const ExtraGroup* z = out.find_extra("obj_id");
-    if (!z) fail("the model has no object ids (train it with --method hybrid)");
+    const ExtraGroup* z = hybrid::ConstHybridFields::bind(out, "viewer").z;
     const int S = out.sh_stride();
     for (int i = 0; i < out.n; ++i) {
       if (std::find(opt.objects.begin(), opt.objects.end(), int(z->data[i])) == opt.objects.end()) continue;

@@ -29,6 +29,7 @@ struct TwoBlobs {
     q.data = {0.f, 1.f, q0_right, 1.f - q0_right};
     ExtraGroup& f = m.add_extra("lang", D);
     f.data = {1, 0, 0, 0, 0, 1, 0, 0};
+    m.add_extra("obj_id", 1).data = {1.f, q0_right > 0.5f ? 0.f : 1.f};
     cam.width = 64;
     cam.height = 32;
     cam.fx = cam.fy = 60;
