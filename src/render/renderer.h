@@ -7,25 +7,35 @@
 //   binning.{h,cpp}   16x16 tile binning, per-tile front-to-back depth order
 //   rasterize.{h,cpp} per-pixel front-to-back alpha compositing of RGB, alpha, depth and C extra channels
 //   simd.h            8-lane packs (GCC vector extensions) and the fast exp used by the rasterizer
-// GaussianRenderer (= RendererT<float>) ties them together and keeps every buffer between calls.
+// GaussianRenderer (= RendererT<float>) ties them together in two phases and keeps every buffer between calls
+// (renderer_state.h); renderer_preprocess.cpp and renderer_composite.cpp hold the phases, renderer.cpp the rest.
 //
-// Data flow of forward() (arrays are [N, ...] per Gaussian unless noted; everything kept in State):
+// Data flow (arrays are [N, ...] per Gaussian unless noted; everything kept in State):
+// preprocess(cam, inputs):
 //   mean, log_scale, quat --project_forward--> mean2d [N,2], conic [N,3], depth [N], radius [N] (0 = culled)
 //   opacity_logit --sigmoid--> opacity [N]
-//   sh (or the given colors) --sh_forward(view dir from the camera centre)--> colors [N,3]
+//   sh --sh_forward(view dir from the camera centre), visible Gaussians only--> colors [N,3] (0 when culled);
+//       or the given colors as they are
 //   mean2d, conic, opacity, depth, radius --bin_gaussians--> per-tile lists sorted by (depth, index),
 //       Gaussian-major pair numbering, opacity-aware boxes
+//   projected() now shows mean2d, conic, depth, opacity, colors, radii and the camera centre; a caller may build
+//   extra channels from them (e.g. q_k * colour) before compositing.
+// composite(channels, settings, out):
 //   --rasterize_forward--> rgb [H,W,3], alpha [H,W], depth [H,W], extra [H,W,C], weight_sums [N,J];
 //       saved: final T [H,W], last contributor [H,W], per-Gaussian records, batch masks
-// backward() runs the same chain in reverse:
+// The backward runs the same chain in reverse, in two matching phases:
+// composite_backward(dout, pgrads):
 //   d rgb/alpha/depth/extra/weight_sums --rasterize_backward--> per (tile, Gaussian) pair slots, reduced per
-//       Gaussian in fixed order: d mean2d [N,2] (returned as the densification statistic), d conic, d opacity,
-//       d colors, d depth, d extra
-//   d opacity --sigmoid'--> d opacity_logit;  d colors --sh_backward--> d sh (+ d mean via the view direction)
+//       Gaussian in fixed order: ProjectedGrads d mean2d [N,2] (the densification statistic), d conic,
+//       d opacity, d colors, d depth, d extra
+//   (the caller may now add to pgrads.colors, e.g. the colour gradient of the extra channels it built)
+// preprocess_backward(pgrads, grads):
+//   d opacity --sigmoid'--> d opacity_logit;  d colors --sh_backward, visible only--> d sh (+ d mean via the view
+//       direction), or d colors as they are when colours were given
 //   d mean2d, d conic, d depth --project_backward--> d mean, d log_scale, d quat
+// forward() = preprocess + composite of inputs.extra; backward() = composite_backward + preprocess_backward
+// (with mean2d and extra moved into GaussianGrads).
 // Results are bitwise deterministic for given inputs, independent of the OpenMP thread count.
-// The hybrid method can call the stages directly (sh_forward / sh_backward, precomputed `colors`, extra channels,
-// pixel-weight sums) or read the per-Gaussian intermediates through projected().
 // Note for densification: 3DGS thresholds the NDC-space gradient (2e-4); d/d(ndc) = d/d(pixel) * (W/2, H/2).
 //
 // Conventions
@@ -37,7 +47,8 @@
 //   S = sh_stride >= (sh_degree + 1)^2 coefficients, coefficient-major then RGB (the 3DGS feature layout);
 //   colour = max(SH(dir) + 0.5, 0) with dir = normalise(mean - camera centre).
 // - Optional `colors` [N,3] replace the SH colour (used by object-conditioned rendering); colour is then used as
-//   given (no clamp), and its gradient is returned in GaussianGrads::colors.
+//   given (no clamp, also for culled Gaussians), and its gradient is returned in GaussianGrads::colors
+//   (GaussianGrads::sh then stays empty, even if `sh` was passed too).
 // - Extra channels: extra [N, C] per-Gaussian vectors, composited as sum_n v_n alpha_n T_n (no background).
 // - Outputs: rgb [H,W,3] = sum c alpha T + T_final * background; alpha [H,W] = 1 - T_final;
 //   depth [H,W] = sum z_n alpha_n T_n (expected depth, not divided by alpha); extra [H,W,C].
@@ -74,15 +85,25 @@ struct GaussianInputsT {
   int sh_stride = 1;
   int sh_degree = 0;                 // active degree, 0..3
   const T* colors = nullptr;         // [N, 3] optional precomputed colours (replace SH)
-  const T* extra = nullptr;          // [N, num_extra] optional
+  const T* extra = nullptr;          // [N, num_extra] optional; forward() only (passed on to composite())
   int num_extra = 0;
 };
 using GaussianInputs = GaussianInputsT<float>;
 
+// Per-Gaussian vectors composite() blends besides RGB, alpha and depth. They are given after preprocess(), so a
+// caller can build them from projected() (e.g. q_k * colour for the hybrid method's object channels).
+template <class T>
+struct ChannelsT {
+  const T* extra = nullptr;  // [N, num_extra]
+  int num_extra = 0;         // C
+};
+using Channels = ChannelsT<float>;
+
+// Compositing settings (used by composite(); preprocess() needs none).
 struct RenderSettings {
   float background[3] = {0, 0, 0};
   bool want_depth = true;
-  // Optional per-pixel weight maps M_j [H, W, J]: forward then also returns per-Gaussian sums
+  // Optional per-pixel weight maps M_j [H, W, J]: composite then also returns per-Gaussian sums
   // weight_sums[n, j] = sum_p M_j(p) alpha_n(p) T_n(p), differentiable through OutputGrads::weight_sums.
   const float* pixel_weights = nullptr;
   int num_pixel_weights = 0;  // J
@@ -113,35 +134,52 @@ struct OutputGradsT {
 };
 using OutputGrads = OutputGradsT<float>;
 
-// Gradients with respect to the inputs. Buffers are resized and overwritten (not accumulated) by backward().
+// Gradients with respect to the projected quantities of projected(): what composite_backward() returns and
+// preprocess_backward() takes. composite_backward() resizes and overwrites every buffer; the caller may add to
+// them in between (e.g. to `colors` the colour gradient of extra channels it built from projected().colors).
+template <class T>
+struct ProjectedGradsT {
+  std::vector<T> mean2d;   // [N, 2] dL/d(projected centre) in pixels (densification statistic)
+  std::vector<T> conic;    // [N, 3] (b counted once)
+  std::vector<T> depth;    // [N] camera-space depth (zeros when the depth channel was off)
+  std::vector<T> opacity;  // [N] w.r.t. the opacity after the sigmoid
+  std::vector<T> colors;   // [N, 3] w.r.t. projected().colors
+  std::vector<T> extra;    // [N, C] w.r.t. the composited channels (0 for forward-only ones)
+};
+using ProjectedGrads = ProjectedGradsT<float>;
+
+// Gradients with respect to the inputs. Buffers are resized and overwritten (not accumulated).
 template <class T>
 struct GaussianGradsT {
   std::vector<T> mean;           // [N, 3]
   std::vector<T> log_scale;      // [N, 3]
   std::vector<T> quat;           // [N, 4]
   std::vector<T> opacity_logit;  // [N]
-  std::vector<T> sh;             // [N, sh_stride, 3] (zero beyond the active degree); when colours were given:
-                                 // zeros if `sh` was also passed (for callers that run sh_backward themselves),
-                                 // else empty
-  std::vector<T> colors;         // [N, 3] when precomputed colours were given
+  std::vector<T> sh;             // [N, sh_stride, 3] (zero beyond the active degree and for culled Gaussians);
+                                 // empty when colours were given
+  std::vector<T> colors;         // [N, 3] when precomputed colours were given (else empty)
+  // Filled by backward() only (moved from its ProjectedGrads); preprocess_backward() leaves them empty.
   std::vector<T> extra;          // [N, C]
   std::vector<T> mean2d;         // [N, 2] dL/d(projected centre) in pixels (densification statistic)
 };
 using GaussianGrads = GaussianGradsT<float>;
 
-// What the last forward() computed per Gaussian (views into the renderer's buffers, valid until the next call).
+// What the last preprocess() computed per Gaussian (views into the renderer's buffers, valid until the next
+// preprocess() or release()).
 template <class T>
 struct ProjectedView {
   int n = 0;
+  int num_visible = 0;         // Gaussians with radius > 0
   const T* mean2d = nullptr;   // [N, 2] projected centre, pixels
   const T* conic = nullptr;    // [N, 3] inverse 2D covariance (a, b, c)
   const T* depth = nullptr;    // [N] camera-space depth
   const T* opacity = nullptr;  // [N] sigmoid(opacity_logit)
-  const T* colors = nullptr;   // [N, 3] colours composited (SH result or the given colours)
+  const T* colors = nullptr;   // [N, 3] colours composited (SH result, 0 when culled; or the given colours)
   const int* radii = nullptr;  // [N] 0 = culled
+  const T* campos = nullptr;   // [3] camera centre in world space (-R^T t), origin of the SH view directions
 };
 
-// The whole pipeline for scalar T (float and double are instantiated in renderer.cpp).
+// The whole pipeline for scalar T (float and double are instantiated in renderer*.cpp).
 template <class T>
 class RendererT {
  public:
@@ -150,22 +188,37 @@ class RendererT {
   RendererT(const RendererT&) = delete;
   RendererT& operator=(const RendererT&) = delete;
 
-  // Renders one view and keeps what backward() needs. The input arrays (and settings.pixel_weights) must stay
-  // alive and unchanged until backward(). Bad input (camera, degrees, missing arrays) throws hgs::Error.
+  // Phase 1: projection, opacity sigmoid, colours (SH for the visible Gaussians, or the given colours) and tile
+  // binning; results in projected(). The input arrays must stay alive and unchanged until preprocess_backward().
+  // g.extra / g.num_extra are not read. Bad input (camera, degrees, missing arrays) throws hgs::Error.
+  void preprocess(const Camera& cam, const GaussianInputsT<T>& g);
+  // Phase 2: composites RGB, alpha, depth, the extra channels and the pixel-weighted sums of the last
+  // preprocess(). ch.extra and s.pixel_weights must stay alive and unchanged until composite_backward(). May be
+  // called again (other channels or settings) after one preprocess(); backward differentiates the last call.
+  void composite(const ChannelsT<T>& ch, const RenderSettings& s, RenderOutputsT<T>& out);
+  // Gradients of the last composite() w.r.t. the projected quantities, for the given output gradients.
+  void composite_backward(const OutputGradsT<T>& dout, ProjectedGradsT<T>& pgrads);
+  // Chains projected-space gradients (from composite_backward(), possibly added to) through SH, the sigmoid and
+  // the projection of the last preprocess(). Fills mean, log_scale, quat, opacity_logit and sh (or colors).
+  void preprocess_backward(const ProjectedGradsT<T>& pgrads, GaussianGradsT<T>& grads);
+
+  // Both phases in one call: preprocess(cam, g), then composite({g.extra, g.num_extra}, s, out).
   void forward(const Camera& cam, const GaussianInputsT<T>& g, const RenderSettings& s, RenderOutputsT<T>& out);
-  // Exact gradients of the last forward() for the given output gradients.
+  // composite_backward + preprocess_backward; also fills grads.mean2d and grads.extra.
   void backward(const OutputGradsT<T>& dout, GaussianGradsT<T>& grads);
 
-  // Frees every buffer (the next forward() allocates them again); backward() needs a new forward() first.
+  // Frees every buffer (the next call must be preprocess() or forward()).
   void release();
 
-  // Per-Gaussian visibility of the last forward: radius in pixels (0 = culled). [N]
+  // Per-Gaussian visibility of the last preprocess: radius in pixels (0 = culled). [N]
   const std::vector<int>& radii() const;
-  // Per-Gaussian intermediate results of the last forward.
+  // Per-Gaussian intermediate results of the last preprocess.
   ProjectedView<T> projected() const;
 
  private:
-  struct State;
+  struct State;  // renderer_state.h
+  // preprocess_backward() without touching grads.mean2d / grads.extra (backward() swaps its own in).
+  void chain_preprocess(const ProjectedGradsT<T>& pgrads, GaussianGradsT<T>& grads);
   State* st_;
 };
 

@@ -1,19 +1,51 @@
-// Central finite-difference checker used by the render gradient tests (double precision).
+// Central finite-difference checker used by the render gradient tests (double precision), and their small helpers
+// (random upstream weights, dot product, index lists, a one-thread guard).
 // Every perturbation is evaluated together with a decision signature (see render_ref.h); when +h or -h changes
 // any discrete decision (alpha crossing 1/255, the 0.99 clamp, the T cut-off, culling, x/y clamping, the SH clamp,
 // the tile rect) the finite difference straddles a discontinuity and that coordinate is skipped and counted. The
 // test then requires that almost all coordinates were checked.
 #pragma once
 #include <gtest/gtest.h>
+#include <omp.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <functional>
+#include <numeric>
+#include <random>
 #include <string>
 #include <vector>
 
 namespace hgs::render::test {
+
+// The finite-difference tests run thousands of tiny renders: one OpenMP thread keeps them fast even on a busy
+// machine (multi-threaded results are covered by the determinism test, which checks 1 vs 2 threads bitwise).
+struct SingleThread {
+  int saved = omp_get_max_threads();
+  SingleThread() { omp_set_num_threads(1); }
+  ~SingleThread() { omp_set_num_threads(saved); }
+};
+
+inline std::vector<double> random_weights(size_t n, std::mt19937& rng) {
+  std::normal_distribution<double> N01(0, 1);
+  std::vector<double> w(n);
+  for (double& v : w) v = N01(rng);
+  return w;
+}
+
+inline double dot(const std::vector<double>& a, const std::vector<double>& b) {
+  double s = 0;
+  for (size_t i = 0; i < std::min(a.size(), b.size()); ++i) s += a[i] * b[i];
+  return s;
+}
+
+inline std::vector<int> all_indices(size_t n) {
+  std::vector<int> v(n);
+  std::iota(v.begin(), v.end(), 0);
+  return v;
+}
 
 struct Eval {
   double loss = 0;

@@ -24,33 +24,6 @@
 namespace hgs::render::test {
 namespace {
 
-// The finite-difference tests run thousands of tiny renders: one OpenMP thread keeps them fast even on a busy
-// machine (multi-threaded results are covered by the determinism test, which checks 1 vs 2 threads bitwise).
-struct SingleThread {
-  int saved = omp_get_max_threads();
-  SingleThread() { omp_set_num_threads(1); }
-  ~SingleThread() { omp_set_num_threads(saved); }
-};
-
-std::vector<double> random_weights(size_t n, std::mt19937& rng) {
-  std::normal_distribution<double> N01(0, 1);
-  std::vector<double> w(n);
-  for (double& v : w) v = N01(rng);
-  return w;
-}
-
-double dot(const std::vector<double>& a, const std::vector<double>& b) {
-  double s = 0;
-  for (size_t i = 0; i < std::min(a.size(), b.size()); ++i) s += a[i] * b[i];
-  return s;
-}
-
-std::vector<int> all_indices(size_t n) {
-  std::vector<int> v(n);
-  std::iota(v.begin(), v.end(), 0);
-  return v;
-}
-
 // ---------------------------------------------------------------------------------------------------------
 TEST(RenderGrad, ProjectionFiniteDifferences) {
   Scene s = random_scene(80, 40, 36, 7);

@@ -1,0 +1,110 @@
+// RendererT phase 2 and its backward: per-tile alpha compositing of RGB, alpha, depth, the extra channels and the
+// pixel-weighted sums of the last preprocess(); backward gives the gradients w.r.t. the projected quantities.
+#include "core/error.h"
+#include "render/renderer_state.h"
+
+namespace hgs::render {
+
+template <class T>
+void RendererT<T>::composite(const ChannelsT<T>& ch, const RenderSettings& s, RenderOutputsT<T>& out) {
+  State& st = *st_;
+  st.has_composite = false;
+  if (!st.has_preprocess) fail("render: composite() called without a successful preprocess()");
+  const int n = st.g.n, H = st.H, W = st.W, C = ch.num_extra, J = s.num_pixel_weights;
+  if (J < 0 || (J > 0 && !s.pixel_weights))
+    fail("render: num_pixel_weights is {} but no pixel_weights array was given", J);
+  if (C < 0 || (C > 0 && n > 0 && !ch.extra)) fail("render: num_extra is {} but no extra array was given", C);
+  st.ch = ch;
+  st.s = s;
+
+  const size_t P = size_t(H) * W;
+  out.rgb.resize(P * 3);
+  out.alpha.resize(P);
+  if (s.want_depth) out.depth.resize(P);
+  else out.depth.clear();
+  if (C > 0) out.extra.resize(P * C);
+  else out.extra.clear();
+  if (J > 0) out.weight_sums.resize(size_t(n) * J);
+  else out.weight_sums.clear();
+  st.final_T.resize(P);
+  st.last.resize(P);
+  RasterInputs<T> ri;
+  ri.width = W;
+  ri.height = H;
+  ri.n = n;
+  ri.mean2d = st.mean2d.data();
+  ri.conic = st.conic.data();
+  ri.opacity = st.opacity.data();
+  ri.color = st.color_ptr;
+  ri.depth = s.want_depth ? st.depth.data() : nullptr;
+  ri.extra = C > 0 ? ch.extra : nullptr;
+  ri.num_extra = C;
+  for (int k = 0; k < 3; ++k) ri.background[k] = s.background[k];
+  ri.pixel_weights = J > 0 ? s.pixel_weights : nullptr;
+  ri.num_weights = J;
+  RasterOutputs<T> ro;
+  ro.weight_sums = J > 0 ? out.weight_sums.data() : nullptr;
+  ro.rgb = out.rgb.data();
+  ro.alpha = out.alpha.data();
+  ro.depth = s.want_depth ? out.depth.data() : nullptr;
+  ro.extra = C > 0 ? out.extra.data() : nullptr;
+  ro.final_T = st.final_T.data();
+  ro.last = st.last.data();
+  rasterize_forward(ri, st.bins, st.ws, ro);
+  out.num_visible = st.visible;
+  st.has_composite = true;
+}
+
+template <class T>
+void RendererT<T>::composite_backward(const OutputGradsT<T>& dout, ProjectedGradsT<T>& pg) {
+  State& st = *st_;
+  if (!st.has_composite) fail("render: backward called without a successful composite()");
+  const int n = st.g.n, C = st.ch.num_extra;
+  const bool want_depth = st.s.want_depth;
+  const int Cg = dout.extra_grad_channels < 0 ? C : dout.extra_grad_channels;
+  if (Cg > C) fail("render: {} extra channels carry gradient but there are only {}", Cg, C);
+  pg.mean2d.resize(size_t(n) * 2);
+  pg.conic.resize(size_t(n) * 3);
+  pg.depth.resize(size_t(n));
+  pg.opacity.resize(size_t(n));
+  pg.colors.resize(size_t(n) * 3);
+  if (C > 0) pg.extra.resize(size_t(n) * C);
+  else pg.extra.clear();
+
+  RasterInputs<T> ri;
+  ri.width = st.W;
+  ri.height = st.H;
+  ri.n = n;
+  ri.mean2d = st.mean2d.data();
+  ri.conic = st.conic.data();
+  ri.opacity = st.opacity.data();
+  ri.color = st.color_ptr;
+  ri.depth = want_depth ? st.depth.data() : nullptr;
+  ri.extra = C > 0 ? st.ch.extra : nullptr;
+  ri.num_extra = dout.extra ? Cg : 0;
+  ri.extra_stride = C;
+  for (int k = 0; k < 3; ++k) ri.background[k] = st.s.background[k];
+  ri.pixel_weights = st.s.num_pixel_weights > 0 ? st.s.pixel_weights : nullptr;
+  ri.num_weights = st.s.num_pixel_weights;
+  RasterGrads<T> rg;
+  rg.d_weight_sums = st.s.num_pixel_weights > 0 ? dout.weight_sums : nullptr;
+  rg.d_rgb = dout.rgb;
+  rg.d_alpha = dout.alpha;
+  rg.d_depth = want_depth ? dout.depth : nullptr;
+  rg.d_extra = C > 0 ? dout.extra : nullptr;
+  rg.mean2d = pg.mean2d.data();
+  rg.conic = pg.conic.data();
+  rg.opacity = pg.opacity.data();
+  rg.color = pg.colors.data();
+  rg.depth = pg.depth.data();
+  rg.extra = C > 0 ? pg.extra.data() : nullptr;
+  rasterize_backward(ri, st.bins, st.ws, st.final_T.data(), st.last.data(), rg);
+}
+
+template void RendererT<float>::composite(const ChannelsT<float>&, const RenderSettings&, RenderOutputsT<float>&);
+template void RendererT<double>::composite(const ChannelsT<double>&, const RenderSettings&,
+                                           RenderOutputsT<double>&);
+template void RendererT<float>::composite_backward(const OutputGradsT<float>&, ProjectedGradsT<float>&);
+template void RendererT<double>::composite_backward(const OutputGradsT<double>&, ProjectedGradsT<double>&);
+
+}  // namespace hgs::render
