@@ -6,7 +6,6 @@
 #include "core/error.h"
 #include "core/half.h"
 #include "core/parallel.h"
-#include "render/sh.h"
 
 namespace hgs::hybrid {
 
@@ -66,18 +65,10 @@ void HybridMethod::prepare(train::StepContext& c) {
   GaussianModel& m = *c.model;
   fields_ = HybridFields::bind(m, "hybrid");  // the model's groups may have moved (checkpoint load)
   const int n = m.n, u = c.view_index, L = data_.num_labels;
-  render::GaussianInputs& in = *c.inputs;
   if (cfg_.use_of) assoc_.fuse(n, fields_);
   dq_.resize(size_t(n) * L);
   parallel_fill(dq_, 0.f);
-  // Colours by SH (all Gaussians; the renderer then takes them as precomputed colours).
-  const float* R = c.view->cam.R;
-  const float* t = c.view->cam.t;
-  for (int k = 0; k < 3; ++k) campos_[k] = -(R[k] * t[0] + R[3 + k] * t[1] + R[6 + k] * t[2]);
-  colors_.resize(size_t(n) * 3);
-  render::sh_forward(n, in.sh_degree, in.sh_stride, in.sh, in.mean, campos_, (const int*)nullptr, colors_.data());
-  in.colors = colors_.data();
-  // Object channels (+ the full semantic render for the no-SCL ablation).
+  // Object channels from the renderer's SH colours of this view (0 for culled Gaussians) (+ the full semantic render for the no-SCL ablation).
   objects_ = data_.views[u].present;
   const std::vector<int>& anchors = semantic_.anchors_of(u);
   const int J = static_cast<int>(objects_.size());
@@ -85,14 +76,14 @@ void HybridMethod::prepare(train::StepContext& c) {
   layout_ = ObjectLayout{J, sem};
   const int C = layout_.total();
   channels_.resize(size_t(n) * C);
-  object_channels(n, L, layout_, objects_.data(), fields_.q->data.data(), colors_.data(), channels_.data());
+  object_channels(n, L, layout_, objects_.data(), fields_.q->data.data(), c.projected->colors, channels_.data());
   if (sem) {
     const ExtraGroup& f = *fields_.f;
 #pragma omp parallel for schedule(static)
     for (int i = 0; i < n; ++i) f.row(i, &channels_[size_t(i) * C + layout_.other()]);
   }
-  in.extra = channels_.data();
-  in.num_extra = C;
+  c.channels->extra = channels_.data();
+  c.channels->num_extra = C;
   // Pixel weights M_k of the SCL anchors: the rasterizer returns a_{n,k} = sum_p M_k(p) alpha_n T_n.
   if (!anchors.empty()) {
     c.settings->pixel_weights = semantic_.pixel_weights(u);
@@ -141,22 +132,19 @@ void HybridMethod::losses(train::StepContext& c) {
 }
 
 void HybridMethod::backward(train::StepContext& c) {
-  GaussianModel& m = *c.model;
-  render::GaussianGrads& g = *c.grads;
-  const int n = m.n;
-  // Object channels -> dq and dc (added to the RGB path's colour gradient), then SH.
-  object_channels_backward(n, data_.num_labels, layout_, objects_.data(), fields_.q->data.data(), colors_.data(),
+  const int n = c.model->n;
+  render::ProjectedGrads& g = *c.pgrads;
+  // Object channels -> dq and dc, added to the RGB path's colour gradient before the renderer's
+  // preprocess_backward takes it through SH.
+  object_channels_backward(n, data_.num_labels, layout_, objects_.data(), fields_.q->data.data(), c.projected->colors,
                            g.extra.data(), dq_.data(), g.colors.data());
-  g.sh.resize(size_t(n) * m.sh_stride() * 3);
-  render::sh_backward(n, c.sh_degree, m.sh_stride(), m.sh.data(), m.mean.data(), campos_, (const int*)nullptr,
-                      g.colors.data(), g.sh.data(), g.mean.data());
   assoc_.backward_and_update(n, fields_, dq_.data(), *c.optim);
 }
 
 void HybridMethod::update(train::StepContext& c) {
   // (With SCL, f was updated in the semantic pass.)
   if (!cfg_.use_scl && cfg_.lambda_sem > 0)
-    semantic_.update_from_channels(c.model->n, fields_, c.grads->extra.data(), layout_.total(), layout_.other(),
+    semantic_.update_from_channels(c.model->n, fields_, c.pgrads->extra.data(), layout_.total(), layout_.other(),
                                    *c.optim);
 }
 
@@ -169,7 +157,7 @@ void HybridMethod::after_step(train::StepContext& c, bool densified) {
 void HybridMethod::release() {
   object_losses_.release();
   semantic_.release();
-  for (auto* v : {&dq_, &colors_, &channels_, &d_channels_, &d_wsum_}) std::vector<float>().swap(*v);
+  for (auto* v : {&dq_, &channels_, &d_channels_, &d_wsum_}) std::vector<float>().swap(*v);
 }
 
 std::vector<std::pair<std::string, std::vector<float>>> HybridMethod::state() const {

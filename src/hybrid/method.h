@@ -2,14 +2,15 @@
 // trainer. Per step, for training view u:
 //  prepare   Observation Fusion: q = softmax(s(w)/T) (association.h; the table is rebuilt every R iterations
 //            and after densification, q is recomputed every step so the gradient reaches the view logits
-//            exactly). Colours c_n by SH, then 4 channels per object present in u's mask, (q c, q)
-//            (object_channels.h), composited in the same rasterization as the RGB image; for SCL the
-//            rasterizer also accumulates a_{n,k} = sum_p M_k alpha T for every anchor object.
+//            exactly). From the renderer's SH colours c_n of the visible Gaussians (its preprocess phase), 4
+//            channels per object present in u's mask, (q c, q) (object_channels.h), composited in the same
+//            rasterization as the RGB image; for SCL the rasterizer also accumulates
+//            a_{n,k} = sum_p M_k alpha T for every anchor object.
 //  losses    terms "app" (eq. 6) and "bro" (eq. 14) per object (object_losses.h), "sem" (SCL, eqs. 9-10, or
 //            the no-SCL cosine; semantic.h, which also takes f's Adam step). The trainer adds "rgb" (3DGS
 //            photometric loss, weight lambda_rgb).
-//  backward  object channels -> dq, dc; SH backward for dc; dq -> view logits through the fusion and their
-//            Adam step.
+//  backward  object channels -> dq, and dc added to the renderer's colour gradient (its preprocess_backward
+//            takes it through SH); dq -> view logits through the fusion and their Adam step.
 //  update    f's Adam step for the no-SCL ablation.
 //  after_step  refresh the observation table (every R iterations, after densification) or z = argmax q.
 // Parameters registered in the trainer's optimiser: "lang" (f, per Gaussian, row-sparse, bfloat16 moments with
@@ -68,12 +69,10 @@ class HybridMethod final : public train::Method {
   SemanticPass semantic_;
   ObjectLayout layout_;
   std::vector<int> objects_;      // labels present in this step's view
-  std::vector<float> colors_;     // [N, 3] SH colours of this step's view
   std::vector<float> channels_;   // [N, C] object channels (+ f for the no-SCL ablation)
   std::vector<float> d_channels_; // [H, W, C] dL/d the rendered channels
   std::vector<float> dq_;         // [N, L]
   std::vector<float> d_wsum_;     // [N, Jf]
-  float campos_[3] = {0, 0, 0};
   HybridLossValues last_;
 };
 

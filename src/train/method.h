@@ -4,11 +4,13 @@
 // the method's included, is registered there), the renderer, the view order and the schedule; it calls the
 // method's parts in this order, once per step:
 //
-//   prepare   before the render: set extra channels / pixel weights on the step's render inputs and settings
+//   prepare   between the renderer's preprocess (projection, SH colours of the visible Gaussians, binning) and
+//             its composite: set extra channels (e.g. built from the projected colours) and pixel weights
 //   losses    after the photometric loss: add weighted terms to the objective, write output gradients
 //             (accumulate into d_rgb, set dout.extra / dout.weight_sums; pointers valid until backward)
-//   backward  after the renderer's backward: chain the renderer's gradients into the method's parameters and
-//             add to the 3DGS parameter gradients (e.g. colour -> SH)
+//   backward  between the renderer's composite_backward and preprocess_backward: chain the projected-space
+//             gradients (d channels, d colours, ...) into the method's parameters, and add to them (e.g. the
+//             colour gradient of channels built from the projected colours) before they reach SH and geometry
 //   update    after Adam on the 3DGS parameters: Adam steps of the method's registered parameters
 //   after_step  after densification (the model and every per-Gaussian moment already follow it)
 //
@@ -47,11 +49,14 @@ struct StepContext {
   Adam* optim = nullptr;
   std::mt19937_64* rng = nullptr;
   render::GaussianInputs* inputs = nullptr;
+  const render::ProjectedView<float>* projected = nullptr;  // after preprocess: colours [N, 3], radii, ...
+  render::Channels* channels = nullptr;                     // extra channels to composite (set by prepare)
   render::RenderSettings* settings = nullptr;
   const render::RenderOutputs* out = nullptr;
   float* d_rgb = nullptr;  // [H, W, 3] dL/d rgb, already holding the photometric term's weighted gradient
   render::OutputGrads* dout = nullptr;
-  render::GaussianGrads* grads = nullptr;
+  render::ProjectedGrads* pgrads = nullptr;  // after composite_backward (d colours, d channels, d mean2d, ...)
+  render::GaussianGrads* grads = nullptr;    // after preprocess_backward (the 3DGS parameters)
   Objective* objective = nullptr;
   int sh_degree = 0;  // active SH degree of this step
 };

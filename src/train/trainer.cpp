@@ -67,6 +67,7 @@ int Trainer::next_view() {
 void Trainer::release_step_buffers() {
   renderer_.release();
   grads_ = render::GaussianGrads{};
+  pgrads_ = render::ProjectedGrads{};
   out_ = render::RenderOutputs{};
   method_->release();
 }
@@ -108,9 +109,16 @@ StepInfo Trainer::step() {
   c.grads = &grads_;
   c.objective = &objective_;
   c.sh_degree = in.sh_degree;
-  method_->prepare(c);
+  render::Channels channels;
+  c.channels = &channels;
+  c.pgrads = &pgrads_;
+  renderer_.preprocess(v.cam, in);  // projection, SH of the visible Gaussians, tile binning
+  const render::ProjectedView<float> projected = renderer_.projected();
+  c.projected = &projected;
+  tick(info.times.forward);
+  method_->prepare(c);  // may build extra channels from the projected colours
   tick(info.times.prepare);
-  renderer_.forward(v.cam, in, rs, out_);
+  renderer_.composite(channels, rs, out_);
   c.out = &out_;
   tick(info.times.forward);
 
@@ -126,10 +134,12 @@ StepInfo Trainer::step() {
   tick(info.times.loss);
   method_->losses(c);
   tick(info.times.method_loss);
-  renderer_.backward(dout, grads_);
+  renderer_.composite_backward(dout, pgrads_);
   tick(info.times.backward);
-  method_->backward(c);
+  method_->backward(c);  // may add to pgrads_.colors (its channels' colour gradient)
   tick(info.times.param_grads);
+  renderer_.preprocess_backward(pgrads_, grads_);
+  tick(info.times.backward);
 
   // Adam.
   adam_.update(adam_.get("mean"), model_.mean.data(), grads_.mean.data(), model_.n);
@@ -144,7 +154,7 @@ StepInfo Trainer::step() {
 
   // Densification (3DGS schedule; statistics are gathered until densify_until).
   if (cfg_.densify && it < cfg_.densify_until) {
-    stats_.add(grads_.mean2d.data(), renderer_.radii().data(), model_.n, W, H);
+    stats_.add(pgrads_.mean2d.data(), renderer_.radii().data(), model_.n, W, H);
     if (it > cfg_.densify_from && it % cfg_.densify_every == 0) {
       release_step_buffers();
       float screen = it > cfg_.opacity_reset_every ? cfg_.screen_limit : 0.f;

@@ -105,6 +105,7 @@ class Trainer {
   render::GaussianRenderer renderer_;
   render::RenderOutputs out_;
   render::GaussianGrads grads_;
+  render::ProjectedGrads pgrads_;
   PhotometricLoss loss_;
   std::vector<float> d_rgb_;  // [H, W, 3]
   Objective objective_;
