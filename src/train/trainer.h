@@ -26,9 +26,6 @@ struct TrainView {
   Image image;  // [H, W, 3]
 };
 
-// Pinhole camera of a scene view for the renderer.
-render::Camera make_camera(const View& v);
-
 // Wall time of the parts of one step (ms), in step order.
 struct StepTimes {
   double prepare = 0;      // the method's per-view inputs (prepare_inputs)
