@@ -22,6 +22,7 @@
 #include "hybrid/scl.h"
 #include "hybrid/method.h"
 #include "model/gaussian_model.h"
+#include "model/render_inputs.h"
 #include "render/renderer.h"
 #include "train/ssim.h"
 #include "train/trainer.h"

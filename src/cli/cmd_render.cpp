@@ -3,16 +3,19 @@
 // SSIM per view and their means.
 #include <omp.h>
 
+#include <nlohmann/json.hpp>
+
 #include "cli/command.h"
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/progress.h"
 #include "model/ply.h"
+#include "model/render_inputs.h"
+#include "render/camera_from_view.h"
 #include "render/renderer.h"
 #include "scene/scene.h"
 #include "train/loss.h"
 #include "train/ssim.h"
-#include "train/trainer.h"
 
 namespace hgs::cli {
 namespace {
@@ -67,7 +70,7 @@ void run_render(const RenderArgs& a) {
   for (size_t k = 0; k < idx.size(); ++k) {
     const View& v = scene.views[idx[k]];
     Image gt = scene.load_image(v.index);
-    renderer.forward(train::make_camera(v), in, rs, ro);
+    renderer.forward(render::camera_from_view(v), in, rs, ro);
     Image img(v.width, v.height, 3);
     for (size_t i = 0; i < img.px.size(); ++i) img.px[i] = std::clamp(ro.rgb[i], 0.f, 1.f);
     double se = 0;

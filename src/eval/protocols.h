@@ -10,7 +10,7 @@
 //   ground-truth boxes (pixel centre in the closed box); with tied maxima, any tied pixel may hit (as LangSplat).
 //   A constant map gives n = 0 everywhere, hence an empty mask.
 //   The queries of a frame are the categories of its label file (LangSplat sets the positives to them), the
-//   relevancy map is LERF's (relevancy.h) at the label resolution; scene mIoU = mean over (frame, query).
+//   relevancy map is LERF's (query/relevancy.h) at the label resolution; scene mIoU = mean over (frame, query).
 //   LangSplat picks, per query, the best of 3 SAM-level feature maps by the max of v'; with one map per query
 //   that choice does not arise.
 //

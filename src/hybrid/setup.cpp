@@ -1,26 +1,16 @@
+// make_trainer: RGB or hybrid trainer for a scene (see setup.h).
 #include "hybrid/setup.h"
 
 #include "core/error.h"
-#include "core/parallel.h"
 #include "hybrid/method.h"
+#include "train/train_views.h"
 
 namespace hgs::hybrid {
-
-std::vector<train::TrainView> load_train_views(const Scene& scene, const std::vector<int>& idx, bool progress) {
-  std::vector<train::TrainView> views(idx.size());
-  parallel_for_progress("load images", long(idx.size()), progress, [&](long i) {
-    const View& v = scene.views[idx[i]];
-    views[i].name = v.name;
-    views[i].cam = train::make_camera(v);
-    views[i].image = scene.load_image(idx[i]);
-  });
-  return views;
-}
 
 std::unique_ptr<train::Trainer> make_trainer(const Scene& scene, const std::vector<int>& idx, const train::TrainConfig& cfg,
                                              const std::optional<HybridConfig>& hybrid, bool progress) {
   if (idx.empty()) fail("{}: the scene has no training views", scene.root.string());
-  auto views = load_train_views(scene, idx, progress);
+  auto views = train::load_train_views(scene, idx, progress);
   const float extent = scene_extent(scene, idx);
   GaussianModel init = init_from_points(scene.points, scene.point_colors, cfg.sh_degree);
   std::unique_ptr<train::Method> method;

@@ -1,5 +1,7 @@
-// Building a trainer for a scene: loads the training images (and, for the hybrid method, masks and
-// features), initialises Gaussians from the SfM points and returns the Trainer with the RGB or the hybrid method.
+// The trainer factory of `hgs train` / `hgs ablate`: loads the training views (train::load_train_views; for the
+// hybrid method also masks and features), initialises Gaussians from the SfM points and returns the
+// train::Trainer with the RGB or the hybrid method. It lives in hybrid/, the top of the training stack, because
+// it knows both methods (train/ must not know hybrid/).
 #pragma once
 #include <memory>
 #include <optional>
@@ -14,8 +16,5 @@ namespace hgs::hybrid {
 std::unique_ptr<train::Trainer> make_trainer(const Scene& scene, const std::vector<int>& train_views,
                                              const train::TrainConfig& cfg, const std::optional<HybridConfig>& hybrid,
                                              bool progress);
-
-// Loads the training images of `idx` (downscaled by the scene) in parallel, with a progress bar.
-std::vector<train::TrainView> load_train_views(const Scene& scene, const std::vector<int>& idx, bool progress);
 
 }  // namespace hgs::hybrid

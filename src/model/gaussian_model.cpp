@@ -126,31 +126,4 @@ GaussianModel init_from_points(const std::vector<Eigen::Vector3f>& points, const
   return m;
 }
 
-float scene_extent(const Scene& scene, const std::vector<int>& views) {
-  std::vector<int> idx = views;
-  if (idx.empty())
-    for (auto& v : scene.views) idx.push_back(v.index);
-  if (idx.empty()) return 1.f;
-  Eigen::Vector3d c = Eigen::Vector3d::Zero();
-  for (int i : idx) c += scene.views[i].camera_center();
-  c /= double(idx.size());
-  double r = 0;
-  for (int i : idx) r = std::max(r, (scene.views[i].camera_center() - c).norm());
-  if (r <= 0) r = 1.0 / 1.1;  // a single camera: unit extent
-  return float(r * 1.1);
-}
-
-render::GaussianInputs render_inputs(const GaussianModel& m) {
-  render::GaussianInputs in;
-  in.n = m.n;
-  in.mean = m.mean.data();
-  in.log_scale = m.log_scale.data();
-  in.quat = m.quat.data();
-  in.opacity_logit = m.opacity_logit.data();
-  in.sh = m.sh.data();
-  in.sh_stride = m.sh_stride();
-  in.sh_degree = m.sh_degree;
-  return in;
-}
-
 }  // namespace hgs

@@ -9,8 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "render/renderer.h"
-#include "scene/scene.h"
+#include <Eigen/Core>
 
 namespace hgs {
 
@@ -85,9 +84,6 @@ void gather_rows(V& a, int d, const std::vector<int>& src, const std::vector<cha
   a.swap(t);
 }
 
-// Read-only renderer inputs for the model (SH colours at the model's full degree; no extra channels).
-render::GaussianInputs render_inputs(const GaussianModel& m);
-
 constexpr float kSH_C0 = 0.28209479177387814f;
 inline float rgb_to_sh(float c) { return (c - 0.5f) / kSH_C0; }
 inline float sh_to_rgb(float s) { return s * kSH_C0 + 0.5f; }
@@ -100,9 +96,5 @@ inline float inverse_sigmoid(float y) { return std::log(y / (1.f - y)); }
 GaussianModel init_from_points(const std::vector<Eigen::Vector3f>& points,      // [P, 3]
                                const std::vector<Eigen::Vector3f>& colors,      // [P, 3] in [0, 1]
                                int sh_degree);
-
-// 3DGS's "cameras extent": 1.1 x the largest distance of a camera centre from the mean camera centre, over
-// the given views (all views when `views` is empty).
-float scene_extent(const Scene& scene, const std::vector<int>& views = {});
 
 }  // namespace hgs

@@ -4,8 +4,9 @@
 #include <cmath>
 
 #include "core/error.h"
-#include "eval/relevancy.h"
 #include "hybrid/fields.h"
+#include "model/render_inputs.h"
+#include "query/relevancy.h"
 
 namespace hgs::query {
 
@@ -52,7 +53,7 @@ std::vector<ObjectScore> score_objects(const ObjectEmbeddings& oe, const float* 
   for (int k = 1; k < oe.num_labels; ++k) {
     if (oe.weight[k] <= 0) continue;
     const float* e = &oe.e[size_t(k) * oe.dim];
-    out.push_back({k, eval::cosine(e, text, oe.dim), eval::lerf_relevancy(e, text, canon, oe.dim)});
+    out.push_back({k, cosine(e, text, oe.dim), lerf_relevancy(e, text, canon, oe.dim)});
   }
   std::sort(out.begin(), out.end(), [](const ObjectScore& a, const ObjectScore& b) {
     return a.cosine != b.cosine ? a.cosine > b.cosine : a.object < b.object;
@@ -101,7 +102,7 @@ std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianM
   render::RenderOutputs out;
   r.forward(cam, in, rs, out);
   const size_t HW = size_t(cam.width) * cam.height;
-  std::vector<float> rel = eval::lerf_relevancy_map(out.extra.data(), HW, D, text, canon, eval::kLerfTemperature, C);
+  std::vector<float> rel = lerf_relevancy_map(out.extra.data(), HW, D, text, canon, kLerfTemperature, C);
   // Pixels where nothing is rendered have a zero feature: relevancy 0 there (not LERF's 0.5 for zero vectors).
   for (size_t p = 0; p < HW; ++p) rel[p] = out.alpha[p] < 1e-4f ? 0.f : rel[p] * std::clamp(out.extra[p * C + D], 0.f, 1.f);
   return rel;

@@ -39,7 +39,7 @@ struct ObjectScore {
 };
 using Canonical = std::vector<std::vector<float>>;  // canonical phrase embeddings, each [D]
 
-// Scores of every foreground object (1..K with Gaussians): cosine and LERF relevancy (src/eval/relevancy.h),
+// Scores of every foreground object (1..K with Gaussians): cosine and LERF relevancy (relevancy.h),
 // best cosine first.
 std::vector<ObjectScore> score_objects(const ObjectEmbeddings& oe, const float* text, const Canonical& canon);
 

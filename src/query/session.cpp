@@ -2,7 +2,7 @@
 
 #include "core/error.h"
 #include "model/ply.h"
-#include "train/trainer.h"
+#include "render/camera_from_view.h"
 
 namespace hgs::query {
 
@@ -35,7 +35,7 @@ ObjectAnswer Session::ask(const std::string& text, const QueryOptions& opt) {
 
 std::vector<float> Session::object_opacity(int view, const std::vector<int>& objects) {
   const View& v = scene_.views.at(view);
-  std::vector<float> A = render_object_opacity(renderer_, model_, train::make_camera(v), objects);
+  std::vector<float> A = render_object_opacity(renderer_, model_, render::camera_from_view(v), objects);
   const size_t HW = size_t(v.width) * v.height, J = objects.size();
   std::vector<float> sum(HW, 0.f);
   for (size_t p = 0; p < HW; ++p)
@@ -57,7 +57,7 @@ eval::Mask Session::answer_mask(int view, const std::string& text, float thresho
 
 std::vector<float> Session::pixel_relevancy(int view, const std::string& text) {
   const auto& e = text_.embed(text);
-  return render_relevancy(renderer_, model_, train::make_camera(scene_.views.at(view)), e.data(), text_.canonical());
+  return render_relevancy(renderer_, model_, render::camera_from_view(scene_.views.at(view)), e.data(), text_.canonical());
 }
 
 }  // namespace hgs::query

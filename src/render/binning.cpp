@@ -8,6 +8,8 @@
 #include <cmath>
 #include <cstring>
 
+#include "render/rasterize.h"  // the alpha cut-off kAlphaMin = 1 / kAlphaMinInverse
+
 namespace hgs::render {
 namespace {
 
@@ -92,12 +94,12 @@ void bin_gaussians(int width, int height, int n, const T* mean2d, const T* conic
     b.counts[i] = 0;
     b.mahal[i] = -1;
     const T o = opacity[i];
-    if (radius[i] <= 0 || !(o * T(255) >= T(1))) continue;
+    if (radius[i] <= 0 || !(o * T(kAlphaMinInverse) >= T(1))) continue;
     const T u = mean2d[2 * i], v = mean2d[2 * i + 1];
     const T a = conic[3 * i], bc = conic[3 * i + 1], c = conic[3 * i + 2];
     const T det = a * c - bc * bc;
     // alpha >= 1/255 needs d^T conic d <= m; bounding box of that ellipse is +-sqrt(m * cov_xx), +-sqrt(m * cov_yy)
-    const T m = T(2) * std::log(T(255) * o) * T(1.0001) + T(1e-4);
+    const T m = T(2) * std::log(T(kAlphaMinInverse) * o) * T(1.0001) + T(1e-4);
     b.mahal[i] = double(m);
     const T ex = std::sqrt(std::max(T(0), m * c / det)) + T(1e-3);
     const T ey = std::sqrt(std::max(T(0), m * a / det)) + T(1e-3);

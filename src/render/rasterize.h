@@ -26,7 +26,8 @@
 // Gradients of a (tile, Gaussian) pair are stored in that pair's slot and the slots are reduced per Gaussian in a
 // fixed order, so results are bitwise deterministic for any thread count and schedule. Parallel over tiles with
 // OpenMP (dynamic schedule); all scratch lives in RasterWorkspace (no allocation once warm).
-// Everything is templated on the scalar (float in production, double in the tests).
+// Everything is templated on the scalar (float in production, double in the tests). Kernels:
+// rasterize_forward.cpp and rasterize_backward.cpp (shared internals in rasterize_common.h).
 #pragma once
 #include <cstdint>
 #include <vector>
@@ -35,6 +36,12 @@
 #include "render/simd.h"
 
 namespace hgs::render {
+
+// The 3DGS cut-offs above, shared by rasterize_forward.cpp, rasterize_backward.cpp and binning.cpp.
+constexpr double kAlphaMax = 0.99;                      // alpha = min(kAlphaMax, ...), no gradient through the clamp
+constexpr double kAlphaMinInverse = 255.0;              // binning tests opacity * 255 >= 1 and ln(255 opacity)
+constexpr double kAlphaMin = 1.0 / kAlphaMinInverse;    // a Gaussian is skipped at a pixel when alpha < 1/255
+constexpr double kTransmittanceMin = 1e-4;              // a pixel stops when T * (1 - alpha) < 1e-4
 
 template <class T>
 struct RasterInputs {

@@ -269,4 +269,18 @@ std::vector<float> upsample_bilinear(const float* src, int h, int w, int d, int 
   return out;
 }
 
+float scene_extent(const Scene& scene, const std::vector<int>& views) {
+  std::vector<int> idx = views;
+  if (idx.empty())
+    for (auto& v : scene.views) idx.push_back(v.index);
+  if (idx.empty()) return 1.f;
+  Eigen::Vector3d c = Eigen::Vector3d::Zero();
+  for (int i : idx) c += scene.views[i].camera_center();
+  c /= double(idx.size());
+  double r = 0;
+  for (int i : idx) r = std::max(r, (scene.views[i].camera_center() - c).norm());
+  if (r <= 0) r = 1.0 / 1.1;  // a single camera: unit extent
+  return float(r * 1.1);
+}
+
 }  // namespace hgs

@@ -69,6 +69,10 @@ struct Scene {
 
 Scene load_scene(const std::filesystem::path& root, const SceneOptions& opt = {});
 
+// 3DGS's "cameras extent": 1.1 x the largest distance of a camera centre from the mean camera centre, over
+// the given views (all views when `views` is empty).
+float scene_extent(const Scene& scene, const std::vector<int>& views = {});
+
 // Bilinear resampling of a [h, w, D] grid to [H, W, D], aligning pixel centres (align_corners = false).
 std::vector<float> upsample_bilinear(const float* src, int h, int w, int d, int H, int W);
 

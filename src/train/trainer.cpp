@@ -6,20 +6,9 @@
 #include <chrono>
 
 #include "core/error.h"
+#include "model/render_inputs.h"
 
 namespace hgs::train {
-
-render::Camera make_camera(const View& v) {
-  render::Camera c;
-  c.width = v.width;
-  c.height = v.height;
-  c.fx = float(v.fx); c.fy = float(v.fy); c.cx = float(v.cx); c.cy = float(v.cy);
-  for (int r = 0; r < 3; ++r) {
-    for (int k = 0; k < 3; ++k) c.R[r * 3 + k] = float(v.R(r, k));
-    c.t[r] = float(v.t[r]);
-  }
-  return c;
-}
 
 Trainer::~Trainer() = default;
 

@@ -26,8 +26,6 @@
 
 namespace hgs::train {
 
-// Pinhole camera of a scene view for the renderer.
-render::Camera make_camera(const View& v);
 
 // Wall time of the parts of one step (ms), in step order.
 struct StepTimes {

@@ -8,14 +8,16 @@
 #include "core/error.h"
 #include "core/fs.h"
 #include "eval/instances.h"
-#include "eval/relevancy.h"
 #include "eval/run.h"
+#include "query/relevancy.h"  // the LERF rule the "2D features" baseline is scored with
 #include "scene/scene.h"
 #include "synth/synth.h"
 #include "test_util.h"
 
 using namespace hgs;
 using namespace hgs::eval;
+using hgs::query::cosine;
+using hgs::query::lerf_relevancy_map;
 namespace fs = std::filesystem;
 
 namespace {

@@ -11,6 +11,7 @@
 #include "train/trainer.h"
 #include "model/ply.h"
 #include "query/query.h"
+#include "render/camera_from_view.h"
 #include "scene/scene.h"
 #include "synth/synth.h"
 #include "test_util.h"
@@ -41,7 +42,7 @@ struct Tiny {
   }
   std::unique_ptr<train::Trainer> trainer(const hybrid::HybridConfig& hc, int iters, int densify_every = 0) {
     std::vector<train::TrainView> views;
-    for (int i : train) views.push_back({scene.views[i].name, train::make_camera(scene.views[i]), scene.load_image(i)});
+    for (int i : train) views.push_back({scene.views[i].name, render::camera_from_view(scene.views[i]), scene.load_image(i)});
     train::TrainConfig cfg = train::TrainConfig{}.scaled_to(iters);
     cfg.sh_degree = 1;
     if (densify_every > 0) {
@@ -83,7 +84,7 @@ double mean_opacity_inside_objects(const GaussianModel& m, const Scene& s, int m
   render::GaussianRenderer r;
   double sum = 0, cnt = 0;
   for (const View& v : s.views) {
-    const std::vector<float> A = query::render_object_opacity(r, m, train::make_camera(v), ks);
+    const std::vector<float> A = query::render_object_opacity(r, m, render::camera_from_view(v), ks);
     const eval::InstanceLabels gt = eval::load_instance_masks(s.root, v.name, names, v.width, v.height);
     for (size_t j = 0; j < gt.ids.size(); ++j) {
       std::vector<float> in(gt.masks[j].begin(), gt.masks[j].end()), core(in.size());

@@ -14,12 +14,13 @@
 #include "hybrid/bro.h"
 #include "hybrid/data.h"
 #include "model/ply.h"
+#include "model/render_inputs.h"
 #include "object_stats.h"
+#include "render/camera_from_view.h"
 #include "render/renderer.h"
 #include "render/sh.h"
 #include "scene/scene.h"
 #include "train/loss.h"
-#include "train/trainer.h"
 using namespace hgs;
 int main(int argc, char** argv) try {
   if (argc < 3) {
@@ -48,7 +49,7 @@ int main(int argc, char** argv) try {
   train::PhotometricLoss pl(0.2f);
   for (size_t vi = 0; vi < idx.size(); ++vi) {
     const View& v = sc.views[idx[vi]];
-    auto cam = train::make_camera(v);
+    auto cam = render::camera_from_view(v);
     Image img = sc.load_image(idx[vi]);
     LabelMap lab = data.masks[vi].labels;
     if (exact) {

@@ -10,7 +10,7 @@
 #include "query/query.h"
 #include "render/renderer.h"
 #include "scene/scene.h"
-#include "train/trainer.h"
+#include "render/camera_from_view.h"
 
 namespace hgs::diag {
 
@@ -30,7 +30,7 @@ inline ObjectMaskStats object_mask_stats(const Scene& sc, const GaussianModel& m
   for (int k = 1; k < L; ++k) ks.push_back(k);
   for (int vi : sc.test_indices()) {
     const View& v = sc.views[vi];
-    const std::vector<float> A = query::render_object_opacity(r, m, train::make_camera(v), ks);  // [H, W, L - 1]
+    const std::vector<float> A = query::render_object_opacity(r, m, render::camera_from_view(v), ks);  // [H, W, L - 1]
     const eval::InstanceLabels gt = eval::load_instance_masks(sc.root, v.name, names, v.width, v.height);
     for (size_t j = 0; j < gt.ids.size(); ++j) {
       const int k = gt.ids[j];

@@ -1,7 +1,7 @@
 // LERF relevancy. The map version normalises the query and canonical vectors once, then takes blocks of
 // 4096 rows: one float GEMM (rows x D times D x (1 + #canonical)) and the row norms give every cosine;
 // p_i uses the logistic form 1 / (1 + exp(T (s_i - s_q))), which cannot overflow.
-#include "eval/relevancy.h"
+#include "query/relevancy.h"
 
 #include <Eigen/Dense>
 
@@ -10,7 +10,7 @@
 
 #include "core/error.h"
 
-namespace hgs::eval {
+namespace hgs::query {
 
 namespace {
 
@@ -96,4 +96,4 @@ std::vector<float> lerf_relevancy_map(const float* features, size_t n, int dim, 
   return out;
 }
 
-}  // namespace hgs::eval
+}  // namespace hgs::query

@@ -8,7 +8,7 @@
 #include <cstddef>
 #include <vector>
 
-namespace hgs::eval {
+namespace hgs::query {
 
 constexpr float kLerfTemperature = 10.f;
 
@@ -25,4 +25,4 @@ std::vector<float> lerf_relevancy_map(const float* features, size_t n, int dim, 
                                       const std::vector<std::vector<float>>& canonical,
                                       float temperature = kLerfTemperature, int stride = 0);
 
-}  // namespace hgs::eval
+}  // namespace hgs::query

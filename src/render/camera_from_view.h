@@ -1,0 +1,11 @@
+// The renderer's pinhole camera of a scene view: image size, intrinsics and the world -> camera pose (R, t),
+// converted from the scene's double precision to the renderer's float.
+#pragma once
+#include "render/renderer.h"
+#include "scene/scene.h"
+
+namespace hgs::render {
+
+Camera camera_from_view(const View& v);
+
+}  // namespace hgs::render

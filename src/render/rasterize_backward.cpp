@@ -1,0 +1,299 @@
+// Tile rasterizer, backward: the exact gradient of rasterize_forward (rasterize.h has the whole algorithm). Each
+// tile walks its Gaussians back to front (Gaussian-major) over the batches of their forward masks, starting at
+// each pixel's last contributor: T_i = T_{i+1} / (1 - alpha_i) is rebuilt from the saved final T and one scalar
+// per pixel S = sum_{j>i} w_j <value_j, dL/dout> gives dL/dalpha_i = T_i <value_i, g> - (S + T_final (<bg, g_rgb>
+// - g_alpha)) / (1 - alpha_i); no gradient flows through the kAlphaMax clamp, and pixels below kAlphaMin are
+// skipped as in forward. Extra-channel dots are precomputed per visit (extra_dots) and the channel gradients
+// summed per Gaussian afterwards (extra_grads). Per-(tile, Gaussian) slots are reduced per Gaussian in a fixed
+// order, so the result is bitwise deterministic for any thread count.
+#include "render/rasterize.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cstring>
+
+#include "render/rasterize_common.h"
+
+#pragma GCC diagnostic ignored "-Wpsabi"
+
+namespace hgs::render {
+using namespace detail;
+namespace {
+
+// Backward accumulator slots per Gaussian (and per pair); extras follow.
+enum Grad { gMx, gMy, gA, gB, gC, gOp, gR, gG, gBl, gZ, kNumGrads };
+
+// Extra channels of one batch, backward: dot[v] = <extra_{g_v}, g> for the batch's visits, g [C] (the batch's
+// upstream gradient packs) held in registers a chunk at a time.
+template <class T>
+void extra_dots(const int* vk, int cnt, const T* ex, int C, int XS, const simd::Pack<T>* g, simd::Pack<T>* dot) {
+  using P = simd::Pack<T>;
+  for (int v = 0; v < cnt; ++v) dot[v] = P{};
+  for_channel_chunks(C, [&]<int CH>(int c0) {
+    P gc[CH];
+    for (int i = 0; i < CH; ++i) gc[i] = g[c0 + i];
+    for (int v = 0; v < cnt; ++v) {
+      const T* e = ex + size_t(vk[v]) * XS + c0;
+      P d0 = P{}, d1 = P{};
+      for (int i = 0; i + 1 < CH; i += 2) {
+        d0 += e[i] * gc[i];
+        d1 += e[i + 1] * gc[i + 1];
+      }
+      if (CH % 2) d0 += e[CH - 1] * gc[CH - 1];
+      dot[v] += d0 + d1;
+    }
+  });
+}
+
+// Extra-channel gradient of one (tile, Gaussian) pair: o[c] = sum over its visits v of hsum(w_v * g_{b_v}[c]),
+// g_b the gradient packs of batch b (stride BS from base).
+template <class T>
+void extra_grads(const int* vb, const simd::Pack<T>* vw, int cnt, const simd::Pack<T>* base, int BS, int C, T* o) {
+  for_channel_chunks(C, [&]<int CH>(int c0) {
+    simd::Pack<T> acc[CH];
+    weighted_rows<CH>(vw, cnt, [&](int v) { return base + size_t(vb[v]) * BS; }, c0, acc);
+    for (int i = 0; i < CH; ++i) o[c0 + i] = simd::hsum<T>(acc[i]);
+  });
+}
+
+// Backward of one tile, Gaussian-major: the tile's Gaussians are walked back to front (k = n-1 .. 0); each visits
+// the batches its mask names, whose per-pixel state (T, S) lives in per-thread scratch, while its gradient
+// sums stay in registers and are stored once per (tile, Gaussian) pair.
+template <class T, bool kDepth, bool kExtra>
+void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
+                   typename RasterWorkspace<T>::PerThread& w, const T* final_T, const int32_t* last,
+                   const RasterGrads<T>& g, const T* records, T* tile_records, const uint32_t* ws_masks,
+                   T* pair_grad) {
+  using P = simd::Pack<T>;
+  using M = simd::Mask<T>;
+  using I = typename std::remove_reference<decltype(M{}[0])>::type;
+  const int W = bins.width, H = bins.height, C = in.num_extra, XS = in.extra_stride > 0 ? in.extra_stride : C;
+  const int F = kNumGrads + C;
+  const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
+  TileData<T> td;
+  if (!load_records(bins, records, tile_records, false, tile, td)) return;
+  const int n = td.n;
+  const uint32_t* masks = ws_masks + bins.tile_start[tile];
+  const int J = g.d_weight_sums ? in.num_weights : 0;
+  if (J > 0) {
+    if (w.dw.size() < size_t(n) * J) w.dw.resize(size_t(n) * J);
+    const int s0 = bins.tile_start[tile];
+    for (int k = 0; k < n; ++k)
+      for (int jj = 0; jj < J; ++jj)
+        w.dw[size_t(k) * J + jj] = g.d_weight_sums[size_t(bins.tile_gauss[s0 + k]) * J + jj];
+  }
+  const T* DW = w.dw.data();
+  // per-batch state: [Tc, S, gr, gg, gb, gd, Tbg, GE[C], MW[J]]
+  enum { bT, bS, bR, bG, bB, bD, bBg, kBatchFixed };
+  const int BS = kBatchFixed + C + J;
+  if (w.bstate.size() < size_t(kBatches) * BS) w.bstate.resize(size_t(kBatches) * BS);
+  if (w.blast.size() < size_t(kBatches)) w.blast.resize(kBatches);
+  P* bst = w.bstate.data();
+  M* blast = w.blast.data();
+  int kmax[kBatches];
+  uint32_t jmask[kBatches];  // pixel-weight maps present in each batch (for_batch_maps)
+  uint32_t live = 0;  // batches with at least one contributor
+  const T bg0 = in.background[0], bg1 = in.background[1], bg2 = in.background[2];
+  for (int bt = 0; bt < kBatches; ++bt) {
+    kmax[bt] = 0;
+    jmask[bt] = 0;
+    const int py = ty0 + bt / kBatchesPerRow, px0 = tx0 + (bt % kBatchesPerRow) * kLanes;
+    if (py >= H || px0 >= W) continue;
+    const int nvalid = std::min(kLanes, W - px0);
+    P* st = bst + size_t(bt) * BS;
+    P Tf = simd::splat(T(1)), gr = P{}, gg = P{}, gb = P{}, ga = P{}, gd = P{};
+    M lastp = M{};
+    for (int c = 0; c < C + J; ++c) st[kBatchFixed + c] = P{};
+    for (int l = 0; l < nvalid; ++l) {
+      const size_t p = size_t(py) * W + px0 + l;
+      Tf[l] = final_T[p];
+      lastp[l] = last[p];
+      kmax[bt] = std::max(kmax[bt], int(last[p]));
+      if (g.d_rgb) {
+        gr[l] = g.d_rgb[3 * p];
+        gg[l] = g.d_rgb[3 * p + 1];
+        gb[l] = g.d_rgb[3 * p + 2];
+      }
+      if (g.d_alpha) ga[l] = g.d_alpha[p];
+      if (kDepth && g.d_depth) gd[l] = g.d_depth[p];
+      if (kExtra && g.d_extra)
+        for (int c = 0; c < C; ++c) st[kBatchFixed + c][l] = g.d_extra[p * XS + c];
+      for (int jj = 0; jj < J; ++jj) {
+        st[kBatchFixed + C + jj][l] = T(in.pixel_weights[p * J + jj]);
+        jmask[bt] |= map_bit(jj, st[kBatchFixed + C + jj][l] != T(0));
+      }
+    }
+    if (kmax[bt] == 0) continue;
+    live |= 1u << bt;
+    st[bT] = Tf;
+    st[bS] = P{};
+    st[bR] = gr;
+    st[bG] = gg;
+    st[bB] = gb;
+    st[bD] = gd;
+    st[bBg] = Tf * (gr * bg0 + gg * bg1 + gb * bg2 - ga);
+    blast[bt] = lastp;
+  }
+  // Extra channels: <extra_k, g> of every (Gaussian, batch) visit is computed before the walk, batch by batch
+  // (extra_dots, the batch's gradient packs in registers); the walk keeps each Gaussian's visits (batch, masked
+  // weight) and extra_grads sums its channel gradients from them once it is done.
+  int voff[kBatches + 1], vcur[kBatches];
+  int* vk = nullptr;
+  P* vdot = nullptr;
+  if (kExtra) {
+    int vcnt[kBatches] = {};
+    size_visit_lists(w, masks, n, live, voff);
+    vk = w.vk.data();
+    vdot = w.vw.data();
+    for (int k = 0; k < n; ++k)
+      for (uint32_t mb = masks[k] & live; mb; mb &= mb - 1) {
+        const int bt = __builtin_ctz(mb);
+        if (k < kmax[bt]) vk[voff[bt] + vcnt[bt]++] = bins.tile_gauss[bins.tile_start[tile] + k];
+      }
+    for (int bt = 0; bt < kBatches; ++bt) {
+      vcur[bt] = vcnt[bt];
+      if (vcnt[bt] > 0)
+        extra_dots<T>(vk + voff[bt], vcnt[bt], in.extra, C, XS, bst + size_t(bt) * BS + kBatchFixed, vdot + voff[bt]);
+    }
+  }
+  int kvb[kBatches];  // this Gaussian's visits with a contribution: batch, masked weight
+  P kvw[kBatches];
+  const P lane = simd::iota_pack<T>();
+  const int s = bins.tile_start[tile];
+  for (int k = n - 1; k >= 0; --k) {
+    uint32_t mb = masks[k] & live;
+    T* o = pair_grad + size_t(bins.tile_pair[s + k]) * F;
+    P aMx = P{}, aMy = P{}, aA = P{}, aB = P{}, aC = P{}, aOp = P{}, aR = P{}, aG = P{}, aBl = P{}, aZ = P{};
+    int nkv = 0;
+    const T* rc = td.rec + size_t(k) * kRecord;
+    const T* dw = J > 0 ? DW + size_t(k) * J : nullptr;
+    while (mb) {
+      const int bt = __builtin_ctz(mb);
+      mb &= mb - 1;
+      if (k >= kmax[bt]) continue;
+      const int vi = kExtra ? voff[bt] + --vcur[bt] : 0;  // this visit in the batch's list (walked backwards)
+      P* st = bst + size_t(bt) * BS;
+      const M inr = (M{} + I(k)) < blast[bt];
+      const T fy = T(ty0 + bt / kBatchesPerRow) + T(0.5);
+      const P fx = lane + (T(tx0 + (bt % kBatchesPerRow) * kLanes) + T(0.5));
+      const T dy = rc[kMy] - fy;
+      const P dx = rc[kMx] - fx;
+      const T bdy = rc[kB] * dy, hcdy2 = rc[kHc] * dy * dy;
+      const P power = -(dx * (rc[kHa] * dx + bdy) + hcdy2);
+      const P gauss = simd::vexp(power);
+      const P araw = rc[kOp] * gauss;
+      const P alpha = simd::vmin<T>(araw, simd::splat(T(kAlphaMax)));
+      const M c = inr & (alpha >= T(kAlphaMin));
+      if (!simd::any(c)) continue;
+      const P gr = st[bR], gg = st[bG], gb = st[bB];
+      const P ioma = simd::vrecip(T(1) - alpha);
+      const P Ti = st[bT] * ioma;
+      const P wgt = alpha * Ti;
+      P dot = rc[kCr] * gr + rc[kCg] * gg + rc[kCb] * gb;
+      if (kDepth) dot += rc[kZ] * st[bD];
+      if (kExtra) dot += vdot[vi];
+      if (J > 0) {
+        // Pixel-weight sums: only the maps that are non-zero in this batch (one, inside a hard object mask).
+        const P* sw = st + kBatchFixed + C;
+        P d0 = P{};
+        for_batch_maps(jmask[bt], J, [&](int jj) { d0 += dw[jj] * sw[jj]; });
+        dot += d0;
+      }
+      const P S = st[bS];
+      P dLda = Ti * dot - (S + st[bBg]) * ioma;
+      st[bS] = c ? S + wgt * dot : S;
+      st[bT] = c ? Ti : st[bT];
+      const P wm = c ? wgt : P{};
+      aR += wm * gr;
+      aG += wm * gg;
+      aBl += wm * gb;
+      if (kDepth) aZ += wm * st[bD];
+      if (kExtra) {
+        kvb[nkv] = bt;
+        kvw[nkv++] = wm;
+      }
+      dLda = (c & (araw < T(kAlphaMax))) ? dLda : P{};
+      aOp += gauss * dLda;
+      const P pw = araw * dLda;  // dL/dpower
+      const P pdx = pw * dx;
+      aMx += rc[kA] * pdx + bdy * pw;
+      aMy += rc[kB] * pdx + (rc[kC] * dy) * pw;
+      aA += pdx * dx;
+      aB += pdx * dy;
+      aC += pw * (dy * dy);
+    }
+    // per-pair results (dpower/dmx = -(a dx + b dy), dpower/da = -dx^2 / 2, dpower/db = -dx dy, ...)
+    o[gMx] = -simd::hsum<T>(aMx);
+    o[gMy] = -simd::hsum<T>(aMy);
+    o[gA] = T(-0.5) * simd::hsum<T>(aA);
+    o[gB] = -simd::hsum<T>(aB);
+    o[gC] = T(-0.5) * simd::hsum<T>(aC);
+    o[gOp] = simd::hsum<T>(aOp);
+    o[gR] = simd::hsum<T>(aR);
+    o[gG] = simd::hsum<T>(aG);
+    o[gBl] = simd::hsum<T>(aBl);
+    o[gZ] = kDepth ? simd::hsum<T>(aZ) : T(0);
+    if (kExtra) extra_grads<T>(kvb, kvw, nkv, bst + kBatchFixed, BS, C, o + kNumGrads);
+    else
+      for (int ch = 0; ch < C; ++ch) o[kNumGrads + ch] = T(0);
+  }
+}
+
+}  // namespace
+
+template <class T>
+void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws, const T* final_T,
+                        const int32_t* last, const RasterGrads<T>& g) {
+  ensure_threads(ws);
+  const int C = in.num_extra, F = kNumGrads + C, XS = in.extra_stride > 0 ? in.extra_stride : C;
+  const bool dep = in.depth != nullptr && g.d_depth != nullptr;
+  const bool ext = C > 0 && g.d_extra != nullptr;
+  if (ws.pair_grad.size() < size_t(bins.num_pairs) * F) ws.pair_grad.resize(size_t(bins.num_pairs) * F);
+  T* pg = ws.pair_grad.data();
+  const uint32_t* MK = ws.masks.data();
+  const T* R = ws.records.data();
+  T* TR = ws.tile_records.data();
+#pragma omp parallel
+  {
+    auto& w = ws.threads[omp_get_thread_num()];
+#pragma omp for schedule(dynamic, 1)
+    for (int t = 0; t < bins.num_tiles; ++t) {
+      if (dep && ext) backward_tile<T, true, true>(in, bins, t, w, final_T, last, g, R, TR, MK, pg);
+      else if (dep) backward_tile<T, true, false>(in, bins, t, w, final_T, last, g, R, TR, MK, pg);
+      else if (ext) backward_tile<T, false, true>(in, bins, t, w, final_T, last, g, R, TR, MK, pg);
+      else backward_tile<T, false, false>(in, bins, t, w, final_T, last, g, R, TR, MK, pg);
+    }
+    // reduce pair slots per Gaussian in a fixed order
+#pragma omp for schedule(static)
+    for (int i = 0; i < in.n; ++i) {
+      T s[kNumGrads] = {};
+      T* gex = g.extra ? g.extra + size_t(i) * XS : nullptr;
+      if (gex)
+        for (int ch = 0; ch < XS; ++ch) gex[ch] = 0;  // channels [C, XS) carry no gradient
+      for (int p = bins.pair_offset[i]; p < bins.pair_offset[i + 1]; ++p) {
+        const T* o = pg + size_t(p) * F;
+        for (int f = 0; f < kNumGrads; ++f) s[f] += o[f];
+        if (gex)
+          for (int ch = 0; ch < C; ++ch) gex[ch] += o[kNumGrads + ch];
+      }
+      g.mean2d[2 * i] = s[gMx];
+      g.mean2d[2 * i + 1] = s[gMy];
+      g.conic[3 * i] = s[gA];
+      g.conic[3 * i + 1] = s[gB];
+      g.conic[3 * i + 2] = s[gC];
+      g.opacity[i] = s[gOp];
+      g.color[3 * i] = s[gR];
+      g.color[3 * i + 1] = s[gG];
+      g.color[3 * i + 2] = s[gBl];
+      if (g.depth) g.depth[i] = s[gZ];
+    }
+  }
+}
+
+template void rasterize_backward<float>(const RasterInputs<float>&, const Binning&, RasterWorkspace<float>&,
+                                        const float*, const int32_t*, const RasterGrads<float>&);
+template void rasterize_backward<double>(const RasterInputs<double>&, const Binning&, RasterWorkspace<double>&,
+                                         const double*, const int32_t*, const RasterGrads<double>&);
+
+}  // namespace hgs::render

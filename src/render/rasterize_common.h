@@ -1,0 +1,98 @@
+// Internals shared by the tile rasterizer's forward (rasterize_forward.cpp) and backward
+// (rasterize_backward.cpp) kernels: the pixel batches of a tile, the 16-scalar Gaussian record layout, the copy
+// of a tile's records into scratch, per-batch visit lists, pixel-weight map and channel-chunk iteration. The
+// algorithm and the cut-offs (kAlphaMax, kAlphaMin, kTransmittanceMin) are described in rasterize.h.
+#pragma once
+#include <omp.h>
+
+#include <algorithm>
+#include <cstring>
+
+#include "render/rasterize.h"
+
+namespace hgs::render::detail {
+
+using simd::kLanes;
+constexpr int kBatchesPerRow = kTileSize / kLanes;
+constexpr int kBatches = kTileSize * kBatchesPerRow;  // 32 batches of 8 pixels per tile
+
+// Gaussian records: one 16-scalar record per Gaussian (one cache line for float), built once per forward in index
+// order and copied per tile into contiguous per-thread scratch (the inner loops read them with broadcasts).
+enum Field { kMx, kMy, kHa, kB, kHc, kA, kC, kOp, kCr, kCg, kCb, kZ, kMahal, kEy, kRecord = 16 };
+
+template <class T>
+struct TileData {
+  int n = 0;
+  const T* rec = nullptr;      // [n, 16]
+};
+
+// Copies the tile's records into per-thread scratch. Returns false for an empty tile. (Extra channels are read
+// in place: a Gaussian's C values are one contiguous row of the input.)
+template <class T>
+bool load_records(const Binning& bins, const T* records, T* tile_records, bool gather, int tile, TileData<T>& td) {
+  const int s = bins.tile_start[tile], e = bins.tile_start[tile + 1];
+  const int n = e - s;
+  td.n = n;
+  if (n == 0) return false;
+  T* rec = tile_records + size_t(s) * kRecord;  // [n, 16], written by forward, read again by backward
+  td.rec = rec;
+  if (gather)
+    for (int k = 0; k < n; ++k)
+      std::memcpy(rec + size_t(k) * kRecord, records + size_t(bins.tile_gauss[s + k]) * kRecord, sizeof(T) * kRecord);
+  return true;
+}
+
+// Per-batch visit lists of a tile in the thread's scratch (w.vk, w.vw): offsets [33] into one flat array sized
+// by the bits `batches` of the masks of Gaussians [0, n) (an upper bound on the visits of every batch).
+template <class PerThread>
+void size_visit_lists(PerThread& w, const uint32_t* masks, int n, uint32_t batches, int* off) {
+  int cnt[kBatches] = {};
+  for (int k = 0; k < n; ++k)
+    for (uint32_t mb = masks[k] & batches; mb; mb &= mb - 1) ++cnt[__builtin_ctz(mb)];
+  off[0] = 0;
+  for (int b = 0; b < kBatches; ++b) off[b + 1] = off[b] + cnt[b];
+  const size_t nv = size_t(off[kBatches]);
+  if (w.vk.size() < nv) w.vk.resize(nv);
+  if (w.vw.size() < nv) w.vw.resize(nv);
+}
+
+// Pixel-weight maps of a batch: bit j of `present` is set when map j is non-zero at one of its pixels
+// (map_bit), and f(j) runs for those maps only (for every map when there are more than 32).
+inline uint32_t map_bit(int j, bool nonzero) { return nonzero && j < 32 ? 1u << j : 0u; }
+template <class F>
+inline __attribute__((always_inline)) void for_batch_maps(uint32_t present, int J, F&& f) {
+  if (J > 32) {
+    for (int j = 0; j < J; ++j) f(j);
+    return;
+  }
+  for (; present; present &= present - 1) f(__builtin_ctz(present));
+}
+
+// Runs chunk.template operator()<CH>(c0) over channels [0, C) in register-sized chunks of 12, 4 and 1.
+template <class Chunk>
+inline __attribute__((always_inline)) void for_channel_chunks(int C, Chunk&& chunk) {
+  int c0 = 0;
+  for (; c0 + 12 <= C; c0 += 12) chunk.template operator()<12>(c0);
+  for (; c0 + 4 <= C; c0 += 4) chunk.template operator()<4>(c0);
+  for (; c0 < C; ++c0) chunk.template operator()<1>(c0);
+}
+
+// acc[i] = sum_v w_v * row(v)[c0 + i], i < CH, over a visit list in order, the CH sums in registers. row(v) gives
+// scalars (broadcast to the lanes) or packs (lane by lane).
+template <int CH, class P, class Row>
+inline __attribute__((always_inline)) void weighted_rows(const P* vw, int cnt, Row&& row, int c0, P* acc) {
+  for (int i = 0; i < CH; ++i) acc[i] = P{};
+  for (int v = 0; v < cnt; ++v) {
+    const P wv = vw[v];
+    const auto* r = row(v) + c0;
+    for (int i = 0; i < CH; ++i) acc[i] += wv * r[i];
+  }
+}
+
+template <class T>
+void ensure_threads(RasterWorkspace<T>& ws) {
+  const size_t nt = size_t(std::max(1, omp_get_max_threads()));
+  if (ws.threads.size() < nt) ws.threads.resize(nt);
+}
+
+}  // namespace hgs::render::detail

@@ -1,0 +1,308 @@
+// Tile rasterizer, forward: per-pixel front-to-back alpha compositing (rasterize.h has the whole algorithm).
+// Per Gaussian, one 16-scalar record (build_records) and a 32-bit mask of the 8-pixel batches of each tile its
+// alpha >= 1/255 ellipse reaches (build_masks, exact per-row x-intervals). Each tile walks its Gaussians front to
+// back (Gaussian-major) over the batches of their masks that still have a live pixel: alpha = min(kAlphaMax,
+// opacity exp(power)), skipped below kAlphaMin, the pixel stops (without accumulating) when T (1 - alpha) <
+// kTransmittanceMin, else w = alpha T is accumulated into colour / depth / pixel-weight sums. Extra channels are
+// summed afterwards from each batch's recorded visits (composite_extras). Saves final T and the last contributor
+// per pixel for backward; per-pair weight sums are reduced per Gaussian in a fixed order.
+#include "render/rasterize.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cstring>
+
+#include "render/rasterize_common.h"
+
+#pragma GCC diagnostic ignored "-Wpsabi"
+
+namespace hgs::render {
+using namespace detail;
+namespace {
+
+template <class T>
+void build_records(const RasterInputs<T>& in, const Binning& bins, T* records) {
+#pragma omp parallel for schedule(static)
+  for (int g = 0; g < in.n; ++g) {
+    T* r = records + size_t(g) * kRecord;
+    r[kMx] = in.mean2d[2 * g];
+    r[kMy] = in.mean2d[2 * g + 1];
+    const T a = in.conic[3 * g], b = in.conic[3 * g + 1], c = in.conic[3 * g + 2];
+    r[kHa] = T(0.5) * a;
+    r[kB] = b;
+    r[kHc] = T(0.5) * c;
+    r[kA] = a;
+    r[kC] = c;
+    r[kOp] = in.opacity[g];
+    r[kCr] = in.color[3 * g];
+    r[kCg] = in.color[3 * g + 1];
+    r[kCb] = in.color[3 * g + 2];
+    r[kZ] = in.depth ? in.depth[g] : T(0);
+    const double m = bins.mahal[g];
+    r[kMahal] = T(m);
+    const double det = double(a) * double(c) - double(b) * double(b);
+    r[kEy] = m > 0 && det > 0 ? T(std::sqrt(m * double(a) / det) + 1e-3) : T(-1);
+    r[14] = r[15] = 0;
+  }
+}
+
+// Spreads the low 16 bits of x to the even bit positions.
+inline uint32_t spread_bits(uint32_t x) {
+  x = (x | (x << 8)) & 0x00FF00FFu;
+  x = (x | (x << 4)) & 0x0F0F0F0Fu;
+  x = (x | (x << 2)) & 0x33333333u;
+  x = (x | (x << 1)) & 0x55555555u;
+  return x;
+}
+
+// Extra channels of one batch, forward: dst[c] = sum_v w_v extra_{g_v}[c] over the batch's visits in walk order
+// (g_v the Gaussian's index, ex [N, XS] the input rows). The walk itself would read-modify-write every channel
+// of the batch state per visit (bound by loads and stores); here a visit costs one weight load and one
+// broadcast FMA per channel. The sums run in the same order as a per-visit accumulation: the same values.
+template <class T>
+void composite_extras(const int* vk, const simd::Pack<T>* vw, int cnt, const T* ex, int C, int XS, simd::Pack<T>* dst) {
+  for_channel_chunks(C, [&]<int CH>(int c0) {
+    simd::Pack<T> acc[CH];  // local, so the sums stay in registers
+    weighted_rows<CH>(vw, cnt, [&](int v) { return ex + size_t(vk[v]) * XS; }, c0, acc);
+    for (int i = 0; i < CH; ++i) dst[c0 + i] = acc[i];
+  });
+}
+
+// Batch masks of a tile, masks [n]: bit (row * 2 + half) is set when the Gaussian can reach the 8-pixel batch
+// (half a row) with alpha >= 1/255. For each of the 16 pixel rows the exact x-interval where d^T conic d <= m
+// (the alpha >= 1/255 region, with margin; binning.h) is computed in double, 4 rows per vector.
+template <class T>
+void build_masks(const Binning& bins, int tile, const TileData<T>& td, uint32_t* masks) {
+  typedef double v4d __attribute__((vector_size(32)));
+  typedef int64_t v4l __attribute__((vector_size(32)));
+  const int n = td.n;
+  const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
+  v4d rowc[4];  // pixel-centre y of the tile rows
+  for (int q = 0; q < 4; ++q)
+    for (int l = 0; l < 4; ++l) rowc[q][l] = ty0 + 4 * q + l + 0.5;
+  const double bx0[2] = {double(tx0), double(tx0 + kLanes)};
+  const double bx1[2] = {double(tx0 + kLanes - 1), double(tx0 + 2 * kLanes - 1)};
+  for (int k = 0; k < n; ++k) {
+    const T* r = td.rec + size_t(k) * kRecord;
+    const double ey = double(r[kEy]);
+    const double u = double(r[kMx]), v = double(r[kMy]);
+    masks[k] = 0;
+    if (ey < 0 || v + ey - 0.5 < ty0 || v - ey - 0.5 > ty0 + kTileSize - 1) continue;
+    const double a = double(r[kA]), b = double(r[kB]), c = double(r[kC]);
+    const double m = double(r[kMahal]), ndet = b * b - a * c, am = a * m, ia = 1.0 / a;
+    uint32_t hit[2] = {0, 0};
+    for (int q = 0; q < 4; ++q) {
+      const v4d dy = v - rowc[q];
+      const v4d disc = dy * dy * ndet + am;
+      const v4l valid = disc >= 0.0;
+      v4d dc = valid ? disc : v4d{};
+#if defined(__AVX__)
+      const v4d sq = (v4d)_mm256_sqrt_pd((__m256d)dc);
+#else
+      v4d sq;
+      for (int l = 0; l < 4; ++l) sq[l] = std::sqrt(dc[l]);
+#endif
+      // pixel x (centre x + 0.5) with dx = u - x - 0.5 in [(-b dy - sq) / a, (-b dy + sq) / a]
+      const v4d xl = u - (sq - b * dy) * ia - (0.5 + 1e-3);
+      const v4d xr = u + (sq + b * dy) * ia - (0.5 - 1e-3);
+      for (int h = 0; h < kBatchesPerRow; ++h) {
+        const v4l hm = valid & (xl <= bx1[h]) & (xr >= bx0[h]);
+#if defined(__AVX__)
+        hit[h] |= uint32_t(_mm256_movemask_pd((__m256d)hm)) << (4 * q);
+#else
+        for (int l = 0; l < 4; ++l) hit[h] |= uint32_t(hm[l] & 1) << (4 * q + l);
+#endif
+      }
+    }
+    masks[k] = spread_bits(hit[0]) | (spread_bits(hit[1]) << 1);
+  }
+}
+
+// Forward of one tile, Gaussian-major: the tile's Gaussians are walked front to back; each updates the batches
+// its mask names that still have a live pixel (per-batch accumulators in per-thread scratch); a batch drops out
+// when all its pixels hit the transmittance cut-off, the tile ends when no batch is left.
+template <class T, bool kDepth, bool kExtra>
+void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typename RasterWorkspace<T>::PerThread& w,
+                  const T* records, T* tile_records, uint32_t* ws_masks, T* pair_w,
+                  const RasterOutputs<T>& out) {
+  using P = simd::Pack<T>;
+  using M = simd::Mask<T>;
+  using I = typename std::remove_reference<decltype(M{}[0])>::type;
+  const int W = bins.width, H = bins.height, C = in.num_extra, J = in.num_weights;
+  const int XS = in.extra_stride > 0 ? in.extra_stride : C;
+  const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
+  TileData<T> td;
+  const bool any_g = load_records(bins, records, tile_records, true, tile, td);
+  const int n = any_g ? td.n : 0;
+  uint32_t* masks = ws_masks + bins.tile_start[tile];
+  if (any_g) build_masks(bins, tile, td, masks);
+  // per-batch state: [T, R, G, B, D, E[C], MW[J]] + active / last masks
+  enum { bT, bR, bG, bB, bD, kBatchFixed };
+  const int BS = kBatchFixed + C + J;
+  if (w.bstate.size() < size_t(kBatches) * BS) w.bstate.resize(size_t(kBatches) * BS);
+  if (w.blast.size() < size_t(2) * kBatches) w.blast.resize(size_t(2) * kBatches);
+  if (J > 0 && w.wacc.size() < size_t(n) * J) w.wacc.resize(size_t(n) * J);
+  P* bst = w.bstate.data();
+  M* bact = w.blast.data();
+  M* blast = bact + kBatches;
+  P* wacc = w.wacc.data();
+  const P lane = simd::iota_pack<T>();
+  const M lane_i = __builtin_convertvector(lane, M);
+  uint32_t alive = 0;
+  uint32_t jmask[kBatches];  // pixel-weight maps present in each batch (for_batch_maps)
+  for (int bt = 0; bt < kBatches; ++bt) {
+    jmask[bt] = 0;
+    const int py = ty0 + bt / kBatchesPerRow, px0 = tx0 + (bt % kBatchesPerRow) * kLanes;
+    if (py >= H || px0 >= W) continue;
+    const int nvalid = std::min(kLanes, W - px0);
+    alive |= 1u << bt;
+    P* st = bst + size_t(bt) * BS;
+    st[bT] = simd::splat(T(1));
+    for (int f = bR; f < BS; ++f) st[f] = P{};
+    for (int jj = 0; jj < J; ++jj)
+      for (int l = 0; l < nvalid; ++l) {
+        st[kBatchFixed + C + jj][l] = T(in.pixel_weights[(size_t(py) * W + px0 + l) * J + jj]);
+        jmask[bt] |= map_bit(jj, st[kBatchFixed + C + jj][l] != T(0));
+      }
+    bact[bt] = lane_i < I(nvalid);
+    blast[bt] = M{};
+  }
+  const uint32_t all_batches = alive;
+  // Extra channels: the walk records each batch's visits (Gaussian, weight pack); composite_extras sums them
+  // afterwards, batch by batch.
+  int voff[kBatches + 1], vcnt[kBatches] = {};
+  int* vk = nullptr;
+  P* vw = nullptr;
+  if (kExtra && n > 0) {
+    size_visit_lists(w, masks, n, all_batches, voff);
+    vk = w.vk.data();
+    vw = w.vw.data();
+  }
+  int kend = 0;  // Gaussians [kend, n) were never reached (all batches terminated)
+  for (int k = 0; k < n && alive; ++k) {
+    kend = k + 1;
+    uint32_t mb = masks[k] & alive;
+    if (!mb) {
+      if (J > 0)
+        for (int jj = 0; jj < J; ++jj) wacc[size_t(k) * J + jj] = P{};
+      continue;
+    }
+    const T* rc = td.rec + size_t(k) * kRecord;
+    P* wa = J > 0 ? wacc + size_t(k) * J : nullptr;
+    for (int jj = 0; jj < J; ++jj) wa[jj] = P{};
+    const M kk = M{} + I(k + 1);
+    while (mb) {
+      const int bt = __builtin_ctz(mb);
+      mb &= mb - 1;
+      P* st = bst + size_t(bt) * BS;
+      const T fy = T(ty0 + bt / kBatchesPerRow) + T(0.5);
+      const P fx = lane + (T(tx0 + (bt % kBatchesPerRow) * kLanes) + T(0.5));
+      const T dy = rc[kMy] - fy;
+      const P dx = rc[kMx] - fx;
+      const T bdy = rc[kB] * dy, hcdy2 = rc[kHc] * dy * dy;
+      const P power = -(dx * (rc[kHa] * dx + bdy) + hcdy2);
+      const P alpha = simd::vmin<T>(rc[kOp] * simd::vexp(power), simd::splat(T(kAlphaMax)));
+      M active = bact[bt];
+      const M valid = active & (alpha >= T(kAlphaMin));
+      if (!simd::any(valid)) continue;
+      const P Tr = st[bT];
+      const P testT = Tr * (T(1) - alpha);
+      const M stop = valid & (testT < T(kTransmittanceMin));
+      active = active & ~stop;
+      const M acc = valid & ~stop;
+      const P wgt = acc ? alpha * Tr : P{};
+      st[bR] += wgt * rc[kCr];
+      st[bG] += wgt * rc[kCg];
+      st[bB] += wgt * rc[kCb];
+      if (kDepth) st[bD] += wgt * rc[kZ];
+      if (kExtra) {
+        const int v = voff[bt] + vcnt[bt]++;
+        vk[v] = bins.tile_gauss[bins.tile_start[tile] + k];
+        vw[v] = wgt;
+      }
+      for_batch_maps(jmask[bt], J, [&](int jj) { wa[jj] += wgt * st[kBatchFixed + C + jj]; });
+      st[bT] = acc ? testT : Tr;
+      blast[bt] = acc ? kk : blast[bt];
+      bact[bt] = active;
+      if (!simd::any(active)) alive &= ~(1u << bt);
+    }
+  }
+  const T bg0 = in.background[0], bg1 = in.background[1], bg2 = in.background[2];
+  for (int bt = 0; bt < kBatches; ++bt) {
+    if (!((all_batches >> bt) & 1)) continue;
+    const int py = ty0 + bt / kBatchesPerRow, px0 = tx0 + (bt % kBatchesPerRow) * kLanes;
+    const int nvalid = std::min(kLanes, W - px0);
+    P* st = bst + size_t(bt) * BS;
+    if (kExtra && vcnt[bt] > 0) composite_extras<T>(vk + voff[bt], vw + voff[bt], vcnt[bt], in.extra, C, XS, st + kBatchFixed);
+    for (int l = 0; l < nvalid; ++l) {
+      const size_t p = size_t(py) * W + px0 + l;
+      const T Tr = st[bT][l];
+      out.rgb[3 * p] = st[bR][l] + Tr * bg0;
+      out.rgb[3 * p + 1] = st[bG][l] + Tr * bg1;
+      out.rgb[3 * p + 2] = st[bB][l] + Tr * bg2;
+      out.alpha[p] = T(1) - Tr;
+      out.final_T[p] = Tr;
+      out.last[p] = int32_t(blast[bt][l]);
+      if (kDepth) out.depth[p] = st[bD][l];
+      if (kExtra)
+        for (int c = 0; c < C; ++c) out.extra[p * C + c] = st[kBatchFixed + c][l];
+    }
+  }
+  if (J > 0 && any_g) {
+    const int s = bins.tile_start[tile];
+    for (int k = 0; k < n; ++k) {
+      T* o = pair_w + size_t(bins.tile_pair[s + k]) * J;
+      if (k < kend && (masks[k] & all_batches))
+        for (int jj = 0; jj < J; ++jj) o[jj] = simd::hsum<T>(wacc[size_t(k) * J + jj]);
+      else
+        for (int jj = 0; jj < J; ++jj) o[jj] = 0;
+    }
+  }
+}
+
+}  // namespace
+
+template <class T>
+void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws,
+                       const RasterOutputs<T>& out) {
+  ensure_threads(ws);
+  const bool dep = in.depth != nullptr, ext = in.num_extra > 0;
+  if (ws.masks.size() < size_t(bins.num_pairs)) ws.masks.resize(size_t(bins.num_pairs));
+  uint32_t* MK = ws.masks.data();
+  if (ws.records.size() < size_t(in.n) * kRecord) ws.records.resize(size_t(in.n) * kRecord);
+  build_records(in, bins, ws.records.data());
+  const T* R = ws.records.data();
+  if (ws.tile_records.size() < size_t(bins.num_pairs) * kRecord) ws.tile_records.resize(size_t(bins.num_pairs) * kRecord);
+  T* TR = ws.tile_records.data();
+  const int J = in.num_weights;
+  if (J > 0 && ws.pair_w.size() < size_t(bins.num_pairs) * J) ws.pair_w.resize(size_t(bins.num_pairs) * J);
+  T* PW = ws.pair_w.data();
+#pragma omp parallel
+  {
+    auto& w = ws.threads[omp_get_thread_num()];
+#pragma omp for schedule(dynamic, 1)
+    for (int t = 0; t < bins.num_tiles; ++t) {
+      if (dep && ext) forward_tile<T, true, true>(in, bins, t, w, R, TR, MK, PW, out);
+      else if (dep) forward_tile<T, true, false>(in, bins, t, w, R, TR, MK, PW, out);
+      else if (ext) forward_tile<T, false, true>(in, bins, t, w, R, TR, MK, PW, out);
+      else forward_tile<T, false, false>(in, bins, t, w, R, TR, MK, PW, out);
+    }
+    if (J > 0) {
+#pragma omp for schedule(static)
+      for (int i = 0; i < in.n; ++i) {
+        T* o = out.weight_sums + size_t(i) * J;
+        for (int jj = 0; jj < J; ++jj) o[jj] = 0;
+        for (int p = bins.pair_offset[i]; p < bins.pair_offset[i + 1]; ++p)
+          for (int jj = 0; jj < J; ++jj) o[jj] += PW[size_t(p) * J + jj];
+      }
+    }
+  }
+}
+
+template void rasterize_forward<float>(const RasterInputs<float>&, const Binning&, RasterWorkspace<float>&,
+                                       const RasterOutputs<float>&);
+template void rasterize_forward<double>(const RasterInputs<double>&, const Binning&, RasterWorkspace<double>&,
+                                        const RasterOutputs<double>&);
+
+}  // namespace hgs::render
