@@ -13,7 +13,9 @@
 #include "core/progress.h"
 #include "eval/report.h"
 #include "eval/run.h"
-#include "hybrid/setup.h"
+#include "hybrid/config.h"
+#include "hybrid/register.h"
+#include "train/registry.h"
 #include "model/ply.h"
 #include "query/session.h"
 
@@ -53,7 +55,8 @@ void run_ablate(const AblateArgs& a) {
     cfg.method = "hybrid";
     cfg.seed = a.seed;
     auto t0 = std::chrono::steady_clock::now();
-    auto trainer = hybrid::make_trainer(scene, scene.train_indices(), cfg, hc, false);
+    hybrid::register_method();
+    auto trainer = train::make_trainer(scene, scene.train_indices(), cfg, "hybrid", hc.to_json(), false);
     Progress bar(fmt::format("ablate {} ({}/{})", name, done, total), a.iters, !a.quiet);
     while (trainer->iteration() < a.iters) {
       auto s = trainer->step();

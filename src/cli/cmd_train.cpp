@@ -14,7 +14,9 @@
 #include "core/progress.h"
 #include "model/ply.h"
 #include "scene/scene.h"
-#include "hybrid/setup.h"
+#include "hybrid/config.h"
+#include "hybrid/register.h"
+#include "train/registry.h"
 #include "train/trainer.h"
 
 namespace hgs::cli {
@@ -65,7 +67,8 @@ void run_train(const TrainArgs& a) {
     hc->bro_image_norm = a.bro_norm == "image";
     hc->unconfident_unobserved = a.unconfident == "unobserved";
   }
-  auto trainer_ptr = hybrid::make_trainer(scene, train_idx, cfg, hc, progress);
+  hybrid::register_method();
+  auto trainer_ptr = train::make_trainer(scene, train_idx, cfg, a.method, hc ? hc->to_json() : nlohmann::json(), progress);
   train::Trainer& trainer = *trainer_ptr;
   const int init_points = trainer.model().n;
   if (!a.resume.empty()) {

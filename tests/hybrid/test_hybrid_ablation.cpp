@@ -7,7 +7,9 @@
 
 #include "eval/report.h"
 #include "eval/run.h"
-#include "hybrid/setup.h"
+#include "hybrid/config.h"
+#include "hybrid/register.h"
+#include "train/registry.h"
 #include "model/ply.h"
 #include "query/session.h"
 #include "synth/synth.h"
@@ -23,7 +25,8 @@ eval::MeanRow train_and_evaluate(const std::filesystem::path& scene_dir, const S
   hc.use_of = hc.use_scl = hc.use_bro = full;
   train::TrainConfig cfg = train::TrainConfig{}.scaled_to(iters);
   cfg.method = "hybrid";
-  auto tr = hybrid::make_trainer(scene, scene.train_indices(), cfg, hc, false);
+  hybrid::register_method();
+  auto tr = train::make_trainer(scene, scene.train_indices(), cfg, "hybrid", hc.to_json(), false);
   while (tr->iteration() < iters) tr->step();
   write_model_ply(ply, tr->model());
   tr.reset();

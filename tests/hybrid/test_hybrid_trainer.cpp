@@ -2,12 +2,15 @@
 // moves the view weights, and its objects answer text queries.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <map>
 
 #include "core/error.h"
 #include "eval/instances.h"
 #include "hybrid/bro.h"
 #include "hybrid/method.h"
+#include "hybrid/register.h"
+#include "train/registry.h"
 #include "train/trainer.h"
 #include "model/ply.h"
 #include "query/query.h"
@@ -243,5 +246,30 @@ TEST(HybridTrainer, SemanticLossMovesGeometryOnlyWhenAsked) {
     EXPECT_NE(tr->model().find_extra("lang")->to_float(), f0) << "f not trained";
     EXPECT_EQ(tr->model().opacity_logit == o0, !geometry);
     EXPECT_EQ(tr->model().mean == m0, !geometry);
+  }
+}
+
+TEST(MethodRegistry, BuildsTheNamedMethodWithItsOptions) {
+  Tiny t;
+  hybrid::register_method();
+  const auto names = train::method_names();
+  ASSERT_GE(names.size(), 2u);
+  EXPECT_EQ(names[0], "rgb");
+  EXPECT_NE(std::find(names.begin(), names.end(), "hybrid"), names.end());
+  train::TrainConfig cfg = train::TrainConfig{}.scaled_to(10);
+  cfg.sh_degree = 1;
+  hybrid::HybridConfig hc;
+  hc.lambda_bro = 0.7f;
+  auto tr = train::make_trainer(t.scene, t.train, cfg, "hybrid", hc.to_json(), false);
+  EXPECT_EQ(tr->method().name(), "hybrid");
+  EXPECT_EQ(hm(*tr).hybrid_config().lambda_bro, 0.7f);
+  EXPECT_EQ(tr->views().size(), t.train.size());
+  EXPECT_TRUE(hybrid::HybridFields::present(tr->model()));
+  EXPECT_EQ(train::make_trainer(t.scene, t.train, cfg, "rgb", nullptr, false)->method().name(), "rgb");
+  try {
+    train::make_trainer(t.scene, t.train, cfg, "nerf", nullptr, false);
+    FAIL() << "no error";
+  } catch (const hgs::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("unknown training method 'nerf' (known: rgb, hybrid"), std::string::npos) << e.what();
   }
 }

@@ -9,7 +9,9 @@
 #include <cstring>
 #include <stdexcept>
 #include <string>
-#include "hybrid/setup.h"
+#include "hybrid/config.h"
+#include "hybrid/register.h"
+#include "train/registry.h"
 #include "hybrid/method.h"
 #include "object_stats.h"
 #include "query/query.h"
@@ -41,7 +43,8 @@ int main(int argc, char** argv) try {
     else throw std::runtime_error("unknown option " + s);
   }
   if (iters < 1 || every < 1) throw std::runtime_error("ITERS and EVERY must be positive");
-  auto tr = hybrid::make_trainer(sc, sc.train_indices(), cfg, hc, false);
+  hybrid::register_method();
+  auto tr = train::make_trainer(sc, sc.train_indices(), cfg, "hybrid", hc.to_json(), false);
   auto& ht = dynamic_cast<hybrid::HybridMethod&>(tr->method());
   auto names = eval::load_object_names(sc.root);
   render::GaussianRenderer r;
