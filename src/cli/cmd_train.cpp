@@ -187,6 +187,9 @@ CommandRegistration reg({"train", "Optimise Hybrid Gaussians (or plain 3DGS with
                  "What a mask pixel below --tau1 tells Observation Fusion: unobserved (nothing; see hybrid/fusion.h) "
                  "or background (eq. 2 as written)")
       ->check(CLI::IsMember({"unobserved", "background"}))->capture_default_str();
+  sub.add_flag("--occlusion-test", h.occlusion_test,
+               "Observation Fusion counts a view only where the Gaussian is not hidden behind the surface the "
+               "model renders there (one extra render per view at each table rebuild; see hybrid/fusion.h)");
   sub.add_option("--bro-gradient", a->bro_gradient,
                  "scale-invariant (BRO cannot fade a whole object; see hybrid/bro.h) or plain (eq. 14's own gradient)")
       ->check(CLI::IsMember({"scale-invariant", "plain"}))->capture_default_str();

@@ -2,8 +2,33 @@
 
 #include "core/error.h"
 #include "hybrid/assign.h"
+#include "model/render_inputs.h"
+#include "render/renderer.h"
 
 namespace hgs::hybrid {
+
+void hide_occluded_all(const GaussianModel& m, const std::vector<MaskView>& views, ObservationTable& table) {
+  render::GaussianRenderer r;
+  render::GaussianInputs in = render_inputs(m);
+  in.sh_degree = 0;  // colours do not matter here
+  render::RenderSettings rs;
+  rs.want_depth = true;
+  render::RenderOutputs out;
+  std::vector<float> surface;
+  for (size_t u = 0; u < views.size(); ++u) {
+    const MaskView& v = views[u];
+    render::Camera cam;
+    cam.width = v.width;
+    cam.height = v.height;
+    cam.fx = float(v.fx); cam.fy = float(v.fy); cam.cx = float(v.cx); cam.cy = float(v.cy);
+    for (int k = 0; k < 9; ++k) cam.R[k] = float(v.R[k]);
+    for (int k = 0; k < 3; ++k) cam.t[k] = float(v.t[k]);
+    r.forward(cam, in, rs, out);
+    surface.resize(out.alpha.size());
+    for (size_t p = 0; p < surface.size(); ++p) surface[p] = out.alpha[p] > 0.5f ? out.depth[p] / out.alpha[p] : 0.f;
+    hide_occluded(m.mean.data(), m.n, v, surface.data(), int(u), table);
+  }
+}
 
 ObjectAssociation::ObjectAssociation(const HybridConfig& cfg, const std::vector<MaskView>* masks, int num_labels)
     : cfg_(cfg), masks_(masks), L_(num_labels) {
@@ -32,6 +57,7 @@ const std::vector<float>& ObjectAssociation::weights() const {
 
 void ObjectAssociation::refresh(GaussianModel& m, HybridFields& h) {
   observe(m.mean.data(), m.n, *masks_, table_);
+  if (cfg_.occlusion_test) hide_occluded_all(m, *masks_, table_);
   if (cfg_.use_of) fuse(m.n, h);
   else single_view_assignment(table_, L_, h.q->data.data());
   update_hard_ids(m.n, h);

@@ -14,6 +14,11 @@
 
 namespace hgs::hybrid {
 
+// The occlusion test of Observation Fusion for every view (fusion.h, hide_occluded): renders the model's depth
+// in each view (surface depth = expected depth / alpha where alpha > 0.5) and marks hidden Gaussians' entries of
+// `table` as no observation. Costs one render per training view.
+void hide_occluded_all(const GaussianModel& m, const std::vector<MaskView>& views, ObservationTable& table);
+
 class ObjectAssociation {
  public:
   static constexpr const char* kLogits = "view_logits";

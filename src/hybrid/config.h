@@ -17,6 +17,10 @@ struct HybridConfig {
   // (fusion.h); false = eq. 2 as written (every unconfident pixel is background evidence). The masks of eqs. 6
   // and 14 keep M_{u,0} = 1 - OR_k M_{u,k} either way.
   bool unconfident_unobserved = true;
+  // Observation Fusion counts a view only where the Gaussian's centre is visible (not behind the surface the
+  // current model renders there; fusion.h). Off by default: on a room scene it moved some objects' Gaussians
+  // towards their label and others away (docs/results.md); false = eq. 3's V (positive depth, in the image).
+  bool occlusion_test = false;
   // T of eq. 5. s_{n,k} is a (weighted) fraction of views, so q_k / q_j = exp((s_k - s_j) / T): at T = 0.1 a label
   // that wins by 20 % of the views still leaves q_k ~ 0.88 and, under heavy mask noise, objects render below
   // the 0.5 mask threshold. 0.05 measured better on three scenes of both presets (docs/results.md).

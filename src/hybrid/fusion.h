@@ -10,6 +10,10 @@
 //             unconfident pixel into background evidence, and SAM2's confidence is lowest on object rims and on
 //             small objects, so under noise the background out-votes the object for many of its own Gaussians
 //             (docs/results.md, "Observation Fusion under noise"); an unconfident pixel says nothing about either.
+//             Option (HybridConfig::occlusion_test, off by default): V_{n,u} also requires the centre to be
+//             visible, not more than kOcclusionTolerance behind the surface the view sees at p_{n,u} (the
+//             current model's rendered depth; hide_occluded). Eq. 3 projects a hidden Gaussian onto its
+//             occluder, whose label (often background) then votes for it.
 // fuse():     w = softmax(view logits) ("learnable normalised reliability"),
 //             s_{n,k} = sum_u w_u V_{n,u} M_{u,k}(p_{n,u}) / (sum_u w_u V_{n,u} + eps)        (eq. 4)
 //             q_n = softmax(s_n / T), z_n = argmax_k q_{n,k}                                  (eq. 5)
@@ -41,6 +45,10 @@ struct MaskView {
   std::vector<uint8_t> observed;  // [H, W] 0 where the pixel is no observation (V = 0); empty = every pixel
 };
 
+// Occlusion test (hide_occluded): a Gaussian whose centre lies more than this fraction behind the surface at its
+// projected pixel is hidden in that view (no observation).
+constexpr double kOcclusionTolerance = 0.05;
+
 // labels[k] = 0 wherever confidence < tau1 (conf may be empty: no filtering). [H, W]
 void apply_confidence(LabelMap& labels, const std::vector<float>& conf, float tau1);
 // observed[p] = conf[p] >= tau1 ([H, W]; empty when conf is empty).
@@ -53,6 +61,10 @@ struct ObservationTable {
 
 // means [N, 3]
 void observe(const float* means, int n, const std::vector<MaskView>& views, ObservationTable& table);
+// Marks view u's observations of Gaussians hidden behind the surface as none. surface_depth [H, W] (0 = no
+// surface: no test there).
+void hide_occluded(const float* means, int n, const MaskView& view, const float* surface_depth, int u,
+                   ObservationTable& table);
 
 template <class T>
 void softmax(const T* x, int n, T* y) {

@@ -165,6 +165,29 @@ TEST(ObservationFusion, UnconfidentPixelsAreNoObservationNotBackground) {
   EXPECT_EQ(confident_pixels({}, 0.5f).size(), 0u);
 }
 
+TEST(ObservationFusion, HiddenGaussiansAreNoObservation) {
+  // A camera at the origin looking down +z sees a surface at depth 2 on the left half of a 10x10 image and
+  // nothing on the right. Gaussians: in front of the surface, just behind it (within the 5 % tolerance), well
+  // behind it, and behind nothing.
+  MaskView v;
+  v.width = v.height = 10;
+  v.fx = v.fy = 10;
+  v.cx = v.cy = 5;
+  v.labels = LabelMap(10, 10, 1);
+  std::vector<float> depth(100, 0.f);
+  for (int y = 0; y < 10; ++y)
+    for (int x = 0; x < 5; ++x) depth[y * 10 + x] = 2.f;
+  const float means[] = {-0.2f, 0.f, 1.f, -0.4f, 0.f, 2.08f, -0.6f, 0.f, 3.f, 0.6f, 0.f, 3.f};
+  ObservationTable tab;
+  observe(means, 4, {v}, tab);
+  for (int i = 0; i < 4; ++i) ASSERT_EQ(tab.label[i], 1) << i;
+  hide_occluded(means, 4, v, depth.data(), 0, tab);
+  EXPECT_EQ(tab.label[0], 1);
+  EXPECT_EQ(tab.label[1], 1);
+  EXPECT_EQ(tab.label[2], kNoObservation);
+  EXPECT_EQ(tab.label[3], 1);
+}
+
 TEST(ObjectChannels, GradientToQAndColour) {
   std::mt19937 rng(2);
   const int N = 7, L = 5, J = 3;

@@ -2,7 +2,8 @@
 // is K in a trained model, the mean of s_{n,l} (eq. 4 with uniform view weights) over every label l, and how
 // many of them each label would win (argmax), from the scene's masks filtered at TAU1 (`background`: eq. 2 as
 // written, pixels below TAU1 are background; `unobserved`: they are no observation), or from the exact
-// ground-truth masks (gt/instances) with `exact`.
+// ground-truth masks (gt/instances) with `exact`; `+visible` (e.g. unobserved+visible) adds the occlusion test
+// (a view counts only where the Gaussian is not behind the surface the model renders there).
 //
 //   diag_fused_evidence SCENE MODEL_DIR K [TAU1] [background|unobserved|exact]
 #include <cstdio>
@@ -10,6 +11,7 @@
 #include <string>
 #include "hybrid/data.h"
 #include "eval/instances.h"
+#include "hybrid/association.h"
 #include "hybrid/fusion.h"
 #include "model/ply.h"
 #include "object_stats.h"
@@ -17,7 +19,7 @@
 using namespace hgs;
 int main(int argc, char** argv) try {
   if (argc < 4) {
-    std::fprintf(stderr, "usage: diag_fused_evidence SCENE MODEL_DIR K [TAU1] [background|unobserved|exact]\n");
+    std::fprintf(stderr, "usage: diag_fused_evidence SCENE MODEL_DIR K [TAU1] [background|unobserved|exact][+visible]\n");
     return 2;
   }
   Scene sc = load_scene(argv[1]);
@@ -26,9 +28,11 @@ int main(int argc, char** argv) try {
   float tau1 = argc > 4 ? atof(argv[4]) : 0.5f;
   hybrid::HybridConfig hc; hc.tau1 = tau1;
   auto idx = sc.train_indices();
-  const std::string mode = argc > 5 ? argv[5] : "background";
+  std::string mode = argc > 5 ? argv[5] : "background";
+  bool visible = false;
+  if (mode.size() > 8 && mode.substr(mode.size() - 8) == "+visible") visible = true, mode.resize(mode.size() - 8);
   if (mode != "background" && mode != "unobserved" && mode != "exact")
-    throw std::runtime_error("the 5th argument must be background, unobserved or exact");
+    throw std::runtime_error("the 5th argument must be background, unobserved or exact (each optionally +visible)");
   hc.unconfident_unobserved = mode == "unobserved";
   auto data = hybrid::load_hybrid_data(sc, idx, hc, false);
   if (mode == "exact") {
@@ -37,6 +41,7 @@ int main(int argc, char** argv) try {
   }
   hybrid::ObservationTable tab;
   hybrid::observe(m.mean.data(), m.n, data.masks, tab);
+  if (visible) hybrid::hide_occluded_all(m, data.masks, tab);
   int L = data.num_labels, U = tab.num_views;
   const ExtraGroup* z = m.find_extra("obj_id");
   if (!z) throw std::runtime_error(std::string(argv[2]) + ": not a hybrid model (no obj_id)");
