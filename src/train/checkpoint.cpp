@@ -141,14 +141,16 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
     m.resize(h.at("n").get<int>());
     for (auto& e : h.at("extras"))
       m.add_extra(e.at("name").get<std::string>(), e.at("dim").get<int>(), 0.f, e.value("f16", false));
-    if (h.value("method", std::string("rgb")) != method_->name())
-      fail("{}: the checkpoint was trained with the {} method, not {}", where, h.value("method", std::string("rgb")),
-           method_->name());
+    // (Checkpoints written before the method registry carry no name: a method configuration means hybrid.)
+    const std::string trained = h.value("method", std::string(h.contains("method_config") ? "hybrid" : "rgb"));
+    if (trained != method_->name())
+      fail("{}: the checkpoint was trained with the {} method, not {}", where, trained, method_->name());
     // The optimiser's parameters are read into copies of the registered ones (same names, same kind), so that
     // their value bindings stay; per-Gaussian ones are sized by the checkpoint's Gaussian count.
     const json& hp = h.at("adam").at("params");
     if (hp.size() != adam_.params.size())
-      fail("{}: the checkpoint holds {} optimiser parameters, this trainer has {}", where, hp.size(), adam_.params.size());
+      fail("{}: the checkpoint holds {} optimiser parameters, this trainer has {} (written by another hgs version?)",
+           where, hp.size(), adam_.params.size());
     std::deque<AdamParam> a;
     std::map<std::string, std::vector<float>> values;  // param/<name> of array parameters
     for (size_t i = 0; i < hp.size(); ++i) {
