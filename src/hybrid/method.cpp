@@ -68,7 +68,8 @@ void HybridMethod::prepare(train::StepContext& c) {
   if (cfg_.use_of) assoc_.fuse(n, fields_);
   dq_.resize(size_t(n) * L);
   parallel_fill(dq_, 0.f);
-  // Object channels from the renderer's SH colours of this view (0 for culled Gaussians) (+ the full semantic render for the no-SCL ablation).
+  // Object channels from the renderer's SH colours of this view (0 for culled Gaussians), plus f for the no-SCL
+  // ablation's full semantic render.
   objects_ = data_.views[u].present;
   const std::vector<int>& anchors = semantic_.anchors_of(u);
   const int J = static_cast<int>(objects_.size());
