@@ -16,20 +16,37 @@ std::vector<uint8_t> confident_pixels(const std::vector<float>& conf, float tau1
   return ok;
 }
 
+namespace {
+
+// Eq. 3 for one centre in one view: camera-space depth z and, when z > 0 and the projection lies in the image,
+// the pixel (ix, iy). Returns false otherwise (V_{n,u} = 0). Shared by observe() and hide_occluded(), which must
+// agree on the pixel.
+inline bool project_centre(const MaskView& v, const float* c, double& z, int& ix, int& iy) {
+  const double X = c[0], Y = c[1], Z = c[2];
+  const double* R = v.R;
+  z = R[6] * X + R[7] * Y + R[8] * Z + v.t[2];
+  if (!(z > 0)) return false;
+  const double x = R[0] * X + R[1] * Y + R[2] * Z + v.t[0];
+  const double y = R[3] * X + R[4] * Y + R[5] * Z + v.t[1];
+  const double px = v.fx * x / z + v.cx, py = v.fy * y / z + v.cy;
+  if (!(px >= 0 && py >= 0 && px < v.width && py < v.height)) return false;
+  ix = static_cast<int>(px);
+  iy = static_cast<int>(py);
+  return true;
+}
+
+}  // namespace
+
 void hide_occluded(const float* means, int n, const MaskView& v, const float* surface_depth, int u,
                    ObservationTable& table) {
   const int U = table.num_views;
-  const double* R = v.R;
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
     uint16_t& l = table.label[size_t(i) * U + u];
-    if (l == kNoObservation) continue;
-    const double X = means[3 * i], Y = means[3 * i + 1], Z = means[3 * i + 2];
-    const double z = R[6] * X + R[7] * Y + R[8] * Z + v.t[2];
-    const double x = R[0] * X + R[1] * Y + R[2] * Z + v.t[0];
-    const double y = R[3] * X + R[4] * Y + R[5] * Z + v.t[1];
-    const int ix = static_cast<int>(v.fx * x / z + v.cx), iy = static_cast<int>(v.fy * y / z + v.cy);
-    const float d = surface_depth[size_t(iy) * v.width + ix];  // in the image: observe() recorded a label
+    double z;
+    int ix, iy;
+    if (l == kNoObservation || !project_centre(v, means + 3 * i, z, ix, iy)) continue;
+    const float d = surface_depth[size_t(iy) * v.width + ix];
     if (d > 0 && z > d * (1 + kOcclusionTolerance)) l = kNoObservation;
   }
 }
@@ -41,17 +58,11 @@ void observe(const float* means, int n, const std::vector<MaskView>& views, Obse
   table.label.assign(size_t(n) * U, kNoObservation);
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
-    const double X = means[3 * i], Y = means[3 * i + 1], Z = means[3 * i + 2];
     for (int u = 0; u < U; ++u) {
       const MaskView& v = views[u];
-      const double* R = v.R;
-      const double z = R[6] * X + R[7] * Y + R[8] * Z + v.t[2];
-      if (!(z > 0)) continue;
-      const double x = R[0] * X + R[1] * Y + R[2] * Z + v.t[0];
-      const double y = R[3] * X + R[4] * Y + R[5] * Z + v.t[1];
-      const double px = v.fx * x / z + v.cx, py = v.fy * y / z + v.cy;
-      if (!(px >= 0 && py >= 0 && px < v.width && py < v.height)) continue;
-      const int ix = static_cast<int>(px), iy = static_cast<int>(py);
+      double z;
+      int ix, iy;
+      if (!project_centre(v, means + 3 * i, z, ix, iy)) continue;
       if (!v.observed.empty() && !v.observed[size_t(iy) * v.width + ix]) continue;
       table.label[size_t(i) * U + u] = v.labels.at(ix, iy);
     }
