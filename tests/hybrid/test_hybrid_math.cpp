@@ -44,6 +44,17 @@ std::vector<double> randv(size_t n, std::mt19937& rng, double lo = -1, double hi
   return v;
 }
 
+// A camera at the origin looking down +z (identity pose): 10x10 image, f = 10, principal point (5, 5), every
+// pixel labelled `label`.
+MaskView pinhole_view(uint16_t label) {
+  MaskView v;
+  v.width = v.height = 10;
+  v.fx = v.fy = 10;
+  v.cx = v.cy = 5;
+  v.labels = LabelMap(10, 10, label);
+  return v;
+}
+
 }  // namespace
 
 TEST(ObservationFusion, GradientToViewLogits) {
@@ -81,12 +92,7 @@ TEST(ObservationFusion, GradientToViewLogits) {
 TEST(ObservationFusion, HandMadeCases) {
   // One camera at the origin looking down +z, 10x10 image, left half labelled 1, right half 2;
   // a second identical camera whose mask says 0 everywhere.
-  MaskView v;
-  v.width = 10;
-  v.height = 10;
-  v.fx = v.fy = 10;
-  v.cx = v.cy = 5;
-  v.labels = LabelMap(10, 10);
+  MaskView v = pinhole_view(0);
   for (int y = 0; y < 10; ++y)
     for (int x = 0; x < 10; ++x) v.labels.at(x, y) = x < 5 ? 1 : 2;
   MaskView bg = v;
@@ -132,11 +138,7 @@ TEST(ObservationFusion, UnconfidentPixelsAreNoObservationNotBackground) {
   // Three identical cameras see one object (label 1) over the whole 10x10 image. In two of them the pixel under
   // the Gaussian has confidence below tau1 (a rim pixel of SAM2's mask). Eq. 2 as written makes those pixels
   // background, so the background wins 2:1; as no observation, the one confident view decides.
-  MaskView v;
-  v.width = v.height = 10;
-  v.fx = v.fy = 10;
-  v.cx = v.cy = 5;
-  v.labels = LabelMap(10, 10, 1);
+  MaskView v = pinhole_view(1);
   std::vector<float> conf(100, 0.9f);
   std::vector<float> rim = conf;
   rim[5 * 10 + 5] = 0.3f;  // the pixel (5, 5) the Gaussian projects to
@@ -169,11 +171,7 @@ TEST(ObservationFusion, HiddenGaussiansAreNoObservation) {
   // A camera at the origin looking down +z sees a surface at depth 2 on the left half of a 10x10 image and
   // nothing on the right. Gaussians: in front of the surface, just behind it (within the 5 % tolerance), well
   // behind it, and behind nothing.
-  MaskView v;
-  v.width = v.height = 10;
-  v.fx = v.fy = 10;
-  v.cx = v.cy = 5;
-  v.labels = LabelMap(10, 10, 1);
+  MaskView v = pinhole_view(1);
   std::vector<float> depth(100, 0.f);
   for (int y = 0; y < 10; ++y)
     for (int x = 0; x < 5; ++x) depth[y * 10 + x] = 2.f;
