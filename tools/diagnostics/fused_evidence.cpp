@@ -5,7 +5,7 @@
 // ground-truth masks (gt/instances) with `exact`; `+visible` (e.g. unobserved+visible) adds the occlusion test
 // (a view counts only where the Gaussian is not behind the surface the model renders there).
 //
-//   diag_fused_evidence SCENE MODEL_DIR K [TAU1] [background|unobserved|exact]
+//   diag_fused_evidence SCENE MODEL_DIR K|@x,y,z,r [TAU1] [background|unobserved|exact][+visible]
 #include <cstdio>
 #include <stdexcept>
 #include <string>
@@ -24,7 +24,15 @@ int main(int argc, char** argv) try {
   }
   Scene sc = load_scene(argv[1]);
   GaussianModel m = read_model_ply(std::string(argv[2]) + "/point_cloud.ply");
-  int k = atoi(argv[3]);
+  // K may also be @x,y,z,r: the Gaussians whose centre lies within r of (x, y, z), whatever their hard id.
+  int k = -1;
+  double sel[4] = {0, 0, 0, -1};
+  if (argv[3][0] == '@') {
+    if (std::sscanf(argv[3] + 1, "%lf,%lf,%lf,%lf", &sel[0], &sel[1], &sel[2], &sel[3]) != 4)
+      throw std::runtime_error("K must be an id or @x,y,z,r");
+  } else {
+    k = atoi(argv[3]);
+  }
   float tau1 = argc > 4 ? atof(argv[4]) : 0.5f;
   hybrid::HybridConfig hc; hc.tau1 = tau1;
   auto idx = sc.train_indices();
@@ -47,7 +55,13 @@ int main(int argc, char** argv) try {
   if (!z) throw std::runtime_error(std::string(argv[2]) + ": not a hybrid model (no obj_id)");
   std::vector<double> s(L, 0); int cnt = 0; std::vector<int> win(L, 0); double nv = 0;
   for (int i = 0; i < m.n; ++i) {
-    if (int(z->data[i]) != k) continue;
+    if (sel[3] > 0) {
+      const float* c = &m.mean[size_t(i) * 3];
+      const double dx = c[0] - sel[0], dy = c[1] - sel[1], dz = c[2] - sel[2];
+      if (dx * dx + dy * dy + dz * dz > sel[3] * sel[3]) continue;
+    } else if (int(z->data[i]) != k) {
+      continue;
+    }
     std::vector<double> si(L, 0); double den = 0;
     for (int u = 0; u < U; ++u) { auto l = tab.label[size_t(i) * U + u]; if (l == hybrid::kNoObservation) continue; den++; si[l]++; }
     if (den == 0) continue;
