@@ -190,9 +190,6 @@ CommandRegistration reg({"train", "Optimise Hybrid Gaussians (or plain 3DGS with
   sub.add_flag("--occlusion-test", h.occlusion_test,
                "Observation Fusion counts a view only where the Gaussian is not hidden behind the surface the "
                "model renders there (one extra render per view at each table rebuild; see hybrid/fusion.h)");
-  sub.add_flag("--noise-model", h.noise_model,
-               "Observation Fusion weighs each observed label by a mask-noise model estimated from the observations "
-               "(Dawid-Skene EM; see hybrid/fusion.h) instead of one vote per view (eq. 4)");
   sub.add_option("--bro-gradient", a->bro_gradient,
                  "scale-invariant (BRO cannot fade a whole object; see hybrid/bro.h) or plain (eq. 14's own gradient)")
       ->check(CLI::IsMember({"scale-invariant", "plain"}))->capture_default_str();

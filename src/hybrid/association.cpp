@@ -46,7 +46,7 @@ void ObjectAssociation::fuse(int n, HybridFields& h) {
   s_.resize(size_t(n) * L_);
   valid_.resize(n);
   softmax(logits_.data(), int(logits_.size()), w_.data());
-  FusionParams p{L_, cfg_.temperature, cfg_.fusion_eps, evidence_.empty() ? nullptr : evidence_.data()};
+  FusionParams p{L_, cfg_.temperature, cfg_.fusion_eps};
   hybrid::fuse(table_, w_.data(), p, h.q->data.data(), s_.data(), valid_.data());
 }
 
@@ -58,7 +58,6 @@ const std::vector<float>& ObjectAssociation::weights() const {
 void ObjectAssociation::refresh(GaussianModel& m, HybridFields& h) {
   observe(m.mean.data(), m.n, *masks_, table_);
   if (cfg_.occlusion_test) hide_occluded_all(m, *masks_, table_);
-  update_evidence();
   if (cfg_.use_of) fuse(m.n, h);
   else single_view_assignment(table_, L_, h.q->data.data());
   update_hard_ids(m.n, h);
@@ -78,7 +77,7 @@ void ObjectAssociation::update_hard_ids(int n, HybridFields& h) const {
 void ObjectAssociation::backward_and_update(int n, const HybridFields& h, const float* dq, train::Adam& optim) {
   if (!cfg_.use_of) return;
   const int U = static_cast<int>(logits_.size());
-  FusionParams p{L_, cfg_.temperature, cfg_.fusion_eps, evidence_.empty() ? nullptr : evidence_.data()};
+  FusionParams p{L_, cfg_.temperature, cfg_.fusion_eps};
   dw_.resize(U);
   dlogits_.resize(U);
   fuse_backward(table_, w_.data(), p, s_.data(), h.q->data.data(), valid_.data(), dq, dw_.data());
@@ -90,12 +89,6 @@ void ObjectAssociation::restore_table(int n, std::vector<uint16_t> labels) {
   table_.n = n;
   table_.num_views = int(logits_.size());
   table_.label = std::move(labels);
-  update_evidence();
-}
-
-void ObjectAssociation::update_evidence() {
-  if (cfg_.use_of && cfg_.noise_model) evidence_ = label_evidence(table_, L_);
-  else evidence_.clear();
 }
 
 }  // namespace hgs::hybrid

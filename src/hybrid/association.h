@@ -44,13 +44,10 @@ class ObjectAssociation {
   void restore_table(int n, std::vector<uint16_t> labels);
 
  private:
-  void update_evidence();  // evidence_ from table_
-
   HybridConfig cfg_;
   const std::vector<MaskView>* masks_;
   int L_;
   ObservationTable table_;
-  std::vector<float> evidence_;  // [L, L] label_evidence() of table_ (HybridConfig::noise_model), else empty
   std::vector<float> logits_, dw_, dlogits_;  // [U]
   mutable std::vector<float> w_;              // [U] softmax(logits_)
   std::vector<float> s_;                          // [N, L]

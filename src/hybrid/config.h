@@ -21,10 +21,6 @@ struct HybridConfig {
   // current model renders there; fusion.h). Off by default: on a room scene it moved some objects' Gaussians
   // towards their label and others away (docs/results.md); false = eq. 3's V (positive depth, in the image).
   bool occlusion_test = false;
-  // Observation Fusion weighs each observed label by a mask-noise model estimated from the table (Dawid-Skene EM,
-  // fusion.h, label_evidence) instead of eq. 4's one vote per view. Off by default: it recovers small objects
-  // that erosion and misses hand to the background, but also gives them background Gaussians (docs/results.md).
-  bool noise_model = false;
   // T of eq. 5. s_{n,k} is a (weighted) fraction of views, so q_k / q_j = exp((s_k - s_j) / T): at T = 0.1 a label
   // that wins by 20 % of the views still leaves q_k ~ 0.88 and, under heavy mask noise, objects render below
   // the 0.5 mask threshold. 0.05 measured better on three scenes of both presets (docs/results.md).

@@ -1,6 +1,5 @@
 #include "hybrid/fusion.h"
 
-#include <algorithm>
 #include <cmath>
 
 namespace hgs::hybrid {
@@ -68,79 +67,6 @@ void observe(const float* means, int n, const std::vector<MaskView>& views, Obse
       table.label[size_t(i) * U + u] = v.labels.at(ix, iy);
     }
   }
-}
-
-std::vector<float> label_evidence(const ObservationTable& tab, int L, int iters, double floor) {
-  // Per Gaussian, the count of each observed label (sparse: a Gaussian is seen with few labels).
-  std::vector<int> start(size_t(tab.n) + 1, 0);
-  std::vector<std::pair<uint16_t, float>> obs;
-  {
-    std::vector<float> c(L, 0.f);
-    for (int n = 0; n < tab.n; ++n) {
-      const uint16_t* lab = &tab.label[size_t(n) * tab.num_views];
-      for (int u = 0; u < tab.num_views; ++u)
-        if (lab[u] < L) c[lab[u]] += 1.f;
-      for (int j = 0; j < L; ++j)
-        if (c[j] > 0) obs.push_back({uint16_t(j), c[j]}), c[j] = 0.f;
-      start[n + 1] = int(obs.size());
-    }
-  }
-  // EM over the Gaussians' unknown labels. post [N, L]; start from the uniform-weight vote of eq. 4.
-  std::vector<double> post(size_t(tab.n) * L, 0.0), theta(size_t(L) * L), prior(L);
-  for (int n = 0; n < tab.n; ++n) {
-    double tot = 0;
-    for (int i = start[n]; i < start[n + 1]; ++i) tot += obs[i].second;
-    for (int i = start[n]; i < start[n + 1]; ++i) post[size_t(n) * L + obs[i].first] = obs[i].second / tot;
-  }
-  const double smooth = 1e-2;  // pseudo-count per (k, j): keeps log theta finite for labels never seen together
-  for (int it = 0; it <= iters; ++it) {
-    // M-step: theta[k][j] from the posterior-weighted counts, prior[k] from the posterior mass.
-    std::fill(theta.begin(), theta.end(), smooth);
-    std::fill(prior.begin(), prior.end(), smooth);
-    for (int n = 0; n < tab.n; ++n) {
-      const double* pn = &post[size_t(n) * L];
-      for (int k = 0; k < L; ++k) {
-        if (pn[k] < 1e-9) continue;
-        prior[k] += pn[k];
-        for (int i = start[n]; i < start[n + 1]; ++i) theta[size_t(k) * L + obs[i].first] += pn[k] * obs[i].second;
-      }
-    }
-    double ptot = 0;
-    for (int k = 0; k < L; ++k) ptot += prior[k];
-    for (int k = 0; k < L; ++k) {
-      double row = 0;
-      for (int j = 0; j < L; ++j) row += theta[size_t(k) * L + j];
-      for (int j = 0; j < L; ++j) theta[size_t(k) * L + j] = std::log(theta[size_t(k) * L + j] / row);
-      prior[k] = std::log(prior[k] / ptot);
-    }
-    if (it == iters) break;
-    // E-step: post[n][k] proportional to pi_k prod_u theta[k][obs_u].
-#pragma omp parallel for schedule(static)
-    for (int n = 0; n < tab.n; ++n) {
-      if (start[n] == start[n + 1]) continue;
-      double* pn = &post[size_t(n) * L];
-      double mx = -1e300;
-      for (int k = 0; k < L; ++k) {
-        double s = prior[k];
-        for (int i = start[n]; i < start[n + 1]; ++i) s += obs[i].second * theta[size_t(k) * L + obs[i].first];
-        pn[k] = s;
-        mx = std::max(mx, s);
-      }
-      double tot = 0;
-      for (int k = 0; k < L; ++k) tot += (pn[k] = std::exp(pn[k] - mx));
-      for (int k = 0; k < L; ++k) pn[k] /= tot;
-    }
-  }
-  // Vote table: per observed label j, the log-likelihood of each true label relative to the best one.
-  const double lf = std::log(floor);
-  std::vector<float> ev(size_t(L) * L);
-  for (int j = 0; j < L; ++j) {
-    double mx = -1e300;
-    for (int k = 0; k < L; ++k) mx = std::max(mx, theta[size_t(k) * L + j]);
-    for (int k = 0; k < L; ++k)
-      ev[size_t(j) * L + k] = float(1.0 + std::max(theta[size_t(k) * L + j] - mx, lf) / -lf);
-  }
-  return ev;
 }
 
 }  // namespace hgs::hybrid

@@ -27,7 +27,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
-#include <limits>
 #include <vector>
 
 #include "core/image.h"
@@ -88,22 +87,7 @@ struct FusionParams {
   int num_labels = 2;     // K + 1
   double temperature = 0.1;  // T of eq. 5
   double eps = 1e-6;      // epsilon of eq. 4
-  // [L, L] or nullptr. nullptr is eq. 4: an observation of label j votes 1 for j and 0 for every other label.
-  // Otherwise it votes evidence[j * L + k] for label k (label_evidence(): the mask-noise model).
-  const float* evidence = nullptr;
 };
-
-// Mask-noise model (HybridConfig::noise_model, an extension of eq. 4; Dawid & Skene 1979, one confusion matrix
-// shared by all views): theta[k][j] = P(a view's mask says j | the Gaussian belongs to k), estimated from the
-// table by EM over the Gaussians' unknown labels (prior pi_k, posterior per Gaussian, `iters` rounds, started from
-// eq. 4's uniform-weight vote). Returns the vote table for FusionParams::evidence:
-//   evidence[j][k] = 1 + max(log theta[k][j] - max_k' log theta[k'][j], log floor) / -log floor,
-// so that argmax_k sum_u evidence[obs_u][k] is the maximum-likelihood label under the model (up to the floor),
-// an observation votes 1 for the label it supports most, and exact masks (theta diagonal) give eq. 4 back.
-// Why: eq. 4 counts every view equally whatever it says, but SAM/SAM2 masks miss small objects (erosion, missed
-// detections) far more often than they paint an object onto the background; a "background" vote on a small
-// object's Gaussian is weak evidence, a vote for the object is strong. [L * L]
-std::vector<float> label_evidence(const ObservationTable& tab, int num_labels, int iters = 10, double floor = 1e-3);
 
 // w [U] (already softmax-normalised), q [N, K+1] in/out (kept where no view is valid), s [N, K+1] out,
 // valid [N] out (1 if some view observed the Gaussian).
@@ -123,18 +107,6 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
     }
     valid[n] = den > 0;
     if (!valid[n]) continue;
-    if (p.evidence) {  // sn holds the weight per observed label; spread each over the labels it supports
-      T obs[256];
-      std::vector<T> big_obs;
-      T* o = L <= 256 ? obs : (big_obs.resize(L), big_obs.data());
-      std::copy(sn, sn + L, o);
-      std::fill(sn, sn + L, T(0));
-      for (int j = 0; j < L; ++j) {
-        if (o[j] == T(0)) continue;
-        const float* e = p.evidence + size_t(j) * L;
-        for (int k = 0; k < L; ++k) sn[k] += o[j] * T(e[k]);
-      }
-    }
     const T inv = T(1) / (den + T(p.eps));
     T logits[256];
     T* lg = L <= 256 ? logits : nullptr;
@@ -160,7 +132,7 @@ void fuse_backward(const ObservationTable& tab, const T* w, const FusionParams& 
   {
     std::vector<T>& dw_local = partial[omp_get_thread_num()];
     dw_local.assign(U, T(0));
-    std::vector<T> ds(L), ev(p.evidence ? L : 0);
+    std::vector<T> ds(L);
 #pragma omp for schedule(static)
     for (int n = 0; n < tab.n; ++n) {
       if (!valid[n]) continue;
@@ -178,25 +150,10 @@ void fuse_backward(const ObservationTable& tab, const T* w, const FusionParams& 
         ds[k] /= T(p.temperature);
         sum_ds_s += ds[k] * sn[k];
       }
-      // With an evidence table, d s_k / d w_u = V_u (evidence[label_u][k] - s_k) / (den + eps); ev[j] caches
-      // sum_k ds_k evidence[j][k] for the labels this Gaussian was seen with (NaN = not yet computed).
-      if (p.evidence) std::fill(ev.begin(), ev.end(), std::numeric_limits<T>::quiet_NaN());
       for (int u = 0; u < U; ++u) {
         if (lab[u] == kNoObservation) continue;
         T g = -sum_ds_s;
-        if (lab[u] < L) {
-          if (!p.evidence) {
-            g += ds[lab[u]];
-          } else {
-            T& t = ev[lab[u]];
-            if (std::isnan(t)) {
-              t = 0;
-              const float* e = p.evidence + size_t(lab[u]) * L;
-              for (int k = 0; k < L; ++k) t += ds[k] * T(e[k]);
-            }
-            g += t;
-          }
-        }
+        if (lab[u] < L) g += ds[lab[u]];
         dw_local[u] += g * inv;
       }
     }

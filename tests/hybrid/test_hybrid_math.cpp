@@ -57,9 +57,7 @@ MaskView pinhole_view(uint16_t label) {
 
 }  // namespace
 
-class ObservationFusionGradient : public ::testing::TestWithParam<bool> {};
-
-TEST_P(ObservationFusionGradient, ToViewLogits) {
+TEST(ObservationFusion, GradientToViewLogits) {
   std::mt19937 rng(1);
   const int N = 30, U = 6, L = 4;
   ObservationTable tab;
@@ -68,10 +66,7 @@ TEST_P(ObservationFusionGradient, ToViewLogits) {
   tab.label.resize(N * U);
   for (auto& l : tab.label) l = rng() % 5 == 0 ? kNoObservation : uint16_t(rng() % L);
   for (int u = 0; u < U; ++u) tab.label[u] = kNoObservation;  // Gaussian 0 has no valid view
-  // With the parameter: a mask-noise vote table (fusion.h, FusionParams::evidence) in [0, 1] instead of eq. 4's.
-  std::vector<float> evidence(L * L);
-  for (auto& e : evidence) e = float(rng() % 1000) / 1000.f;
-  FusionParams p{L, 0.3, 1e-6, GetParam() ? evidence.data() : nullptr};
+  FusionParams p{L, 0.3, 1e-6};
   std::vector<double> logits = randv(U, rng), dq = randv(N * L, rng), q0(N * L, 0.25);
   auto loss = [&](std::vector<double>* q_out, std::vector<double>* s_out, std::vector<uint8_t>* valid_out) {
     std::vector<double> w(U), q = q0, s(N * L);
@@ -92,58 +87,6 @@ TEST_P(ObservationFusionGradient, ToViewLogits) {
   fuse_backward(tab, w.data(), p, s.data(), q.data(), valid.data(), dq.data(), dw.data());
   softmax_backward(w.data(), dw.data(), U, dlogits.data());
   check_grad(logits, [&] { return loss(nullptr, nullptr, nullptr); }, dlogits);
-}
-
-INSTANTIATE_TEST_SUITE_P(VoteTable, ObservationFusionGradient, ::testing::Values(false, true),
-                         [](const auto& info) { return info.param ? "NoiseModel" : "Eq4"; });
-
-TEST(ObservationFusion, NoiseModelKeepsASmallObjectTheMasksOftenMiss) {
-  // 400 background Gaussians and 40 of a small object (label 1) seen in 10 views. The masks miss the object in
-  // 6 of 10 views (background there) and paint it onto 1 view of 20 % of the background Gaussians (its rim).
-  // Eq. 4 hands the object to the background 6:4; the noise model learns that a background vote on this object
-  // is weak evidence and a vote for it strong, keeps the object and leaves the rim background (1 vote in 10).
-  // With exact masks the vote table is the identity (eq. 4).
-  const int Nb = 400, No = 40, N = Nb + No, U = 10, L = 2;
-  ObservationTable tab, exact;
-  tab.n = exact.n = N;
-  tab.num_views = exact.num_views = U;
-  tab.label.assign(size_t(N) * U, 0);
-  exact.label.assign(size_t(N) * U, 0);
-  std::mt19937 rng(3);
-  for (int n = 0; n < N; ++n) {
-    const bool obj = n >= Nb;
-    for (int u = 0; u < U; ++u) {
-      exact.label[size_t(n) * U + u] = obj;
-      if (obj) tab.label[size_t(n) * U + u] = (u + n) % 10 < 4;  // 4 views of 10 say "object"
-    }
-    if (!obj && n % 5 == 0) tab.label[size_t(n) * U + rng() % U] = 1;  // the rim: one view says "object"
-  }
-  const std::vector<float> ident = label_evidence(exact, L);
-  EXPECT_NEAR(ident[0], 1.f, 1e-6);
-  EXPECT_NEAR(ident[1], 0.f, 1e-6);
-  EXPECT_NEAR(ident[2], 0.f, 1e-6);
-  EXPECT_NEAR(ident[3], 1.f, 1e-6);
-  const std::vector<float> ev = label_evidence(tab, L);
-  // theta[k][j] = P(mask says j | label k): object 0.6 / 0.4, background 0.98 / 0.02; votes relative to the
-  // likelier label on the scale of log(1e-3): a background vote says little against the object, an object vote
-  // much against the background.
-  const double S = -std::log(1e-3);
-  EXPECT_NEAR(ev[1], 1 + std::log(0.6 / 0.98) / S, 0.01);
-  EXPECT_NEAR(ev[2], 1 + std::log(0.02 / 0.4) / S, 0.01);
-  std::vector<float> w(U, 1.f / U);
-  for (bool model : {false, true}) {
-    FusionParams p{L, 0.05, 1e-6, model ? ev.data() : nullptr};
-    std::vector<float> q(size_t(N) * L, 0.5f), s(q.size());
-    std::vector<uint8_t> valid(N);
-    fuse(tab, w.data(), p, q.data(), s.data(), valid.data());
-    std::vector<uint16_t> z(N);
-    hard_ids(q.data(), N, L, z.data());
-    int obj_kept = 0, bg_kept = 0;
-    for (int n = 0; n < N; ++n) (n >= Nb ? obj_kept : bg_kept) += z[n] == (n >= Nb);
-    SCOPED_TRACE(model ? "noise model" : "eq. 4");
-    EXPECT_EQ(obj_kept, model ? No : 0);
-    EXPECT_EQ(bg_kept, Nb);
-  }
 }
 
 TEST(ObservationFusion, HandMadeCases) {

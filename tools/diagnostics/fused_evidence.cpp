@@ -53,7 +53,7 @@ int main(int argc, char** argv) try {
   int L = data.num_labels, U = tab.num_views;
   const ExtraGroup* z = m.find_extra("obj_id");
   if (!z) throw std::runtime_error(std::string(argv[2]) + ": not a hybrid model (no obj_id)");
-  std::vector<double> s(L, 0); int cnt = 0; std::vector<int> win(L, 0); double nv = 0;
+  std::vector<double> s(L, 0); int cnt = 0; std::vector<int> win(L, 0), hard(L, 0); double nv = 0;
   for (int i = 0; i < m.n; ++i) {
     if (sel[3] > 0) {
       const float* c = &m.mean[size_t(i) * 3];
@@ -64,6 +64,8 @@ int main(int argc, char** argv) try {
     }
     std::vector<double> si(L, 0); double den = 0;
     for (int u = 0; u < U; ++u) { auto l = tab.label[size_t(i) * U + u]; if (l == hybrid::kNoObservation) continue; den++; si[l]++; }
+    const int zi = int(z->data[i]);
+    if (zi >= 0 && zi < L) hard[zi]++;
     if (den == 0) continue;
     cnt++; nv += den;
     int best = 0; for (int l = 0; l < L; ++l) { s[l] += si[l] / den; if (si[l] > si[best]) best = l; }
@@ -75,6 +77,8 @@ int main(int argc, char** argv) try {
   }
   printf("object %d: %d Gaussians, mean valid views %.1f\n  mean s:", k, cnt, nv / cnt);
   for (int l = 0; l < L; ++l) printf(" %d:%.3f", l, s[l] / cnt);
+  printf("\n  model's hard ids:");
+  for (int l = 0; l < L; ++l) printf(" %d:%d", l, hard[l]);
   printf("\n  argmax:");
   for (int l = 0; l < L; ++l) printf(" %d:%d", l, win[l]);
   printf("\n");
