@@ -38,9 +38,13 @@ std::map<int, std::string> load_object_names(const fs::path& scene) {
 InstanceLabels load_instance_masks(const fs::path& scene, const std::string& view_name,
                                    const std::map<int, std::string>& names, int expect_width, int expect_height,
                                    int downscale) {
-  const fs::path file = scene / "gt" / "instances" / view_name;
+  // gt/instances/<stem>.png (a PNG beside JPEG images), else under the image's own name.
+  const fs::path by_stem = scene / "gt" / "instances" / (fs::path(view_name).stem().string() + ".png");
+  const fs::path by_name = scene / "gt" / "instances" / view_name;
+  const fs::path file = fs::is_regular_file(by_stem) ? by_stem : by_name;
   if (downscale < 1) fail("{}: downscale factor must be >= 1, got {}", file.string(), downscale);
-  if (!fs::is_regular_file(file)) fail("{}: file not found (instance map)", file.string());
+  if (!fs::is_regular_file(file))
+    fail("{}: file not found (instance map; {} was tried too)", by_name.string(), by_stem.string());
   LabelMap full = load_label_png(file);
   if (full.width < downscale || full.height < downscale)
     fail("{}: size {}x{} is smaller than the downscale factor {}", file.string(), full.width, full.height, downscale);

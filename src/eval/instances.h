@@ -1,6 +1,6 @@
 // Ground truth of synthetic scenes for the `instances` protocol: object names from SCENE/masks/objects.json
-// ({"1": "red mug", ...}) and the exact instance maps SCENE/gt/instances/<view name> (label PNG, 0 =
-// background, k = object k).
+// ({"1": "red mug", ...}) and the exact instance maps SCENE/gt/instances/<stem>.png, or <view name> when that
+// is missing (label PNG, 0 = background, k = object k).
 #pragma once
 #include <filesystem>
 #include <map>

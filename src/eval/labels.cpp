@@ -1,9 +1,16 @@
-// Label loaders. Polygon fill: for each pixel row, intersect the horizontal line through the row's pixel
-// centres with every edge (half-open in y), sort the crossings and fill the pixel centres lying in
-// [c0, c1), [c2, c3), ... — the even-odd rule, so self-overlapping parts cancel.
+// Label loaders. Polygon fill as LangSplat's polygon_to_mask does it, cv2.fillPoly(mask, [np.int32(points)], 1)
+// (LINE_8, shift 0), reproduced rule for rule (fill_polygon):
+//  1. vertices truncated toward zero to integers (numpy's float -> int32 cast);
+//  2. every edge drawn as OpenCV's 8-connected Bresenham line (boundary pixels are inside);
+//  3. scanlines: a non-horizontal edge is active on rows [y_top, y_bottom); its crossing is kept in 16.16 fixed
+//     point, starting at the upper vertex and stepping by ((x1 - x0) << 16) / (y1 - y0) (truncated) per row;
+//     the sorted crossings are paired (even-odd) and each pair fills ceil(left) .. floor(right), inclusive.
+// Deviation: OpenCV clips a line that leaves the image before stepping it, which can move its in-image pixels by
+// one; here the whole line is stepped and out-of-image pixels are dropped. Coordinates are clamped to +-2^20.
 #include "eval/labels.h"
 
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <cmath>
 #include <map>
@@ -20,33 +27,64 @@ namespace hgs::eval {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
+namespace {
+
+// OpenCV's LineIterator (8-connected, left to right) from (x0, y0) to (x1, y1); pixels outside are dropped.
+void draw_line(int64_t x0, int64_t y0, int64_t x1, int64_t y1, int width, int height, Mask& mask) {
+  if (x1 < x0) std::swap(x0, x1), std::swap(y0, y1);
+  const int64_t ax = x1 - x0, ay = std::abs(y1 - y0), sy = y1 < y0 ? -1 : 1;
+  const bool y_major = ay > ax;
+  const int64_t major = y_major ? ay : ax, minor = y_major ? ax : ay;
+  int64_t err = major - 2 * minor, x = x0, y = y0;
+  for (int64_t i = 0; i <= major; ++i) {
+    if (x >= 0 && x < width && y >= 0 && y < height) mask[size_t(y) * width + size_t(x)] = 1;
+    const bool step_minor = err < 0;
+    err += -2 * minor + (step_minor ? 2 * major : 0);
+    if (y_major) { y += sy; if (step_minor) ++x; }
+    else { ++x; if (step_minor) y += sy; }
+  }
+}
+
+}  // namespace
+
 void fill_polygon(const std::vector<Point2>& poly, int width, int height, Mask& mask) {
   if (mask.size() != size_t(width) * height)
     fail("eval: polygon target mask holds {} pixels, expected {}x{}", mask.size(), width, height);
   const size_t n = poly.size();
-  if (n < 3) return;
-  double ymin = poly[0][1], ymax = poly[0][1];
-  for (auto& p : poly) { ymin = std::min(ymin, p[1]); ymax = std::max(ymax, p[1]); }
-  const int r0 = static_cast<int>(std::clamp(std::floor(ymin - 0.5), 0.0, double(height)));
-  const int r1 = static_cast<int>(std::clamp(std::ceil(ymax), -1.0, double(height - 1)));
-  std::vector<double> xs;
-  for (int y = r0; y <= r1; ++y) {
-    const double yc = y + 0.5;
-    xs.clear();
-    for (size_t i = 0; i < n; ++i) {
-      const Point2& a = poly[i];
-      const Point2& b = poly[(i + 1) % n];
-      if ((a[1] <= yc && yc < b[1]) || (b[1] <= yc && yc < a[1]))
-        xs.push_back(a[0] + (yc - a[1]) * (b[0] - a[0]) / (b[1] - a[1]));
+  if (n == 0) return;
+  constexpr double kLimit = 1 << 20;
+  std::vector<std::array<int64_t, 2>> v(n);
+  for (size_t i = 0; i < n; ++i)
+    for (int c = 0; c < 2; ++c) {
+      const double x = poly[i][c];
+      v[i][c] = std::isnan(x) ? 0 : static_cast<int64_t>(std::clamp(x, -kLimit, kLimit));  // truncates toward 0
     }
+  struct Edge { int64_t y0, y1, x, dx; };  // x: 16.16 fixed point at row y0
+  std::vector<Edge> edges;
+  int64_t ymin = v[0][1], ymax = v[0][1];
+  for (size_t i = 0; i < n; ++i) {
+    const auto& a = v[(i + n - 1) % n];
+    const auto& b = v[i];
+    draw_line(a[0], a[1], b[0], b[1], width, height, mask);
+    ymin = std::min(ymin, b[1]);
+    ymax = std::max(ymax, b[1]);
+    if (a[1] == b[1]) continue;
+    const auto& top = a[1] < b[1] ? a : b;
+    const auto& bottom = a[1] < b[1] ? b : a;
+    edges.push_back({top[1], bottom[1], top[0] * 65536, (b[0] - a[0]) * 65536 / (b[1] - a[1])});
+  }
+  std::vector<int64_t> xs;
+  for (int64_t y = std::max<int64_t>(ymin, 0); y < std::min<int64_t>(ymax, height); ++y) {
+    xs.clear();
+    for (const Edge& e : edges)
+      if (e.y0 <= y && y < e.y1) xs.push_back(e.x + (y - e.y0) * e.dx);
     std::sort(xs.begin(), xs.end());
     uint8_t* row = &mask[size_t(y) * width];
     for (size_t k = 0; k + 1 < xs.size(); k += 2) {
-      // Pixel x is inside iff xs[k] <= x + 0.5 < xs[k+1].
-      const double lo = std::ceil(xs[k] - 0.5), hi = std::ceil(xs[k + 1] - 0.5) - 1;
-      const int x0 = static_cast<int>(std::clamp(lo, 0.0, double(width)));
-      const int x1 = static_cast<int>(std::clamp(hi, -1.0, double(width - 1)));
-      for (int x = x0; x <= x1; ++x) row[x] = 1;
+      // Arithmetic shifts: floor division by 65536 for negative crossings too.
+      const int64_t x0 = std::max<int64_t>((xs[k] + 65535) >> 16, 0);
+      const int64_t x1 = std::min<int64_t>(xs[k + 1] >> 16, width - 1);
+      for (int64_t x = x0; x <= x1; ++x) row[x] = 1;
     }
   }
 }
@@ -58,8 +96,8 @@ Mask rasterize_polygon(const std::vector<Point2>& poly, int width, int height) {
 }
 
 bool BBox::contains_pixel(int x, int y) const {
-  const double cx = x + 0.5, cy = y + 0.5;
-  return cx >= x1 && cx <= x2 && cy >= y1 && cy <= y2;
+  // LangSplat's lerf_localization compares the integer pixel index with the box corners.
+  return x >= x1 && x <= x2 && y >= y1 && y <= y2;
 }
 
 const LerfCategory* LerfFrameLabels::find(const std::string& name) const {

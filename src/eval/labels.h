@@ -17,19 +17,19 @@
 
 namespace hgs::eval {
 
-using Point2 = std::array<double, 2>;  // (x, y) in pixel-corner units: pixel (i, j) spans [i, i+1) x [j, j+1)
+using Point2 = std::array<double, 2>;  // (x, y) in pixels, as in the label file (integer x = column index)
 
-// Even-odd fill of a closed polygon (last vertex joins the first) sampled at pixel centres. A centre exactly on
-// an edge is inside when the edge is the left boundary of a span and outside when it is the right one (spans
-// are [left, right)); rows use the half-open rule y0 <= yc < y1 so shared vertices are not counted twice.
-// Parts outside the image are clipped. Fewer than 3 vertices gives an empty mask.
+// Fill of a closed polygon (last vertex joins the first) exactly as cv2.fillPoly(mask, [np.int32(points)], 1),
+// LangSplat's polygon_to_mask: vertices truncated to integers, the outline's pixels included, even-odd rule
+// inside (labels.cpp says how, rule by rule). Parts outside the image are clipped. With one or two vertices
+// only the outline is drawn (a point, a line), as OpenCV does.
 Mask rasterize_polygon(const std::vector<Point2>& poly, int width, int height);  // -> [H, W] 0/1
 // ORs the polygon into `mask` ([H, W]).
 void fill_polygon(const std::vector<Point2>& poly, int width, int height, Mask& mask);
 
 struct BBox {
-  double x1 = 0, y1 = 0, x2 = 0, y2 = 0;  // pixel-corner units, x1 <= x2, y1 <= y2 (swapped on load if needed)
-  // True when the centre of pixel (x, y) lies in the closed box [x1, x2] x [y1, y2].
+  double x1 = 0, y1 = 0, x2 = 0, y2 = 0;  // pixels, x1 <= x2, y1 <= y2 (swapped on load if needed)
+  // True when the integer pixel index (x, y) lies in the closed box [x1, x2] x [y1, y2] (LangSplat's test).
   bool contains_pixel(int x, int y) const;
 };
 

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "core/error.h"
 
@@ -114,7 +115,9 @@ double boundary_iou(const Mask& gt, const Mask& pred, int width, int height, int
   check(gt, width, height, "ground-truth");
   check(pred, width, height, "predicted");
   if (d <= 0) d = boundary_width(width, height);
-  return iou(boundary_region(gt, width, height, d), boundary_region(pred, width, height, d), width, height);
+  const Confusion c = confusion(boundary_region(gt, width, height, d), boundary_region(pred, width, height, d), width, height);
+  const long uni = c.tp + c.fp + c.fn;
+  return uni == 0 ? std::numeric_limits<double>::quiet_NaN() : double(c.tp) / double(uni);
 }
 
 MaskScores score_mask(const Mask& gt, const Mask& pred, int width, int height, int d) {

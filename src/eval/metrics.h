@@ -6,7 +6,8 @@
 //  - iou(G, P) with G and P both empty is 1 (the prediction agrees perfectly with "nothing there"); with exactly
 //    one of them empty it is 0. The 3D-OVS protocol overrides the both-empty case to 0 (protocols.h), this
 //    function does not.
-//  - boundary_iou follows the same rule on the boundary sets: both boundaries empty => 1, one empty => 0.
+//  - boundary_iou with both boundaries empty is NaN, as the reference (boundary-iou-api divides 0 by 0); report
+//    means skip NaN (report.cpp), so such a pair counts in no boundary mean. One empty => 0.
 //  - pixel_accuracy of two empty masks is 1 (every pixel agrees). A 0 x 0 image is an error.
 #pragma once
 #include <cstdint>

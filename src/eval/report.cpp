@@ -63,8 +63,17 @@ std::vector<MeanRow> group(const EvalReport& r, KeyFn key) {
 
 json num(double v) { return std::isnan(v) ? json(nullptr) : json(v); }
 
-json row_json(const MeanRow& m, const char* keyname) {
-  json j = {{keyname, m.key}, {"count", m.count}, {"mIoU", num(m.miou)}, {"mBIoU", num(m.mbiou)}, {"mAcc", num(m.macc)}};
+}  // namespace
+
+double paper_accuracy(const MeanRow& m, const std::string& protocol) {
+  return protocol == "lerf-ovs" ? m.loc_acc : m.macc;
+}
+
+namespace {
+
+json row_json(const MeanRow& m, const char* keyname, const std::string& protocol) {
+  json j = {{keyname, m.key}, {"count", m.count}, {"mIoU", num(m.miou)}, {"mBIoU", num(m.mbiou)},
+            {"mAcc", num(paper_accuracy(m, protocol))}, {"pixel_acc", num(m.macc)}};
   if (m.loc_count) { j["loc_acc"] = num(m.loc_acc); j["loc_count"] = m.loc_count; }
   if (!std::isnan(m.seconds)) j["mean_seconds"] = m.seconds;
   return j;
@@ -148,11 +157,11 @@ json report_json(const EvalReport& r) {
   j["protocol"] = r.protocol;
   j["scene"] = r.scene;
   j["mode"] = r.mode;
-  j["summary"] = row_json(scene_mean(r), "key");
+  j["summary"] = row_json(scene_mean(r), "key", r.protocol);
   j["frames"] = json::array();
-  for (auto& m : frame_means(r)) j["frames"].push_back(row_json(m, "frame"));
+  for (auto& m : frame_means(r)) j["frames"].push_back(row_json(m, "frame", r.protocol));
   j["queries"] = json::array();
-  for (auto& m : query_means(r)) j["queries"].push_back(row_json(m, "query"));
+  for (auto& m : query_means(r)) j["queries"].push_back(row_json(m, "query", r.protocol));
   j["records"] = json::array();
   for (auto& q : r.records) {
     json e = {{"frame", q.frame}, {"query", q.query}, {"iou", num(q.iou)}, {"biou", num(q.biou)}, {"acc", num(q.acc)}};
@@ -165,17 +174,21 @@ json report_json(const EvalReport& r) {
 }
 
 std::string report_markdown(const std::vector<EvalReport>& reports) {
-  std::string md = "# Evaluation report\n\nMetrics in percent; mIoU / mBIoU are means over (frame, query) pairs.\n\n";
-  md += "| protocol | scene | mode | pairs | mAcc | mIoU | mBIoU | loc. acc | ms/query |\n"
-        "|---|---|---|---:|---:|---:|---:|---:|---:|\n";
+  std::string md = "# Evaluation report\n\nMetrics in percent; mIoU / mBIoU are means over (frame, query) pairs. "
+                   "mAcc is the accuracy the protocol's papers report: localisation accuracy for LERF-OVS, pixel "
+                   "accuracy otherwise.\n\n";
+  md += "| protocol | scene | mode | relevancy | pairs | mAcc | mIoU | mBIoU | pixel acc | loc. acc | ms/query |\n"
+        "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|\n";
   for (auto& r : reports) {
     MeanRow s = scene_mean(r);
-    md += fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} | {} |\n", cell(r.protocol), cell(r.scene), cell(r.mode),
-                      s.count, pct(s.macc), pct(s.miou), pct(s.mbiou), pct(s.loc_acc),
+    const std::string rel = r.extra.contains("relevancy") ? r.extra["relevancy"].get<std::string>() : "-";
+    md += fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n", cell(r.protocol), cell(r.scene),
+                      cell(r.mode), cell(rel), s.count, pct(paper_accuracy(s, r.protocol)), pct(s.miou), pct(s.mbiou),
+                      pct(s.macc), pct(s.loc_acc),
                       std::isnan(s.seconds) ? std::string("-") : fmt::format("{:.1f}", 1000 * s.seconds));
   }
   auto table = [&](const std::string& title, const char* keyname, const std::vector<MeanRow>& rows, const MeanRow& total) {
-    md += fmt::format("\n### {}\n\n| {} | n | mAcc | mIoU | mBIoU | loc. acc |\n|---|---:|---:|---:|---:|---:|\n", title, keyname);
+    md += fmt::format("\n### {}\n\n| {} | n | pixel acc | mIoU | mBIoU | loc. acc |\n|---|---:|---:|---:|---:|---:|\n", title, keyname);
     for (auto& m : rows)
       md += fmt::format("| {} | {} | {} | {} | {} | {} |\n", cell(m.key), m.count, pct(m.macc), pct(m.miou), pct(m.mbiou),
                         pct(m.loc_acc));

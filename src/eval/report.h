@@ -6,6 +6,10 @@
 // mIoU). mAcc is the mean over frames of the frame accuracy when frame accuracies are given (3D-OVS: the
 // multi-class pixel accuracy of the image), else the mean of the records' pixel accuracies. Localisation
 // accuracy is hits / records that have a localisation result.
+//
+// Names in report.json: "mAcc" is the accuracy a paper of the protocol reports: for LERF-OVS the localisation
+// accuracy (LERF, LangSplat), for 3D-OVS and instances the pixel accuracy. "pixel_acc" is always the pixel
+// accuracy and "loc_acc" the localisation accuracy where there is one.
 #pragma once
 #include <filesystem>
 #include <limits>
@@ -45,6 +49,9 @@ struct EvalReport {
   std::map<std::string, double> frame_accuracy;  // optional per-frame accuracy overriding the record mean
   nlohmann::json extra = nlohmann::json::object();  // free-form: options, timings, paths
 };
+
+// The "mAcc" of a protocol's papers: localisation accuracy for "lerf-ovs", pixel accuracy otherwise.
+double paper_accuracy(const MeanRow& m, const std::string& protocol);
 
 // Record of one LERF-OVS (frame, query) evaluation (iou, biou, acc, localisation).
 QueryRecord lerf_record(const std::string& frame, const std::string& query, const LerfQueryResult& r,

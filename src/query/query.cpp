@@ -78,16 +78,16 @@ std::vector<float> render_object_opacity(render::GaussianRenderer& r, const Gaus
   return out.extra;
 }
 
+const char* relevancy_name(Relevancy v) { return v == Relevancy::Lerf ? "lerf" : "foreground"; }
+
 std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
-                                    const float* text, const Canonical& canon) {
+                                    const float* text, const Canonical& canon, Relevancy variant) {
   const auto h = hybrid::ConstHybridFields::bind(m, "query");
   const ExtraGroup *f = h.f, *q = h.q;
   const int D = f->dim;
   render::GaussianInputs in = render_inputs(m);
   // Channels [0, D): the language map sum_n f_n alpha T; channel D: the foreground opacity
-  // sum_n (1 - q_{n,0}) alpha T. Background Gaussians get no language supervision (SCL's anchors are the
-  // foreground objects), so their f_n stay near the random init: the relevancy is weighted by the foreground
-  // opacity, which is ~0 where background is seen.
+  // sum_n (1 - q_{n,0}) alpha T (used by Relevancy::Foreground only).
   const int C = D + 1;
   std::vector<float> ch(size_t(m.n) * C);
 #pragma omp parallel for schedule(static)
@@ -103,7 +103,7 @@ std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianM
   r.forward(cam, in, rs, out);
   const size_t HW = size_t(cam.width) * cam.height;
   std::vector<float> rel = lerf_relevancy_map(out.extra.data(), HW, D, text, canon, kLerfTemperature, C);
-  // Pixels where nothing is rendered have a zero feature: relevancy 0 there (not LERF's 0.5 for zero vectors).
+  if (variant == Relevancy::Lerf) return rel;  // a zero feature (nothing rendered) gets 0.5, as any tie
   for (size_t p = 0; p < HW; ++p) rel[p] = out.alpha[p] < 1e-4f ? 0.f : rel[p] * std::clamp(out.extra[p * C + D], 0.f, 1.f);
   return rel;
 }

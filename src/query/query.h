@@ -46,10 +46,19 @@ std::vector<ObjectScore> score_objects(const ObjectEmbeddings& oe, const float* 
 // Opacity render of objects `ks` (channel j = A_{ks[j]}). Returns [H, W, J].
 std::vector<float> render_object_opacity(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
                                          const std::vector<int>& ks);
-// Per-pixel relevancy of the rendered foreground language map for a query: [H, W] (0 where nothing is
-// rendered).
+// How a pixel's relevancy is computed from the rendered language map F(p) = sum_n f_n alpha T:
+//  Lerf:       LERF's relevancy of F(p) as LangSplat's evaluation computes it (min over the canonical phrases of
+//              the pairwise softmax at temperature 10), nothing else; the published protocol.
+//  Foreground: ours: that relevancy times the rendered foreground opacity sum_n (1 - q_{n,0}) alpha T, and 0
+//              where nothing is rendered (alpha < 1e-4). Background Gaussians get no language supervision (SCL's
+//              anchors are the foreground objects), so their f_n stay near the random init; the weight silences
+//              them.
+enum class Relevancy { Lerf, Foreground };
+const char* relevancy_name(Relevancy v);  // "lerf" | "foreground"
+
+// Per-pixel relevancy of the rendered language map for a query: [H, W].
 std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
-                                    const float* text, const Canonical& canon);
+                                    const float* text, const Canonical& canon, Relevancy variant = Relevancy::Lerf);
 
 // Copy of the model keeping Gaussians whose hard id is in `objects` (or not in it when `remove`).
 GaussianModel select_objects(const GaussianModel& m, const std::vector<int>& objects, bool remove);

@@ -55,9 +55,10 @@ eval::Mask Session::answer_mask(int view, const std::string& text, float thresho
   return object_mask(view, {ask(text).chosen[0]}, threshold, opacity);
 }
 
-std::vector<float> Session::pixel_relevancy(int view, const std::string& text) {
+std::vector<float> Session::pixel_relevancy(int view, const std::string& text, Relevancy variant) {
   const auto& e = text_.embed(text);
-  return render_relevancy(renderer_, model_, render::camera_from_view(scene_.views.at(view)), e.data(), text_.canonical());
+  return render_relevancy(renderer_, model_, render::camera_from_view(scene_.views.at(view)), e.data(), text_.canonical(),
+                          variant);
 }
 
 }  // namespace hgs::query

@@ -45,8 +45,8 @@ class Session {
                          std::vector<float>* opacity = nullptr);
   // Object-level answer in one view: the best object for `text`, its mask and (optionally) its opacity.
   eval::Mask answer_mask(int view, const std::string& text, float threshold, std::vector<float>* opacity = nullptr);
-  // LERF relevancy of the rendered language map: [H, W].
-  std::vector<float> pixel_relevancy(int view, const std::string& text);
+  // Relevancy of the rendered language map (query.h, Relevancy): [H, W].
+  std::vector<float> pixel_relevancy(int view, const std::string& text, Relevancy variant = Relevancy::Lerf);
 
  private:
   Scene scene_;

@@ -1,8 +1,9 @@
-// Polygon labels from binary masks. Each 8-connected part is traced along pixel edges: every pixel side
-// between inside and outside becomes a directed edge (clockwise in image coordinates, inside on the right);
-// edges are chained into loops, preferring a left turn where two diagonal pixels touch so that 8-connected
-// pixels stay in one loop. The loop with the largest area is the part's outer boundary; collinear vertices
-// are dropped. Filling the polygon with the even-odd rule at pixel centres gives the part back (holes filled).
+// Polygon labels from binary masks, in the form LERF-OVS labels take and cv2.fillPoly reads back (eval/labels.cpp):
+// each 8-connected part's outer boundary traced through the centres of its boundary pixels (Moore-neighbour
+// tracing, clockwise in image coordinates, the contour cv2.findContours gives), consecutive points 8-neighbours,
+// then runs in one direction merged into one segment (horizontal, vertical and 45-degree lines are drawn by
+// OpenCV's line exactly on those pixels). Filling the polygon as cv2.fillPoly does gives the part back with its
+// holes filled. A one-pixel part is the point repeated three times (a polygon needs three vertices).
 #include <algorithm>
 #include <cstdlib>
 #include <unordered_map>
@@ -36,60 +37,45 @@ std::vector<std::vector<std::pair<int, int>>> trace_polygons(const std::vector<u
           }
       }
     }
+  // Directions clockwise in image coordinates (y down), starting east.
+  static const int DX[8] = {1, 1, 0, -1, -1, -1, 0, 1}, DY[8] = {0, 1, 1, 1, 0, -1, -1, -1};
   std::vector<std::vector<std::pair<int, int>>> polys;
   for (size_t id = 0; id < parts.size(); ++id) {
     auto in = [&](int x, int y) { return x >= 0 && y >= 0 && x < w && y < h && comp[size_t(y) * w + x] == int(id); };
-    struct Edge { int x0, y0, x1, y1; bool used; };
-    std::vector<Edge> edges;
-    for (int i : parts[id]) {
-      int x = i % w, y = i / w;
-      if (!in(x, y - 1)) edges.push_back({x, y, x + 1, y, false});
-      if (!in(x + 1, y)) edges.push_back({x + 1, y, x + 1, y + 1, false});
-      if (!in(x, y + 1)) edges.push_back({x + 1, y + 1, x, y + 1, false});
-      if (!in(x - 1, y)) edges.push_back({x, y + 1, x, y, false});
-    }
-    std::unordered_map<int64_t, std::vector<int>> from;
-    auto key = [&](int x, int y) { return int64_t(y) * (w + 2) + x; };
-    for (size_t e = 0; e < edges.size(); ++e) from[key(edges[e].x0, edges[e].y0)].push_back(static_cast<int>(e));
-    std::vector<std::pair<int, int>> best;
-    long best_area = -1;
-    for (size_t s = 0; s < edges.size(); ++s) {
-      if (edges[s].used) continue;
-      std::vector<std::pair<int, int>> loop;
-      int e = static_cast<int>(s);
-      while (e >= 0 && !edges[e].used) {
-        Edge& E = edges[e];
-        E.used = true;
-        loop.emplace_back(E.x0, E.y0);
-        int dx = E.x1 - E.x0, dy = E.y1 - E.y0;
-        int next = -1, next_rank = 9;
-        for (int c : from[key(E.x1, E.y1)]) {
-          if (edges[c].used) continue;
-          int cx = edges[c].x1 - edges[c].x0, cy = edges[c].y1 - edges[c].y0;
-          int cross = dx * cy - dy * cx;  // < 0: left turn in y-down image coordinates
-          int rank = cross < 0 ? 0 : cross == 0 ? 1 : 2;
-          if (rank < next_rank) { next_rank = rank; next = c; }
-        }
-        e = next;
+    // Start: the part's first pixel in raster order; nothing of the part lies north of it or west of it.
+    int start = *std::min_element(parts[id].begin(), parts[id].end());
+    const int sx = start % w, sy = start / w;
+    std::vector<std::pair<int, int>> pts = {{sx, sy}};
+    std::vector<int> dirs;
+    int x = sx, y = sy, d = 0;  // as if arrived moving east: search from north, clockwise
+    int first_dir = -1;
+    for (size_t guard = 0; guard < 8 * parts[id].size() + 8; ++guard) {
+      int found = -1;
+      for (int k = 0; k < 8; ++k) {
+        const int nd = (d + 6 + k) % 8;  // from "back-left" of the arrival direction, clockwise
+        if (in(x + DX[nd], y + DY[nd])) { found = nd; break; }
       }
-      long area2 = 0;
-      for (size_t k = 0; k < loop.size(); ++k) {
-        auto [ax, ay] = loop[k];
-        auto [bx, by] = loop[(k + 1) % loop.size()];
-        area2 += long(ax) * by - long(bx) * ay;
-      }
-      if (std::labs(area2) > best_area) { best_area = std::labs(area2); best = loop; }
+      if (found < 0) break;  // a single pixel
+      if (x == sx && y == sy && found == first_dir) break;  // Jacob's stopping criterion
+      if (first_dir < 0) first_dir = found;
+      x += DX[found];
+      y += DY[found];
+      d = found;
+      dirs.push_back(found);
+      pts.emplace_back(x, y);
     }
-    // Drop collinear vertices.
-    std::vector<std::pair<int, int>> simple;
-    const size_t m = best.size();
-    for (size_t k = 0; k < m; ++k) {
-      auto [px, py] = best[(k + m - 1) % m];
-      auto [cx, cy] = best[k];
-      auto [nx, ny] = best[(k + 1) % m];
-      if ((cx - px) * (ny - cy) - (cy - py) * (nx - cx) != 0) simple.emplace_back(cx, cy);
+    if (dirs.empty()) {
+      polys.push_back({{sx, sy}, {sx, sy}, {sx, sy}});
+      continue;
     }
-    polys.push_back(std::move(simple));
+    pts.pop_back();  // the walk ends back at the start
+    // Keep a point where the direction changes (the start always).
+    std::vector<std::pair<int, int>> poly;
+    const size_t m = pts.size();
+    for (size_t k = 0; k < m; ++k)
+      if (k == 0 || dirs[k - 1] != dirs[k]) poly.push_back(pts[k]);
+    while (poly.size() < 3) poly.push_back(poly.back());
+    polys.push_back(std::move(poly));
   }
   return polys;
 }

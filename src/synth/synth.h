@@ -69,8 +69,9 @@ std::vector<float> simulate_features(const RenderedView& v, const std::vector<st
                                      const std::vector<float>& context, double noise, int dim, uint64_t seed,
                                      int& grid_h, int& grid_w);
 
-// Outer boundary polygons (one per 8-connected part, vertices on pixel corners) of the pixels where
-// `inside` is true; filling them with an even-odd rule at pixel centres gives back each part without holes.
+// Outer boundary polygons (one per 8-connected part, through the centres of its boundary pixels, as
+// cv2.findContours) of the pixels where `inside` is true; filling them as cv2.fillPoly does (eval::fill_polygon)
+// gives back each part without holes.
 std::vector<std::vector<std::pair<int, int>>> trace_polygons(const std::vector<uint8_t>& inside, int width, int height);
 
 // Generates the whole scene into `out` (created; must not exist or be empty).

@@ -1,4 +1,4 @@
-// Polygon rasterisation (even-odd, pixel centres, pixel-corner vertices, border clipping) and the LERF-OVS /
+// Polygon rasterisation (cv2.fillPoly's rules: integer vertices, outline included, even-odd; border clipping) and the LERF-OVS /
 // 3D-OVS label loaders with valid and malformed files.
 #include <gtest/gtest.h>
 
@@ -16,63 +16,80 @@ using namespace hgs::eval;
 using hgs::eval::test::ascii;
 namespace fs = std::filesystem;
 
-TEST(EvalPolygon, PixelCornerUnitsAndPixelCentres) {
-  // The square [1, 3] x [1, 3] in corner units covers exactly pixels 1..2 x 1..2.
-  EXPECT_EQ(rasterize_polygon({{1, 1}, {3, 1}, {3, 3}, {1, 3}}, 4, 4), ascii({"....", ".##.", ".##.", "...."}));
-  // Triangle (0,0), (4,0), (0,4): centre (x+.5, y+.5) inside iff x + y + 1 < 4; centres exactly on the
-  // hypotenuse (x + y + 1 = 4, e.g. (3.5, 0.5)) are on a span's right end -> outside.
-  EXPECT_EQ(rasterize_polygon({{0, 0}, {4, 0}, {0, 4}}, 4, 4), ascii({"###.", "##..", "#...", "...."}));
-  // Vertices given as pixel centres would shift the result: [0.5, 2.5]^2 covers centres 0.5..1.5 -> pixels 0..1.
-  EXPECT_EQ(rasterize_polygon({{0.5, 0.5}, {2.5, 0.5}, {2.5, 2.5}, {0.5, 2.5}}, 4, 4),
-            ascii({"##..", "##..", "....", "...."}));
+// Expected masks below are worked out by hand from cv2.fillPoly's rules (labels.cpp): vertices truncated to
+// integers, the outline's 8-connected lines included, spans filled from ceil(left) to floor(right).
+TEST(EvalPolygon, IntegerVerticesAndOutlineIncludedAsOpenCV) {
+  // The square with corners (1, 1) and (3, 3) covers pixels 1..3 x 1..3: both ends included.
+  EXPECT_EQ(rasterize_polygon({{1, 1}, {3, 1}, {3, 3}, {1, 3}}, 5, 5),
+            ascii({".....", ".###.", ".###.", ".###.", "....."}));
+  // Triangle (0,0), (4,0), (0,4): rows 0..3 fill 0 .. 4 - y; row 4 is the outline's vertex (0, 4).
+  EXPECT_EQ(rasterize_polygon({{0, 0}, {4, 0}, {0, 4}}, 5, 5),
+            ascii({"#####", "####.", "###..", "##...", "#...."}));
   // Orientation does not matter.
-  EXPECT_EQ(rasterize_polygon({{1, 3}, {3, 3}, {3, 1}, {1, 1}}, 4, 4), ascii({"....", ".##.", ".##.", "...."}));
+  EXPECT_EQ(rasterize_polygon({{1, 3}, {3, 3}, {3, 1}, {1, 1}}, 5, 5),
+            ascii({".....", ".###.", ".###.", ".###.", "....."}));
 }
 
-TEST(EvalPolygon, EvenOddSelfOverlap) {
-  // The path runs twice around the square [2, 4] x [2, 4]: winding number 2 there, so even-odd leaves it out.
-  std::vector<Point2> p = {{0, 0}, {6, 0}, {6, 4}, {2, 4}, {2, 2}, {4, 2}, {4, 6}, {0, 6}};
-  EXPECT_EQ(rasterize_polygon(p, 6, 6), ascii({"######", "######", "##..##", "##..##", "####..", "####.."}));
+TEST(EvalPolygon, FractionalVerticesTruncateTowardZero) {
+  // numpy's float -> int32 cast: 0.9 -> 0, 2.9 -> 2, -0.7 -> 0 (not -1).
+  EXPECT_EQ(rasterize_polygon({{0.9, 0.9}, {2.9, 0.9}, {2.9, 2.9}, {0.9, 2.9}}, 4, 4),
+            ascii({"###.", "###.", "###.", "...."}));
+  EXPECT_EQ(rasterize_polygon({{-0.7, 1}, {1.99, 1}, {1.99, 2}, {-0.7, 2}}, 3, 3), ascii({"...", "##.", "##."}));
 }
 
-TEST(EvalPolygon, BowTieHandComputed) {
-  // Two triangles meeting at (2, 2). Row y has crossings at 0, 4 (the closing verticals) and at yc, 4 - yc
-  // (the diagonals); spans are [c0, c1), [c2, c3), so a centre on a span's right end is outside.
-  std::vector<Point2> bow = {{0, 0}, {4, 4}, {4, 0}, {0, 4}};
-  // Row 0: crossings 0, 0.5, 3.5, 4: [0, 0.5) holds no centre, [3.5, 4) holds 3.5 -> pixel 3.
-  // Row 1 (1.5): 0, 1.5, 2.5, 4: [0,1.5) -> pixel 0; [2.5, 4) -> pixels 2, 3.
-  // Row 2 (2.5): 0, 1.5, 2.5, 4: same as row 1. Row 3 (3.5): 0, 0.5, 3.5, 4 -> pixel 3.
-  EXPECT_EQ(rasterize_polygon(bow, 4, 4), ascii({"...#", "#.##", "#.##", "...#"}));
+TEST(EvalPolygon, BowTieEvenOdd) {
+  // Edges (0,0)-(4,4), (4,4)-(4,0), (4,0)-(0,4), (0,4)-(0,0): row y crosses at 0, y, 4 - y, 4; pairs fill
+  // [0, min] and [max, 4]; row 2 meets in the middle; row 4 is outline only.
+  EXPECT_EQ(rasterize_polygon({{0, 0}, {4, 4}, {4, 0}, {0, 4}}, 5, 5),
+            ascii({"#...#", "##.##", "#####", "##.##", "#...#"}));
+}
+
+TEST(EvalPolygon, ShallowEdgeFollowsOpenCVsLine) {
+  // The outline from (0, 0) to (4, 1) is OpenCV's 8-connected line: (0,0) (1,0) (2,0) (3,1) (4,1); the fill of
+  // the thin triangle (0,0), (4,1), (0,1) adds row 0's span [0, 0] only (row 1 is the bottom: outline).
+  EXPECT_EQ(rasterize_polygon({{0, 0}, {4, 1}, {0, 1}}, 5, 2), ascii({"###..", "#####"}));
 }
 
 TEST(EvalPolygon, BorderAndOutsideAreClipped) {
-  EXPECT_EQ(rasterize_polygon({{0, 0}, {5, 0}, {5, 2}, {0, 2}}, 5, 3), ascii({"#####", "#####", "....."}));
-  EXPECT_EQ(rasterize_polygon({{-10, -10}, {50, -10}, {50, 1}, {-10, 1}}, 5, 3), ascii({"#####", ".....", "....."}));
+  // Rows 0 (fill) and 1 (the bottom edge's outline) of a box that extends past the image.
+  EXPECT_EQ(rasterize_polygon({{-10, -10}, {50, -10}, {50, 1}, {-10, 1}}, 5, 3), ascii({"#####", "#####", "....."}));
   EXPECT_EQ(rasterize_polygon({{3, -5}, {100, -5}, {100, 100}, {3, 100}}, 5, 3), ascii({"...##", "...##", "...##"}));
   EXPECT_EQ(rasterize_polygon({{10, 10}, {20, 10}, {20, 20}}, 5, 3), Mask(15, 0));
-  EXPECT_EQ(rasterize_polygon({{0, 0}, {5, 0}}, 5, 3), Mask(15, 0));  // < 3 vertices
+  EXPECT_EQ(rasterize_polygon({{0, 0}, {4, 0}}, 5, 3), ascii({"#####", ".....", "....."}));  // 2 vertices: a line
+  EXPECT_EQ(rasterize_polygon({{1, 2}}, 5, 3), ascii({".....", ".....", ".#..."}));             // 1 vertex: a point
+  EXPECT_EQ(rasterize_polygon({}, 5, 3), Mask(15, 0));
   EXPECT_EQ(rasterize_polygon({{-1e300, -1e300}, {1e300, -1e300}, {1e300, 1e300}, {-1e300, 1e300}}, 5, 3), Mask(15, 1));
 }
 
-TEST(EvalPolygon, MatchesNaivePointInPolygon) {
-  // Random star-like self-intersecting polygons with fractional vertices vs a crossing-count reference.
-  std::vector<Point2> p;
+TEST(EvalPolygon, SimplePolygonsCoverTheirClosedLatticePointsAndTheOutline) {
+  // Random simple (star-shaped) polygons with integer vertices: every lattice point inside or on the boundary
+  // is filled, and every other filled pixel is within one pixel of the boundary (an outline pixel).
   uint32_t s = 12345;
-  auto rnd = [&] { s = s * 1664525u + 1013904223u; return (s >> 8) / double(1 << 24); };
-  for (int trial = 0; trial < 30; ++trial) {
-    p.clear();
-    const int n = 3 + trial % 9;
-    for (int k = 0; k < n; ++k) p.push_back({rnd() * 24 - 2, rnd() * 18 - 2});
-    Mask m = rasterize_polygon(p, 20, 14);
-    for (int y = 0; y < 14; ++y)
-      for (int x = 0; x < 20; ++x) {
-        const double px = x + 0.5, py = y + 0.5;
-        bool in = false;
+  auto rnd = [&](int n) { s = s * 1664525u + 1013904223u; return int((s >> 8) % uint32_t(n)); };
+  for (int trial = 0; trial < 40; ++trial) {
+    const int n = 3 + trial % 8, W = 24, H = 18;
+    std::vector<Point2> p;
+    for (int k = 0; k < n; ++k) {
+      const double a = 2 * 3.14159265358979 * (k + 0.1 + 0.8 * rnd(1000) / 1000.0) / n;
+      const double r = 2 + rnd(9);
+      p.push_back({std::floor(12 + r * std::cos(a)), std::floor(9 + r * std::sin(a))});
+    }
+    const Mask m = rasterize_polygon(p, W, H);
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        bool in = false, on = false;
+        double dist = 1e9;
         for (int i = 0, j = n - 1; i < n; j = i++) {
           const double xi = p[i][0], yi = p[i][1], xj = p[j][0], yj = p[j][1];
-          if ((yi > py) != (yj > py) && px < (xj - xi) * (py - yi) / (yj - yi) + xi) in = !in;
+          const double ex = xj - xi, ey = yj - yi, len2 = ex * ex + ey * ey;
+          const double t = len2 > 0 ? std::clamp(((x - xi) * ex + (y - yi) * ey) / len2, 0.0, 1.0) : 0.0;
+          const double d = std::hypot(x - xi - t * ex, y - yi - t * ey);
+          dist = std::min(dist, d);
+          on |= d < 1e-9;
+          if ((yi > y) != (yj > y) && x < ex * (y - yi) / ey + xi) in = !in;
         }
-        ASSERT_EQ(m[y * 20 + x] != 0, in) << "trial " << trial << " pixel " << x << "," << y;
+        if (in || on) ASSERT_EQ(m[y * W + x], 1) << "trial " << trial << " pixel " << x << "," << y;
+        else if (m[y * W + x]) ASSERT_LT(dist, 1.0) << "trial " << trial << " pixel " << x << "," << y;
       }
   }
 }
@@ -129,11 +146,12 @@ TEST(EvalLerfLabels, LoadsAndMergesCategories) {
   const LerfCategory* mug = L.find("mug");
   ASSERT_NE(mug, nullptr);
   EXPECT_EQ(L.find("cup"), nullptr);
-  EXPECT_EQ(mug->mask, ascii({"##..##", "##....", "......", "......"}));
+  // cv2.fillPoly includes the outline: the square (0,0)-(2,2) covers pixels 0..2; parts past the image are clipped.
+  EXPECT_EQ(mug->mask, ascii({"###.##", "###.##", "###...", "......"}));
   EXPECT_EQ(L.find("plate")->mask, ascii({"......", "...###", "...###", "...###"}));
   ASSERT_EQ(mug->bboxes.size(), 2u);
   EXPECT_EQ(mug->polygons.size(), 2u);
-  // Swapped corners are normalised; pixel centres inside the closed box count.
+  // Swapped corners are normalised; integer pixel indices inside the closed box count (LangSplat's test).
   const BBox& pb = L.find("plate")->bboxes[0];
   EXPECT_EQ(pb.x1, 3);
   EXPECT_EQ(pb.y1, 1);
@@ -154,7 +172,7 @@ TEST(EvalLerfLabels, NestedBoxAndSeveralPolygonsPerObject) {
                  "segmentation": [[[0, 0], [1, 0], [1, 2], [0, 2]], [[3, 0], [5, 0], [5, 1], [3, 1]]]}]})");
   LerfFrameLabels L = load_lerf_frame(tmp / "f.json");
   ASSERT_EQ(L.categories.size(), 1u);
-  EXPECT_EQ(L.categories[0].mask, ascii({"#..##", "#...."}));
+  EXPECT_EQ(L.categories[0].mask, ascii({"##.##", "##.##"}));
   EXPECT_EQ(L.categories[0].polygons.size(), 2u);
   ASSERT_EQ(L.categories[0].bboxes.size(), 1u);
   EXPECT_EQ(L.categories[0].bboxes[0].x1, 0.0);
@@ -166,11 +184,11 @@ TEST(EvalLerfLabels, Downscale) {
   hgs::test::TempDir tmp;
   write(tmp / "f.json", R"({"info": {"name": "f.jpg", "width": 9, "height": 8},
     "objects": [{"category": "a", "bbox": [2, 2, 6, 6], "segmentation": [[2, 2], [6, 2], [6, 6], [2, 6]]}]})");
-  // F = 2: 4x4 labels, the square becomes [1, 3]^2 -> pixels 1..2.
+  // F = 2: 4x4 labels, the square becomes (1,1)-(3,3) -> pixels 1..3 (outline included).
   LerfFrameLabels L = load_lerf_frame(tmp / "f.json", 4, 4, 2);
   EXPECT_EQ(L.width, 4);
   EXPECT_EQ(L.height, 4);
-  EXPECT_EQ(L.categories[0].mask, ascii({"....", ".##.", ".##.", "...."}));
+  EXPECT_EQ(L.categories[0].mask, ascii({"....", ".###", ".###", ".###"}));
   EXPECT_EQ(L.categories[0].bboxes[0].x2, 3.0);
   expect_error([&] { load_lerf_frame(tmp / "f.json", 9, 8, 2); }, (tmp / "f.json").string(),
                "label size 4x4 does not match the image size 9x8");

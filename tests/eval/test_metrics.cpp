@@ -2,6 +2,7 @@
 // touching the border, several d), and the fast erosion against a naive iterated 3x3 erosion.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <random>
 
 #include "core/error.h"
@@ -21,6 +22,10 @@ TEST(EvalMetrics, ShiftedSquaresHandComputed) {
   EXPECT_EQ(boundary_region(g, 5, 5, 1), ascii({".....", ".###.", ".#.#.", ".###.", "....."}));
   EXPECT_DOUBLE_EQ(boundary_iou(g, p, 5, 5, 1), 4.0 / 12.0);
   EXPECT_DOUBLE_EQ(boundary_iou(g, g, 5, 5, 1), 1.0);
+  // Both boundaries empty: NaN as the reference's 0 / 0 (skipped by the report's means); one empty: 0.
+  const Mask empty(25, 0);
+  EXPECT_TRUE(std::isnan(boundary_iou(empty, empty, 5, 5, 1)));
+  EXPECT_DOUBLE_EQ(boundary_iou(g, empty, 5, 5, 1), 0.0);
   // d = 2 erodes the whole 3x3 square: boundaries are the squares, BIoU = IoU.
   EXPECT_DOUBLE_EQ(boundary_iou(g, p, 5, 5, 2), 6.0 / 12.0);
   Confusion c = confusion(g, p, 5, 5);
@@ -67,7 +72,7 @@ TEST(EvalMetrics, EmptyMaskConventions) {
   Mask e(12, 0), f(12, 0);
   f[5] = 1;
   EXPECT_DOUBLE_EQ(iou(e, e, 4, 3), 1.0);
-  EXPECT_DOUBLE_EQ(boundary_iou(e, e, 4, 3), 1.0);
+  EXPECT_TRUE(std::isnan(boundary_iou(e, e, 4, 3)));  // the reference's 0 / 0
   EXPECT_DOUBLE_EQ(pixel_accuracy(e, e, 4, 3), 1.0);
   EXPECT_DOUBLE_EQ(iou(e, f, 4, 3), 0.0);
   EXPECT_DOUBLE_EQ(iou(f, e, 4, 3), 0.0);

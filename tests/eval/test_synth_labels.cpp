@@ -170,4 +170,15 @@ TEST(EvalInstances, MalformedObjectNamesAndMissingMaps) {
   EXPECT_EQ(I.masks[0], Mask(6, 0));
   EXPECT_EQ(I.masks[1], (Mask{0, 0, 0, 0, 0, 1}));
   EXPECT_THROW(load_instance_masks(tmp / "s", "v.png", names, 4, 2), Error);
+  // A JPEG view's map is gt/instances/<stem>.png (the image's own name is the fallback).
+  InstanceLabels J = load_instance_masks(tmp / "s", "v.jpg", names);
+  EXPECT_EQ(J.masks[1], I.masks[1]);
+  std::string missing;
+  try {
+    load_instance_masks(tmp / "s", "w.jpg", names);
+  } catch (const Error& e) {
+    missing = e.what();
+  }
+  EXPECT_NE(missing.find("w.jpg: file not found"), std::string::npos) << missing;
+  EXPECT_NE(missing.find("w.png was tried too"), std::string::npos) << missing;
 }

@@ -5,7 +5,10 @@
 
 #include <cmath>
 
+#include "model/render_inputs.h"
 #include "query/query.h"
+#include "query/relevancy.h"
+#include "render/renderer.h"
 
 namespace hgs {
 namespace {
@@ -44,12 +47,13 @@ query::Canonical canonical() {  // two unit directions away from the axes the bl
   return {{0, 0, 1, 0}, {0, 0, 0.6f, 0.8f}};
 }
 
-TEST(Relevancy, BackgroundGaussiansDoNotMatchAQuery) {
+TEST(Relevancy, ForegroundVariantSilencesBackgroundGaussians) {
   TwoBlobs s;
   render::GaussianRenderer r;
   const float text_right[TwoBlobs::D] = {0, 1, 0, 0}, text_left[TwoBlobs::D] = {1, 0, 0, 0};
-  const std::vector<float> rel_r = query::render_relevancy(r, s.m, s.cam, text_right, canonical());
-  const std::vector<float> rel_l = query::render_relevancy(r, s.m, s.cam, text_left, canonical());
+  const auto fg = query::Relevancy::Foreground;
+  const std::vector<float> rel_r = query::render_relevancy(r, s.m, s.cam, text_right, canonical(), fg);
+  const std::vector<float> rel_l = query::render_relevancy(r, s.m, s.cam, text_left, canonical(), fg);
   ASSERT_EQ(rel_r.size(), size_t(s.cam.width) * s.cam.height);
   // The query that matches the background blob's embedding finds nothing there...
   EXPECT_LT(rel_r[s.right()], 0.01f);
@@ -64,9 +68,31 @@ TEST(Relevancy, ForegroundBlobKeepsItsRelevancy) {
   TwoBlobs s(0.f);
   render::GaussianRenderer r;
   const float text_right[TwoBlobs::D] = {0, 1, 0, 0};
-  const std::vector<float> rel = query::render_relevancy(r, s.m, s.cam, text_right, canonical());
+  const std::vector<float> rel = query::render_relevancy(r, s.m, s.cam, text_right, canonical(), query::Relevancy::Foreground);
   EXPECT_GT(rel[s.right()], 0.9f);  // LERF relevancy of a feature equal to the text (cosine 1 against 0)
   EXPECT_LT(rel[s.left()], 0.6f);   // ... and of an orthogonal one (about 0.5)
+}
+
+TEST(Relevancy, LerfVariantIsTheRelevancyOfTheRenderedFeatureAlone) {
+  // The published protocol: no foreground weight. The background blob answers the query that matches its
+  // embedding, the empty corner (zero feature) gets 0.5 like any tie, and every pixel equals LERF's relevancy
+  // of the rendered feature sum_n f_n alpha T computed here by brute force.
+  TwoBlobs s;
+  render::GaussianRenderer r;
+  const float text_right[TwoBlobs::D] = {0, 1, 0, 0};
+  const std::vector<float> rel = query::render_relevancy(r, s.m, s.cam, text_right, canonical());  // default: Lerf
+  EXPECT_GT(rel[s.right()], 0.9f);
+  EXPECT_FLOAT_EQ(rel[0], 0.5f);
+  render::GaussianInputs in = render_inputs(s.m);
+  in.extra = s.m.find_extra("lang")->data.data();
+  in.num_extra = TwoBlobs::D;
+  render::RenderSettings rs;
+  render::RenderOutputs out;
+  r.forward(s.cam, in, rs, out);
+  for (size_t p = 0; p < rel.size(); ++p)
+    ASSERT_NEAR(rel[p], query::lerf_relevancy(&out.extra[p * TwoBlobs::D], text_right, canonical(), TwoBlobs::D), 1e-5)
+        << "pixel " << p;
+  EXPECT_STREQ(query::relevancy_name(query::Relevancy::Lerf), "lerf");
 }
 
 }  // namespace

@@ -8,6 +8,7 @@
 #include "core/fs.h"
 #include "core/image.h"
 #include "core/npy.h"
+#include "eval/labels.h"
 #include "scene/colmap.h"
 #include "scene/scene.h"
 #include "synth/synth.h"
@@ -38,15 +39,6 @@ std::map<std::string, std::vector<uint8_t>> all_files(const fs::path& root) {
   for (auto& e : fs::recursive_directory_iterator(root))
     if (e.is_regular_file()) m[fs::relative(e.path(), root).string()] = read_file_bytes(e.path());
   return m;
-}
-
-bool even_odd(const std::vector<std::pair<int, int>>& poly, double px, double py) {
-  bool in = false;
-  for (size_t i = 0, j = poly.size() - 1; i < poly.size(); j = i++) {
-    double xi = poly[i].first, yi = poly[i].second, xj = poly[j].first, yj = poly[j].second;
-    if ((yi > py) != (yj > py) && px < (xj - xi) * (py - yi) / (yj - yi) + xi) in = !in;
-  }
-  return in;
 }
 
 }  // namespace
@@ -225,6 +217,8 @@ TEST(Synth, MaskSimulationOnHandMadeCase) {
 }
 
 TEST(Synth, PolygonsRasteriseBackToTheParts) {
+  // Filled as cv2.fillPoly does (LangSplat's polygon_to_mask), the polygons give back every part exactly:
+  // a disc, a box on the border, a diagonal chain, a one-pixel part and a one-pixel-wide L.
   const int W = 40, H = 30;
   std::vector<uint8_t> in(W * H, 0);
   auto set = [&](int x, int y) { in[y * W + x] = 1; };
@@ -234,14 +228,33 @@ TEST(Synth, PolygonsRasteriseBackToTheParts) {
       if (x >= 25 && x < 39 && y >= 0 && y < 6) set(x, y);              // box on the border
     }
   set(30, 10); set(31, 11); set(32, 12);  // diagonal chain (one 8-connected part)
+  set(2, 28);                             // one pixel
+  for (int k = 0; k < 6; ++k) set(20 + k, 25), set(20, 20 + k);  // L, one pixel wide
   auto polys = synth::trace_polygons(in, W, H);
-  ASSERT_EQ(polys.size(), 3u);
+  ASSERT_EQ(polys.size(), 5u);
   std::vector<uint8_t> back(W * H, 0);
-  for (auto& p : polys)
-    for (int y = 0; y < H; ++y)
-      for (int x = 0; x < W; ++x)
-        if (even_odd(p, x + 0.5, y + 0.5)) back[y * W + x] = 1;
+  for (auto& p : polys) {
+    std::vector<eval::Point2> q;
+    for (auto [x, y] : p) q.push_back({double(x), double(y)});
+    eval::fill_polygon(q, W, H, back);
+  }
   EXPECT_EQ(back, in);
+}
+
+TEST(Synth, PolygonsFillHoles) {
+  // A square ring: its polygon is the outer boundary, so the hole comes back filled.
+  const int W = 9, H = 9;
+  std::vector<uint8_t> in(W * H, 0), want(W * H, 0);
+  for (int y = 1; y < 8; ++y)
+    for (int x = 1; x < 8; ++x) {
+      want[y * W + x] = 1;
+      in[y * W + x] = (x == 1 || x == 7 || y == 1 || y == 7);
+    }
+  auto polys = synth::trace_polygons(in, W, H);
+  ASSERT_EQ(polys.size(), 1u);
+  std::vector<eval::Point2> q;
+  for (auto [x, y] : polys[0]) q.push_back({double(x), double(y)});
+  EXPECT_EQ(eval::rasterize_polygon(q, W, H), want);
 }
 
 TEST(Synth, LabelsMatchGroundTruth) {
