@@ -108,6 +108,15 @@ std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianM
   return rel;
 }
 
+std::vector<int> choose_objects(const std::vector<ObjectScore>& scores, float min_relevancy, const std::string& text) {
+  if (scores.empty()) fail("the model has no foreground objects to answer \"{}\"", text);
+  std::vector<int> chosen = {scores[0].object};
+  if (min_relevancy > 0)
+    for (size_t i = 1; i < scores.size(); ++i)
+      if (scores[i].relevancy >= min_relevancy) chosen.push_back(scores[i].object);
+  return chosen;
+}
+
 GaussianModel select_objects(const GaussianModel& m, const std::vector<int>& objects, bool remove) {
   const ExtraGroup* z = hybrid::ConstHybridFields::bind(m, "query").z;
   std::vector<int> keep;

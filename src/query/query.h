@@ -43,6 +43,11 @@ using Canonical = std::vector<std::vector<float>>;  // canonical phrase embeddin
 // best cosine first.
 std::vector<ObjectScore> score_objects(const ObjectEmbeddings& oe, const float* text, const Canonical& canon);
 
+// The objects an answer selects from `scores` (best first, as score_objects returns them): the best one always,
+// and with min_relevancy > 0 also every other whose LERF relevancy is at least min_relevancy. Fails naming
+// `text` when there is no object to choose.
+std::vector<int> choose_objects(const std::vector<ObjectScore>& scores, float min_relevancy, const std::string& text);
+
 // Opacity render of objects `ks` (channel j = A_{ks[j]}). Returns [H, W, J].
 std::vector<float> render_object_opacity(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
                                          const std::vector<int>& ks);

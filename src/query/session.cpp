@@ -25,11 +25,7 @@ ObjectAnswer Session::ask(const std::string& text, const QueryOptions& opt) {
   a.text = text;
   const auto& e = text_.embed(text);
   a.scores = score_objects(oe_, e.data(), text_.canonical());
-  if (a.scores.empty()) fail("the model has no foreground objects to answer \"{}\"", text);
-  a.chosen.push_back(a.scores[0].object);
-  if (opt.min_relevancy > 0)
-    for (size_t i = 1; i < a.scores.size(); ++i)
-      if (a.scores[i].relevancy >= opt.min_relevancy) a.chosen.push_back(a.scores[i].object);
+  a.chosen = choose_objects(a.scores, opt.min_relevancy, text);
   return a;
 }
 
