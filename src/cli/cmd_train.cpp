@@ -187,6 +187,10 @@ CommandRegistration reg({"train", "Optimise Hybrid Gaussians (or plain 3DGS with
                  "What a mask pixel below --tau1 tells Observation Fusion: unobserved (nothing; see hybrid/fusion.h) "
                  "or background (eq. 2 as written)")
       ->check(CLI::IsMember({"unobserved", "background"}))->capture_default_str();
+  sub.add_option("--background-vote", h.background_vote,
+                 "Weight of a background observation in Observation Fusion's evidence (eq. 4; 1 = the paper; 0.5 helped "
+                 "under heavy mask noise and hurt at low noise; see "
+                 "hybrid/fusion.h)")->check(CLI::Range(0.0, 1.0))->capture_default_str();
   sub.add_flag("--occlusion-test", h.occlusion_test,
                "Observation Fusion counts a view only where the Gaussian is not hidden behind the surface the "
                "model renders there (one extra render per view at each table rebuild; see hybrid/fusion.h)");

@@ -46,7 +46,7 @@ void ObjectAssociation::fuse(int n, HybridFields& h) {
   s_.resize(size_t(n) * L_);
   valid_.resize(n);
   softmax(logits_.data(), int(logits_.size()), w_.data());
-  FusionParams p{L_, cfg_.temperature, cfg_.fusion_eps};
+  FusionParams p{L_, cfg_.temperature, cfg_.fusion_eps, cfg_.background_vote};
   hybrid::fuse(table_, w_.data(), p, h.q->data.data(), s_.data(), valid_.data());
 }
 
@@ -77,7 +77,7 @@ void ObjectAssociation::update_hard_ids(int n, HybridFields& h) const {
 void ObjectAssociation::backward_and_update(int n, const HybridFields& h, const float* dq, train::Adam& optim) {
   if (!cfg_.use_of) return;
   const int U = static_cast<int>(logits_.size());
-  FusionParams p{L_, cfg_.temperature, cfg_.fusion_eps};
+  FusionParams p{L_, cfg_.temperature, cfg_.fusion_eps, cfg_.background_vote};
   dw_.resize(U);
   dlogits_.resize(U);
   fuse_backward(table_, w_.data(), p, s_.data(), h.q->data.data(), valid_.data(), dq, dw_.data());

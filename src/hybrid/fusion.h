@@ -15,7 +15,14 @@
 //             current model's rendered depth; hide_occluded). Eq. 3 projects a hidden Gaussian onto its
 //             occluder, whose label (often background) then votes for it.
 // fuse():     w = softmax(view logits) ("learnable normalised reliability"),
-//             s_{n,k} = sum_u w_u V_{n,u} M_{u,k}(p_{n,u}) / (sum_u w_u V_{n,u} + eps)        (eq. 4)
+//             s_{n,k} = sum_u w_u V_{n,u} b_k M_{u,k}(p_{n,u}) / (sum_u w_u V_{n,u} + eps)    (eq. 4)
+//             b_0 = FusionParams::background_vote, b_k = 1 for objects; the paper has b_0 = 1, the default.
+//             Option (HybridConfig::background_vote, `hgs train --background-vote`): M_{u,0} = 1 - OR_k M_{u,k}
+//             is not an observation of the background but the absence of every mask, and a missed or eroded
+//             object (common for small objects in SAM2's masks) produces it; with b_0 = 1 a small object's own
+//             Gaussians lose the vote to the background under heavy mask noise (docs/results.md sections 5-8).
+//             With b_0 = 0.5 an object wins with more than a third of the views: better at high noise, worse
+//             (objects bloat) at low and medium noise, hence off by default (section 8).
 //             q_n = softmax(s_n / T), z_n = argmax_k q_{n,k}                                  (eq. 5)
 //             Gaussians without any valid view keep their previous q (and z).
 // fuse_backward(): exact dL/dlogits from dL/dq through eqs. 4-5 and the softmax over views (Gaussians without a
@@ -87,6 +94,7 @@ struct FusionParams {
   int num_labels = 2;     // K + 1
   double temperature = 0.1;  // T of eq. 5
   double eps = 1e-6;      // epsilon of eq. 4
+  double background_vote = 1.0;  // weight of a background observation in eq. 4's numerator (1 = the paper)
 };
 
 // w [U] (already softmax-normalised), q [N, K+1] in/out (kept where no view is valid), s [N, K+1] out,
@@ -103,7 +111,7 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
     for (int u = 0; u < U; ++u) {
       if (lab[u] == kNoObservation) continue;
       den += w[u];
-      if (lab[u] < L) sn[lab[u]] += w[u];
+      if (lab[u] < L) sn[lab[u]] += lab[u] == 0 ? T(p.background_vote) * w[u] : w[u];
     }
     valid[n] = den > 0;
     if (!valid[n]) continue;
@@ -153,7 +161,7 @@ void fuse_backward(const ObservationTable& tab, const T* w, const FusionParams& 
       for (int u = 0; u < U; ++u) {
         if (lab[u] == kNoObservation) continue;
         T g = -sum_ds_s;
-        if (lab[u] < L) g += ds[lab[u]];
+        if (lab[u] < L) g += lab[u] == 0 ? T(p.background_vote) * ds[0] : ds[lab[u]];
         dw_local[u] += g * inv;
       }
     }

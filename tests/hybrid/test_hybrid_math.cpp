@@ -66,27 +66,56 @@ TEST(ObservationFusion, GradientToViewLogits) {
   tab.label.resize(N * U);
   for (auto& l : tab.label) l = rng() % 5 == 0 ? kNoObservation : uint16_t(rng() % L);
   for (int u = 0; u < U; ++u) tab.label[u] = kNoObservation;  // Gaussian 0 has no valid view
-  FusionParams p{L, 0.3, 1e-6};
-  std::vector<double> logits = randv(U, rng), dq = randv(N * L, rng), q0(N * L, 0.25);
-  auto loss = [&](std::vector<double>* q_out, std::vector<double>* s_out, std::vector<uint8_t>* valid_out) {
-    std::vector<double> w(U), q = q0, s(N * L);
-    std::vector<uint8_t> valid(N);
+  for (double background_vote : {1.0, 0.4}) {
+    SCOPED_TRACE(background_vote);
+    FusionParams p{L, 0.3, 1e-6, background_vote};
+    std::vector<double> logits = randv(U, rng), dq = randv(N * L, rng), q0(N * L, 0.25);
+    auto loss = [&](std::vector<double>* q_out, std::vector<double>* s_out, std::vector<uint8_t>* valid_out) {
+      std::vector<double> w(U), q = q0, s(N * L);
+      std::vector<uint8_t> valid(N);
+      softmax(logits.data(), U, w.data());
+      fuse(tab, w.data(), p, q.data(), s.data(), valid.data());
+      double l = 0;
+      for (int i = 0; i < N * L; ++i) l += dq[i] * q[i];
+      if (q_out) *q_out = q, *s_out = s, *valid_out = valid;
+      return l;
+    };
+    std::vector<double> q, s, w(U), dw(U), dlogits(U);
+    std::vector<uint8_t> valid;
+    loss(&q, &s, &valid);
+    EXPECT_EQ(valid[0], 0);
+    for (int k = 0; k < L; ++k) EXPECT_EQ(q[k], 0.25);  // kept
     softmax(logits.data(), U, w.data());
-    fuse(tab, w.data(), p, q.data(), s.data(), valid.data());
-    double l = 0;
-    for (int i = 0; i < N * L; ++i) l += dq[i] * q[i];
-    if (q_out) *q_out = q, *s_out = s, *valid_out = valid;
-    return l;
-  };
-  std::vector<double> q, s, w(U), dw(U), dlogits(U);
-  std::vector<uint8_t> valid;
-  loss(&q, &s, &valid);
-  EXPECT_EQ(valid[0], 0);
-  for (int k = 0; k < L; ++k) EXPECT_EQ(q[k], 0.25);  // kept
-  softmax(logits.data(), U, w.data());
-  fuse_backward(tab, w.data(), p, s.data(), q.data(), valid.data(), dq.data(), dw.data());
-  softmax_backward(w.data(), dw.data(), U, dlogits.data());
-  check_grad(logits, [&] { return loss(nullptr, nullptr, nullptr); }, dlogits);
+    fuse_backward(tab, w.data(), p, s.data(), q.data(), valid.data(), dq.data(), dw.data());
+    softmax_backward(w.data(), dw.data(), U, dlogits.data());
+    check_grad(logits, [&] { return loss(nullptr, nullptr, nullptr); }, dlogits);
+  }
+}
+
+TEST(ObservationFusion, BackgroundVoteWeighsTheAbsenceOfAMask) {
+  // Five views of one Gaussian: two masks say object 1, three say background (a missed or eroded small object).
+  // Eq. 4 as written (background_vote 1): s = (0.6, 0.4), the background wins. With background_vote 0.5 the
+  // background's numerator halves, s = (0.3, 0.4): the object wins. A Gaussian seen as background in every view
+  // stays background at any vote weight; object votes are never discounted.
+  ObservationTable tab;
+  tab.n = 2;
+  tab.num_views = 5;
+  tab.label = {1, 0, 1, 0, 0,  //
+               0, 0, 0, 0, 0};
+  const float w[] = {0.2f, 0.2f, 0.2f, 0.2f, 0.2f};
+  for (double bv : {1.0, 0.5}) {
+    SCOPED_TRACE(bv);
+    FusionParams p{2, 0.05, 1e-9, bv};
+    std::vector<float> q(4, 0.5f), s(4);
+    std::vector<uint8_t> valid(2);
+    fuse(tab, w, p, q.data(), s.data(), valid.data());
+    EXPECT_NEAR(s[0], 0.6 * bv, 1e-6);
+    EXPECT_NEAR(s[1], 0.4, 1e-6);
+    EXPECT_EQ(q[1] > q[0], bv < 1.0);
+    EXPECT_NEAR(s[2], bv, 1e-6);
+    EXPECT_NEAR(s[3], 0.0, 1e-6);
+    EXPECT_GT(q[2], q[3]);
+  }
 }
 
 TEST(ObservationFusion, HandMadeCases) {
