@@ -188,12 +188,12 @@ CommandRegistration reg({"train", "Optimise Hybrid Gaussians (or plain 3DGS with
                  "or background (eq. 2 as written)")
       ->check(CLI::IsMember({"unobserved", "background"}))->capture_default_str();
   sub.add_option("--background-vote", h.background_vote,
-                 "Weight of a background observation in Observation Fusion's evidence (eq. 4; 1 = the paper; 0.5 helped "
-                 "under heavy mask noise and hurt at low noise; see "
+                 "Weight of a background observation in Observation Fusion's evidence (eq. 4; 1 = the paper; see "
                  "hybrid/fusion.h)")->check(CLI::Range(0.0, 1.0))->capture_default_str();
-  sub.add_flag("--occlusion-test", h.occlusion_test,
+  sub.add_flag("--occlusion-test,!--no-occlusion-test", h.occlusion_test,
                "Observation Fusion counts a view only where the Gaussian is not hidden behind the surface the "
-               "model renders there (one extra render per view at each table rebuild; see hybrid/fusion.h)");
+               "model renders there (on by default; one extra render per view at each table rebuild; see "
+               "hybrid/fusion.h). --no-occlusion-test = eq. 3's V");
   sub.add_option("--bro-gradient", a->bro_gradient,
                  "scale-invariant (BRO cannot fade a whole object; see hybrid/bro.h) or plain (eq. 14's own gradient)")
       ->check(CLI::IsMember({"scale-invariant", "plain"}))->capture_default_str();

@@ -57,7 +57,8 @@ const std::vector<float>& ObjectAssociation::weights() const {
 
 void ObjectAssociation::refresh(GaussianModel& m, HybridFields& h) {
   observe(m.mean.data(), m.n, *masks_, table_);
-  if (cfg_.occlusion_test) hide_occluded_all(m, *masks_, table_);
+  // The occlusion test is part of Observation Fusion; the single-view assignment (no-OF ablation) keeps eq. 3's V.
+  if (cfg_.use_of && cfg_.occlusion_test) hide_occluded_all(m, *masks_, table_);
   if (cfg_.use_of) fuse(m.n, h);
   else single_view_assignment(table_, L_, h.q->data.data());
   update_hard_ids(m.n, h);

@@ -10,19 +10,20 @@
 //             unconfident pixel into background evidence, and SAM2's confidence is lowest on object rims and on
 //             small objects, so under noise the background out-votes the object for many of its own Gaussians
 //             (docs/results.md, "Observation Fusion under noise"); an unconfident pixel says nothing about either.
-//             Option (HybridConfig::occlusion_test, off by default): V_{n,u} also requires the centre to be
+//             Deviation (HybridConfig::occlusion_test, on by default): V_{n,u} also requires the centre to be
 //             visible, not more than kOcclusionTolerance behind the surface the view sees at p_{n,u} (the
 //             current model's rendered depth; hide_occluded). Eq. 3 projects a hidden Gaussian onto its
 //             occluder, whose label (often background) then votes for it.
 // fuse():     w = softmax(view logits) ("learnable normalised reliability"),
 //             s_{n,k} = sum_u w_u V_{n,u} b_k M_{u,k}(p_{n,u}) / (sum_u w_u V_{n,u} + eps)    (eq. 4)
-//             b_0 = FusionParams::background_vote, b_k = 1 for objects; the paper has b_0 = 1, the default.
-//             Option (HybridConfig::background_vote, `hgs train --background-vote`): M_{u,0} = 1 - OR_k M_{u,k}
-//             is not an observation of the background but the absence of every mask, and a missed or eroded
-//             object (common for small objects in SAM2's masks) produces it; with b_0 = 1 a small object's own
-//             Gaussians lose the vote to the background under heavy mask noise (docs/results.md sections 5-8).
-//             With b_0 = 0.5 an object wins with more than a third of the views: better at high noise, worse
-//             (objects bloat) at low and medium noise, hence off by default (section 8).
+//             b_0 = FusionParams::background_vote, b_k = 1 for objects; the paper has b_0 = 1.
+//             Deviation (HybridConfig::background_vote, default 0.5, with the occlusion test): M_{u,0} =
+//             1 - OR_k M_{u,k} is not an observation of the background but the absence of every mask, and a
+//             missed or eroded object (common for small objects in SAM2's masks) produces it; with b_0 = 1 a small
+//             object's own Gaussians lose the vote to the background under heavy mask noise (docs/results.md
+//             sections 5-8). With b_0 = 0.5 an object wins with more than a third of the views that see it. Without
+//             the occlusion test, Gaussians hidden behind an object (the table under a mug) then take its label
+//             and objects bloat (section 8).
 //             q_n = softmax(s_n / T), z_n = argmax_k q_{n,k}                                  (eq. 5)
 //             Gaussians without any valid view keep their previous q (and z).
 // fuse_backward(): exact dL/dlogits from dL/dq through eqs. 4-5 and the softmax over views (Gaussians without a
