@@ -21,6 +21,9 @@ HybridConfig HybridConfig::from_json(const nlohmann::json& j) {
 #define X(f) if (j.contains(#f)) j.at(#f).get_to(c.f);
   HGS_HYBRID_FIELDS(X)
 #undef X
+  // A configuration written before background_vote existed (an older checkpoint) was trained with eq. 4 as
+  // written; its occlusion_test field, false then, is read above.
+  if (!j.is_null() && !j.contains("background_vote")) c.background_vote = 1.0f;
   return c;
 }
 

@@ -273,3 +273,23 @@ TEST(MethodRegistry, BuildsTheNamedMethodWithItsOptions) {
     EXPECT_NE(std::string(e.what()).find("unknown training method 'nerf' (known: rgb, hybrid"), std::string::npos) << e.what();
   }
 }
+
+TEST(HybridConfigJson, RoundTripsAndOlderConfigurationsKeepEq4) {
+  hybrid::HybridConfig c;
+  c.background_vote = 0.7f;
+  c.occlusion_test = false;
+  const hybrid::HybridConfig r = hybrid::HybridConfig::from_json(c.to_json());
+  EXPECT_EQ(r.background_vote, 0.7f);
+  EXPECT_FALSE(r.occlusion_test);
+  // A checkpoint written before background_vote existed was trained with eq. 4 as written (and its
+  // occlusion_test field is false): resuming it must not switch to the half background vote.
+  nlohmann::json old = hybrid::HybridConfig{}.to_json();
+  old.erase("background_vote");
+  old["occlusion_test"] = false;
+  const hybrid::HybridConfig o = hybrid::HybridConfig::from_json(old);
+  EXPECT_EQ(o.background_vote, 1.0f);
+  EXPECT_FALSE(o.occlusion_test);
+  // Today's defaults.
+  EXPECT_EQ(hybrid::HybridConfig{}.background_vote, 0.5f);
+  EXPECT_TRUE(hybrid::HybridConfig{}.occlusion_test);
+}
