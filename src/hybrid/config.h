@@ -21,8 +21,8 @@ struct HybridConfig {
   // current model renders there; fusion.h). On by default together with background_vote 0.5: alone it moved
   // some objects' Gaussians towards their label and others away, and background_vote alone bloated objects at
   // low noise through hidden views; together they were above eq. 4 as written on five of six scenes of three
-  // noise levels and 0.4 mIoU below it at low noise (docs/results.md section 8). Only with OF: the single-view assignment of the no-OF rows keeps eq. 3's V.
-  // false = eq. 3's V (positive depth, in the image).
+  // noise levels and 0.4 mIoU below it at low noise (docs/results.md section 8). Only with OF: the single-view
+  // assignment of the no-OF rows keeps eq. 3's V. false = eq. 3's V (positive depth, in the image).
   bool occlusion_test = true;
   // T of eq. 5. s_{n,k} is a (weighted) fraction of views, so q_k / q_j = exp((s_k - s_j) / T): at T = 0.1 a label
   // that wins by 20 % of the views still leaves q_k ~ 0.88 and, under heavy mask noise, objects render below
