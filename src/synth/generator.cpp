@@ -190,9 +190,15 @@ void generate(const fs::path& out, const SynthOptions& opt) {
 
     // Labels for the held-out views (every 8th view, the LLFF split hgs uses without test.txt).
     {
-      std::vector<std::string> classes;
-      for (auto& o : world.objects) classes.push_back(o.name);
-      std::vector<std::string> seg_classes = classes;
+      // 3D-OVS classes: the objects and, as the real 3D-OVS labels every surface, the background surfaces
+      // (table, floor, walls: every concept that is no object; "sky" = nothing hit stays unlabelled).
+      std::vector<std::string> seg_classes;
+      for (auto& o : world.objects) seg_classes.push_back(o.name);
+      std::vector<int> surface_concepts;  // indices into concept_names
+      for (size_t c = 1; c < concept_names.size(); ++c)
+        if (std::find(seg_classes.begin(), seg_classes.end(), concept_names[c]) == seg_classes.end())
+          surface_concepts.push_back(int(c));
+      for (int c : surface_concepts) seg_classes.push_back(concept_names[c]);
       std::sort(seg_classes.begin(), seg_classes.end());
       std::string ctext;
       for (auto& c : seg_classes) ctext += c + "\n";
@@ -200,14 +206,22 @@ void generate(const fs::path& out, const SynthOptions& opt) {
       for (int i = 0; i < opt.views; i += 8) {
         const RenderedView& rv = views[i];
         const std::string stem = rv.name.substr(0, rv.name.size() - 4);
+        auto save_segmentation = [&](const std::string& cls, const std::vector<uint8_t>& inside) {
+          Image seg(opt.width, opt.height, 1);
+          for (size_t p = 0; p < inside.size(); ++p) seg.px[p] = inside[p] ? 1.f : 0.f;
+          save_png(tmp / "segmentations" / std::to_string(i) / (cls + ".png"), seg);
+        };
+        for (int c : surface_concepts) {
+          std::vector<uint8_t> inside(rv.instances.v.size());
+          for (size_t p = 0; p < inside.size(); ++p) inside[p] = rv.concept_id[p] == c && rv.instances.v[p] == 0;
+          save_segmentation(concept_names[c], inside);
+        }
         json objs = json::array();
         for (auto& o : world.objects) {
           std::vector<uint8_t> inside(rv.instances.v.size());
           size_t cnt = 0;
           for (size_t p = 0; p < inside.size(); ++p) cnt += inside[p] = rv.instances.v[p] == o.id;
-          Image seg(opt.width, opt.height, 1);
-          for (size_t p = 0; p < inside.size(); ++p) seg.px[p] = inside[p] ? 1.f : 0.f;
-          save_png(tmp / "segmentations" / std::to_string(i) / (o.name + ".png"), seg);
+          save_segmentation(o.name, inside);
           if (!cnt) continue;
           for (auto& poly : trace_polygons(inside, opt.width, opt.height)) {
             int x1 = opt.width, y1 = opt.height, x2 = 0, y2 = 0;

@@ -1,6 +1,7 @@
 // The label loaders on a scene written by `hgs synth`: LERF-OVS polygons rasterise back to the exact
 // ground-truth instance masks (hole-filled; exactly equal for objects without holes), and the 3D-OVS masks
-// equal the instance masks of the name-sorted view they index.
+// of objects equal the instance masks of the name-sorted view they index, with the background surfaces as
+// classes of their own.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -108,10 +109,19 @@ TEST(EvalSynthLabels, PolygonsAndSegmentationsMatchInstanceMasks) {
   EXPECT_GE(present, 4);
   EXPECT_GE(exact, present / 2) << "too few hole-free objects to test exact equality (" << with_holes << " with holes)";
 
-  // 3D-OVS.
+  // 3D-OVS: the objects and the background surfaces (synth.json background_concepts that are no object) are
+  // classes. Object classes equal the instance masks; surface classes are disjoint, lie on background pixels
+  // and together label every background pixel but the sky's.
   OvsLabelSet L = open_3dovs_labels(scene);
-  std::vector<std::string> sorted;
+  const auto meta = nlohmann::json::parse(read_file_text(scene / "synth.json"));
+  std::vector<std::string> sorted, surfaces;
   for (auto& [id, name] : names) sorted.push_back(name);
+  for (const auto& c : meta["background_concepts"]) {
+    const std::string n = c.get<std::string>();
+    if (std::find(sorted.begin(), sorted.end(), n) == sorted.end()) surfaces.push_back(n);
+  }
+  ASSERT_GE(surfaces.size(), 1u);
+  sorted.insert(sorted.end(), surfaces.begin(), surfaces.end());
   std::sort(sorted.begin(), sorted.end());
   EXPECT_EQ(L.classes, sorted);
   ASSERT_EQ(L.views.size(), 2u);
@@ -120,15 +130,24 @@ TEST(EvalSynthLabels, PolygonsAndSegmentationsMatchInstanceMasks) {
   for (size_t v = 0; v < L.views.size(); ++v) {
     OvsViewLabels V = load_3dovs_view(L, v, o.width, o.height);
     const LabelMap inst = load_label_png(scene / "gt/instances" / views[V.index]);
+    std::vector<int> covered(inst.v.size(), 0);
     for (size_t c = 0; c < L.classes.size(); ++c) {
+      for (size_t i = 0; i < inst.v.size(); ++i) covered[i] += V.masks[c][i];
       int id = -1;
       for (auto& [k, name] : names)
         if (name == L.classes[c]) id = k;
-      ASSERT_GT(id, 0);
+      if (id < 0) continue;  // a surface class
       Mask gt(inst.v.size());
       for (size_t i = 0; i < gt.size(); ++i) gt[i] = inst.v[i] == id;
       EXPECT_EQ(V.masks[c], gt) << "view " << V.index << " class " << L.classes[c];
     }
+    size_t background = 0, labelled_background = 0;
+    for (size_t i = 0; i < inst.v.size(); ++i) {
+      ASSERT_LE(covered[i], 1) << "classes overlap at pixel " << i;
+      if (inst.v[i] == 0) background++, labelled_background += covered[i];
+      else ASSERT_EQ(covered[i], 1);
+    }
+    EXPECT_GT(labelled_background, background / 2) << "view " << V.index << ": surfaces label too little";
     // Downscaled labels agree with the downscaled instance map.
     OvsViewLabels D = load_3dovs_view(L, v, o.width / 2, o.height / 2, 2);
     const InstanceLabels I2 = load_instance_masks(scene, views[V.index], names, o.width / 2, o.height / 2, 2);
