@@ -181,6 +181,11 @@ CommandRegistration reg({"train", "Optimise Hybrid Gaussians (or plain 3DGS with
   sub.add_option("--tau1", h.tau1, "Mask confidence threshold (eq. 2)")->capture_default_str();
   sub.add_option("--fusion-temperature", h.temperature, "Temperature T of the association softmax (eq. 5)")->capture_default_str();
   sub.add_option("--tau2", h.tau2, "InfoNCE temperature (eq. 10)")->capture_default_str();
+  sub.add_option("--scl-background", h.scl_background,
+                 "The background as a Semantic Contrastive Learning class: auto (in views with fewer than two "
+                 "foreground objects, where eq. 10 has no negative), on (every view) or off (eq. 10 as written); "
+                 "see hybrid/config.h")
+      ->check(CLI::IsMember({"auto", "on", "off"}))->capture_default_str();
   sub.add_option("--fusion-every", h.fusion_every, "Rebuild the observation table every R iterations")->capture_default_str();
   sub.add_option("--bro-kernel", h.bro_kernel, "Side of the square structuring element of BRO")->check(CLI::Range(1, 63))->capture_default_str();
   sub.add_option("--unconfident", a->unconfident,

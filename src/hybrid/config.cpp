@@ -1,11 +1,13 @@
 #include "hybrid/config.h"
 
+#include "core/error.h"
+
 namespace hgs::hybrid {
 
 #define HGS_HYBRID_FIELDS(X)                                                                                     \
   X(use_of) X(use_scl) X(use_bro) X(lambda_rgb) X(lambda_app) X(lambda_sem) X(lambda_bro) X(lambda_dssim) X(tau1) \
   X(unconfident_unobserved) X(occlusion_test) X(background_vote)                                                  \
-  X(temperature) X(fusion_eps) X(tau2) X(fusion_every) X(bro_kernel) X(bro_scale_invariant) X(bro_image_norm)      \
+  X(temperature) X(fusion_eps) X(tau2) X(scl_background) X(fusion_every) X(bro_kernel) X(bro_scale_invariant) X(bro_image_norm)      \
   X(sem_geometry) X(bro_eps) X(min_mask_pixels) X(lr_lang) X(lang_half) X(lr_view) X(lang_init_std)
 
 nlohmann::json HybridConfig::to_json() const {
@@ -24,6 +26,10 @@ HybridConfig HybridConfig::from_json(const nlohmann::json& j) {
   // A configuration written before background_vote existed (an older checkpoint) was trained with eq. 4 as
   // written; its occlusion_test field, false then, is read above.
   if (!j.is_null() && !j.contains("background_vote")) c.background_vote = 1.0f;
+  // Likewise one written before scl_background: eq. 10 without the background.
+  if (!j.is_null() && !j.contains("scl_background")) c.scl_background = "off";
+  if (c.scl_background != "auto" && c.scl_background != "on" && c.scl_background != "off")
+    fail("hybrid configuration: scl_background must be auto, on or off (got '{}')", c.scl_background);
   return c;
 }
 

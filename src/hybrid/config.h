@@ -2,6 +2,7 @@
 // defaults here are ours, chosen on the synthetic benchmark, and every one is a `hgs train` option.
 #pragma once
 #include <nlohmann/json.hpp>
+#include <string>
 
 namespace hgs::hybrid {
 
@@ -37,6 +38,14 @@ struct HybridConfig {
   // (docs/results.md section 8).
   float background_vote = 0.5f;
   float tau2 = 0.1f;          // InfoNCE temperature (eq. 10)
+  // The background in SCL. Eq. 10 contrasts foreground objects only, so a view with fewer than two of them gives
+  // an anchor no negative (its InfoNCE is 0 and passes no gradient) and, in a one-object scene, f is never trained
+  // against anything: pixel-mode relevancy inside the object stays noise. "auto": a view whose SCL objects are
+  // fewer than two adds its background (label 0, pooled like an object) as one more SCL class, an anchor and a
+  // candidate; views with two or more keep eq. 10 exactly. "on": every view adds it (the background Gaussians'
+  // f then learns the background's features, which the faithful LERF relevancy needs; docs/results.md).
+  // "off": eq. 10 as written.
+  std::string scl_background = "auto";
   // The semantic loss (eq. 10 through the pooled weights a_{n,k} = sum_p M_k alpha T) also moves opacities and
   // geometry. Off by default: SCL then trains f and (through q) the view weights only. With it, the opacities of a
   // high-noise scene's objects halved and objects fell below the mask threshold (docs/results.md); true = the full

@@ -9,6 +9,15 @@
 
 namespace hgs::hybrid {
 
+std::vector<int> scl_classes(const std::vector<int>& fg, float background_area, const std::string& rule,
+                             int min_pixels) {
+  const bool add = rule == "on" || (rule == "auto" && fg.size() < 2);
+  std::vector<int> out;
+  if (add && background_area >= min_pixels) out.push_back(0);
+  out.insert(out.end(), fg.begin(), fg.end());
+  return out;
+}
+
 HybridData load_hybrid_data(const Scene& scene, const std::vector<int>& idx, const HybridConfig& cfg, bool progress) {
   HybridData d;
   const int K = scene.num_objects();
@@ -50,6 +59,7 @@ HybridData load_hybrid_data(const Scene& scene, const std::vector<int>& idx, con
       if (hv.area[l] > 0) hv.present.push_back(l);
       if (l > 0 && hv.area[l] >= cfg.min_mask_pixels) hv.fg.push_back(l);
     }
+    hv.scl = scl_classes(hv.fg, hv.area[0], cfg.scl_background, cfg.min_mask_pixels);
     if (!cfg.use_scl) {
       hv.ph = gh;
       hv.pw = gw;

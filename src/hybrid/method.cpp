@@ -183,6 +183,10 @@ void HybridMethod::state_loaded(const std::string& where, const nlohmann::json& 
   if (table.size() != size_t(n) * U)
     fail("{}: the hybrid state does not match {} training views and {} Gaussians", where, U, n);
   // Checked: take it.
+  if (c.scl_background != cfg_.scl_background) {  // the views' SCL classes follow the checkpoint's rule
+    for (HybridView& hv : data_.views) hv.scl = scl_classes(hv.fg, hv.area[0], c.scl_background, c.min_mask_pixels);
+    semantic_ = SemanticPass(c, &data_);
+  }
   cfg_ = c;
   assoc_.set_config(c);
   semantic_.set_config(c);

@@ -1,6 +1,7 @@
 // The semantic term of one view. With SCL (eqs. 9-10): pooled object predictions P_k = sum_n q f a / m from
 // the renderer's pixel-weighted sums a_{n,k} = sum_p M_k alpha T, InfoNCE of each anchor object against the
-// pooled references of another view holding it (positive) and that view's other objects (negatives); one pass
+// pooled references of another view holding it (positive) and that view's other SCL classes (negatives: its
+// other objects, and its background under config.h's scl_background rule); one pass
 // over the Gaussians then forms dq, da (with sem_geometry only) and df_n = sum_j q a G_j row by row, and takes
 // f's row-sparse Adam step on the same row (no [N, D] gradient buffer; "lang" is a registered per-Gaussian
 // parameter with its own step count). Without SCL (the ablation): 1 - cos between the full semantic render
@@ -17,6 +18,16 @@
 #include "train/adam.h"
 
 namespace hgs::hybrid {
+
+// One InfoNCE anchor: SCL class classes_u[j] of view u with its positive's view v.
+struct SclAnchor {
+  int j, v;
+};
+// The anchors of view u: every class of classes_u that another view's SCL classes hold, its positive view drawn
+// uniformly among those other views. views_with [L]: ascending training views whose SCL classes hold each label
+// (u's own classes are in their lists). Classes held by no other view are skipped.
+std::vector<SclAnchor> draw_scl_anchors(const std::vector<int>& classes_u, const std::vector<std::vector<int>>& views_with,
+                                        int u, std::mt19937_64& rng);
 
 struct SemanticValues {
   double loss = 0;  // mean InfoNCE over the anchors, or the mean cosine loss
@@ -48,7 +59,7 @@ class SemanticPass {
   const HybridData* data_;
   int L_, D_;
   std::vector<std::vector<int>> views_with_;  // [L] training views whose SCL objects include l
-  std::vector<int> fg_;
+  std::vector<int> classes_;
   std::vector<float> pixel_w_;                // [H, W, Jf]
   std::vector<float> P_, dP_, G_;             // [Jf, D] predictions, their gradient, dP / (m + eps)
   std::vector<float> refs_;                   // [R, D] InfoNCE candidates of one anchor
