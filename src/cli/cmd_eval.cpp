@@ -2,10 +2,11 @@
 // model with a benchmark protocol (src/eval/run.h) and writes report.json, report.md and overlay PNGs.
 // lerf-ovs reports both the pixel-level (LangSplat protocol) and the object-level mode on the same frames;
 // 3d-ovs the pixel-level argmax over classes and the object-level one; instances (synthetic scenes) the
-// object-level mode and the pixel-level mode (LERF post-processing).
+// object-level mode and the pixel-level mode (LERF post-processing). --mode picks one (cli/evaluate.h).
 #include <fmt/format.h>
 
 #include "cli/command.h"
+#include "cli/evaluate.h"
 #include "core/error.h"
 #include "eval/report.h"
 #include "eval/run.h"
@@ -16,7 +17,7 @@ namespace {
 namespace fs = std::filesystem;
 
 struct EvalArgs {
-  std::string scene, model, protocol = "instances", out, clip, relevancy = "lerf";
+  std::string scene, model, protocol = "instances", out, clip, relevancy = "lerf", mode = "both";
   int downscale = 1, threads = 0;
   float mask_threshold = 0.5f;
   bool no_png = false, quiet = false;
@@ -39,60 +40,16 @@ void run_eval(const EvalArgs& a) {
   query::Session s(a.scene, ply, a.downscale, a.clip);
   const fs::path out = a.out;
   const fs::path dir = out.parent_path().empty() ? fs::path(".") : out.parent_path();
-  eval::RunOptions opt;
+  EvaluateOptions opt;
+  opt.protocol = a.protocol;
+  opt.object = a.mode != "pixel";
+  opt.pixel = a.mode != "object";
+  opt.relevancy = a.relevancy == "lerf" ? query::Relevancy::Lerf : query::Relevancy::Foreground;
+  opt.mask_threshold = a.mask_threshold;
+  if (!a.no_png) opt.overlay_dir = dir / "overlays";
   opt.progress = !a.quiet;
-  auto object_fn = [&](int view, const std::string& q, std::vector<float>* heat) {
-    return s.answer_mask(view, q, a.mask_threshold, heat);
-  };
-  const query::Relevancy rel = a.relevancy == "lerf" ? query::Relevancy::Lerf : query::Relevancy::Foreground;
-  auto pixel_fn = [&](int view, const std::string& q) { return s.pixel_relevancy(view, q, rel); };
-  auto pixel_mask_fn = [&](int view, const std::string& q, std::vector<float>* heat) {
-    std::vector<float> r = s.pixel_relevancy(view, q, rel);
-    const View& v = s.scene().views[view];
-    eval::Mask m = eval::lerf_postprocess(r, v.width, v.height, opt.lerf).mask;
-    if (heat) *heat = std::move(r);
-    return m;
-  };
-  auto png_dir = [&](const std::string& mode) {
-    return a.no_png ? fs::path() : dir / "overlays" / mode;
-  };
-  std::vector<eval::EvalReport> reports;
-  if (a.protocol == "lerf-ovs") {
-    opt.overlay_dir = png_dir("pixel");
-    reports.push_back(eval::run_lerf_ovs(s.scene(), pixel_fn, opt));
-    opt.overlay_dir = png_dir("object");
-    reports.push_back(eval::run_lerf_ovs_masks(s.scene(), object_fn, opt));
-  } else if (a.protocol == "3d-ovs") {
-    opt.overlay_dir = png_dir("pixel");
-    reports.push_back(eval::run_3dovs(s.scene(), [&](int view, const std::vector<std::string>& classes) {
-      std::vector<std::vector<float>> maps;
-      for (auto& c : classes) maps.push_back(s.pixel_relevancy(view, c, rel));
-      return maps;
-    }, opt));
-    reports.back().mode = "pixel";
-    opt.overlay_dir = png_dir("object");
-    reports.push_back(eval::run_3dovs(s.scene(), [&](int view, const std::vector<std::string>& classes) {
-      std::vector<std::vector<float>> maps;
-      for (auto& c : classes) {
-        auto ans = s.ask(c);
-        std::vector<float> A = s.object_opacity(view, {ans.chosen[0]});
-        for (auto& x : A) x *= ans.scores[0].relevancy;  // class score map: its object's opacity x relevancy
-        maps.push_back(std::move(A));
-      }
-      return maps;
-    }, opt));
-    reports.back().mode = "object";
-  } else {
-    opt.overlay_dir = png_dir("object");
-    reports.push_back(eval::run_instances(s.scene(), object_fn, opt));
-    opt.overlay_dir = png_dir("pixel");
-    reports.push_back(eval::run_instances(s.scene(), pixel_mask_fn, opt));
-    reports.back().mode = "pixel";
-  }
-  for (auto& r : reports) {
-    r.extra["model"] = ply.string();
-    if (r.mode == "pixel") r.extra["relevancy"] = query::relevancy_name(rel);
-  }
+  std::vector<eval::EvalReport> reports = evaluate_model(s, opt);
+  for (auto& r : reports) r.extra["model"] = ply.string();
   fs::path md = out;
   md.replace_extension(".md");
   eval::write_reports(out, md, reports);
@@ -109,6 +66,10 @@ CommandRegistration reg({"eval", "Evaluate a trained hybrid model: LERF-OVS, 3D-
     sub.add_option("--protocol", a->protocol, "lerf-ovs, 3d-ovs or instances")
         ->check(CLI::IsMember({"lerf-ovs", "3d-ovs", "instances"}))->capture_default_str();
     sub.add_option("--out", a->out, "report.json path (report.md and overlays/ go beside it)")->required();
+    sub.add_option("--mode", a->mode,
+                   "object (each query's best object; on 3d-ovs background pixels take the language field's "
+                   "class, see cli/evaluate.h), pixel (relevancy of the rendered language map) or both")
+        ->check(CLI::IsMember({"object", "pixel", "both"}))->capture_default_str();
     sub.add_option("--relevancy", a->relevancy,
                    "Pixel mode: lerf (LERF's relevancy of the rendered language map, as LangSplat's evaluation) or "
                    "foreground (ours: times the rendered foreground opacity; see query/query.h)")

@@ -1,0 +1,65 @@
+// `hgs ablate` through the CLI on a tiny synthetic scene: rows x scenes x seeds with two protocols and both
+// modes, mean and sample standard deviation per row, the eq. 15 row, and an interrupted ablation continuing
+// from the runs already on disk.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "core/fs.h"
+#include "test_util.h"
+
+using namespace hgs;
+namespace fs = std::filesystem;
+
+TEST(AblateCli, RowsSeedsProtocolsModesAndResume) {
+  test::TempDir tmp;
+  const std::string s = (tmp / "s").string(), out = (tmp / "a").string();
+  auto r = test::run_hgs("synth --out " + s + " --views 16 --width 96 --height 72 --objects 3 --points 2000 "
+                         "--noise medium --feature-dim 16 --supersample 1 --seed 4 --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string cmd = "ablate " + s + " --out " + out +
+                          " --iters 30 --rows ends --eq15-row --seeds 2 --protocol instances,3d-ovs --mode both --quiet";
+  r = test::run_hgs(cmd);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(read_file_text(tmp / "a" / "ablation.json"));
+  ASSERT_EQ(j["summary"].size(), 3u);  // all-off, full, full with eq. 15 alone
+  EXPECT_EQ(j["summary"][2]["lambda_rgb"].get<double>(), 0.0);
+  EXPECT_EQ(j["summary"][1]["lambda_rgb"].get<double>(), 1.0);
+  EXPECT_EQ(j["runs"].size(), 6u);  // 3 rows x 2 seeds
+  for (const auto& row : j["summary"]) {
+    for (const char* key : {"instances/object", "instances/pixel", "3d-ovs/object", "3d-ovs/pixel"}) {
+      ASSERT_TRUE(row["results"].contains(key)) << row["row"] << " " << key;
+      const auto& k = row["results"][key];
+      EXPECT_EQ(k["runs"], 2);
+      ASSERT_TRUE(k["miou_mean"].is_number()) << key;
+      ASSERT_TRUE(k["miou_std"].is_number()) << key;
+      // The summary is the mean and sample std of the two runs' values.
+      std::vector<double> v;
+      for (const auto& run : j["runs"])
+        if (run["row"] == row["row"]) v.push_back(run["run"]["results"][key]["miou"].get<double>());
+      ASSERT_EQ(v.size(), 2u);
+      EXPECT_NEAR(k["miou_mean"].get<double>(), (v[0] + v[1]) / 2, 1e-12);
+      EXPECT_NEAR(k["miou_std"].get<double>(), std::abs(v[0] - v[1]) / std::sqrt(2.0), 1e-12);
+    }
+  }
+  // Different seeds train different models.
+  EXPECT_NE(j["runs"][1]["run"]["results"]["instances/object"]["miou"],
+            j["runs"][4]["run"]["results"]["instances/object"]["miou"]);
+  const std::string md = read_file_text(tmp / "a" / "ablation.md");
+  EXPECT_NE(md.find("## 3d-ovs/pixel (relevancy lerf)"), std::string::npos) << md;
+  EXPECT_NE(md.find(" ± "), std::string::npos);
+  // Continuing: every run is on disk, so nothing is trained again and the summary is the same.
+  r = test::run_hgs(cmd.substr(0, cmd.size() - 8));  // without --quiet: one line per run
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  size_t reused = 0;
+  for (size_t p = r.out.find("(reused)"); p != std::string::npos; p = r.out.find("(reused)", p + 1)) ++reused;
+  EXPECT_EQ(reused, 6u) << r.out;
+  EXPECT_EQ(nlohmann::json::parse(read_file_text(tmp / "a" / "ablation.json"))["summary"], j["summary"]);
+  // A protocol without labels is a clear error before any training.
+  fs::remove_all(tmp / "s" / "segmentations");
+  r = test::run_hgs("ablate " + s + " --out " + (tmp / "b").string() + " --iters 5 --protocol 3d-ovs --quiet");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("no labels for the 3d-ovs protocol"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(tmp / "b" / "ablation.json"));
+}
