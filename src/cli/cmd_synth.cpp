@@ -25,6 +25,14 @@ CommandRegistration reg({"synth", "Generate a synthetic benchmark scene (images,
     sub.add_option("--noise", o->noise, "Simulated 2D-model error level: none, low, medium, high")
         ->check(CLI::IsMember({"none", "low", "medium", "high"}))->capture_default_str();
     sub.add_option("--feature-dim", o->feature_dim, "Language feature dimension D")->capture_default_str();
+    sub.add_option("--mask-ids", o->mask_ids,
+                   "Mask ids: consistent (one id per object in every view, as SAM2 propagation gives) or per-view "
+                   "(shuffled in every view, as raw SAM gives; truth in gt/mask_ids.json, no masks/objects.json)")
+        ->check(CLI::IsMember({"consistent", "per-view"}))->capture_default_str();
+    sub.add_option("--mask-style", o->mask_style,
+                   "Masks: label (SAM2-like label maps) or sam (overlapping SAM masks: wholes, halves, background surfaces, "
+                   "as SAM JSON with COCO RLE in sam/<stem>.json; masks/ holds them flattened as `hgs masks import` does)")
+        ->check(CLI::IsMember({"label", "sam"}))->capture_default_str();
     sub.add_option("--supersample", o->supersample, "Samples per pixel per axis for the RGB images")->check(CLI::Range(1, 8))->capture_default_str();
     sub.add_option("--threads", *threads, "Worker threads (0 = all cores)");
     sub.add_flag("--quiet", [o](int64_t n) { o->progress = n == 0; }, "No progress bars");

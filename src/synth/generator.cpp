@@ -1,17 +1,21 @@
 // Orchestrates `hgs synth`: builds the world, renders every view, simulates masks and features, samples
 // SfM-like points with visibility tracks, writes the COLMAP model, labels for the held-out views (LERF-OVS
-// JSON polygons and 3D-OVS PNGs) and a synth.json record. Everything is written into a temporary folder
+// JSON polygons and 3D-OVS PNGs) and a synth.json record. --mask-ids per-view / --mask-style sam add
+// gt/mask_ids.json (what each per-view id truly is) and, for sam, sam/<stem>.json (SAM JSON, COCO RLE). Everything is written into a temporary folder
 // beside the output and renamed at the end, so a failure leaves nothing behind.
 #include <algorithm>
 #include <cmath>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <random>
+#include <set>
 
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/npy.h"
 #include "core/progress.h"
+#include "masks/flatten.h"
+#include "masks/rle.h"
 #include "scene/colmap.h"
 #include "synth/synth.h"
 
@@ -41,7 +45,29 @@ json float_array(const std::vector<float>& v) {
   return a;
 }
 
+// --mask-ids per-view: the ids present in `mask` get a random permutation of 1..m; returns id -> true object.
+json shuffle_ids(LabelMap& mask, uint64_t seed) {
+  std::vector<int> present;
+  {
+    std::set<int> s(mask.v.begin(), mask.v.end());
+    for (int l : s)
+      if (l) present.push_back(l);
+  }
+  std::vector<int> ids(present.size());
+  for (size_t i = 0; i < ids.size(); ++i) ids[i] = int(i) + 1;
+  Rng rng(seed);
+  for (size_t i = ids.size(); i > 1; --i) std::swap(ids[i - 1], ids[size_t(rng.integer(0, int(i) - 1))]);
+  std::map<int, int> to;
+  json truth = json::object();
+  for (size_t i = 0; i < present.size(); ++i) to[present[i]] = ids[i], truth[std::to_string(ids[i])] = {{"object", present[i]}};
+  for (auto& l : mask.v)
+    if (l) l = uint16_t(to[l]);
+  return truth;
+}
+
 void validate(const SynthOptions& o) {
+  if (o.mask_ids != "consistent" && o.mask_ids != "per-view") fail("--mask-ids: unknown value '{}' (consistent or per-view)", o.mask_ids);
+  if (o.mask_style != "label" && o.mask_style != "sam") fail("--mask-style: unknown value '{}' (label or sam)", o.mask_style);
   if (o.views < 2 || o.views > 10000) fail("--views: must be between 2 and 10000, got {}", o.views);
   if (o.width < 16 || o.height < 16 || o.width > 8192 || o.height > 8192)
     fail("--width/--height: must be between 16 and 8192, got {}x{}", o.width, o.height);
@@ -89,17 +115,68 @@ void generate(const fs::path& out, const SynthOptions& opt) {
       }
       bar.finish();
     }
-    // Simulated SAM2 masks and confidences.
+    // Simulated SAM2 masks and confidences (or SAM-style overlapping masks with --mask-style sam).
+    const bool sam_style = opt.mask_style == "sam", per_view = opt.mask_ids == "per-view";
+    std::vector<char> split(K, 0);  // --mask-style sam: objects that SAM also cuts into two halves
+    for (int k = 0; k < K; ++k) split[k] = mix(opt.seed, 7, k) & 1;
+    json mask_ids = json::object();  // per view: id in masks/<stem>.png -> what it truly is
+    std::set<int> surface_used;
+    auto write_sam_view = [&](const fs::path& dir, const std::string& stem, const RenderedView& rv, const Intrinsics& Kin,
+                              const World& wd, const std::vector<char>& spl, const NoiseLevel& nlv, uint64_t seed, bool pv,
+                              json& ids_out) {
+      std::vector<SamMask> sam = simulate_sam_masks(rv, Kin, wd, spl, nlv, seed);
+      const int W = rv.rgb.width, H = rv.rgb.height;
+      json list = json::array();
+      std::vector<masks::SourceMask> src;
+      json ids = json::object();
+      for (size_t m = 0; m < sam.size(); ++m) {
+        masks::SourceMask sm;
+        sm.rle = masks::rle_encode(sam[m].inside, W, H);
+        sm.predicted_iou = sam[m].predicted_iou;
+        sm.stability_score = sam[m].stability_score;
+        int x0 = W, y0 = H, x1 = -1, y1 = -1;
+        for (int y = 0; y < H; ++y)
+          for (int x = 0; x < W; ++x)
+            if (sam[m].inside[size_t(y) * W + x]) x0 = std::min(x0, x), y0 = std::min(y0, y), x1 = std::max(x1, x), y1 = std::max(y1, y);
+        list.push_back({{"segmentation", {{"size", {H, W}}, {"counts", masks::rle_counts_to_string(sm.rle.counts)}}},
+                        {"area", masks::rle_area(sm.rle)},
+                        {"bbox", {x0, y0, x1 - x0 + 1, y1 - y0 + 1}},
+                        {"predicted_iou", sam[m].predicted_iou},
+                        {"point_coords", {{(x0 + x1) / 2, (y0 + y1) / 2}}},
+                        {"stability_score", sam[m].stability_score},
+                        {"crop_box", {0, 0, W, H}}});
+        src.push_back(std::move(sm));
+        const int e = sam[m].entity;
+        json truth = {{"entity", e}};
+        if (e <= K) truth["object"] = e;
+        else if (e <= 3 * K) truth["object"] = (e - K - 1) / 2 + 1, truth["part"] = (e - K - 1) % 2 + 1;
+        else truth["object"] = 0, truth["surface"] = concept_names[e - 3 * K], surface_used.insert(e - 3 * K);
+        ids[std::to_string(pv ? int(m) + 1 : e)] = truth;
+      }
+      atomic_write_text(dir / "sam" / (stem + ".json"), list.dump() + "\n");
+      masks::Flattened f = masks::flatten_masks(src, W, H);  // ids 1 + list position
+      if (!pv)
+        for (auto& l : f.labels.v)
+          if (l) l = uint16_t(sam[l - 1].entity);
+      save_label_png(dir / "masks" / (stem + ".png"), f.labels);
+      write_npy(dir / "masks" / (stem + ".conf.npy"), make_npy_f32({size_t(H), size_t(W)}, f.confidence.empty() ? std::vector<float>(size_t(W) * H, 1.f).data() : f.confidence.data()));
+      ids_out[stem] = ids;
+    };
     {
       Progress bar("synth: masks+features", opt.views, opt.progress);
       for (int i = 0; i < opt.views; ++i) {
         const std::string stem = views[i].name.substr(0, views[i].name.size() - 4);
-        LabelMap mask;
-        std::vector<float> conf;
-        simulate_masks(views[i].instances, nl, K, mix(opt.seed, 1, i), mask, conf);
-        save_label_png(tmp / "masks" / (stem + ".png"), mask);
-        if (!conf.empty())
-          write_npy(tmp / "masks" / (stem + ".conf.npy"), make_npy_f16({size_t(opt.height), size_t(opt.width)}, conf.data()));
+        if (sam_style) {
+          write_sam_view(tmp, stem, views[i], K_, world, split, nl, mix(opt.seed, 6, i), per_view, mask_ids);
+        } else {
+          LabelMap mask;
+          std::vector<float> conf;
+          simulate_masks(views[i].instances, nl, K, mix(opt.seed, 1, i), mask, conf);
+          if (per_view) mask_ids[stem] = shuffle_ids(mask, mix(opt.seed, 5, i));
+          save_label_png(tmp / "masks" / (stem + ".png"), mask);
+          if (!conf.empty())
+            write_npy(tmp / "masks" / (stem + ".conf.npy"), make_npy_f16({size_t(opt.height), size_t(opt.width)}, conf.data()));
+        }
         int gh, gw;
         auto feat = simulate_features(views[i], concepts, context, nl.feature, opt.feature_dim, mix(opt.seed, 2, i), gh, gw);
         write_npy(tmp / "features" / (stem + ".npy"), make_npy_f16({size_t(gh), size_t(gw), size_t(opt.feature_dim)}, feat.data()));
@@ -107,11 +184,19 @@ void generate(const fs::path& out, const SynthOptions& opt) {
       }
       bar.finish();
     }
-    {
+    if (!per_view) {  // per-view ids name nothing: no objects.json, the truth is in gt/mask_ids.json
       json names = json::object();
       for (auto& o : world.objects) names[std::to_string(o.id)] = o.name;
+      if (sam_style) {
+        for (auto& o : world.objects)
+          if (split[o.id - 1])
+            for (int h = 1; h <= 2; ++h) names[std::to_string(K + 2 * (o.id - 1) + h)] = fmt::format("{} (part {})", o.name, h);
+        for (size_t c = 1; c < concept_names.size(); ++c)
+          if (surface_used.count(int(c))) names[std::to_string(3 * K + int(c))] = concept_names[c];
+      }
       atomic_write_text(tmp / "masks" / "objects.json", names.dump(2) + "\n");
     }
+    if (per_view || sam_style) atomic_write_text(tmp / "gt" / "mask_ids.json", mask_ids.dump(1) + "\n");
     // Text embeddings: class names (concept + small noise), synonyms (more noise), background surfaces,
     // distractors (pool names not in the scene, plus a few unrelated phrases) and LERF's canonical phrases.
     {
@@ -260,6 +345,8 @@ void generate(const fs::path& out, const SynthOptions& opt) {
                    {"synonyms", syn},
                    {"distractors", world.unused_names},
                    {"background_concepts", std::vector<std::string>(concept_names.begin() + 1, concept_names.end())}};
+      if (per_view) meta["mask_ids"] = opt.mask_ids;  // only when not the default, so default scenes keep their bytes
+      if (sam_style) meta["mask_style"] = opt.mask_style;
       atomic_write_text(tmp / "synth.json", meta.dump(2) + "\n");
     }
     std::error_code ec;

@@ -2,6 +2,8 @@
 // two objects (propagation failure), missed detections, boundary jitter (erosion or dilation of each
 // object by a random radius, square element, via a chessboard distance transform), and merges of touching
 // objects. Confidence is lower near label boundaries (ramp over 4 px) plus Gaussian noise.
+// SAM-style masks (simulate_sam_masks): wholes, halves and background surfaces from the exact instance map and
+// depth, each independently missed or eroded / dilated.
 #include <algorithm>
 #include <cmath>
 #include <set>
@@ -48,6 +50,74 @@ std::vector<int> chessboard_distance(const std::vector<uint8_t>& src, int w, int
 }
 
 }  // namespace
+
+std::vector<SamMask> simulate_sam_masks(const RenderedView& v, const Intrinsics& K, const World& world,
+                                        const std::vector<char>& split, const NoiseLevel& nl, uint64_t seed) {
+  const int w = v.rgb.width, h = v.rgb.height, nobj = int(world.objects.size());
+  const size_t n = size_t(w) * h;
+  Rng rng(seed);
+  std::vector<SamMask> out;
+  auto add = [&](int entity, std::vector<uint8_t> inside) {
+    if (rng.chance(nl.miss)) return;
+    if (nl.jitter > 0) {
+      const int r = rng.integer(0, nl.jitter);
+      const bool erode = rng.chance(0.5);
+      if (r > 0) {
+        std::vector<uint8_t> src(n);
+        for (size_t i = 0; i < n; ++i) src[i] = erode ? !inside[i] : inside[i];
+        std::vector<int> d = chessboard_distance(src, w, h);
+        for (size_t i = 0; i < n; ++i) {
+          if (erode && inside[i] && d[i] <= r) inside[i] = 0;
+          if (!erode && !inside[i] && d[i] <= r) inside[i] = 1;
+        }
+      }
+    }
+    size_t area = 0;
+    for (uint8_t b : inside) area += b;
+    if (area < 16) return;
+    SamMask m;
+    m.inside = std::move(inside);
+    m.entity = entity;
+    m.predicted_iou = std::round(rng.uniform(0.86, 1.0) * 1e4) / 1e4;
+    m.stability_score = std::round(rng.uniform(0.9, 1.0) * 1e4) / 1e4;
+    out.push_back(std::move(m));
+  };
+  for (int k = 1; k <= nobj; ++k) {
+    std::vector<uint8_t> inside(n), half1(n), half2(n);
+    size_t a = 0, a1 = 0, a2 = 0;
+    const double split_x = world.objects[k - 1].position.x();
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const size_t p = size_t(y) * w + x;
+        if (v.instances.v[p] != k) continue;
+        inside[p] = 1;
+        ++a;
+        if (!split[k - 1]) continue;
+        const double z = v.depth[p];
+        const Vec3 pc((x + 0.5 - K.cx) / K.fx * z, (y + 0.5 - K.cy) / K.fy * z, z);
+        const Vec3 X = v.R.transpose() * (pc - v.t);
+        if (X.x() < split_x) half1[p] = 1, ++a1;
+        else half2[p] = 1, ++a2;
+      }
+    if (!a) continue;
+    add(k, std::move(inside));
+    if (a1 >= 16 && a2 >= 16) {
+      add(nobj + 2 * (k - 1) + 1, std::move(half1));
+      add(nobj + 2 * (k - 1) + 2, std::move(half2));
+    }
+  }
+  int max_concept = 0;
+  for (uint16_t c : v.concept_id) max_concept = std::max<int>(max_concept, c);
+  for (int c = 1; c <= max_concept; ++c) {
+    std::vector<uint8_t> inside(n);
+    size_t a = 0;
+    for (size_t p = 0; p < n; ++p)
+      if (v.instances.v[p] == 0 && v.concept_id[p] == c) inside[p] = 1, ++a;
+    if (a) add(3 * nobj + c, std::move(inside));
+  }
+  for (size_t i = out.size(); i > 1; --i) std::swap(out[i - 1], out[size_t(rng.integer(0, int(i) - 1))]);
+  return out;
+}
 
 void simulate_masks(const LabelMap& gt, const NoiseLevel& nl, int num_objects, uint64_t seed, LabelMap& mask,
                     std::vector<float>& conf) {

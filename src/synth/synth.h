@@ -22,6 +22,9 @@ struct SynthOptions {
   std::string noise = "medium";  // none | low | medium | high
   int feature_dim = 512;
   int supersample = 2;  // per-axis samples per pixel for the RGB images
+  // What the simulated masks look like (defaults: one consistent id per object, as SAM2 video propagation gives).
+  std::string mask_ids = "consistent";  // consistent | per-view (ids shuffled independently in every view, as raw SAM)
+  std::string mask_style = "label";     // label (SAM2-like label maps) | sam (overlapping SAM masks, sam/<stem>.json)
   bool progress = true;
 };
 
@@ -61,6 +64,19 @@ RenderedView render_view(const World& w, const Intrinsics& K, const Eigen::Matri
 // Simulated SAM2 label map for one view and its per-pixel confidence (empty when noise is none).
 void simulate_masks(const LabelMap& gt, const NoiseLevel& nl, int num_objects, uint64_t seed, LabelMap& mask,
                     std::vector<float>& confidence);
+
+// --mask-style sam: what SAM's automatic mask generator would give in one view, overlapping and multi-granular:
+// every visible object whole, the two halves (split by the world plane x = the object's x) of the objects chosen
+// by `split`, and every visible background surface (table, floor, walls). Each mask may be missed or jittered
+// (the noise level's rates), masks under 16 px are dropped, and the list is shuffled. `entity` names the truth:
+// k = object k, K + 2(k-1) + 1 / + 2 = its first / second half, 3K + c = background surface of concept c.
+struct SamMask {
+  std::vector<uint8_t> inside;  // [H, W]
+  int entity = 0;
+  double predicted_iou = 1, stability_score = 1;
+};
+std::vector<SamMask> simulate_sam_masks(const RenderedView& v, const Intrinsics& K, const World& world,
+                                        const std::vector<char>& split, const NoiseLevel& nl, uint64_t seed);
 
 // Unit "concept" vector of a phrase in R^D, fixed by the phrase alone (the same in every scene, like a real text encoder).
 std::vector<float> concept_vector(const std::string& phrase, int dim);

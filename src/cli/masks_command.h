@@ -1,0 +1,16 @@
+// Sub-subcommands of `hgs masks` (import, associate, ...). Each lives in its own src/cli/cmd_masks_<name>.cpp and
+// registers itself with a static `MasksSubcommandRegistration`, like top-level commands do (command.h);
+// cmd_masks.cpp builds `hgs masks` from this registry. To add `hgs masks associate`, write
+// src/cli/cmd_masks_associate.cpp with one registration — nothing else changes.
+#pragma once
+#include "cli/command.h"
+
+namespace hgs::cli {
+
+std::vector<CommandSpec>& masks_registry();
+
+struct MasksSubcommandRegistration {
+  MasksSubcommandRegistration(CommandSpec spec) { masks_registry().push_back(std::move(spec)); }
+};
+
+}  // namespace hgs::cli
