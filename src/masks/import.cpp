@@ -134,7 +134,7 @@ ImportSummary import_masks(const ImportOptions& opt) {
     if (!has[v.index]) sum.missing.push_back(v.name);
 
   const std::string suffix = fmt::format("{:08x}", std::random_device{}());
-  const fs::path tmp_masks = s.root / (".masks.import-" + suffix), tmp_feat = s.root / (".features.import-" + suffix);
+  const fs::path tmp_masks = s.root / fmt::format(".masks.import-{}", suffix), tmp_feat = s.root / fmt::format(".features.import-{}", suffix);
   try {
     ensure_dir(tmp_masks);
     if (langsplat) ensure_dir(tmp_feat);
@@ -195,7 +195,7 @@ ImportSummary import_masks(const ImportOptions& opt) {
     atomic_write_text(tmp_masks / "import.json", meta.dump(1) + "\n");
     // Swap in: the old folders move aside, the new ones into place, the old ones are removed.
     auto swap_in = [&](const fs::path& tmp, const fs::path& dst) {
-      const fs::path old = s.root / ("." + dst.filename().string() + ".old-" + suffix);
+      const fs::path old = s.root / fmt::format(".{}.old-{}", dst.filename().string(), suffix);
       std::error_code ec;
       if (fs::exists(dst)) {
         fs::rename(dst, old, ec);

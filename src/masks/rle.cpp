@@ -67,15 +67,25 @@ Rle rle_encode(const std::vector<uint8_t>& mask, int width, int height) {
   return r;
 }
 
+void rle_check(const Rle& r, const std::string& where) {
+  const uint64_t n = uint64_t(r.width) * r.height;
+  uint64_t pos = 0;
+  for (size_t i = 0; i < r.counts.size(); ++i) {
+    if (pos + r.counts[i] > n)
+      fail("{}: RLE counts overrun the mask: run {} ends at pixel {} but size is {}x{} = {} pixels", where, i,
+           pos + r.counts[i], r.height, r.width, n);
+    pos += r.counts[i];
+  }
+  if (pos != n) fail("{}: RLE counts cover {} pixels but size is {}x{} = {} pixels", where, pos, r.height, r.width, n);
+}
+
 std::vector<uint8_t> rle_decode(const Rle& r, const std::string& where) {
+  rle_check(r, where);
   const uint64_t n = uint64_t(r.width) * r.height;
   std::vector<uint8_t> m(n, 0);
   uint64_t pos = 0;
   uint8_t v = 0;
   for (size_t i = 0; i < r.counts.size(); ++i, v ^= 1) {
-    if (pos + r.counts[i] > n)
-      fail("{}: RLE counts overrun the mask: run {} ends at pixel {} but size is {}x{} = {} pixels", where, i,
-           pos + r.counts[i], r.height, r.width, n);
     if (v)
       for (uint64_t p = pos; p < pos + r.counts[i]; ++p) {
         const uint64_t x = p / r.height, y = p % r.height;  // column-major
@@ -83,7 +93,6 @@ std::vector<uint8_t> rle_decode(const Rle& r, const std::string& where) {
       }
     pos += r.counts[i];
   }
-  if (pos != n) fail("{}: RLE counts cover {} pixels but size is {}x{} = {} pixels", where, pos, r.height, r.width, n);
   return m;
 }
 

@@ -22,6 +22,8 @@ std::string rle_counts_to_string(const std::vector<uint32_t>& counts);
 
 // Binary mask [H, W] row-major (1 = inside) -> RLE.
 Rle rle_encode(const std::vector<uint8_t>& mask, int width, int height);
+// Fails (naming `where`) unless the counts cover exactly h x w pixels: "overrun" when they run past the end.
+void rle_check(const Rle& rle, const std::string& where);
 // RLE -> binary mask [H, W] row-major. Fails (naming `where`) unless the counts cover exactly h x w pixels.
 std::vector<uint8_t> rle_decode(const Rle& rle, const std::string& where);
 

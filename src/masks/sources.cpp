@@ -73,7 +73,7 @@ std::vector<SourceMask> read_sam_json(const fs::path& file, int width, int heigh
     } else {
       fail("{}: RLE 'counts' must be a string or a list of integers", where);
     }
-    rle_decode(s.rle, where);  // checks that the runs cover exactly h x w pixels
+    rle_check(s.rle, where);  // the runs must cover exactly h x w pixels
     s.predicted_iou = optional_number(m, "predicted_iou");
     s.stability_score = optional_number(m, "stability_score");
     s.source = fmt::format("{}[{}]", file.filename().string(), i);
