@@ -3,6 +3,7 @@
 #include "masks/flatten.h"
 
 #include <algorithm>
+#include <map>
 #include <numeric>
 
 #include "core/error.h"
@@ -21,6 +22,44 @@ double mask_confidence(const SourceMask& m) {
   const double a = has_iou ? std::clamp(m.predicted_iou, 0.0, 1.0) : 1.0;
   const double b = has_stab ? std::clamp(m.stability_score, 0.0, 1.0) : 1.0;
   return a * b;
+}
+
+std::vector<int> part_of(const std::vector<SourceMask>& masks, double min_fraction) {
+  const size_t M = masks.size();
+  std::vector<std::pair<uint64_t, int>> events;  // (position, +(i+1) start / -(i+1) end)
+  std::vector<uint64_t> area(M, 0);
+  for (size_t i = 0; i < M; ++i) {
+    uint64_t pos = 0;
+    const auto& c = masks[i].rle.counts;
+    for (size_t k = 0; k < c.size(); ++k) {
+      if ((k & 1) && c[k]) {
+        events.push_back({pos, int(i) + 1});
+        events.push_back({pos + c[k], -(int(i) + 1)});
+        area[i] += c[k];
+      }
+      pos += c[k];
+    }
+  }
+  std::sort(events.begin(), events.end());  // at one position ends (negative) come before starts
+  std::map<std::pair<int, int>, uint64_t> overlap;  // (i, j), i < j -> shared pixels
+  std::vector<int> active;
+  uint64_t last = 0;
+  for (auto [pos, e] : events) {
+    if (pos > last && active.size() > 1)
+      for (size_t a = 0; a < active.size(); ++a)
+        for (size_t b = a + 1; b < active.size(); ++b)
+          overlap[{std::min(active[a], active[b]), std::max(active[a], active[b])}] += pos - last;
+    last = pos;
+    if (e > 0) active.push_back(e - 1);
+    else active.erase(std::find(active.begin(), active.end(), -e - 1));
+  }
+  std::vector<int> parent(M, -1);
+  for (auto& [ij, n] : overlap)
+    for (auto [i, j] : {ij, std::pair<int, int>{ij.second, ij.first}}) {  // is i a part of j?
+      if (area[j] <= area[i] || double(n) < min_fraction * double(area[i])) continue;
+      if (parent[i] < 0 || area[j] < area[parent[i]] || (area[j] == area[parent[i]] && j < parent[i])) parent[i] = j;
+    }
+  return parent;
 }
 
 Flattened flatten_masks(const std::vector<SourceMask>& masks, int width, int height) {

@@ -35,6 +35,11 @@ struct Flattened {
   std::vector<uint64_t> visible;  // [M] pixels each mask kept after flattening
 };
 
+// The hierarchy flattening hides: for every mask i, the smallest strictly larger mask j that holds at least
+// `min_fraction` of i's pixels (i is a part of j), or -1. Sweep over the masks' runs in their common column-major
+// order, keeping the set of masks that cover the current stretch, so the cost is in runs, not pixels.
+std::vector<int> part_of(const std::vector<SourceMask>& masks, double min_fraction = 0.9);
+
 // All masks must have size width x height (checked by the caller, which knows the file names).
 Flattened flatten_masks(const std::vector<SourceMask>& masks, int width, int height);
 

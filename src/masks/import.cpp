@@ -167,9 +167,11 @@ ImportSummary import_masks(const ImportOptions& opt) {
           write_npy(tmp_masks / (v.stem + ".conf.npy"), make_npy_f32({size_t(v.height), size_t(v.width)}, f.confidence.data()));
           sum.confidence = true;
         }
+        const std::vector<int> parent = part_of(src);
         json list = json::array();
         for (size_t i = 0; i < src.size(); ++i) {
           list.push_back({{"id", i + 1}, {"source", src[i].source}, {"area", rle_area(src[i].rle)}, {"visible", f.visible[i]},
+                          {"part_of", parent[i] >= 0 ? json(parent[i] + 1) : json(nullptr)},
                           {"predicted_iou", score_json(src[i].predicted_iou)},
                           {"stability_score", score_json(src[i].stability_score)}});
           sum.hidden += f.visible[i] == 0;

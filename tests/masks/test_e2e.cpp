@@ -78,6 +78,19 @@ TEST(MasksCli, SynthSamPerViewImportsToTheSynthMasksAndTheTruth) {
   }
   EXPECT_GT(labelled, 0u);
   EXPECT_GE(covered, object_px * 95 / 100);  // objects under 16 px are dropped as SAM drops them
+  // import.json's part_of recovers the whole / half hierarchy that flattening hides.
+  const json meta = json::parse(read_file_text(s / "masks" / "import.json"));
+  int halves = 0;
+  for (auto& st : stems(s))
+    for (auto& m : meta["views"][st]["masks"]) {
+      const json& e = truth[st][std::to_string(m["id"].get<int>())];
+      if (!e.contains("part")) continue;
+      ++halves;
+      ASSERT_FALSE(m["part_of"].is_null()) << st << " mask " << m["id"];
+      const json& whole = truth[st][std::to_string(m["part_of"].get<int>())];
+      EXPECT_EQ(whole["entity"], e["object"]) << st << " mask " << m["id"];
+    }
+  EXPECT_GT(halves, 0);
 }
 
 TEST(MasksCli, SynthSamConsistentMatchesUpToAPerViewPermutation) {

@@ -148,7 +148,43 @@ TEST(Flatten, SmallestMaskWinsTiesGoToTheFirstListed) {
   EXPECT_FLOAT_EQ(f.confidence[1], 0.7f);       // mask 2
   EXPECT_FLOAT_EQ(f.confidence[5], float(0.9 * 0.8));
   EXPECT_FLOAT_EQ(f.confidence[7], 1.f);        // no mask
+  // Mask 1 lies inside mask 0; mask 2 has 2 of its 3 pixels in mask 0 (below 90%); mask 3 equals mask 2 in
+  // area, and a part must be strictly smaller than its whole.
+  EXPECT_EQ(part_of(ms), (std::vector<int>{-1, 0, -1, -1}));
+  EXPECT_EQ(part_of(ms, 0.6), (std::vector<int>{-1, 0, 0, 0}));
   // Without scores there is no confidence map.
   for (auto& m : ms) m.predicted_iou = m.stability_score = -1;
   EXPECT_TRUE(flatten_masks(ms, W, H).confidence.empty());
+}
+
+TEST(Flatten, PartOfMatchesABruteForceCount) {
+  std::mt19937 rng(11);
+  const int W = 9, H = 7;
+  int parts = 0;
+  for (int trial = 0; trial < 100; ++trial) {
+    std::vector<SourceMask> ms(2 + rng() % 6);
+    std::vector<std::vector<uint8_t>> bits;
+    for (auto& m : ms) {
+      std::vector<uint8_t> b(W * H, 0);
+      const int x0 = rng() % W, y0 = rng() % H, x1 = x0 + rng() % (W - x0), y1 = y0 + rng() % (H - y0);
+      for (int y = y0; y <= y1; ++y)
+        for (int x = x0; x <= x1; ++x) b[y * W + x] = trial % 2 || rng() % 5 != 0;  // odd trials: solid boxes
+      m.rle = rle_encode(b, W, H);
+      bits.push_back(b);
+    }
+    std::vector<int> want(ms.size(), -1);
+    for (size_t i = 0; i < ms.size(); ++i) {
+      const uint64_t ai = rle_area(ms[i].rle);
+      for (size_t j = 0; j < ms.size(); ++j) {
+        const uint64_t aj = rle_area(ms[j].rle);
+        uint64_t n = 0;
+        for (int p = 0; p < W * H; ++p) n += bits[i][p] && bits[j][p];
+        if (j == i || ai == 0 || aj <= ai || double(n) < 0.9 * double(ai)) continue;  // an empty mask is nobody's part
+        if (want[i] < 0 || aj < rle_area(ms[want[i]].rle)) want[i] = int(j);
+      }
+    }
+    ASSERT_EQ(part_of(ms), want) << "trial " << trial;
+    for (int p : want) parts += p >= 0;
+  }
+  EXPECT_GT(parts, 30);  // the cases do exercise the relation
 }
