@@ -17,13 +17,14 @@ const char* kDescription =
     "  sam2-png   <stem>.png: SAM2 label maps, palette (label = palette index) or 8/16-bit grey\n"
     "  langsplat  <name>_s.npy + <name>_f.npy: LangSplat preprocess.py output (language_features/)\n"
     "Overlapping SAM masks: the smallest mask covering a pixel wins (ties: the one listed first).\n"
-    "Ids are per view (1 + position in the view's list); they mean nothing across views.";
+    "Ids are per view (1 + position in the view's list); they mean nothing across views.\n"
+    "Example: hgs masks import SCENE --from langsplat SCENE/language_features --level l";
 
 MasksSubcommandRegistration reg({"import", "Import SAM / SAM2 / LangSplat masks into SCENE/masks/ (and LangSplat features into SCENE/features/)", 10,
   [](CLI::App& sub) {
     auto o = std::make_shared<masks::ImportOptions>();
     auto scene = std::make_shared<std::string>(), dir = std::make_shared<std::string>();
-    sub.description(std::string(sub.get_description()) + "\n" + kDescription);
+    sub.footer(kDescription);
     sub.add_option("SCENE", *scene, "Scene folder (images/, sparse/0/)")->required();
     sub.add_option("--from", o->from, "Input format: sam-json, sam-png, sam2-png or langsplat")
         ->required()->check(CLI::IsMember(masks::import_formats()));
