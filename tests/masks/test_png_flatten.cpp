@@ -28,6 +28,34 @@ void chunk(std::vector<uint8_t>& o, const char* t, const std::vector<uint8_t>& d
   put32(o, uint32_t(crc32(0, o.data() + st, uInt(d.size() + 4))));
 }
 
+// A grey or palette PNG of bit depth 1, 2 or 4: samples packed most significant first, rows padded to a byte.
+std::vector<uint8_t> packed_png(const std::vector<uint8_t>& px, int w, int h, int ctype, int depth) {
+  std::vector<uint8_t> raw;
+  const int per = 8 / depth;
+  for (int y = 0; y < h; ++y) {
+    raw.push_back(0);
+    for (int x0 = 0; x0 < w; x0 += per) {
+      uint8_t b = 0;
+      for (int k = 0; k < per; ++k)
+        if (x0 + k < w) b |= uint8_t(px[size_t(y) * w + x0 + k] << (8 - depth * (k + 1)));
+      raw.push_back(b);
+    }
+  }
+  uLongf zl = compressBound(uLong(raw.size()));
+  std::vector<uint8_t> z(zl);
+  compress2(z.data(), &zl, raw.data(), uLong(raw.size()), 9);
+  z.resize(zl);
+  std::vector<uint8_t> o = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'}, ihdr;
+  put32(ihdr, w);
+  put32(ihdr, h);
+  ihdr.insert(ihdr.end(), {uint8_t(depth), uint8_t(ctype), 0, 0, 0});
+  chunk(o, "IHDR", ihdr);
+  if (ctype == 3) chunk(o, "PLTE", std::vector<uint8_t>(3 << depth, 200));
+  chunk(o, "IDAT", z);
+  chunk(o, "IEND", {});
+  return o;
+}
+
 // An 8-bit grey or palette PNG whose row y is filtered with filter y % 5 (filters applied from their definition).
 std::vector<uint8_t> filtered_png(const std::vector<uint8_t>& px, int w, int h, int ctype) {
   std::vector<uint8_t> raw;
@@ -100,6 +128,19 @@ TEST(IndexPng, EveryScanlineFilterMatchesTheReference) {
     LabelMap d = decode_index_png(png.data(), png.size(), "f.png");
     for (size_t i = 0; i < px.size(); ++i) ASSERT_EQ(d.v[i], px[i]) << "pixel " << i << " colour type " << ctype;
   }
+}
+
+TEST(IndexPng, SubByteDepths) {
+  std::mt19937 rng(9);
+  const int w = 11, h = 5;  // 11 is not a multiple of 8 / depth: rows end in a padded byte
+  for (int ctype : {0, 3})
+    for (int depth : {1, 2, 4}) {
+      std::vector<uint8_t> px(size_t(w) * h);
+      for (auto& v : px) v = uint8_t(rng() % (1 << depth));
+      auto png = packed_png(px, w, h, ctype, depth);
+      LabelMap d = decode_index_png(png.data(), png.size(), "d.png");
+      for (size_t i = 0; i < px.size(); ++i) ASSERT_EQ(d.v[i], px[i]) << "depth " << depth << " type " << ctype << " pixel " << i;
+    }
 }
 
 TEST(IndexPng, BadInput) {
