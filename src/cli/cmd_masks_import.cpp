@@ -45,6 +45,8 @@ MasksSubcommandRegistration reg({"import", "Import SAM / SAM2 / LangSplat masks 
       if (s.hidden) fmt::print(" ({} fully covered by smaller masks)", s.hidden);
       fmt::print("\n  wrote {}/masks/<stem>.png{}{}\n", *scene, s.confidence ? " and .conf.npy" : "",
                  s.features ? fmt::format(", {}/features/<stem>.npy ({}x{} grid, D = {})", *scene, s.grid_w, s.grid_h, s.feature_dim) : "");
+      if (o->from != "sam2-png")
+        fmt::print("  note: ids are per view (1 + position in each view's list): they do not name the same object across views\n");
       if (!s.missing.empty())
         fmt::print("  {} views have no masks in {} (first: {})\n", s.missing.size(), *dir, s.missing.front());
     };
