@@ -2,10 +2,14 @@
 
 #include <cmath>
 
+#include "core/error.h"
+
 namespace hgs::hybrid {
 
 void apply_confidence(LabelMap& labels, const std::vector<float>& conf, float tau1) {
   if (conf.empty()) return;
+  if (conf.size() != labels.v.size())
+    fail("hybrid: a confidence map of {} pixels for a mask of {} pixels", conf.size(), labels.v.size());
   for (size_t i = 0; i < labels.v.size(); ++i)
     if (conf[i] < tau1) labels.v[i] = 0;
 }

@@ -9,6 +9,7 @@
 #include <limits>
 #include <vector>
 
+#include "core/error.h"
 #include "hybrid/assign.h"
 #include "hybrid/fusion.h"
 
@@ -112,4 +113,15 @@ TEST(PoolReference, ZeroSumGivesAZeroRowButKeepsTheArea) {
   pool_reference(f.data(), labels, 3, 2, z.data(), area.data());
   EXPECT_EQ(z, (std::vector<float>(6, 0.f)));
   EXPECT_EQ(area, (std::vector<float>{0, 2}));
+}
+
+TEST(ApplyConfidence, AMapOfAnotherSizeIsAClearError) {
+  LabelMap labels(3, 2);
+  try {
+    hybrid::apply_confidence(labels, std::vector<float>(5, 1.f), 0.5f);
+    FAIL() << "no error";
+  } catch (const hgs::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("a confidence map of 5 pixels for a mask of 6 pixels"), std::string::npos)
+        << e.what();
+  }
 }
