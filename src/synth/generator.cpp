@@ -92,6 +92,15 @@ void generate(const fs::path& out, const SynthOptions& opt) {
     if (std::find(concept_names.begin(), concept_names.end(), p.concept_name) == concept_names.end()) concept_names.push_back(p.concept_name);
   std::vector<std::vector<float>> concepts;
   for (auto& c : concept_names) concepts.push_back(concept_vector(c, opt.feature_dim));
+  // Background surfaces: every concept that is no object ("sky" = nothing hit is none). surface_of[c] = 1 + the
+  // surface's index for concept c, else 0.
+  std::vector<int> surface_concepts;  // indices into concept_names
+  std::vector<int> surface_of(concept_names.size(), 0);
+  for (size_t c = 1; c < concept_names.size(); ++c) {
+    bool object = false;
+    for (auto& o : world.objects) object |= o.name == concept_names[c];
+    if (!object) surface_concepts.push_back(int(c)), surface_of[c] = int(surface_concepts.size());
+  }
   const std::string context_phrase = opt.preset == "room" ? "a photo of a room" : "a photo of a tabletop";
   std::vector<float> context = concept_vector(context_phrase, opt.feature_dim);
 
@@ -172,7 +181,16 @@ void generate(const fs::path& out, const SynthOptions& opt) {
           LabelMap mask;
           std::vector<float> conf;
           simulate_masks(views[i].instances, nl, K, mix(opt.seed, 1, i), mask, conf);
-          if (per_view) mask_ids[stem] = shuffle_ids(mask, mix(opt.seed, 5, i));
+          if (opt.surface_masks)
+            for (size_t p = 0; p < mask.v.size(); ++p)
+              if (mask.v[p] == 0 && views[i].instances.v[p] == 0 && surface_of[views[i].concept_id[p]])
+                mask.v[p] = static_cast<uint16_t>(K + surface_of[views[i].concept_id[p]]);
+          if (per_view) {
+            mask_ids[stem] = shuffle_ids(mask, mix(opt.seed, 5, i));
+            for (auto& [id, truth] : mask_ids[stem].items())  // a surface's id K + j is no object
+              if (truth["object"].get<int>() > K)
+                truth = {{"object", 0}, {"surface", concept_names[surface_concepts[truth["object"].get<int>() - K - 1]]}};
+          }
           save_label_png(tmp / "masks" / (stem + ".png"), mask);
           if (!conf.empty())
             write_npy(tmp / "masks" / (stem + ".conf.npy"), make_npy_f16({size_t(opt.height), size_t(opt.width)}, conf.data()));
@@ -187,6 +205,9 @@ void generate(const fs::path& out, const SynthOptions& opt) {
     if (!per_view) {  // per-view ids name nothing: no objects.json, the truth is in gt/mask_ids.json
       json names = json::object();
       for (auto& o : world.objects) names[std::to_string(o.id)] = o.name;
+      if (opt.surface_masks && !sam_style)
+        for (size_t j = 0; j < surface_concepts.size(); ++j)
+          names[std::to_string(K + 1 + int(j))] = concept_names[surface_concepts[j]];
       if (sam_style) {
         for (auto& o : world.objects)
           if (split[o.id - 1])
@@ -279,10 +300,6 @@ void generate(const fs::path& out, const SynthOptions& opt) {
       // (table, floor, walls: every concept that is no object; "sky" = nothing hit stays unlabelled).
       std::vector<std::string> seg_classes;
       for (auto& o : world.objects) seg_classes.push_back(o.name);
-      std::vector<int> surface_concepts;  // indices into concept_names
-      for (size_t c = 1; c < concept_names.size(); ++c)
-        if (std::find(seg_classes.begin(), seg_classes.end(), concept_names[c]) == seg_classes.end())
-          surface_concepts.push_back(int(c));
       for (int c : surface_concepts) seg_classes.push_back(concept_names[c]);
       std::sort(seg_classes.begin(), seg_classes.end());
       std::string ctext;
@@ -347,6 +364,7 @@ void generate(const fs::path& out, const SynthOptions& opt) {
                    {"background_concepts", std::vector<std::string>(concept_names.begin() + 1, concept_names.end())}};
       if (per_view) meta["mask_ids"] = opt.mask_ids;  // only when not the default, so default scenes keep their bytes
       if (sam_style) meta["mask_style"] = opt.mask_style;
+      if (opt.surface_masks) meta["surface_masks"] = true;
       atomic_write_text(tmp / "synth.json", meta.dump(2) + "\n");
     }
     std::error_code ec;

@@ -25,6 +25,10 @@ struct SynthOptions {
   // What the simulated masks look like (defaults: one consistent id per object, as SAM2 video propagation gives).
   std::string mask_ids = "consistent";  // consistent | per-view (ids shuffled independently in every view, as raw SAM)
   std::string mask_style = "label";     // label (SAM2-like label maps) | sam (overlapping SAM masks, sam/<stem>.json)
+  // Label style: the background surfaces (table, floor, walls, shelf) get mask ids K + 1 ... K + S too, as SAM2
+  // tracks whatever SAM segmented; objects.json names them. The object masks are the same as without it (the
+  // surfaces fill the mask's background pixels that show a surface; they carry no noise of their own).
+  bool surface_masks = false;
   bool progress = true;
 };
 

@@ -297,3 +297,36 @@ TEST(Synth, EveryPresetPlacesItsDefaultObjectsAtEverySeed) {
     EXPECT_EQ(synth::make_world("tabletop", 8, seed).objects.size(), 8u) << "tabletop seed " << seed;
   }
 }
+
+TEST(Synth, SurfaceMasksAddTheBackgroundSurfacesAndKeepTheObjectMasks) {
+  test::TempDir tmp;
+  synth::SynthOptions o = tiny("high");
+  synth::generate(tmp / "a", o);
+  o.surface_masks = true;
+  synth::generate(tmp / "b", o);
+  const auto names = nlohmann::json::parse(read_file_text(tmp / "b" / "masks" / "objects.json"));
+  const auto meta = nlohmann::json::parse(read_file_text(tmp / "b" / "synth.json"));
+  // Objects 1..K keep their names; K + 1.. are the background concepts that are no object (tabletop: the table
+  // and the floor).
+  EXPECT_EQ(names.size(), size_t(o.objects) + 2);
+  EXPECT_EQ(names[std::to_string(o.objects + 1)], "wooden table");
+  EXPECT_EQ(names[std::to_string(o.objects + 2)], "floor");
+  EXPECT_TRUE(meta["surface_masks"].get<bool>());
+  size_t surface_pixels = 0;
+  for (int i = 0; i < o.views; ++i) {
+    const std::string stem = fmt::format("frame_{:05d}", i + 1);
+    const LabelMap a = load_label_png(tmp / "a" / "masks" / (stem + ".png"));
+    const LabelMap b = load_label_png(tmp / "b" / "masks" / (stem + ".png"));
+    const LabelMap gt = load_label_png(tmp / "b" / "gt" / "instances" / (stem + ".png"));
+    for (size_t p = 0; p < a.v.size(); ++p) {
+      if (a.v[p] != 0) {
+        ASSERT_EQ(b.v[p], a.v[p]) << stem << " pixel " << p << ": an object mask changed";
+      } else if (b.v[p] != 0) {
+        ASSERT_GT(b.v[p], o.objects) << stem << " pixel " << p;
+        ASSERT_EQ(gt.v[p], 0) << stem << " pixel " << p << ": a surface id on an object's pixel";
+        ++surface_pixels;
+      }
+    }
+  }
+  EXPECT_GT(surface_pixels, size_t(o.views) * 96 * 72 / 4);  // the table and floor fill much of every view
+}
