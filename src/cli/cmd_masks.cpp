@@ -13,7 +13,7 @@ std::vector<CommandSpec>& masks_registry() {
 
 namespace {
 
-CommandRegistration reg({"masks", "Import per-view masks from SAM / SAM2 / LangSplat into a scene's masks/ (subcommands: import)", 15,
+CommandRegistration reg({"masks", "Import per-view masks from SAM / SAM2 / LangSplat into a scene's masks/ (subcommands: import, associate, score)", 15,
                          [](CLI::App& sub) {
                            sub.require_subcommand(1);
                            auto& subs = masks_registry();

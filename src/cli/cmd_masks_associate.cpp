@@ -1,0 +1,73 @@
+// `hgs masks associate SCENE`: per-view mask ids -> one id per physical object in every view (src/masks/associate.h).
+#include <fmt/format.h>
+
+#include "cli/masks_command.h"
+#include "masks/associate.h"
+
+namespace hgs::cli {
+namespace {
+
+const char* kDescription =
+    "Lifts every view's masks to 3D through COLMAP's 2D-3D correspondences (sparse/0/images.bin: the 3D point\n"
+    "each keypoint observes) and links masks of different views that hold the same 3D points. The graph of\n"
+    "(view, mask) nodes is clustered greedily by two-way containment of shared points (only points both views\n"
+    "see, and only points away from mask edges);\n"
+    "two masks of one view never join (parts listed in import.json are first folded into their whole when the\n"
+    "whole was left with less than half its pixels). Masks covering more than --max-area of the image are\n"
+    "dropped as background, masks with fewer than --min-points 3D points as unliftable, objects seen in fewer\n"
+    "than --min-views views as unconfirmed; a left-out mask then joins the object holding most of its 3D points\n"
+    "if that object has no mask in its view.\n"
+    "Writes masks/<stem>.png (object ids, the same in every view), masks/objects.json (names from --names or the\n"
+    "input's objects.json by majority, else \"object N\"), masks/associate.json (objects, views per object, what\n"
+    "every per-view id became, dropped masks and why); the input is kept in masks/per_view/. With --out-masks DIR\n"
+    "everything goes to DIR and the scene is left as it is. Running again needs --force and starts from per_view/.\n"
+    "Example: hgs masks import SCENE --from sam-json SAM_DIR && hgs masks associate SCENE";
+
+MasksSubcommandRegistration reg({"associate", "Make per-view mask ids consistent across views (one id per physical object) through COLMAP's 3D points", 20,
+  [](CLI::App& sub) {
+    auto o = std::make_shared<masks::AssociateOptions>();
+    auto scene = std::make_shared<std::string>(), out = std::make_shared<std::string>(), names = std::make_shared<std::string>();
+    sub.footer(kDescription);
+    sub.add_option("SCENE", *scene, "Scene folder (images/, sparse/0/ with 2D-3D correspondences, masks/)")->required();
+    sub.add_option("--out-masks", *out, "Write the associated masks folder here instead of replacing SCENE/masks");
+    sub.add_option("--names", *names, "Per-view names, JSON {\"<stem>\": {\"<id>\": \"name\"}}; an object takes its masks' most common name");
+    sub.add_option("--min-affinity", o->min_affinity, "Smallest IoU of shared 3D points for two groups of masks to be one object")
+        ->capture_default_str();
+    sub.add_option("--min-views", o->min_views, "Objects seen in fewer views are dropped")->capture_default_str();
+    sub.add_option("--min-points", o->min_points, "Masks holding fewer 3D points cannot be lifted and are dropped")->capture_default_str();
+    sub.add_option("--core-margin", o->core_margin, "Keypoints closer than this many pixels to a mask's edge do not count (boundary errors)")
+        ->check(CLI::Range(0, 64))->capture_default_str();
+    sub.add_option("--max-area", o->max_area, "Masks covering a larger fraction of their image are background and dropped")
+        ->capture_default_str();
+    sub.add_flag("--no-attach", [o](int64_t n) { o->attach = n == 0; }, "Do not attach left-out masks to the object holding most of their 3D points");
+    sub.add_flag("--no-join-parts", [o](int64_t n) { o->join_parts = n == 0; }, "Do not fold parts into their whole (import.json part_of)");
+    sub.add_flag("--drop-surfaces", o->drop_surfaces, "Drop objects whose 3D points spread like a surface (table, floor, walls)");
+    sub.add_option("--surface-spread", o->surface_spread, "RMS spread of an object's 3D points, relative to all points, above which it is a surface")
+        ->capture_default_str();
+    sub.add_flag("--force", o->force, "Associate again (from masks/per_view) or replace a non-empty --out-masks");
+    sub.add_flag("--quiet", [o](int64_t n) { o->progress = n == 0; }, "No progress bar");
+    return [=] {
+      o->scene = *scene;
+      o->out_masks = *out;
+      o->names = *names;
+      masks::AssociateSummary s = masks::associate_masks(*o);
+      fmt::print("associated {} masks in {} of {} views", s.masks, s.views_with_masks, s.views);
+      if (s.joined_parts) fmt::print(" ({} parts folded into their whole)", s.joined_parts);
+      fmt::print(": {} objects", s.objects.size());
+      if (s.attached) fmt::print(" ({} masks attached by their points' votes)", s.attached);
+      fmt::print("\n");
+      for (auto& ob : s.objects)
+        fmt::print("  {:>3}  {:<24} {:>3} views {:>4} masks {:>6} points{}\n", ob.id, ob.name, ob.views, ob.masks, ob.points,
+                   ob.surface ? fmt::format("  (surface, spread {:.2f})", ob.spread) : "");
+      const int dropped = s.dropped_background + s.dropped_few_points + s.dropped_few_views;
+      fmt::print("  dropped {} masks: {} background (> --max-area), {} with too few 3D points, {} in objects seen in too few views",
+                 dropped, s.dropped_background, s.dropped_few_points, s.dropped_few_views);
+      if (s.dropped_surface) fmt::print(", {} surface objects", s.dropped_surface);
+      fmt::print("\n  wrote {}/<stem>.png, objects.json, associate.json", s.out_dir.string());
+      if (!s.backup_dir.empty()) fmt::print("; the per-view input is in {}", s.backup_dir.string());
+      fmt::print("\n");
+    };
+  }});
+
+}  // namespace
+}  // namespace hgs::cli

@@ -1,0 +1,62 @@
+// `hgs masks associate`: per-view masks whose ids mean nothing across views (hgs masks import, hgs synth
+// --mask-ids per-view) -> one id per physical object in every view, by lifting the masks to 3D through COLMAP's
+// 2D-3D correspondences (images.bin: the 3D point each keypoint observes).
+//
+// Steps: (1) every mask of every view becomes a node; with masks/import.json, parts are first joined to their
+// whole when flattening left the whole less than half of its pixels (the parts tile it: SAM's whole + parts);
+// (2) nodes covering more than max_area of the image are dropped as background, nodes with fewer than
+// min_points 3D points as unliftable; (3) the graph of nodes linked by shared 3D points is clustered (cluster.h);
+// (4) clusters seen in fewer than min_views views are dropped; every remaining cluster is one object, numbered by
+// views (most first); (5) every 3D point votes for the object most of its masks belong to, and a mask left out
+// (too few points to cluster, or alone) joins the object holding at least half of its points when that object
+// has no mask in its view yet (sparse points on small or far objects). Names come from a names file or masks/objects.json by majority over the object's masks.
+// Output: masks/<stem>.png with the object ids, masks/objects.json, masks/associate.json (report) and the
+// input kept in masks/per_view/ (or everything in --out-masks DIR). All written into a temporary folder and
+// moved into place at the end.
+#pragma once
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace hgs::masks {
+
+struct AssociateOptions {
+  std::filesystem::path scene;
+  std::filesystem::path out_masks;  // empty: in place (SCENE/masks, originals kept in SCENE/masks/per_view)
+  std::filesystem::path names;      // optional {"<stem>": {"<id>": "name"}} per-view names
+  double min_affinity = 0.3;        // two-way containment to merge (cluster.h)
+  int min_views = 2;                // objects seen in fewer views are dropped
+  int min_points = 3;               // masks with fewer 3D points cannot be lifted and are dropped
+  int core_margin = 2;              // keypoints closer than this (px) to a mask's boundary do not lift it (SAM's edge errors)
+  double max_area = 0.8;            // masks covering a larger fraction of their image are background
+  bool attach = true;               // masks left out (few points, alone) join the object holding most of their points
+  bool join_parts = true;           // use import.json's part_of (see above)
+  bool drop_surfaces = false;       // drop objects whose 3D spread is larger than surface_spread (walls, floor, table)
+  double surface_spread = 0.5;      // RMS spread of an object's points / RMS spread of all points
+  bool force = false;               // re-associate an already associated scene (from masks/per_view) / replace out_masks
+  bool progress = true;
+};
+
+struct AssociatedObject {
+  int id = 0;
+  std::string name;
+  int views = 0;           // views with a mask of this object
+  int masks = 0;           // nodes (after joining parts)
+  long points = 0;         // 3D points it holds
+  double spread = 0;       // RMS spread of its points relative to all points
+  bool surface = false;    // spread > surface_spread
+};
+
+struct AssociateSummary {
+  int views = 0, views_with_masks = 0;
+  int masks = 0;                      // nodes considered (after joining parts)
+  int joined_parts = 0;               // per-view masks folded into their whole
+  int attached = 0;                   // masks left out of the clustering that joined an object by their points' votes
+  std::vector<AssociatedObject> objects;
+  int dropped_background = 0, dropped_few_points = 0, dropped_few_views = 0, dropped_surface = 0;
+  std::filesystem::path out_dir, backup_dir;  // where the masks went, where the originals are (empty with --out-masks)
+};
+
+AssociateSummary associate_masks(const AssociateOptions& opt);
+
+}  // namespace hgs::masks

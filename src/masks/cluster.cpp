@@ -1,0 +1,195 @@
+// Mask graph and its greedy two-way average-containment clustering with same-view cannot-links (cluster.h).
+#include "masks/cluster.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <queue>
+#include <tuple>
+#include <unordered_map>
+
+namespace hgs::masks {
+
+MaskGraph build_mask_graph(int num_views, const std::vector<int>& node_view,
+                           const std::vector<std::vector<PointObservation>>& point_obs) {
+  MaskGraph g;
+  g.num_views = num_views;
+  g.node_view = node_view;
+  const size_t N = node_view.size();
+  g.points.assign(N, 0);
+  g.covis.assign(N, std::vector<int32_t>(size_t(num_views), 0));
+  std::unordered_map<uint64_t, std::pair<int64_t, int64_t>> inter;
+  std::vector<PointObservation> obs;
+  std::vector<char> seen(size_t(num_views), 0);
+  for (const auto& track : point_obs) {
+    obs.clear();
+    for (const auto& o : track)  // first observation per view
+      if (!seen[o.view]) seen[o.view] = 1, obs.push_back(o);
+    for (const auto& o : obs) seen[o.view] = 0;
+    for (size_t i = 0; i < obs.size(); ++i) {
+      const int a = obs[i].node;
+      if (a < 0 || !obs[i].core) continue;
+      ++g.points[a];
+      for (size_t j = 0; j < obs.size(); ++j) {
+        if (j == i) continue;
+        ++g.covis[a][obs[j].view];
+        const int b = obs[j].node;
+        if (b < 0) continue;
+        if (a < b) ++inter[(uint64_t(a) << 32) | uint64_t(b)].first;
+        else ++inter[(uint64_t(b) << 32) | uint64_t(a)].second;
+      }
+    }
+  }
+  g.inter.reserve(inter.size());
+  for (auto& [k, n] : inter) g.inter.push_back({{int(k >> 32), int(k & 0xffffffffu)}, n});
+  std::sort(g.inter.begin(), g.inter.end());
+  return g;
+}
+
+namespace {
+
+struct Cluster {
+  std::vector<int64_t> count, visible;             // [V] nodes in view v, nodes visible in view v
+  std::map<int, std::pair<double, double>> nbr;    // other cluster -> (sum c(this -> other), sum c(other -> this))
+  std::vector<int> nodes;
+  int stamp = 0;
+  bool alive = true;
+};
+
+bool visible_in(const MaskGraph& g, int a, int v, const ClusterOptions& opt) {
+  const int64_t c = g.covis[a][v];
+  return c > 0 && c >= opt.min_points && double(c) >= opt.min_covisible * double(g.points[a]);
+}
+
+double affinity(const Cluster& x, const Cluster& y, const std::pair<double, double>& s) {
+  double pxy = 0, pyx = 0;
+  for (size_t v = 0; v < x.count.size(); ++v) pxy += double(x.visible[v]) * double(y.count[v]), pyx += double(y.visible[v]) * double(x.count[v]);
+  if (pxy <= 0 || pyx <= 0) return 0;
+  return std::sqrt((s.first / pxy) * (s.second / pyx));
+}
+
+bool share_a_view(const Cluster& x, const Cluster& y) {
+  for (size_t v = 0; v < x.count.size(); ++v)
+    if (x.count[v] && y.count[v]) return true;
+  return false;
+}
+
+Cluster make_cluster(const MaskGraph& g, const std::vector<int>& nodes, const ClusterOptions& opt) {
+  Cluster c;
+  c.count.assign(size_t(g.num_views), 0);
+  c.visible.assign(size_t(g.num_views), 0);
+  for (int a : nodes) {
+    ++c.count[g.node_view[a]];
+    for (int v = 0; v < g.num_views; ++v) c.visible[v] += visible_in(g, a, v, opt);
+  }
+  c.nodes = nodes;
+  return c;
+}
+
+// c(a -> b) given `inter` core points of a inside b (0 when a is not visible in b's view).
+double containment(const MaskGraph& g, int a, int b, int64_t inter, const ClusterOptions& opt) {
+  const int v = g.node_view[b];
+  return visible_in(g, a, v, opt) ? double(inter) / double(g.covis[a][v]) : 0.0;
+}
+
+}  // namespace
+
+double cluster_affinity(const MaskGraph& g, const std::vector<int>& x, const std::vector<int>& y, const ClusterOptions& opt) {
+  std::vector<char> in_x(g.node_view.size(), 0), in_y(g.node_view.size(), 0);
+  for (int a : x) in_x[a] = 1;
+  for (int b : y) in_y[b] = 1;
+  std::pair<double, double> s{0, 0};
+  for (auto& [ab, n] : g.inter) {
+    auto [a, b] = ab;
+    auto [nab, nba] = n;
+    if (in_y[a] && in_x[b]) std::swap(a, b), std::swap(nab, nba);
+    else if (!(in_x[a] && in_y[b])) continue;
+    s.first += containment(g, a, b, nab, opt);
+    s.second += containment(g, b, a, nba, opt);
+  }
+  return affinity(make_cluster(g, x, opt), make_cluster(g, y, opt), s);
+}
+
+Clustering cluster_masks(const MaskGraph& g, const ClusterOptions& opt) {
+  const int N = int(g.node_view.size());
+  std::vector<Cluster> cl(static_cast<size_t>(N));
+  for (int a = 0; a < N; ++a) cl[a] = make_cluster(g, {a}, opt);
+  for (auto& [ab, n] : g.inter) {
+    const auto [a, b] = ab;
+    const double sab = containment(g, a, b, n.first, opt), sba = containment(g, b, a, n.second, opt);
+    cl[a].nbr[b] = {sab, sba};
+    cl[b].nbr[a] = {sba, sab};
+  }
+  // Max-heap on affinity; equal affinities: smaller (a, b) first.
+  using Item = std::tuple<double, int, int, int, int>;  // affinity, a, b, stamp a, stamp b
+  auto worse = [](const Item& p, const Item& q) {
+    if (std::get<0>(p) != std::get<0>(q)) return std::get<0>(p) < std::get<0>(q);
+    return std::make_pair(std::get<1>(p), std::get<2>(p)) > std::make_pair(std::get<1>(q), std::get<2>(q));
+  };
+  std::priority_queue<Item, std::vector<Item>, decltype(worse)> heap(worse);
+  auto push = [&](int a, int b) {
+    if (a > b) std::swap(a, b);
+    const double s = affinity(cl[a], cl[b], cl[a].nbr.at(b));
+    if (s >= opt.min_affinity && !share_a_view(cl[a], cl[b])) heap.emplace(s, a, b, cl[a].stamp, cl[b].stamp);
+  };
+  for (int a = 0; a < N; ++a)
+    for (auto& [b, n] : cl[a].nbr)
+      if (b > a) push(a, b);
+  while (!heap.empty()) {
+    auto [s, a, b, sa, sb] = heap.top();
+    heap.pop();
+    if (!cl[a].alive || !cl[b].alive || cl[a].stamp != sa || cl[b].stamp != sb) continue;
+    if (share_a_view(cl[a], cl[b])) continue;
+    // Merge b into a.
+    Cluster& A = cl[a];
+    Cluster& B = cl[b];
+    for (int v = 0; v < g.num_views; ++v) A.count[v] += B.count[v], A.visible[v] += B.visible[v];
+    A.nodes.insert(A.nodes.end(), B.nodes.begin(), B.nodes.end());
+    for (auto& [c, xy] : B.nbr) {
+      if (c == a) continue;
+      auto& ac = A.nbr[c];
+      ac.first += xy.first, ac.second += xy.second;
+      cl[c].nbr.erase(b);
+      auto& ca = cl[c].nbr[a];
+      ca.first += xy.second, ca.second += xy.first;
+    }
+    A.nbr.erase(b);
+    B.nbr.clear();
+    B.alive = false;
+    ++A.stamp;
+    for (auto& [c, xy] : A.nbr) push(a, c);
+  }
+  // Objects: clusters seen in at least min_views views, ordered by views, points, first node.
+  struct Obj {
+    int views;
+    int64_t points;
+    std::vector<int> nodes;
+  };
+  std::vector<Obj> objs;
+  for (int a = 0; a < N; ++a) {
+    if (!cl[a].alive) continue;
+    int views = 0;
+    for (int64_t c : cl[a].count) views += c > 0;
+    if (views < opt.min_views) continue;
+    int64_t pts = 0;
+    for (int n : cl[a].nodes) pts += g.points[n];
+    std::vector<int> nodes = cl[a].nodes;
+    std::sort(nodes.begin(), nodes.end());
+    objs.push_back({views, pts, std::move(nodes)});
+  }
+  std::sort(objs.begin(), objs.end(), [](const Obj& p, const Obj& q) {
+    if (p.views != q.views) return p.views > q.views;
+    if (p.points != q.points) return p.points > q.points;
+    return p.nodes.front() < q.nodes.front();
+  });
+  Clustering r;
+  r.cluster.assign(size_t(N), -1);
+  r.num_objects = int(objs.size());
+  for (int k = 0; k < r.num_objects; ++k) {
+    for (int n : objs[k].nodes) r.cluster[n] = k;
+    r.members.push_back(std::move(objs[k].nodes));
+  }
+  return r;
+}
+
+}  // namespace hgs::masks

@@ -1,0 +1,76 @@
+// Greedy one-to-one matching of mask ids to true objects on summed per-view IoU, then mean per-view IoU (score.h).
+#include "masks/score.h"
+
+#include <algorithm>
+#include <tuple>
+
+#include "core/error.h"
+#include "core/image.h"
+#include "scene/scene.h"
+
+namespace hgs::masks {
+namespace fs = std::filesystem;
+
+MaskScore score_masks(const fs::path& scene, const fs::path& masks_dir, int min_pixels) {
+  Scene s = load_scene(scene);
+  struct ViewCounts {
+    std::map<int, long> gt_area, pred_area;
+    std::map<std::pair<int, int>, long> inter;  // (pred, gt)
+  };
+  std::vector<ViewCounts> vc;
+  std::map<std::pair<int, int>, double> total;  // (pred, gt) -> sum of per-view IoU
+  for (auto& v : s.views) {
+    const fs::path gp = s.root / "gt" / "instances" / v.name, mp = masks_dir / (v.stem + ".png");
+    if (!fs::exists(gp) || !fs::exists(mp)) continue;
+    LabelMap gt = load_label_png(gp), pr = load_label_png(mp);
+    if (gt.width != pr.width || gt.height != pr.height)
+      fail("{}: mask is {}x{} but {} is {}x{}", mp.string(), pr.width, pr.height, gp.string(), gt.width, gt.height);
+    ViewCounts c;
+    for (size_t i = 0; i < gt.v.size(); ++i) {
+      if (gt.v[i]) ++c.gt_area[gt.v[i]];
+      if (pr.v[i]) ++c.pred_area[pr.v[i]];
+      if (gt.v[i] && pr.v[i]) ++c.inter[{pr.v[i], gt.v[i]}];
+    }
+    for (auto& [pg, n] : c.inter)
+      total[pg] += double(n) / double(c.pred_area[pg.first] + c.gt_area[pg.second] - n);
+    vc.push_back(std::move(c));
+  }
+  if (vc.empty()) fail("{}: no view has both a mask in {} and gt/instances/<name>", scene.string(), masks_dir.string());
+  std::vector<std::tuple<double, int, int>> cand;
+  for (auto& [pg, t] : total) cand.emplace_back(-t, pg.first, pg.second);
+  std::sort(cand.begin(), cand.end());
+  MaskScore r;
+  std::map<int, int> used_pred;
+  for (auto& [t, p, g] : cand) {
+    if (r.match.count(g) || used_pred.count(p)) continue;
+    r.match[g] = p;
+    used_pred[p] = g;
+  }
+  r.views = int(vc.size());
+  std::map<int, std::pair<double, int>> per_obj;
+  double sum = 0;
+  int above = 0;
+  for (auto& c : vc)
+    for (auto& [g, ga] : c.gt_area) {
+      if (ga < min_pixels) continue;
+      double iou = 0;
+      if (auto it = r.match.find(g); it != r.match.end()) {
+        auto in = c.inter.find({it->second, g});
+        const long n = in == c.inter.end() ? 0 : in->second;
+        const long pa = c.pred_area.count(it->second) ? c.pred_area.at(it->second) : 0;
+        iou = double(n) / double(pa + ga - n);
+      }
+      sum += iou;
+      above += iou >= 0.5;
+      ++r.pairs;
+      per_obj[g].first += iou;
+      per_obj[g].second += 1;
+    }
+  r.mean_iou = r.pairs ? sum / r.pairs : 0;
+  r.pairs_above_half = r.pairs ? double(above) / r.pairs : 0;
+  for (auto& [g, si] : per_obj) r.object_iou[g] = si.first / si.second, r.object_mean_iou += si.first / si.second;
+  if (!per_obj.empty()) r.object_mean_iou /= double(per_obj.size());
+  return r;
+}
+
+}  // namespace hgs::masks
