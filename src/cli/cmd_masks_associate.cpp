@@ -40,6 +40,9 @@ MasksSubcommandRegistration reg({"associate", "Make per-view mask ids consistent
     sub.add_option("--max-area", o->max_area, "Masks covering a larger fraction of their image are background and dropped")
         ->capture_default_str();
     sub.add_flag("--no-attach", [o](int64_t n) { o->attach = n == 0; }, "Do not attach left-out masks to the object holding most of their 3D points");
+    sub.add_option("--part-fraction", o->part_fraction,
+                   "A SAM mask is part of the smallest larger one holding this share of it (re-read from import.json's source; 0.9 = import.json's own)")
+        ->check(CLI::Range(0.05, 0.9))->capture_default_str();
     sub.add_flag("--no-join-parts", [o](int64_t n) { o->join_parts = n == 0; }, "Do not fold parts into their whole (import.json part_of)");
     sub.add_flag("--drop-surfaces", o->drop_surfaces, "Drop objects whose 3D points spread like a surface (table, floor, walls)");
     sub.add_option("--surface-spread", o->surface_spread, "RMS spread of an object's 3D points, relative to all points, above which it is a surface")

@@ -18,6 +18,8 @@
 #include "core/image.h"
 #include "core/progress.h"
 #include "masks/cluster.h"
+#include "masks/flatten.h"
+#include "masks/sources.h"
 #include "scene/colmap.h"
 #include "scene/scene.h"
 
@@ -42,8 +44,13 @@ struct MaskInfo {  // one id of import.json
   int part_of = 0;
 };
 
-// Per view: id -> root id after joining parts to a whole that flattening left with less than half its pixels.
+// Per view: id -> root id after joining parts to their whole when the parts tile it: flattening left the whole
+// less than half of its pixels, or its parts (import.json's part_of) add up to at least half of its area. A large
+// mask holding a few small objects (a table with things on it) keeps them apart.
 std::map<int, int> part_roots(const std::map<int, MaskInfo>& info, double image_px, double max_area) {
+  std::map<int, double> child_area;
+  for (auto& [id, m] : info)
+    if (m.part_of > 0) child_area[m.part_of] += m.area;
   std::map<int, int> root;
   for (auto& [id, m] : info) {
     int r = id;
@@ -51,7 +58,8 @@ std::map<int, int> part_roots(const std::map<int, MaskInfo>& info, double image_
       auto it = info.find(info.at(r).part_of);
       if (info.at(r).part_of <= 0 || it == info.end()) break;
       const MaskInfo& p = it->second;
-      if (p.visible >= 0.5 * p.area || p.area > max_area * image_px) break;
+      const bool tiled = p.visible < 0.5 * p.area || child_area[it->first] >= 0.5 * p.area;
+      if (!tiled || p.area > max_area * image_px) break;
       r = it->first;
     }
     root[id] = r;
@@ -198,6 +206,18 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
             mi.part_of = e.contains("part_of") && e["part_of"].is_number() ? e["part_of"].get<int>() : 0;
             info[e["id"].get<int>()] = mi;
           }
+        // SAM's own masks still there: part_of again at --part-fraction (import.json's is at 90%, which boundary
+        // errors on small objects often miss). Ids are 1 + list position, as in import.json.
+        const std::string fmt_name = import_info.value("format", "");
+        const fs::path src_dir = import_info.value("source", "");
+        const fs::path src = fmt_name == "sam-json" ? src_dir / (v.stem + ".json") : src_dir / v.stem;
+        if (opt.part_fraction < 0.9 && (fmt_name == "sam-json" || fmt_name == "sam-png") && fs::exists(src)) {
+          const std::vector<SourceMask> sm = fmt_name == "sam-json" ? read_sam_json(src, v.width, v.height)
+                                                                    : read_sam_png_folder(src, v.width, v.height);
+          const std::vector<int> parent = part_of(sm, opt.part_fraction);
+          for (size_t i = 0; i < sm.size(); ++i)
+            if (auto it = info.find(int(i) + 1); it != info.end()) it->second.part_of = parent[i] >= 0 ? parent[i] + 1 : 0;
+        }
         root = part_roots(info, px, opt.max_area);
       }
       for (auto& [l, a] : area) {
@@ -463,10 +483,11 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
                       {"spread", std::round(o.spread * 1000) / 1000}, {"surface", o.surface}});
     }
     atomic_write_text(tmp / "objects.json", objects.dump(2) + "\n");
-    json report = {{"source", fs::absolute(in).lexically_normal().string()},
+    // Where the per-view input is after this run (in place: masks/per_view, whatever it was read from).
+    json report = {{"source", fs::absolute(in_place ? masks_dir / "per_view" : in).lexically_normal().string()},
                    {"colmap", images_file.string()},
                    {"options", {{"min_affinity", opt.min_affinity}, {"min_views", opt.min_views}, {"min_points", opt.min_points},
-                                {"max_area", opt.max_area}, {"core_margin", opt.core_margin}, {"attach", opt.attach}, {"join_parts", opt.join_parts}, {"drop_surfaces", opt.drop_surfaces},
+                                {"max_area", opt.max_area}, {"core_margin", opt.core_margin}, {"attach", opt.attach}, {"join_parts", opt.join_parts}, {"part_fraction", opt.part_fraction}, {"drop_surfaces", opt.drop_surfaces},
                                 {"surface_spread", opt.surface_spread}}},
                    {"views_with_masks", sum.views_with_masks},
                    {"masks", sum.masks},

@@ -3,7 +3,9 @@
 // 2D-3D correspondences (images.bin: the 3D point each keypoint observes).
 //
 // Steps: (1) every mask of every view becomes a node; with masks/import.json, parts are first joined to their
-// whole when flattening left the whole less than half of its pixels (the parts tile it: SAM's whole + parts);
+// whole when they tile it (the whole kept less than half of its pixels after flattening, or its parts add up to
+// half its area: SAM's whole + parts, not a table holding a few things); part_of comes from import.json (90%
+// overlap) or, when SAM's files are still at import.json's source, is recomputed at part_fraction;
 // (2) nodes covering more than max_area of the image are dropped as background, nodes with fewer than
 // min_points 3D points as unliftable; (3) the graph of nodes linked by shared 3D points is clustered (cluster.h);
 // (4) clusters seen in fewer than min_views views are dropped; every remaining cluster is one object, numbered by
@@ -30,7 +32,8 @@ struct AssociateOptions {
   int core_margin = 2;              // keypoints closer than this (px) to a mask's boundary do not lift it (SAM's edge errors)
   double max_area = 0.8;            // masks covering a larger fraction of their image are background
   bool attach = true;               // masks left out (few points, alone) join the object holding most of their points
-  bool join_parts = true;           // use import.json's part_of (see above)
+  bool join_parts = true;
+  double part_fraction = 0.5;       // with SAM's masks still at import.json's source: part_of recomputed at this overlap           // use import.json's part_of (see above)
   bool drop_surfaces = false;       // drop objects whose 3D spread is larger than surface_spread (walls, floor, table)
   double surface_spread = 0.5;      // RMS spread of an object's points / RMS spread of all points
   bool force = false;               // re-associate an already associated scene (from masks/per_view) / replace out_masks
