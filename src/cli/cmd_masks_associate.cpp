@@ -43,6 +43,9 @@ MasksSubcommandRegistration reg({"associate", "Make per-view mask ids consistent
     sub.add_option("--part-fraction", o->part_fraction,
                    "A SAM mask is part of the smallest larger one holding this share of it (re-read from import.json's source; 0.9 = import.json's own)")
         ->check(CLI::Range(0.05, 0.9))->capture_default_str();
+    sub.add_option("--part-merge", o->part_merge,
+                   "A group of masks lying this much inside another object's whole masks (SAM whole + parts) joins it as a part")
+        ->check(CLI::Range(0.0, 1.0))->capture_default_str();
     sub.add_flag("--no-join-parts", [o](int64_t n) { o->join_parts = n == 0; }, "Do not fold parts into their whole (import.json part_of)");
     sub.add_flag("--drop-surfaces", o->drop_surfaces, "Drop objects whose 3D points spread like a surface (table, floor, walls)");
     sub.add_option("--surface-spread", o->surface_spread, "RMS spread of an object's 3D points, relative to all points, above which it is a surface")

@@ -286,10 +286,13 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
     for (auto& o : point_obs_raw[p])
       point_obs[p].push_back({o.view, o.node >= 0 ? kept_of[o.node] : -1, o.node < 0 || o.core || core_count[o.node] < opt.min_points});
   MaskGraph g = build_mask_graph(int(s.views.size()), kept_view, point_obs);
+  g.whole.assign(node_of_kept.size(), 0);
+  for (size_t k = 0; k < node_of_kept.size(); ++k) g.whole[k] = nodes[node_of_kept[k]].ids.size() > 1;
   ClusterOptions co;
   co.min_affinity = opt.min_affinity;
   co.min_views = opt.min_views;
   co.min_points = opt.min_points;
+  co.part_merge = opt.join_parts ? opt.part_merge : 0;
   Clustering c = cluster_masks(g, co);
   std::vector<int> object_of(nodes.size(), -1);  // node -> object index
   for (size_t k = 0; k < node_of_kept.size(); ++k) {
@@ -487,7 +490,7 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
     json report = {{"source", fs::absolute(in_place ? masks_dir / "per_view" : in).lexically_normal().string()},
                    {"colmap", images_file.string()},
                    {"options", {{"min_affinity", opt.min_affinity}, {"min_views", opt.min_views}, {"min_points", opt.min_points},
-                                {"max_area", opt.max_area}, {"core_margin", opt.core_margin}, {"attach", opt.attach}, {"join_parts", opt.join_parts}, {"part_fraction", opt.part_fraction}, {"drop_surfaces", opt.drop_surfaces},
+                                {"max_area", opt.max_area}, {"core_margin", opt.core_margin}, {"attach", opt.attach}, {"join_parts", opt.join_parts}, {"part_fraction", opt.part_fraction}, {"part_merge", opt.part_merge}, {"drop_surfaces", opt.drop_surfaces},
                                 {"surface_spread", opt.surface_spread}}},
                    {"views_with_masks", sum.views_with_masks},
                    {"masks", sum.masks},

@@ -33,6 +33,7 @@ struct AssociateOptions {
   double max_area = 0.8;            // masks covering a larger fraction of their image are background
   bool attach = true;               // masks left out (few points, alone) join the object holding most of their points
   bool join_parts = true;
+  double part_merge = 0.5;          // a cluster inside another's whole masks joins it as a part (cluster.h)
   double part_fraction = 0.5;       // with SAM's masks still at import.json's source: part_of recomputed at this overlap           // use import.json's part_of (see above)
   bool drop_surfaces = false;       // drop objects whose 3D spread is larger than surface_spread (walls, floor, table)
   double surface_spread = 0.5;      // RMS spread of an object's points / RMS spread of all points

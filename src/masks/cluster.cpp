@@ -159,6 +159,45 @@ Clustering cluster_masks(const MaskGraph& g, const ClusterOptions& opt) {
     ++A.stamp;
     for (auto& [c, xy] : A.nbr) push(a, c);
   }
+  // Parts: a cluster whose points lie inside another cluster's whole masks (nodes that parts were folded into)
+  // is a part of that object that SAM kept apart in some views; best pair first.
+  if (opt.part_merge > 0 && !g.whole.empty()) {
+    std::unordered_map<uint64_t, int64_t> core_in;  // (a, b) -> core points of a inside b
+    for (auto& [ab, n] : g.inter) {
+      core_in[(uint64_t(ab.first) << 32) | uint64_t(ab.second)] = n.first;
+      core_in[(uint64_t(ab.second) << 32) | uint64_t(ab.first)] = n.second;
+    }
+    while (true) {
+      double best = 0;
+      int by = -1, bx = -1;
+      for (int y = 0; y < N; ++y) {
+        if (!cl[y].alive) continue;
+        for (int x = 0; x < N; ++x) {
+          if (x == y || !cl[x].alive) continue;
+          double sum = 0;
+          int pairs = 0;
+          for (int a : cl[x].nodes) {
+            if (!g.whole[a]) continue;
+            for (int b : cl[y].nodes) {
+              if (!visible_in(g, b, g.node_view[a], opt)) continue;
+              ++pairs;
+              auto it = core_in.find((uint64_t(b) << 32) | uint64_t(a));
+              if (it != core_in.end()) sum += containment(g, b, a, it->second, opt);
+            }
+          }
+          if (pairs < 2) continue;
+          const double c = sum / pairs;
+          if (c >= opt.part_merge && c > best) best = c, by = y, bx = x;
+        }
+      }
+      if (by < 0) break;
+      Cluster& X = cl[bx];
+      Cluster& Y = cl[by];
+      for (int v = 0; v < g.num_views; ++v) X.count[v] += Y.count[v], X.visible[v] += Y.visible[v];
+      X.nodes.insert(X.nodes.end(), Y.nodes.begin(), Y.nodes.end());
+      Y.alive = false;
+    }
+  }
   // Objects: clusters seen in at least min_views views, ordered by views, points, first node.
   struct Obj {
     int views;

@@ -20,8 +20,16 @@
 // clusters merge (pair counts = sum over views of visible_X[v] x count_Y[v]), so each merge costs O(V) per
 // neighbour. A merge needs affinity >= min_affinity and is refused when both clusters hold a node of the same view
 // (two masks of one view are never one object; parts of a mask are joined to it before, see associate.h). Ties
-// break on the smaller cluster ids, so the result is deterministic. Clusters seen in fewer than min_views views
-// are dropped.
+// break on the smaller cluster ids, so the result is deterministic.
+//
+// Parts: SAM gives an object whole and in parts; where the parts tile the whole they are folded into one node
+// before (associate.h) and the node is marked `whole`, but in views where that failed (a missed or badly eroded
+// whole) the parts stay separate nodes and, being two masks of one view, form clusters of their own. A cluster Y
+// then joins a cluster X when Y's points lie inside X's whole nodes: mean of c(b -> a) over b in Y, a whole in X,
+// b visible in a's view (at least two such pairs) >= part_merge; best pair first, repeated. Two masks of one view
+// end in one object only this way: one is a part of the other's object as other views show. Merged neighbours
+// (label maps without parts) have no whole nodes and never join.
+// Finally clusters seen in fewer than min_views views are dropped.
 #pragma once
 #include <cstdint>
 #include <utility>
@@ -34,6 +42,7 @@ struct MaskGraph {
   std::vector<int> node_view;                          // [N] view of each node
   std::vector<int64_t> points;                         // [N] core 3D points of each node
   std::vector<std::vector<int32_t>> covis;             // [N, V] core points of the node that view v observes (0 at its own view)
+  std::vector<char> whole;  // [N] optional: 1 = a whole mask whose parts were folded into it (SAM's whole + parts)
   // (a < b) -> (core points of a inside b, core points of b inside a), sorted by (a, b), only pairs sharing a point
   std::vector<std::pair<std::pair<int, int>, std::pair<int64_t, int64_t>>> inter;
 };
@@ -55,6 +64,7 @@ struct ClusterOptions {
   double min_covisible = 0.25; // a node is visible in view v when that share of its points (and min_points) is seen there
   int min_points = 3;
   int min_views = 2;           // clusters seen in fewer views are dropped
+  double part_merge = 0.5;     // a cluster this contained in another's whole masks joins it as a part (0 = never)
 };
 
 struct Clustering {

@@ -280,6 +280,6 @@ TEST(MasksAssociate, SynthSamStyleWholesAndPartsBecomeObjects) {
     for (auto& [id, e] : m.items()) e["surface_entity"] = e.contains("surface") ? e["entity"].get<int>() : 0;
   const double f_surf = consistent_fraction(rep["ids"], surfaces, "surface_entity");
   std::cout << "SAM-style masks on their object's id: objects " << f_obj << ", surfaces " << f_surf << "\n";
-  EXPECT_GE(f_obj, 0.75);   // measured 0.80: halves kept apart in views where no whole holds them stay their own object
+  EXPECT_GE(f_obj, 0.9);    // measured 0.96 (0.80 without joining part clusters, 0.61 at 96 x 72)
   EXPECT_GE(f_surf, 0.65);  // measured 0.72: the floor, seen at grazing angles, splits into runs of views
 }

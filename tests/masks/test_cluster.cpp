@@ -210,3 +210,30 @@ TEST(ClusterMasks, RandomGraphsNeverPutTwoMasksOfOneViewTogetherAndAreDeterminis
     EXPECT_EQ(c.cluster, cluster_masks(g, o).cluster);
   }
 }
+
+TEST(ClusterMasks, PartsKeptApartInSomeViewsJoinTheObjectWhoseWholesHoldThem) {
+  // Views 0, 1: SAM's whole A (its parts folded into it: `whole`); views 2, 3: the two halves apart (the whole
+  // missed), so each half forms a cluster of its own, never with the other (same views).
+  World w;
+  w.views = 4;
+  w.node("W0", 0);
+  w.node("W1", 1);
+  for (int v : {2, 3}) w.node("L" + std::to_string(v), v), w.node("R" + std::to_string(v), v);
+  w.node("B0", 0);  // a neighbour, never inside A's wholes
+  w.node("B2", 2);
+  w.points(20, {{0, "W0"}, {1, "W1"}, {2, "L2"}, {3, "L3"}});
+  w.points(20, {{0, "W0"}, {1, "W1"}, {2, "R2"}, {3, "R3"}});
+  w.points(15, {{0, "B0"}, {1, ""}, {2, "B2"}});
+  w.points(60, {{0, ""}, {1, ""}, {2, ""}, {3, ""}});
+  MaskGraph g = w.graph();
+  ClusterOptions o;
+  o.part_merge = 0;
+  EXPECT_EQ(named(w, cluster_masks(g, o)),
+            (std::map<std::string, std::set<std::string>>{{"0", {"L2", "L3", "W0", "W1"}}, {"1", {"R2", "R3"}}, {"2", {"B0", "B2"}}}));
+  // Without whole marks nothing joins either (merged neighbours look the same).
+  EXPECT_EQ(named(w, cluster_masks(g)), named(w, cluster_masks(g, o)));
+  g.whole.assign(g.node_view.size(), 0);
+  g.whole[w.id["W0"]] = g.whole[w.id["W1"]] = 1;
+  EXPECT_EQ(named(w, cluster_masks(g)),
+            (std::map<std::string, std::set<std::string>>{{"0", {"L2", "L3", "R2", "R3", "W0", "W1"}}, {"1", {"B0", "B2"}}}));
+}
