@@ -175,17 +175,23 @@ Clustering cluster_masks(const MaskGraph& g, const ClusterOptions& opt) {
         for (int x = 0; x < N; ++x) {
           if (x == y || !cl[x].alive) continue;
           double sum = 0;
-          int pairs = 0;
+          int pairs = 0, holding = 0;  // holding: whole nodes of x that hold y on average
           for (int a : cl[x].nodes) {
             if (!g.whole[a]) continue;
+            double sa = 0;
+            int pa = 0;
             for (int b : cl[y].nodes) {
               if (!visible_in(g, b, g.node_view[a], opt)) continue;
-              ++pairs;
+              ++pa;
               auto it = core_in.find((uint64_t(b) << 32) | uint64_t(a));
-              if (it != core_in.end()) sum += containment(g, b, a, it->second, opt);
+              if (it != core_in.end()) sa += containment(g, b, a, it->second, opt);
             }
+            sum += sa, pairs += pa;
+            holding += pa > 0 && sa >= opt.part_merge * pa;
           }
-          if (pairs < 2) continue;
+          // A stray whole mask clustered into the wrong object must not pull another object in: the parts must
+          // lie inside at least two of x's wholes and an eighth of x's masks.
+          if (pairs < 2 || holding < 2 || 8 * holding < int(cl[x].nodes.size())) continue;
           const double c = sum / pairs;
           if (c >= opt.part_merge && c > best) best = c, by = y, bx = x;
         }

@@ -26,7 +26,9 @@
 // before (associate.h) and the node is marked `whole`, but in views where that failed (a missed or badly eroded
 // whole) the parts stay separate nodes and, being two masks of one view, form clusters of their own. A cluster Y
 // then joins a cluster X when Y's points lie inside X's whole nodes: mean of c(b -> a) over b in Y, a whole in X,
-// b visible in a's view (at least two such pairs) >= part_merge; best pair first, repeated. Two masks of one view
+// b visible in a's view >= part_merge, and Y lies inside (mean >= part_merge) at least two of X's whole nodes
+// and as many as an eighth of X's nodes (one stray whole in the wrong cluster must not pull an object in); best
+// pair first, repeated. Two masks of one view
 // end in one object only this way: one is a part of the other's object as other views show. Merged neighbours
 // (label maps without parts) have no whole nodes and never join.
 // Finally clusters seen in fewer than min_views views are dropped.
