@@ -295,26 +295,20 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
   co.part_merge = opt.join_parts ? opt.part_merge : 0;
   Clustering c = cluster_masks(g, co);
   std::vector<int> object_of(nodes.size(), -1);  // node -> object index
+  std::vector<int> alone;  // kept nodes in no object
   for (size_t k = 0; k < node_of_kept.size(); ++k) {
     object_of[node_of_kept[k]] = c.cluster[k];
-    if (c.cluster[k] < 0) {
-      // Why it joined no object: its best affinity, and whether that object already has a mask in its view.
-      double best = 0;
-      int best_k = -1;
-      for (int o = 0; o < c.num_objects; ++o) {
-        const double a = cluster_affinity(g, {int(k)}, c.members[o], co);
-        if (a > best) best = a, best_k = o;
-      }
-      std::string why = "no 3D point shared with any object";
-      if (best_k >= 0) {
-        bool same_view = false;
-        for (int m : c.members[best_k]) same_view |= g.node_view[m] == g.node_view[k];
-        why = fmt::format("closest object #{} at affinity {:.2f}{}", best_k + 1, best,
-                          same_view ? " already has a mask in this view" : " (< --min-affinity)");
-      }
-      nodes[node_of_kept[k]].drop = fmt::format("seen in fewer than --min-views {} views; {}", opt.min_views, why);
-      ++sum.dropped_few_views;
-    }
+    if (c.cluster[k] < 0) alone.push_back(int(k));
+  }
+  // Why each of those joined no object: its best affinity, and whether that object has a mask in its view.
+  const std::vector<NodeMatch> near = nearest_objects(g, c, alone, co);
+  for (size_t i = 0; i < alone.size(); ++i) {
+    const NodeMatch& m = near[i];
+    const std::string why = m.object < 0 ? "no 3D point shared with any object"
+                                         : fmt::format("closest object #{} at affinity {:.2f}{}", m.object + 1, m.affinity,
+                                                       m.same_view ? " already has a mask in this view" : " (< --min-affinity)");
+    nodes[node_of_kept[alone[i]]].drop = fmt::format("seen in fewer than --min-views {} views; {}", opt.min_views, why);
+    ++sum.dropped_few_views;
   }
 
   // Point votes: a 3D point belongs to the object that most of its observations' masks belong to (ties: smaller).

@@ -120,6 +120,25 @@ Clustering cluster_masks(const MaskGraph& g, const ClusterOptions& opt) {
     cl[a].nbr[b] = {sab, sba};
     cl[b].nbr[a] = {sba, sab};
   }
+  // Merges cluster b into cluster a (counts, nodes, neighbour sums).
+  auto merge = [&](int a, int b) {
+    Cluster& A = cl[a];
+    Cluster& B = cl[b];
+    for (int v = 0; v < g.num_views; ++v) A.count[v] += B.count[v], A.visible[v] += B.visible[v];
+    A.nodes.insert(A.nodes.end(), B.nodes.begin(), B.nodes.end());
+    for (auto& [c, xy] : B.nbr) {
+      if (c == a) continue;
+      auto& ac = A.nbr[c];
+      ac.first += xy.first, ac.second += xy.second;
+      cl[c].nbr.erase(b);
+      auto& ca = cl[c].nbr[a];
+      ca.first += xy.second, ca.second += xy.first;
+    }
+    A.nbr.erase(b);
+    B.nbr.clear();
+    B.alive = false;
+    ++A.stamp;
+  };
   // Max-heap on affinity; equal affinities: smaller (a, b) first.
   using Item = std::tuple<double, int, int, int, int>;  // affinity, a, b, stamp a, stamp b
   auto worse = [](const Item& p, const Item& q) {
@@ -140,24 +159,8 @@ Clustering cluster_masks(const MaskGraph& g, const ClusterOptions& opt) {
     heap.pop();
     if (!cl[a].alive || !cl[b].alive || cl[a].stamp != sa || cl[b].stamp != sb) continue;
     if (share_a_view(cl[a], cl[b])) continue;
-    // Merge b into a.
-    Cluster& A = cl[a];
-    Cluster& B = cl[b];
-    for (int v = 0; v < g.num_views; ++v) A.count[v] += B.count[v], A.visible[v] += B.visible[v];
-    A.nodes.insert(A.nodes.end(), B.nodes.begin(), B.nodes.end());
-    for (auto& [c, xy] : B.nbr) {
-      if (c == a) continue;
-      auto& ac = A.nbr[c];
-      ac.first += xy.first, ac.second += xy.second;
-      cl[c].nbr.erase(b);
-      auto& ca = cl[c].nbr[a];
-      ca.first += xy.second, ca.second += xy.first;
-    }
-    A.nbr.erase(b);
-    B.nbr.clear();
-    B.alive = false;
-    ++A.stamp;
-    for (auto& [c, xy] : A.nbr) push(a, c);
+    merge(a, b);
+    for (auto& [c, xy] : cl[a].nbr) push(a, c);
   }
   // Parts: a cluster whose points lie inside another cluster's whole masks (nodes that parts were folded into)
   // is a part of that object that SAM kept apart in some views; best pair first.
@@ -167,41 +170,54 @@ Clustering cluster_masks(const MaskGraph& g, const ClusterOptions& opt) {
       core_in[(uint64_t(ab.first) << 32) | uint64_t(ab.second)] = n.first;
       core_in[(uint64_t(ab.second) << 32) | uint64_t(ab.first)] = n.second;
     }
-    while (true) {
-      double best = 0;
-      int by = -1, bx = -1;
-      for (int y = 0; y < N; ++y) {
-        if (!cl[y].alive) continue;
-        for (int x = 0; x < N; ++x) {
-          if (x == y || !cl[x].alive) continue;
-          double sum = 0;
-          int pairs = 0, holding = 0;  // holding: whole nodes of x that hold y on average
-          for (int a : cl[x].nodes) {
-            if (!g.whole[a]) continue;
-            double sa = 0;
-            int pa = 0;
-            for (int b : cl[y].nodes) {
-              if (!visible_in(g, b, g.node_view[a], opt)) continue;
-              ++pa;
-              auto it = core_in.find((uint64_t(b) << 32) | uint64_t(a));
-              if (it != core_in.end()) sa += containment(g, b, a, it->second, opt);
-            }
-            sum += sa, pairs += pa;
-            holding += pa > 0 && sa >= opt.part_merge * pa;
-          }
-          // A stray whole mask clustered into the wrong object must not pull another object in: the parts must
-          // lie inside at least two of x's wholes and an eighth of x's masks.
-          if (pairs < 2 || holding < 2 || 8 * holding < int(cl[x].nodes.size())) continue;
-          const double c = sum / pairs;
-          if (c >= opt.part_merge && c > best) best = c, by = y, bx = x;
+    auto wholes = [&](int x) {
+      int n = 0;
+      for (int a : cl[x].nodes) n += g.whole[a];
+      return n;
+    };
+    // Mean containment of y in x's whole nodes, or -1 when y does not lie inside enough of them.
+    auto part_score = [&](int x, int y) -> double {
+      double sum = 0;
+      int pairs = 0, holding = 0;  // holding: whole nodes of x that hold y on average
+      for (int a : cl[x].nodes) {
+        if (!g.whole[a]) continue;
+        double sa = 0;
+        int pa = 0;
+        for (int b : cl[y].nodes) {
+          if (!visible_in(g, b, g.node_view[a], opt)) continue;
+          ++pa;
+          auto it = core_in.find((uint64_t(b) << 32) | uint64_t(a));
+          if (it != core_in.end()) sa += containment(g, b, a, it->second, opt);
         }
+        sum += sa, pairs += pa;
+        holding += pa > 0 && sa >= opt.part_merge * pa;
       }
-      if (by < 0) break;
-      Cluster& X = cl[bx];
-      Cluster& Y = cl[by];
-      for (int v = 0; v < g.num_views; ++v) X.count[v] += Y.count[v], X.visible[v] += Y.visible[v];
-      X.nodes.insert(X.nodes.end(), Y.nodes.begin(), Y.nodes.end());
-      Y.alive = false;
+      // A stray whole mask clustered into the wrong object must not pull another object in: the parts must
+      // lie inside at least two of x's wholes and an eighth of x's masks.
+      if (pairs < 2 || holding < 2 || 8 * holding < int(cl[x].nodes.size())) return -1;
+      return sum / pairs;
+    };
+    std::map<std::pair<int, int>, double> score;  // (x, y): y would join x; only neighbours sharing points
+    auto rescore = [&](int x, int y) {
+      const double c = wholes(x) >= 2 ? part_score(x, y) : -1;
+      if (c >= opt.part_merge) score[{x, y}] = c;
+      else score.erase({x, y});
+    };
+    for (int x = 0; x < N; ++x)
+      if (cl[x].alive && wholes(x) >= 2)
+        for (auto& [y, xy] : cl[x].nbr) rescore(x, y);
+    while (!score.empty()) {
+      auto best = score.begin();
+      for (auto it = score.begin(); it != score.end(); ++it)
+        if (it->second > best->second) best = it;  // ties: the smallest (x, y)
+      const auto [x, y] = best->first;
+      merge(x, y);
+      for (auto it = score.begin(); it != score.end();)
+        it = it->first.first == x || it->first.second == x || it->first.first == y || it->first.second == y ? score.erase(it) : std::next(it);
+      for (auto& [c, xy] : cl[x].nbr) {
+        rescore(x, c);
+        rescore(c, x);
+      }
     }
   }
   // Objects: clusters seen in at least min_views views, ordered by views, points, first node.
@@ -235,6 +251,45 @@ Clustering cluster_masks(const MaskGraph& g, const ClusterOptions& opt) {
     r.members.push_back(std::move(objs[k].nodes));
   }
   return r;
+}
+
+std::vector<NodeMatch> nearest_objects(const MaskGraph& g, const Clustering& c, const std::vector<int>& nodes,
+                                       const ClusterOptions& opt) {
+  const int K = c.num_objects, V = g.num_views;
+  std::vector<std::vector<int64_t>> count(size_t(K), std::vector<int64_t>(size_t(V), 0)), visible = count;  // [K, V]
+  for (int k = 0; k < K; ++k)
+    for (int a : c.members[k]) {
+      ++count[k][g.node_view[a]];
+      for (int v = 0; v < V; ++v) visible[k][v] += visible_in(g, a, v, opt);
+    }
+  std::vector<char> wanted(g.node_view.size(), 0);
+  for (int n : nodes) wanted[n] = 1;
+  std::vector<std::map<int, std::pair<double, double>>> sums(g.node_view.size());  // node -> object -> (c(n->o), c(o->n))
+  for (auto& [ab, n] : g.inter) {
+    const auto [a, b] = ab;
+    if (wanted[a] && c.cluster[b] >= 0) {
+      auto& s = sums[a][c.cluster[b]];
+      s.first += containment(g, a, b, n.first, opt), s.second += containment(g, b, a, n.second, opt);
+    }
+    if (wanted[b] && c.cluster[a] >= 0) {
+      auto& s = sums[b][c.cluster[a]];
+      s.first += containment(g, b, a, n.second, opt), s.second += containment(g, a, b, n.first, opt);
+    }
+  }
+  std::vector<NodeMatch> out;
+  for (int n : nodes) {
+    NodeMatch m;
+    for (auto& [k, s] : sums[n]) {
+      double pno = 0;
+      for (int v = 0; v < V; ++v) pno += double(visible_in(g, n, v, opt)) * double(count[k][v]);
+      const double pon = double(visible[k][g.node_view[n]]);
+      const double aff = pno > 0 && pon > 0 ? std::sqrt((s.first / pno) * (s.second / pon)) : 0;
+      if (m.object < 0 || aff > m.affinity) m.object = k, m.affinity = aff;
+    }
+    if (m.object >= 0) m.same_view = count[m.object][g.node_view[n]] > 0;
+    out.push_back(m);
+  }
+  return out;
 }
 
 }  // namespace hgs::masks

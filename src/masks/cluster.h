@@ -80,4 +80,14 @@ double cluster_affinity(const MaskGraph& g, const std::vector<int>& x, const std
 
 Clustering cluster_masks(const MaskGraph& g, const ClusterOptions& opt = {});
 
+// For each of `nodes` (left out of the objects): the object it has the highest affinity with (as
+// cluster_affinity({node}, members), computed from the node's own edges), -1 when it shares no point with any.
+struct NodeMatch {
+  int object = -1;
+  double affinity = 0;
+  bool same_view = false;  // that object already has a mask in the node's view
+};
+std::vector<NodeMatch> nearest_objects(const MaskGraph& g, const Clustering& c, const std::vector<int>& nodes,
+                                       const ClusterOptions& opt = {});
+
 }  // namespace hgs::masks

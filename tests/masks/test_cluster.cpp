@@ -237,3 +237,36 @@ TEST(ClusterMasks, PartsKeptApartInSomeViewsJoinTheObjectWhoseWholesHoldThem) {
   EXPECT_EQ(named(w, cluster_masks(g)),
             (std::map<std::string, std::set<std::string>>{{"0", {"L2", "L3", "R2", "R3", "W0", "W1"}}, {"1", {"B0", "B2"}}}));
 }
+
+TEST(ClusterMasks, NearestObjectsAgreeWithTheAffinityOfEachObject) {
+  std::mt19937 rng(11);
+  for (int trial = 0; trial < 10; ++trial) {
+    World w;
+    w.views = 5;
+    for (int v = 0; v < w.views; ++v)
+      for (int m = 0; m < 4; ++m) w.node(std::to_string(v) + "_" + std::to_string(m), v);
+    for (int p = 0; p < 400; ++p) {
+      std::map<int, std::string> in;
+      for (int v = 0; v < w.views; ++v)
+        if (rng() % 2) in[v] = rng() % 4 ? std::to_string(v) + "_" + std::to_string(rng() % 4) : "";
+      w.points(1, in);
+    }
+    MaskGraph g = w.graph();
+    ClusterOptions o;
+    o.min_affinity = 0.2;
+    Clustering c = cluster_masks(g, o);
+    std::vector<int> nodes(g.node_view.size());
+    for (size_t i = 0; i < nodes.size(); ++i) nodes[i] = int(i);
+    const std::vector<NodeMatch> near = nearest_objects(g, c, nodes, o);
+    for (int n : nodes) {  // brute force over the objects
+      double best = 0;
+      int best_k = -1;
+      for (int k = 0; k < c.num_objects; ++k) {
+        const double a = cluster_affinity(g, {n}, c.members[k], o);
+        if (a > best) best = a, best_k = k;
+      }
+      EXPECT_NEAR(near[n].affinity, best, 1e-12) << trial << " " << n;
+      if (best > 0) EXPECT_EQ(near[n].object, best_k) << trial << " " << n;
+    }
+  }
+}
