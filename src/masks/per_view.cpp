@@ -1,0 +1,49 @@
+// Core pixels (separable min / max of labels) and the folding of parts into their whole (per_view.h).
+#include "masks/per_view.h"
+
+#include <algorithm>
+
+namespace hgs::masks {
+
+std::vector<uint8_t> core_pixels(const LabelMap& m, int r) {
+  const int W = m.width, H = m.height;
+  std::vector<uint8_t> core(size_t(W) * H, 1);
+  if (r <= 0) return core;
+  std::vector<uint16_t> hmin(core.size()), hmax(core.size());
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      uint16_t lo = 65535, hi = 0;
+      for (int dx = std::max(0, x - r); dx <= std::min(W - 1, x + r); ++dx) lo = std::min(lo, m.at(dx, y)), hi = std::max(hi, m.at(dx, y));
+      hmin[size_t(y) * W + x] = lo, hmax[size_t(y) * W + x] = hi;
+    }
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      uint16_t lo = 65535, hi = 0;
+      for (int dy = std::max(0, y - r); dy <= std::min(H - 1, y + r); ++dy)
+        lo = std::min(lo, hmin[size_t(dy) * W + x]), hi = std::max(hi, hmax[size_t(dy) * W + x]);
+      core[size_t(y) * W + x] = lo == hi;
+    }
+  return core;
+}
+
+std::map<int, int> part_roots(const std::map<int, MaskInfo>& info, double image_px, double max_area) {
+  std::map<int, double> child_area;
+  for (auto& [id, m] : info)
+    if (m.part_of > 0) child_area[m.part_of] += m.area;
+  std::map<int, int> root;
+  for (auto& [id, m] : info) {
+    int r = id;
+    for (int step = 0; step < 64; ++step) {
+      auto it = info.find(info.at(r).part_of);
+      if (info.at(r).part_of <= 0 || it == info.end()) break;
+      const MaskInfo& p = it->second;
+      const bool tiled = p.visible < 0.5 * p.area || child_area[it->first] >= 0.5 * p.area;
+      if (!tiled || p.area > max_area * image_px) break;
+      r = it->first;
+    }
+    root[id] = r;
+  }
+  return root;
+}
+
+}  // namespace hgs::masks

@@ -1,0 +1,28 @@
+// Per-view steps of `hgs masks associate` (associate.h): which keypoints of a label map are core points (away
+// from every mask edge), and which per-view masks fold into their whole (SAM's whole + parts).
+#pragma once
+#include <cstdint>
+#include <map>
+#include <vector>
+
+#include "core/image.h"
+
+namespace hgs::masks {
+
+// [H, W] 1 where every pixel within chessboard distance `r` (clipped to the image: the frame is no edge) has the
+// pixel's label. Separable min / max filters over the labels: O(H W r).
+std::vector<uint8_t> core_pixels(const LabelMap& m, int r);
+
+struct MaskInfo {  // one id of import.json
+  double area = 0;     // the mask's own pixels
+  double visible = 0;  // pixels it kept after flattening
+  int part_of = 0;     // id of the whole it is a part of, 0 = none
+};
+
+// Per view: id -> root id, following part_of while the whole is tiled by its parts (it kept less than half of
+// its pixels after flattening, or the areas of the masks that are part of it add up to at least half of its own)
+// and covers at most `max_area` of the `image_px` pixels. A large mask holding a few small objects (a table with
+// things on it) keeps them apart.
+std::map<int, int> part_roots(const std::map<int, MaskInfo>& info, double image_px, double max_area);
+
+}  // namespace hgs::masks
