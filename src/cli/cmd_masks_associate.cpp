@@ -9,14 +9,14 @@ namespace {
 
 const char* kDescription =
     "Lifts every view's masks to 3D through COLMAP's 2D-3D correspondences (sparse/0/images.bin: the 3D point\n"
-    "each keypoint observes) and links masks of different views that hold the same 3D points. The graph of\n"
-    "(view, mask) nodes is clustered greedily by two-way containment of shared points (only points both views\n"
-    "see, and only points away from mask edges);\n"
-    "two masks of one view never join (parts listed in import.json are first folded into their whole when the\n"
-    "whole was left with less than half its pixels). Masks covering more than --max-area of the image are\n"
-    "dropped as background, masks with fewer than --min-points 3D points as unliftable, objects seen in fewer\n"
-    "than --min-views views as unconfirmed; a left-out mask then joins the object holding most of its 3D points\n"
-    "if that object has no mask in its view.\n"
+    "each keypoint observes; only keypoints --core-margin px away from mask edges) and links masks of different\n"
+    "views that hold the same points. The graph of (view, mask) nodes is clustered greedily by two-way\n"
+    "containment (counting only points both views see); two masks of one view never join, except parts: with\n"
+    "import.json, parts are folded into a whole they tile, and a group of masks lying inside another object's\n"
+    "whole masks joins it. Masks covering more than --max-area of the image are dropped as background, masks\n"
+    "with fewer than --min-points 3D points as unliftable, objects seen in fewer than --min-views views as\n"
+    "unconfirmed; a left-out mask then joins the object holding most of its 3D points if that object has no\n"
+    "mask in its view. Details: docs/formats.md.\n"
     "Writes masks/<stem>.png (object ids, the same in every view), masks/objects.json (names from --names or the\n"
     "input's objects.json by majority, else \"object N\"), masks/associate.json (objects, views per object, what\n"
     "every per-view id became, dropped masks and why); the input is kept in masks/per_view/. With --out-masks DIR\n"
@@ -31,7 +31,7 @@ MasksSubcommandRegistration reg({"associate", "Make per-view mask ids consistent
     sub.add_option("SCENE", *scene, "Scene folder (images/, sparse/0/ with 2D-3D correspondences, masks/)")->required();
     sub.add_option("--out-masks", *out, "Write the associated masks folder here instead of replacing SCENE/masks");
     sub.add_option("--names", *names, "Per-view names, JSON {\"<stem>\": {\"<id>\": \"name\"}}; an object takes its masks' most common name");
-    sub.add_option("--min-affinity", o->min_affinity, "Smallest IoU of shared 3D points for two groups of masks to be one object")
+    sub.add_option("--min-affinity", o->min_affinity, "Smallest two-way containment of shared 3D points (geometric mean) for two groups of masks to join")
         ->capture_default_str();
     sub.add_option("--min-views", o->min_views, "Objects seen in fewer views are dropped")->capture_default_str();
     sub.add_option("--min-points", o->min_points, "Masks holding fewer 3D points cannot be lifted and are dropped")->capture_default_str();
