@@ -48,7 +48,7 @@ MasksSubcommandRegistration reg({"associate", "Make per-view mask ids consistent
         ->check(CLI::Range(0.0, 1.0))->capture_default_str();
     sub.add_flag("--no-join-parts", [o](int64_t n) { o->join_parts = n == 0; }, "Do not fold parts into their whole (import.json part_of)");
     sub.add_flag("--drop-surfaces", o->drop_surfaces, "Drop objects whose 3D points spread like a surface (table, floor, walls)");
-    sub.add_option("--surface-spread", o->surface_spread, "RMS spread of an object's 3D points, relative to all points, above which it is a surface")
+    sub.add_option("--surface-spread", o->surface_spread, "Spread of an object's 3D points (80th-percentile distance from their median), relative to all points', above which it is a surface")
         ->capture_default_str();
     sub.add_flag("--force", o->force, "Associate again (from masks/per_view) or replace a non-empty --out-masks");
     sub.add_flag("--quiet", [o](int64_t n) { o->progress = n == 0; }, "No progress bar");

@@ -323,31 +323,19 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
   for (size_t i = 0; i < nodes.size(); ++i)
     if (object_of[i] >= 0) members[object_of[i]].push_back(int(i));
 
-  // 3D spread of each object's voted points, relative to all points.
+  // 3D spread of each object's voted points, relative to all points (robust: a few stray points do not count).
   std::vector<double> spread(K, 0);
   std::vector<long> obj_points(K, 0);
   {
-    Eigen::Vector3d mean_all = Eigen::Vector3d::Zero();
-    for (auto& p : model.points) mean_all += p.xyz;
-    mean_all /= double(std::max<size_t>(model.points.size(), 1));
-    double var_all = 0;
-    for (auto& p : model.points) var_all += (p.xyz - mean_all).squaredNorm();
-    var_all /= double(std::max<size_t>(model.points.size(), 1));
-    std::vector<Eigen::Vector3d> s1(K, Eigen::Vector3d::Zero());
-    std::vector<double> s2(K, 0);
+    std::vector<std::vector<Eigen::Vector3d>> pts(K);
+    std::vector<Eigen::Vector3d> all;
     for (size_t p = 0; p < point_object.size(); ++p) {
-      const int k = point_object[p];
-      if (k < 0) continue;
-      ++obj_points[k];
-      s1[k] += model.points[p].xyz;
-      s2[k] += model.points[p].xyz.squaredNorm();
+      all.push_back(model.points[p].xyz);
+      if (point_object[p] >= 0) pts[point_object[p]].push_back(model.points[p].xyz), ++obj_points[point_object[p]];
     }
-    for (int k = 0; k < K; ++k) {
-      if (!obj_points[k] || var_all <= 0) continue;
-      const Eigen::Vector3d mu = s1[k] / double(obj_points[k]);
-      const double var = std::max(0.0, s2[k] / double(obj_points[k]) - mu.squaredNorm());
-      spread[k] = std::sqrt(var / var_all);
-    }
+    const double all_spread = robust_spread(all);
+    for (int k = 0; k < K; ++k)
+      if (all_spread > 0 && !pts[k].empty()) spread[k] = robust_spread(pts[k]) / all_spread;
   }
 
   // Objects: ids 1.. in cluster order (dropped surfaces removed), names by majority over their masks.

@@ -36,7 +36,7 @@ struct AssociateOptions {
   double part_merge = 0.5;          // a cluster inside another's whole masks joins it as a part (cluster.h)
   double part_fraction = 0.5;       // with SAM's masks still at import.json's source: part_of recomputed at this overlap           // use import.json's part_of (see above)
   bool drop_surfaces = false;       // drop objects whose 3D spread is larger than surface_spread (walls, floor, table)
-  double surface_spread = 0.5;      // RMS spread of an object's points / RMS spread of all points
+  double surface_spread = 0.17;     // spread of an object's points / spread of all points (robust_spread, per_view.h)
   bool force = false;               // re-associate an already associated scene (from masks/per_view) / replace out_masks
   bool progress = true;
 };

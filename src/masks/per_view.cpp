@@ -1,4 +1,4 @@
-// Core pixels (separable min / max of labels) and the folding of parts into their whole (per_view.h).
+// Core pixels (separable min / max of labels), the folding of parts into their whole, robust spread (per_view.h).
 #include "masks/per_view.h"
 
 #include <algorithm>
@@ -44,6 +44,25 @@ std::map<int, int> part_roots(const std::map<int, MaskInfo>& info, double image_
     root[id] = r;
   }
   return root;
+}
+
+double robust_spread(const std::vector<Eigen::Vector3d>& points) {
+  if (points.empty()) return 0;
+  auto median = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    return v[v.size() / 2];
+  };
+  Eigen::Vector3d c;
+  for (int d = 0; d < 3; ++d) {
+    std::vector<double> v;
+    for (auto& p : points) v.push_back(p[d]);
+    c[d] = median(v);
+  }
+  std::vector<double> dist;
+  for (auto& p : points) dist.push_back((p - c).norm());
+  const size_t q = std::min(dist.size() - 1, size_t(0.8 * double(dist.size())));
+  std::nth_element(dist.begin(), dist.begin() + q, dist.end());
+  return dist[q];
 }
 
 }  // namespace hgs::masks

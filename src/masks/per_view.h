@@ -1,6 +1,8 @@
-// Per-view steps of `hgs masks associate` (associate.h): which keypoints of a label map are core points (away
-// from every mask edge), and which per-view masks fold into their whole (SAM's whole + parts).
+// Steps of `hgs masks associate` (associate.h): which keypoints of a label map are core points (away from every
+// mask edge), which per-view masks fold into their whole (SAM's whole + parts), and how widely an object's 3D
+// points spread (surfaces).
 #pragma once
+#include <Eigen/Core>
 #include <cstdint>
 #include <map>
 #include <vector>
@@ -24,5 +26,8 @@ struct MaskInfo {  // one id of import.json
 // and covers at most `max_area` of the `image_px` pixels. A large mask holding a few small objects (a table with
 // things on it) keeps them apart.
 std::map<int, int> part_roots(const std::map<int, MaskInfo>& info, double image_px, double max_area);
+
+// Spread of a point set: the 80th percentile of the distances from the coordinate-wise median (0 when empty).
+double robust_spread(const std::vector<Eigen::Vector3d>& points);
 
 }  // namespace hgs::masks

@@ -54,3 +54,19 @@ TEST(PartRoots, PartsFoldIntoAWholeTheyTileOnly) {
   cyc[2] = {10, 0, 1};
   EXPECT_EQ(part_roots(cyc, 100, 0.8).size(), 2u);
 }
+
+TEST(RobustSpread, IgnoresAFewStrayPoints) {
+  std::vector<Eigen::Vector3d> p;
+  for (int i = 0; i < 100; ++i) p.emplace_back(i % 10, i / 10, 0);  // a 10 x 10 grid around (4.5, 4.5)
+  const double base = robust_spread(p);
+  EXPECT_GT(base, 3.0);
+  EXPECT_LT(base, 6.0);
+  for (int i = 0; i < 5; ++i) p.emplace_back(1000, 1000, 1000);  // 5% far away: the 80th percentile barely moves
+  EXPECT_LT(robust_spread(p), base + 1.0);
+  EXPECT_EQ(robust_spread({}), 0.0);
+  EXPECT_EQ(robust_spread({Eigen::Vector3d(1, 2, 3)}), 0.0);
+  // Brute force on a line: median 0, distances 0..10 -> the 80th percentile of 21 values (index 16) is 8.
+  std::vector<Eigen::Vector3d> line;
+  for (int i = -10; i <= 10; ++i) line.emplace_back(i, 0, 0);
+  EXPECT_EQ(robust_spread(line), 8.0);
+}
