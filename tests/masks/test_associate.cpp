@@ -282,4 +282,17 @@ TEST(MasksAssociate, SynthSamStyleWholesAndPartsBecomeObjects) {
   std::cout << "SAM-style masks on their object's id: objects " << f_obj << ", surfaces " << f_surf << "\n";
   EXPECT_GE(f_obj, 0.9);    // measured 0.96 (0.80 without joining part clusters, 0.61 at 96 x 72)
   EXPECT_GE(f_surf, 0.65);  // measured 0.72: the floor, seen at grazing angles, splits into runs of views
+
+  // --drop-surfaces: the background surfaces lose their ids, the objects keep theirs.
+  r = test::run_hgs("masks associate " + s.string() + " --drop-surfaces --out-masks " + (t / "ds").string() + " --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json ds = json::parse(read_file_text(t / "ds" / "associate.json"));
+  int surf = 0, surf_dropped = 0;
+  for (auto& [st, m] : truth.items())
+    for (auto& [id, e] : m.items())
+      if (e.contains("surface") && ds["ids"].contains(st) && ds["ids"][st].contains(id)) ++surf, surf_dropped += ds["ids"][st][id].is_null();
+  EXPECT_GT(surf, 20);
+  EXPECT_GE(double(surf_dropped) / surf, 0.9) << surf_dropped << " of " << surf;  // measured 32 of 32
+  std::cout << "--drop-surfaces: " << surf_dropped << " of " << surf << " surface masks dropped\n";
+  EXPECT_EQ(consistent_fraction(ds["ids"], truth, "object"), f_obj);
 }
