@@ -74,6 +74,7 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
     fail("{}: masks are already associated (associate.json); pass --force to associate again from masks/per_view",
          masks_dir.string());
   const fs::path in = associated ? masks_dir / "per_view" : masks_dir;
+  if (!fs::is_directory(in)) fail("{}: no masks folder (per-view masks/<stem>.png, e.g. from `hgs masks import`)", in.string());
   if (associated && !fs::is_directory(in)) fail("{}: associate.json but no per_view/ folder with the original masks", masks_dir.string());
   if (!in_place && !opt.force && non_empty_dir(opt.out_masks))
     fail("{}: already exists and is not empty; pass --force to replace it", opt.out_masks.string());

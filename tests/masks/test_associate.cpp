@@ -170,6 +170,15 @@ TEST(MasksAssociate, BadInputNamesTheFileAndChangesNothing) {
     EXPECT_TRUE(fs::is_empty(s / "masks"));
     EXPECT_FALSE(hidden_leftovers(s));
   }
+  {  // no masks folder
+    const fs::path s = t / "nofolder";
+    make_scene(s);
+    fs::remove_all(s / "masks");
+    auto r = test::run_hgs("masks associate " + s.string() + " --quiet");
+    EXPECT_EQ(r.exit_code, 1) << r.err;
+    EXPECT_NE(r.err.find((s / "masks").string() + ": no masks folder"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(s / "masks"));
+  }
   {  // a mask for an image the model does not have
     const fs::path s = t / "stray";
     make_scene(s);
