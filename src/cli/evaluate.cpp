@@ -8,14 +8,15 @@
 namespace hgs::cli {
 namespace fs = std::filesystem;
 
-bool has_protocol_labels(const Scene& scene, const std::string& protocol) {
-  if (protocol == "instances") return fs::is_directory(scene.root / "gt" / "instances");
-  if (protocol == "3d-ovs") return fs::is_directory(scene.segmentation_dir());
-  if (protocol == "lerf-ovs") return fs::is_directory(scene.label_dir());
+namespace {
+
+// The folder holding a protocol's ground truth.
+fs::path protocol_label_dir(const Scene& scene, const std::string& protocol) {
+  if (protocol == "instances") return scene.root / "gt" / "instances";
+  if (protocol == "3d-ovs") return scene.segmentation_dir();
+  if (protocol == "lerf-ovs") return scene.label_dir();
   fail("unknown protocol '{}' (lerf-ovs, 3d-ovs or instances)", protocol);
 }
-
-namespace {
 
 // 3D-OVS object mode (evaluate.h): score_c(p) = A_{k(c)}(p) r_obj(c) + A_0(p) r_c(p) for every class c.
 std::vector<std::vector<float>> object_class_scores(query::Session& s, render::GaussianRenderer& r, int view,
@@ -32,22 +33,25 @@ std::vector<std::vector<float>> object_class_scores(query::Session& s, render::G
   const View& v = s.scene().views.at(view);
   const std::vector<float> A = query::render_object_opacity(r, s.model(), render::camera_from_view(v), ids);  // [HW, J]
   const size_t HW = size_t(v.width) * v.height, J = ids.size();
-  std::vector<std::vector<float>> maps;
+  std::vector<std::vector<float>> maps = s.pixel_relevancies(view, classes, query::Relevancy::Lerf);  // [C][H, W]
   for (size_t c = 0; c < classes.size(); ++c) {
     const size_t j = std::find(ids.begin(), ids.end(), chosen[c]) - ids.begin();
-    std::vector<float> rc = s.pixel_relevancy(view, classes[c], query::Relevancy::Lerf);  // [H, W]
+    std::vector<float>& rc = maps[c];
     for (size_t p = 0; p < HW; ++p) rc[p] = A[p * J + j] * rel_obj[c] + A[p * J] * rc[p];
-    maps.push_back(std::move(rc));
   }
   return maps;
 }
 
 }  // namespace
 
+bool has_protocol_labels(const Scene& scene, const std::string& protocol) {
+  return fs::is_directory(protocol_label_dir(scene, protocol));
+}
+
 std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOptions& o) {
   if (!has_protocol_labels(s.scene(), o.protocol))
     fail("{}: no labels for the {} protocol (needs {})", s.scene().root.string(), o.protocol,
-         o.protocol == "instances" ? "gt/instances/" : o.protocol == "3d-ovs" ? "segmentations/" : "label/");
+         protocol_label_dir(s.scene(), o.protocol).string());
   eval::RunOptions opt;
   opt.progress = o.progress;
   const query::Relevancy rel = o.relevancy;
@@ -71,9 +75,7 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
       reports.push_back(eval::run_lerf_ovs(s.scene(), pixel_fn, opt));
     } else if (o.protocol == "3d-ovs") {
       reports.push_back(eval::run_3dovs(s.scene(), [&](int view, const std::vector<std::string>& classes) {
-        std::vector<std::vector<float>> maps;
-        for (auto& c : classes) maps.push_back(s.pixel_relevancy(view, c, rel));
-        return maps;
+        return s.pixel_relevancies(view, classes, rel);
       }, opt));
     } else {
       reports.push_back(eval::run_instances(s.scene(), pixel_mask_fn, opt));

@@ -82,6 +82,12 @@ const char* relevancy_name(Relevancy v) { return v == Relevancy::Lerf ? "lerf" :
 
 std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
                                     const float* text, const Canonical& canon, Relevancy variant) {
+  return std::move(render_relevancies(r, m, cam, {text}, canon, variant)[0]);
+}
+
+std::vector<std::vector<float>> render_relevancies(render::GaussianRenderer& r, const GaussianModel& m,
+                                                   const render::Camera& cam, const std::vector<const float*>& texts,
+                                                   const Canonical& canon, Relevancy variant) {
   const auto h = hybrid::ConstHybridFields::bind(m, "query");
   const ExtraGroup *f = h.f, *q = h.q;
   const int D = f->dim;
@@ -102,10 +108,16 @@ std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianM
   render::RenderOutputs out;
   r.forward(cam, in, rs, out);
   const size_t HW = size_t(cam.width) * cam.height;
-  std::vector<float> rel = lerf_relevancy_map(out.extra.data(), HW, D, text, canon, kLerfTemperature, C);
-  if (variant == Relevancy::Lerf) return rel;  // a zero feature (nothing rendered) gets 0.5, as any tie
-  for (size_t p = 0; p < HW; ++p) rel[p] = out.alpha[p] < 1e-4f ? 0.f : rel[p] * std::clamp(out.extra[p * C + D], 0.f, 1.f);
-  return rel;
+  std::vector<std::vector<float>> maps;
+  for (const float* text : texts) {
+    std::vector<float> rel = lerf_relevancy_map(out.extra.data(), HW, D, text, canon, kLerfTemperature, C);
+    // Lerf: a zero feature (nothing rendered) gets 0.5, as any tie.
+    if (variant == Relevancy::Foreground)
+      for (size_t p = 0; p < HW; ++p)
+        rel[p] = out.alpha[p] < 1e-4f ? 0.f : rel[p] * std::clamp(out.extra[p * C + D], 0.f, 1.f);
+    maps.push_back(std::move(rel));
+  }
+  return maps;
 }
 
 std::vector<int> choose_objects(const std::vector<ObjectScore>& scores, float min_relevancy, const std::string& text) {

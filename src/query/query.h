@@ -64,6 +64,11 @@ const char* relevancy_name(Relevancy v);  // "lerf" | "foreground"
 // Per-pixel relevancy of the rendered language map for a query: [H, W].
 std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
                                     const float* text, const Canonical& canon, Relevancy variant = Relevancy::Lerf);
+// The same for several queries from one render of the language map: texts[t] is [D]; result [T][H, W], each equal
+// to render_relevancy(texts[t]).
+std::vector<std::vector<float>> render_relevancies(render::GaussianRenderer& r, const GaussianModel& m,
+                                                   const render::Camera& cam, const std::vector<const float*>& texts,
+                                                   const Canonical& canon, Relevancy variant = Relevancy::Lerf);
 
 // Copy of the model keeping Gaussians whose hard id is in `objects` (or not in it when `remove`).
 GaussianModel select_objects(const GaussianModel& m, const std::vector<int>& objects, bool remove);

@@ -57,4 +57,12 @@ std::vector<float> Session::pixel_relevancy(int view, const std::string& text, R
                           variant);
 }
 
+std::vector<std::vector<float>> Session::pixel_relevancies(int view, const std::vector<std::string>& texts,
+                                                           Relevancy variant) {
+  std::vector<const float*> e;
+  for (const auto& t : texts) e.push_back(text_.embed(t).data());  // embed() keeps each embedding (cache)
+  return render_relevancies(renderer_, model_, render::camera_from_view(scene_.views.at(view)), e, text_.canonical(),
+                            variant);
+}
+
 }  // namespace hgs::query

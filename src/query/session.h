@@ -47,6 +47,9 @@ class Session {
   eval::Mask answer_mask(int view, const std::string& text, float threshold, std::vector<float>* opacity = nullptr);
   // Relevancy of the rendered language map (query.h, Relevancy): [H, W].
   std::vector<float> pixel_relevancy(int view, const std::string& text, Relevancy variant = Relevancy::Lerf);
+  // The same for several texts from one render of the view's language map: [T][H, W].
+  std::vector<std::vector<float>> pixel_relevancies(int view, const std::vector<std::string>& texts,
+                                                    Relevancy variant = Relevancy::Lerf);
 
  private:
   Scene scene_;

@@ -95,5 +95,23 @@ TEST(Relevancy, LerfVariantIsTheRelevancyOfTheRenderedFeatureAlone) {
   EXPECT_STREQ(query::relevancy_name(query::Relevancy::Lerf), "lerf");
 }
 
+TEST(Relevancy, SeveralTextsFromOneRenderEqualOneRenderEach) {
+  // render_relevancies (one render of the language map, T texts) must give exactly what T calls of
+  // render_relevancy give, in both variants and in the order of the texts.
+  TwoBlobs s;
+  render::GaussianRenderer r;
+  const float t0[TwoBlobs::D] = {0, 1, 0, 0}, t1[TwoBlobs::D] = {1, 0, 0, 0}, t2[TwoBlobs::D] = {0.6f, 0, 0, 0.8f};
+  for (auto variant : {query::Relevancy::Lerf, query::Relevancy::Foreground}) {
+    const auto maps = query::render_relevancies(r, s.m, s.cam, {t0, t1, t2}, canonical(), variant);
+    ASSERT_EQ(maps.size(), 3u);
+    const float* texts[3] = {t0, t1, t2};
+    for (int t = 0; t < 3; ++t) {
+      const std::vector<float> one = query::render_relevancy(r, s.m, s.cam, texts[t], canonical(), variant);
+      ASSERT_EQ(maps[t], one) << "text " << t << " variant " << query::relevancy_name(variant);
+    }
+    EXPECT_NE(maps[0], maps[1]);
+  }
+}
+
 }  // namespace
 }  // namespace hgs
