@@ -43,7 +43,7 @@ std::vector<float> NpyArray::to_float() const {
   std::vector<float> out(n);
   switch (dtype) {
     case DType::F16: for (size_t i = 0; i < n; ++i) out[i] = half_to_float(as<uint16_t>()[i]); break;
-    case DType::F32: std::memcpy(out.data(), data.data(), n * 4); break;
+    case DType::F32: if (n) std::memcpy(out.data(), data.data(), n * 4); break;  // empty: both may be null
     case DType::U8: for (size_t i = 0; i < n; ++i) out[i] = as<uint8_t>()[i]; break;
     case DType::U16: for (size_t i = 0; i < n; ++i) out[i] = as<uint16_t>()[i]; break;
     case DType::I32: for (size_t i = 0; i < n; ++i) out[i] = static_cast<float>(as<int32_t>()[i]); break;
@@ -52,6 +52,8 @@ std::vector<float> NpyArray::to_float() const {
 }
 
 namespace {
+
+constexpr size_t kMaxHeader = 65536;  // numpy itself refuses headers above 10000 bytes by default
 
 struct Header {
   DType dtype;
@@ -74,6 +76,7 @@ Header parse_header(const uint8_t* b, size_t size, const std::string& name) {
   } else {
     fail("{}: unsupported NPY version {}", name, major);
   }
+  if (hlen > kMaxHeader) fail("{}: NPY header of {} bytes is too long (at most {})", name, hlen, kMaxHeader);
   if (hstart + hlen > size) fail("{}: truncated NPY header", name);
   std::string h(reinterpret_cast<const char*>(b + hstart), hlen);
   std::smatch m;
@@ -94,12 +97,22 @@ Header parse_header(const uint8_t* b, size_t size, const std::string& name) {
     fail("{}: NPY header has no 'shape'", name);
   std::vector<size_t> shape;
   std::string s = m[1];
-  std::regex num(R"(\s*(\d+)\s*,?)");
-  for (std::sregex_iterator it(s.begin(), s.end(), num), end; it != end; ++it) shape.push_back(std::stoull((*it)[1]));
   // reject anything in the shape tuple other than digits, commas and spaces
   for (char c : s)
     if (!(std::isdigit(static_cast<unsigned char>(c)) || c == ',' || c == ' '))
-      fail("{}: malformed NPY shape '({})'", name, s);
+      fail("{}: malformed NPY shape '({})'", name, s.substr(0, 80));
+  // Dimensions and the body size in bytes must fit a size_t (checked here, before anything is allocated).
+  std::regex num(R"(\s*(\d+)\s*,?)");
+  size_t bytes = dtype_size(t);
+  for (std::sregex_iterator it(s.begin(), s.end(), num), end; it != end; ++it) {
+    const std::string d = (*it)[1];
+    size_t v = 0;
+    for (char c : d)
+      if (__builtin_mul_overflow(v, size_t(10), &v) || __builtin_add_overflow(v, size_t(c - '0'), &v))
+        fail("{}: NPY dimension {} is too large", name, d.substr(0, 40));
+    if (__builtin_mul_overflow(bytes, v, &bytes)) fail("{}: NPY shape ({}) is too large", name, s.substr(0, 80));
+    shape.push_back(v);
+  }
   return {t, shape, hstart + hlen};
 }
 
@@ -111,7 +124,7 @@ NpyArray parse_npy(const uint8_t* b, size_t size, const std::string& name) {
   a.dtype = h.dtype;
   a.shape = h.shape;
   size_t need = a.size() * dtype_size(a.dtype);
-  if (h.body_offset + need > size)
+  if (need > size - h.body_offset)
     fail("{}: truncated NPY body ({} bytes, header says {})", name, size - h.body_offset, need);
   a.data.assign(b + h.body_offset, b + h.body_offset + need);
   return a;

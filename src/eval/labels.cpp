@@ -115,6 +115,8 @@ double number(const json& v, const fs::path& file, const std::string& where) {
   return d;
 }
 
+constexpr size_t kMaxMaskBytes = size_t(1) << 30;  // all category masks of one LERF-OVS frame together
+
 int positive_int(const json& obj, const char* key, const fs::path& file) {
   if (!obj.contains(key)) fail("{}: missing key info.{}", file.string(), key);
   const json& v = obj[key];
@@ -197,6 +199,10 @@ LerfFrameLabels load_lerf_frame(const fs::path& file, int expect_width, int expe
     }
     auto it = index.find(cat);
     if (it == index.end()) {
+      // Every category holds a full-size mask: their total is bounded before allocating another.
+      if ((L.categories.size() + 1) * (size_t(L.width) * L.height) > kMaxMaskBytes)
+        fail("{}: {} categories of {}x{} masks exceed {} MiB", file.string(), L.categories.size() + 1, L.width,
+             L.height, kMaxMaskBytes >> 20);
       it = index.emplace(cat, L.categories.size()).first;
       LerfCategory c;
       c.name = cat;

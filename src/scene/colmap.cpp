@@ -1,6 +1,7 @@
 #include "scene/colmap.h"
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cstring>
 #include <fstream>
 #include <sstream>
@@ -65,6 +66,11 @@ class Reader {
   size_t pos_ = 0;
 };
 
+// Image names become file names and appear in one-line error messages.
+bool has_control_char(const std::string& s) {
+  return std::any_of(s.begin(), s.end(), [](char c) { return static_cast<unsigned char>(c) < 0x20 || c == 0x7f; });
+}
+
 class Writer {
  public:
   template <typename T>
@@ -113,6 +119,7 @@ ColmapModel read_colmap_bin(const std::filesystem::path& dir) {
       for (int k = 0; k < 3; ++k) im.tvec[k] = r.get<double>();
       im.camera_id = r.get<int32_t>();
       im.name = r.cstring();
+      if (has_control_char(im.name)) fail("{}: image {} has a name with control characters", r.path().string(), im.id);
       uint64_t np = r.get<uint64_t>();
       r.check_count(np, 24, "point2D");
       im.xys.resize(np);
@@ -209,6 +216,7 @@ ColmapModel read_colmap_txt(const std::filesystem::path& dir) {
         std::getline(ss >> std::ws, cur.name);
         while (!cur.name.empty() && (cur.name.back() == ' ' || cur.name.back() == '\t')) cur.name.pop_back();
         if (cur.name.empty()) fail("{}:{}: image line has no name", path.string(), no);
+        if (has_control_char(cur.name)) fail("{}:{}: image name has control characters", path.string(), no);
         if (!m.cameras.count(cur.camera_id))
           fail("{}:{}: image '{}' refers to camera {} which is not in cameras.txt", path.string(), no, cur.name, cur.camera_id);
         expect_points = true;

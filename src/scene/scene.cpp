@@ -3,6 +3,8 @@
 #include <stb/stb_image_write.h>
 
 #include <algorithm>
+#include <cmath>
+#include <limits>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -41,6 +43,17 @@ std::string strip_ext(const std::string& name) {
   return (p.parent_path() / p.stem()).generic_string();
 }
 
+// fs::exists without its filesystem_error: a path the system cannot look up (a name too long, made from a COLMAP
+// image name) is a one-line hgs::Error naming it.
+bool path_exists(const fs::path& p) {
+  std::error_code ec;
+  const bool e = fs::exists(p, ec);
+  if (ec) fail("{}: cannot access ({})", p.string(), ec.message());
+  return e;
+}
+
+constexpr uint64_t kMaxSide = 1 << 16;  // largest camera width or height accepted (pixels)
+
 json read_json(const fs::path& p) {
   std::string text = read_file_text(p);
   try {
@@ -56,11 +69,11 @@ Scene load_scene(const fs::path& root_in, const SceneOptions& opt) {
   Scene s;
   s.root = root_in;
   s.downscale = std::max(1, opt.downscale);
-  if (!fs::exists(s.root)) fail("{}: scene folder not found", s.root.string());
+  if (!path_exists(s.root)) fail("{}: scene folder not found", s.root.string());
   if (!fs::is_directory(s.root)) fail("{}: not a folder", s.root.string());
   fs::path sparse = s.root / "sparse" / "0";
   if (!fs::is_directory(sparse)) {
-    if (fs::is_directory(s.root / "sparse") && fs::exists(s.root / "sparse" / "cameras.bin")) sparse = s.root / "sparse";
+    if (fs::is_directory(s.root / "sparse") && path_exists(s.root / "sparse" / "cameras.bin")) sparse = s.root / "sparse";
     else fail("{}: no COLMAP model (expected sparse/0/ with cameras, images, points3D)", s.root.string());
   }
   fs::path images_dir = s.root / "images";
@@ -78,23 +91,32 @@ Scene load_scene(const fs::path& root_in, const SceneOptions& opt) {
     const ColmapCamera& cam = m.cameras.at(im.camera_id);
     double fx, fy, cx, cy;
     require_pinhole(cam, (sparse / "cameras").string(), fx, fy, cx, cy);
+    // Sizes and poses from the file are checked before anything is sized or rendered by them.
+    if (cam.width < 1 || cam.height < 1 || cam.width > kMaxSide || cam.height > kMaxSide)
+      fail("{}: camera {} is {}x{} pixels; expected 1..{} a side", (sparse / "cameras").string(), cam.id, cam.width,
+           cam.height, kMaxSide);
+    if (!(std::isfinite(fx) && std::isfinite(fy) && fx > 0 && fy > 0 && std::isfinite(cx) && std::isfinite(cy)))
+      fail("{}: camera {} has invalid intrinsics (fx {}, fy {}, cx {}, cy {})", (sparse / "cameras").string(), cam.id,
+           fx, fy, cx, cy);
+    if (!im.qvec.allFinite() || !im.tvec.allFinite() || im.qvec.norm() < 1e-12)
+      fail("{}: image '{}' has an invalid pose (non-finite or zero quaternion)", (sparse / "images").string(), im.name);
     v.image_path = images_dir / im.name;
-    if (!fs::exists(v.image_path))
+    if (!path_exists(v.image_path))
       fail("{}: image '{}' is listed in the COLMAP model but missing", v.image_path.string(), im.name);
     // COLMAP puts the pixel-coordinate origin at the top-left corner of the top-left pixel, so an integer
     // downscale divides every intrinsic by F exactly.
     v.width = static_cast<int>(cam.width) / F;
     v.height = static_cast<int>(cam.height) / F;
     v.fx = fx / F; v.fy = fy / F; v.cx = cx / F; v.cy = cy / F;
-    if (F > 1 && fs::exists(scaled_dir / im.name)) v.image_path = scaled_dir / im.name;
+    if (F > 1 && path_exists(scaled_dir / im.name)) v.image_path = scaled_dir / im.name;
     v.R = qvec_to_rotmat(im.qvec);
     v.t = im.tvec;
     fs::path mp = s.root / "masks" / (v.stem + ".png");
-    if (fs::exists(mp)) v.mask_path = mp;
+    if (path_exists(mp)) v.mask_path = mp;
     fs::path cp = s.root / "masks" / (v.stem + ".conf.npy");
-    if (fs::exists(cp)) v.conf_path = cp;
+    if (path_exists(cp)) v.conf_path = cp;
     fs::path fp = s.root / "features" / (v.stem + ".npy");
-    if (fs::exists(fp)) v.feature_path = fp;
+    if (path_exists(fp)) v.feature_path = fp;
     s.views.push_back(std::move(v));
   }
   std::sort(s.views.begin(), s.views.end(), [](const View& a, const View& b) { return a.name < b.name; });
@@ -102,7 +124,7 @@ Scene load_scene(const fs::path& root_in, const SceneOptions& opt) {
 
   // Train/test split.
   fs::path test_txt = s.root / "test.txt";
-  if (fs::exists(test_txt)) {
+  if (path_exists(test_txt)) {
     std::istringstream in(read_file_text(test_txt));
     std::set<std::string> names;
     std::string line;
@@ -123,12 +145,14 @@ Scene load_scene(const fs::path& root_in, const SceneOptions& opt) {
 
   s.points.reserve(m.points.size());
   for (auto& p : m.points) {
+    if (!p.xyz.cast<float>().allFinite())
+      fail("{}: point {} has non-finite coordinates", (sparse / "points3D").string(), p.id);
     s.points.emplace_back(p.xyz.cast<float>());
     s.point_colors.emplace_back(p.rgb[0] / 255.f, p.rgb[1] / 255.f, p.rgb[2] / 255.f);
   }
 
   fs::path objects = s.root / "masks" / "objects.json";
-  if (fs::exists(objects)) {
+  if (path_exists(objects)) {
     json j = read_json(objects);
     if (!j.is_object()) fail("{}: expected an object {{\"1\": \"name\", ...}}", objects.string());
     for (auto& [k, val] : j.items()) {
@@ -139,14 +163,22 @@ Scene load_scene(const fs::path& root_in, const SceneOptions& opt) {
     }
   }
   fs::path te = s.root / "text_embeddings.json";
-  if (fs::exists(te)) {
+  if (path_exists(te)) {
     json j = read_json(te);
     if (!j.is_object()) fail("{}: expected an object {{\"phrase\": [floats], ...}}", te.string());
     size_t dim = 0;
     for (auto& [k, val] : j.items()) {
-      if (!val.is_array() || val.empty() || !val[0].is_number())
+      if (!val.is_array() || val.empty() ||
+          !std::all_of(val.begin(), val.end(), [](const json& x) { return x.is_number(); }))
         fail("{}: embedding of '{}' is not an array of numbers", te.string(), k);
-      auto vec = val.get<std::vector<float>>();
+      std::vector<float> vec;
+      vec.reserve(val.size());
+      for (const json& x : val) {  // range-checked as double: a double -> float cast out of range is undefined
+        const double d = x.get<double>();
+        if (!(std::abs(d) <= std::numeric_limits<float>::max()))
+          fail("{}: embedding of '{}' holds {}, not a finite float", te.string(), k, x.dump());
+        vec.push_back(float(d));
+      }
       if (dim && vec.size() != dim) fail("{}: embedding of '{}' has {} values, others have {}", te.string(), k, vec.size(), dim);
       dim = vec.size();
       s.text_embeddings[k] = std::move(vec);

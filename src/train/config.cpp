@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "core/error.h"
+#include "core/json_number.h"
 
 namespace hgs::train {
 
@@ -59,6 +60,13 @@ TrainConfig TrainConfig::from_json(const nlohmann::json& j, const std::string& w
   if (!j.is_object()) fail("{}: training configuration is not a JSON object", where);
   auto get = [&](const char* key, auto& dst) {
     if (!j.contains(key)) return;
+    using T = std::decay_t<decltype(dst)>;
+    if constexpr (std::is_arithmetic_v<T>) {  // range-checked (json_number.h)
+      const std::optional<T> v = json_number<T>(j.at(key));
+      if (!v) fail("{}: '{}' has the wrong type or is out of range", where, key);
+      dst = *v;
+      return;
+    }
     try {
       j.at(key).get_to(dst);
     } catch (const std::exception&) {

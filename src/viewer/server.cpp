@@ -231,7 +231,10 @@ struct Server::Impl {
 };
 
 Server::Server(query::Session& session, ServerOptions opt)
-    : http_(std::make_unique<httplib::Server>()), opt_(std::move(opt)) {
+    : Server(session, std::move(opt), std::make_unique<httplib::Server>()) {}
+
+Server::Server(query::Session& session, ServerOptions opt, std::unique_ptr<httplib::Server> http)
+    : http_(std::move(http)), opt_(std::move(opt)) {
   if (opt_.static_dir.empty()) opt_.static_dir = default_static_dir();
   impl_ = std::make_unique<Impl>(session, opt_);
   Impl& I = *impl_;

@@ -28,6 +28,9 @@ struct ServerOptions {
 class Server {
  public:
   Server(query::Session& session, ServerOptions opt);
+  // The same routes and handlers installed on `http` (a subclass may feed it requests from memory, as the fuzz
+  // harness fuzz/fuzz_viewer.cpp does); start() still binds and serves it.
+  Server(query::Session& session, ServerOptions opt, std::unique_ptr<httplib::Server> http);
   ~Server();
   Server(const Server&) = delete;
   Server& operator=(const Server&) = delete;
