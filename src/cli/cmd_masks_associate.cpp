@@ -1,11 +1,52 @@
 // `hgs masks associate SCENE`: per-view mask ids -> one id per physical object in every view (src/masks/associate.h).
 #include <fmt/format.h>
 
+#include <memory>
+
 #include "cli/masks_command.h"
+#include "core/error.h"
+#include "core/npy.h"
 #include "masks/associate.h"
+#include "model/ply.h"
+#include "model/render_inputs.h"
+#include "render/camera_from_view.h"
+#include "render/renderer.h"
 
 namespace hgs::cli {
 namespace {
+namespace fs = std::filesystem;
+
+// --depth DIR: DIR/<stem>.npy, z-depth [H, W] (any float dtype NPY reads); a view without a file has none.
+std::function<std::vector<float>(const View&)> depth_from_folder(const fs::path& dir) {
+  if (!fs::is_directory(dir)) fail("{}: --depth: not a folder (expected <stem>.npy z-depth maps)", dir.string());
+  return [dir](const View& v) -> std::vector<float> {
+    const fs::path f = dir / (v.stem + ".npy");
+    if (!fs::exists(f)) return {};
+    NpyArray a = read_npy(f);
+    if (a.shape.size() != 2 || a.shape[0] != size_t(v.height) || a.shape[1] != size_t(v.width))
+      fail("{}: depth must be [H, W] = [{}, {}] for view {}", f.string(), v.height, v.width, v.name);
+    return a.to_float();
+  };
+}
+
+// --depth-model MODEL: the model's expected depth sum_n z_n alpha_n T_n / alpha where its opacity alpha >= 0.5
+// (elsewhere none): a few hundred iterations of `hgs train --method rgb` are enough to place the surfaces.
+std::function<std::vector<float>(const View&)> depth_from_model(const fs::path& model_arg) {
+  const fs::path ply = fs::is_directory(model_arg) ? model_arg / "point_cloud.ply" : model_arg;
+  auto model = std::make_shared<GaussianModel>(read_model_ply(ply));
+  auto renderer = std::make_shared<render::GaussianRenderer>();
+  return [model, renderer](const View& v) {
+    render::GaussianInputs in = render_inputs(*model);
+    render::RenderSettings rs;
+    rs.want_depth = true;
+    render::RenderOutputs out;
+    renderer->forward(render::camera_from_view(v), in, rs, out);
+    std::vector<float> d(out.alpha.size(), 0.f);
+    for (size_t p = 0; p < d.size(); ++p)
+      if (out.alpha[p] >= 0.5f) d[p] = out.depth[p] / out.alpha[p];
+    return d;
+  };
+}
 
 const char* kDescription =
     "Lifts every view's masks to 3D through COLMAP's 2D-3D correspondences (sparse/0/images.bin: the 3D point\n"
@@ -21,6 +62,10 @@ const char* kDescription =
     "input's objects.json by majority, else \"object N\"), masks/associate.json (objects, views per object, what\n"
     "every per-view id became, dropped masks and why); the input is kept in masks/per_view/. With --out-masks DIR\n"
     "everything goes to DIR and the scene is left as it is. Running again needs --force and starts from per_view/.\n"
+    "Depth: objects with few COLMAP points (small, textureless) can be linked through dense depth instead:\n"
+    "--depth-model M renders each view's depth from a trained model (a short `hgs train SCENE --method rgb\n"
+    "--iters 1000 --out M` will do), --depth DIR reads DIR/<stem>.npy z-depth maps [H, W]; every --depth-stride-th\n"
+    "pixel is lifted and counts as seen by each other view whose depth agrees within --depth-tolerance.\n"
     "Example: hgs masks import SCENE --from sam-json SAM_DIR && hgs masks associate SCENE";
 
 MasksSubcommandRegistration reg({"associate", "Make per-view mask ids consistent across views (one id per physical object) through COLMAP's 3D points", 20,
@@ -50,16 +95,27 @@ MasksSubcommandRegistration reg({"associate", "Make per-view mask ids consistent
     sub.add_flag("--drop-surfaces", o->drop_surfaces, "Drop objects whose 3D points spread like a surface (table, floor, walls)");
     sub.add_option("--surface-spread", o->surface_spread, "Spread of an object's 3D points (80th-percentile distance from their median), relative to all points', above which it is a surface")
         ->capture_default_str();
+    auto depth_dir = std::make_shared<std::string>(), depth_model = std::make_shared<std::string>();
+    sub.add_option("--depth", *depth_dir, "Folder of <stem>.npy z-depth maps [H, W] (0 = none) lifting every mask pixel, not only keypoints");
+    sub.add_option("--depth-model", *depth_model, "Render each view's depth from this model (folder with point_cloud.ply, or a PLY)")
+        ->excludes(sub.get_option("--depth"));
+    sub.add_option("--depth-stride", o->depth_stride, "With depth: lift every Nth pixel in x and y (0 = about 4096 per view)")
+        ->check(CLI::Range(0, 256))->capture_default_str();
+    sub.add_option("--depth-tolerance", o->depth_tolerance, "With depth: relative depth difference under which another view sees a lifted pixel")
+        ->check(CLI::Range(1e-4, 1.0))->capture_default_str();
     sub.add_flag("--force", o->force, "Associate again (from masks/per_view) or replace a non-empty --out-masks");
     sub.add_flag("--quiet", [o](int64_t n) { o->progress = n == 0; }, "No progress bar");
     return [=] {
       o->scene = *scene;
       o->out_masks = *out;
       o->names = *names;
+      if (!depth_dir->empty()) o->depth = depth_from_folder(*depth_dir);
+      if (!depth_model->empty()) o->depth = depth_from_model(*depth_model);
       masks::AssociateSummary s = masks::associate_masks(*o);
       fmt::print("associated {} masks in {} of {} views", s.masks, s.views_with_masks, s.views);
       if (s.joined_parts) fmt::print(" ({} parts folded into their whole)", s.joined_parts);
       fmt::print(": {} objects", s.objects.size());
+      if (s.depth_points) fmt::print(" ({} COLMAP points, {} lifted from depth)", s.colmap_points, s.depth_points);
       if (s.attached) fmt::print(" ({} masks attached by their points' votes)", s.attached);
       fmt::print("\n");
       for (auto& ob : s.objects)

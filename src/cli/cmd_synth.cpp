@@ -36,6 +36,7 @@ CommandRegistration reg({"synth", "Generate a synthetic benchmark scene (images,
     sub.add_flag("--surface-masks", o->surface_masks,
                  "Label-style masks also hold the background surfaces (table, floor, walls) as objects K+1.., named "
                  "in objects.json, as SAM2 propagation of everything SAM segmented gives (the object masks stay the same)");
+    sub.add_flag("--depth", o->write_depth, "Also write the exact depth of every view, gt/depth/<stem>.npy (camera z [H, W], float32; 0 = nothing)");
     sub.add_option("--supersample", o->supersample, "Samples per pixel per axis for the RGB images")->check(CLI::Range(1, 8))->capture_default_str();
     sub.add_option("--threads", *threads, "Worker threads (0 = all cores)");
     sub.add_flag("--quiet", [o](int64_t n) { o->progress = n == 0; }, "No progress bars");

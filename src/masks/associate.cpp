@@ -18,6 +18,7 @@
 #include "core/image.h"
 #include "core/progress.h"
 #include "masks/cluster.h"
+#include "masks/depth_tracks.h"
 #include "masks/flatten.h"
 #include "masks/per_view.h"
 #include "masks/sources.h"
@@ -131,6 +132,9 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
   std::vector<LabelMap> labels(s.views.size());
   std::vector<std::vector<PointObservation>> point_obs_raw(model.points.size());  // node: index into `nodes` or -1
   std::vector<long> core_count;  // per node: keypoints in its core
+  std::vector<std::vector<uint8_t>> cores(s.views.size());  // per view: core pixels (core_pixels)
+  std::vector<Eigen::Vector3d> point_xyz;  // [P] COLMAP's points, then the depth tracks' points
+  for (auto& p : model.points) point_xyz.push_back(p.xyz);
   {
     Progress bar("associate: read masks", long(s.views.size()), opt.progress);
     for (auto& v : s.views) {
@@ -211,8 +215,45 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
         }
       }
       labels[v.index] = std::move(m);
+      cores[v.index] = core;
     }
     bar.finish();
+  }
+  sum.colmap_points = long(model.points.size());
+  if (opt.depth) {
+    // Dense tracks from depth (depth_tracks.h), added after COLMAP's points.
+    std::vector<std::vector<float>> depth(s.views.size());
+    std::vector<DepthCamera> cams(s.views.size());
+    long pixels = 0;
+    for (auto& v : s.views) {
+      DepthCamera& c = cams[v.index];
+      c.width = v.width, c.height = v.height, c.fx = v.fx, c.fy = v.fy, c.cx = v.cx, c.cy = v.cy, c.R = v.R, c.t = v.t;
+      if (labels[v.index].v.empty()) continue;  // a view without masks observes nothing, as for COLMAP's points
+      depth[v.index] = opt.depth(v);
+      if (depth[v.index].empty()) continue;
+      if (depth[v.index].size() != size_t(v.width) * v.height)
+        fail("depth of view {}: {} values for a {}x{} image", v.name, depth[v.index].size(), v.width, v.height);
+      c.depth = depth[v.index].data();
+      pixels += long(v.width) * v.height;
+    }
+    const int views_with_depth = int(std::count_if(cams.begin(), cams.end(), [](auto& c) { return c.depth != nullptr; }));
+    const int stride = opt.depth_stride > 0 ? opt.depth_stride
+                                            : std::max(1, int(std::lround(std::sqrt(double(pixels) / std::max(1, views_with_depth) / 4096.0))));
+    DepthTracks dt = depth_tracks(cams, stride, opt.depth_tolerance);
+    sum.depth_points = long(dt.xyz.size());
+    point_obs_raw.resize(model.points.size() + dt.xyz.size());
+    for (size_t t = 0; t < dt.xyz.size(); ++t) {
+      const int idx = int(point_xyz.size());
+      point_xyz.push_back(dt.xyz[t]);
+      for (const DepthObservation& o : dt.obs[t]) {
+        const LabelMap& m = labels[o.view];
+        const int l = m.at(o.x, o.y);
+        const int node = l ? view_node[o.view][l] : -1;
+        const bool is_core = cores[o.view][size_t(o.y) * m.width + o.x];
+        if (node >= 0) nodes[node].points.push_back(idx), core_count[node] += is_core;
+        point_obs_raw[idx].push_back({o.view, node, is_core});
+      }
+    }
   }
   if (sum.views_with_masks == 0) fail("{}: no <stem>.png mask for any view of the scene", in.string());
   sum.masks = int(nodes.size());
@@ -233,7 +274,7 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
   }
   // A mask too small to have min_points core points lifts all its points.
   core_count.resize(nodes.size(), 0);
-  std::vector<std::vector<PointObservation>> point_obs(model.points.size());
+  std::vector<std::vector<PointObservation>> point_obs(point_obs_raw.size());
   for (size_t p = 0; p < point_obs_raw.size(); ++p)
     for (auto& o : point_obs_raw[p])
       point_obs[p].push_back({o.view, o.node >= 0 ? kept_of[o.node] : -1, o.node < 0 || o.core || core_count[o.node] < opt.min_points});
@@ -265,7 +306,7 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
 
   // Point votes: a 3D point belongs to the object that most of its observations' masks belong to (ties: smaller).
   const int K = c.num_objects;
-  std::vector<int> point_object(model.points.size(), -1);
+  std::vector<int> point_object(point_obs_raw.size(), -1);
   auto vote_points = [&] {
     std::vector<int> votes(K, 0), touched;
     for (size_t p = 0; p < point_obs_raw.size(); ++p) {
@@ -330,9 +371,13 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
   {
     std::vector<std::vector<Eigen::Vector3d>> pts(K);
     std::vector<Eigen::Vector3d> all;
+    // Over COLMAP's points only (--surface-spread is calibrated on them; lifted depth pixels sample the views'
+    // visible surfaces evenly, which weighs large backgrounds differently).
     for (size_t p = 0; p < point_object.size(); ++p) {
-      all.push_back(model.points[p].xyz);
-      if (point_object[p] >= 0) pts[point_object[p]].push_back(model.points[p].xyz), ++obj_points[point_object[p]];
+      if (point_object[p] >= 0) ++obj_points[point_object[p]];
+      if (p >= model.points.size()) continue;
+      all.push_back(point_xyz[p]);
+      if (point_object[p] >= 0) pts[point_object[p]].push_back(point_xyz[p]);
     }
     const double all_spread = robust_spread(all);
     for (int k = 0; k < K; ++k)
@@ -425,7 +470,10 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
                    {"colmap", images_file.string()},
                    {"options", {{"min_affinity", opt.min_affinity}, {"min_views", opt.min_views}, {"min_points", opt.min_points},
                                 {"max_area", opt.max_area}, {"core_margin", opt.core_margin}, {"attach", opt.attach}, {"join_parts", opt.join_parts}, {"part_fraction", opt.part_fraction}, {"part_merge", opt.part_merge}, {"drop_surfaces", opt.drop_surfaces},
-                                {"surface_spread", opt.surface_spread}}},
+                                {"surface_spread", opt.surface_spread}, {"depth", bool(opt.depth)},
+                                {"depth_stride", opt.depth_stride}, {"depth_tolerance", opt.depth_tolerance}}},
+                   {"colmap_points", sum.colmap_points},
+                   {"depth_points", sum.depth_points},
                    {"views_with_masks", sum.views_with_masks},
                    {"masks", sum.masks},
                    {"joined_parts", sum.joined_parts},

@@ -15,10 +15,16 @@
 // Output: masks/<stem>.png with the object ids, masks/objects.json, masks/associate.json (report) and the
 // input kept in masks/per_view/ (or everything in --out-masks DIR). All written into a temporary folder and
 // moved into place at the end.
+//
+// Depth (optional): with a z-depth map per view (AssociateOptions::depth), every pixel on a grid is lifted too and
+// re-projected into the other views where their depth agrees (depth_tracks.h); those tracks join COLMAP's points.
 #pragma once
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
+
+#include "scene/scene.h"
 
 namespace hgs::masks {
 
@@ -37,6 +43,11 @@ struct AssociateOptions {
   double part_fraction = 0.5;       // with SAM's masks still at import.json's source: part_of recomputed at this overlap           // use import.json's part_of (see above)
   bool drop_surfaces = false;       // drop objects whose 3D spread is larger than surface_spread (walls, floor, table)
   double surface_spread = 0.17;     // spread of an object's points / spread of all points (robust_spread, per_view.h)
+  // Optional dense correspondences: z-depth [H, W] of a view (empty = none for that view; <= 0 = no depth at a
+  // pixel), e.g. rendered from a short RGB training; null = COLMAP's points only.
+  std::function<std::vector<float>(const View&)> depth;
+  int depth_stride = 0;             // lift every stride-th pixel; 0 = about 4096 pixels per view
+  double depth_tolerance = 0.03;    // relative depth agreement for a lifted point to count as seen by another view
   bool force = false;               // re-associate an already associated scene (from masks/per_view) / replace out_masks
   bool progress = true;
 };
@@ -57,6 +68,7 @@ struct AssociateSummary {
   int joined_parts = 0;               // per-view masks folded into their whole
   int attached = 0;                   // masks left out of the clustering that joined an object by their points' votes
   std::vector<AssociatedObject> objects;
+  long colmap_points = 0, depth_points = 0;  // 3D points used (depth: lifted pixels seen by another view)
   int dropped_background = 0, dropped_few_points = 0, dropped_few_views = 0, dropped_surface = 0;
   std::filesystem::path out_dir, backup_dir;  // where the masks went, where the originals are (empty with --out-masks)
 };

@@ -120,6 +120,11 @@ void generate(const fs::path& out, const SynthOptions& opt) {
         views[i].name = fmt::format("frame_{:05d}.png", i + 1);
         save_png(tmp / "images" / views[i].name, views[i].rgb);
         save_label_png(tmp / "gt" / "instances" / views[i].name, views[i].instances);
+        if (opt.write_depth) {
+          const std::string stem = fs::path(views[i].name).replace_extension().string();
+          write_npy(tmp / "gt" / "depth" / (stem + ".npy"),
+                    make_npy_f32({size_t(opt.height), size_t(opt.width)}, views[i].depth.data()));
+        }
         bar.update(i + 1);
       }
       bar.finish();
@@ -365,6 +370,7 @@ void generate(const fs::path& out, const SynthOptions& opt) {
       if (per_view) meta["mask_ids"] = opt.mask_ids;  // only when not the default, so default scenes keep their bytes
       if (sam_style) meta["mask_style"] = opt.mask_style;
       if (opt.surface_masks) meta["surface_masks"] = true;
+      if (opt.write_depth) meta["depth"] = "gt/depth";
       atomic_write_text(tmp / "synth.json", meta.dump(2) + "\n");
     }
     std::error_code ec;

@@ -29,6 +29,7 @@ struct SynthOptions {
   // tracks whatever SAM segmented; objects.json names them. The object masks are the same as without it (the
   // surfaces fill the mask's background pixels that show a surface; they carry no noise of their own).
   bool surface_masks = false;
+  bool write_depth = false;  // gt/depth/<stem>.npy: exact camera z at pixel centres [H, W] float32 (0 = sky)
   bool progress = true;
 };
 

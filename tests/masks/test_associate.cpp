@@ -268,6 +268,44 @@ TEST(MasksAssociate, SynthPerViewIdsBecomeTheConsistentIds) {
             << exact_views << " of " << maps.size() << "\n";
 }
 
+TEST(MasksAssociate, DepthLiftsObjectsThatHoldTooFewColmapPoints) {
+  // 300 SfM points for 5 objects in 16 views: many masks hold fewer than --min-points and are dropped or attached
+  // by few votes. With synth's exact depth (--depth) every mask lifts; the same with a bad depth file is a
+  // one-line error naming it.
+  test::TempDir t;
+  const fs::path pv = t / "pv";
+  std::string scene = kScene;
+  scene.replace(scene.find("--points 6000"), 13, "--points 300");
+  auto r = test::run_hgs("synth --out " + pv.string() + " " + scene + " --noise medium --mask-ids per-view --depth");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json truth = json::parse(read_file_text(pv / "gt" / "mask_ids.json"));
+  r = test::run_hgs("masks associate " + pv.string() + " --quiet --out-masks " + (t / "sparse").string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json sparse = json::parse(read_file_text(t / "sparse" / "associate.json"));
+  r = test::run_hgs("masks associate " + pv.string() + " --quiet --out-masks " + (t / "dense").string() + " --depth " +
+                    (pv / "gt" / "depth").string());
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json dense = json::parse(read_file_text(t / "dense" / "associate.json"));
+  EXPECT_EQ(sparse["depth_points"].get<long>(), 0);
+  EXPECT_GT(dense["depth_points"].get<long>(), 1000);
+  const double f_sparse = consistent_fraction(sparse["ids"], truth, "object");
+  const double f_dense = consistent_fraction(dense["ids"], truth, "object");
+  EXPECT_GE(f_dense, 0.95);
+  EXPECT_GT(f_dense, f_sparse + 0.02);
+  EXPECT_EQ(dense["objects"].size(), 5u);
+  std::cout << "per-view masks on their object, 300 SfM points: " << f_sparse << " without depth, " << f_dense
+            << " with depth\n";
+  // A depth map of the wrong size names its file.
+  const fs::path bad = t / "bad_depth";
+  fs::create_directories(bad);
+  std::vector<float> z(12, 1.f);
+  write_npy(bad / "frame_00001.npy", make_npy_f32({3, 4}, z.data()));
+  r = test::run_hgs("masks associate " + pv.string() + " --quiet --out-masks " + (t / "x").string() + " --depth " + bad.string());
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.err.find("frame_00001.npy"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(t / "x"));
+}
+
 TEST(MasksAssociate, SynthSamStyleWholesAndPartsBecomeObjects) {
   test::TempDir t;
   const fs::path s = t / "s";
