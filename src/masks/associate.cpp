@@ -16,6 +16,7 @@
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/image.h"
+#include "core/npy.h"
 #include "core/progress.h"
 #include "masks/cluster.h"
 #include "masks/depth_tracks.h"
@@ -130,6 +131,7 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
   std::vector<std::map<int, int>> view_root(s.views.size());  // per view: per-view id -> root id
   std::vector<std::map<int, int>> view_node(s.views.size());  // per view: root id -> node
   std::vector<LabelMap> labels(s.views.size());
+  std::vector<std::vector<float>> reflattened_conf(s.views.size());  // [H, W] per view whose parts were clipped
   std::vector<std::vector<PointObservation>> point_obs_raw(model.points.size());  // node: index into `nodes` or -1
   std::vector<long> core_count;  // per node: keypoints in its core
   std::vector<std::vector<uint8_t>> cores(s.views.size());  // per view: core pixels (core_pixels)
@@ -167,14 +169,26 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
         const std::string fmt_name = import_info.value("format", "");
         const fs::path src_dir = import_info.value("source", "");
         const fs::path src = fmt_name == "sam-json" ? src_dir / (v.stem + ".json") : src_dir / v.stem;
-        if (opt.part_fraction < 0.9 && (fmt_name == "sam-json" || fmt_name == "sam-png") && fs::exists(src)) {
-          const std::vector<SourceMask> sm = fmt_name == "sam-json" ? read_sam_json(src, v.width, v.height)
-                                                                    : read_sam_png_folder(src, v.width, v.height);
+        std::vector<SourceMask> sm;
+        if ((opt.part_fraction < 0.9 || opt.whole_pixels) && (fmt_name == "sam-json" || fmt_name == "sam-png") && fs::exists(src))
+          sm = fmt_name == "sam-json" ? read_sam_json(src, v.width, v.height) : read_sam_png_folder(src, v.width, v.height);
+        if (opt.part_fraction < 0.9 && !sm.empty()) {
           const std::vector<int> parent = part_of(sm, opt.part_fraction);
           for (size_t i = 0; i < sm.size(); ++i)
             if (auto it = info.find(int(i) + 1); it != info.end()) it->second.part_of = parent[i] >= 0 ? parent[i] + 1 : 0;
         }
         root = part_roots(info, px, opt.max_area);
+        // The whole's outline: parts folded into it keep only their pixels inside it (whole_pixels, associate.h).
+        if (opt.whole_pixels && !sm.empty()) {
+          Flattened f;
+          if (clip_parts_to_wholes(sm, root, v.width, v.height, f)) {
+            m = std::move(f.labels);
+            if (!f.confidence.empty()) reflattened_conf[v.index] = std::move(f.confidence);
+            area.clear();
+            for (uint16_t l : m.v)
+              if (l) ++area[l];
+          }
+        }
       }
       for (auto& [l, a] : area) {
         auto it = root.find(l);
@@ -455,7 +469,11 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
       ensure_dir(png.parent_path());
       save_label_png(png, out);
       const fs::path conf = in / (v.stem + ".conf.npy");
-      if (fs::exists(conf)) fs::copy_file(conf, tmp / (v.stem + ".conf.npy"));
+      if (!reflattened_conf[v.index].empty())
+        write_npy(tmp / (v.stem + ".conf.npy"),
+                  make_npy_f32({size_t(v.height), size_t(v.width)}, reflattened_conf[v.index].data()));
+      else if (fs::exists(conf))
+        fs::copy_file(conf, tmp / (v.stem + ".conf.npy"));
     }
     bar.finish();
     json objects = json::object(), list = json::array();
@@ -469,7 +487,7 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
     json report = {{"source", fs::absolute(in_place ? masks_dir / "per_view" : in).lexically_normal().string()},
                    {"colmap", images_file.string()},
                    {"options", {{"min_affinity", opt.min_affinity}, {"min_views", opt.min_views}, {"min_points", opt.min_points},
-                                {"max_area", opt.max_area}, {"core_margin", opt.core_margin}, {"attach", opt.attach}, {"join_parts", opt.join_parts}, {"part_fraction", opt.part_fraction}, {"part_merge", opt.part_merge}, {"drop_surfaces", opt.drop_surfaces},
+                                {"max_area", opt.max_area}, {"core_margin", opt.core_margin}, {"attach", opt.attach}, {"join_parts", opt.join_parts}, {"part_fraction", opt.part_fraction}, {"part_merge", opt.part_merge}, {"whole_pixels", opt.whole_pixels}, {"drop_surfaces", opt.drop_surfaces},
                                 {"surface_spread", opt.surface_spread}, {"depth", bool(opt.depth)},
                                 {"depth_stride", opt.depth_stride}, {"depth_tolerance", opt.depth_tolerance}}},
                    {"colmap_points", sum.colmap_points},

@@ -5,7 +5,8 @@
 // Steps: (1) every mask of every view becomes a node; with masks/import.json, parts are first joined to their
 // whole when they tile it (the whole kept less than half of its pixels after flattening, or its parts add up to
 // half its area: SAM's whole + parts, not a table holding a few things); part_of comes from import.json (90%
-// overlap) or, when SAM's files are still at import.json's source, is recomputed at part_fraction;
+// overlap) or, when SAM's files are still at import.json's source, is recomputed at part_fraction, and the
+// parts folded into a whole are clipped to the whole's own mask (whole_pixels; clip_parts_to_wholes, per_view.h);
 // (2) nodes covering more than max_area of the image are dropped as background, nodes with fewer than
 // min_points 3D points as unliftable; (3) the graph of nodes linked by shared 3D points is clustered (cluster.h);
 // (4) clusters seen in fewer than min_views views are dropped; every remaining cluster is one object, numbered by
@@ -40,6 +41,9 @@ struct AssociateOptions {
   bool attach = true;               // masks left out (few points, alone) join the object holding most of their points
   bool join_parts = true;
   double part_merge = 0.5;          // a cluster inside another's whole masks joins it as a part (cluster.h)
+  // A part folded into its whole keeps only its pixels inside the whole (clip_parts_to_wholes, per_view.h); needs
+  // SAM's own masks at import.json's source (sam-json, sam-png). false = the union of the whole and its parts.
+  bool whole_pixels = true;
   double part_fraction = 0.5;       // with SAM's masks still at import.json's source: part_of recomputed at this overlap           // use import.json's part_of (see above)
   bool drop_surfaces = false;       // drop objects whose 3D spread is larger than surface_spread (walls, floor, table)
   double surface_spread = 0.17;     // spread of an object's points / spread of all points (robust_spread, per_view.h)

@@ -1,7 +1,10 @@
-// Core pixels (separable min / max of labels), the folding of parts into their whole, robust spread (per_view.h).
+// Core pixels (separable min / max of labels), the folding of parts into their whole and their clipping to it,
+// robust spread (per_view.h).
 #include "masks/per_view.h"
 
 #include <algorithm>
+
+#include "masks/rle.h"
 
 namespace hgs::masks {
 
@@ -44,6 +47,25 @@ std::map<int, int> part_roots(const std::map<int, MaskInfo>& info, double image_
     root[id] = r;
   }
   return root;
+}
+
+bool clip_parts_to_wholes(const std::vector<SourceMask>& masks, const std::map<int, int>& root, int width, int height,
+                          Flattened& out) {
+  const int M = int(masks.size());
+  std::map<int, std::vector<uint8_t>> whole;  // root index -> its own pixels [H, W]
+  std::vector<SourceMask> clipped;
+  for (auto& [id, r] : root) {
+    if (id == r || id < 1 || id > M || r < 1 || r > M) continue;
+    if (clipped.empty()) clipped = masks;
+    auto it = whole.find(r - 1);
+    if (it == whole.end()) it = whole.emplace(r - 1, rle_decode(masks[r - 1].rle, masks[r - 1].source)).first;
+    std::vector<uint8_t> px = rle_decode(masks[id - 1].rle, masks[id - 1].source);
+    for (size_t p = 0; p < px.size(); ++p) px[p] &= it->second[p];
+    clipped[id - 1].rle = rle_encode(px, width, height);
+  }
+  if (clipped.empty()) return false;
+  out = flatten_masks(clipped, width, height);
+  return true;
 }
 
 double robust_spread(const std::vector<Eigen::Vector3d>& points) {

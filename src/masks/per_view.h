@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "core/image.h"
+#include "masks/flatten.h"
 
 namespace hgs::masks {
 
@@ -26,6 +27,14 @@ struct MaskInfo {  // one id of import.json
 // and covers at most `max_area` of the `image_px` pixels. A large mask holding a few small objects (a table with
 // things on it) keeps them apart.
 std::map<int, int> part_roots(const std::map<int, MaskInfo>& info, double image_px, double max_area);
+
+// SAM's whole outlines its object: with `root` from part_roots (mask i has id i + 1; ids absent from `root` are
+// their own root), every mask folded into another keeps only its pixels inside its root's own mask, and the view
+// is flattened again (flatten_masks). A part and its whole carry independent boundary errors, so their union is
+// biased outwards; the whole alone is not. A part whose whole is missing from the view is not folded and stays as
+// it is. Returns false, leaving `out` alone, when no mask of the view is folded into another.
+bool clip_parts_to_wholes(const std::vector<SourceMask>& masks, const std::map<int, int>& root, int width, int height,
+                          Flattened& out);
 
 // Spread of a point set: the 80th percentile of the distances from the coordinate-wise median (0 when empty).
 double robust_spread(const std::vector<Eigen::Vector3d>& points);

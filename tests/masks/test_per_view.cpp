@@ -4,6 +4,7 @@
 #include <random>
 
 #include "masks/per_view.h"
+#include "masks/rle.h"
 
 using namespace hgs;
 using namespace hgs::masks;
@@ -69,4 +70,56 @@ TEST(RobustSpread, IgnoresAFewStrayPoints) {
   std::vector<Eigen::Vector3d> line;
   for (int i = -10; i <= 10; ++i) line.emplace_back(i, 0, 0);
   EXPECT_EQ(robust_spread(line), 8.0);
+}
+
+namespace {
+// A rectangle [x0, x1) x [y0, y1) as a SAM mask of a w x h image.
+SourceMask rect(int w, int h, int x0, int y0, int x1, int y1, const std::string& name) {
+  std::vector<uint8_t> px(size_t(w) * h, 0);
+  for (int y = y0; y < y1; ++y)
+    for (int x = x0; x < x1; ++x) px[size_t(y) * w + x] = 1;
+  SourceMask m;
+  m.rle = rle_encode(px, w, h);
+  m.predicted_iou = 0.9;
+  m.source = name;
+  return m;
+}
+}  // namespace
+
+TEST(ClipPartsToWholes, PartsKeepOnlyTheirPixelsInsideTheirWhole) {
+  // 12 x 8 image: a table (id 1, the whole bottom half, not folded), a whole object (id 2, x 2..8, y 1..6), its two
+  // halves dilated by one pixel (ids 3, 4; 3 sticks out at the left and top, 4 at the right and bottom), and a
+  // small object (id 5) that is no part of anything.
+  const int W = 12, H = 8;
+  std::vector<SourceMask> masks = {rect(W, H, 0, 4, W, H, "table"), rect(W, H, 2, 1, 8, 6, "whole"),
+                                   rect(W, H, 1, 0, 6, 7, "left half"), rect(W, H, 5, 1, 9, 7, "right half"),
+                                   rect(W, H, 10, 1, 12, 3, "cup")};
+  const std::map<int, int> root = {{1, 1}, {2, 2}, {3, 2}, {4, 2}, {5, 5}};
+  Flattened f;
+  ASSERT_TRUE(clip_parts_to_wholes(masks, root, W, H, f));
+  // Brute force: every pixel's label is the smallest covering mask after clipping parts to their whole, so the
+  // object (ids 2, 3, 4 together) covers exactly the whole's rectangle.
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const int l = f.labels.at(x, y);
+      const bool in_whole = x >= 2 && x < 8 && y >= 1 && y < 6;
+      EXPECT_EQ(l >= 2 && l <= 4, in_whole) << x << "," << y << " label " << l;
+      if (!in_whole) {
+        const int want = (x >= 10 && y >= 1 && y < 3) ? 5 : (y >= 4 ? 1 : 0);
+        EXPECT_EQ(l, want) << x << "," << y;
+      } else {
+        EXPECT_NE(l, 2) << "parts tile the whole here, smaller wins: " << x << "," << y;  // left: x < 6, right: x >= 5
+      }
+    }
+  // Unclipped, the union sticks out of the whole (the halves' dilation).
+  const Flattened u = flatten_masks(masks, W, H);
+  int outside = 0;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) outside += (u.labels.at(x, y) == 3 || u.labels.at(x, y) == 4) && !(x >= 2 && x < 8 && y >= 1 && y < 6);
+  EXPECT_GT(outside, 5);
+  // Nothing folded: nothing to do.
+  Flattened untouched;
+  untouched.labels = LabelMap(1, 1);
+  EXPECT_FALSE(clip_parts_to_wholes(masks, {{1, 1}, {2, 2}, {3, 3}}, W, H, untouched));
+  EXPECT_EQ(untouched.labels.width, 1);
 }
