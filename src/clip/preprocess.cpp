@@ -14,6 +14,11 @@ struct Taps {
   int max_count = 0;
 };
 
+float triangle(float x) {
+  x = std::fabs(x);
+  return x < 1 ? 1 - x : 0;
+}
+
 float keys(float x, float a) {
   x = std::fabs(x);
   if (x < 1) return ((a + 2) * x - (a + 3)) * x * x + 1;
@@ -21,12 +26,13 @@ float keys(float x, float a) {
   return 0;
 }
 
-// PIL / torch-antialias taps for resizing `in` samples to `out`.
-Taps aa_taps(int in, int out) {
+// PIL / torch-antialias taps for resizing `in` samples to `out` (bicubic: support 2, bilinear: support 1).
+Taps aa_taps(int in, int out, AaFilter filter) {
   Taps t;
+  const bool cubic = filter == AaFilter::Bicubic;
   const double scale = double(in) / out;
   const double fscale = std::max(scale, 1.0);
-  const double support = 2.0 * fscale;
+  const double support = (cubic ? 2.0 : 1.0) * fscale;
   t.max_count = int(std::ceil(support)) * 2 + 1;
   t.start.resize(out);
   t.count.resize(out);
@@ -39,7 +45,8 @@ Taps aa_taps(int in, int out) {
     double total = 0;
     float* wr = t.w.data() + size_t(i) * t.max_count;
     for (int j = 0; j < n; ++j) {
-      double v = keys(float((j + xmin - center + 0.5) / fscale), -0.5f);
+      const float d = float((j + xmin - center + 0.5) / fscale);
+      double v = cubic ? keys(d, -0.5f) : triangle(d);
       wr[j] = float(v);
       total += v;
     }
@@ -107,9 +114,9 @@ std::vector<float> separable(const float* src, int h, int w, int c, int oh, int 
 
 }  // namespace
 
-std::vector<float> resize_aa(const float* src, int h, int w, int c, int oh, int ow) {
+std::vector<float> resize_aa(const float* src, int h, int w, int c, int oh, int ow, AaFilter filter) {
   if (h <= 0 || w <= 0 || oh <= 0 || ow <= 0) fail("resize: empty image ({}x{} -> {}x{})", w, h, ow, oh);
-  return separable(src, h, w, c, oh, ow, aa_taps(w, ow), aa_taps(h, oh), false);
+  return separable(src, h, w, c, oh, ow, aa_taps(w, ow, filter), aa_taps(h, oh, filter), false);
 }
 
 std::vector<float> resize_bicubic(const float* src, int h, int w, int c, int oh, int ow) {

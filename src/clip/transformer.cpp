@@ -86,7 +86,7 @@ void matmul(const float* x, int n, int k, const float* p, int n_out, float* y) {
   cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, n, n_out, k, 1.f, x, k, p, n_out, 0.f, y, n_out);
 }
 
-void layer_norm(const LayerNorm& ln, const float* x, int n, int c, float* y) {
+void layer_norm(const LayerNorm& ln, const float* x, int n, int c, float* y, float eps) {
   parallel_for(n, std::max(1, 32768 / std::max(c, 1)), [&](long r0, long r1) {
     for (long i = r0; i < r1; ++i) {
       const float* r = x + size_t(i) * c;
@@ -96,7 +96,7 @@ void layer_norm(const LayerNorm& ln, const float* x, int n, int c, float* y) {
       mean /= c;
       for (int j = 0; j < c; ++j) var += (r[j] - mean) * (r[j] - mean);
       var /= c;
-      const float m = float(mean), inv = float(1.0 / std::sqrt(var + 1e-5));
+      const float m = float(mean), inv = float(1.0 / std::sqrt(var + eps));
       for (int j = 0; j < c; ++j) o[j] = (r[j] - m) * inv * ln.g[j] + ln.b[j];
     }
   });
@@ -146,6 +146,19 @@ void l2_normalize_rows(float* x, int n, int d) {
   }
 }
 
+void multi_head_attention(const float* q, int ldq, const float* k, int ldk, const float* v, int ldv, int nq, int nk,
+                          int heads, int hd, float scale, float* out, int ldo, float* scores, bool causal,
+                          const std::function<void(int, float*)>& bias) {
+  for (int hh = 0; hh < heads; ++hh) {
+    cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, nq, nk, hd, scale, q + hh * hd, ldq, k + hh * hd, ldk, 0.f,
+                scores, nk);
+    if (bias) bias(hh, scores);
+    softmax_rows(scores, nq, nk, causal);
+    cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, nq, hd, nk, 1.f, scores, nk, v + hh * hd, ldv, 0.f,
+                out + hh * hd, ldo);
+  }
+}
+
 void block_forward(const Block& b, int heads, Activation act, const std::vector<Segment>& segs, bool causal, float* x,
                    int n, Workspace& ws) {
   const int w = b.qkv.in, hd = w / heads, w3 = 3 * w;
@@ -155,16 +168,8 @@ void block_forward(const Block& b, int heads, Activation act, const std::vector<
   linear(b.qkv, ws.h.data(), n, ws.qkv.data());
   for (const Segment& sg : segs) {
     const float* base = ws.qkv.data() + size_t(sg.start) * w3;
-    for (int hh = 0; hh < heads; ++hh) {
-      const float* q = base + hh * hd;
-      const float* k = base + w + hh * hd;
-      const float* v = base + 2 * w + hh * hd;
-      float* s = ws.scores.data();
-      cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, sg.len, sg.len, hd, scale, q, w3, k, w3, 0.f, s, sg.len);
-      softmax_rows(s, sg.len, sg.len, causal);
-      cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, sg.len, hd, sg.len, 1.f, s, sg.len, v, w3, 0.f,
-                  ws.attn.data() + size_t(sg.start) * w + hh * hd, w);
-    }
+    multi_head_attention(base, w3, base + w, w3, base + 2 * w, w3, sg.len, sg.len, heads, hd, scale,
+                         ws.attn.data() + size_t(sg.start) * w, w, ws.scores.data(), causal);
   }
   linear_add(b.out, ws.attn.data(), n, x);
   // MLP.

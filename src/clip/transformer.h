@@ -7,6 +7,7 @@
 // into one token matrix (`Segment`s): linear layers see all of them at once, attention stays within each.
 // Buffers live in a Workspace sized once per forward call; nothing is allocated per token or per layer.
 #pragma once
+#include <functional>
 #include <vector>
 
 #include "clip/model.h"
@@ -30,11 +31,20 @@ struct Workspace {
 void linear(const Linear& l, const float* x, int n, float* y);
 // y [N, out] += x [N, in] W^T + b.
 void linear_add(const Linear& l, const float* x, int n, float* y);
-// y [N, C] = LayerNorm(x [N, C]) with eps 1e-5 (in place allowed).
-void layer_norm(const LayerNorm& ln, const float* x, int n, int c, float* y);
+// y [N, C] = LayerNorm(x [N, C]) with eps 1e-5 unless given (in place allowed).
+void layer_norm(const LayerNorm& ln, const float* x, int n, int c, float* y, float eps = 1e-5f);
 void activation(Activation a, float* x, size_t count);  // in place
 // Row-wise softmax of s [rows, cols]; with `causal`, row i keeps columns 0..row0+i only (others set to 0).
 void softmax_rows(float* s, int rows, int cols, bool causal, int row0 = 0);
+
+// Multi-head attention of one sequence: for every head h, out_h [nq, hd] = softmax(scale q_h k_h^T + B_h) v_h,
+// where head h's q, k, v are the columns [h * hd, (h + 1) * hd) of q [nq, ldq], k [nk, ldk], v [nk, ldv] and its
+// output goes to the same columns of out [nq, ldo]. Two sgemm calls per head around a row softmax over
+// `scores` [nq, nk] (caller's buffer). `bias`, when given, adds B_h to the scaled scores [nq, nk] of head h
+// before the softmax (SAM's relative positions); `causal` keeps key j <= query i only.
+void multi_head_attention(const float* q, int ldq, const float* k, int ldk, const float* v, int ldv, int nq, int nk,
+                          int heads, int hd, float scale, float* out, int ldo, float* scores, bool causal = false,
+                          const std::function<void(int, float*)>& bias = {});
 
 // One block applied in place to x [N, width].
 void block_forward(const Block& b, int heads, Activation act, const std::vector<Segment>& segs, bool causal, float* x,

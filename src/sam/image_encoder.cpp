@@ -1,0 +1,165 @@
+// SAM's ViT image encoder and neck on HWC token matrices.
+//   patch embedding: im2col of the P x P patches (c, ky, kx) times the conv weight, plus the absolute positions;
+//   layer: x += proj(attn(LN1(x))); x += lin2(GELU(lin1(LN2(x)))), LayerNorm eps 1e-6. Windowed layers cut the
+//     normalised tokens into w x w windows after zero-padding the grid to a multiple of w (padded tokens take part
+//     as keys with value bias, as in SAM) and attend within each; global layers attend over the whole grid.
+//     Attention adds the decomposed relative positions before the softmax: for query (i, j) and key (k, l),
+//     q . Rh[i - k + s - 1] + q . Rw[j - l + s - 1] with the unscaled query (s = window or grid side); the two
+//     tables of dot products come from one sgemm each (q [n, hd] x R^T [hd, 2s - 1]) and are gathered.
+//   neck: 1x1 conv, channel LayerNorm, 3x3 conv (pad 1, im2col), channel LayerNorm (eps 1e-6, no biases).
+#include <algorithm>
+#include <cblas.h>
+#include <cmath>
+
+#include "clip/thread_pool.h"
+#include "clip/transformer.h"
+#include "core/error.h"
+#include "sam/model.h"
+
+namespace hgs::sam {
+namespace {
+
+constexpr float kVitEps = 1e-6f;
+
+// Relative-position bias of one head: adds to scores [n, n] (n = s * s tokens of an s x s grid) the terms
+// q . rel_h[qi_row - k_row + s - 1] + q . rel_w[qi_col - k_col + s - 1]; q [n, hd] with row stride ldq.
+void add_rel_pos(const float* q, int ldq, int s, int hd, const float* rel_h, const float* rel_w, float* scores,
+                 std::vector<float>& th, std::vector<float>& tw) {
+  const int n = s * s, r = 2 * s - 1;
+  th.resize(size_t(n) * r);
+  tw.resize(size_t(n) * r);
+  cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, n, r, hd, 1.f, q, ldq, rel_h, hd, 0.f, th.data(), r);
+  cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, n, r, hd, 1.f, q, ldq, rel_w, hd, 0.f, tw.data(), r);
+  clip::parallel_for(n, 64, [&](long i0, long i1) {
+    for (long i = i0; i < i1; ++i) {
+      const int qi = int(i) / s, qj = int(i) % s;
+      const float* a = th.data() + size_t(i) * r;
+      const float* b = tw.data() + size_t(i) * r;
+      float* row = scores + size_t(i) * n;
+      for (int k = 0; k < s; ++k) {
+        const float hk = a[qi - k + s - 1];
+        float* rk = row + size_t(k) * s;
+        for (int l = 0; l < s; ++l) rk[l] += hk + b[qj - l + s - 1];
+      }
+    }
+  });
+}
+
+struct VitWork {
+  std::vector<float> h, win, qkv, attn, out, mlp, scores, th, tw;
+};
+
+// Attention of one layer on the normalised tokens h [g * g, C]; adds proj(attn) to x [g * g, C].
+void vit_attention(const VitLayer& l, int g, int C, int heads, const float* h, float* x, VitWork& w) {
+  const int hd = C / heads;
+  const float scale = 1.f / std::sqrt(float(hd));
+  const int s = l.window > 0 ? l.window : g;       // side of one attention grid
+  const int nw = l.window > 0 ? (g + s - 1) / s : 1;  // windows per side
+  const int n = s * s, M = nw * nw * n;            // tokens per window, all (padded) tokens
+  // Gather windows: token (wy, wx, i, j) <- grid (wy * s + i, wx * s + j), zero outside the grid.
+  w.win.assign(size_t(M) * C, 0.f);
+  for (int wy = 0; wy < nw; ++wy)
+    for (int wx = 0; wx < nw; ++wx)
+      for (int i = 0; i < s; ++i)
+        for (int j = 0; j < s; ++j) {
+          const int y = wy * s + i, xx = wx * s + j;
+          if (y >= g || xx >= g) continue;
+          std::copy_n(h + (size_t(y) * g + xx) * C, C, w.win.data() + ((size_t(wy * nw + wx) * n) + i * s + j) * C);
+        }
+  w.qkv.resize(size_t(M) * 3 * C);
+  clip::linear(l.qkv, w.win.data(), M, w.qkv.data());
+  w.attn.resize(size_t(M) * C);
+  w.scores.resize(size_t(n) * n);
+  for (int wi = 0; wi < nw * nw; ++wi) {
+    const float* base = w.qkv.data() + size_t(wi) * n * 3 * C;
+    auto bias = [&](int head, float* sc) {
+      add_rel_pos(base + head * hd, 3 * C, s, hd, l.rel_h.data(), l.rel_w.data(), sc, w.th, w.tw);
+    };
+    clip::multi_head_attention(base, 3 * C, base + C, 3 * C, base + 2 * C, 3 * C, n, n, heads, hd, scale,
+                               w.attn.data() + size_t(wi) * n * C, C, w.scores.data(), false, bias);
+  }
+  w.out.resize(size_t(M) * C);
+  clip::linear(l.proj, w.attn.data(), M, w.out.data());
+  for (int wy = 0; wy < nw; ++wy)
+    for (int wx = 0; wx < nw; ++wx)
+      for (int i = 0; i < s; ++i)
+        for (int j = 0; j < s; ++j) {
+          const int y = wy * s + i, xx = wx * s + j;
+          if (y >= g || xx >= g) continue;
+          const float* o = w.out.data() + ((size_t(wy * nw + wx) * n) + i * s + j) * C;
+          float* d = x + (size_t(y) * g + xx) * C;
+          for (int c = 0; c < C; ++c) d[c] += o[c];
+        }
+}
+
+// im2col of a 3x3 convolution with zero padding 1 on x [g, g, C]: cols [g * g, 9 * C] ordered (ky, kx, c).
+void im2col3x3(const float* x, int g, int C, std::vector<float>& cols) {
+  cols.assign(size_t(g) * g * 9 * C, 0.f);
+  for (int y = 0; y < g; ++y)
+    for (int xx = 0; xx < g; ++xx) {
+      float* o = cols.data() + (size_t(y) * g + xx) * 9 * C;
+      for (int ky = 0; ky < 3; ++ky)
+        for (int kx = 0; kx < 3; ++kx) {
+          const int sy = y + ky - 1, sx = xx + kx - 1;
+          if (sy < 0 || sy >= g || sx < 0 || sx >= g) continue;
+          std::copy_n(x + (size_t(sy) * g + sx) * C, C, o + (ky * 3 + kx) * C);
+        }
+    }
+}
+
+}  // namespace
+
+std::vector<float> SamModel::encode(const float* x, std::vector<std::vector<float>>* stages) const {
+  const VisionEncoder& v = vision;
+  const int g = v.grid, P = v.patch, C = v.hidden, N = g * g, S = image_size(), K = 3 * P * P;
+  // Patch embedding: cols [N, 3 * P * P] ordered (c, ky, kx) like the conv weight.
+  std::vector<float> cols(size_t(N) * K);
+  for (int py = 0; py < g; ++py)
+    for (int px = 0; px < g; ++px) {
+      float* o = cols.data() + (size_t(py) * g + px) * K;
+      for (int c = 0; c < 3; ++c)
+        for (int ky = 0; ky < P; ++ky)
+          for (int kx = 0; kx < P; ++kx) o[(c * P + ky) * P + kx] = x[((size_t(py) * P + ky) * S + px * P + kx) * 3 + c];
+    }
+  std::vector<float> tok(size_t(N) * C);
+  clip::linear(v.patch_embed, cols.data(), N, tok.data());
+  for (size_t i = 0; i < tok.size(); ++i) tok[i] += v.pos[i];
+  if (stages) {
+    stages->clear();
+    stages->push_back(tok);
+  }
+  VitWork w;
+  w.h.resize(size_t(N) * C);
+  for (const VitLayer& l : v.layers) {
+    clip::layer_norm(l.ln1, tok.data(), N, C, w.h.data(), kVitEps);
+    vit_attention(l, g, C, v.heads, w.h.data(), tok.data(), w);
+    clip::layer_norm(l.ln2, tok.data(), N, C, w.h.data(), kVitEps);
+    w.mlp.resize(size_t(N) * l.fc1.out);
+    clip::linear(l.fc1, w.h.data(), N, w.mlp.data());
+    clip::activation(clip::Activation::GELU, w.mlp.data(), w.mlp.size());
+    clip::linear_add(l.fc2, w.mlp.data(), N, tok.data());
+    if (stages) stages->push_back(tok);
+  }
+  // Neck.
+  const int O = v.out;
+  std::vector<float> a(size_t(N) * O), out(size_t(N) * O);
+  clip::linear(v.neck1, tok.data(), N, a.data());
+  clip::layer_norm(v.neck_ln1, a.data(), N, O, a.data(), kVitEps);
+  im2col3x3(a.data(), g, O, cols);
+  clip::linear(v.neck2, cols.data(), N, out.data());
+  clip::layer_norm(v.neck_ln2, out.data(), N, O, out.data(), kVitEps);
+  return out;
+}
+
+ImageEmbedding SamModel::embed(const Image& img) const {
+  ImageEmbedding e;
+  std::vector<float> x = preprocess(img, &e.input_h, &e.input_w);
+  e.data = encode(x.data());
+  e.grid = vision.grid;
+  e.channels = vision.out;
+  e.orig_h = img.height;
+  e.orig_w = img.width;
+  return e;
+}
+
+}  // namespace hgs::sam

@@ -1,0 +1,189 @@
+// SAM's mask decoder: a two-way transformer between the prompt tokens [iou token, mask tokens, sparse prompt]
+// and the image tokens (embedding + no-mask embedding, with the dense positional encoding added to queries and
+// keys at every attention), then output upscaling (two 2x2 stride-2 transposed convolutions, channel LayerNorm
+// and GELU), one hypernetwork MLP per mask token giving the weights of a dot product with every upscaled pixel,
+// and the IoU head on the IoU token.
+//   block (first block without the token residual and positions in self-attention):
+//     q = LN1(q + self(q + qpe, q + qpe, q)); q = LN2(q + t2i(q + qpe, k + kpe, k)); q = LN3(q + mlp(q));
+//     k = LN4(k + i2t(k + kpe, q + qpe, q));   final: q = LN(q + t2i_final(q + qpe, k + kpe, k)).
+// Attention projects to an inner width (C / 2 in the cross attentions), splits heads, scales by 1/sqrt(head dim).
+// The first block's token-to-image keys and values depend on the image only and are computed once per call.
+#include <algorithm>
+#include <cblas.h>
+#include <cmath>
+
+#include "clip/transformer.h"
+#include "core/error.h"
+#include "sam/model.h"
+
+namespace hgs::sam {
+namespace {
+
+struct Proj {
+  std::vector<float> q, k, v, o;
+};
+
+void add(const float* a, const float* b, size_t n, std::vector<float>& out) {
+  out.resize(n);
+  for (size_t i = 0; i < n; ++i) out[i] = a[i] + b[i];
+}
+
+// out [nq, C] = attention(qin [nq, C], kin [nk, C], vin [nk, C]); `kv` (optional) holds k_proj(kin) and
+// v_proj(vin) already computed.
+void attend(const Attention& a, int heads, const float* qin, int nq, const float* kin, const float* vin, int nk,
+            float* out, Proj& w, std::vector<float>& scores, const Proj* kv = nullptr) {
+  const int I = a.q.out, hd = I / heads;
+  w.q.resize(size_t(nq) * I);
+  clip::linear(a.q, qin, nq, w.q.data());
+  const float *K, *V;
+  if (kv) {
+    K = kv->k.data();
+    V = kv->v.data();
+  } else {
+    w.k.resize(size_t(nk) * I);
+    w.v.resize(size_t(nk) * I);
+    clip::linear(a.k, kin, nk, w.k.data());
+    clip::linear(a.v, vin, nk, w.v.data());
+    K = w.k.data();
+    V = w.v.data();
+  }
+  w.o.resize(size_t(nq) * I);
+  scores.resize(size_t(nq) * nk);
+  clip::multi_head_attention(w.q.data(), I, K, I, V, I, nq, nk, heads, hd, 1.f / std::sqrt(float(hd)), w.o.data(), I,
+                             scores.data());
+  clip::linear(a.out, w.o.data(), nq, out);
+}
+
+void relu(float* x, size_t n) {
+  for (size_t i = 0; i < n; ++i) x[i] = std::max(x[i], 0.f);
+}
+
+// y [out] = mlp(x [in]) for one vector.
+std::vector<float> run_mlp(const Mlp& m, const float* x) {
+  std::vector<float> a(x, x + m.layers.front().in), b;
+  for (size_t j = 0; j < m.layers.size(); ++j) {
+    b.resize(m.layers[j].out);
+    clip::linear(m.layers[j], a.data(), 1, b.data());
+    if (j + 1 < m.layers.size()) relu(b.data(), b.size());
+    a.swap(b);
+  }
+  return a;
+}
+
+// x [g, g, in] -> [2g, 2g, out]: the 2x2 stride-2 transposed convolution as one product with u.w [in, 4 out].
+std::vector<float> upconv(const Upconv& u, const float* x, int g) {
+  std::vector<float> y(size_t(g) * g * 4 * u.out), out(size_t(4) * g * g * u.out);
+  clip::matmul(x, g * g, u.in, u.w.data(), 4 * u.out, y.data());
+  const int G = 2 * g;
+  for (int i = 0; i < g; ++i)
+    for (int j = 0; j < g; ++j)
+      for (int d = 0; d < 4; ++d) {
+        const float* s = y.data() + (size_t(i) * g + j) * 4 * u.out + d * u.out;
+        float* o = out.data() + (size_t(2 * i + d / 2) * G + 2 * j + d % 2) * u.out;
+        for (int c = 0; c < u.out; ++c) o[c] = s[c] + u.b[c];
+      }
+  return out;
+}
+
+}  // namespace
+
+std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, int B, int T) const {
+  const MaskDecoder& d = decoder;
+  const int C = channels(), g = vision.grid, N = g * g, heads = d.heads;
+  const int Tt = 1 + d.tokens + T;  // iou token, mask tokens, prompt tokens
+  if (d.layers.empty()) fail("SAM mask decoder has no layers");
+  const std::vector<float> pe = dense_pe();  // [N, C]
+  std::vector<float> src0(size_t(N) * C), kpe;
+  for (size_t i = 0; i < src0.size(); ++i) src0[i] = emb[i] + prompt.no_mask[i % C];
+  add(src0.data(), pe.data(), src0.size(), kpe);
+  // The first block's token-to-image keys / values: the same for every prompt.
+  Proj kv0;
+  const Attention& a0 = d.layers[0].token_to_image;
+  kv0.k.resize(size_t(N) * a0.k.out);
+  kv0.v.resize(size_t(N) * a0.v.out);
+  clip::linear(a0.k, kpe.data(), N, kv0.k.data());
+  clip::linear(a0.v, src0.data(), N, kv0.v.data());
+
+  std::vector<Prediction> res(B);
+  Proj w;
+  std::vector<float> scores, q(size_t(Tt) * C), qpe, keys, tmp, qq, kk, mlp;
+  for (int b = 0; b < B; ++b) {
+    std::copy(d.iou_token.begin(), d.iou_token.end(), q.begin());
+    std::copy(d.mask_tokens.begin(), d.mask_tokens.end(), q.begin() + C);
+    std::copy_n(sparse + size_t(b) * T * C, size_t(T) * C, q.begin() + size_t(1 + d.tokens) * C);
+    qpe = q;
+    keys = src0;
+    tmp.resize(std::max(size_t(Tt), size_t(N)) * C);
+    for (size_t li = 0; li < d.layers.size(); ++li) {
+      const TwoWayLayer& l = d.layers[li];
+      if (li == 0) {
+        attend(l.self_attn, heads, q.data(), Tt, q.data(), q.data(), Tt, tmp.data(), w, scores);
+        std::copy_n(tmp.data(), size_t(Tt) * C, q.data());
+      } else {
+        add(q.data(), qpe.data(), q.size(), qq);
+        attend(l.self_attn, heads, qq.data(), Tt, qq.data(), q.data(), Tt, tmp.data(), w, scores);
+        for (size_t i = 0; i < q.size(); ++i) q[i] += tmp[i];
+      }
+      clip::layer_norm(l.ln1, q.data(), Tt, C, q.data(), d.ln_eps);
+      add(q.data(), qpe.data(), q.size(), qq);
+      if (li == 0) {
+        attend(l.token_to_image, heads, qq.data(), Tt, nullptr, nullptr, N, tmp.data(), w, scores, &kv0);
+      } else {
+        add(keys.data(), pe.data(), keys.size(), kk);
+        attend(l.token_to_image, heads, qq.data(), Tt, kk.data(), keys.data(), N, tmp.data(), w, scores);
+      }
+      for (size_t i = 0; i < q.size(); ++i) q[i] += tmp[i];
+      clip::layer_norm(l.ln2, q.data(), Tt, C, q.data(), d.ln_eps);
+      mlp.resize(size_t(Tt) * l.mlp1.out);
+      clip::linear(l.mlp1, q.data(), Tt, mlp.data());
+      relu(mlp.data(), mlp.size());
+      clip::linear_add(l.mlp2, mlp.data(), Tt, q.data());
+      clip::layer_norm(l.ln3, q.data(), Tt, C, q.data(), d.ln_eps);
+      add(q.data(), qpe.data(), q.size(), qq);
+      if (li == 0) kk = kpe;
+      else add(keys.data(), pe.data(), keys.size(), kk);
+      attend(l.image_to_token, heads, kk.data(), N, qq.data(), q.data(), Tt, tmp.data(), w, scores);
+      for (size_t i = 0; i < keys.size(); ++i) keys[i] += tmp[i];
+      clip::layer_norm(l.ln4, keys.data(), N, C, keys.data(), d.ln_eps);
+    }
+    add(q.data(), qpe.data(), q.size(), qq);
+    add(keys.data(), pe.data(), keys.size(), kk);
+    attend(d.final_attn, heads, qq.data(), Tt, kk.data(), keys.data(), N, tmp.data(), w, scores);
+    for (size_t i = 0; i < q.size(); ++i) q[i] += tmp[i];
+    clip::layer_norm(d.ln_final, q.data(), Tt, C, q.data(), d.ln_final_eps);
+
+    // Upscaling: [g, g, C] -> [2g, 2g, C/4] (LN, GELU) -> [4g, 4g, C/8] (GELU).
+    std::vector<float> u1 = upconv(d.up1, keys.data(), g);
+    clip::layer_norm(d.up_ln, u1.data(), 4 * N, d.up1.out, u1.data(), 1e-6f);
+    clip::activation(clip::Activation::GELU, u1.data(), u1.size());
+    std::vector<float> u2 = upconv(d.up2, u1.data(), 2 * g);
+    clip::activation(clip::Activation::GELU, u2.data(), u2.size());
+    const int D = d.up2.out, P = 16 * N;
+    std::vector<float> hyper(size_t(d.tokens) * D);
+    for (int t = 0; t < d.tokens; ++t) {
+      std::vector<float> h = run_mlp(d.hyper[t], q.data() + size_t(1 + t) * C);
+      if (int(h.size()) != D) fail("SAM hypernetwork {} gives {} values, the upscaled embedding has {}", t, h.size(), D);
+      std::copy(h.begin(), h.end(), hyper.begin() + size_t(t) * D);
+    }
+    Prediction& r = res[b];
+    r.tokens = d.tokens;
+    r.size = 4 * g;
+    r.lowres.resize(size_t(d.tokens) * P);
+    // masks [tokens, P] = hyper [tokens, D] x u2^T [D, P]
+    cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, d.tokens, P, D, 1.f, hyper.data(), D, u2.data(), D, 0.f,
+                r.lowres.data(), P);
+    r.iou = run_mlp(d.iou_head, q.data());
+  }
+  return res;
+}
+
+Prediction SamModel::predict(const ImageEmbedding& e, const Prompt& p) const {
+  if (e.grid != vision.grid || e.channels != channels())
+    fail("SAM: image embedding of grid {} x {} channels does not match the model ({} x {})", e.grid, e.channels,
+         vision.grid, channels());
+  const std::vector<float> sparse = encode_prompt(to_input(e, p));
+  const int T = int(sparse.size()) / channels();
+  return decode(e.data.data(), sparse.data(), 1, T).front();
+}
+
+}  // namespace hgs::sam
