@@ -1,4 +1,6 @@
 // The native SAM against PyTorch (tests/data/sam, tools/sam_reference): every stage of the tiny random model.
+// Tolerances are relative to 1 + |ref|; observed (g++ 12, OpenBLAS 0.3.21): preprocessing 3e-7, encoder
+// stages 1e-6 to 4e-6, prompts 9e-7, decoder masks 1e-6 to 4e-6, IoU 7e-7, post-processing 0.
 #include <gtest/gtest.h>
 
 #include <fstream>
@@ -85,8 +87,8 @@ TEST(SamModel, EncoderStagesMatchTorch) {
   std::vector<float> emb = tiny_sam().encode(px.data(), &stages);
   ASSERT_EQ(stages.size(), 4u);
   EXPECT_LT(max_rel_err(stages[0], sam_ref("patch.npy")), 2e-6);
-  for (int i = 0; i < 3; ++i) EXPECT_LT(max_rel_err(stages[i + 1], sam_ref("layer" + std::to_string(i) + ".npy")), 5e-6) << "layer " << i;
-  EXPECT_LT(max_rel_err(emb, sam_ref("embedding.npy")), 5e-6);
+  for (int i = 0; i < 3; ++i) EXPECT_LT(max_rel_err(stages[i + 1], sam_ref("layer" + std::to_string(i) + ".npy")), 1e-5) << "layer " << i;
+  EXPECT_LT(max_rel_err(emb, sam_ref("embedding.npy")), 1e-5);
 }
 
 TEST(SamModel, EmbedRunsPreprocessingAndEncoder) {
@@ -95,7 +97,7 @@ TEST(SamModel, EmbedRunsPreprocessingAndEncoder) {
   EXPECT_EQ(e.orig_h, r.H);
   EXPECT_EQ(e.orig_w, r.W);
   EXPECT_EQ(e.input_h, r.in_h);
-  EXPECT_LT(max_rel_err(e.data, sam_ref("embedding.npy")), 5e-6);
+  EXPECT_LT(max_rel_err(e.data, sam_ref("embedding.npy")), 1e-5);  // observed 4.8e-6 (float32 rounding)
 }
 
 TEST(SamModel, DensePositionalEncodingMatchesTorch) {
@@ -119,7 +121,7 @@ TEST(SamModel, DecoderMatchesTorch) {
   for (size_t k = 0; k < r.prompts.size(); ++k) {
     sam::Prediction p = tiny_sam().predict(e, r.prompts[k]);
     EXPECT_EQ(p.size, 32);
-    EXPECT_LT(max_rel_err(p.lowres, sam_ref("lowres" + std::to_string(k) + ".npy")), 5e-6) << "prompt " << k;
+    EXPECT_LT(max_rel_err(p.lowres, sam_ref("lowres" + std::to_string(k) + ".npy")), 1e-5) << "prompt " << k;
     EXPECT_LT(max_rel_err(p.iou, sam_ref("iou" + std::to_string(k) + ".npy")), 5e-6) << "prompt " << k;
   }
 }
@@ -154,8 +156,8 @@ TEST(SamModel, BatchedDecodeEqualsOneByOne) {
   both.insert(both.end(), b.begin(), b.end());
   std::vector<sam::Prediction> res = m.decode(e.data.data(), both.data(), 2, int(a.size()) / m.channels());
   ASSERT_EQ(res.size(), 2u);
-  EXPECT_LT(max_rel_err(res[0].lowres, sam_ref("lowres0.npy")), 5e-6);
-  EXPECT_LT(max_rel_err(res[1].lowres, sam_ref("lowres2.npy")), 5e-6);
+  EXPECT_LT(max_rel_err(res[0].lowres, sam_ref("lowres0.npy")), 1e-5);
+  EXPECT_LT(max_rel_err(res[1].lowres, sam_ref("lowres2.npy")), 1e-5);
 }
 
 TEST(SamModel, DecoderHeadsMatter) {

@@ -1,0 +1,112 @@
+// `hgs masks generate SCENE --sam W`: SAM's automatic mask generator on every view (src/sam/amg.h), written per
+// view as SAM JSON (COCO RLE strings) to SCENE/sam/<stem>.json, the form `hgs masks import --from sam-json` reads.
+// A view whose file exists is skipped (resume-safe; --force recomputes); each file is written atomically.
+#include <fmt/format.h>
+
+#include <nlohmann/json.hpp>
+
+#include "cli/masks_command.h"
+#include "clip/model.h"
+#include "core/error.h"
+#include "core/fs.h"
+#include "core/progress.h"
+#include "masks/rle.h"
+#include "sam/amg.h"
+#include "scene/scene.h"
+
+namespace hgs::cli {
+namespace {
+namespace fs = std::filesystem;
+
+struct GenerateArgs {
+  std::string scene, sam, out;
+  sam::AmgOptions amg;
+  int downscale = 1, threads = 0, decoder_heads = 0;
+  bool force = false, quiet = false;
+};
+
+nlohmann::json to_json(const std::vector<sam::AmgMask>& ms, int w, int h) {
+  nlohmann::json list = nlohmann::json::array();
+  for (const sam::AmgMask& m : ms) {
+    masks::Rle r = masks::rle_encode(m.mask, w, h);
+    list.push_back({{"segmentation", {{"size", {h, w}}, {"counts", masks::rle_counts_to_string(r.counts)}}},
+                    {"area", m.area},
+                    {"bbox", {m.bbox[0], m.bbox[1], m.bbox[2], m.bbox[3]}},
+                    {"predicted_iou", m.predicted_iou},
+                    {"point_coords", {{m.point[0], m.point[1]}}},
+                    {"stability_score", m.stability_score},
+                    {"crop_box", {0, 0, w, h}}});
+  }
+  return list;
+}
+
+void run_generate(const GenerateArgs& a) {
+  clip::set_num_threads(a.threads);
+  Scene s = load_scene(a.scene, {a.downscale, false});
+  sam::SamModel m = sam::SamModel::load(a.sam, {a.decoder_heads});
+  if (!a.quiet) fmt::print(stderr, "model: {}\n", m.describe());
+  const fs::path out_dir = a.out.empty() ? s.root / "sam" : fs::path(a.out);
+  const int n = a.amg.points_per_side * a.amg.points_per_side;
+  const int batches = (n + a.amg.points_per_batch - 1) / a.amg.points_per_batch;
+  Progress bar("sam masks", long(s.views.size()) * batches, !a.quiet);
+  int done = 0, skipped = 0;
+  size_t total = 0;
+  for (const View& v : s.views) {
+    const fs::path out = out_dir / (v.stem + ".json");
+    if (!a.force && fs::exists(out)) {
+      ++skipped;
+    } else {
+      Image img = s.load_image(v.index);
+      sam::ImageEmbedding e = m.embed(img);
+      std::vector<sam::AmgMask> ms = sam::generate_masks(m, e, a.amg, [&](int d, int) {
+        bar.update(long(done) * batches + (d + a.amg.points_per_batch - 1) / a.amg.points_per_batch, v.stem);
+      });
+      ensure_dir(out.parent_path());
+      atomic_write_text(out, to_json(ms, img.width, img.height).dump());
+      total += ms.size();
+    }
+    ++done;
+    bar.update(long(done) * batches, fmt::format("{} masks", total));
+  }
+  bar.finish();
+  fmt::print("wrote {} SAM mask files to {} ({} skipped as already done): {} masks\n", done - skipped,
+             out_dir.string(), skipped, total);
+  fmt::print("  next: hgs masks import {} --from sam-json {}\n", a.scene, out_dir.string());
+}
+
+const char* kDescription =
+    "Runs SAM's automatic mask generator (segment-anything's defaults: 32 x 32 grid of points, predicted IoU >\n"
+    "0.88, stability score > 0.95 at offset 1, box NMS at 0.7; one crop, no small-region removal) on every view\n"
+    "and writes SCENE/sam/<stem>.json: [{segmentation: {size, counts (COCO RLE)}, area, bbox, predicted_iou,\n"
+    "point_coords, stability_score, crop_box}], sorted by predicted IoU. Views already written are skipped, so an\n"
+    "interrupted run resumes. Weights: Hugging Face SamModel or segment-anything .safetensors (docs/sam.md).\n"
+    "Example: hgs masks generate SCENE --sam sam-vit-base.safetensors && hgs masks import SCENE --from sam-json SCENE/sam";
+
+MasksSubcommandRegistration reg({"generate", "Run SAM's automatic mask generator on every view into SCENE/sam/<stem>.json", 5,
+  [](CLI::App& sub) {
+    auto a = std::make_shared<GenerateArgs>();
+    sub.footer(kDescription);
+    sub.add_option("SCENE", a->scene, "Scene folder (images/, sparse/0/)")->required();
+    sub.add_option("--sam", a->sam, "SAM weights (.safetensors)")->required()->check(CLI::ExistingFile);
+    sub.add_option("--out", a->out, "Output folder (default SCENE/sam)");
+    sub.add_option("--points-per-side", a->amg.points_per_side, "Grid of n x n prompt points")
+        ->capture_default_str()->check(CLI::Range(1, 256));
+    sub.add_option("--points-per-batch", a->amg.points_per_batch, "Points decoded together")
+        ->capture_default_str()->check(CLI::Range(1, 4096));
+    sub.add_option("--pred-iou-thresh", a->amg.pred_iou_thresh, "Keep masks whose predicted IoU is above this")->capture_default_str();
+    sub.add_option("--stability-thresh", a->amg.stability_score_thresh, "Keep masks whose stability score is above this")
+        ->capture_default_str();
+    sub.add_option("--stability-offset", a->amg.stability_score_offset, "Logit offset of the stability score")->capture_default_str();
+    sub.add_option("--box-nms-thresh", a->amg.box_nms_thresh, "Box IoU above which the lower-scored mask is dropped")
+        ->capture_default_str();
+    sub.add_option("--downscale", a->downscale, "Integer image downscale factor before SAM")->capture_default_str()->check(CLI::Range(1, 64));
+    sub.add_option("--decoder-heads", a->decoder_heads, "Mask decoder heads (0 = config.json beside the weights, else 8)")
+        ->capture_default_str();
+    sub.add_flag("--force", a->force, "Recompute views whose file exists");
+    sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();
+    sub.add_flag("--quiet", a->quiet, "No progress bar");
+    return [a] { run_generate(*a); };
+  }});
+
+}  // namespace
+}  // namespace hgs::cli
