@@ -1,0 +1,199 @@
+// SAM speed on this machine at ViT-B shapes (sam-vit-base: hidden 768 x 12 layers, 12 heads, window 14, global
+// layers 2, 5, 8, 11, 1024 px, patch 16; neck / decoder 256, 2 decoder layers, 8 heads; random weights built
+// here, no file needed): the image embedding at 1024x1024, the mask decoder on a batch of 64 single-point
+// prompts, a whole automatic-mask image (32 x 32 grid, segment-anything's defaults, embedding included), and
+// a plain sgemm of the ViT MLP's shape for the attainable FLOP rate. Counters: FLOPS (from the model's
+// multiply-adds, to compare with the sgemm's), peak RSS of the process (MB).
+//   ./build/bench_sam --benchmark_min_time=1
+#include <benchmark/benchmark.h>
+#include <cblas.h>
+#include <sys/resource.h>
+
+#include <cmath>
+#include <random>
+
+#include "sam/amg.h"
+#include "sam/model.h"
+
+using namespace hgs;
+using namespace hgs::sam;
+
+namespace {
+
+constexpr int kHidden = 768, kLayers = 12, kHeads = 12, kWindow = 14, kGrid = 64, kPatch = 16, kOut = 256;
+
+std::vector<float> randn(size_t n, float scale, std::mt19937& rng) {
+  std::normal_distribution<float> d(0.f, scale);
+  std::vector<float> v(n);
+  for (auto& x : v) x = d(rng);
+  return v;
+}
+
+Linear lin(int out, int in, std::mt19937& rng) { return {in, out, randn(size_t(out) * in, 1.f / std::sqrt(float(in)), rng), randn(out, 0.02f, rng)}; }
+LayerNorm ln(int c) { return {std::vector<float>(c, 1.f), std::vector<float>(c, 0.f)}; }
+Attention attn(int c, int inner, std::mt19937& rng) { return {lin(inner, c, rng), lin(inner, c, rng), lin(inner, c, rng), lin(c, inner, rng)}; }
+Mlp mlp(int in, int hidden, int out, std::mt19937& rng) { return {{lin(hidden, in, rng), lin(hidden, hidden, rng), lin(out, hidden, rng)}}; }
+Upconv upconv(int in, int out, std::mt19937& rng) { return {in, out, randn(size_t(in) * 4 * out, 1.f / std::sqrt(float(in)), rng), randn(out, 0.02f, rng)}; }
+
+const SamModel& vit_b() {
+  static SamModel m = [] {
+    std::mt19937 rng(1);
+    SamModel s;
+    VisionEncoder& v = s.vision;
+    v.patch = kPatch, v.grid = kGrid, v.hidden = kHidden, v.heads = kHeads, v.out = kOut;
+    v.patch_embed = lin(kHidden, 3 * kPatch * kPatch, rng);
+    v.pos = randn(size_t(kGrid) * kGrid * kHidden, 0.02f, rng);
+    const int hd = kHidden / kHeads;
+    for (int i = 0; i < kLayers; ++i) {
+      VitLayer l;
+      l.window = (i % 3 == 2) ? 0 : kWindow;
+      const int size = l.window ? l.window : kGrid;
+      l.ln1 = l.ln2 = ln(kHidden);
+      l.qkv = lin(3 * kHidden, kHidden, rng);
+      l.proj = lin(kHidden, kHidden, rng);
+      l.fc1 = lin(4 * kHidden, kHidden, rng);
+      l.fc2 = lin(kHidden, 4 * kHidden, rng);
+      l.rel_h = randn(size_t(2 * size - 1) * hd, 0.02f, rng);
+      l.rel_w = randn(size_t(2 * size - 1) * hd, 0.02f, rng);
+      v.layers.push_back(std::move(l));
+    }
+    v.neck1 = {kHidden, kOut, randn(size_t(kOut) * kHidden, 1.f / std::sqrt(float(kHidden)), rng), std::vector<float>(kOut, 0.f)};
+    v.neck2 = {9 * kOut, kOut, randn(size_t(kOut) * 9 * kOut, 1.f / std::sqrt(9.f * kOut), rng), std::vector<float>(kOut, 0.f)};
+    v.neck_ln1 = v.neck_ln2 = ln(kOut);
+    PromptEncoder& p = s.prompt;
+    p.gauss = randn(size_t(kOut), 1.f, rng);
+    for (auto& e : p.point) e = randn(kOut, 1.f, rng);
+    p.not_a_point = randn(kOut, 1.f, rng);
+    p.no_mask = randn(kOut, 1.f, rng);
+    MaskDecoder& d = s.decoder;
+    d.heads = 8;
+    d.tokens = 4;
+    d.iou_token = randn(kOut, 1.f, rng);
+    d.mask_tokens = randn(size_t(4) * kOut, 1.f, rng);
+    for (int i = 0; i < 2; ++i) {
+      TwoWayLayer l;
+      l.self_attn = attn(kOut, kOut, rng);
+      l.token_to_image = attn(kOut, kOut / 2, rng);
+      l.image_to_token = attn(kOut, kOut / 2, rng);
+      l.ln1 = l.ln2 = l.ln3 = l.ln4 = ln(kOut);
+      l.mlp1 = lin(2048, kOut, rng);
+      l.mlp2 = lin(kOut, 2048, rng);
+      d.layers.push_back(std::move(l));
+    }
+    d.final_attn = attn(kOut, kOut / 2, rng);
+    d.ln_final = ln(kOut);
+    d.up1 = upconv(kOut, kOut / 4, rng);
+    d.up_ln = ln(kOut / 4);
+    d.up2 = upconv(kOut / 4, kOut / 8, rng);
+    for (int i = 0; i < 4; ++i) d.hyper.push_back(mlp(kOut, kOut, kOut / 8, rng));
+    d.iou_head = mlp(kOut, 256, 4, rng);
+    return s;
+  }();
+  return m;
+}
+
+double peak_rss_mb() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_maxrss / 1024.0;
+}
+
+// Multiply-add FLOPs (2 per MAC) of the image encoder.
+double encoder_flops() {
+  const double C = kHidden, N = double(kGrid) * kGrid;
+  const int nw = (kGrid + kWindow - 1) / kWindow;
+  const double M = double(nw) * nw * kWindow * kWindow;  // padded windowed tokens
+  double f = 2 * N * C * 3 * kPatch * kPatch;
+  for (int i = 0; i < kLayers; ++i) {
+    const bool global = i % 3 == 2;
+    const double t = global ? N : M, s2 = global ? N : double(kWindow) * kWindow, wins = global ? 1 : double(nw) * nw;
+    f += 2 * t * C * 4 * C;                     // qkv, proj
+    f += 4 * wins * s2 * s2 * C;                // Q K^T and P V
+    f += 2 * 2 * t * (2 * std::sqrt(s2) - 1) * C;  // relative-position tables
+    f += 2 * N * C * 8 * C;                     // MLP
+  }
+  f += 2 * N * C * kOut + 2 * N * 9.0 * kOut * kOut;  // neck
+  return f;
+}
+
+// FLOPs of the decoder for B single-point prompts (T = 2 sparse tokens): the per-prompt projections of the
+// image tokens and the upscaling dominate.
+double decoder_flops(int B) {
+  const double C = kOut, I = kOut / 2, N = double(kGrid) * kGrid, Tt = 7;
+  double shared = 2 * N * C * I * 2;  // layer 0 token-to-image keys and values
+  double per = 0;
+  per += 2 * (2 * N * C * I);          // layer 0 image-to-token q and out projections
+  per += 2 * (2 * N * C * I) + 2 * (2 * N * C * I);  // layer 1: token-to-image k, v; image-to-token q, out
+  per += 2 * (2 * N * C * I);          // final attention k, v
+  per += 4 * N * Tt * I * 3 * 2;       // attention products (small)
+  per += 2 * N * C * 4 * (C / 4) + 2 * 4 * N * (C / 4) * 4 * (C / 8);  // upscaling
+  per += 2 * 4 * (C / 8) * 16 * N;     // mask dot products
+  return shared + B * per;
+}
+
+void BM_ImageEmbedding1024(benchmark::State& state) {
+  const SamModel& m = vit_b();
+  std::mt19937 rng(2);
+  auto x = randn(size_t(1024) * 1024 * 3, 1.f, rng);
+  for (auto _ : state) benchmark::DoNotOptimize(m.encode(x.data()));
+  state.counters["FLOPS"] = benchmark::Counter(encoder_flops(), benchmark::Counter::kIsIterationInvariantRate);
+  state.counters["peak_RSS_MB"] = peak_rss_mb();
+}
+BENCHMARK(BM_ImageEmbedding1024)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(2);
+
+void BM_Decoder64Prompts(benchmark::State& state) {
+  const SamModel& m = vit_b();
+  std::mt19937 rng(3);
+  ImageEmbedding e;
+  e.grid = kGrid, e.channels = kOut, e.orig_h = 768, e.orig_w = 1024, e.input_h = 768, e.input_w = 1024;
+  e.data = randn(size_t(kGrid) * kGrid * kOut, 1.f, rng);
+  std::vector<float> sparse;
+  std::uniform_real_distribution<float> U(0.f, 1000.f);
+  for (int i = 0; i < 64; ++i) {
+    Prompt p;
+    p.points = {{U(rng), U(rng) * 0.75f}};
+    p.labels = {1};
+    auto s = m.encode_prompt(m.to_input(e, p));
+    sparse.insert(sparse.end(), s.begin(), s.end());
+  }
+  for (auto _ : state) benchmark::DoNotOptimize(m.decode(e.data.data(), sparse.data(), 64, 2));
+  state.counters["FLOPS"] = benchmark::Counter(decoder_flops(64), benchmark::Counter::kIsIterationInvariantRate);
+  state.counters["peak_RSS_MB"] = peak_rss_mb();
+}
+BENCHMARK(BM_Decoder64Prompts)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(2);
+
+// A whole automatic-mask image: embedding + 32 x 32 points in batches of 64, segment-anything's thresholds.
+void BM_AutomaticMasksImage(benchmark::State& state) {
+  const SamModel& m = vit_b();
+  Image img(1024, 768, 3);
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<float> U(0.f, 1.f);
+  for (auto& v : img.px) v = U(rng);
+  size_t masks = 0;
+  for (auto _ : state) {
+    ImageEmbedding e = m.embed(img);
+    masks = generate_masks(m, e, AmgOptions{}).size();
+  }
+  state.counters["masks"] = double(masks);
+  state.counters["FLOPS"] = benchmark::Counter(encoder_flops() + 16 * decoder_flops(64), benchmark::Counter::kIsIterationInvariantRate);
+  state.counters["peak_RSS_MB"] = peak_rss_mb();
+}
+BENCHMARK(BM_AutomaticMasksImage)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1);
+
+// The reference rate: one sgemm with the shape of the ViT-B MLP up-projection, [n, 768] x [768, 3072].
+void BM_SgemmReference(benchmark::State& state) {
+  const int n = int(state.range(0)), k = 768, o = 3072;
+  std::mt19937 rng(5);
+  auto a = randn(size_t(n) * k, 1.f, rng), b = randn(size_t(o) * k, 1.f, rng);
+  std::vector<float> c(size_t(n) * o);
+  for (auto _ : state) {
+    cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, n, o, k, 1.f, a.data(), k, b.data(), k, 0.f, c.data(), o);
+    benchmark::DoNotOptimize(c.data());
+  }
+  state.counters["FLOPS"] = benchmark::Counter(2.0 * n * k * o, benchmark::Counter::kIsIterationInvariantRate);
+}
+BENCHMARK(BM_SgemmReference)->Arg(4096)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+}  // namespace
+
+BENCHMARK_MAIN();
