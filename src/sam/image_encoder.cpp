@@ -5,7 +5,8 @@
 //     as keys with value bias, as in SAM) and attend within each; global layers attend over the whole grid.
 //     Attention adds the decomposed relative positions before the softmax: for query (i, j) and key (k, l),
 //     q . Rh[i - k + s - 1] + q . Rw[j - l + s - 1] with the unscaled query (s = window or grid side); the two
-//     tables of dot products come from one sgemm each (q [n, hd] x R^T [hd, 2s - 1]) and are gathered.
+//     tables of dot products come from one sgemm each (q [n, hd] x R^T [hd, 2s - 1]) and are gathered. Global
+//     attention runs in blocks of query rows so that the scores stay in cache.
 //   neck: 1x1 conv, channel LayerNorm, 3x3 conv (pad 1, im2col), channel LayerNorm (eps 1e-6, no biases).
 #include <algorithm>
 #include <cblas.h>
@@ -21,18 +22,19 @@ namespace {
 
 constexpr float kVitEps = 1e-6f;
 
-// Relative-position bias of one head: adds to scores [n, n] (n = s * s tokens of an s x s grid) the terms
-// q . rel_h[qi_row - k_row + s - 1] + q . rel_w[qi_col - k_col + s - 1]; q [n, hd] with row stride ldq.
-void add_rel_pos(const float* q, int ldq, int s, int hd, const float* rel_h, const float* rel_w, float* scores,
-                 std::vector<float>& th, std::vector<float>& tw) {
+// Relative-position bias of one head for the query rows [row0, row0 + nq) of an s x s grid (n = s * s keys):
+// adds to scores [nq, n] the terms q . rel_h[q_row - k_row + s - 1] + q . rel_w[q_col - k_col + s - 1];
+// q [nq, hd] (those rows) with row stride ldq.
+void add_rel_pos(const float* q, int ldq, int row0, int nq, int s, int hd, const float* rel_h, const float* rel_w,
+                 float* scores, std::vector<float>& th, std::vector<float>& tw) {
   const int n = s * s, r = 2 * s - 1;
-  th.resize(size_t(n) * r);
-  tw.resize(size_t(n) * r);
-  cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, n, r, hd, 1.f, q, ldq, rel_h, hd, 0.f, th.data(), r);
-  cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, n, r, hd, 1.f, q, ldq, rel_w, hd, 0.f, tw.data(), r);
-  clip::parallel_for(n, 64, [&](long i0, long i1) {
+  th.resize(size_t(nq) * r);
+  tw.resize(size_t(nq) * r);
+  cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, nq, r, hd, 1.f, q, ldq, rel_h, hd, 0.f, th.data(), r);
+  cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, nq, r, hd, 1.f, q, ldq, rel_w, hd, 0.f, tw.data(), r);
+  clip::parallel_for(nq, 16, [&](long i0, long i1) {
     for (long i = i0; i < i1; ++i) {
-      const int qi = int(i) / s, qj = int(i) % s;
+      const int qi = int(row0 + i) / s, qj = int(row0 + i) % s;
       const float* a = th.data() + size_t(i) * r;
       const float* b = tw.data() + size_t(i) * r;
       float* row = scores + size_t(i) * n;
@@ -69,14 +71,20 @@ void vit_attention(const VitLayer& l, int g, int C, int heads, const float* h, f
   w.qkv.resize(size_t(M) * 3 * C);
   clip::linear(l.qkv, w.win.data(), M, w.qkv.data());
   w.attn.resize(size_t(M) * C);
-  w.scores.resize(size_t(n) * n);
+  // Query blocks keep the score matrix [rows, n] within ~2 MB (cache) for the global layers.
+  const int rows = std::min(n, std::max(16, (1 << 19) / n));
+  w.scores.resize(size_t(rows) * n);
   for (int wi = 0; wi < nw * nw; ++wi) {
     const float* base = w.qkv.data() + size_t(wi) * n * 3 * C;
-    auto bias = [&](int head, float* sc) {
-      add_rel_pos(base + head * hd, 3 * C, s, hd, l.rel_h.data(), l.rel_w.data(), sc, w.th, w.tw);
-    };
-    clip::multi_head_attention(base, 3 * C, base + C, 3 * C, base + 2 * C, 3 * C, n, n, heads, hd, scale,
-                               w.attn.data() + size_t(wi) * n * C, C, w.scores.data(), false, bias);
+    for (int r0 = 0; r0 < n; r0 += rows) {
+      const int nq = std::min(rows, n - r0);
+      const float* qb = base + size_t(r0) * 3 * C;
+      auto bias = [&](int head, float* sc) {
+        add_rel_pos(qb + head * hd, 3 * C, r0, nq, s, hd, l.rel_h.data(), l.rel_w.data(), sc, w.th, w.tw);
+      };
+      clip::multi_head_attention(qb, 3 * C, base + C, 3 * C, base + 2 * C, 3 * C, nq, n, heads, hd, scale,
+                                 w.attn.data() + (size_t(wi) * n + r0) * C, C, w.scores.data(), false, bias);
+    }
   }
   w.out.resize(size_t(M) * C);
   clip::linear(l.proj, w.attn.data(), M, w.out.data());
