@@ -96,8 +96,15 @@ void run_train(const TrainArgs& a) {
   std::vector<std::pair<std::string, double>> ema_terms;  // each weighted term, in the objective's order
   train::StepTimes parts;  // summed over the steps of this run
   auto t0 = std::chrono::steady_clock::now();
+  std::string last_ckpt = a.resume;  // the newest checkpoint on disk, for the message of a failed step
   while (trainer.iteration() < a.iters) {
-    train::StepInfo s = trainer.step();
+    train::StepInfo s;
+    try {
+      s = trainer.step();
+    } catch (const Error& e) {  // e.g. a non-finite loss or gradient: nothing of this run's state is saved
+      if (last_ckpt.empty()) fail("{} (no checkpoint written: nothing saved)", e.what());
+      fail("{} (the last checkpoint {} is intact: --resume from it)", e.what(), last_ckpt);
+    }
     ms.push_back(float(s.ms));
     train::StepTimes::each([&](const char*, double train::StepTimes::*m) { parts.*m += s.times.*m; });
     bool first = ms.size() == 1;
@@ -114,6 +121,7 @@ void run_train(const TrainArgs& a) {
       ensure_dir(out / "checkpoints");
       trainer.save_checkpoint(out / "checkpoints" / fmt::format("iter_{}.ckpt", it));
       write_model_ply(out / fmt::format("point_cloud_iter_{}.ply", it), trainer.model());
+      last_ckpt = (out / "checkpoints" / fmt::format("iter_{}.ckpt", it)).string();
     }
     if (progress) {
       std::string terms;

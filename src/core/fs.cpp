@@ -1,7 +1,13 @@
 #include "core/fs.h"
 
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
 #include <fstream>
 #include <random>
+#include <system_error>
 
 #include "core/error.h"
 
@@ -25,14 +31,37 @@ std::string read_file_text(const fs::path& path) {
   return std::string(b.begin(), b.end());
 }
 
-void atomic_write(const fs::path& path, const std::function<void(const fs::path&)>& write) {
-  fs::path dir = path.parent_path();
-  if (!dir.empty()) ensure_dir(dir);
+namespace {
+
+std::string errno_text(int e) { return std::error_code(e, std::generic_category()).message(); }
+
+struct Fd {  // closes on scope exit
+  int fd;
+  ~Fd() {
+    if (fd >= 0) ::close(fd);
+  }
+};
+
+fs::path temp_name(const fs::path& path) {
   static thread_local std::mt19937_64 rng{std::random_device{}()};
   fs::path tmp = path;
   tmp += fmt::format(".tmp{:08x}", static_cast<uint32_t>(rng()));
+  return tmp;
+}
+
+// Flushes the file `fd` to the disk: once its name appears, its bytes are there too (also across a power loss).
+void sync_fd(int fd, const fs::path& path) {
+  if (::fsync(fd) != 0) fail("{}: cannot write ({})", path.string(), errno_text(errno));
+}
+
+// Fallback for file systems without O_TMPFILE: named temp file, fsync, rename.
+void write_via_named_temp(const fs::path& path, const std::function<void(const fs::path&)>& write) {
+  const fs::path tmp = temp_name(path);
   try {
     write(tmp);
+    Fd f{::open(tmp.c_str(), O_RDONLY | O_CLOEXEC)};
+    if (f.fd < 0) fail("{}: cannot write ({})", path.string(), errno_text(errno));
+    sync_fd(f.fd, path);
     std::error_code ec;
     fs::rename(tmp, path, ec);
     if (ec) fail("{}: cannot write ({})", path.string(), ec.message());
@@ -43,12 +72,54 @@ void atomic_write(const fs::path& path, const std::function<void(const fs::path&
   }
 }
 
+}  // namespace
+
+void atomic_write(const fs::path& path, const std::function<void(const fs::path&)>& write) {
+  fs::path dir = path.parent_path();
+  if (!dir.empty()) ensure_dir(dir);
+  // An unnamed file in the destination folder: a kill before it is linked leaves nothing behind.
+  Fd f{::open(dir.empty() ? "." : dir.c_str(), O_TMPFILE | O_WRONLY | O_CLOEXEC, 0666)};
+  if (f.fd < 0) {
+    const int e = errno;
+    if (e == EOPNOTSUPP || e == EISDIR || e == EINVAL) return write_via_named_temp(path, write);
+    fail("{}: cannot write ({})", path.string(), errno_text(e));
+  }
+  const std::string proc = fmt::format("/proc/self/fd/{}", f.fd);
+  if (::access(proc.c_str(), F_OK) != 0) return write_via_named_temp(path, write);  // no /proc
+  write(proc);  // the writer reopens the unnamed file through /proc (truncating it) and closes it
+  sync_fd(f.fd, path);
+  if (::linkat(AT_FDCWD, proc.c_str(), AT_FDCWD, path.c_str(), AT_SYMLINK_FOLLOW) == 0) return;
+  if (errno != EEXIST) fail("{}: cannot write ({})", path.string(), errno_text(errno));
+  // Replacing a file: link under a temporary name (complete already), then rename over the old one.
+  for (int attempt = 0;; ++attempt) {
+    const fs::path tmp = temp_name(path);
+    if (::linkat(AT_FDCWD, proc.c_str(), AT_FDCWD, tmp.c_str(), AT_SYMLINK_FOLLOW) != 0) {
+      if (errno == EEXIST && attempt < 8) continue;
+      fail("{}: cannot write ({})", path.string(), errno_text(errno));
+    }
+    if (::rename(tmp.c_str(), path.c_str()) != 0) {
+      const int e = errno;
+      ::unlink(tmp.c_str());
+      fail("{}: cannot write ({})", path.string(), errno_text(e));
+    }
+    return;
+  }
+}
+
 void atomic_write_bytes(const fs::path& path, const void* data, size_t size) {
   atomic_write(path, [&](const fs::path& tmp) {
-    std::ofstream out(tmp, std::ios::binary);
-    if (!out) fail("{}: cannot open for writing", path.string());
-    out.write(static_cast<const char*>(data), static_cast<std::streamsize>(size));
-    if (!out) fail("{}: write error (disk full?)", path.string());
+    Fd f{::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666)};
+    if (f.fd < 0) fail("{}: cannot open for writing ({})", path.string(), errno_text(errno));
+    const char* p = static_cast<const char*>(data);
+    for (size_t done = 0; done < size;) {  // every short write is continued; an error is reported (no stream buffer)
+      const ssize_t n = ::write(f.fd, p + done, std::min<size_t>(size - done, size_t(1) << 30));
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) fail("{}: write error ({})", path.string(), errno_text(n < 0 ? errno : ENOSPC));
+      done += size_t(n);
+    }
+    const int fd = f.fd;
+    f.fd = -1;
+    if (::close(fd) != 0) fail("{}: write error ({})", path.string(), errno_text(errno));
   });
 }
 

@@ -1,5 +1,10 @@
-// File helpers: whole-file reads with clear errors, and atomic writes (temp file in the same folder, then
-// rename) so that a failed command never leaves partial output behind.
+// File helpers: whole-file reads with clear errors, and atomic writes so that a failed or killed command never
+// leaves partial output behind: the data goes to an unnamed file in the destination folder (Linux O_TMPFILE),
+// is flushed to the disk (fsync), and only then gets its name (linkat, or link under a temporary name + rename
+// when it replaces a file). A process killed at any moment (SIGKILL) leaves the old file or the new one, never
+// a torn one, and no temporary file (file systems without O_TMPFILE: a named temp file `<name>.tmpXXXXXXXX`
+// that a kill may leave behind, never under the output's name). Disk full, a file size limit (RLIMIT_FSIZE)
+// or a read-only folder fail with a one-line hgs::Error naming the file.
 #pragma once
 #include <cstdint>
 #include <filesystem>
@@ -13,7 +18,8 @@ namespace fs = std::filesystem;
 std::vector<uint8_t> read_file_bytes(const fs::path& path);
 std::string read_file_text(const fs::path& path);
 
-// Calls `write(tmp_path)` then renames tmp_path to `path`. The temp file is removed if `write` throws.
+// Calls `write(tmp_path)` (which creates or truncates tmp_path and writes the whole file, reporting its own
+// errors), then flushes it and gives it the name `path`. Nothing appears under `path` if `write` throws.
 void atomic_write(const fs::path& path, const std::function<void(const fs::path&)>& write);
 void atomic_write_bytes(const fs::path& path, const void* data, size_t size);
 void atomic_write_text(const fs::path& path, const std::string& text);

@@ -67,11 +67,13 @@ void Adam::update(AdamParam& p, float* value, const float* grad, int n) const {
   float* m = p.m.data();
   float* v = p.v.data();
   bool uniform = std::all_of(p.lr.begin(), p.lr.end(), [&](float l) { return l == p.lr[0]; });
+  long bad = 0;
   if (uniform) {
     const float step = p.lr[0] / bc1;
-#pragma omp parallel for simd schedule(static)
+#pragma omp parallel for simd schedule(static) reduction(+ : bad)
     for (size_t i = 0; i < total; ++i) {
       float g = grad[i];
+      bad += nonfinite_bit(g);
       float mi = b1 * m[i] + (1 - b1) * g;
       float vi = b2 * v[i] + (1 - b2) * g * g;
       m[i] = mi;
@@ -83,12 +85,13 @@ void Adam::update(AdamParam& p, float* value, const float* grad, int n) const {
     float steps[256];
     if (d > 256) fail("adam: parameter '{}' has {} columns with different rates (max 256)", p.name, d);
     for (int c = 0; c < d; ++c) steps[c] = p.lr[c] / bc1;
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) reduction(+ : bad)
     for (long r = 0; r < n; ++r) {
       const size_t o = size_t(r) * d;
-#pragma omp simd
+#pragma omp simd reduction(+ : bad)
       for (int c = 0; c < d; ++c) {
         float g = grad[o + c];
+        bad += nonfinite_bit(g);
         float mi = b1 * m[o + c] + (1 - b1) * g;
         float vi = b2 * v[o + c] + (1 - b2) * g * g;
         m[o + c] = mi;
@@ -97,6 +100,7 @@ void Adam::update(AdamParam& p, float* value, const float* grad, int n) const {
       }
     }
   }
+  p.nonfinite += bad;
 }
 
 void Adam::check_rows(const AdamParam& p, int n) const {
@@ -197,12 +201,15 @@ void adam_row(const AdamParam& p, X* x, const float* g, float* m32, float* v32, 
 template <class X>
 void Adam::update_row(AdamParam& p, X* value, long row, const float* g) const {
   check_rows(p, int(p.rows()));
-  row_kernel(p, value, row, g, ++p.step);
+  p.nonfinite += row_kernel(p, value, row, g, ++p.step);
 }
 
 template <class X>
-void Adam::row_kernel(AdamParam& p, X* value, long row, const float* g, long ts) const {
+int Adam::row_kernel(AdamParam& p, X* value, long row, const float* g, long ts) const {
   const int d = p.dim;
+  int bad = 0;
+#pragma omp simd reduction(+ : bad)
+  for (int c = 0; c < d; ++c) bad += nonfinite_bit(g[c]);
   const double t = double(std::max(1L, ts));
   const float step = p.lr[0] / float(1.0 - std::pow(double(beta1), t));
   const float inv_sqrt_bc2 = float(1.0 / std::sqrt(1.0 - std::pow(double(beta2), t)));
@@ -214,12 +221,13 @@ void Adam::row_kernel(AdamParam& p, X* value, long row, const float* g, long ts)
   else
     adam_row(p, value + o, g, p.m.data() + o, p.v.data() + o, nullptr, nullptr, beta1, beta2, p.eps, step,
              inv_sqrt_bc2, base);
+  return bad;
 }
 
 template void Adam::update_row<float>(AdamParam&, float*, long, const float*) const;
 template void Adam::update_row<uint16_t>(AdamParam&, uint16_t*, long, const float*) const;
-template void Adam::row_kernel<float>(AdamParam&, float*, long, const float*, long) const;
-template void Adam::row_kernel<uint16_t>(AdamParam&, uint16_t*, long, const float*, long) const;
+template int Adam::row_kernel<float>(AdamParam&, float*, long, const float*, long) const;
+template int Adam::row_kernel<uint16_t>(AdamParam&, uint16_t*, long, const float*, long) const;
 
 void Adam::gather(const std::vector<int>& src, const std::vector<char>& fresh) {
   for (auto& p : params) {
@@ -232,6 +240,16 @@ void Adam::gather(const std::vector<int>& src, const std::vector<char>& fresh) {
       gather_rows(p.v, p.dim, src, fresh);
     }
   }
+}
+
+const AdamParam* Adam::first_nonfinite() const {
+  for (const auto& p : params)
+    if (p.nonfinite > 0) return &p;
+  return nullptr;
+}
+
+void Adam::clear_nonfinite() {
+  for (auto& p : params) p.nonfinite = 0;
 }
 
 void Adam::reset_moments(const std::string& name) {

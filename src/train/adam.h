@@ -9,6 +9,8 @@
 // Wide per-Gaussian embeddings (the hybrid method's f_n, D = 512) use update_rows instead: row-sparse, the
 // gradient of a row is produced on the fly (no [N, D] gradient buffer), the moments may be stored in bfloat16
 // and the values in IEEE half (half the memory each; stochastic rounding keeps them unbiased, see core/half.h).
+// Every update counts the non-finite gradient values it saw (`AdamParam::nonfinite`, an exponent test fused into
+// the update loops): the trainer checks the counts after each step and stops naming the parameter group.
 #pragma once
 #include <cstdint>
 #include <deque>
@@ -38,6 +40,7 @@ struct AdamParam {
   std::vector<float> m, v;  // [N, dim] (float32 moments)
   bool bf16 = false;        // moments stored in m16 / v16 instead of m / v
   std::vector<uint16_t> m16, v16;  // [N, dim] (bfloat16 moments)
+  long nonfinite = 0;       // NaN / Inf gradient values seen by the updates since the last clear_nonfinite()
   void set_lr(float value) { lr.assign(dim, value); }
   size_t rows() const { return (bf16 ? m16.size() : m.size()) / size_t(dim); }
 };
@@ -69,14 +72,18 @@ class Adam {
   // One step that updates a single row (g [dim] is its gradient; advances p.step). X = float or uint16_t.
   template <class X>
   void update_row(AdamParam& p, X* value, long row, const float* g) const;
-  // The per-row kernel at step t (does not advance p.step).
+  // The per-row kernel at step t (does not advance p.step). Returns the number of non-finite values in g (the
+  // caller adds them to p.nonfinite).
   template <class X>
-  void row_kernel(AdamParam& p, X* value, long row, const float* g, long t) const;
+  int row_kernel(AdamParam& p, X* value, long row, const float* g, long t) const;
   // Row i of every per-Gaussian moment array becomes old row src[i], or zeros when fresh[i] (fresh may be
   // empty = none). Array parameters are left alone.
   void gather(const std::vector<int>& src, const std::vector<char>& fresh);
   // Zeroes both moments of one parameter (3DGS does this when it resets opacities).
   void reset_moments(const std::string& name);
+  // The first parameter whose updates saw a non-finite gradient value since the last clear (null = none).
+  const AdamParam* first_nonfinite() const;
+  void clear_nonfinite();
 
  private:
   void check_rows(const AdamParam& p, int n) const;  // throws unless p holds n rows and dim <= kMaxRowUpdateDim
@@ -88,13 +95,22 @@ template <class X, class RowGrad>
 void Adam::update_rows(AdamParam& p, X* value, int n, RowGrad&& row_grad) const {
   check_rows(p, n);
   const long t = ++p.step;
-#pragma omp parallel
+  long bad = 0;
+#pragma omp parallel reduction(+ : bad)
   {
     alignas(64) float g[kMaxRowUpdateDim];
 #pragma omp for schedule(dynamic, 64)
     for (long i = 0; i < n; ++i)
-      if (row_grad(i, g)) row_kernel(p, value, i, g, t);
+      if (row_grad(i, g)) bad += row_kernel(p, value, i, g, t);
   }
+  p.nonfinite += bad;
+}
+
+// 1 when x is NaN or +-Inf (an exponent test on the bits: vectorises, and survives -ffast-math).
+inline int nonfinite_bit(float x) {
+  uint32_t u;
+  __builtin_memcpy(&u, &x, 4);
+  return (u & 0x7f800000u) == 0x7f800000u;
 }
 
 }  // namespace hgs::train

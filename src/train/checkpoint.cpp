@@ -7,6 +7,8 @@
 // (bfloat16 moments widened, exact), densification statistics, then the method's non-parameter state
 // ("method/<name>", e.g. the hybrid method's observation table). No per-method code: every parameter the method
 // registered is saved and restored by name. Read and written in streams (no whole-file buffer).
+#include <cmath>
+#include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <memory>
@@ -106,8 +108,9 @@ void Trainer::save_checkpoint(const std::filesystem::path& path) const {
         ok = std::fwrite(chunk.data(), 4, c, f) == c;
       }
     }
-    ok = (std::fclose(f) == 0) && ok;
-    if (!ok) fail("{}: write failed (disk full?)", path.string());
+    int err = ok ? 0 : errno;  // of the failed write (e.g. ENOSPC, EFBIG)
+    if (std::fclose(f) != 0 && ok) ok = false, err = errno;
+    if (!ok) fail("{}: write failed ({})", path.string(), err ? std::strerror(err) : "disk full?");
   });
 }
 
@@ -235,7 +238,12 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
       ++seen;
     }
     if (seen != dst.size() + dst16.size()) fail("{}: checkpoint holds {} arrays, expected {}", where, seen, dst.size() + dst16.size());
-    for (int i = 0; i < m.n; ++i) st.count[i] = int(counts[i]);
+    for (int i = 0; i < m.n; ++i) {  // written from ints: anything else is corruption (and casting it undefined)
+      const float c = counts[i];
+      if (!(c >= 0 && c <= float(1 << 24) && c == std::floor(c)))
+        fail("{}: corrupt densification statistics (count {} of Gaussian {})", where, c, i);
+      st.count[i] = int(c);
+    }
     std::istringstream rs(h.at("rng").get<std::string>());
     std::mt19937_64 rng;
     rs >> rng;

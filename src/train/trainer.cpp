@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <cstdlib>
 
 #include "core/error.h"
 #include "model/render_inputs.h"
@@ -36,6 +38,29 @@ Trainer::Trainer(const TrainConfig& cfg, GaussianModel model, std::vector<TrainV
     adam_.get(name).values = [this, f = f] { return ParamValues{&(model_.*f), nullptr}; };
   stats_.reset(model_.n);
   method_->attach(model_, adam_, views_);
+  if (const char* e = std::getenv("HGS_INJECT_NAN")) {  // test hook (numerical faults): "<iteration>:<group>"
+    const std::string spec = e;
+    const size_t colon = spec.find(':');
+    char* end = nullptr;
+    const long it = colon == std::string::npos ? 0 : std::strtol(spec.c_str(), &end, 10);
+    inject_group_ = colon == std::string::npos ? "" : spec.substr(colon + 1);
+    const bool known = inject_group_ == "loss" || inject_group_ == "mean" || inject_group_ == "log_scale" ||
+                       inject_group_ == "quat" || inject_group_ == "opacity" || inject_group_ == "sh";
+    if (it <= 0 || end != spec.c_str() + colon || !known)
+      fail("HGS_INJECT_NAN: expected <iteration>:<loss|mean|log_scale|quat|opacity|sh>, got '{}'", spec);
+    inject_iter_ = int(it);
+  }
+}
+
+void Trainer::check_finite(int it) const {
+  for (const LossTerm& t : objective_.terms())
+    if (!std::isfinite(t.value))
+      fail("train: iteration {}: the '{}' loss is {} (non-finite); training stopped", it, t.name, t.value);
+  if (!adam_.first_nonfinite()) return;
+  std::string groups;  // every group that saw one, in registration order (a NaN spreads through the chain rule)
+  for (const AdamParam& p : adam_.params)
+    if (p.nonfinite > 0) groups += fmt::format("{}'{}' ({} values)", groups.empty() ? "" : ", ", p.name, p.nonfinite);
+  fail("train: iteration {}: non-finite gradient (NaN/Inf) in parameter group {}; training stopped", it, groups);
 }
 
 int Trainer::active_sh_degree() const {
@@ -71,6 +96,7 @@ StepInfo Trainer::step() {
   };
   if (model_.n == 0) fail("train: every Gaussian was pruned by iteration {}", it_);
   const int it = ++it_;  // 1-based, as in 3DGS
+  adam_.clear_nonfinite();
   adam_.get("mean").set_lr(cfg_.position_lr(it, extent_));
   const int vi = next_view();
   const TrainView& v = views_[vi];
@@ -117,6 +143,7 @@ StepInfo Trainer::step() {
   const float w_rgb = method_->rgb_weight();
   if (w_rgb != 1.f)
     for (float& g : d_rgb_) g *= w_rgb;
+  if (it == inject_iter_ && inject_group_ == "loss") info.loss.total = d_rgb_[0] = std::nanf("");
   objective_.add("rgb", w_rgb, info.loss.total);
   dout.rgb = d_rgb_.data();
   c.d_rgb = d_rgb_.data();
@@ -130,6 +157,13 @@ StepInfo Trainer::step() {
   renderer_.preprocess_backward(pgrads_, grads_);
   tick(info.times.backward);
 
+  if (it == inject_iter_ && inject_group_ != "loss") {
+    std::vector<float>* g = inject_group_ == "mean" ? &grads_.mean : inject_group_ == "log_scale" ? &grads_.log_scale
+                            : inject_group_ == "quat" ? &grads_.quat : inject_group_ == "opacity" ? &grads_.opacity_logit
+                                                                                                   : &grads_.sh;
+    (*g)[g->size() / 2] = std::nanf("");
+  }
+
   // Adam.
   adam_.update(adam_.get("mean"), model_.mean.data(), grads_.mean.data(), model_.n);
   adam_.update(adam_.get("log_scale"), model_.log_scale.data(), grads_.log_scale.data(), model_.n);
@@ -137,6 +171,11 @@ StepInfo Trainer::step() {
   adam_.update(adam_.get("opacity"), model_.opacity_logit.data(), grads_.opacity_logit.data(), model_.n);
   adam_.update(adam_.get("sh"), model_.sh.data(), grads_.sh.data(), model_.n);
   method_->update(c);
+  // Numerical faults: every loss term finite and every gradient value the optimiser saw this step (the method's
+  // parameters too, some updated during losses/backward) finite; else stop before densification and before
+  // anything is saved (hgs train keeps its last checkpoint).
+  check_finite(it);
+  adam_.clear_nonfinite();
   tick(info.times.update);
   info.terms = objective_.terms();
   info.total = objective_.total();

@@ -70,6 +70,8 @@ class Trainer {
   Trainer(const Trainer&) = delete;
   Trainer& operator=(const Trainer&) = delete;
 
+  // One iteration. A non-finite loss term or gradient value (any registered parameter) stops it with an
+  // hgs::Error naming the iteration and the term or parameter group; the model is then not to be saved.
   StepInfo step();
   int iteration() const { return it_; }  // iterations done
   int active_sh_degree() const;
@@ -109,8 +111,13 @@ class Trainer {
   Objective objective_;
   std::unique_ptr<Method> method_;
 
+  int inject_iter_ = 0;     // HGS_INJECT_NAN=<iteration>:<group> (a test hook, see docs/reliability.md)
+  std::string inject_group_;
+
   int next_view();
   void release_step_buffers();
+  // Throws hgs::Error naming iteration `it` and the loss term or parameter group when one was not finite.
+  void check_finite(int it) const;
 };
 
 }  // namespace hgs::train
