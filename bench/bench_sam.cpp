@@ -116,18 +116,19 @@ double encoder_flops() {
   return f;
 }
 
-// FLOPs of the decoder for B single-point prompts (T = 2 sparse tokens): the per-prompt projections of the
-// image tokens and the upscaling dominate.
+// FLOPs the decoder executes for B single-point prompts (Tt = 7 tokens: iou, 4 masks, point, padding), with
+// the reassociated cross attentions of src/sam/decoder_attention.h; elementwise work not counted.
 double decoder_flops(int B) {
-  const double C = kOut, I = kOut / 2, N = double(kGrid) * kGrid, Tt = 7;
-  double shared = 2 * N * C * I * 2;  // layer 0 token-to-image keys and values
+  const double C = kOut, I = kOut / 2, N = double(kGrid) * kGrid, Tt = 7, R = 8 * Tt;
+  const double shared = 3 * (2 * N * C * I);     // layer 0: token-to-image k, v; image-to-token q
   double per = 0;
-  per += 2 * (2 * N * C * I);          // layer 0 image-to-token q and out projections
-  per += 2 * (2 * N * C * I) + 2 * (2 * N * C * I);  // layer 1: token-to-image k, v; image-to-token q, out
-  per += 2 * (2 * N * C * I);          // final attention k, v
-  per += 4 * N * Tt * I * 3 * 2;       // attention products (small)
+  per += 2 * (2 * Tt * N * I);                   // layer 0 token-to-image scores and values
+  per += 2 * N * Tt * I + 2 * N * R * C;         // layer 0 image-to-token scores, values through out_proj
+  per += 2 * (2 * R * N * C);                    // layer 1 token-to-image (few queries)
+  per += 2 * N * C * I + 2 * N * Tt * I + 2 * N * R * C;  // layer 1 image-to-token
+  per += 2 * (2 * R * N * C);                    // final token-to-image
   per += 2 * N * C * 4 * (C / 4) + 2 * 4 * N * (C / 4) * 4 * (C / 8);  // upscaling
-  per += 2 * 4 * (C / 8) * 16 * N;     // mask dot products
+  per += 2 * 4 * (C / 8) * 16 * N;               // mask dot products
   return shared + B * per;
 }
 

@@ -7,13 +7,15 @@
 //     q = LN1(q + self(q + qpe, q + qpe, q)); q = LN2(q + t2i(q + qpe, k + kpe, k)); q = LN3(q + mlp(q));
 //     k = LN4(k + i2t(k + kpe, q + qpe, q));   final: q = LN(q + t2i_final(q + qpe, k + kpe, k)).
 // Attention projects to an inner width (C / 2 in the cross attentions), splits heads, scales by 1/sqrt(head dim).
-// The first block's token-to-image keys and values depend on the image only and are computed once per call.
+// The first block's token-to-image keys and values and image-to-token queries depend on the image only and are
+// computed once per call; the other cross attentions use the reassociated forms of decoder_attention.h.
 #include <algorithm>
 #include <cblas.h>
 #include <cmath>
 
 #include "clip/transformer.h"
 #include "core/error.h"
+#include "sam/decoder_attention.h"
 #include "sam/model.h"
 
 namespace hgs::sam {
@@ -103,9 +105,14 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
   kv0.v.resize(size_t(N) * a0.v.out);
   clip::linear(a0.k, kpe.data(), N, kv0.k.data());
   clip::linear(a0.v, src0.data(), N, kv0.v.data());
+  // ... and the first block's image-to-token query projection.
+  const Attention& i0 = d.layers[0].image_to_token;
+  std::vector<float> q0(size_t(N) * i0.q.out);
+  clip::linear(i0.q, kpe.data(), N, q0.data());
 
   std::vector<Prediction> res(B);
   Proj w;
+  AttnWork aw;
   std::vector<float> scores, q(size_t(Tt) * C), qpe, keys, tmp, qq, kk, mlp;
   for (int b = 0; b < B; ++b) {
     std::copy(d.iou_token.begin(), d.iou_token.end(), q.begin());
@@ -130,7 +137,7 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
         attend(l.token_to_image, heads, qq.data(), Tt, nullptr, nullptr, N, tmp.data(), w, scores, &kv0);
       } else {
         add(keys.data(), pe.data(), keys.size(), kk);
-        attend(l.token_to_image, heads, qq.data(), Tt, kk.data(), keys.data(), N, tmp.data(), w, scores);
+        attend_few_queries(l.token_to_image, heads, qq.data(), Tt, kk.data(), keys.data(), N, tmp.data(), aw);
       }
       for (size_t i = 0; i < q.size(); ++i) q[i] += tmp[i];
       clip::layer_norm(l.ln2, q.data(), Tt, C, q.data(), d.ln_eps);
@@ -140,15 +147,15 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
       clip::linear_add(l.mlp2, mlp.data(), Tt, q.data());
       clip::layer_norm(l.ln3, q.data(), Tt, C, q.data(), d.ln_eps);
       add(q.data(), qpe.data(), q.size(), qq);
-      if (li == 0) kk = kpe;
-      else add(keys.data(), pe.data(), keys.size(), kk);
-      attend(l.image_to_token, heads, kk.data(), N, qq.data(), q.data(), Tt, tmp.data(), w, scores);
+      if (li > 0) add(keys.data(), pe.data(), keys.size(), kk);
+      attend_few_keys(l.image_to_token, heads, li == 0 ? nullptr : kk.data(), li == 0 ? q0.data() : nullptr, N,
+                      qq.data(), q.data(), Tt, tmp.data(), aw);
       for (size_t i = 0; i < keys.size(); ++i) keys[i] += tmp[i];
       clip::layer_norm(l.ln4, keys.data(), N, C, keys.data(), d.ln_eps);
     }
     add(q.data(), qpe.data(), q.size(), qq);
     add(keys.data(), pe.data(), keys.size(), kk);
-    attend(d.final_attn, heads, qq.data(), Tt, kk.data(), keys.data(), N, tmp.data(), w, scores);
+    attend_few_queries(d.final_attn, heads, qq.data(), Tt, kk.data(), keys.data(), N, tmp.data(), aw);
     for (size_t i = 0; i < q.size(); ++i) q[i] += tmp[i];
     clip::layer_norm(d.ln_final, q.data(), Tt, C, q.data(), d.ln_final_eps);
 
