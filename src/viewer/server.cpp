@@ -28,7 +28,32 @@ struct HttpError : std::runtime_error {
 
 void send_json(httplib::Response& res, const json& j, int status = 200) {
   res.status = status;
-  res.set_content(j.dump(), "application/json");
+  // Messages may quote what the client sent: bytes that are not UTF-8 become U+FFFD instead of an exception.
+  res.set_content(j.dump(-1, ' ', false, json::error_handler_t::replace), "application/json");
+}
+
+// Strict UTF-8 (no overlong forms, surrogates or code points above U+10FFFF).
+bool valid_utf8(const std::string& s) {
+  const auto* p = reinterpret_cast<const unsigned char*>(s.data());
+  const size_t n = s.size();
+  for (size_t i = 0; i < n;) {
+    const unsigned c = p[i];
+    int len = 0;
+    unsigned cp = 0, min = 0;
+    if (c < 0x80) { ++i; continue; }
+    if ((c & 0xE0) == 0xC0) len = 2, cp = c & 0x1F, min = 0x80;
+    else if ((c & 0xF0) == 0xE0) len = 3, cp = c & 0x0F, min = 0x800;
+    else if ((c & 0xF8) == 0xF0) len = 4, cp = c & 0x07, min = 0x10000;
+    else return false;
+    if (i + len > n) return false;
+    for (int k = 1; k < len; ++k) {
+      if ((p[i + k] & 0xC0) != 0x80) return false;
+      cp = (cp << 6) | (p[i + k] & 0x3F);
+    }
+    if (cp < min || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF)) return false;
+    i += len;
+  }
+  return true;
 }
 
 std::string png_bytes(const Image& img) {  // img: [H, W, 3] in [0, 1]
@@ -90,6 +115,7 @@ struct Server::Impl {
   std::string checked_text(const std::string& t) const {
     if (t.empty()) throw HttpError(400, "text: empty query");
     if (t.size() > opt.max_text) throw HttpError(400, fmt::format("text: longer than {} characters", opt.max_text));
+    if (!valid_utf8(t)) throw HttpError(400, "text: not valid UTF-8");
     return t;
   }
 
@@ -257,11 +283,19 @@ Server::Server(query::Session& session, ServerOptions opt, std::unique_ptr<httpl
     };
   };
 
+  // Limits set explicitly (not the library's defaults): body size, timeouts, keep-alive, workers.
   svr.set_payload_max_length(opt_.max_body);
+  svr.set_read_timeout(opt_.read_timeout_s, 0);
+  svr.set_write_timeout(opt_.write_timeout_s, 0);
+  svr.set_keep_alive_timeout(opt_.keep_alive_s);
+  svr.set_keep_alive_max_count(size_t(std::max(1, opt_.keep_alive_max)));
+  const size_t workers = size_t(std::max(1, opt_.threads));
+  svr.new_task_queue = [workers] { return new httplib::ThreadPool(workers); };
   // SO_REUSEADDR only: httplib's default SO_REUSEPORT would let a second server share a port in use.
-  svr.set_socket_options([](socket_t sock) {
+  svr.set_socket_options([this](socket_t sock) {
     int yes = 1;
     ::setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, reinterpret_cast<void*>(&yes), sizeof yes);
+    listen_fd_ = int(sock);
   });
   svr.set_error_handler([](const httplib::Request& req, httplib::Response& res) {
     if (!res.body.empty()) return;
@@ -269,6 +303,18 @@ Server::Server(query::Session& session, ServerOptions opt, std::unique_ptr<httpl
                       : res.status == 404 ? "not found: " + req.path
                                           : fmt::format("HTTP {}", res.status);
     send_json(res, {{"error", msg}}, res.status);
+  });
+
+  svr.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
+    size_t bytes = 0;
+    for (const auto& [k, v] : req.headers) bytes += k.size() + v.size() + 4;
+    if (req.headers.size() <= opt_.max_headers && bytes <= opt_.max_header_bytes)
+      return httplib::Server::HandlerResponse::Unhandled;
+    send_json(res, {{"error", fmt::format("request header fields too large ({} fields, {} bytes; at most {} and {})",
+                                          req.headers.size(), bytes, opt_.max_headers, opt_.max_header_bytes)}},
+              431);
+    res.set_header("Connection", "close");
+    return httplib::Server::HandlerResponse::Handled;
   });
 
   svr.Get("/api/scene", guard([&I](const httplib::Request&, httplib::Response& res) { send_json(res, I.scene_info()); }));
@@ -324,6 +370,9 @@ int Server::start() {
     if (!http_->bind_to_port(opt_.host, opt_.port)) fail("cannot bind {}:{} (address in use or not local?)", opt_.host, opt_.port);
     port_ = opt_.port;
   }
+  // Linux updates the backlog of a listening socket on a second listen(): the library listens with 5, which
+  // drops connection bursts (clients then wait for a SYN retransmit, 1 s).
+  if (listen_fd_ >= 0) ::listen(listen_fd_, opt_.listen_backlog);
   thread_ = std::thread([this] { http_->listen_after_bind(); });
   // Wait until the accept loop runs: a stop() before that would be lost and join() would hang.
   for (int i = 0; i < 10000 && !http_->is_running(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(1));

@@ -1,7 +1,9 @@
 // `hgs view`'s HTTP server: a JSON API over a query::Session plus the browser front end's static files.
 // Endpoints (README, "Viewer"): GET /api/scene, /api/objects, /api/query?text=, POST /api/query,
 // GET /api/model.ply, /api/export.ply, /api/views/<i>/{image,overlay,heatmap}.png. The session is not
-// thread-safe, so every request that touches it holds one mutex. Errors are JSON {"error": "..."} with a 4xx.
+// thread-safe, so every request that touches it holds one mutex. Errors are JSON {"error": "..."} with a 4xx;
+// every JSON reply is valid UTF-8 (bytes a client sent that are not are replaced by U+FFFD in messages), and
+// query texts must be valid UTF-8. Load figures and limits: docs/reliability.md ("The viewer under load").
 #pragma once
 #include <cstddef>
 #include <filesystem>
@@ -22,7 +24,17 @@ struct ServerOptions {
   int port = 7860;                       // 0 = any free port
   std::filesystem::path static_dir;      // front end; empty = default_static_dir()
   size_t max_body = 64 * 1024;           // request bodies above this get 413
-  size_t max_text = 256;                 // longest accepted query text (characters)
+  size_t max_text = 256;                 // longest accepted query text (bytes of UTF-8)
+  // Connection limits (cpp-httplib 0.11: request line and each header line are capped at 8 kB by the library).
+  // A connection holds one worker while it is open, so `threads` bounds the clients served at once, slow ones
+  // included (a client sending nothing for `read_timeout_s` is dropped; see docs/reliability.md).
+  int threads = 32;
+  int read_timeout_s = 5, write_timeout_s = 5;
+  int keep_alive_s = 2, keep_alive_max = 100;  // idle keep-alive connections release their worker after this
+  int listen_backlog = 128;                    // pending connections (the library's own default is 5)
+  // Requests with more header fields or header bytes get 431. The library has read them by then (0.11 has
+  // no such limit of its own): this bounds what a handler sees, not what one connection may send.
+  size_t max_headers = 64, max_header_bytes = 16 * 1024;
 };
 
 class Server {
@@ -51,6 +63,7 @@ class Server {
   std::unique_ptr<httplib::Server> http_;
   std::thread thread_;
   int port_ = 0;
+  int listen_fd_ = -1;  // the listening socket (its backlog is raised after bind)
   ServerOptions opt_;
 };
 
