@@ -76,7 +76,7 @@ void run_generate(const GenerateArgs& a) {
 
 const char* kDescription =
     "Runs SAM's automatic mask generator (segment-anything's defaults: 32 x 32 grid of points, predicted IoU >\n"
-    "0.88, stability score > 0.95 at offset 1, box NMS at 0.7; one crop, no small-region removal) on every view\n"
+    "0.88, stability score > 0.95 at offset 1, box NMS at 0.7; one crop; --min-region-area 0) on every view\n"
     "and writes SCENE/sam/<stem>.json: [{segmentation: {size, counts (COCO RLE)}, area, bbox, predicted_iou,\n"
     "point_coords, stability_score, crop_box}], sorted by predicted IoU. Views already written are skipped, so an\n"
     "interrupted run resumes. Weights: Hugging Face SamModel or segment-anything .safetensors (docs/sam.md).\n"
@@ -99,6 +99,9 @@ MasksSubcommandRegistration reg({"generate", "Run SAM's automatic mask generator
     sub.add_option("--stability-offset", a->amg.stability_score_offset, "Logit offset of the stability score")->capture_default_str();
     sub.add_option("--box-nms-thresh", a->amg.box_nms_thresh, "Box IoU above which the lower-scored mask is dropped")
         ->capture_default_str();
+    sub.add_option("--min-region-area", a->amg.min_mask_region_area,
+                   "Fill holes and drop islands below this many pixels, then NMS again (0 = off, as segment-anything)")
+        ->capture_default_str()->check(CLI::Range(0, 1 << 30));
     sub.add_option("--downscale", a->downscale, "Integer image downscale factor before SAM")->capture_default_str()->check(CLI::Range(1, 64));
     sub.add_option("--decoder-heads", a->decoder_heads, "Mask decoder heads (0 = config.json beside the weights, else 8)")
         ->capture_default_str();

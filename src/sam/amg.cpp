@@ -53,6 +53,72 @@ std::vector<int> box_nms(const std::vector<std::array<float, 4>>& boxes, const s
   return keep;
 }
 
+bool remove_small_regions(std::vector<uint8_t>& mask, int W, int H, int area, bool holes) {
+  // 8-connected components of the pixels equal to `target` (flood fill with an explicit stack).
+  const uint8_t target = holes ? 0 : 1;
+  std::vector<int> label(mask.size(), -1), sizes, stack;
+  for (size_t s0 = 0; s0 < mask.size(); ++s0) {
+    if (mask[s0] != target || label[s0] >= 0) continue;
+    const int id = int(sizes.size());
+    int n = 0;
+    label[s0] = id;
+    stack.assign(1, int(s0));
+    while (!stack.empty()) {
+      const int p = stack.back();
+      stack.pop_back();
+      ++n;
+      const int x = p % W, y = p / W;
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int xx = x + dx, yy = y + dy;
+          if (xx < 0 || yy < 0 || xx >= W || yy >= H) continue;
+          const int q = yy * W + xx;
+          if (mask[q] == target && label[q] < 0) {
+            label[q] = id;
+            stack.push_back(q);
+          }
+        }
+    }
+    sizes.push_back(n);
+  }
+  std::vector<uint8_t> small(sizes.size());
+  bool any = false;
+  for (size_t i = 0; i < sizes.size(); ++i) any |= (small[i] = sizes[i] < area);
+  if (!any) return false;
+  if (holes) {
+    for (size_t i = 0; i < mask.size(); ++i)
+      if (label[i] >= 0 && small[label[i]]) mask[i] = 1;
+  } else {
+    bool all_small = true;
+    for (uint8_t v : small) all_small &= v != 0;
+    const int largest = int(std::max_element(sizes.begin(), sizes.end()) - sizes.begin());
+    for (size_t i = 0; i < mask.size(); ++i)
+      if (label[i] >= 0) mask[i] = all_small ? label[i] == largest : !small[label[i]];
+  }
+  return true;
+}
+
+namespace {
+
+void set_box_area(AmgMask& a, int W, int H) {
+  int x0 = W, y0 = H, x1 = -1, y1 = -1;
+  a.area = 0;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      if (!a.mask[size_t(y) * W + x]) continue;
+      ++a.area;
+      x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
+    }
+  if (a.area == 0) x0 = y0 = x1 = y1 = 0;
+  a.bbox = {x0, y0, x1 - x0, y1 - y0};
+}
+
+std::array<float, 4> xyxy(const AmgMask& a) {
+  return {float(a.bbox[0]), float(a.bbox[1]), float(a.bbox[0] + a.bbox[2]), float(a.bbox[1] + a.bbox[3])};
+}
+
+}  // namespace
+
 std::vector<AmgMask> generate_masks(const SamModel& m, const ImageEmbedding& e, const AmgOptions& o,
                                     const std::function<void(int, int)>& progress) {
   if (o.points_per_side < 1 || o.points_per_batch < 1) fail("SAM masks: points per side and per batch must be >= 1");
@@ -86,21 +152,12 @@ std::vector<AmgMask> generate_masks(const SamModel& m, const ImageEmbedding& e, 
         if (!(stab > o.stability_score_thresh)) continue;
         AmgMask a;
         a.mask.resize(full.size());
-        int x0 = W, y0 = H, x1 = -1, y1 = -1;
-        for (int y = 0; y < H; ++y)
-          for (int x = 0; x < W; ++x) {
-            const bool in = full[size_t(y) * W + x] > 0.f;
-            a.mask[size_t(y) * W + x] = in;
-            if (!in) continue;
-            ++a.area;
-            x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
-          }
-        if (a.area == 0) x0 = y0 = x1 = y1 = 0;
-        a.bbox = {x0, y0, x1 - x0, y1 - y0};
+        for (size_t k = 0; k < full.size(); ++k) a.mask[k] = full[k] > 0.f;
+        set_box_area(a, W, H);
         a.predicted_iou = p.iou[t];
         a.stability_score = stab;
         a.point = pts[i];
-        boxes.push_back({float(x0), float(y0), float(x1), float(y1)});
+        boxes.push_back(xyxy(a));
         scores.push_back(a.predicted_iou);
         cand.push_back(std::move(a));
       }
@@ -109,7 +166,21 @@ std::vector<AmgMask> generate_masks(const SamModel& m, const ImageEmbedding& e, 
   }
   std::vector<AmgMask> out;
   for (int k : box_nms(boxes, scores, o.box_nms_thresh)) out.push_back(std::move(cand[k]));
-  return out;
+  if (o.min_mask_region_area <= 0 || out.empty()) return out;
+  // Small holes and islands, then NMS again preferring the masks that did not change.
+  std::vector<AmgMask> fixed = out;
+  std::vector<std::array<float, 4>> b2;
+  std::vector<float> unchanged;
+  for (AmgMask& a : fixed) {
+    const bool c1 = remove_small_regions(a.mask, W, H, o.min_mask_region_area, true);
+    const bool c2 = remove_small_regions(a.mask, W, H, o.min_mask_region_area, false);
+    set_box_area(a, W, H);
+    b2.push_back(xyxy(a));
+    unchanged.push_back(c1 || c2 ? 0.f : 1.f);
+  }
+  std::vector<AmgMask> res;
+  for (int k : box_nms(b2, unchanged, o.box_nms_thresh)) res.push_back(std::move(fixed[k]));
+  return res;
 }
 
 }  // namespace hgs::sam

@@ -3,7 +3,8 @@
 // masks are kept when their predicted IoU exceeds pred_iou_thresh and their stability score (pixels above
 // +offset over pixels above -offset of the full-resolution logits) exceeds stability_score_thresh; the rest
 // are binarised at 0, boxed, and reduced by greedy box NMS (IoU > box_nms_thresh suppressed, highest
-// predicted IoU first). Output order: descending predicted IoU.
+// predicted IoU first). Output order: descending predicted IoU. With min_mask_region_area, small holes and
+// islands are then removed and NMS runs again with the unchanged masks first.
 #pragma once
 #include <array>
 #include <cstdint>
@@ -21,6 +22,9 @@ struct AmgOptions {  // segment-anything's defaults
   float stability_score_thresh = 0.95f;
   float stability_score_offset = 1.0f;
   float box_nms_thresh = 0.7f;
+  // > 0: fill holes and drop islands smaller than this many pixels in every mask (8-connected regions), then
+  // NMS again preferring the masks that did not change (segment-anything's postprocess_small_regions).
+  int min_mask_region_area = 0;
 };
 
 struct AmgMask {
@@ -39,6 +43,11 @@ float stability_score(const float* logits, size_t n, float thr, float offset);
 
 // Greedy NMS over boxes (x0, y0, x1, y1) by descending score: returns kept indices in that order.
 std::vector<int> box_nms(const std::vector<std::array<float, 4>>& boxes, const std::vector<float>& scores, float thresh);
+
+// Fills (holes = true: regions of 0s) or removes (false: regions of 1s) the 8-connected regions of mask [H, W]
+// smaller than `area` pixels; when every region of 1s is small, the largest is kept. Returns whether the mask
+// changed.
+bool remove_small_regions(std::vector<uint8_t>& mask, int W, int H, int area, bool holes);
 
 // `progress(done, total)` is called after every batch of points when given.
 std::vector<AmgMask> generate_masks(const SamModel& m, const ImageEmbedding& e, const AmgOptions& o = {},

@@ -125,3 +125,88 @@ TEST(SamAmg, NmsAndThresholdsReduceTheSet) {
 
 }  // namespace
 }  // namespace hgs::test
+
+namespace hgs::test {
+namespace {
+
+// Parses rows of '#' (1) and '.' (0).
+std::vector<uint8_t> grid(const std::vector<std::string>& rows) {
+  std::vector<uint8_t> m;
+  for (const auto& r : rows)
+    for (char c : r) m.push_back(c == '#');
+  return m;
+}
+
+TEST(SamAmg, SmallHolesAreFilled) {
+  // A 3-pixel hole and a 1-pixel hole inside, a large background outside (also a 0-region: kept).
+  auto m = grid({"..........",
+                 ".########.",
+                 ".#...####.",
+                 ".########.",
+                 ".####.###.",
+                 ".########.",
+                 ".........."});
+  auto want = grid({"..........",
+                    ".########.",
+                    ".########.",
+                    ".########.",
+                    ".########.",
+                    ".########.",
+                    ".........."});
+  EXPECT_TRUE(sam::remove_small_regions(m, 10, 7, 4, true));
+  EXPECT_EQ(m, want);
+  EXPECT_FALSE(sam::remove_small_regions(m, 10, 7, 4, true));  // nothing small left
+  // Threshold 3: the 3-pixel hole stays (regions smaller than the area are filled).
+  auto m3 = grid({"..........", ".########.", ".#...####.", ".########.", ".####.###.", ".########.", ".........."});
+  EXPECT_TRUE(sam::remove_small_regions(m3, 10, 7, 3, true));
+  EXPECT_EQ(m3[2 * 10 + 2], 0);
+  EXPECT_EQ(m3[4 * 10 + 5], 1);
+}
+
+TEST(SamAmg, SmallIslandsAreDroppedDiagonalsConnect) {
+  auto m = grid({"##......#.",
+                 "##.......#",
+                 "..........",
+                 "....###...",
+                 "....###...",
+                 "....###...",
+                 "#........."});
+  // Islands: the 2x2 block (4 px), the diagonal pair (2 px, 8-connected), the corner pixel (1), the 3x3 (9).
+  EXPECT_TRUE(sam::remove_small_regions(m, 10, 7, 4, false));
+  auto want = grid({"##........", "##........", "..........", "....###...", "....###...", "....###...", ".........."});
+  EXPECT_EQ(m, want);
+  // Every island small: the largest is kept.
+  auto s = grid({"#.#", "...", "##."});
+  EXPECT_TRUE(sam::remove_small_regions(s, 3, 3, 5, false));
+  EXPECT_EQ(s, grid({"...", "...", "##."}));
+}
+
+TEST(SamAmg, MinRegionAreaChangesTheTinyModelsMasks) {
+  sam::ImageEmbedding e = tiny_sam().embed(sam_image());
+  sam::AmgOptions o;
+  o.points_per_side = 5;
+  o.pred_iou_thresh = 0.55f;
+  o.stability_score_thresh = 0.02f;
+  o.stability_score_offset = 0.25f;
+  o.box_nms_thresh = 1.0f;
+  std::vector<sam::AmgMask> raw = sam::generate_masks(tiny_sam(), e, o);
+  o.min_mask_region_area = 20;
+  std::vector<sam::AmgMask> clean = sam::generate_masks(tiny_sam(), e, o);
+  ASSERT_EQ(clean.size(), raw.size());  // NMS off: only the masks change
+  size_t changed = 0;
+  for (const sam::AmgMask& c : clean) {
+    std::vector<uint8_t> m = c.mask;  // a cleaned mask has nothing left to remove
+    EXPECT_FALSE(sam::remove_small_regions(m, e.orig_w, e.orig_h, 20, true) && sam::remove_small_regions(m, e.orig_w, e.orig_h, 20, false));
+    int area = 0;
+    for (uint8_t v : c.mask) area += v;
+    EXPECT_EQ(area, c.area);
+  }
+  for (const sam::AmgMask& r : raw) {
+    std::vector<uint8_t> m = r.mask;
+    changed += sam::remove_small_regions(m, e.orig_w, e.orig_h, 20, true) | sam::remove_small_regions(m, e.orig_w, e.orig_h, 20, false);
+  }
+  EXPECT_GT(changed, 0u);  // the speckled random masks do have small regions
+}
+
+}  // namespace
+}  // namespace hgs::test
