@@ -13,6 +13,7 @@
 #include <cblas.h>
 #include <cmath>
 
+#include "clip/thread_pool.h"
 #include "clip/transformer.h"
 #include "core/error.h"
 #include "sam/decoder_attention.h"
@@ -111,76 +112,86 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
   clip::linear(i0.q, kpe.data(), N, q0.data());
 
   std::vector<Prediction> res(B);
-  Proj w;
-  AttnWork aw;
-  std::vector<float> scores, q(size_t(Tt) * C), qpe, keys, tmp, qq, kk, mlp;
-  for (int b = 0; b < B; ++b) {
-    std::copy(d.iou_token.begin(), d.iou_token.end(), q.begin());
-    std::copy(d.mask_tokens.begin(), d.mask_tokens.end(), q.begin() + C);
-    std::copy_n(sparse + size_t(b) * T * C, size_t(T) * C, q.begin() + size_t(1 + d.tokens) * C);
-    qpe = q;
-    keys = src0;
-    tmp.resize(std::max(size_t(Tt), size_t(N)) * C);
-    for (size_t li = 0; li < d.layers.size(); ++li) {
-      const TwoWayLayer& l = d.layers[li];
-      if (li == 0) {
-        attend(l.self_attn, heads, q.data(), Tt, q.data(), q.data(), Tt, tmp.data(), w, scores);
-        std::copy_n(tmp.data(), size_t(Tt) * C, q.data());
-      } else {
+  // Several prompts: one prompt per thread with single-threaded OpenBLAS (one hand-off per batch instead of one
+  // per matrix product; on a shared machine the per-call thread hand-offs cost more than the products).
+  const bool per_prompt = B > 1 && clip::pool_threads() > 1;
+  const int blas_threads = openblas_get_num_threads();
+  if (per_prompt) openblas_set_num_threads(1);
+  auto body = [&](long b0, long b1) {
+    Proj w;
+    AttnWork aw;
+    std::vector<float> scores, q(size_t(Tt) * C), qpe, keys, tmp, qq, kk, mlp;
+    for (long b = b0; b < b1; ++b) {
+      std::copy(d.iou_token.begin(), d.iou_token.end(), q.begin());
+      std::copy(d.mask_tokens.begin(), d.mask_tokens.end(), q.begin() + C);
+      std::copy_n(sparse + size_t(b) * T * C, size_t(T) * C, q.begin() + size_t(1 + d.tokens) * C);
+      qpe = q;
+      keys = src0;
+      tmp.resize(std::max(size_t(Tt), size_t(N)) * C);
+      for (size_t li = 0; li < d.layers.size(); ++li) {
+        const TwoWayLayer& l = d.layers[li];
+        if (li == 0) {
+          attend(l.self_attn, heads, q.data(), Tt, q.data(), q.data(), Tt, tmp.data(), w, scores);
+          std::copy_n(tmp.data(), size_t(Tt) * C, q.data());
+        } else {
+          add(q.data(), qpe.data(), q.size(), qq);
+          attend(l.self_attn, heads, qq.data(), Tt, qq.data(), q.data(), Tt, tmp.data(), w, scores);
+          for (size_t i = 0; i < q.size(); ++i) q[i] += tmp[i];
+        }
+        clip::layer_norm(l.ln1, q.data(), Tt, C, q.data(), d.ln_eps);
         add(q.data(), qpe.data(), q.size(), qq);
-        attend(l.self_attn, heads, qq.data(), Tt, qq.data(), q.data(), Tt, tmp.data(), w, scores);
+        if (li == 0) {
+          attend(l.token_to_image, heads, qq.data(), Tt, nullptr, nullptr, N, tmp.data(), w, scores, &kv0);
+        } else {
+          add(keys.data(), pe.data(), keys.size(), kk);
+          attend_few_queries(l.token_to_image, heads, qq.data(), Tt, kk.data(), keys.data(), N, tmp.data(), aw);
+        }
         for (size_t i = 0; i < q.size(); ++i) q[i] += tmp[i];
+        clip::layer_norm(l.ln2, q.data(), Tt, C, q.data(), d.ln_eps);
+        mlp.resize(size_t(Tt) * l.mlp1.out);
+        clip::linear(l.mlp1, q.data(), Tt, mlp.data());
+        relu(mlp.data(), mlp.size());
+        clip::linear_add(l.mlp2, mlp.data(), Tt, q.data());
+        clip::layer_norm(l.ln3, q.data(), Tt, C, q.data(), d.ln_eps);
+        add(q.data(), qpe.data(), q.size(), qq);
+        if (li > 0) add(keys.data(), pe.data(), keys.size(), kk);
+        attend_few_keys(l.image_to_token, heads, li == 0 ? nullptr : kk.data(), li == 0 ? q0.data() : nullptr, N,
+                        qq.data(), q.data(), Tt, tmp.data(), aw);
+        for (size_t i = 0; i < keys.size(); ++i) keys[i] += tmp[i];
+        clip::layer_norm(l.ln4, keys.data(), N, C, keys.data(), d.ln_eps);
       }
-      clip::layer_norm(l.ln1, q.data(), Tt, C, q.data(), d.ln_eps);
       add(q.data(), qpe.data(), q.size(), qq);
-      if (li == 0) {
-        attend(l.token_to_image, heads, qq.data(), Tt, nullptr, nullptr, N, tmp.data(), w, scores, &kv0);
-      } else {
-        add(keys.data(), pe.data(), keys.size(), kk);
-        attend_few_queries(l.token_to_image, heads, qq.data(), Tt, kk.data(), keys.data(), N, tmp.data(), aw);
-      }
+      add(keys.data(), pe.data(), keys.size(), kk);
+      attend_few_queries(d.final_attn, heads, qq.data(), Tt, kk.data(), keys.data(), N, tmp.data(), aw);
       for (size_t i = 0; i < q.size(); ++i) q[i] += tmp[i];
-      clip::layer_norm(l.ln2, q.data(), Tt, C, q.data(), d.ln_eps);
-      mlp.resize(size_t(Tt) * l.mlp1.out);
-      clip::linear(l.mlp1, q.data(), Tt, mlp.data());
-      relu(mlp.data(), mlp.size());
-      clip::linear_add(l.mlp2, mlp.data(), Tt, q.data());
-      clip::layer_norm(l.ln3, q.data(), Tt, C, q.data(), d.ln_eps);
-      add(q.data(), qpe.data(), q.size(), qq);
-      if (li > 0) add(keys.data(), pe.data(), keys.size(), kk);
-      attend_few_keys(l.image_to_token, heads, li == 0 ? nullptr : kk.data(), li == 0 ? q0.data() : nullptr, N,
-                      qq.data(), q.data(), Tt, tmp.data(), aw);
-      for (size_t i = 0; i < keys.size(); ++i) keys[i] += tmp[i];
-      clip::layer_norm(l.ln4, keys.data(), N, C, keys.data(), d.ln_eps);
-    }
-    add(q.data(), qpe.data(), q.size(), qq);
-    add(keys.data(), pe.data(), keys.size(), kk);
-    attend_few_queries(d.final_attn, heads, qq.data(), Tt, kk.data(), keys.data(), N, tmp.data(), aw);
-    for (size_t i = 0; i < q.size(); ++i) q[i] += tmp[i];
-    clip::layer_norm(d.ln_final, q.data(), Tt, C, q.data(), d.ln_final_eps);
+      clip::layer_norm(d.ln_final, q.data(), Tt, C, q.data(), d.ln_final_eps);
 
-    // Upscaling: [g, g, C] -> [2g, 2g, C/4] (LN, GELU) -> [4g, 4g, C/8] (GELU).
-    std::vector<float> u1 = upconv(d.up1, keys.data(), g);
-    clip::layer_norm(d.up_ln, u1.data(), 4 * N, d.up1.out, u1.data(), 1e-6f);
-    clip::activation(clip::Activation::GELU, u1.data(), u1.size());
-    std::vector<float> u2 = upconv(d.up2, u1.data(), 2 * g);
-    clip::activation(clip::Activation::GELU, u2.data(), u2.size());
-    const int D = d.up2.out, P = 16 * N;
-    std::vector<float> hyper(size_t(d.tokens) * D);
-    for (int t = 0; t < d.tokens; ++t) {
-      std::vector<float> h = run_mlp(d.hyper[t], q.data() + size_t(1 + t) * C);
-      if (int(h.size()) != D) fail("SAM hypernetwork {} gives {} values, the upscaled embedding has {}", t, h.size(), D);
-      std::copy(h.begin(), h.end(), hyper.begin() + size_t(t) * D);
+      // Upscaling: [g, g, C] -> [2g, 2g, C/4] (LN, GELU) -> [4g, 4g, C/8] (GELU).
+      std::vector<float> u1 = upconv(d.up1, keys.data(), g);
+      clip::layer_norm(d.up_ln, u1.data(), 4 * N, d.up1.out, u1.data(), 1e-6f);
+      clip::activation(clip::Activation::GELU, u1.data(), u1.size());
+      std::vector<float> u2 = upconv(d.up2, u1.data(), 2 * g);
+      clip::activation(clip::Activation::GELU, u2.data(), u2.size());
+      const int D = d.up2.out, P = 16 * N;
+      std::vector<float> hyper(size_t(d.tokens) * D);
+      for (int t = 0; t < d.tokens; ++t) {
+        std::vector<float> h = run_mlp(d.hyper[t], q.data() + size_t(1 + t) * C);
+        if (int(h.size()) != D) fail("SAM hypernetwork {} gives {} values, the upscaled embedding has {}", t, h.size(), D);
+        std::copy(h.begin(), h.end(), hyper.begin() + size_t(t) * D);
+      }
+      Prediction& r = res[b];
+      r.tokens = d.tokens;
+      r.size = 4 * g;
+      r.lowres.resize(size_t(d.tokens) * P);
+      // masks [tokens, P] = hyper [tokens, D] x u2^T [D, P]
+      cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, d.tokens, P, D, 1.f, hyper.data(), D, u2.data(), D, 0.f,
+                  r.lowres.data(), P);
+      r.iou = run_mlp(d.iou_head, q.data());
     }
-    Prediction& r = res[b];
-    r.tokens = d.tokens;
-    r.size = 4 * g;
-    r.lowres.resize(size_t(d.tokens) * P);
-    // masks [tokens, P] = hyper [tokens, D] x u2^T [D, P]
-    cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, d.tokens, P, D, 1.f, hyper.data(), D, u2.data(), D, 0.f,
-                r.lowres.data(), P);
-    r.iou = run_mlp(d.iou_head, q.data());
-  }
+  };
+  if (per_prompt) clip::parallel_for(B, 2, body);
+  else body(0, B);
+  if (per_prompt) openblas_set_num_threads(blas_threads);
   return res;
 }
 
