@@ -261,6 +261,10 @@ OvsLabelSet open_3dovs_labels(const fs::path& scene) {
     if (!c.empty()) {
       if (c.find('/') != std::string::npos || c.find('\\') != std::string::npos)
         fail("{}: line {}: class name \"{}\" contains a path separator", cfile.string(), line, c);
+      // Each class names a file <class>.png: it must be a name the file system can hold, printable on one line.
+      if (c.size() > 200) fail("{}: line {}: class name of {} bytes is too long (at most 200)", cfile.string(), line, c.size());
+      if (std::any_of(c.begin(), c.end(), [](char ch) { return static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f; }))
+        fail("{}: line {}: class name contains control characters", cfile.string(), line);
       if (!seen.insert(c).second) fail("{}: line {}: duplicate class \"{}\"", cfile.string(), line, c);
       L.classes.push_back(c);
     }
@@ -295,7 +299,8 @@ OvsViewLabels load_3dovs_view(const OvsLabelSet& labels, size_t i, int expect_wi
   int full_w = 0, full_h = 0;  // size of the first class PNG
   for (auto& c : labels.classes) {
     const fs::path p = v.dir / (c + ".png");
-    if (!fs::is_regular_file(p)) fail("{}: missing class mask for \"{}\"", p.string(), c);
+    std::error_code ec;
+    if (!fs::is_regular_file(p, ec)) fail("{}: missing class mask for \"{}\"{}", p.string(), c, ec ? " (" + ec.message() + ")" : "");
     const Image img = load_image(p, 1);
     if (out.masks.empty()) {
       full_w = img.width;

@@ -1,5 +1,6 @@
 #include "hybrid/method.h"
 
+#include <cmath>
 #include <chrono>
 #include <random>
 
@@ -182,6 +183,8 @@ void HybridMethod::state_loaded(const std::string& where, const nlohmann::json& 
   const auto& table = arrays["observations"];
   if (table.size() != size_t(n) * U)
     fail("{}: the hybrid state does not match {} training views and {} Gaussians", where, U, n);
+  for (float v : table)  // written from 16-bit object ids: anything else is corruption (and casting it undefined)
+    if (!(v >= 0 && v <= 65535 && v == std::floor(v))) fail("{}: corrupt observation table (value {})", where, v);
   // Checked: take it.
   if (c.scl_background != cfg_.scl_background) {  // the views' SCL classes follow the checkpoint's rule
     for (HybridView& hv : data_.views) hv.scl = scl_classes(hv.fg, hv.area[0], c.scl_background, c.min_mask_pixels);
