@@ -94,6 +94,10 @@ MasksSubcommandRegistration reg({"associate", "Make per-view mask ids consistent
     sub.add_flag("--part-union", [o](int64_t n) { o->whole_pixels = n == 0; },
                  "A part folded into its whole keeps its pixels outside the whole too (default: the whole's outline, "
                  "from SAM's masks at import.json's source)");
+    sub.add_option("--edge-confidence", o->edge_ramp,
+                   "Confidence of the written masks ramps from half its score on every mask edge to the full score this "
+                   "many pixels inside (SAM's files give one score per mask; 0 = keep the input's confidences)")
+        ->check(CLI::Range(0, 64))->capture_default_str();
     sub.add_flag("--no-join-parts", [o](int64_t n) { o->join_parts = n == 0; }, "Do not fold parts into their whole (import.json part_of)");
     sub.add_flag("--drop-surfaces", o->drop_surfaces, "Drop objects whose 3D points spread like a surface (table, floor, walls)");
     sub.add_option("--surface-spread", o->surface_spread, "Spread of an object's 3D points (80th-percentile distance from their median), relative to all points', above which it is a surface")

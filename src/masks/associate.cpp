@@ -468,12 +468,18 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
       const fs::path png = tmp / (v.stem + ".png");
       ensure_dir(png.parent_path());
       save_label_png(png, out);
-      const fs::path conf = in / (v.stem + ".conf.npy");
-      if (!reflattened_conf[v.index].empty())
-        write_npy(tmp / (v.stem + ".conf.npy"),
-                  make_npy_f32({size_t(v.height), size_t(v.width)}, reflattened_conf[v.index].data()));
-      else if (fs::exists(conf))
-        fs::copy_file(conf, tmp / (v.stem + ".conf.npy"));
+      const fs::path conf_file = in / (v.stem + ".conf.npy");
+      std::vector<float> conf = std::move(reflattened_conf[v.index]);
+      if (conf.empty() && opt.edge_ramp > 0 && fs::exists(conf_file)) {
+        conf = read_npy(conf_file).to_float();
+        if (conf.size() != size_t(v.width) * v.height)
+          fail("{}: {} confidences for a {}x{} view", conf_file.string(), conf.size(), v.width, v.height);
+      }
+      if (opt.edge_ramp > 0) edge_ramp_confidence(out, opt.edge_ramp, conf);
+      if (!conf.empty())
+        write_npy(tmp / (v.stem + ".conf.npy"), make_npy_f32({size_t(v.height), size_t(v.width)}, conf.data()));
+      else if (fs::exists(conf_file))
+        fs::copy_file(conf_file, tmp / (v.stem + ".conf.npy"));
     }
     bar.finish();
     json objects = json::object(), list = json::array();
@@ -487,7 +493,7 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
     json report = {{"source", fs::absolute(in_place ? masks_dir / "per_view" : in).lexically_normal().string()},
                    {"colmap", images_file.string()},
                    {"options", {{"min_affinity", opt.min_affinity}, {"min_views", opt.min_views}, {"min_points", opt.min_points},
-                                {"max_area", opt.max_area}, {"core_margin", opt.core_margin}, {"attach", opt.attach}, {"join_parts", opt.join_parts}, {"part_fraction", opt.part_fraction}, {"part_merge", opt.part_merge}, {"whole_pixels", opt.whole_pixels}, {"drop_surfaces", opt.drop_surfaces},
+                                {"max_area", opt.max_area}, {"core_margin", opt.core_margin}, {"attach", opt.attach}, {"join_parts", opt.join_parts}, {"part_fraction", opt.part_fraction}, {"part_merge", opt.part_merge}, {"whole_pixels", opt.whole_pixels}, {"edge_ramp", opt.edge_ramp}, {"drop_surfaces", opt.drop_surfaces},
                                 {"surface_spread", opt.surface_spread}, {"depth", bool(opt.depth)},
                                 {"depth_stride", opt.depth_stride}, {"depth_tolerance", opt.depth_tolerance}}},
                    {"colmap_points", sum.colmap_points},

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 
+#include "core/error.h"
 #include "masks/rle.h"
 
 namespace hgs::masks {
@@ -66,6 +67,33 @@ bool clip_parts_to_wholes(const std::vector<SourceMask>& masks, const std::map<i
   if (clipped.empty()) return false;
   out = flatten_masks(clipped, width, height);
   return true;
+}
+
+void edge_ramp_confidence(const LabelMap& labels, int ramp, std::vector<float>& conf) {
+  const int W = labels.width, H = labels.height;
+  const size_t n = size_t(W) * H;
+  if (conf.empty()) conf.assign(n, 1.f);
+  if (conf.size() != n) fail("edge_ramp_confidence: {} confidences for a {}x{} label map", conf.size(), W, H);
+  if (ramp <= 0) return;
+  // Chessboard distance to the nearest edge pixel: two raster passes (forward, then backward).
+  const int inf = W + H;
+  std::vector<int> d(n);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const uint16_t l = labels.at(x, y);
+      const bool edge = (x > 0 && labels.at(x - 1, y) != l) || (x + 1 < W && labels.at(x + 1, y) != l) ||
+                        (y > 0 && labels.at(x, y - 1) != l) || (y + 1 < H && labels.at(x, y + 1) != l);
+      d[size_t(y) * W + x] = edge ? 0 : inf;
+    }
+  auto relax = [&](int x, int y, int dx, int dy) {
+    const int xx = x + dx, yy = y + dy;
+    if (xx >= 0 && yy >= 0 && xx < W && yy < H) d[size_t(y) * W + x] = std::min(d[size_t(y) * W + x], d[size_t(yy) * W + xx] + 1);
+  };
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) relax(x, y, -1, 0), relax(x, y, -1, -1), relax(x, y, 0, -1), relax(x, y, 1, -1);
+  for (int y = H - 1; y >= 0; --y)
+    for (int x = W - 1; x >= 0; --x) relax(x, y, 1, 0), relax(x, y, 1, 1), relax(x, y, 0, 1), relax(x, y, -1, 1);
+  for (size_t p = 0; p < n; ++p) conf[p] *= 0.5f + 0.5f * std::min(1.f, float(d[p]) / float(ramp));
 }
 
 double robust_spread(const std::vector<Eigen::Vector3d>& points) {

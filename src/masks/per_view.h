@@ -36,6 +36,14 @@ std::map<int, int> part_roots(const std::map<int, MaskInfo>& info, double image_
 bool clip_parts_to_wholes(const std::vector<SourceMask>& masks, const std::map<int, int>& root, int width, int height,
                           Flattened& out);
 
+// Per-pixel confidence for masks whose files give one score per mask (SAM's JSON and PNG folders): the score
+// times a ramp from 1/2 on an edge (a pixel with a 4-neighbour of another label, background included) to 1 at
+// `ramp` pixels (chessboard distance) from the nearest edge, as a mask logit's sigmoid crosses 1/2 on the object's
+// outline. This is a prior, not a measurement: with Observation Fusion's tau1 = 1/2 it makes the edge pixels,
+// where independent masks of one object disagree, no observation. `conf` [H, W] is scaled in place (empty: scores
+// of 1 are assumed and it is filled).
+void edge_ramp_confidence(const LabelMap& labels, int ramp, std::vector<float>& conf);
+
 // Spread of a point set: the 80th percentile of the distances from the coordinate-wise median (0 when empty).
 double robust_spread(const std::vector<Eigen::Vector3d>& points);
 

@@ -3,6 +3,7 @@
 
 #include <random>
 
+#include "core/error.h"
 #include "masks/per_view.h"
 #include "masks/rle.h"
 
@@ -122,4 +123,45 @@ TEST(ClipPartsToWholes, PartsKeepOnlyTheirPixelsInsideTheirWhole) {
   untouched.labels = LabelMap(1, 1);
   EXPECT_FALSE(clip_parts_to_wholes(masks, {{1, 1}, {2, 2}, {3, 3}}, W, H, untouched));
   EXPECT_EQ(untouched.labels.width, 1);
+}
+
+TEST(EdgeRampConfidence, MatchesBruteForceDistanceToTheNearestEdge) {
+  std::mt19937 rng(11);
+  for (int trial = 0; trial < 10; ++trial) {
+    LabelMap m(9 + int(rng() % 15), 6 + int(rng() % 15));
+    for (int y = 0; y < m.height; ++y)
+      for (int x = 0; x < m.width; ++x) m.at(x, y) = uint16_t((x / 5 + (y / 4) * 2 + trial) % 3);
+    std::vector<float> score(size_t(m.width) * m.height);
+    for (auto& c : score) c = 0.6f + 0.4f * float(rng() % 100) / 100.f;
+    for (int ramp : {1, 3, 6}) {
+      std::vector<float> conf = score;
+      edge_ramp_confidence(m, ramp, conf);
+      for (int y = 0; y < m.height; ++y)
+        for (int x = 0; x < m.width; ++x) {
+          int best = m.width + m.height;  // brute force: nearest pixel with a 4-neighbour of another label
+          for (int yy = 0; yy < m.height; ++yy)
+            for (int xx = 0; xx < m.width; ++xx) {
+              const uint16_t l = m.at(xx, yy);
+              const bool edge = (xx > 0 && m.at(xx - 1, yy) != l) || (xx + 1 < m.width && m.at(xx + 1, yy) != l) ||
+                                (yy > 0 && m.at(xx, yy - 1) != l) || (yy + 1 < m.height && m.at(xx, yy + 1) != l);
+              if (edge) best = std::min(best, std::max(std::abs(xx - x), std::abs(yy - y)));
+            }
+          const size_t p = size_t(y) * m.width + x;
+          const float want = score[p] * (0.5f + 0.5f * std::min(1.f, float(best) / float(ramp)));
+          ASSERT_NEAR(conf[p], want, 1e-6) << trial << " ramp " << ramp << " at " << x << "," << y;
+        }
+    }
+  }
+  // No scores given: a score of 1 everywhere; an edge pixel gets 1/2.
+  LabelMap two(4, 1);
+  two.at(2, 0) = two.at(3, 0) = 1;
+  std::vector<float> conf;
+  edge_ramp_confidence(two, 2, conf);
+  ASSERT_EQ(conf.size(), 4u);
+  EXPECT_FLOAT_EQ(conf[0], 0.75f);
+  EXPECT_FLOAT_EQ(conf[1], 0.5f);
+  EXPECT_FLOAT_EQ(conf[2], 0.5f);
+  EXPECT_FLOAT_EQ(conf[3], 0.75f);
+  std::vector<float> wrong(3, 1.f);
+  EXPECT_THROW(edge_ramp_confidence(two, 2, wrong), hgs::Error);
 }
