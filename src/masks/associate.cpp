@@ -108,6 +108,8 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
       if (v.is_string()) global_names[std::atoi(k.c_str())] = v.get<std::string>();
   }
   json import_info = fs::exists(in / "import.json") ? read_json(in / "import.json") : json();
+  const std::string import_format = import_info.is_object() ? import_info.value("format", "") : "";
+  const bool sam_scores = import_format == "sam-json" || import_format == "sam-png";  // one score per mask
 
   // Every mask file must belong to a view (a stray mask means the masks and the model do not match).
   {
@@ -470,12 +472,15 @@ AssociateSummary associate_masks(const AssociateOptions& opt) {
       save_label_png(png, out);
       const fs::path conf_file = in / (v.stem + ".conf.npy");
       std::vector<float> conf = std::move(reflattened_conf[v.index]);
-      if (conf.empty() && opt.edge_ramp > 0 && fs::exists(conf_file)) {
+      // The ramp replaces what a per-pixel confidence would say: only for SAM's per-mask scores (flat up to the
+      // edge) and masks without any confidence; a per-pixel confidence (SAM2's, the user's) is kept as it is.
+      const bool flat = sam_scores || !fs::exists(conf_file);
+      if (conf.empty() && flat && opt.edge_ramp > 0 && fs::exists(conf_file)) {
         conf = read_npy(conf_file).to_float();
         if (conf.size() != size_t(v.width) * v.height)
           fail("{}: {} confidences for a {}x{} view", conf_file.string(), conf.size(), v.width, v.height);
       }
-      if (opt.edge_ramp > 0) edge_ramp_confidence(out, opt.edge_ramp, conf);
+      if (flat && opt.edge_ramp > 0) edge_ramp_confidence(out, opt.edge_ramp, conf);
       if (!conf.empty())
         write_npy(tmp / (v.stem + ".conf.npy"), make_npy_f32({size_t(v.height), size_t(v.width)}, conf.data()));
       else if (fs::exists(conf_file))

@@ -44,8 +44,9 @@ struct AssociateOptions {
   // A part folded into its whole keeps only its pixels inside the whole (clip_parts_to_wholes, per_view.h); needs
   // SAM's own masks at import.json's source (sam-json, sam-png). false = the union of the whole and its parts.
   bool whole_pixels = true;
-  // Confidence of the written masks: their own (import's) times an edge ramp over this many pixels
-  // (edge_ramp_confidence, per_view.h); 0 = the input's confidences as they are.
+  // Confidence of the written masks imported from SAM's files (per-mask scores) or without a confidence file: their
+  // own times an edge ramp over this many pixels (edge_ramp_confidence, per_view.h); 0 = the input's as they are.
+  // Per-pixel confidences of other sources are always kept.
   int edge_ramp = 4;
   double part_fraction = 0.5;       // with SAM's masks still at import.json's source: part_of recomputed at this overlap           // use import.json's part_of (see above)
   bool drop_surfaces = false;       // drop objects whose 3D spread is larger than surface_spread (walls, floor, table)

@@ -107,10 +107,13 @@ TEST(MasksAssociate, HandMadeSceneGetsOneIdPerObject) {
   // Names by majority (ties: alphabetical); the input is kept as it was in per_view/; confidences follow.
   EXPECT_EQ(json::parse(read_file_text(s / "masks" / "objects.json")), json({{"1", "red mug"}, {"2", "blue book"}}));
   for (auto& [name, bytes] : before) EXPECT_EQ(read_file_bytes(s / "masks" / "per_view" / name), bytes) << name;
-  {  // the input's confidences times the edge ramp over the written labels (--edge-confidence 4)
-    std::vector<float> want = read_npy(s / "masks" / "per_view" / "v0.conf.npy").to_float();
-    masks::edge_ramp_confidence(load_label_png(s / "masks" / "v0.png"), 4, want);
-    EXPECT_EQ(read_npy(s / "masks" / "v0.conf.npy").to_float(), want);
+  // v0's own per-pixel confidence is kept; v1 and v2 had none: the edge ramp over their written labels
+  // (--edge-confidence 4, scores of 1).
+  EXPECT_EQ(read_file_bytes(s / "masks" / "v0.conf.npy"), before.at("v0.conf.npy"));
+  for (const char* v : {"v1", "v2"}) {
+    std::vector<float> want;
+    masks::edge_ramp_confidence(load_label_png(s / "masks" / (std::string(v) + ".png")), 4, want);
+    EXPECT_EQ(read_npy(s / "masks" / (std::string(v) + ".conf.npy")).to_float(), want) << v;
   }
   const json rep = json::parse(read_file_text(s / "masks" / "associate.json"));
   EXPECT_EQ(rep["ids"]["v1"], json({{"1", 2}, {"2", 1}}));
@@ -138,10 +141,11 @@ TEST(MasksAssociate, HandMadeSceneGetsOneIdPerObject) {
   expect_same(snapshot(s / "masks"), first);
   EXPECT_EQ(read_file_bytes(t / "out" / "v1.png"), first.at("v1.png"));
   EXPECT_FALSE(fs::exists(t / "out" / "per_view"));
-  // --edge-confidence 0: the input's confidences as they were.
+  // --edge-confidence 0: the input's confidences as they were (none for v1).
   r = test::run_hgs("masks associate " + s.string() + " --out-masks " + (t / "out0").string() + " --edge-confidence 0 --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(read_file_bytes(t / "out0" / "v0.conf.npy"), before.at("v0.conf.npy"));
+  EXPECT_FALSE(fs::exists(t / "out0" / "v1.conf.npy"));
   EXPECT_EQ(json::parse(read_file_text(t / "out" / "objects.json")), json({{"1", "object 1"}, {"2", "object 2"}}));
 }
 
