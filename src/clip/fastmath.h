@@ -3,18 +3,19 @@
 //             2^n put straight into the exponent bits. Relative error ~1e-7 over [-87, 88] (input clamped).
 //   fast_erf: Abramowitz & Stegun 7.1.26 (|error| <= 1.5e-7 in exact arithmetic, <= 5e-7 evaluated in float).
 #pragma once
+#include <algorithm>
+#include <bit>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 
 namespace hgs::clip {
 
 inline float fast_exp(float x) {
-  x = x < -87.0f ? -87.0f : (x > 88.0f ? 88.0f : x);
+  x = std::min(std::max(x, -87.0f), 88.0f);  // min / max rather than branches: the loops vectorise
   const float t = x * 1.44269504088896341f + 12582912.0f;  // round(x / ln2) in the low mantissa bits
   const float n = t - 12582912.0f;
-  int32_t ti;
-  std::memcpy(&ti, &t, 4);
-  const int32_t ni = ti - 0x4B400000;
+  const int32_t ni = std::bit_cast<int32_t>(t) - 0x4B400000;
   const float r = x - n * 0.693359375f + n * 2.12194440e-4f;
   float y = 1.9875691500e-4f;
   y = y * r + 1.3981999507e-3f;
@@ -23,18 +24,18 @@ inline float fast_exp(float x) {
   y = y * r + 1.6666665459e-1f;
   y = y * r + 5.0000001201e-1f;
   y = y * r * r + r + 1.0f;
-  const int32_t bits = (ni + 127) << 23;
-  float scale;
-  std::memcpy(&scale, &bits, 4);
+  const float scale = std::bit_cast<float>((ni + 127) << 23);
   return y * scale;
 }
 
 inline float fast_erf(float x) {
-  const float a = x < 0 ? -x : x;
+  // |x| is capped at 6: beyond it the formula gives 1.0f anyway (p e^{-a^2} < 1e-16), and the cap keeps
+  // e^{-a^2} from reaching the denormal range (a 20x slowdown of the GELU of large activations).
+  const float a = std::min(std::fabs(x), 6.f);
   const float t = 1.0f / (1.0f + 0.3275911f * a);
   const float p = ((((1.061405429f * t - 1.453152027f) * t + 1.421413741f) * t - 0.284496736f) * t + 0.254829592f) * t;
   const float y = 1.0f - p * fast_exp(-a * a);
-  return x < 0 ? -y : y;
+  return std::copysign(y, x);
 }
 
 }  // namespace hgs::clip
