@@ -102,7 +102,7 @@ void run_train(const TrainArgs& a) {
     try {
       s = trainer.step();
     } catch (const Error& e) {  // e.g. a non-finite loss or gradient: nothing of this run's state is saved
-      if (last_ckpt.empty()) fail("{} (no checkpoint written: nothing saved)", e.what());
+      if (last_ckpt.empty()) fail("{} (no checkpoint was written: --save-every N keeps one)", e.what());
       fail("{} (the last checkpoint {} is intact: --resume from it)", e.what(), last_ckpt);
     }
     ms.push_back(float(s.ms));
