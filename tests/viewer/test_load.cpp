@@ -348,6 +348,15 @@ TEST_F(ViewerLoad, OversizeAndMalformedRequestsAreRefused) {
     EXPECT_EQ(status_of(resp), 400) << q << ": " << resp;
     EXPECT_NE(resp.find("UTF-8"), std::string::npos) << q << ": " << resp;
   }
+  // Valid multi-byte UTF-8 passes the check (then fails as a phrase the scene has no embedding for).
+  for (const std::string q : {"caf%C3%A9", "%F0%9F%98%80", "%EF%BF%BD", "%F4%8F%BF%BF"}) {
+    const std::string resp = raw(port, "GET /api/query?text=" + q + " HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
+    EXPECT_EQ(status_of(resp), 400) << q << ": " << resp;
+    EXPECT_EQ(resp.find("UTF-8"), std::string::npos) << q << ": " << resp;
+    const size_t h = resp.find("\r\n\r\n");
+    ASSERT_NE(h, std::string::npos);
+    EXPECT_FALSE(json::parse(resp.substr(h + 4), nullptr, false).is_discarded()) << resp;
+  }
   // Path traversal beyond the basic cases of test_server.cpp: double encoding, raw backslashes, a symlinked
   // folder inside the static folder, invalid UTF-8 in the path.
   for (const std::string p : {"/%252e%252e/secret.txt", "/%252e%252e%252fsecret.txt", "/..\\secret.txt",
