@@ -44,19 +44,21 @@ void preprocess_shape(int h, int w, int longest, int* oh, int* ow) {
   *ow = int(w * s + 0.5);
 }
 
-std::vector<float> resize_planes_bilinear(const float* src, int n, int h, int w, int ch, int cw, int oh, int ow) {
-  if (ch <= 0 || cw <= 0 || ch > h || cw > w || oh <= 0 || ow <= 0)
+std::vector<float> resize_planes_bilinear(const float* src, int n, int h, int w, int ch, int cw, int oh, int ow,
+                                          int keep_h, int keep_w) {
+  if (ch <= 0 || cw <= 0 || ch > h || cw > w || oh <= 0 || ow <= 0 || keep_h > oh || keep_w > ow)
     fail("bilinear resize: bad sizes ({}x{} crop of {}x{} -> {}x{})", cw, ch, w, h, ow, oh);
   const Lin tx = lin_taps(cw, ow), ty = lin_taps(ch, oh);
-  std::vector<float> out(size_t(n) * oh * ow);
-  clip::parallel_for(long(n) * oh, 16, [&](long r0, long r1) {
+  const int rows = keep_h > 0 ? keep_h : oh, cols = keep_w > 0 ? keep_w : ow;
+  std::vector<float> out(size_t(n) * rows * cols);
+  clip::parallel_for(long(n) * rows, 16, [&](long r0, long r1) {
     for (long r = r0; r < r1; ++r) {
-      const int p = int(r / oh), y = int(r % oh);
+      const int p = int(r / rows), y = int(r % rows);
       const float* a = src + (size_t(p) * h + ty.i0[y]) * w;
       const float* b = src + (size_t(p) * h + ty.i1[y]) * w;
       const float ly = ty.l1[y];
-      float* o = out.data() + size_t(r) * ow;
-      for (int x = 0; x < ow; ++x) {
+      float* o = out.data() + size_t(r) * cols;
+      for (int x = 0; x < cols; ++x) {
         const int x0 = tx.i0[x], x1 = tx.i1[x];
         const float lx = tx.l1[x];
         const float top = (1 - lx) * a[x0] + lx * a[x1], bot = (1 - lx) * b[x0] + lx * b[x1];
@@ -88,8 +90,9 @@ std::vector<float> SamModel::preprocess(const Image& img, int* input_h, int* inp
 
 std::vector<float> SamModel::upscale_masks(const ImageEmbedding& e, const float* lowres, int n) const {
   const int s = 4 * vision.grid, S = image_size();
-  std::vector<float> full = resize_planes_bilinear(lowres, n, s, s, s, s, S, S);
-  return resize_planes_bilinear(full.data(), n, S, S, e.input_h, e.input_w, e.orig_h, e.orig_w);
+  // Only the part of the S x S upsampling that the crop keeps.
+  std::vector<float> crop = resize_planes_bilinear(lowres, n, s, s, s, s, S, S, e.input_h, e.input_w);
+  return resize_planes_bilinear(crop.data(), n, e.input_h, e.input_w, e.input_h, e.input_w, e.orig_h, e.orig_w);
 }
 
 }  // namespace hgs::sam

@@ -12,7 +12,9 @@ namespace hgs::sam {
 void preprocess_shape(int h, int w, int longest, int* oh, int* ow);
 
 // src [n, h, w] (row stride w, plane stride h * w) -> [n, oh, ow]; only the top-left ch x cw of each source
-// plane is used (a crop; ch = h, cw = w for all of it).
-std::vector<float> resize_planes_bilinear(const float* src, int n, int h, int w, int ch, int cw, int oh, int ow);
+// plane is used (a crop; ch = h, cw = w for all of it). With keep_h / keep_w > 0 only the top-left
+// keep_h x keep_w of each output plane is computed and returned: [n, keep_h, keep_w].
+std::vector<float> resize_planes_bilinear(const float* src, int n, int h, int w, int ch, int cw, int oh, int ow,
+                                          int keep_h = 0, int keep_w = 0);
 
 }  // namespace hgs::sam
