@@ -1,11 +1,14 @@
-// The ViT layers against a brute-force double-precision evaluation of SAM's formulas on a random model whose
-// sizes exercise what the tiny fixture does not: a grid that windows do not divide (28 = 5 x 5 windows of 6,
-// padded to 30) and a global layer large enough (784 tokens) to be split into blocks of query rows.
+// Kernels against brute-force double-precision evaluations: the ViT layers on a random model whose sizes
+// exercise what the tiny fixture does not (a 28 x 28 grid in 5 x 5 windows of 6, padded to 30, and a global
+// layer of 784 tokens split into blocks of query rows), and the decoder's reassociated cross attentions
+// against plain attention.
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <random>
 
+#include "clip/transformer.h"
+#include "sam/decoder_attention.h"
 #include "sam/model.h"
 #include "sam_test_util.h"
 
@@ -150,6 +153,63 @@ TEST(SamKernels, VitLayersMatchBruteForce) {
     for (size_t i = 0; i < x.size(); ++i) x[i] += b[i];
     EXPECT_LT(max_rel_err(stages[li + 1], std::vector<float>(x.begin(), x.end())), 1e-5) << "layer " << li;
   }
+}
+
+}  // namespace
+}  // namespace hgs::test
+
+namespace hgs::test {
+namespace {
+
+// Plain attention in double: out [nq, C] = out_proj(concat_h softmax(q_h k_h^T / sqrt(d)) v_h), with q, k, v the
+// projections of qin [nq, C], kin / vin [nk, C].
+std::vector<float> plain_attention(const sam::Attention& a, int heads, const std::vector<float>& qin, int nq,
+                                   const std::vector<float>& kin, const std::vector<float>& vin, int nk) {
+  auto proj = [](const sam::Linear& l, const std::vector<float>& x, int n) {
+    Mat xd(x.begin(), x.end());
+    return apply(l, xd, n);
+  };
+  Mat q = proj(a.q, qin, nq), k = proj(a.k, kin, nk), v = proj(a.v, vin, nk);
+  const int I = a.q.out, hd = I / heads;
+  Mat o(size_t(nq) * I, 0.0);
+  for (int h = 0; h < heads; ++h)
+    for (int i = 0; i < nq; ++i) {
+      std::vector<double> s(nk);
+      double mx = -1e300, sum = 0;
+      for (int j = 0; j < nk; ++j) {
+        double d = 0;
+        for (int c = 0; c < hd; ++c) d += q[size_t(i) * I + h * hd + c] * k[size_t(j) * I + h * hd + c];
+        s[j] = d / std::sqrt(double(hd));
+        mx = std::max(mx, s[j]);
+      }
+      for (auto& x : s) sum += (x = std::exp(x - mx));
+      for (int j = 0; j < nk; ++j)
+        for (int c = 0; c < hd; ++c) o[size_t(i) * I + h * hd + c] += s[j] / sum * v[size_t(j) * I + h * hd + c];
+    }
+  Mat out = apply(a.out, o, nq);
+  return std::vector<float>(out.begin(), out.end());
+}
+
+TEST(SamKernels, ReassociatedDecoderAttentionMatchesPlainAttention) {
+  std::mt19937 rng(5);
+  const int C = 32, I = 16, heads = 4, few = 5, many = 300;
+  sam::Attention a{lin(I, C, rng), lin(I, C, rng), lin(I, C, rng), lin(C, I, rng)};
+  for (auto* l : {&a.q, &a.k}) for (auto& x : l->w) x *= 3.f;  // peaked softmax
+  std::vector<float> tok = randn(size_t(few) * C, 1.f, rng), img = randn(size_t(many) * C, 1.f, rng),
+                     img2 = randn(size_t(many) * C, 1.f, rng), tok2 = randn(size_t(few) * C, 1.f, rng);
+  sam::AttnWork w;
+  // Tokens -> image (keys img, values img2).
+  std::vector<float> out(size_t(few) * C);
+  sam::attend_few_queries(a, heads, tok.data(), few, img.data(), img2.data(), many, out.data(), w);
+  EXPECT_LT(max_rel_err(out, plain_attention(a, heads, tok, few, img, img2, many)), 2e-5);
+  // Image -> tokens, with and without the precomputed query projection.
+  std::vector<float> out2(size_t(many) * C), out3(size_t(many) * C), qp(size_t(many) * I);
+  sam::attend_few_keys(a, heads, img.data(), nullptr, many, tok.data(), tok2.data(), few, out2.data(), w);
+  const std::vector<float> ref = plain_attention(a, heads, img, many, tok, tok2, few);
+  EXPECT_LT(max_rel_err(out2, ref), 2e-5);
+  clip::linear(a.q, img.data(), many, qp.data());
+  sam::attend_few_keys(a, heads, nullptr, qp.data(), many, tok.data(), tok2.data(), few, out3.data(), w);
+  EXPECT_EQ(out3, out2);
 }
 
 }  // namespace
