@@ -48,7 +48,7 @@ void add_rel_pos(const float* q, int ldq, int row0, int nq, int s, int hd, const
 }
 
 struct VitWork {
-  std::vector<float> h, win, qkv, attn, out, mlp, scores, th, tw;
+  std::vector<float> h, win, qkv, attn, out, mlp;
 };
 
 // Attention of one layer on the normalised tokens h [g * g, C]; adds proj(attn) to x [g * g, C].
@@ -71,21 +71,30 @@ void vit_attention(const VitLayer& l, int g, int C, int heads, const float* h, f
   w.qkv.resize(size_t(M) * 3 * C);
   clip::linear(l.qkv, w.win.data(), M, w.qkv.data());
   w.attn.resize(size_t(M) * C);
-  // Query blocks keep the score matrix [rows, n] within ~2 MB (cache) for the global layers.
+  // Query blocks keep the score matrix [rows, n] within ~2 MB (cache) for the global layers. The (window,
+  // block) units are independent: one per thread with single-threaded OpenBLAS (one hand-off per layer instead
+  // of several per head).
   const int rows = std::min(n, std::max(16, (1 << 19) / n));
-  w.scores.resize(size_t(rows) * n);
-  for (int wi = 0; wi < nw * nw; ++wi) {
-    const float* base = w.qkv.data() + size_t(wi) * n * 3 * C;
-    for (int r0 = 0; r0 < n; r0 += rows) {
-      const int nq = std::min(rows, n - r0);
+  const int blocks = (n + rows - 1) / rows, units = nw * nw * blocks;
+  const bool split = units > 1 && clip::pool_threads() > 1;
+  const int blas_threads = openblas_get_num_threads();
+  if (split) openblas_set_num_threads(1);
+  auto run = [&](long u0, long u1) {
+    std::vector<float> scores(size_t(rows) * n), th, tw;
+    for (long u = u0; u < u1; ++u) {
+      const int wi = int(u / blocks), r0 = int(u % blocks) * rows, nq = std::min(rows, n - r0);
+      const float* base = w.qkv.data() + size_t(wi) * n * 3 * C;
       const float* qb = base + size_t(r0) * 3 * C;
       auto bias = [&](int head, float* sc) {
-        add_rel_pos(qb + head * hd, 3 * C, r0, nq, s, hd, l.rel_h.data(), l.rel_w.data(), sc, w.th, w.tw);
+        add_rel_pos(qb + head * hd, 3 * C, r0, nq, s, hd, l.rel_h.data(), l.rel_w.data(), sc, th, tw);
       };
       clip::multi_head_attention(qb, 3 * C, base + C, 3 * C, base + 2 * C, 3 * C, nq, n, heads, hd, scale,
-                                 w.attn.data() + (size_t(wi) * n + r0) * C, C, w.scores.data(), false, bias);
+                                 w.attn.data() + (size_t(wi) * n + r0) * C, C, scores.data(), false, bias);
     }
-  }
+  };
+  if (split) clip::parallel_for(units, 2, run);
+  else run(0, units);
+  if (split) openblas_set_num_threads(blas_threads);
   w.out.resize(size_t(M) * C);
   clip::linear(l.proj, w.attn.data(), M, w.out.data());
   for (int wy = 0; wy < nw; ++wy)
