@@ -57,6 +57,7 @@ std::vector<int64_t> read_npy_integers(const fs::path& file, std::vector<size_t>
       else if (bytes == 4) { float f; std::memcpy(&f, p, 4); v = f; }
       else std::memcpy(&v, p, 8);
       if (!std::isfinite(v) || v != std::floor(v)) fail("{}: element {} is {}, not an integer", name, i, v);
+      if (std::abs(v) > 9.0e18) fail("{}: element {} is {}, out of range", name, i, v);  // int64 cast undefined
       out[i] = int64_t(v);
     } else if (kind == 'i') {
       int64_t x = 0;

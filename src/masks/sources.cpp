@@ -41,7 +41,7 @@ std::vector<SourceMask> read_sam_json(const fs::path& file, int width, int heigh
   json j;
   try {
     j = json::parse(read_file_text(file));
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {  // parse_error, and out_of_range for a number too large
     fail("{}: invalid JSON ({})", name, e.what());
   }
   if (!j.is_array()) fail("{}: expected a JSON list of masks (SAM automatic mask generator output)", name);

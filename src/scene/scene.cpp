@@ -58,7 +58,7 @@ json read_json(const fs::path& p) {
   std::string text = read_file_text(p);
   try {
     return json::parse(text);
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {  // parse_error, and out_of_range for a number too large
     fail("{}: invalid JSON ({})", p.string(), e.what());
   }
 }

@@ -124,7 +124,12 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
   char magic[8];
   uint64_t len = 0;
   if (std::fread(magic, 1, 8, fp) != 8 || std::memcmp(magic, kMagic, 8) != 0) fail("{}: not an hgs checkpoint", where);
-  if (std::fread(&len, 8, 1, fp) != 1 || len > (uint64_t(1) << 32)) fail("{}: truncated checkpoint header", where);
+  // Sizes from the file are checked against the file's own size before anything is allocated by them.
+  std::error_code size_ec;
+  const uint64_t file_size = std::filesystem::file_size(path, size_ec);
+  if (size_ec) fail("{}: cannot read checkpoint size ({})", where, size_ec.message());
+  if (std::fread(&len, 8, 1, fp) != 1 || len > file_size - std::min<uint64_t>(file_size, 16))
+    fail("{}: truncated checkpoint header", where);
   std::string hs(len, '\0');
   if (std::fread(hs.data(), 1, len, fp) != len) fail("{}: truncated checkpoint header", where);
   json h;
@@ -220,7 +225,11 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
       auto it16 = dst16.find(name);
       if (it == dst.end() && it16 == dst16.end()) fail("{}: unexpected array '{}'", where, name);
       if (it != dst.end()) {
-        if (name.rfind("method/", 0) == 0) it->second->resize(count);  // sizes checked by method_state_loaded
+        if (name.rfind("method/", 0) == 0) {  // sizes checked by method_state_loaded; here only against the file
+          const long pos = std::ftell(fp);
+          if (pos < 0 || count > (file_size - uint64_t(pos)) / 4) fail("{}: truncated checkpoint (array '{}')", where, name);
+          it->second->resize(count);
+        }
         if (it->second->size() != count) fail("{}: array '{}' has {} values, expected {}", where, name, count, it->second->size());
         if (std::fread(it->second->data(), 4, count, fp) != count) fail("{}: truncated checkpoint (array '{}')", where, name);
       } else {

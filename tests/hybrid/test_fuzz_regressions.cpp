@@ -2,7 +2,10 @@
 // (under UBSan: a float cast to int out of range), now a one-line hgs::Error naming the file.
 #include <gtest/gtest.h>
 
+#include <cstring>
+
 #include "core/error.h"
+#include "core/fs.h"
 #include "expect_error.h"
 #include "scene/scene.h"
 #include "test_util.h"
@@ -30,4 +33,31 @@ TEST(FuzzRegressions, CheckpointCountOutOfRange) {
   auto trainer = train::make_trainer(scene, scene.train_indices(), cfg, "hybrid", hybrid::HybridConfig{}.to_json(), false);
   const fs::path file = fs::path(HGS_SOURCE_DIR) / "tests" / "data" / "fuzz_findings" / "checkpoint_count_out_of_range.ckpt";
   EXPECT_FILE_ERROR(trainer->load_checkpoint(file), file, "corrupt densification statistics");
+}
+
+// fuzz_checkpoint: a header length of ~3 GB (a file of a few KB) was allocated before reading; the length is now
+// checked against the file's size.
+TEST(FuzzRegressions, CheckpointHeaderLongerThanTheFile) {
+  test::TempDir t;
+  auto r = test::run_hgs("synth --out " + (t / "tiny").string() +
+                         " --views 4 --width 32 --height 24 --objects 3 --points 200 --feature-dim 8 --noise none"
+                         " --supersample 1 --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = test::run_hgs("train " + (t / "tiny").string() + " --out " + (t / "m").string() +
+                    " --method rgb --iters 4 --save-every 4 --sh-degree 0 --threads 1 --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const fs::path good = t / "m" / "checkpoints" / "iter_4.ckpt";
+  std::vector<uint8_t> b = read_file_bytes(good);
+  ASSERT_GT(b.size(), 16u);
+  const uint64_t len = uint64_t(3) << 30;  // bytes 8..15: the header's length
+  std::memcpy(b.data() + 8, &len, 8);
+  const fs::path bad = t / "bad.ckpt";
+  atomic_write_bytes(bad, b.data(), b.size());
+  const Scene scene = load_scene(t / "tiny");
+  train::TrainConfig base;
+  base.sh_degree = 0;
+  train::TrainConfig cfg = base.scaled_to(4);
+  auto trainer = train::make_trainer(scene, scene.train_indices(), cfg, "rgb", nlohmann::json(), false);
+  EXPECT_FILE_ERROR(trainer->load_checkpoint(bad), bad, "truncated checkpoint header");
+  EXPECT_NO_THROW(trainer->load_checkpoint(good));
 }
