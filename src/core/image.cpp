@@ -11,8 +11,22 @@
 
 namespace hgs {
 
+namespace {
+// Sizes from an image header are checked before anything is allocated by them: a PNG of a few bytes may claim
+// 2^24 x 2^24 pixels (stb's own limit), which decoding would try to allocate.
+constexpr int64_t kMaxImagePixels = int64_t(1) << 28;  // 268 megapixels (1 GiB as floats per channel)
+
+void check_header_size(const std::vector<uint8_t>& bytes, const std::filesystem::path& path) {
+  int w = 0, h = 0, c = 0;
+  if (!stbi_info_from_memory(bytes.data(), static_cast<int>(bytes.size()), &w, &h, &c)) return;  // decoding says why
+  if (w < 1 || h < 1 || int64_t(w) * h > kMaxImagePixels)
+    fail("{}: image of {}x{} pixels is too large (at most {} pixels)", path.string(), w, h, kMaxImagePixels);
+}
+}  // namespace
+
 Image load_image(const std::filesystem::path& path, int channels) {
   auto bytes = read_file_bytes(path);
+  check_header_size(bytes, path);
   int w, h, c;
   const bool is16 = stbi_is_16_bit_from_memory(bytes.data(), static_cast<int>(bytes.size()));
   Image img;
@@ -46,6 +60,7 @@ LabelMap load_label_png(const std::filesystem::path& path) {
     fail("{}: cannot decode label PNG ({})", path.string(), stbi_failure_reason());
   if (c != 1)
     fail("{}: label map must be a single-channel (greyscale) 8- or 16-bit PNG, found {} channels", path.string(), c);
+  check_header_size(bytes, path);
   LabelMap m(w, h);
   if (stbi_is_16_bit_from_memory(bytes.data(), static_cast<int>(bytes.size()))) {
     uint16_t* p = stbi_load_16_from_memory(bytes.data(), static_cast<int>(bytes.size()), &w, &h, &c, 1);

@@ -6,6 +6,7 @@
 
 #include "core/error.h"
 #include "core/fs.h"
+#include "core/image.h"
 #include "core/npy.h"
 #include "expect_error.h"
 #include "test_util.h"
@@ -64,4 +65,16 @@ TEST(FuzzRegressions, NpyHeaderTooLong) {
   b += std::string(n, ' ');
   atomic_write_text(f, b);
   EXPECT_FILE_ERROR(read_npy(f), f, "too long");
+}
+
+// fuzz_image: a 31-byte PNG whose header claims 220 x 4802568 16-bit grey pixels (2 GB) was allocated before
+// decoding (out of memory); header sizes are now checked first.
+TEST(FuzzRegressions, PngHeaderClaimsTooManyPixels) {
+  test::TempDir t;
+  const unsigned char png[] = {0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a, 0x00, 0x00, 0x00, 0x0d, 0x49, 0x48, 0x44, 0x52,
+                               0x00, 0x00, 0x00, 0xdc, 0x00, 0x49, 0x48, 0x08, 0x10, 0x00, 0x00, 0x00, 0x00, 0x11, 0x3b};
+  const auto f = t / "mask.png";
+  atomic_write_bytes(f, png, sizeof(png));
+  EXPECT_FILE_ERROR(load_label_png(f), f, "too large");
+  EXPECT_FILE_ERROR(load_image(f, 3), f, "too large");
 }
