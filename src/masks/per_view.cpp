@@ -69,30 +69,48 @@ bool clip_parts_to_wholes(const std::vector<SourceMask>& masks, const std::map<i
   return true;
 }
 
-void edge_ramp_confidence(const LabelMap& labels, int ramp, std::vector<float>& conf) {
-  const int W = labels.width, H = labels.height;
-  const size_t n = size_t(W) * H;
-  if (conf.empty()) conf.assign(n, 1.f);
-  if (conf.size() != n) fail("edge_ramp_confidence: {} confidences for a {}x{} label map", conf.size(), W, H);
-  if (ramp <= 0) return;
-  // Chessboard distance to the nearest edge pixel: two raster passes (forward, then backward).
-  const int inf = W + H;
-  std::vector<int> d(n);
+std::vector<uint8_t> label_edges(const LabelMap& m) {
+  const int W = m.width, H = m.height;
+  std::vector<uint8_t> edge(size_t(W) * H, 0);
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
-      const uint16_t l = labels.at(x, y);
-      const bool edge = (x > 0 && labels.at(x - 1, y) != l) || (x + 1 < W && labels.at(x + 1, y) != l) ||
-                        (y > 0 && labels.at(x, y - 1) != l) || (y + 1 < H && labels.at(x, y + 1) != l);
-      d[size_t(y) * W + x] = edge ? 0 : inf;
+      const uint16_t l = m.at(x, y);
+      edge[size_t(y) * W + x] = (x > 0 && m.at(x - 1, y) != l) || (x + 1 < W && m.at(x + 1, y) != l) ||
+                                (y > 0 && m.at(x, y - 1) != l) || (y + 1 < H && m.at(x, y + 1) != l);
     }
-  auto relax = [&](int x, int y, int dx, int dy) {
-    const int xx = x + dx, yy = y + dy;
-    if (xx >= 0 && yy >= 0 && xx < W && yy < H) d[size_t(y) * W + x] = std::min(d[size_t(y) * W + x], d[size_t(yy) * W + xx] + 1);
-  };
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) relax(x, y, -1, 0), relax(x, y, -1, -1), relax(x, y, 0, -1), relax(x, y, 1, -1);
-  for (int y = H - 1; y >= 0; --y)
-    for (int x = W - 1; x >= 0; --x) relax(x, y, 1, 0), relax(x, y, 1, 1), relax(x, y, 0, 1), relax(x, y, -1, 1);
+  return edge;
+}
+
+std::vector<int> chessboard_distance(const std::vector<uint8_t>& src, int w, int h) {
+  const int inf = w + h;
+  std::vector<int> d(src.size());
+  for (size_t i = 0; i < src.size(); ++i) d[i] = src[i] ? 0 : inf;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      int& v = d[size_t(y) * w + x];
+      if (x > 0) v = std::min(v, d[size_t(y) * w + x - 1] + 1);
+      if (y > 0)
+        for (int dx = -1; dx <= 1; ++dx)
+          if (x + dx >= 0 && x + dx < w) v = std::min(v, d[size_t(y - 1) * w + x + dx] + 1);
+    }
+  for (int y = h - 1; y >= 0; --y)
+    for (int x = w - 1; x >= 0; --x) {
+      int& v = d[size_t(y) * w + x];
+      if (x + 1 < w) v = std::min(v, d[size_t(y) * w + x + 1] + 1);
+      if (y + 1 < h)
+        for (int dx = -1; dx <= 1; ++dx)
+          if (x + dx >= 0 && x + dx < w) v = std::min(v, d[size_t(y + 1) * w + x + dx] + 1);
+    }
+  return d;
+}
+
+void edge_ramp_confidence(const LabelMap& labels, int ramp, std::vector<float>& conf) {
+  const size_t n = size_t(labels.width) * labels.height;
+  if (conf.empty()) conf.assign(n, 1.f);
+  if (conf.size() != n)
+    fail("edge_ramp_confidence: {} confidences for a {}x{} label map", conf.size(), labels.width, labels.height);
+  if (ramp <= 0) return;
+  const std::vector<int> d = chessboard_distance(label_edges(labels), labels.width, labels.height);
   for (size_t p = 0; p < n; ++p) conf[p] *= 0.5f + 0.5f * std::min(1.f, float(d[p]) / float(ramp));
 }
 

@@ -36,6 +36,12 @@ std::map<int, int> part_roots(const std::map<int, MaskInfo>& info, double image_
 bool clip_parts_to_wholes(const std::vector<SourceMask>& masks, const std::map<int, int>& root, int width, int height,
                           Flattened& out);
 
+// [H, W] 1 on every edge of a label map: a pixel with a 4-neighbour of another label (background included).
+std::vector<uint8_t> label_edges(const LabelMap& m);
+// [H, W] chessboard (L-infinity) distance from every pixel to the nearest pixel with src != 0 (w + h where there
+// is none); two raster passes.
+std::vector<int> chessboard_distance(const std::vector<uint8_t>& src, int w, int h);
+
 // Per-pixel confidence for masks whose files give one score per mask (SAM's JSON and PNG folders): the score
 // times a ramp from 1/2 on an edge (a pixel with a 4-neighbour of another label, background included) to 1 at
 // `ramp` pixels (chessboard distance) from the nearest edge, as a mask logit's sigmoid crosses 1/2 on the object's

@@ -9,6 +9,7 @@
 #include <set>
 
 #include "core/error.h"
+#include "masks/per_view.h"
 #include "synth/synth.h"
 
 namespace hgs::synth {
@@ -21,35 +22,7 @@ NoiseLevel noise_level(const std::string& name) {
   fail("--noise: unknown level '{}' (none, low, medium or high)", name);
 }
 
-namespace {
-
-// Chessboard (L-infinity) distance from every pixel to the nearest pixel with src != 0; two passes.
-std::vector<int> chessboard_distance(const std::vector<uint8_t>& src, int w, int h) {
-  const int inf = w + h;
-  std::vector<int> d(src.size());
-  for (size_t i = 0; i < src.size(); ++i) d[i] = src[i] ? 0 : inf;
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      int& v = d[size_t(y) * w + x];
-      if (x > 0) v = std::min(v, d[size_t(y) * w + x - 1] + 1);
-      if (y > 0) {
-        for (int dx = -1; dx <= 1; ++dx)
-          if (x + dx >= 0 && x + dx < w) v = std::min(v, d[size_t(y - 1) * w + x + dx] + 1);
-      }
-    }
-  for (int y = h - 1; y >= 0; --y)
-    for (int x = w - 1; x >= 0; --x) {
-      int& v = d[size_t(y) * w + x];
-      if (x + 1 < w) v = std::min(v, d[size_t(y) * w + x + 1] + 1);
-      if (y + 1 < h) {
-        for (int dx = -1; dx <= 1; ++dx)
-          if (x + dx >= 0 && x + dx < w) v = std::min(v, d[size_t(y + 1) * w + x + dx] + 1);
-      }
-    }
-  return d;
-}
-
-}  // namespace
+using masks::chessboard_distance;  // masks/per_view.h
 
 std::vector<SamMask> simulate_sam_masks(const RenderedView& v, const Intrinsics& K, const World& world,
                                         const std::vector<char>& split, const NoiseLevel& nl, uint64_t seed) {
@@ -173,15 +146,7 @@ void simulate_masks(const LabelMap& gt, const NoiseLevel& nl, int num_objects, u
   // 5. confidence
   conf.clear();
   if (nl.conf_noise <= 0) return;
-  std::vector<uint8_t> edge(n, 0);
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      int l = mask.at(x, y);
-      if ((x + 1 < w && mask.at(x + 1, y) != l) || (y + 1 < h && mask.at(x, y + 1) != l) || (x > 0 && mask.at(x - 1, y) != l) ||
-          (y > 0 && mask.at(x, y - 1) != l))
-        edge[size_t(y) * w + x] = 1;
-    }
-  std::vector<int> d = chessboard_distance(edge, w, h);
+  std::vector<int> d = chessboard_distance(masks::label_edges(mask), w, h);
   conf.resize(n);
   for (size_t i = 0; i < n; ++i) {
     double c = 0.45 + 0.55 * std::min(1.0, d[i] / 4.0) + nl.conf_noise * rng.normal();

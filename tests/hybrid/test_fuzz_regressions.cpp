@@ -16,14 +16,20 @@
 using namespace hgs;
 namespace fs = std::filesystem;
 
+namespace {
+// The fuzz harnesses' tiny scene (fuzz/util.cpp), on which the inputs were found.
+void write_tiny_scene(const fs::path& out) {
+  const auto r = test::run_hgs("synth --out " + out.string() +
+                               " --views 4 --width 32 --height 24 --objects 3 --points 200 --feature-dim 8 --noise none"
+                               " --supersample 1 --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+}
+}  // namespace
+
 // fuzz_checkpoint: a densification count of 5.3e22 in stats/count of a hybrid checkpoint was cast to int.
 TEST(FuzzRegressions, CheckpointCountOutOfRange) {
   test::TempDir t;
-  // The fuzz harnesses' tiny scene (fuzz/util.cpp), on which the input was found.
-  auto r = test::run_hgs("synth --out " + (t / "tiny").string() +
-                         " --views 4 --width 32 --height 24 --objects 3 --points 200 --feature-dim 8 --noise none"
-                         " --supersample 1 --quiet");
-  ASSERT_EQ(r.exit_code, 0) << r.err;
+  ASSERT_NO_FATAL_FAILURE(write_tiny_scene(t / "tiny"));
   const Scene scene = load_scene(t / "tiny");
   train::TrainConfig base;
   base.sh_degree = 0;
@@ -39,11 +45,8 @@ TEST(FuzzRegressions, CheckpointCountOutOfRange) {
 // checked against the file's size.
 TEST(FuzzRegressions, CheckpointHeaderLongerThanTheFile) {
   test::TempDir t;
-  auto r = test::run_hgs("synth --out " + (t / "tiny").string() +
-                         " --views 4 --width 32 --height 24 --objects 3 --points 200 --feature-dim 8 --noise none"
-                         " --supersample 1 --quiet");
-  ASSERT_EQ(r.exit_code, 0) << r.err;
-  r = test::run_hgs("train " + (t / "tiny").string() + " --out " + (t / "m").string() +
+  ASSERT_NO_FATAL_FAILURE(write_tiny_scene(t / "tiny"));
+  auto r = test::run_hgs("train " + (t / "tiny").string() + " --out " + (t / "m").string() +
                     " --method rgb --iters 4 --save-every 4 --sh-degree 0 --threads 1 --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const fs::path good = t / "m" / "checkpoints" / "iter_4.ckpt";
