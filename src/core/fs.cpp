@@ -49,6 +49,12 @@ fs::path temp_name(const fs::path& path) {
   return tmp;
 }
 
+fs::path replace_name(const fs::path& path) {
+  fs::path tmp = path;
+  tmp += kReplaceSuffix;
+  return tmp;
+}
+
 // Flushes the file `fd` to the disk: once its name appears, its bytes are there too (also across a power loss).
 void sync_fd(int fd, const fs::path& path) {
   if (::fsync(fd) != 0) fail("{}: cannot write ({})", path.string(), errno_text(errno));
@@ -90,19 +96,21 @@ void atomic_write(const fs::path& path, const std::function<void(const fs::path&
   sync_fd(f.fd, path);
   if (::linkat(AT_FDCWD, proc.c_str(), AT_FDCWD, path.c_str(), AT_SYMLINK_FOLLOW) == 0) return;
   if (errno != EEXIST) fail("{}: cannot write ({})", path.string(), errno_text(errno));
-  // Replacing a file: link under a temporary name (complete already), then rename over the old one.
+  // Replacing a file: link under `<name>.hgs-replace` (complete already), then rename over the old one. Linux
+  // has no atomic "link over an existing name", so a kill between the two calls leaves a complete copy under
+  // that name; the name is fixed (not random) so that the next write of the same output removes it: a crashed
+  // run leaves at most one such file per output, whole, and never a torn file under the output's name.
+  const fs::path tmp = replace_name(path);
   for (int attempt = 0;; ++attempt) {
-    const fs::path tmp = temp_name(path);
-    if (::linkat(AT_FDCWD, proc.c_str(), AT_FDCWD, tmp.c_str(), AT_SYMLINK_FOLLOW) != 0) {
-      if (errno == EEXIST && attempt < 8) continue;
-      fail("{}: cannot write ({})", path.string(), errno_text(errno));
-    }
-    if (::rename(tmp.c_str(), path.c_str()) != 0) {
-      const int e = errno;
-      ::unlink(tmp.c_str());
-      fail("{}: cannot write ({})", path.string(), errno_text(e));
-    }
-    return;
+    if (::linkat(AT_FDCWD, proc.c_str(), AT_FDCWD, tmp.c_str(), AT_SYMLINK_FOLLOW) == 0) break;
+    if (errno != EEXIST || attempt >= 8) fail("{}: cannot write ({})", path.string(), errno_text(errno));
+    if (::unlink(tmp.c_str()) != 0 && errno != ENOENT)  // left by a killed run (or a concurrent writer's)
+      fail("{}: cannot remove {} ({})", path.string(), tmp.filename().string(), errno_text(errno));
+  }
+  if (::rename(tmp.c_str(), path.c_str()) != 0) {
+    const int e = errno;
+    ::unlink(tmp.c_str());
+    fail("{}: cannot write ({})", path.string(), errno_text(e));
   }
 }
 

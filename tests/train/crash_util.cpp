@@ -94,8 +94,12 @@ std::vector<std::string> incomplete_outputs(const fs::path& dir) {
   std::vector<std::string> bad;
   for (const auto& e : fs::recursive_directory_iterator(dir)) {
     if (!e.is_regular_file()) continue;
+    // A complete copy under `<name>.hgs-replace` is the one trace atomic_write's kill window may leave (see
+    // core/fs.h): it must be whole, so it is checked as the file it replaces.
     const fs::path& p = e.path();
-    const std::string name = p.filename().string(), ext = p.extension().string();
+    fs::path kind = p;
+    if (kind.extension() == kReplaceSuffix) kind.replace_extension();
+    const std::string name = kind.filename().string(), ext = kind.extension().string();
     const std::string where = p.lexically_relative(dir).string();
     try {
       if (name.find(".tmp") != std::string::npos) {
