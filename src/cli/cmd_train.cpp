@@ -12,6 +12,7 @@
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/progress.h"
+#include "dist/mpi.h"
 #include "model/ply.h"
 #include "scene/scene.h"
 #include "hybrid/config.h"
@@ -27,7 +28,7 @@ struct TrainArgs {
   hybrid::HybridConfig hybrid;
   bool no_of = false, no_scl = false, no_bro = false;
   std::string lang_storage = "half", bro_gradient = "scale-invariant", bro_norm = "image", unconfident = "unobserved";
-  int iters = 30000, downscale = 1, threads = 0, sh_degree = 3, save_every = 0;
+  int iters = 30000, downscale = 1, threads = 0, sh_degree = 3, save_every = 0, batch = 1;
   uint64_t seed = 0;
   bool no_densify = false, white_bg = false, quiet = false;
 };
@@ -39,13 +40,25 @@ double peak_rss_mb() {
 }
 
 void run_train(const TrainArgs& a) {
-  set_threads(a.threads);
+  // Under mpirun every rank runs this same function on the same scene and configuration; rank 0 alone writes
+  // outputs and shows progress (docs/scaling.md).
+  dist::Session mpi;
+  const int R = mpi.size(), G = a.batch * R;
+  const bool writer = mpi.rank() == 0;
+  // Ranks sharing a machine share its cores: by default each takes its share.
+  set_threads(a.threads == 0 && R > 1 ? std::max(1, omp_get_num_procs() / dist::local_ranks()) : a.threads);
   Scene scene = load_scene(a.scene, {a.downscale, false});
   std::vector<int> train_idx = scene.train_indices();
   if (train_idx.empty()) fail("{}: the scene has no training views", a.scene);
-  const bool progress = !a.quiet;
+  if (G > int(train_idx.size()))
+    fail("{}: a step of {} views ({} per rank x {} ranks) is more than the {} training views", a.scene, G, a.batch,
+         R, train_idx.size());
+  if (a.save_every % G != 0)
+    fail("--save-every {} is not a multiple of the {} views of a step (--batch {} x {} ranks)", a.save_every, G,
+         a.batch, R);
+  const bool progress = !a.quiet && writer;
   const fs::path out = a.out;
-  ensure_dir(out);
+  if (writer) ensure_dir(out);
 
   train::TrainConfig base;
   base.sh_degree = a.sh_degree;
@@ -55,6 +68,7 @@ void run_train(const TrainArgs& a) {
   cfg.densify = !a.no_densify;
   cfg.white_bg = a.white_bg;
   cfg.save_every = a.save_every;
+  cfg.batch = a.batch;
 
   std::optional<hybrid::HybridConfig> hc;
   if (a.method == "hybrid") {
@@ -68,7 +82,8 @@ void run_train(const TrainArgs& a) {
     hc->unconfident_unobserved = a.unconfident == "unobserved";
   }
   hybrid::register_method();
-  auto trainer_ptr = train::make_trainer(scene, train_idx, cfg, a.method, hc ? hc->to_json() : nlohmann::json(), progress);
+  auto trainer_ptr = train::make_trainer(scene, train_idx, cfg, a.method, hc ? hc->to_json() : nlohmann::json(),
+                                         progress, &mpi.reducer());
   train::Trainer& trainer = *trainer_ptr;
   const int init_points = trainer.model().n;
   if (!a.resume.empty()) {
@@ -76,6 +91,9 @@ void run_train(const TrainArgs& a) {
     if (trainer.iteration() >= a.iters)
       fail("{}: checkpoint is at iteration {}, nothing to do for --iters {}", a.resume, trainer.iteration(), a.iters);
   }
+  if ((a.iters - trainer.iteration()) % G != 0)
+    fail("--iters {}: the {} images left after iteration {} are not a multiple of the {} views of a step (--batch "
+         "{} x {} ranks)", a.iters, a.iters - trainer.iteration(), trainer.iteration(), G, a.batch, R);
 
   nlohmann::json config = trainer.config().to_json();
   config["scene"] = fs::absolute(scene.root).lexically_normal().string();
@@ -86,7 +104,8 @@ void run_train(const TrainArgs& a) {
   config["split"] = scene.split_source;
   if (hc) config["hybrid"] = hc->to_json();
   if (!a.resume.empty()) config["resumed_from"] = a.resume;
-  atomic_write_text(out / "config.json", config.dump(2) + "\n");
+  config["ranks"] = R;
+  if (writer) atomic_write_text(out / "config.json", config.dump(2) + "\n");
 
   const int start = trainer.iteration();
   std::vector<float> ms;
@@ -117,7 +136,7 @@ void run_train(const TrainArgs& a) {
     }
     ema_psnr = first ? s.psnr : 0.4 * s.psnr + 0.6 * ema_psnr;
     const int it = trainer.iteration();
-    if (a.save_every > 0 && it % a.save_every == 0 && it < a.iters) {
+    if (writer && a.save_every > 0 && it % a.save_every == 0 && it < a.iters) {
       ensure_dir(out / "checkpoints");
       trainer.save_checkpoint(out / "checkpoints" / fmt::format("iter_{}.ckpt", it));
       write_model_ply(out / fmt::format("point_cloud_iter_{}.ply", it), trainer.model());
@@ -134,6 +153,7 @@ void run_train(const TrainArgs& a) {
   }
   double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   bar.finish(fmt::format("loss {:.4f} psnr {:.2f} N {}", ema_loss, ema_psnr, trainer.model().n));
+  if (!writer) return;  // every rank holds the same model; rank 0 writes it
   write_model_ply(out / "point_cloud.ply", trainer.model());
   if (a.save_every > 0) {
     ensure_dir(out / "checkpoints");
@@ -155,7 +175,12 @@ void run_train(const TrainArgs& a) {
                              return j;
                            }()},
                           {"final_train_psnr_ema", ema_psnr},
-                          {"threads", omp_get_max_threads()}};
+                          {"threads", omp_get_max_threads()},
+                          {"ranks", R},
+                          {"views_per_step", G},
+                          // this rank's share of the gradient exchange (rank 0; every rank sends about as much)
+                          {"comm_bytes_per_step", ms.empty() ? 0.0 : trainer.reducer().stats.bytes_sent / ms.size()},
+                          {"comm_ms_per_step", ms.empty() ? 0.0 : trainer.reducer().stats.ms / ms.size()}};
   nlohmann::json part_ms = nlohmann::json::object();
   std::string part_line;
   train::StepTimes::each([&](const char* name, double train::StepTimes::*m) {
@@ -170,6 +195,9 @@ void run_train(const TrainArgs& a) {
                format_duration(wall), stats["median_ms_per_iter"].get<double>(), trainer.model().n,
                (out / "point_cloud.ply").string());
   if (progress) fmt::print("mean ms per step: {}\n", part_line);
+  if (progress && R > 1)
+    fmt::print("gradient exchange per step (rank 0): {:.2f} MB sent, {:.1f} ms\n",
+               stats["comm_bytes_per_step"].get<double>() / 1e6, stats["comm_ms_per_step"].get<double>());
 }
 
 CommandRegistration reg({"train", "Optimise Hybrid Gaussians (or plain 3DGS with --method rgb) on a scene's training views", 20, [](CLI::App& sub) {
@@ -221,13 +249,17 @@ CommandRegistration reg({"train", "Optimise Hybrid Gaussians (or plain 3DGS with
                  "Language embeddings in half precision with bfloat16 Adam moments (half), or all float32 (f32)")
       ->check(CLI::IsMember({"half", "f32"}))->capture_default_str();
   sub.add_option("--lr-view", h.lr_view, "Adam learning rate of the view reliability logits")->capture_default_str();
-  sub.add_option("--iters", a->iters, "Iterations (the 30k densification schedule is scaled to this)")
+  sub.add_option("--batch", a->batch,
+                 "Views per step on this process: their gradients are averaged (learning rates unchanged); under "
+                 "mpirun each of R ranks takes this many, R x B per step (docs/scaling.md)")
+      ->check(CLI::Range(1, 4096))->capture_default_str();
+  sub.add_option("--iters", a->iters, "Training images to see (steps x views per step); the 30k densification schedule is scaled to this")
       ->check(CLI::Range(1, 10000000))->capture_default_str();
   sub.add_option("--downscale", a->downscale, "Integer image downscale factor")->check(CLI::Range(1, 64))->capture_default_str();
   sub.add_option("--threads", a->threads, "Worker threads (0 = all cores)")->check(CLI::Range(0, 1024));
   sub.add_option("--seed", a->seed, "Random seed (view order, split sampling)")->capture_default_str();
   sub.add_option("--sh-degree", a->sh_degree, "Maximum SH degree")->check(CLI::Range(0, 3))->capture_default_str();
-  sub.add_option("--save-every", a->save_every, "Write a checkpoint and a PLY every N iterations (0 = off)")
+  sub.add_option("--save-every", a->save_every, "Write a checkpoint and a PLY every N iterations (0 = off; a multiple of the views per step)")
       ->check(CLI::Range(0, 10000000))->capture_default_str();
   sub.add_option("--resume", a->resume, "Continue from a checkpoint (MODEL/checkpoints/iter_N.ckpt)");
   sub.add_flag("--no-densify", a->no_densify, "Keep the Gaussian count fixed (no clone/split/prune/opacity reset)");

@@ -75,7 +75,7 @@ void ObjectAssociation::update_hard_ids(int n, HybridFields& h) const {
   }
 }
 
-void ObjectAssociation::backward_and_update(int n, const HybridFields& h, const float* dq, train::Adam& optim) {
+void ObjectAssociation::backward(int n, const HybridFields& h, const float* dq, bool first) {
   if (!cfg_.use_of) return;
   const int U = static_cast<int>(logits_.size());
   FusionParams p{L_, cfg_.temperature, cfg_.fusion_eps, cfg_.background_vote};
@@ -83,7 +83,22 @@ void ObjectAssociation::backward_and_update(int n, const HybridFields& h, const 
   dlogits_.resize(U);
   fuse_backward(table_, w_.data(), p, s_.data(), h.q->data.data(), valid_.data(), dq, dw_.data());
   softmax_backward(w_.data(), dw_.data(), U, dlogits_.data());
-  optim.update(optim.get(kLogits), logits_.data(), dlogits_.data(), U);
+  if (first) step_dlogits_ = dlogits_;
+  else
+    for (int u = 0; u < U; ++u) step_dlogits_[u] += dlogits_[u];
+  step_set_ = true;
+}
+
+void ObjectAssociation::reduce(train::Reducer& r) {
+  if (step_set_ && r.size() > 1) r.sum(step_dlogits_.data(), step_dlogits_.size());
+}
+
+void ObjectAssociation::update(train::Adam& optim, float scale) {
+  if (!step_set_) return;
+  step_set_ = false;
+  if (scale != 1.f)
+    for (float& g : step_dlogits_) g *= scale;
+  optim.update(optim.get(kLogits), logits_.data(), step_dlogits_.data(), int(logits_.size()));
 }
 
 void ObjectAssociation::restore_table(int n, std::vector<uint16_t> labels) {

@@ -11,6 +11,7 @@
 #include "hybrid/fields.h"
 #include "hybrid/fusion.h"
 #include "train/adam.h"
+#include "train/reducer.h"
 
 namespace hgs::hybrid {
 
@@ -34,8 +35,12 @@ class ObjectAssociation {
   void fuse(int n, HybridFields& h);
   // z = argmax q.
   void update_hard_ids(int n, HybridFields& h) const;
-  // dq [N, L] -> view logits through eqs. 4-5 and the softmax over views, then their Adam step (OF only).
-  void backward_and_update(int n, const HybridFields& h, const float* dq, train::Adam& optim);
+  // dq [N, L] of one view -> the view logits' gradient through eqs. 4-5 and the softmax over views, added to
+  // the step's sum (first = the step's first view: overwrites). OF only.
+  void backward(int n, const HybridFields& h, const float* dq, bool first);
+  // The step's sum over the ranks (rank order), then the logits' Adam step with it x scale (1 / G).
+  void reduce(train::Reducer& r);
+  void update(train::Adam& optim, float scale);
 
   const std::vector<float>& weights() const;  // [U] softmax of the current logits
   const std::vector<float>& logits() const { return logits_; }  // [U]
@@ -48,7 +53,8 @@ class ObjectAssociation {
   const std::vector<MaskView>* masks_;
   int L_;
   ObservationTable table_;
-  std::vector<float> logits_, dw_, dlogits_;  // [U]
+  std::vector<float> logits_, dw_, dlogits_, step_dlogits_;  // [U]
+  bool step_set_ = false;
   mutable std::vector<float> w_;              // [U] softmax(logits_)
   std::vector<float> s_;                          // [N, L]
   std::vector<uint8_t> valid_;                    // [N]

@@ -66,7 +66,7 @@ void HybridMethod::prepare(train::StepContext& c) {
   GaussianModel& m = *c.model;
   fields_ = HybridFields::bind(m, "hybrid");  // the model's groups may have moved (checkpoint load)
   const int n = m.n, u = c.view_index, L = data_.num_labels;
-  if (cfg_.use_of) assoc_.fuse(n, fields_);
+  if (cfg_.use_of && c.slot == 0) assoc_.fuse(n, fields_);  // q from the logits: the same for every view of a step
   dq_.resize(size_t(n) * L);
   parallel_fill(dq_, 0.f);
   // Object channels from the renderer's SH colours of this view (0 for culled Gaussians), plus f for the no-SCL
@@ -117,7 +117,7 @@ void HybridMethod::losses(train::StepContext& c) {
         da = d_wsum_.data();
       }
       sv = semantic_.contrastive(u, n, fields_, Jf > 0 ? out.weight_sums.data() : nullptr, dq_.data(), da, *c.rng,
-                                 *c.optim);
+                                 c.slot == 0);
       if (da && sv.anchors > 0) c.dout->weight_sums = da;
     } else {
       sv = semantic_.cosine(u, W, H, out.extra.data(), C, layout_.other(), d_channels_.data());
@@ -140,19 +140,26 @@ void HybridMethod::backward(train::StepContext& c) {
   // preprocess_backward takes it through SH.
   object_channels_backward(n, data_.num_labels, layout_, objects_.data(), fields_.q->data.data(), c.projected->colors,
                            g.extra.data(), dq_.data(), g.colors.data());
-  assoc_.backward_and_update(n, fields_, dq_.data(), *c.optim);
+  assoc_.backward(n, fields_, dq_.data(), c.slot == 0);
+  if (!cfg_.use_scl && cfg_.lambda_sem > 0)
+    semantic_.add_channel_grads(n, g.extra.data(), layout_.total(), layout_.other(), c.slot == 0);
+}
+
+void HybridMethod::reduce(train::StepContext& c) {
+  assoc_.reduce(*c.reducer);
+  semantic_.reduce(*c.reducer);
 }
 
 void HybridMethod::update(train::StepContext& c) {
-  // (With SCL, f was updated in the semantic pass.)
-  if (!cfg_.use_scl && cfg_.lambda_sem > 0)
-    semantic_.update_from_channels(c.model->n, fields_, c.pgrads->extra.data(), layout_.total(), layout_.other(),
-                                   *c.optim);
+  assoc_.update(*c.optim, c.grad_scale);
+  semantic_.update(c.model->n, fields_, *c.optim, c.grad_scale);
 }
 
 void HybridMethod::after_step(train::StepContext& c, bool densified) {
   fields_ = HybridFields::bind(*c.model, "hybrid");
-  if (densified || (cfg_.fusion_every > 0 && c.iteration % cfg_.fusion_every == 0)) assoc_.refresh(*c.model, fields_);
+  // The table is rebuilt every fusion_every images seen: in the step that covers a multiple of it.
+  const int prev = c.iteration - 1, cur = prev + c.step_views, fe = cfg_.fusion_every;
+  if (densified || (fe > 0 && cur / fe > prev / fe)) assoc_.refresh(*c.model, fields_);
   else assoc_.update_hard_ids(c.model->n, fields_);
 }
 

@@ -44,6 +44,7 @@ class HybridMethod final : public train::Method {
   void prepare(train::StepContext& c) override;
   void losses(train::StepContext& c) override;
   void backward(train::StepContext& c) override;
+  void reduce(train::StepContext& c) override;
   void update(train::StepContext& c) override;
   void after_step(train::StepContext& c, bool densified) override;
   void release() override;

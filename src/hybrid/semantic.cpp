@@ -1,6 +1,7 @@
 #include "hybrid/semantic.h"
 
 #include <algorithm>
+#include <cstring>
 
 #include "core/error.h"
 #include "hybrid/scl.h"
@@ -45,7 +46,8 @@ const float* SemanticPass::pixel_weights(int u) {
 }
 
 SemanticValues SemanticPass::contrastive(int u, int n, HybridFields& h, const float* a, float* dq, float* da,
-                                         std::mt19937_64& rng, train::Adam& optim) {
+                                         std::mt19937_64& rng, bool first) {
+  if (first) views_.clear();
   SemanticValues out;
   const int Jf = static_cast<int>(classes_.size());
   if (Jf == 0) return out;
@@ -79,18 +81,25 @@ SemanticValues SemanticPass::contrastive(int u, int n, HybridFields& h, const fl
     }
     loss += info_nce(&P_[size_t(j) * D_], D_, refs_.data(), int(o.scl.size()), pos, cfg_.tau2, &dP_[size_t(j) * D_], scale);
   }
-  // One pass over the Gaussians: da and dq from the dot products with the current f_n, then f_n's row-sparse
-  // Adam step on the same row, whose gradient df_n = sum_j q a G_j needs no other part of the step (f enters
-  // no render here).
+  // One pass over the Gaussians: da and dq from the dot products with the current f_n. f's own gradient waits
+  // for update(), in factored form: every view of the step sees the same f.
   G_.resize(size_t(Jf) * D_);
   pooled_row_factors(Jf, D_, dP_.data(), mass.data(), 1e-6f, G_.data());
-  auto rows = [&](long i, float* g) {
+#pragma omp parallel for schedule(static)
+  for (long i = 0; i < n; ++i) {
     alignas(64) float buf[train::kMaxRowUpdateDim];
-    return pooled_backward_row(i, D_, L_, Jf, q, lang_row(i, buf), a, classes_.data(), G_.data(), dq, da, g);
-  };
-  train::AdamParam& p = optim.get(kParam);
-  if (lang.f16) optim.update_rows(p, lang.half.data(), n, rows);
-  else optim.update_rows(p, lang.data.data(), n, rows);
+    pooled_backward_row<float>(i, D_, L_, Jf, q, lang_row(i, buf), a, classes_.data(), G_.data(), dq, da, nullptr);
+  }
+  FactoredView& fv = views_.emplace_back();
+  fv.objs = classes_;
+  fv.G = G_;
+  for (long i = 0; i < n; ++i) {
+    const float* ai = a + size_t(i) * Jf;
+    if (std::any_of(ai, ai + Jf, [](float x) { return x != 0.f; })) {
+      fv.rows.push_back(int(i));
+      fv.a.insert(fv.a.end(), ai, ai + Jf);
+    }
+  }
   out.loss = loss / anchors.size();
   return out;
 }
@@ -104,19 +113,123 @@ SemanticValues SemanticPass::cosine(int u, int W, int H, const float* extra, int
   return out;
 }
 
-void SemanticPass::update_from_channels(int n, HybridFields& h, const float* ge, int C, int o, train::Adam& optim) {
-  // Row-sparse Adam on f_n: only Gaussians with a semantic gradient are updated.
+void SemanticPass::add_channel_grads(int n, const float* ge, int C, int o, bool first) {
+  const int D = D_;
+  fgrad_.resize(size_t(n) * D);
+  fgrad_set_ = true;
+#pragma omp parallel for schedule(static)
+  for (long i = 0; i < n; ++i) {
+    const float* src = ge + size_t(i) * C + o;
+    float* dst = &fgrad_[size_t(i) * D];
+    for (int d = 0; d < D; ++d) dst[d] = first ? src[d] : dst[d] + src[d];
+  }
+}
+
+namespace {
+
+// The factored views as bytes: per view Jf, rows, objs [Jf], G [Jf, D], rows [rows], a [rows, Jf].
+template <class V>
+std::vector<uint8_t> pack_views(const std::vector<V>& views) {
+  std::vector<uint8_t> b;
+  auto put = [&](const void* p, size_t bytes) {
+    const auto* c = static_cast<const uint8_t*>(p);
+    b.insert(b.end(), c, c + bytes);
+  };
+  const int32_t count = int32_t(views.size());
+  put(&count, 4);
+  for (const V& v : views) {
+    const int32_t jf = int32_t(v.objs.size()), rows = int32_t(v.rows.size());
+    put(&jf, 4);
+    put(&rows, 4);
+    put(v.objs.data(), 4 * v.objs.size());
+    put(v.G.data(), 4 * v.G.size());
+    put(v.rows.data(), 4 * v.rows.size());
+    put(v.a.data(), 4 * v.a.size());
+  }
+  return b;
+}
+
+template <class V>
+void unpack_views(const std::vector<uint8_t>& b, int D, std::vector<V>& out) {
+  size_t o = 0;
+  auto get = [&](void* p, size_t bytes) {
+    if (o + bytes > b.size()) fail("hybrid: a rank sent a truncated semantic gradient");
+    std::memcpy(p, b.data() + o, bytes);
+    o += bytes;
+  };
+  int32_t count = 0;
+  get(&count, 4);
+  for (int32_t k = 0; k < count; ++k) {
+    int32_t jf = 0, rows = 0;
+    get(&jf, 4);
+    get(&rows, 4);
+    V& v = out.emplace_back();
+    v.objs.resize(jf);
+    v.G.resize(size_t(jf) * D);
+    v.rows.resize(rows);
+    v.a.resize(size_t(rows) * jf);
+    get(v.objs.data(), 4 * v.objs.size());
+    get(v.G.data(), 4 * v.G.size());
+    get(v.rows.data(), 4 * v.rows.size());
+    get(v.a.data(), 4 * v.a.size());
+  }
+}
+
+}  // namespace
+
+void SemanticPass::reduce(train::Reducer& r) {
+  if (r.size() == 1) return;
+  if (fgrad_set_) r.sum(fgrad_.data(), fgrad_.size());
+  if (!cfg_.use_scl || cfg_.lambda_sem <= 0) return;
+  const std::vector<std::vector<uint8_t>> all = r.gather(pack_views(views_));
+  views_.clear();
+  for (const auto& b : all) unpack_views(b, D_, views_);
+}
+
+void SemanticPass::update(int n, HybridFields& h, train::Adam& optim, float scale) {
   ExtraGroup& lang = *h.f;
   const int D = D_;
+  train::AdamParam& p = optim.get(kParam);
+  if (fgrad_set_) {  // no-SCL ablation: rows with a semantic gradient
+    fgrad_set_ = false;
+    if (fgrad_.size() != size_t(n) * D) fail("hybrid: the semantic gradient holds {} rows, the model {}", fgrad_.size() / D, n);
+    auto rows = [&](long i, float* g) {
+      const float* src = &fgrad_[size_t(i) * D];
+      bool any = false;
+      for (int d = 0; d < D; ++d) any |= (g[d] = scale == 1.f ? src[d] : src[d] * scale) != 0.f;
+      return any;
+    };
+    if (lang.f16) optim.update_rows(p, lang.half.data(), n, rows);
+    else optim.update_rows(p, lang.data.data(), n, rows);
+    return;
+  }
+  if (views_.empty()) return;  // no anchors in any view of the step: f keeps its values and its step count
+  // Where each view's rows are (-1 = not in that view's masks).
+  std::vector<std::vector<int>> pos(views_.size(), std::vector<int>(n, -1));
+  for (size_t k = 0; k < views_.size(); ++k)
+    for (size_t r = 0; r < views_[k].rows.size(); ++r) {
+      const int i = views_[k].rows[r];
+      if (i < 0 || i >= n) fail("hybrid: a semantic gradient row {} is outside the {} Gaussians", i, n);
+      pos[k][i] = int(r);
+    }
+  const float* q = h.q->data.data();
+  const int L = L_;
   auto rows = [&](long i, float* g) {
-    const float* src = ge + size_t(i) * C + o;
     bool any = false;
-    for (int d = 0; d < D; ++d) any |= (g[d] = src[d]) != 0.f;
+    for (size_t k = 0; k < views_.size(); ++k) {
+      const int r = pos[k][i];
+      if (r < 0) continue;
+      const FactoredView& v = views_[k];
+      const int Jf = int(v.objs.size());
+      any = pooled_df_row<float>(D, Jf, q + size_t(i) * L, &v.a[size_t(r) * Jf], v.objs.data(), v.G.data(), g, any);
+    }
+    if (any && scale != 1.f)
+      for (int d = 0; d < D; ++d) g[d] *= scale;
     return any;
   };
-  train::AdamParam& p = optim.get(kParam);
   if (lang.f16) optim.update_rows(p, lang.half.data(), n, rows);
   else optim.update_rows(p, lang.data.data(), n, rows);
+  views_.clear();
 }
 
 }  // namespace hgs::hybrid

@@ -2,11 +2,13 @@
 // the renderer's pixel-weighted sums a_{n,k} = sum_p M_k alpha T, InfoNCE of each anchor object against the
 // pooled references of another view holding it (positive) and that view's other SCL classes (negatives: its
 // other objects, and its background under config.h's scl_background rule); one pass
-// over the Gaussians then forms dq, da (with sem_geometry only) and df_n = sum_j q a G_j row by row, and takes
-// f's row-sparse Adam step on the same row (no [N, D] gradient buffer; "lang" is a registered per-Gaussian
-// parameter with its own step count). Without SCL (the ablation): 1 - cos between the full semantic render
-// sum f alpha T (extra channels) and the upsampled reference features, f updated from the renderer's channel
-// gradients after backward.
+// over the Gaussians then forms dq and da (with sem_geometry only). f's gradient df_n = sum_j q a G_j is not
+// formed per view: the view is kept in factored form (its objects, G [Jf, D] and the non-zero rows of a), and
+// at the step's end one row-sparse Adam step of f ("lang", a registered per-Gaussian parameter with its own step
+// count) forms each row's df from every view of the step (no [N, D] gradient buffer). With MPI the factored
+// views are what the ranks exchange: Jf x D + rows x (Jf + 1) numbers per view instead of rows x D. Without SCL
+// (the ablation): 1 - cos between the full semantic render sum f alpha T (extra channels) and the upsampled
+// reference features, f updated from the renderer's channel gradients summed over the step's views.
 #pragma once
 #include <random>
 #include <vector>
@@ -16,6 +18,7 @@
 #include "hybrid/fields.h"
 #include "hybrid/object_channels.h"
 #include "train/adam.h"
+#include "train/reducer.h"
 
 namespace hgs::hybrid {
 
@@ -44,14 +47,19 @@ class SemanticPass {
   const std::vector<int>& anchors_of(int u);
   const float* pixel_weights(int u);
   // SCL. weight_sums [N, Jf]; adds lambda_sem * d/dq to dq [N, L]; da [N, Jf] (null = no gradient to the
-  // pooled weights); f is updated in place.
+  // pooled weights); keeps the view's factored f gradient for update() (first = the step's first view).
   SemanticValues contrastive(int u, int n, HybridFields& h, const float* weight_sums, float* dq, float* da,
-                             std::mt19937_64& rng, train::Adam& optim);
+                             std::mt19937_64& rng, bool first);
   // No-SCL ablation: loss on the render's channels [o, o + D) of extra [H, W, C]; writes lambda_sem * d/d
   // into the same channels of d_extra.
   SemanticValues cosine(int u, int W, int H, const float* extra, int C, int o, float* d_extra);
-  // No-SCL ablation: f's row-sparse Adam step from the renderer's gradient of its channels (grad_extra [N, C]).
-  void update_from_channels(int n, HybridFields& h, const float* grad_extra, int C, int o, train::Adam& optim);
+  // No-SCL ablation: adds the renderer's gradient of f's channels (grad_extra [N, C]) to the step's sum.
+  void add_channel_grads(int n, const float* grad_extra, int C, int o, bool first);
+  // After the step's last view: every rank gets every rank's factored views (SCL) or the sum of the channel
+  // gradients (no SCL), in rank order.
+  void reduce(train::Reducer& r);
+  // f's row-sparse Adam step with the step's gradient x scale (1 / G); nothing when no view had one.
+  void update(int n, HybridFields& h, train::Adam& optim, float scale);
   void release() { std::vector<float>().swap(pixel_w_); }
 
  private:
@@ -64,6 +72,16 @@ class SemanticPass {
   std::vector<float> P_, dP_, G_;             // [Jf, D] predictions, their gradient, dP / (m + eps)
   std::vector<float> refs_;                   // [R, D] InfoNCE candidates of one anchor
   std::vector<float> sref_;                   // [H, W, D] (no-SCL ablation)
+  // One view's f gradient in factored form: df_n = sum_j q_{n,objs[j]} a_{n,j} G_j.
+  struct FactoredView {
+    std::vector<int> objs;  // [Jf]
+    std::vector<float> G;   // [Jf, D]
+    std::vector<int> rows;  // Gaussians with a non-zero a
+    std::vector<float> a;   // [rows, Jf]
+  };
+  std::vector<FactoredView> views_;  // the step's (after reduce: every rank's, in global order)
+  std::vector<float> fgrad_;         // [N, D] no-SCL ablation: the step's channel-gradient sum
+  bool fgrad_set_ = false;
 };
 
 }  // namespace hgs::hybrid

@@ -144,6 +144,7 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
     TrainConfig c = TrainConfig::from_json(h.at("config"), where);
     c.iters = cfg_.iters;
     c.save_every = cfg_.save_every;
+    c.batch = cfg_.batch;  // a run may resume with another batch or number of ranks
     GaussianModel m;
     m.sh_degree = h.at("sh_degree").get<int>();
     m.resize(h.at("n").get<int>());

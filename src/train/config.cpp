@@ -52,7 +52,8 @@ nlohmann::json TrainConfig::to_json() const {
           {"percent_dense", densify_cfg.percent_dense},
           {"min_opacity", densify_cfg.min_opacity},
           {"max_world_scale", densify_cfg.max_world_scale},
-          {"save_every", save_every}};
+          {"save_every", save_every},
+          {"batch", batch}};
 }
 
 TrainConfig TrainConfig::from_json(const nlohmann::json& j, const std::string& where) {
@@ -98,6 +99,8 @@ TrainConfig TrainConfig::from_json(const nlohmann::json& j, const std::string& w
   get("min_opacity", c.densify_cfg.min_opacity);
   get("max_world_scale", c.densify_cfg.max_world_scale);
   get("save_every", c.save_every);
+  get("batch", c.batch);
+  if (c.batch < 1 || c.batch > 4096) fail("{}: 'batch' must be 1..4096, got {}", where, c.batch);
   return c;
 }
 

@@ -28,6 +28,9 @@ struct TrainConfig {
   float screen_limit = 20.f;  // px, used after the first opacity reset
   DensifyConfig densify_cfg;
   int save_every = 0;  // checkpoint + PLY every N iterations (0 = never during training)
+  // Views per step on this process (--batch); a step of R MPI ranks sees R x batch views. Every iteration count
+  // here (iters, the schedules, save_every) counts training images seen, so it does not depend on the batch.
+  int batch = 1;
 
   // Copy for a run of `iterations` with the 30k densification schedule scaled by f = iterations / 30000:
   // densify_until = 15000 f; for short runs (f < 1) three floors keep the 3DGS dynamics, because compressing

@@ -28,6 +28,38 @@ void DensifyStats::add(const float* g, const int* radii, int n, int W, int H) {
   }
 }
 
+void StepStats::add_view(const float* g, const int* radii, int count_n, int W, int H, bool first) {
+  if (first) {
+    n = count_n;
+    v.assign(3 * size_t(n), 0.f);
+  } else if (count_n != n) {
+    fail("densify: step statistics hold {} Gaussians, the view {}", n, count_n);
+  }
+  const float sx = 0.5f * W, sy = 0.5f * H;
+  float *nr = norm(), *ct = count(), *mr = max_radius();
+#pragma omp parallel for simd schedule(static)
+  for (int i = 0; i < n; ++i) {
+    if (radii[i] <= 0) continue;
+    float gx = g[2 * i] * sx, gy = g[2 * i + 1] * sy;
+    nr[i] += std::sqrt(gx * gx + gy * gy);
+    ct[i] += 1.f;
+    mr[i] = std::max(mr[i], float(radii[i]));
+  }
+}
+
+void DensifyStats::add(const StepStats& s) {
+  const int n = int(count.size());
+  if (s.n != n) fail("densify: statistics hold {} Gaussians, the step {}", n, s.n);
+  const float *nr = s.norm(), *ct = s.count(), *mr = s.max_radius();
+#pragma omp parallel for simd schedule(static)
+  for (int i = 0; i < n; ++i) {
+    if (ct[i] <= 0) continue;  // visible in none of the step's views
+    grad_accum[i] += nr[i];
+    count[i] += int(ct[i]);
+    max_radius[i] = std::max(max_radius[i], mr[i]);
+  }
+}
+
 namespace {
 
 // Applies the row gather to the model, Adam and the max-radius statistic (fresh rows get radius 0).

@@ -26,15 +26,35 @@ struct DensifyConfig {
   float split_scale_div = 1.6f;  // 0.8 x split_children
 };
 
+// The densification statistics of one step's views before they reach DensifyStats: per Gaussian the sum of the
+// views' NDC-gradient norms, the number of views it was visible in, and its largest radius. As one float array
+// [3, N] (norm sums, counts, max radii), so the trainer sends it with the gradients (sums) and the radii (max).
+struct StepStats {
+  int n = 0;
+  std::vector<float> v;  // [3, N]
+  float* norm() { return v.data(); }
+  float* count() { return v.data() + n; }
+  float* max_radius() { return v.data() + 2 * size_t(n); }
+  const float* norm() const { return v.data(); }
+  const float* count() const { return v.data() + n; }
+  const float* max_radius() const { return v.data() + 2 * size_t(n); }
+  // Adds one view (first = the step's first view: overwrites). Same arithmetic as DensifyStats::add, so one view
+  // per step gives the same statistics.
+  void add_view(const float* mean2d_grad, const int* radii, int n, int W, int H, bool first);
+};
+
 struct DensifyStats {
   std::vector<float> grad_accum;  // [N] sum of NDC-gradient norms
   std::vector<int> count;         // [N] views in which the Gaussian was visible
   std::vector<float> max_radius;  // [N] largest screen radius (px)
 
   void reset(int n);
-  // mean2d_grad [N, 2] in pixels, radii [N] (0 = not visible), image size W x H.
+  // One view: mean2d_grad [N, 2] in pixels, radii [N] (0 = not visible), image size W x H.
   void add(const float* mean2d_grad, const int* radii, int n, int W, int H);
+  // One step of several views (--batch, MPI): the step's sums (StepStats) added at once.
+  void add(const StepStats& s);
 };
+
 
 struct DensifyResult {
   int cloned = 0, split = 0, pruned = 0;

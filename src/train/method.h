@@ -2,7 +2,9 @@
 // LichtFeld Studio's strategy interface and gsplat's Strategy). Plain 3DGS is the method that adds nothing;
 // Hybrid Gaussians (hybrid/method.h) is another. The trainer owns the model, the optimiser (every parameter,
 // the method's included, is registered there), the renderer, the view order and the schedule; it calls the
-// method's parts in this order, once per step:
+// method's parts in this order. A step sees a global batch of G views (`--batch` views on each MPI rank; G = 1
+// by default): prepare, losses and backward run once per view of this process, then reduce, update and
+// after_step once per step.
 //
 //   prepare   between the renderer's preprocess (projection, SH colours of the visible Gaussians, binning) and
 //             its composite: set extra channels (e.g. built from the projected colours) and pixel weights
@@ -10,8 +12,13 @@
 //             (accumulate into d_rgb, set dout.extra / dout.weight_sums; pointers valid until backward)
 //   backward  between the renderer's composite_backward and preprocess_backward: chain the projected-space
 //             gradients (d channels, d colours, ...) into the method's parameters, and add to them (e.g. the
-//             colour gradient of channels built from the projected colours) before they reach SH and geometry
-//   update    after Adam on the 3DGS parameters: Adam steps of the method's registered parameters
+//             colour gradient of channels built from the projected colours) before they reach SH and geometry.
+//             The method's own parameter gradients are summed over the step's views here, never applied: every
+//             view of a step sees the same parameters
+//   reduce    after the last view: combine those sums across ranks (c.reducer, rank order), so that every rank
+//             holds the global batch's sum
+//   update    after Adam on the 3DGS parameters: Adam steps of the method's registered parameters with the
+//             batch mean (sum x c.grad_scale)
 //   after_step  after densification (the model and every per-Gaussian moment already follow it)
 //
 // Checkpoints hold every registered parameter (values and moments) without per-method code; state() is only
@@ -30,6 +37,7 @@
 #include "render/renderer.h"
 #include "train/adam.h"
 #include "train/objective.h"
+#include "train/reducer.h"
 
 namespace hgs::train {
 
@@ -42,12 +50,19 @@ struct TrainView {
 // Everything one step's parts see. Fields are filled as the step proceeds (out after the render, grads after
 // the renderer's backward).
 struct StepContext {
-  int iteration = 0;   // 1-based
+  int iteration = 0;   // 1-based: training images seen before this step + 1 (the schedules count images)
   int view_index = 0;  // into the trainer's views
+  int slot = 0;        // this process's view number within the step, 0 .. batch - 1
+  int global_slot = 0; // the view's number within the global batch, rank x batch + slot
+  int step_views = 1;  // G: views of the global batch
+  float grad_scale = 1;  // 1 / G: the update uses the mean over the global batch
+  Reducer* reducer = nullptr;
   const TrainView* view = nullptr;
   GaussianModel* model = nullptr;
   Adam* optim = nullptr;
-  std::mt19937_64* rng = nullptr;
+  std::mt19937_64* rng = nullptr;  // one view per step: the trainer's; several: this view's, seeded from
+                                   // (seed, iteration, global_slot), so any split of a batch over ranks draws the
+                                   // same numbers
   render::GaussianInputs* inputs = nullptr;
   const render::ProjectedView<float>* projected = nullptr;  // after preprocess: colours [N, 3], radii, ...
   render::Channels* channels = nullptr;                     // extra channels to composite (set by prepare)
@@ -73,6 +88,7 @@ class Method {
   virtual void prepare(StepContext& c) {}
   virtual void losses(StepContext& c) {}
   virtual void backward(StepContext& c) {}
+  virtual void reduce(StepContext& c) {}
   virtual void update(StepContext& c) {}
   virtual void after_step(StepContext& c, bool densified) {}
   // Frees per-step buffers before densification.

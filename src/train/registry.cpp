@@ -42,7 +42,7 @@ std::vector<std::string> method_names() {
 }
 
 std::unique_ptr<Trainer> make_trainer(const Scene& scene, const std::vector<int>& idx, const TrainConfig& cfg,
-                                      const std::string& method, const nlohmann::json& options, bool progress) {
+                                      const std::string& method, const nlohmann::json& options, bool progress, Reducer* reducer) {
   MethodFactory f;
   {
     std::lock_guard<std::mutex> lock(registry_mutex());
@@ -59,7 +59,7 @@ std::unique_ptr<Trainer> make_trainer(const Scene& scene, const std::vector<int>
   auto views = load_train_views(scene, idx, progress);
   const float extent = scene_extent(scene, idx);
   GaussianModel init = init_from_points(scene.points, scene.point_colors, cfg.sh_degree);
-  return std::make_unique<Trainer>(cfg, std::move(init), std::move(views), extent, std::move(m));
+  return std::make_unique<Trainer>(cfg, std::move(init), std::move(views), extent, std::move(m), reducer);
 }
 
 }  // namespace hgs::train

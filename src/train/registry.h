@@ -30,7 +30,9 @@ void register_method(MethodFactory f);
 // Registered names, "rgb" first.
 std::vector<std::string> method_names();
 // The trainer for `method` on the training views `idx`; throws hgs::Error for an unknown method or no views.
+// reducer: see Trainer (null = one process).
 std::unique_ptr<Trainer> make_trainer(const Scene& scene, const std::vector<int>& idx, const TrainConfig& cfg,
-                                      const std::string& method, const nlohmann::json& options, bool progress);
+                                      const std::string& method, const nlohmann::json& options, bool progress,
+                                      Reducer* reducer = nullptr);
 
 }  // namespace hgs::train

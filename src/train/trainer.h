@@ -1,9 +1,13 @@
 // Trainer: the 3DGS optimisation loop for one GaussianModel over a set of posed training images, with a Method
-// (train/method.h) plugged in by composition. One call to step() = pick the next view of a seeded shuffled
-// order, method.prepare, render, photometric loss L = 0.8 L1 + 0.2 (1 - SSIM) (weighted by the method's
-// rgb_weight), method.losses, render backward, method.backward, Adam on the 3DGS parameters (lrs of
-// TrainConfig, position lr decaying with the iteration), method.update, SH degree schedule, densification and
-// opacity resets, method.after_step. The trainer owns the model, the optimiser registry (the method registers
+// (train/method.h) plugged in by composition. One call to step() takes the next G views of a seeded shuffled
+// order (G = cfg.batch x ranks; G = 1 by default), and for each of this process's views: method.prepare,
+// render, photometric loss L = 0.8 L1 + 0.2 (1 - SSIM) (weighted by the method's rgb_weight), method.losses,
+// render backward, method.backward, gradients summed in view order. Then the Reducer adds the ranks' sums in
+// rank order, and once per step: Adam on the 3DGS parameters with the batch mean (lrs of TrainConfig, position
+// lr decaying with the images seen), method.reduce and method.update, SH degree schedule, densification and
+// opacity resets, method.after_step. Every schedule counts training images seen (iteration() advances by G per
+// step), so a run with a larger batch sees the same views at the same schedule points in fewer steps; the
+// learning rates stay as they are (Adam's step does not grow with the batch: the gradient is the mean). The trainer owns the model, the optimiser registry (the method registers
 // its parameters there), the renderer and the schedule; checkpoints hold everything needed to resume
 // bit-for-bit (model, every registered parameter and its moments, statistics, RNG, view order, method state).
 #pragma once
@@ -23,6 +27,7 @@
 #include "train/loss.h"
 #include "train/method.h"
 #include "train/objective.h"
+#include "train/reducer.h"
 
 namespace hgs::train {
 
@@ -35,6 +40,7 @@ struct StepTimes {
   double method_loss = 0;  // the method's losses (Method::losses)
   double backward = 0;     // render backward
   double param_grads = 0;  // the method's chain rule to its parameters (Method::backward)
+  double reduce = 0;       // combining the ranks' gradients (Reducer; 0 on one process)
   double update = 0;       // Adam and the method's own updates (Method::update)
   double densify = 0;      // densification, opacity reset and after_step
   template <class F> static void each(F&& f) {  // f(name, member pointer) for every part
@@ -44,16 +50,17 @@ struct StepTimes {
     f("method_loss", &StepTimes::method_loss);
     f("backward", &StepTimes::backward);
     f("param_grads", &StepTimes::param_grads);
+    f("reduce", &StepTimes::reduce);
     f("update", &StepTimes::update);
     f("densify", &StepTimes::densify);
   }
 };
 
 struct StepInfo {
-  LossValues loss;  // of the photometric term (total = its unweighted value)
+  LossValues loss;  // of the photometric term (total = its unweighted value); mean over this process's views
   double total = 0;  // the optimised objective: sum of the weighted terms
   std::vector<LossTerm> terms;
-  float psnr = 0;   // of this step's training view
+  float psnr = 0;   // of this step's training views (from the mean MSE)
   int num_gaussians = 0;
   double ms = 0;    // wall time of the step
   StepTimes times;  // ... and of its parts
@@ -63,9 +70,10 @@ struct StepInfo {
 
 class Trainer {
  public:
-  // method null = plain 3DGS (RgbMethod).
+  // method null = plain 3DGS (RgbMethod). reducer null = one process; else it is not owned and must outlive
+  // the trainer (every rank builds the same trainer: same views, model, config and seed).
   Trainer(const TrainConfig& cfg, GaussianModel model, std::vector<TrainView> views, float extent,
-          std::unique_ptr<Method> method = nullptr);
+          std::unique_ptr<Method> method = nullptr, Reducer* reducer = nullptr);
   ~Trainer();
   Trainer(const Trainer&) = delete;
   Trainer& operator=(const Trainer&) = delete;
@@ -73,7 +81,8 @@ class Trainer {
   // One iteration. A non-finite loss term or gradient value (any registered parameter) stops it with an
   // hgs::Error naming the iteration and the term or parameter group; the model is then not to be saved.
   StepInfo step();
-  int iteration() const { return it_; }  // iterations done
+  int iteration() const { return it_; }  // training images seen (= steps x views per step)
+  int step_views() const;                // G: views of one step over all ranks
   int active_sh_degree() const;
   const GaussianModel& model() const { return model_; }
   GaussianModel& model() { return model_; }
@@ -82,6 +91,7 @@ class Trainer {
   const Adam& adam() const { return adam_; }
   const std::vector<TrainView>& views() const { return views_; }
   Method& method() { return *method_; }
+  Reducer& reducer() { return *reducer_; }
   const Method& method() const { return *method_; }
 
   // Binary checkpoint (see checkpoint.cpp for the layout). Writes atomically.
@@ -104,7 +114,12 @@ class Trainer {
   size_t order_pos_ = 0;
   render::GaussianRenderer renderer_;
   render::RenderOutputs out_;
-  render::GaussianGrads grads_;
+  render::GaussianGrads grads_;       // the step's sum over its views (then the mean)
+  render::GaussianGrads view_grads_;  // of the second and later views of a step
+  StepStats step_stats_;
+  std::vector<float> pack_;           // the gradients and statistic sums sent to the other ranks
+  Reducer local_reducer_;
+  Reducer* reducer_ = nullptr;
   render::ProjectedGrads pgrads_;
   PhotometricLoss loss_;
   std::vector<float> d_rgb_;  // [H, W, 3]
@@ -115,6 +130,8 @@ class Trainer {
   std::string inject_group_;
 
   int next_view();
+  // Sums the gradients and statistics of the step over the ranks, then scales the gradients by 1 / G.
+  void reduce_and_scale(float grad_scale);
   void release_step_buffers();
   // Throws hgs::Error naming iteration `it` and the loss term or parameter group when one was not finite.
   void check_finite(int it) const;
