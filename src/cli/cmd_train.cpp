@@ -4,6 +4,10 @@
 #include <omp.h>
 #include <sys/resource.h>
 
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -116,6 +120,14 @@ void run_train(const TrainArgs& a) {
   train::StepTimes parts;  // summed over the steps of this run
   auto t0 = std::chrono::steady_clock::now();
   std::string last_ckpt = a.resume;  // the newest checkpoint on disk, for the message of a failed step
+  // Test hook (tests/dist): HGS_TEST_KILL=<rank>:<images> kills that rank with SIGKILL once it has seen that many
+  // images, as a crashed machine would.
+  int kill_at = 0;
+  if (const char* k = std::getenv("HGS_TEST_KILL")) {
+    int r = -1, at = 0;
+    if (std::sscanf(k, "%d:%d", &r, &at) != 2 || r < 0 || at <= 0) fail("HGS_TEST_KILL: expected <rank>:<images>, got '{}'", k);
+    if (r == mpi.rank()) kill_at = at;
+  }
   while (trainer.iteration() < a.iters) {
     train::StepInfo s;
     try {
@@ -136,6 +148,7 @@ void run_train(const TrainArgs& a) {
     }
     ema_psnr = first ? s.psnr : 0.4 * s.psnr + 0.6 * ema_psnr;
     const int it = trainer.iteration();
+    if (kill_at > 0 && it >= kill_at) std::raise(SIGKILL);
     if (writer && a.save_every > 0 && it % a.save_every == 0 && it < a.iters) {
       ensure_dir(out / "checkpoints");
       trainer.save_checkpoint(out / "checkpoints" / fmt::format("iter_{}.ckpt", it));

@@ -92,6 +92,7 @@ bool checkpoint_complete(const fs::path& file, std::string* why) {
 
 std::vector<std::string> incomplete_outputs(const fs::path& dir) {
   std::vector<std::string> bad;
+  if (!fs::exists(dir)) return bad;  // killed before it made the folder: no output, none torn
   for (const auto& e : fs::recursive_directory_iterator(dir)) {
     if (!e.is_regular_file()) continue;
     // A complete copy under `<name>.hgs-replace` is the one trace atomic_write's kill window may leave (see

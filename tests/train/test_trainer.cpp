@@ -294,3 +294,93 @@ TEST(Method, RegisteredParametersFollowDensificationAndCheckpoints) {
 
 }  // namespace
 }  // namespace hgs::train
+
+namespace hgs::train {
+namespace {
+
+// Records the 3DGS gradient the update step sees (after the batch mean), the views of each step, and
+// densification.
+struct GradTap : Method {
+  std::vector<float> mean_grad, sh_grad;
+  std::vector<int> views, step_views;
+  std::vector<int> densified_at;  // iteration() after the steps that densified
+  const Trainer* tr = nullptr;
+  std::string name() const override { return "tap"; }
+  void prepare(StepContext& c) override { views.push_back(c.view_index); }
+  void update(StepContext& c) override {
+    mean_grad = c.grads->mean;
+    sh_grad = c.grads->sh;
+    step_views.push_back(c.step_views);
+  }
+  void after_step(StepContext& c, bool densified) override {
+    if (densified) densified_at.push_back(c.iteration - 1 + c.step_views);
+  }
+};
+
+TEST(TrainerBatch, StepGradientIsTheMeanOfItsViews) {
+  Tiny t;
+  TrainConfig cfg = TrainConfig().scaled_to(100);
+  cfg.densify = false;
+  auto grad_of = [&](std::vector<TrainView> views, int batch) {
+    TrainConfig c = cfg;
+    c.batch = batch;
+    auto tap = std::make_unique<GradTap>();
+    GradTap& g = *tap;
+    Trainer tr(c, t.model, std::move(views), 1.f, std::move(tap));
+    tr.step();
+    EXPECT_EQ(tr.iteration(), batch);
+    return std::make_pair(g.mean_grad, g.sh_grad);
+  };
+  const auto a = grad_of({t.views[0]}, 1), b = grad_of({t.views[2]}, 1), ab = grad_of({t.views[0], t.views[2]}, 2);
+  ASSERT_EQ(ab.first.size(), a.first.size());
+  int differ = 0;
+  for (size_t k = 0; k < a.first.size(); ++k) {
+    EXPECT_EQ(ab.first[k], (a.first[k] + b.first[k]) * 0.5f) << k;  // two addends: exact in either order
+    differ += a.first[k] != b.first[k];
+  }
+  EXPECT_GT(differ, 0) << "the two views' gradients should differ";
+  for (size_t k = 0; k < a.second.size(); ++k) EXPECT_EQ(ab.second[k], (a.second[k] + b.second[k]) * 0.5f) << k;
+}
+
+TEST(TrainerBatch, TwoCopiesOfAViewStepLikeTheViewAlone) {
+  Tiny t;
+  TrainConfig cfg = TrainConfig().scaled_to(100);
+  cfg.densify = false;
+  Trainer one(cfg, t.model, {t.views[1]}, 1.f);
+  cfg.batch = 2;
+  Trainer two(cfg, t.model, {t.views[1], t.views[1]}, 1.f);
+  one.step();
+  two.step();  // mean of two equal gradients = the gradient; the same learning rates (images 1-2 start at 1)
+  EXPECT_EQ(one.model().mean, two.model().mean);
+  EXPECT_EQ(one.model().sh, two.model().sh);
+  EXPECT_EQ(one.model().opacity_logit, two.model().opacity_logit);
+}
+
+TEST(TrainerBatch, SchedulesCountImagesSeenAndEveryViewIsUsedOncePerEpoch) {
+  Tiny t(true);
+  std::vector<TrainView> views;
+  for (int k = 0; k < 2; ++k)
+    for (const TrainView& v : t.views) views.push_back(v);  // 6 views: epochs of 3 steps of 2
+  TrainConfig cfg = TrainConfig().scaled_to(400);
+  cfg.densify_from = 10;
+  cfg.densify_every = 20;
+  cfg.densify_until = 100;
+  cfg.densify_cfg.grad_threshold = 1e-5f;
+  cfg.batch = 2;
+  auto tap = std::make_unique<GradTap>();
+  GradTap& g = *tap;
+  Trainer tr(cfg, t.model, views, 1.f, std::move(tap));
+  for (int s = 0; s < 30; ++s) tr.step();
+  EXPECT_EQ(tr.iteration(), 60);
+  EXPECT_EQ(g.densified_at, (std::vector<int>{20, 40, 60}));  // images 20, 40, 60: steps 10, 20, 30
+  ASSERT_EQ(g.views.size(), 60u);
+  for (size_t e = 0; e + 6 <= g.views.size(); e += 6) {  // each epoch a permutation of the 6 views
+    std::vector<int> ep(g.views.begin() + e, g.views.begin() + e + 6);
+    std::sort(ep.begin(), ep.end());
+    EXPECT_EQ(ep, (std::vector<int>{0, 1, 2, 3, 4, 5}));
+  }
+  EXPECT_EQ(g.step_views, std::vector<int>(30, 2));
+}
+
+}  // namespace
+}  // namespace hgs::train
