@@ -1,6 +1,7 @@
 // SAM's ViT image encoder and neck on HWC token matrices.
 //   patch embedding: im2col of the P x P patches (c, ky, kx) times the conv weight, plus the absolute positions;
-//   layer: x += proj(attn(LN1(x))); x += lin2(GELU(lin1(LN2(x)))), LayerNorm eps 1e-6. Windowed layers cut the
+//   layer: x += proj(attn(LN1(x))); x += lin2(GELU(lin1(LN2(x)))), LayerNorm eps 1e-6; the attention and MLP
+//     widths and the head count are the layer's own (SlimSAM's pruned models), the residual width is shared. Windowed layers cut the
 //     normalised tokens into w x w windows after zero-padding the grid to a multiple of w (padded tokens take part
 //     as keys with value bias, as in SAM) and attend within each; global layers attend over the whole grid.
 //     Attention adds the decomposed relative positions before the softmax: for query (i, j) and key (k, l),
@@ -11,6 +12,7 @@
 #include <algorithm>
 #include <cblas.h>
 #include <cmath>
+#include <functional>
 
 #include "clip/thread_pool.h"
 #include "clip/transformer.h"
@@ -51,9 +53,11 @@ struct VitWork {
   std::vector<float> h, win, qkv, attn, out, mlp;
 };
 
-// Attention of one layer on the normalised tokens h [g * g, C]; adds proj(attn) to x [g * g, C].
+// Attention of one layer on the normalised tokens h [g * g, C]; adds proj(attn) to x [g * g, C]. The layer's
+// own attention width I = qkv.out / 3 = heads * hd (pruned models differ per layer) sets the widths of q, k, v
+// and of the attention output (proj: I -> C).
 void vit_attention(const VitLayer& l, int g, int C, int heads, const float* h, float* x, VitWork& w) {
-  const int hd = C / heads;
+  const int I = l.qkv.out / 3, hd = I / heads;
   const float scale = 1.f / std::sqrt(float(hd));
   const int s = l.window > 0 ? l.window : g;       // side of one attention grid
   const int nw = l.window > 0 ? (g + s - 1) / s : 1;  // windows per side
@@ -68,9 +72,9 @@ void vit_attention(const VitLayer& l, int g, int C, int heads, const float* h, f
           if (y >= g || xx >= g) continue;
           std::copy_n(h + (size_t(y) * g + xx) * C, C, w.win.data() + ((size_t(wy * nw + wx) * n) + i * s + j) * C);
         }
-  w.qkv.resize(size_t(M) * 3 * C);
+  w.qkv.resize(size_t(M) * 3 * I);
   clip::linear(l.qkv, w.win.data(), M, w.qkv.data());
-  w.attn.resize(size_t(M) * C);
+  w.attn.resize(size_t(M) * I);
   // Query blocks keep the score matrix [rows, n] within ~2 MB (cache) for the global layers. The (window,
   // block) units are independent: one per thread with single-threaded OpenBLAS (one hand-off per layer instead
   // of several per head).
@@ -83,13 +87,15 @@ void vit_attention(const VitLayer& l, int g, int C, int heads, const float* h, f
     std::vector<float> scores(size_t(rows) * n), th, tw;
     for (long u = u0; u < u1; ++u) {
       const int wi = int(u / blocks), r0 = int(u % blocks) * rows, nq = std::min(rows, n - r0);
-      const float* base = w.qkv.data() + size_t(wi) * n * 3 * C;
-      const float* qb = base + size_t(r0) * 3 * C;
-      auto bias = [&](int head, float* sc) {
-        add_rel_pos(qb + head * hd, 3 * C, r0, nq, s, hd, l.rel_h.data(), l.rel_w.data(), sc, th, tw);
-      };
-      clip::multi_head_attention(qb, 3 * C, base + C, 3 * C, base + 2 * C, 3 * C, nq, n, heads, hd, scale,
-                                 w.attn.data() + (size_t(wi) * n + r0) * C, C, scores.data(), false, bias);
+      const float* base = w.qkv.data() + size_t(wi) * n * 3 * I;
+      const float* qb = base + size_t(r0) * 3 * I;
+      std::function<void(int, float*)> bias;
+      if (!l.rel_h.empty())
+        bias = [&](int head, float* sc) {
+          add_rel_pos(qb + head * hd, 3 * I, r0, nq, s, hd, l.rel_h.data(), l.rel_w.data(), sc, th, tw);
+        };
+      clip::multi_head_attention(qb, 3 * I, base + I, 3 * I, base + 2 * I, 3 * I, nq, n, heads, hd, scale,
+                                 w.attn.data() + (size_t(wi) * n + r0) * I, I, scores.data(), false, bias);
     }
   };
   if (split) clip::parallel_for(units, 2, run);
@@ -149,7 +155,7 @@ std::vector<float> SamModel::encode(const float* x, std::vector<std::vector<floa
   w.h.resize(size_t(N) * C);
   for (const VitLayer& l : v.layers) {
     clip::layer_norm(l.ln1, tok.data(), N, C, w.h.data(), kVitEps);
-    vit_attention(l, g, C, v.heads, w.h.data(), tok.data(), w);
+    vit_attention(l, g, C, l.heads > 0 ? l.heads : v.heads, w.h.data(), tok.data(), w);
     clip::layer_norm(l.ln2, tok.data(), N, C, w.h.data(), kVitEps);
     w.mlp.resize(size_t(N) * l.fc1.out);
     clip::linear(l.fc1, w.h.data(), N, w.mlp.data());

@@ -1,10 +1,11 @@
 // Loading SAM from safetensors: detects the naming (Hugging Face SamModel or segment-anything), reads every size
-// from the tensor shapes (ViT width, depth, heads from the relative-position width, window size and global
-// layers from each layer's relative-position length, patch, grid, neck / decoder widths, MLP depths), converts
+// from the tensor shapes (ViT width, depth, each layer's own attention width, heads (attention width / the
+// relative-position width) and MLP width, window size and global layers from each layer's relative-position length, patch, grid, neck / decoder widths, MLP depths), converts
 // to float32 in one layout (Linear [out, in], convolutions as matrices for HWC tensors) and checks every shape:
 // a missing or mis-shaped tensor is a one-line error naming the file and the tensor.
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <fstream>
 #include <nlohmann/json.hpp>
 
@@ -100,20 +101,41 @@ struct Loader {
   std::vector<float> vec(const std::string& hf, int c) const { return get(hf, {1, c}); }
 };
 
-int config_decoder_heads(const fs::path& weights) {
+// What config.json beside the weights says about the shapes that do not show in the tensors (0 / empty =
+// not given): the decoder's head count and, for ViT layers without relative-position tables, the encoder's head
+// count, window size and global layers (Hugging Face SamVisionConfig).
+struct ConfigHints {
+  int decoder_heads = 0, vit_heads = 0, window = 0;
+  std::vector<int> global_layers;
+  bool has_vision = false;
+};
+
+ConfigHints read_config(const fs::path& weights) {
+  ConfigHints h;
   fs::path cfg = (weights.parent_path().empty() ? fs::path(".") : weights.parent_path()) / "config.json";
-  if (!fs::is_regular_file(cfg)) return 0;
+  if (!fs::is_regular_file(cfg)) return h;
   try {
     nlohmann::json j = nlohmann::json::parse(std::ifstream(cfg));
     if (j.contains("mask_decoder_config") && j["mask_decoder_config"].contains("num_attention_heads"))
-      return j["mask_decoder_config"]["num_attention_heads"].get<int>();
+      h.decoder_heads = j["mask_decoder_config"]["num_attention_heads"].get<int>();
+    if (j.contains("vision_config")) {
+      const nlohmann::json& v = j["vision_config"];
+      h.has_vision = v.contains("window_size") && v.contains("global_attn_indexes");
+      if (v.contains("num_attention_heads")) h.vit_heads = v["num_attention_heads"].get<int>();
+      if (v.contains("window_size")) h.window = v["window_size"].get<int>();
+      if (v.contains("global_attn_indexes")) h.global_layers = v["global_attn_indexes"].get<std::vector<int>>();
+    }
   } catch (const nlohmann::json::exception& e) {
     fail("{}: cannot read the model config beside the weights ({})", cfg.string(), e.what());
   }
-  return 0;
+  return h;
 }
 
-void load_vision(const Loader& L, VisionEncoder& v) {
+// Every size of a layer comes from its own tensors (SlimSAM prunes each layer's head dimension and MLP width
+// independently; the residual width C is the encoder's): attention width I from qkv [3 I, C] (and proj
+// [C, I]), head dim from the relative-position tables [2 s - 1, hd], heads = I / hd, window s, MLP width from
+// lin1 [mlp, C] (and lin2 [C, mlp]).
+void load_vision(const Loader& L, const ConfigHints& cfg, int given_heads, VisionEncoder& v) {
   const std::string file = L.file();
   const std::string conv = "vision_encoder.patch_embed.projection.weight";
   auto cs = L.shape(conv);
@@ -130,27 +152,53 @@ void load_vision(const Loader& L, VisionEncoder& v) {
   for (int i = 0; i < n; ++i) {
     const std::string p = fmt::format("vision_encoder.layers.{}.", i);
     VitLayer l;
-    const int64_t rel = L.dim(p + "attn.rel_pos_h", 0), hd = L.dim(p + "attn.rel_pos_h", 1);
-    if (hd <= 0 || C % hd || rel % 2 == 0)
-      fail("{}: tensor '{}' has shape {}, expected [2 * size - 1, head_dim] with head_dim dividing {}", file,
-           L.key(p + "attn.rel_pos_h"), shape_str(L.shape(p + "attn.rel_pos_h")), C);
-    if (i == 0) v.heads = int(C / hd);
-    if (C / hd != v.heads)
-      fail("{}: tensor '{}' implies {} heads, layer 0 has {}", file, L.key(p + "attn.rel_pos_h"), C / hd, v.heads);
-    const int size = int(rel + 1) / 2;
-    if (size > v.grid) fail("{}: tensor '{}' covers {} positions, more than the {}-token grid", file, L.key(p + "attn.rel_pos_h"), size, v.grid);
-    l.window = size == v.grid ? 0 : size;
-    l.rel_h = L.get(p + "attn.rel_pos_h", {rel, hd});
-    l.rel_w = L.get(p + "attn.rel_pos_w", {rel, hd});
+    const std::string qkv = p + "attn.qkv.weight";
+    const int64_t rows = L.dim(qkv, 0);
+    if (rows <= 0 || rows % 3)
+      fail("{}: tensor '{}' has shape {}, expected [3 * attention width, {}]", file, L.key(qkv), shape_str(L.shape(qkv)), C);
+    const int I = int(rows / 3);
+    l.qkv = L.lin(p + "attn.qkv", 3 * I, C);
+    l.proj = L.lin(p + "attn.proj", C, I);
+    const std::string rh = p + "attn.rel_pos_h", rw = p + "attn.rel_pos_w";
+    if (L.has(rh) || L.has(rw)) {
+      const auto rs = L.shape(rh);
+      const int64_t rel = rs.size() == 2 ? rs[0] : 0, hd = rs.size() == 2 ? rs[1] : 0;
+      if (rel <= 0 || hd <= 0 || I % hd || rel % 2 == 0)
+        fail("{}: tensor '{}' has shape {}, expected [2 * size - 1, head_dim] with head_dim dividing the attention "
+             "width {} ('{}' has shape {})", file, L.key(rh), shape_str(rs), I, L.key(qkv), shape_str(L.shape(qkv)));
+      l.heads = int(I / hd);
+      if (given_heads > 0 && l.heads != given_heads)
+        fail("{}: tensor '{}' has shape {} but [{}, {}] was expected ({} heads given, attention width {})", file,
+             L.key(rh), shape_str(rs), rel, I % given_heads ? std::string("?") : std::to_string(I / given_heads),
+             given_heads, I);
+      const int size = int(rel + 1) / 2;
+      if (size > v.grid) fail("{}: tensor '{}' covers {} positions, more than the {}-token grid", file, L.key(rh), size, v.grid);
+      l.window = size == v.grid ? 0 : size;
+      l.rel_h = L.get(rh, {rel, hd});
+      l.rel_w = L.get(rw, {rel, hd});
+    } else {
+      // No relative positions: the head count given or from config.json, the window from config.json.
+      const int heads = given_heads > 0 ? given_heads : cfg.vit_heads;
+      if (heads <= 0 || !cfg.has_vision)
+        fail("{}: layer {} has no relative-position tables ('{}'), so its head count and window need config.json's "
+             "vision_config (num_attention_heads, window_size, global_attn_indexes) beside the weights", file, i, L.key(rh));
+      if (I % heads)
+        fail("{}: tensor '{}' has shape {}: attention width {} is not a multiple of {} heads", file, L.key(qkv),
+             shape_str(L.shape(qkv)), I, heads);
+      l.heads = heads;
+      const bool global = std::find(cfg.global_layers.begin(), cfg.global_layers.end(), i) != cfg.global_layers.end();
+      l.window = global || cfg.window <= 0 || cfg.window >= v.grid ? 0 : cfg.window;
+    }
     l.ln1 = L.ln(p + "layer_norm1", C);
     l.ln2 = L.ln(p + "layer_norm2", C);
-    l.qkv = L.lin(p + "attn.qkv", 3 * C, C);
-    l.proj = L.lin(p + "attn.proj", C, C);
     const int mlp = int(L.dim(p + "mlp.lin1.weight", 0));
     l.fc1 = L.lin(p + "mlp.lin1", mlp, C);
     l.fc2 = L.lin(p + "mlp.lin2", C, mlp);
     v.layers.push_back(std::move(l));
   }
+  v.heads = v.layers[0].heads;
+  for (const VitLayer& l : v.layers)
+    if (l.heads != v.heads) v.heads = 0;
   v.out = int(L.dim("vision_encoder.neck.conv1.weight", 0));
   const int O = v.out;
   v.neck1 = {C, O, L.get("vision_encoder.neck.conv1.weight", {O, C, 1, 1}), std::vector<float>(O, 0.f)};
@@ -223,12 +271,13 @@ SamModel SamModel::load(const std::filesystem::path& path, const SamOptions& opt
          "or 'image_encoder.pos_embed')", file);
   }
   Loader L{st, m.naming};
-  load_vision(L, m.vision);
+  const ConfigHints cfg = read_config(path);
+  load_vision(L, cfg, opt.vit_heads, m.vision);
   const int C = m.vision.out;
   if (C % 2) fail("{}: neck width {} is odd", file, C);
   load_prompt(L, st, C, m.prompt);
   load_decoder(L, C, m.decoder);
-  const int heads = opt.decoder_heads > 0 ? opt.decoder_heads : config_decoder_heads(path) > 0 ? config_decoder_heads(path) : 8;
+  const int heads = opt.decoder_heads > 0 ? opt.decoder_heads : cfg.decoder_heads > 0 ? cfg.decoder_heads : 8;
   for (const TwoWayLayer& l : m.decoder.layers)
     if (l.token_to_image.q.out % heads || C % heads)
       fail("{}: {} decoder heads do not divide the attention widths ({} and {})", file, heads, C, l.token_to_image.q.out);
@@ -237,15 +286,23 @@ SamModel SamModel::load(const std::filesystem::path& path, const SamOptions& opt
 }
 
 std::string SamModel::describe() const {
-  std::string windows, global;
+  std::string windows, global, widths;
+  bool uniform = true;
   for (size_t i = 0; i < vision.layers.size(); ++i) {
-    if (vision.layers[i].window == 0) global += (global.empty() ? "" : ",") + std::to_string(i);
-    else if (windows.empty()) windows = std::to_string(vision.layers[i].window);
+    const VitLayer& l = vision.layers[i];
+    if (l.window == 0) global += (global.empty() ? "" : ",") + std::to_string(i);
+    else if (windows.empty()) windows = std::to_string(l.window);
+    const int h = l.heads > 0 ? l.heads : vision.heads;
+    widths += fmt::format("{}{}x{}/{}", i ? "," : "", h, h > 0 ? l.qkv.out / 3 / h : 0, l.fc1.out);
+    const VitLayer& f = vision.layers[0];
+    uniform = uniform && h == (f.heads > 0 ? f.heads : vision.heads) && l.qkv.out == f.qkv.out && l.fc1.out == f.fc1.out;
   }
-  return fmt::format("{} naming; ViT hidden {} x {} layers, {} heads, patch {}, {}px, window {}, global layers [{}]; "
+  const std::string vit = uniform ? fmt::format("{} heads", vision.heads)
+                                  : fmt::format("per-layer heads x head dim / MLP [{}]", widths);
+  return fmt::format("{} naming; ViT hidden {} x {} layers, {}, patch {}, {}px, window {}, global layers [{}]; "
                      "neck {}; decoder {} layers, {} heads, {} mask tokens",
                      naming == Naming::HuggingFace ? "Hugging Face" : "segment-anything", vision.hidden,
-                     vision.layers.size(), vision.heads, vision.patch, image_size(), windows.empty() ? "-" : windows,
+                     vision.layers.size(), vit, vision.patch, image_size(), windows.empty() ? "-" : windows,
                      global, vision.out, decoder.layers.size(), decoder.heads, decoder.tokens);
 }
 

@@ -27,19 +27,27 @@ struct SamOptions {
   // Attention heads of the mask decoder (not visible in the tensor shapes): 0 = `mask_decoder_config.
   // num_attention_heads` of config.json beside the weights if present, else 8 (every released SAM).
   int decoder_heads = 0;
+  // Attention heads of each ViT layer: 0 = from the tensors (the layer's attention width / the width of its
+  // relative-position tables; for a layer without tables `vision_config.num_attention_heads` of config.json).
+  // Given, it must agree with every layer's tables and serves the layers without tables.
+  int vit_heads = 0;
 };
 
+// One ViT layer. Its widths are its own (SlimSAM's pruned models differ per layer): attention width
+// inner = qkv.out / 3 = heads * head_dim, MLP width fc1.out; only the residual width `hidden` is shared.
 struct VitLayer {
   LayerNorm ln1, ln2;
-  Linear qkv;                        // [3 * hidden, hidden]: rows q, k, v (heads contiguous within each)
-  Linear proj;                       // [hidden, hidden]
+  Linear qkv;                        // [3 * inner, hidden]: rows q, k, v (heads contiguous within each)
+  Linear proj;                       // [hidden, inner]
   Linear fc1, fc2;                   // [mlp, hidden], [hidden, mlp]
-  std::vector<float> rel_h, rel_w;   // [2 * size - 1, head_dim]
+  std::vector<float> rel_h, rel_w;   // [2 * size - 1, head_dim]; empty = no relative positions
   int window = 0;                    // 0 = global attention over the whole grid
+  int heads = 0;                     // 0 = VisionEncoder::heads; scale 1 / sqrt(head_dim)
 };
 
 struct VisionEncoder {
-  int patch = 0, grid = 0, hidden = 0, heads = 0, out = 0;
+  int patch = 0, grid = 0, hidden = 0, out = 0;
+  int heads = 0;                     // the layers' head count when they all agree (else 0: see VitLayer::heads)
   Linear patch_embed;                // [hidden, 3 * patch * patch], conv weight flattened as (c, ky, kx)
   std::vector<float> pos;            // [grid * grid, hidden]
   std::vector<VitLayer> layers;

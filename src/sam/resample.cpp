@@ -19,19 +19,22 @@ struct Lin {
   std::vector<float> l1;  // weight of i1 (i0 gets 1 - l1)
 };
 
-// torch's linear source indices for `in` -> `out` samples (align_corners false).
+// torch's linear source indices for `in` -> `out` samples (align_corners false). The source position is computed
+// in double and only the weight rounded to float: in float, (o + 0.5) * in / out loses ~1e-7 of the position,
+// which at positions ~40 (the crop's upsampling to the image size) is ~2e-6 of the weight; this matches torch's
+// results to a few ulp (observed 6e-7 against 2.6e-6 with float positions).
 Lin lin_taps(int in, int out) {
   Lin t;
   t.i0.resize(out);
   t.i1.resize(out);
   t.l1.resize(out);
-  const float scale = float(in) / float(out);
+  const double scale = double(in) / double(out);
   for (int o = 0; o < out; ++o) {
-    float s = std::max((o + 0.5f) * scale - 0.5f, 0.f);
+    const double s = std::max((o + 0.5) * scale - 0.5, 0.0);
     int i = std::min(int(s), in - 1);
     t.i0[o] = i;
     t.i1[o] = std::min(i + 1, in - 1);
-    t.l1[o] = s - float(i);
+    t.l1[o] = float(s - double(i));
   }
   return t;
 }

@@ -3,41 +3,12 @@
 // stages 1e-6 to 4e-6, prompts 9e-7, decoder masks 1e-6 to 4e-6, IoU 7e-7, post-processing 0.
 #include <gtest/gtest.h>
 
-#include <fstream>
-#include <nlohmann/json.hpp>
-
 #include "sam_test_util.h"
 
 namespace hgs::test {
 namespace {
 
 using sam::Prompt;
-
-struct RefPrompts {
-  int H = 0, W = 0, in_h = 0, in_w = 0;
-  std::vector<Prompt> prompts;
-};
-
-RefPrompts read_prompts() {
-  nlohmann::json j = nlohmann::json::parse(std::ifstream(sam_data("prompts.json")));
-  RefPrompts r;
-  r.H = j["image_hw"][0];
-  r.W = j["image_hw"][1];
-  r.in_h = j["input_hw"][0];
-  r.in_w = j["input_hw"][1];
-  for (const auto& p : j["prompts"]) {
-    Prompt q;
-    if (p.contains("points"))
-      for (size_t i = 0; i < p["points"].size(); ++i) {
-        q.points.push_back({p["points"][i][0].get<float>(), p["points"][i][1].get<float>()});
-        q.labels.push_back(p["labels"][i].get<int>());
-      }
-    if (p.contains("boxes"))
-      for (const auto& b : p["boxes"]) q.boxes.push_back({b[0].get<float>(), b[1].get<float>(), b[2].get<float>(), b[3].get<float>()});
-    r.prompts.push_back(q);
-  }
-  return r;
-}
 
 // The reference geometry without running the encoder (embedding from the fixture).
 sam::ImageEmbedding ref_embedding(const RefPrompts& r) {

@@ -2,63 +2,12 @@
 // error naming the tensor.
 #include <gtest/gtest.h>
 
-#include <functional>
-#include <regex>
-
-#include "clip/safetensors.h"
 #include "core/error.h"
 #include "sam_test_util.h"
 #include "test_util.h"
 
 namespace hgs::test {
 namespace {
-
-// Copies the tiny model to `dst`, renaming tensors with `rename` (empty result = drop) and optionally giving
-// one tensor another shape (same element count).
-void rewrite(const std::filesystem::path& dst, const std::function<std::string(const std::string&)>& rename,
-             const std::string& reshape_name = "", const std::vector<int64_t>& new_shape = {}) {
-  clip::SafeTensors st(sam_data("tiny_sam.safetensors"));
-  std::vector<std::vector<float>> data;
-  std::vector<clip::TensorToWrite> out;
-  const auto names = st.names();
-  data.reserve(names.size());
-  for (const std::string& n : names) {
-    std::string m = rename(n);
-    if (m.empty()) continue;
-    data.push_back(st.to_float(n));
-    std::vector<int64_t> shape = st.info(n).shape;
-    if (n == reshape_name) shape = new_shape;
-    out.push_back({m, shape, data.back().data()});
-  }
-  clip::write_safetensors(dst, out, clip::StDType::F32);
-}
-
-std::string sub(std::string s, const std::string& re, const std::string& by) { return std::regex_replace(s, std::regex(re), by); }
-
-// segment-anything's state-dict names for the tiny model's tensors (written independently of src/sam/load.cpp).
-std::string to_segment_anything(const std::string& n) {
-  std::string s = n;
-  s = sub(s, R"(^shared_image_embedding\.positional_embedding$)", "prompt_encoder.pe_layer.positional_encoding_gaussian_matrix");
-  s = sub(s, R"(^vision_encoder\.patch_embed\.projection)", "image_encoder.patch_embed.proj");
-  s = sub(s, R"(^vision_encoder\.layers\.(\d+)\.layer_norm(\d))", "image_encoder.blocks.$1.norm$2");
-  s = sub(s, R"(^vision_encoder\.layers\.)", "image_encoder.blocks.");
-  s = sub(s, R"(^vision_encoder\.neck\.conv1)", "image_encoder.neck.0");
-  s = sub(s, R"(^vision_encoder\.neck\.layer_norm1)", "image_encoder.neck.1");
-  s = sub(s, R"(^vision_encoder\.neck\.conv2)", "image_encoder.neck.2");
-  s = sub(s, R"(^vision_encoder\.neck\.layer_norm2)", "image_encoder.neck.3");
-  s = sub(s, R"(^vision_encoder\.)", "image_encoder.");
-  s = sub(s, R"(^prompt_encoder\.point_embed\.)", "prompt_encoder.point_embeddings.");
-  s = sub(s, R"(transformer\.layers\.(\d+)\.layer_norm(\d))", "transformer.layers.$1.norm$2");
-  s = sub(s, R"(layer_norm_final_attn)", "norm_final_attn");
-  s = sub(s, R"(upscale_conv1)", "output_upscaling.0");
-  s = sub(s, R"(upscale_layer_norm)", "output_upscaling.1");
-  s = sub(s, R"(upscale_conv2)", "output_upscaling.3");
-  // MLP heads of 3 layers: proj_in, layers.0, proj_out -> layers.0, 1, 2.
-  s = sub(s, R"((mlps\.\d+|iou_prediction_head)\.layers\.0\.)", "$1.layers.1.");
-  s = sub(s, R"((mlps\.\d+|iou_prediction_head)\.proj_in\.)", "$1.layers.0.");
-  s = sub(s, R"((mlps\.\d+|iou_prediction_head)\.proj_out\.)", "$1.layers.2.");
-  return s;
-}
 
 std::string load_error(const std::filesystem::path& p) {
   try {

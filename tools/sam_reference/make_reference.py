@@ -25,6 +25,12 @@ Writes into OUT_DIR: tiny_sam.safetensors and
   amg.json (options, and per kept mask: bbox XYWH, area, predicted_iou, stability_score, point_coords) and
   amg_masks.npy [K, 45, 70] uint8: the automatic mask generator on a 5 x 5 grid (batches of 7) with lowered
   thresholds (random weights predict low IoUs).
+
+Pruned model (CFG_PRUNED, like SlimSAM's pruned checkpoints: the residual width stays 32, every ViT layer has
+its own heads x head dim and MLP width: 2 x 6 / 40, 4 x 5 / 24 (the global layer), 1 x 16 / 72; the attention
+scale is each layer's head dim ** -0.5; prompt encoder and decoder as above; own seed), into OUT_DIR/pruned:
+pruned_sam.safetensors and the same stages for the same image and prompt sets (image.npy, pixels.npy and
+prompts.json are the tiny model's), low-res masks of prompt sets 1 and 3 only (size).
 """
 import json
 import math
@@ -45,6 +51,10 @@ STD = (0.229, 0.224, 0.225)
 
 CFG = dict(hidden=32, layers=3, heads=2, mlp=96, patch=8, image=64, window=3, global_layers=[1],
            out=32, dec_layers=2, dec_heads=8, dec_mlp=64, iou_hidden=24, iou_depth=3)
+
+# Pruned like SlimSAM: one residual width (32), every layer its own heads x head dim (attention widths 12, 20,
+# 16) and MLP width; the layers' head dims differ so that their relative-position tables do too.
+CFG_PRUNED = dict(CFG, layer_heads=[2, 4, 1], layer_head_dims=[6, 5, 16], layer_mlp=[40, 24, 72])
 
 # ------------------------------------------------------------------------------------------------ modules
 
@@ -84,13 +94,16 @@ def rel_table(q, k, rel):
 
 
 class VisionAttention(nn.Module):
-    def __init__(self, dim, heads, size):
+    """Attention of width heads * hd (dim // heads unless a pruned layer gives its own head dim hd), scale
+    hd ** -0.5 (SlimSAM resets it to the pruned head dim)."""
+
+    def __init__(self, dim, heads, size, hd=None):
         super().__init__()
         self.heads = heads
-        hd = dim // heads
+        hd = dim // heads if hd is None else hd
         self.scale = hd ** -0.5
-        self.qkv = nn.Linear(dim, 3 * dim)
-        self.proj = nn.Linear(dim, dim)
+        self.qkv = nn.Linear(dim, 3 * heads * hd)
+        self.proj = nn.Linear(heads * hd, dim)
         self.rel_pos_h = nn.Parameter(torch.zeros(2 * size - 1, hd))
         self.rel_pos_w = nn.Parameter(torch.zeros(2 * size - 1, hd))
 
@@ -111,10 +124,10 @@ class VisionAttention(nn.Module):
 
 
 class VisionLayer(nn.Module):
-    def __init__(self, dim, heads, mlp, window, grid):
+    def __init__(self, dim, heads, mlp, window, grid, hd=None):
         super().__init__()
         self.layer_norm1 = nn.LayerNorm(dim, eps=1e-6)
-        self.attn = VisionAttention(dim, heads, window if window > 0 else grid)
+        self.attn = VisionAttention(dim, heads, window if window > 0 else grid, hd)
         self.layer_norm2 = nn.LayerNorm(dim, eps=1e-6)
         self.mlp = MLP2(dim, mlp, nn.GELU())
         self.window = window
@@ -163,8 +176,12 @@ class VisionEncoder(nn.Module):
         g = c["image"] // c["patch"]
         self.patch_embed = PatchEmbed(c["hidden"], c["patch"])
         self.pos_embed = nn.Parameter(torch.zeros(1, g, g, c["hidden"]))
+        # A pruned model (SlimSAM) gives each layer its own heads, head dim and MLP width.
         self.layers = nn.ModuleList([
-            VisionLayer(c["hidden"], c["heads"], c["mlp"], 0 if i in c["global_layers"] else c["window"], g)
+            VisionLayer(c["hidden"], c["layer_heads"][i] if "layer_heads" in c else c["heads"],
+                        c["layer_mlp"][i] if "layer_mlp" in c else c["mlp"],
+                        0 if i in c["global_layers"] else c["window"], g,
+                        c["layer_head_dims"][i] if "layer_head_dims" in c else None)
             for i in range(c["layers"])])
         self.neck = Neck(c["hidden"], c["out"])
 
@@ -464,9 +481,8 @@ def save(name, t):
     np.save(os.path.join(OUT, name), np.ascontiguousarray(t.detach().cpu().numpy().astype(np.float32)))
 
 
-def main():
-    torch.manual_seed(1234)
-    c = CFG
+def make_model(c, seed):
+    torch.manual_seed(seed)
     model = Sam(c).eval()
     sd = {}
     with torch.no_grad():
@@ -486,21 +502,38 @@ def main():
                 p.copy_(torch.randn_like(p) * (1.2 / math.sqrt(fan_in)))
             p.copy_(p.half().float())  # the model computes with the F16 values it saves
             sd[name] = p
-    os.makedirs(OUT, exist_ok=True)
-    save_safetensors(os.path.join(OUT, "tiny_sam.safetensors"), sd)
+    return model, sd
 
-    S = c["image"]
+
+def test_image():
     H, W = 45, 70
     yy, xx = np.meshgrid(np.arange(H), np.arange(W), indexing="ij")
     rng = np.random.default_rng(7)
     img = np.stack([0.5 + 0.4 * np.sin(xx / 7.0 + k) * np.cos(yy / 5.0 - k) for k in range(3)], -1)
-    img8 = np.round(255 * np.clip(img + 0.05 * rng.standard_normal(img.shape), 0, 1)).astype(np.uint8)
-    np.save(os.path.join(OUT, "image.npy"), img8)
+    return np.round(255 * np.clip(img + 0.05 * rng.standard_normal(img.shape), 0, 1)).astype(np.uint8)
+
+
+PROMPTS = [
+    {"points": [[30.0, 20.0]], "labels": [1]},
+    {"points": [[12.5, 8.0], [60.0, 40.0]], "labels": [1, 0]},
+    {"boxes": [[5.0, 4.0, 50.0, 33.0]]},
+    {"points": [[40.0, 25.0]], "labels": [1], "boxes": [[20.0, 10.0, 66.0, 42.0]]},
+]
+
+
+def write_outputs(model, c, img8, full=True, lowres_sets=(0, 1, 2, 3)):
+    """Every stage's outputs into OUT. full=False leaves out what does not depend on the model (the image, the
+    preprocessed pixels, the prompt sets: the tiny model's files)."""
+    S = c["image"]
+    H, W = img8.shape[:2]
+    if full:
+        np.save(os.path.join(OUT, "image.npy"), img8)
     img = img8.astype(np.float32) / 255.0
 
     with torch.no_grad():
         px, hw = preprocess(img, S)
-        save("pixels.npy", px.permute(1, 2, 0))
+        if full:
+            save("pixels.npy", px.permute(1, 2, 0))
         emb, stages = model.vision_encoder(px[None])
         save("patch.npy", stages[0][0])
         for i, s in enumerate(stages[1:]):
@@ -511,12 +544,7 @@ def main():
         dense = model.prompt_encoder.no_mask_embed.weight[0][:, None, None].expand_as(pe)
 
         sy, sx = hw[0] / H, hw[1] / W  # original pixels -> input pixels
-        prompts = [
-            {"points": [[30.0, 20.0]], "labels": [1]},
-            {"points": [[12.5, 8.0], [60.0, 40.0]], "labels": [1, 0]},
-            {"boxes": [[5.0, 4.0, 50.0, 33.0]]},
-            {"points": [[40.0, 25.0]], "labels": [1], "boxes": [[20.0, 10.0, 66.0, 42.0]]},
-        ]
+        prompts = PROMPTS
         for k, pr in enumerate(prompts):
             pts = lab = box = None
             if "points" in pr:
@@ -527,7 +555,8 @@ def main():
             sparse = model.prompt_encoder(pts, lab, box)
             save(f"sparse{k}.npy", sparse)
             masks, iou = model.mask_decoder(emb[0], pe, sparse, dense)
-            save(f"lowres{k}.npy", masks)
+            if k in lowres_sets:
+                save(f"lowres{k}.npy", masks)
             save(f"iou{k}.npy", iou)
             if k == 3:  # post-processing does not depend on the prompt: one set keeps the fixture small
                 save(f"masks{k}.npy", postprocess(masks, S, hw, (H, W)))
@@ -536,9 +565,28 @@ def main():
         with open(os.path.join(OUT, "amg.json"), "w") as f:
             json.dump({"options": AMG, "masks": anns}, f, indent=1)
         print("AMG:", len(anns), "masks", [round(a["predicted_iou"], 3) for a in anns])
-        with open(os.path.join(OUT, "prompts.json"), "w") as f:
-            json.dump({"image_hw": [H, W], "input_hw": list(hw), "prompts": prompts}, f, indent=1)
+        if full:
+            with open(os.path.join(OUT, "prompts.json"), "w") as f:
+                json.dump({"image_hw": [H, W], "input_hw": list(hw), "prompts": prompts}, f, indent=1)
     print("wrote", OUT)
+
+
+def main():
+    global OUT
+    base = OUT
+    model, sd = make_model(CFG, 1234)
+    os.makedirs(OUT, exist_ok=True)
+    save_safetensors(os.path.join(OUT, "tiny_sam.safetensors"), sd)
+    img8 = test_image()
+    write_outputs(model, CFG, img8)
+
+    # The pruned model (own seed) into OUT/pruned: the same image and prompt sets as above.
+    OUT = os.path.join(base, "pruned")
+    model, sd = make_model(CFG_PRUNED, 4321)
+    os.makedirs(OUT, exist_ok=True)
+    save_safetensors(os.path.join(OUT, "pruned_sam.safetensors"), sd)
+    write_outputs(model, CFG_PRUNED, img8, full=False, lowres_sets=(1, 3))
+    OUT = base
 
 
 if __name__ == "__main__":
