@@ -152,12 +152,23 @@ void load_vision(const Loader& L, const ConfigHints& cfg, int given_heads, Visio
   for (int i = 0; i < n; ++i) {
     const std::string p = fmt::format("vision_encoder.layers.{}.", i);
     VitLayer l;
-    const std::string qkv = p + "attn.qkv.weight";
+    // qkv [3 I, C], or SlimSAM's separate q, k, v [I, C] each (its pruning code splits them), concatenated.
+    const bool split = !L.has(p + "attn.qkv.weight") && L.has(p + "attn.q.weight");
+    const std::string qkv = p + (split ? "attn.q.weight" : "attn.qkv.weight");
     const int64_t rows = L.dim(qkv, 0);
-    if (rows <= 0 || rows % 3)
+    if (rows <= 0 || (!split && rows % 3))
       fail("{}: tensor '{}' has shape {}, expected [3 * attention width, {}]", file, L.key(qkv), shape_str(L.shape(qkv)), C);
-    const int I = int(rows / 3);
-    l.qkv = L.lin(p + "attn.qkv", 3 * I, C);
+    const int I = int(split ? rows : rows / 3);
+    if (split) {
+      l.qkv = {C, 3 * I, {}, {}};
+      for (const char* part : {"attn.q", "attn.k", "attn.v"}) {
+        Linear x = L.lin(p + part, I, C);
+        l.qkv.w.insert(l.qkv.w.end(), x.w.begin(), x.w.end());
+        l.qkv.b.insert(l.qkv.b.end(), x.b.begin(), x.b.end());
+      }
+    } else {
+      l.qkv = L.lin(p + "attn.qkv", 3 * I, C);
+    }
     l.proj = L.lin(p + "attn.proj", C, I);
     const std::string rh = p + "attn.rel_pos_h", rw = p + "attn.rel_pos_w";
     if (L.has(rh) || L.has(rw)) {

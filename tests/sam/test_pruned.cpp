@@ -5,7 +5,9 @@
 
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <regex>
 
+#include "clip/safetensors.h"
 #include "core/error.h"
 #include "sam/amg.h"
 #include "sam_test_util.h"
@@ -242,6 +244,59 @@ TEST(SamPruned, LayerWithoutRelativePositionsUsesTheConfig) {
   EXPECT_EQ(sa, sb);
   // ... and the tables do matter: the zeroed model is not the reference.
   EXPECT_GT(max_rel_err(sa[2], pref("layer1.npy")), 1e-3);
+}
+
+// SlimSAM's pruning code keeps q, k, v as separate linears ('attn.q', 'attn.k', 'attn.v', each [I, C]): the
+// pruned model saved that way in segment-anything naming, optionally with one tensor given another shape.
+void write_split_qkv(const std::filesystem::path& dst, const std::string& reshape_name = "",
+                     const std::vector<int64_t>& new_shape = {}) {
+  clip::SafeTensors st(pruned_file());
+  const auto names = st.names();
+  std::vector<std::vector<float>> data;
+  std::vector<clip::TensorToWrite> out;
+  data.reserve(3 * names.size());
+  const std::regex qkv(R"((.*\.attn\.)qkv\.(weight|bias))");
+  for (const std::string& n : names) {
+    std::vector<float> v = st.to_float(n);
+    std::vector<int64_t> shape = st.info(n).shape;
+    const std::string m = to_segment_anything(n);
+    std::smatch mt;
+    if (std::regex_match(m, mt, qkv)) {
+      const size_t part = v.size() / 3;
+      shape[0] /= 3;
+      for (int j = 0; j < 3; ++j) {
+        data.emplace_back(v.begin() + j * part, v.begin() + (j + 1) * part);
+        const std::string name = mt[1].str() + "qkv"[j] + "." + mt[2].str();
+        out.push_back({name, name == reshape_name ? new_shape : shape, data.back().data()});
+      }
+    } else {
+      data.push_back(std::move(v));
+      out.push_back({m, m == reshape_name ? new_shape : shape, data.back().data()});
+    }
+  }
+  clip::write_safetensors(dst, out, clip::StDType::F32);
+}
+
+TEST(SamPruned, SeparateQkvLinearsLoad) {
+  TempDir t;
+  write_split_qkv(t / "split.safetensors");
+  clip::SafeTensors st(t / "split.safetensors");
+  ASSERT_TRUE(st.has("image_encoder.blocks.1.attn.k.weight"));
+  ASSERT_FALSE(st.has("image_encoder.blocks.1.attn.qkv.weight"));
+  sam::SamModel m = sam::SamModel::load(t / "split.safetensors");
+  EXPECT_EQ(m.vision.layers[1].qkv.out, 60);
+  EXPECT_EQ(m.vision.layers[1].heads, 4);
+  std::vector<float> px = sam_ref("pixels.npy");
+  std::vector<std::vector<float>> a, b;
+  EXPECT_EQ(m.encode(px.data(), &a), pruned_sam().encode(px.data(), &b));
+  EXPECT_EQ(a, b);
+  EXPECT_LT(max_rel_err(a[3], pref("layer2.npy")), 1e-5);
+  // A mis-shaped k of layer 2 ([16, 32] stored as [32, 16]) is named.
+  write_split_qkv(t / "bad.safetensors", "image_encoder.blocks.2.attn.k.weight", {32, 16});
+  std::string err = load_error(t / "bad.safetensors");
+  EXPECT_NE(err.find("bad.safetensors: tensor 'image_encoder.blocks.2.attn.k.weight' has shape [32, 16] but [16, 32] "
+                     "was expected"), std::string::npos) << err;
+  EXPECT_EQ(err.find('\n'), std::string::npos) << err;
 }
 
 }  // namespace
