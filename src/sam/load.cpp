@@ -45,8 +45,14 @@ std::string sa_name(std::string n) {
 struct Loader {
   const SafeTensors& st;
   Naming naming;
+  bool data_parallel = false;  // segment-anything names under 'image_encoder.module.' (SlimSAM's DataParallel encoder)
   std::string file() const { return st.path().string(); }
-  std::string key(const std::string& hf) const { return naming == Naming::HuggingFace ? hf : sa_name(hf); }
+  std::string key(const std::string& hf) const {
+    if (naming == Naming::HuggingFace) return hf;
+    std::string n = sa_name(hf);
+    if (data_parallel && n.rfind("image_encoder.", 0) == 0) n.insert(14, "module.");
+    return n;
+  }
   bool has(const std::string& hf) const { return st.has(key(hf)); }
 
   std::vector<float> get(const std::string& hf, const std::vector<int64_t>& shape) const { return st.to_float(key(hf), shape); }
@@ -275,13 +281,13 @@ SamModel SamModel::load(const std::filesystem::path& path, const SamOptions& opt
   m.path = path;
   if (st.has("vision_encoder.pos_embed")) {
     m.naming = Naming::HuggingFace;
-  } else if (st.has("image_encoder.pos_embed")) {
+  } else if (st.has("image_encoder.pos_embed") || st.has("image_encoder.module.pos_embed")) {
     m.naming = Naming::SegmentAnything;
   } else {
     fail("{}: not a SAM model in Hugging Face SamModel or segment-anything naming (no 'vision_encoder.pos_embed' "
          "or 'image_encoder.pos_embed')", file);
   }
-  Loader L{st, m.naming};
+  Loader L{st, m.naming, !st.has("image_encoder.pos_embed") && st.has("image_encoder.module.pos_embed")};
   const ConfigHints cfg = read_config(path);
   load_vision(L, cfg, opt.vit_heads, m.vision);
   const int C = m.vision.out;

@@ -291,6 +291,22 @@ TEST(SamPruned, SeparateQkvLinearsLoad) {
   EXPECT_EQ(m.encode(px.data(), &a), pruned_sam().encode(px.data(), &b));
   EXPECT_EQ(a, b);
   EXPECT_LT(max_rel_err(a[3], pref("layer2.npy")), 1e-5);
+  // SlimSAM's checkpoints hold the encoder in a DataParallel wrapper: 'image_encoder.module.*' also loads.
+  clip::SafeTensors sp(t / "split.safetensors");
+  const auto sp_names = sp.names();
+  std::vector<std::vector<float>> sp_data;
+  std::vector<clip::TensorToWrite> sp_out;
+  sp_data.reserve(sp_names.size());
+  for (const std::string& n : sp_names) {
+    sp_data.push_back(sp.to_float(n));
+    std::string m2 = n;
+    if (m2.rfind("image_encoder.", 0) == 0) m2.insert(14, "module.");
+    sp_out.push_back({m2, sp.info(n).shape, sp_data.back().data()});
+  }
+  clip::write_safetensors(t / "dp.safetensors", sp_out, clip::StDType::F32);
+  sam::SamModel dp = sam::SamModel::load(t / "dp.safetensors");
+  EXPECT_EQ(dp.encode(px.data()), m.encode(px.data()));
+  EXPECT_EQ(dp.naming, sam::Naming::SegmentAnything);
   // A mis-shaped k of layer 2 ([16, 32] stored as [32, 16]) is named.
   write_split_qkv(t / "bad.safetensors", "image_encoder.blocks.2.attn.k.weight", {32, 16});
   std::string err = load_error(t / "bad.safetensors");
