@@ -83,6 +83,7 @@ int Trainer::next_view() {
 void Trainer::release_step_buffers() {
   renderer_.release();
   grads_ = render::GaussianGrads{};
+  view_grads_ = render::GaussianGrads{};
   pgrads_ = render::ProjectedGrads{};
   out_ = render::RenderOutputs{};
   method_->release();
@@ -175,6 +176,7 @@ StepInfo Trainer::step() {
   c.step_views = G;
   c.grad_scale = G > 1 ? 1.f / float(G) : 1.f;
   c.reducer = reducer_;
+  if (!(cfg_.densify && it < cfg_.densify_until) && step_stats_.n > 0) step_stats_ = StepStats{};  // not gathering
   std::vector<LossTerm> terms;  // summed over this process's views, then the mean
   double mse = 0;
   for (int b = 0; b < B; ++b) {
