@@ -27,13 +27,14 @@ void pooled_prediction_backward(int n, int D, int L, int J, const T* q, const T*
                                 const T* mass, T eps, const T* dP, T* dq, T* df, T* da) {
   std::vector<T> g(size_t(J) * D);
   pooled_row_factors(J, D, dP, mass, eps, g.data());
-  // Row by row (pooled_backward_row, which the trainer also calls); df is added here.
+  // Row by row (pooled_backward_row and pooled_df_row, which the trainer also calls); df is added here.
 #pragma omp parallel
   {
     std::vector<T> row(D);
 #pragma omp for schedule(static)
     for (int i = 0; i < n; ++i) {
-      if (!pooled_backward_row(long(i), D, L, J, q, f + size_t(i) * D, a, objs, g.data(), dq, da, row.data()) || !df)
+      pooled_backward_row(long(i), D, L, J, q, f + size_t(i) * D, a, objs, g.data(), dq, da);
+      if (!df || !pooled_df_row(D, J, q + size_t(i) * L, a + size_t(i) * J, objs, g.data(), row.data(), false))
         continue;
       T* dfi = df + size_t(i) * D;
       for (int d = 0; d < D; ++d) dfi[d] += row[d];

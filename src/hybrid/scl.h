@@ -78,16 +78,12 @@ void pooled_row_factors(int J, int D, const T* dP, const T* mass, T eps, T* G) {
   }
 }
 
-// Row i of pooled_prediction_backward, for the trainer's single pass over the Gaussians (the row-sparse Adam
-// step of f_n runs right after it on the same row, so f is read once). fi = f_i [D]; with G = dP / (mass + eps)
-// [J, D],
-//   da_i [J] (overwritten; 0 where a = 0), dq_i [L] (added), df_i = sum_j q_{i,objs[j]} a_{i,j} G_j [D].
-// Returns false, leaving df_i unwritten, when every q a term is zero (the Gaussian touches none of the masks).
-// dq, da or df_i may be null (df_i null: only dq / da; pooled_df_row gives df_i later, as batched steps do).
+// Row i of pooled_prediction_backward's dq and da, for the trainer's pass over the Gaussians. fi = f_i [D];
+// with G = dP / (mass + eps) [J, D]: da_i [J] (overwritten; 0 where a = 0), dq_i [L] (added). dq or da may be
+// null. f's own gradient is pooled_df_row's (the trainer forms it at the step's end, over the step's views).
 template <class T>
-bool pooled_backward_row(long i, int D, int L, int J, const T* q, const T* fi, const T* a, const int* objs, const T* G,
-                         T* dq, T* da, T* df_i) {
-  bool any = false;
+void pooled_backward_row(long i, int D, int L, int J, const T* q, const T* fi, const T* a, const int* objs, const T* G,
+                         T* dq, T* da) {
   for (int j = 0; j < J; ++j) {
     const T ai = a[size_t(i) * J + j], qi = q[size_t(i) * L + objs[j]];
     if (ai == T(0)) {
@@ -100,24 +96,13 @@ bool pooled_backward_row(long i, int D, int L, int J, const T* q, const T* fi, c
     for (int d = 0; d < D; ++d) dot += fi[d] * gj[d];
     if (da) da[size_t(i) * J + j] = qi * dot;
     if (dq) dq[size_t(i) * L + objs[j]] += ai * dot;
-    const T w = ai * qi;
-    if (w == T(0) || !df_i) continue;
-    if (!any) {
-#pragma omp simd
-      for (int d = 0; d < D; ++d) df_i[d] = w * gj[d];
-      any = true;
-    } else {
-#pragma omp simd
-      for (int d = 0; d < D; ++d) df_i[d] += w * gj[d];
-    }
   }
-  return any;
 }
 
-// df_i of pooled_backward_row alone, from row i's q_i [L] and a_i [J] (a row of one view's weight sums), added
-// to df_i when `any` (else written); returns whether df_i now holds a term. Same arithmetic as
-// pooled_backward_row, so a step of one view updates f as the single pass did; a batched step adds its views'
-// rows in view order.
+// Row i of pooled_prediction_backward's df: df_i = sum_j q_{i,objs[j]} a_{i,j} G_j [D], from row i's q_i [L] and
+// a_i [J] (a row of one view's weight sums), added to df_i when `any` (else written). Returns whether df_i holds
+// a term: false, leaving df_i unwritten, when every q a term is zero (the Gaussian touches none of the masks).
+// A batched step adds its views' rows in view order.
 template <class T>
 bool pooled_df_row(int D, int J, const T* qi, const T* ai, const int* objs, const T* G, T* df_i, bool any) {
   for (int j = 0; j < J; ++j) {

@@ -88,7 +88,7 @@ SemanticValues SemanticPass::contrastive(int u, int n, HybridFields& h, const fl
 #pragma omp parallel for schedule(static)
   for (long i = 0; i < n; ++i) {
     alignas(64) float buf[train::kMaxRowUpdateDim];
-    pooled_backward_row<float>(i, D_, L_, Jf, q, lang_row(i, buf), a, classes_.data(), G_.data(), dq, da, nullptr);
+    pooled_backward_row<float>(i, D_, L_, Jf, q, lang_row(i, buf), a, classes_.data(), G_.data(), dq, da);
   }
   FactoredView& fv = views_.emplace_back();
   fv.objs = classes_;

@@ -17,15 +17,9 @@ void DensifyStats::reset(int n) {
 
 void DensifyStats::add(const float* g, const int* radii, int n, int W, int H) {
   if (int(count.size()) != n) fail("densify: statistics hold {} Gaussians, the model {}", count.size(), n);
-  const float sx = 0.5f * W, sy = 0.5f * H;
-#pragma omp parallel for simd schedule(static)
-  for (int i = 0; i < n; ++i) {
-    if (radii[i] <= 0) continue;
-    float gx = g[2 * i] * sx, gy = g[2 * i + 1] * sy;
-    grad_accum[i] += std::sqrt(gx * gx + gy * gy);
-    count[i] += 1;
-    max_radius[i] = std::max(max_radius[i], float(radii[i]));
-  }
+  StepStats one;  // one view is a step of one view (same sums)
+  one.add_view(g, radii, n, W, H, true);
+  add(one);
 }
 
 void StepStats::add_view(const float* g, const int* radii, int count_n, int W, int H, bool first) {

@@ -281,8 +281,8 @@ TEST(Scl, PooledPredictionAndInfoNceGradients) {
     return loss();
   };
   check_grad(a_rest, loss_rest, da_rest);
-  // The trainer runs the backward one row at a time (pooled_backward_row, followed by the row-sparse Adam
-  // step of f): the same dq, da and df, and "no gradient" exactly for a Gaussian that touches no mask.
+  // The trainer runs the backward one row at a time (pooled_backward_row for dq and da, pooled_df_row for f's
+  // row-sparse Adam step): the same dq, da and df, and "no gradient" exactly for a Gaussian that touches no mask.
   std::vector<double> G(J * D);
   for (int j = 0; j < J; ++j)
     for (int d = 0; d < D; ++d) G[j * D + d] = dP[j * D + d] / (mass[j] + 1e-6);
@@ -294,8 +294,9 @@ TEST(Scl, PooledPredictionAndInfoNceGradients) {
   std::vector<double> dq_rows(N * L, 0.0), da_rows(N * J, -3.0);
   for (int i = 0; i < N; ++i) {
     std::vector<double> row(D, -7.0);
-    const bool any = pooled_backward_row(i, D, L, J, q.data(), f.data() + i * D, a.data(), objs, G.data(),
-                                         dq_rows.data(), da_rows.data(), row.data());
+    pooled_backward_row(i, D, L, J, q.data(), f.data() + i * D, a.data(), objs, G.data(), dq_rows.data(),
+                        da_rows.data());
+    const bool any = pooled_df_row(D, J, q.data() + i * L, a.data() + i * J, objs, G.data(), row.data(), false);
     EXPECT_EQ(any, i != 3) << "row " << i;
     for (int d = 0; d < D; ++d) EXPECT_NEAR(any ? row[d] : 0.0, df[i * D + d], 1e-12) << "row " << i;
   }
