@@ -15,6 +15,7 @@
 #include "clip/safetensors.h"
 #include "core/image.h"
 #include "core/npy.h"
+#include "sam/amg.h"
 #include "sam/model.h"
 
 namespace hgs::test {
@@ -124,6 +125,36 @@ inline std::string to_segment_anything(const std::string& n) {
   s = sub(s, R"((mlps\.\d+|iou_prediction_head)\.proj_in\.)", "$1.layers.0.");
   s = sub(s, R"((mlps\.\d+|iou_prediction_head)\.proj_out\.)", "$1.layers.2.");
   return s;
+}
+
+// An embedding of the reference geometry from a fixture array (no encoder run).
+inline sam::ImageEmbedding embedding_from(const sam::SamModel& m, std::vector<float> data, const RefPrompts& r) {
+  sam::ImageEmbedding e;
+  e.grid = m.vision.grid;
+  e.channels = m.channels();
+  e.data = std::move(data);
+  e.orig_h = r.H;
+  e.orig_w = r.W;
+  e.input_h = r.in_h;
+  e.input_w = r.in_w;
+  return e;
+}
+
+// The automatic masks `got` against the reference's (JSON records `ref` and their masks [K, H, W]).
+inline void expect_amg_masks_match(const std::vector<sam::AmgMask>& got, const nlohmann::json& ref,
+                                   const std::vector<float>& ref_masks, size_t plane) {
+  ASSERT_EQ(got.size(), ref.size());
+  for (size_t k = 0; k < got.size(); ++k) {
+    EXPECT_NEAR(got[k].predicted_iou, ref[k]["predicted_iou"].get<double>(), 1e-5) << k;
+    EXPECT_NEAR(got[k].stability_score, ref[k]["stability_score"].get<double>(), 1e-3) << k;
+    EXPECT_NEAR(got[k].point[0], ref[k]["point_coords"][0][0].get<double>(), 1e-4) << k;
+    EXPECT_NEAR(got[k].point[1], ref[k]["point_coords"][0][1].get<double>(), 1e-4) << k;
+    for (int c = 0; c < 4; ++c) EXPECT_EQ(got[k].bbox[c], ref[k]["bbox"][c].get<int>()) << k;
+    EXPECT_EQ(got[k].area, ref[k]["area"].get<int>()) << k;
+    size_t diff = 0;
+    for (size_t i = 0; i < plane; ++i) diff += got[k].mask[i] != (ref_masks[k * plane + i] > 0.5f);
+    EXPECT_EQ(diff, 0u) << k;
+  }
 }
 
 }  // namespace hgs::test

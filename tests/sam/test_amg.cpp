@@ -90,19 +90,7 @@ TEST(SamAmg, MatchesTorchOnTheTinyModel) {
   std::vector<float> ref_masks = sam_ref("amg_masks.npy", &shape);
   const auto& ref = j["masks"];
   ASSERT_GT(ref.size(), 3u);
-  ASSERT_EQ(got.size(), ref.size());
-  const size_t plane = size_t(e.orig_h) * e.orig_w;
-  for (size_t k = 0; k < got.size(); ++k) {
-    EXPECT_NEAR(got[k].predicted_iou, ref[k]["predicted_iou"].get<double>(), 1e-5) << k;
-    EXPECT_NEAR(got[k].stability_score, ref[k]["stability_score"].get<double>(), 1e-3) << k;
-    EXPECT_NEAR(got[k].point[0], ref[k]["point_coords"][0][0].get<double>(), 1e-4) << k;
-    EXPECT_NEAR(got[k].point[1], ref[k]["point_coords"][0][1].get<double>(), 1e-4) << k;
-    for (int c = 0; c < 4; ++c) EXPECT_EQ(got[k].bbox[c], ref[k]["bbox"][c].get<int>()) << k;
-    EXPECT_EQ(got[k].area, ref[k]["area"].get<int>()) << k;
-    size_t diff = 0;
-    for (size_t i = 0; i < plane; ++i) diff += got[k].mask[i] != (ref_masks[k * plane + i] > 0.5f);
-    EXPECT_EQ(diff, 0u) << k;
-  }
+  expect_amg_masks_match(got, ref, ref_masks, size_t(e.orig_h) * e.orig_w);
 }
 
 TEST(SamAmg, NmsAndThresholdsReduceTheSet) {

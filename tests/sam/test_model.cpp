@@ -11,17 +11,7 @@ namespace {
 using sam::Prompt;
 
 // The reference geometry without running the encoder (embedding from the fixture).
-sam::ImageEmbedding ref_embedding(const RefPrompts& r) {
-  sam::ImageEmbedding e;
-  e.grid = tiny_sam().vision.grid;
-  e.channels = tiny_sam().channels();
-  e.data = sam_ref("embedding.npy");
-  e.orig_h = r.H;
-  e.orig_w = r.W;
-  e.input_h = r.in_h;
-  e.input_w = r.in_w;
-  return e;
-}
+sam::ImageEmbedding ref_embedding(const RefPrompts& r) { return embedding_from(tiny_sam(), sam_ref("embedding.npy"), r); }
 
 TEST(SamModel, SizesReadFromTensors) {
   const sam::SamModel& m = tiny_sam();

@@ -35,15 +35,7 @@ const sam::SamModel& pruned_sam_sa() {
 }
 
 sam::ImageEmbedding ref_embedding(const sam::SamModel& m, const RefPrompts& r) {
-  sam::ImageEmbedding e;
-  e.grid = m.vision.grid;
-  e.channels = m.channels();
-  e.data = pref("embedding.npy");
-  e.orig_h = r.H;
-  e.orig_w = r.W;
-  e.input_h = r.in_h;
-  e.input_w = r.in_w;
-  return e;
+  return embedding_from(m, pref("embedding.npy"), r);
 }
 
 std::string load_error(const std::filesystem::path& p, const sam::SamOptions& opt = {}) {
@@ -153,19 +145,7 @@ TEST(SamPruned, AutomaticMasksMatchTorch) {
   std::vector<float> ref_masks = pref("amg_masks.npy");
   const auto& ref = j["masks"];
   ASSERT_GE(ref.size(), 2u);
-  ASSERT_EQ(got.size(), ref.size());
-  const size_t plane = size_t(e.orig_h) * e.orig_w;
-  for (size_t k = 0; k < got.size(); ++k) {
-    EXPECT_NEAR(got[k].predicted_iou, ref[k]["predicted_iou"].get<double>(), 1e-5) << k;
-    EXPECT_NEAR(got[k].stability_score, ref[k]["stability_score"].get<double>(), 1e-3) << k;
-    EXPECT_NEAR(got[k].point[0], ref[k]["point_coords"][0][0].get<double>(), 1e-4) << k;
-    EXPECT_NEAR(got[k].point[1], ref[k]["point_coords"][0][1].get<double>(), 1e-4) << k;
-    for (int c = 0; c < 4; ++c) EXPECT_EQ(got[k].bbox[c], ref[k]["bbox"][c].get<int>()) << k;
-    EXPECT_EQ(got[k].area, ref[k]["area"].get<int>()) << k;
-    size_t diff = 0;
-    for (size_t i = 0; i < plane; ++i) diff += got[k].mask[i] != (ref_masks[k * plane + i] > 0.5f);
-    EXPECT_EQ(diff, 0u) << k;
-  }
+  expect_amg_masks_match(got, ref, ref_masks, size_t(e.orig_h) * e.orig_w);
 }
 
 // A mis-shaped per-layer tensor of the pruned model: a one-line error naming the file, the tensor, its shape
