@@ -1,13 +1,14 @@
 // One hybrid training step (paper eq. 15: photometric + object-conditioned appearance + SCL + BRO, with
 // Observation Fusion and Adam on q's view logits and on f) against one plain RGB step on the same scene, so the
-// ratio asked of the hybrid method (<= 1.6x the RGB step) is read off one run. Scene: the 30k-Gaussian box of
-// bench_scene.h (SH degree 3, 320x240, fx = fy = 300) seen by two cameras 0.2 apart; K = 8 objects laid out as a
-// 4 x 2 grid of mask cells with a 16-pixel background border, D = 512 random unit reference features per
-// object. Densification off; the observation table is rebuilt every R = 100 steps as in training.
+// ratio asked of the hybrid method (<= 2x the RGB step) is read off one run. Scene: bench_hybrid_scene.h at
+// 320x240 (30k Gaussians, SH degree 3, K = 8 objects + background present in each view, D = 512).
+// Densification off; the observation table is rebuilt every R = 100 steps as in training. The hybrid step runs
+// exact (objects_per_step 0) and with the objects-per-step approximation (4 and 2 of the 9 present objects;
+// hybrid/config.h). Every timing runs at 1 and 2 OpenMP threads (bench_threads.h).
 // Both steps report the mean time of each part of the step as counters (ms_forward, ms_method_loss, ...; the
 // hybrid step also ms_method_loss_objects / _semantic). Also times the parts of a hybrid step separately
 // (fusion, object channels, SCL pooling) for profiling, and measures the peak memory of a 300k-Gaussian hybrid
-// step (BM_HybridStepMemory300k, run alone).
+// step (BM_HybridStepMemory300k, run alone; bench_scale has the full-resolution cases).
 //   build/bench_hybrid --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
 #include <benchmark/benchmark.h>
 
@@ -16,7 +17,9 @@
 #include <cmath>
 #include <random>
 
+#include "bench_hybrid_scene.h"
 #include "bench_scene.h"
+#include "bench_threads.h"
 #include "hybrid/fusion.h"
 #include "hybrid/object_channels.h"
 #include "hybrid/scl.h"
@@ -36,70 +39,16 @@ using bench::bench_model;
 using bench::kH;
 using bench::kN;
 using bench::kW;
-constexpr int kK = 8, kD = 512, kViews = 2;
+using bench::kD;
+using bench::kK;
+using bench::kViews;
+using Setup = bench::HybridScene;
 
 double peak_rss_mb() {
   rusage ru;
   getrusage(RUSAGE_SELF, &ru);
   return ru.ru_maxrss / 1024.0;
 }
-
-LabelMap grid_labels() {
-  LabelMap lab(kW, kH, 0);
-  const int b = 16;
-  for (int y = b; y < kH - b; ++y)
-    for (int x = b; x < kW - b; ++x) lab.at(x, y) = uint16_t(1 + (x - b) * 4 / (kW - 2 * b) + 4 * ((y - b) * 2 / (kH - 2 * b)));
-  return lab;
-}
-
-struct Setup {
-  GaussianModel model;
-  std::vector<train::TrainView> views;
-  hybrid::HybridData data;
-  Setup() {
-    GaussianModel gt = bench_model(1234);
-    render::GaussianRenderer r;
-    render::RenderOutputs out;
-    render::GaussianInputs in = render_inputs(gt);
-    std::mt19937 rng(7);
-    std::normal_distribution<float> N(0, 1);
-    data.num_labels = kK + 1;
-    data.dim = kD;
-    for (int v = 0; v < kViews; ++v) {
-      train::TrainView tv;
-      tv.name = "bench" + std::to_string(v);
-      tv.cam = bench_camera(0.2f * v);
-      r.forward(tv.cam, in, {}, out);
-      tv.image = Image(kW, kH, 3);
-      tv.image.px = out.rgb;
-      views.push_back(tv);
-      hybrid::MaskView mv;
-      mv.width = kW;
-      mv.height = kH;
-      mv.fx = mv.fy = 300;
-      mv.cx = 160;
-      mv.cy = 120;
-      mv.t[0] = 0.2 * v;
-      mv.labels = grid_labels();
-      data.masks.push_back(mv);
-      hybrid::HybridView hv;
-      hv.area.assign(kK + 1, 0.f);
-      for (uint16_t l : mv.labels.v) hv.area[l] += 1;
-      hv.zref.assign(size_t(kK + 1) * kD, 0.f);
-      for (int l = 0; l <= kK; ++l) {
-        hv.present.push_back(l);
-        if (l > 0) hv.fg.push_back(l);
-        for (int d = 0; d < kD; ++d) hv.zref[size_t(l) * kD + d] = N(rng);
-        hybrid::normalize(&hv.zref[size_t(l) * kD], kD);
-      }
-      data.views.push_back(hv);
-    }
-    model = gt;
-    std::normal_distribution<float> P(0, 0.3f);
-    for (int i = 0; i < kN; ++i)
-      for (int c = 0; c < 3; ++c) model.sh[i * 48 + c] += P(rng);
-  }
-};
 
 Setup& setup() {
   static Setup s;
@@ -136,6 +85,7 @@ struct PartTimes {
 };
 
 void BM_RgbStep(benchmark::State& st) {
+  const bench::OmpThreads threads(st, 0);
   auto& s = setup();
   train::Trainer trainer(bench_config(), s.model, s.views, 5.f);
   for (int i = 0; i < 3; ++i) trainer.step();
@@ -144,9 +94,13 @@ void BM_RgbStep(benchmark::State& st) {
   parts.report(st);
 }
 
+// Arg: HybridConfig::objects_per_step (0 = every present object, the exact eqs. 6 and 14).
 void BM_HybridStep(benchmark::State& st) {
+  const bench::OmpThreads threads(st, 1);
   auto& s = setup();
-  auto method = std::make_unique<hybrid::HybridMethod>(hybrid::HybridConfig{}, s.data, bench_config().seed);
+  hybrid::HybridConfig hc;
+  hc.objects_per_step = static_cast<int>(st.range(0));
+  auto method = std::make_unique<hybrid::HybridMethod>(hc, s.data, bench_config().seed);
   const hybrid::HybridMethod& hm = *method;
   train::Trainer trainer(bench_config(), s.model, s.views, 5.f, std::move(method));
   for (int i = 0; i < 3; ++i) trainer.step();
@@ -187,6 +141,7 @@ void BM_HybridStepMemory300k(benchmark::State& st) {
 
 // Parts of the step, for profiling.
 void BM_Fuse(benchmark::State& st) {
+  const bench::OmpThreads threads(st, 0);
   auto& s = setup();
   hybrid::ObservationTable tab;
   hybrid::observe(s.model.mean.data(), kN, s.data.masks, tab);
@@ -197,6 +152,7 @@ void BM_Fuse(benchmark::State& st) {
 }
 
 void BM_ObjectChannels(benchmark::State& st) {
+  const bench::OmpThreads threads(st, 0);
   const int L = kK + 1;
   const hybrid::ObjectLayout lay{L, 0};
   std::vector<float> q(size_t(kN) * L, 0.1f), col(size_t(kN) * 3, 0.5f), extra(size_t(kN) * lay.total());
@@ -206,6 +162,7 @@ void BM_ObjectChannels(benchmark::State& st) {
 }
 
 void BM_PooledPrediction(benchmark::State& st) {
+  const bench::OmpThreads threads(st, 0);
   const int L = kK + 1;
   std::mt19937 rng(1);
   std::uniform_real_distribution<float> U(0, 1);
@@ -222,6 +179,7 @@ void BM_PooledPrediction(benchmark::State& st) {
 // Render forward + backward with 4 channels per present object (9 with the background; the opacity channels
 // forward-only) and the 8 pixel-weight sums of the SCL anchors (arg 1), or the plain RGB render (arg 0).
 void BM_RenderObjects(benchmark::State& st) {
+  const bench::OmpThreads threads(st, 1);
   auto& s = setup();
   const bool objects = st.range(0) != 0;
   const int L = kK + 1, C = objects ? 4 * L : 0, J = objects ? kK : 0;
@@ -253,6 +211,7 @@ void BM_RenderObjects(benchmark::State& st) {
 
 // SSIM forward + backward of the 9 object images of a view as one 27-channel image (arg 1) or 9 3-channel ones.
 void BM_ObjectSsim(benchmark::State& st) {
+  const bench::OmpThreads threads(st, 1);
   const int L = kK + 1;
   std::mt19937 rng(2);
   std::uniform_real_distribution<float> U(0, 1);
@@ -273,12 +232,12 @@ void BM_ObjectSsim(benchmark::State& st) {
 
 }  // namespace
 
-BENCHMARK(BM_RenderObjects)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_ObjectSsim)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_RgbStep)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_HybridStep)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_RenderObjects)->ArgNames({"objects", "threads"})->ArgsProduct({{0, 1}, {1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ObjectSsim)->ArgNames({"one_image", "threads"})->ArgsProduct({{0, 1}, {1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_RgbStep)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_HybridStep)->ArgNames({"objects_per_step", "threads"})->ArgsProduct({{0, 4, 2}, {1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_HybridStepMemory300k)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
-BENCHMARK(BM_Fuse)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_ObjectChannels)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_PooledPrediction)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Fuse)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ObjectChannels)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_PooledPrediction)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_MAIN();

@@ -1,5 +1,5 @@
-// Benchmarks of the CPU rasterizer at 320x240 with 30k Gaussians, SH degree 3 (times in ms, wall clock, all
-// OpenMP threads). Scene: a camera at the origin looking down +z (fx = fy = 300, so ~56 deg horizontal FOV) and
+// Benchmarks of the CPU rasterizer at 320x240 with 30k Gaussians, SH degree 3 (times in ms, wall clock, at 1
+// and 2 OpenMP threads). Scene: a camera at the origin looking down +z (fx = fy = 300, so ~56 deg horizontal FOV) and
 // 30k Gaussians uniform in the box x in [-2.5, 2.5], y in [-1.9, 1.9], z in [3, 7] (the box fills the view),
 // anisotropic scales exp(U[log 0.01, log 0.06]) per axis (1-4 px sigma on screen), random rotations, opacity
 // U[0.05, 0.95], SH coefficients N(0, 0.5) for DC and N(0, 0.1) above. Counters: composited/px = Gaussians a
@@ -18,7 +18,10 @@
 #include "render/renderer.h"
 #include "render/sh.h"
 
+#include "bench_threads.h"
+
 using namespace hgs::render;
+namespace bench = hgs::bench;
 
 namespace {
 
@@ -101,6 +104,7 @@ Stages& stages() {
 }
 
 void BM_Project(benchmark::State& state) {
+  const bench::OmpThreads threads(state, 0);
   BenchScene& s = scene();
   Stages& st = stages();
   for (auto _ : state)
@@ -109,6 +113,7 @@ void BM_Project(benchmark::State& state) {
 }
 
 void BM_ShForward(benchmark::State& state) {
+  const bench::OmpThreads threads(state, 0);
   BenchScene& s = scene();
   Stages& st = stages();
   for (auto _ : state)
@@ -116,6 +121,7 @@ void BM_ShForward(benchmark::State& state) {
 }
 
 void BM_Binning(benchmark::State& state) {
+  const bench::OmpThreads threads(state, 0);
   BenchScene& s = scene();
   Stages& st = stages();
   for (auto _ : state)
@@ -148,6 +154,7 @@ double composited_per_pixel(const Stages& st) {
 }
 
 void BM_RasterizeForward(benchmark::State& state) {
+  const bench::OmpThreads threads(state, 0);
   Stages& st = stages();
   state.counters["composited/px"] = composited_per_pixel(st);
   for (auto _ : state) rasterize_forward(st.in, st.bins, st.ws, st.out);
@@ -158,6 +165,7 @@ void BM_RasterizeForward(benchmark::State& state) {
 }
 
 void BM_RasterizeBackward(benchmark::State& state) {
+  const bench::OmpThreads threads(state, 0);
   Stages& st = stages();
   rasterize_forward(st.in, st.bins, st.ws, st.out);
   const int n = scene().n;
@@ -170,6 +178,7 @@ void BM_RasterizeBackward(benchmark::State& state) {
 }
 
 void BM_RenderForward(benchmark::State& state) {
+  const bench::OmpThreads threads(state, 0);
   BenchScene& s = scene();
   GaussianRenderer r;
   RenderOutputs out;
@@ -181,6 +190,7 @@ void BM_RenderForward(benchmark::State& state) {
 
 // RGB forward + backward of the whole renderer (projection, SH, binning, rasterize, and all backward stages).
 void BM_RenderForwardBackward(benchmark::State& state) {
+  const bench::OmpThreads threads(state, 0);
   BenchScene& s = scene();
   GaussianRenderer r;
   RenderOutputs out;
@@ -199,12 +209,12 @@ void BM_RenderForwardBackward(benchmark::State& state) {
 
 }  // namespace
 
-BENCHMARK(BM_Project)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_ShForward)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_Binning)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_RasterizeForward)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_RasterizeBackward)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_RenderForward)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_RenderForwardBackward)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Project)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ShForward)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Binning)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_RasterizeForward)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_RasterizeBackward)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_RenderForward)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_RenderForwardBackward)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 BENCHMARK_MAIN();

@@ -1,4 +1,4 @@
-// The benchmark scene shared by bench_train and bench_hybrid: a 320x240 camera at the origin looking down +z
+// The benchmark scene shared by bench_train, bench_hybrid and bench_scale: a 320x240 camera (or W x H) at the origin looking down +z
 // (fx = fy = 300), optionally moved along x, and Gaussians uniform in the box [-2.5, 2.5] x [-1.9, 1.9] x
 // [3, 7] with log-uniform scales in [0.01, 0.06] x `scale`, random rotations, opacity U[0.05, 0.95], SH
 // degree 3 with DC N(0, 0.5) and higher coefficients N(0, 0.1).
@@ -13,13 +13,14 @@ namespace hgs::bench {
 
 constexpr int kW = 320, kH = 240, kN = 30000;
 
-inline render::Camera bench_camera(float x = 0.f) {
+// fx = fy = 300 W / 320: the same field of view at every size.
+inline render::Camera bench_camera(float x = 0.f, int W = kW, int H = kH) {
   render::Camera c;
-  c.width = kW;
-  c.height = kH;
-  c.fx = c.fy = 300;
-  c.cx = 160;
-  c.cy = 120;
+  c.width = W;
+  c.height = H;
+  c.fx = c.fy = 300.f * float(W) / float(kW);
+  c.cx = 0.5f * float(W);
+  c.cy = 0.5f * float(H);
   c.t[0] = x;
   return c;
 }

@@ -1,4 +1,4 @@
-// Benchmarks of the training glue at 320x240 (times in ms, wall clock, all OpenMP threads): SSIM forward,
+// Benchmarks of the training glue at 320x240 (times in ms, wall clock, at 1 and 2 OpenMP threads): SSIM forward,
 // SSIM forward+backward, the full photometric loss (L1 + D-SSIM with gradient), one Adam update of 30k
 // Gaussians with SH degree 3 (59 floats each), and one full RGB training step (render forward, loss,
 // backward, Adam) through train::Trainer with densification off. Scene: camera at the origin looking down +z
@@ -12,6 +12,7 @@
 #include <random>
 
 #include "bench_scene.h"
+#include "bench_threads.h"
 #include "model/gaussian_model.h"
 #include "render/renderer.h"
 #include "train/adam.h"
@@ -68,12 +69,14 @@ BenchData& data() {
 }
 
 void BM_SsimForward(benchmark::State& st) {
+  const bench::OmpThreads threads(st, 0);
   auto& d = data();
   train::SsimWorkspace<float> ws;
   for (auto _ : st) benchmark::DoNotOptimize(train::ssim(d.a.data(), d.b.data(), kH, kW, 3, (float*)nullptr, ws));
 }
 
 void BM_SsimForwardBackward(benchmark::State& st) {
+  const bench::OmpThreads threads(st, 0);
   auto& d = data();
   train::SsimWorkspace<float> ws;
   std::vector<float> g(d.a.size());
@@ -81,6 +84,7 @@ void BM_SsimForwardBackward(benchmark::State& st) {
 }
 
 void BM_PhotometricLoss(benchmark::State& st) {
+  const bench::OmpThreads threads(st, 0);
   auto& d = data();
   train::PhotometricLoss loss;
   std::vector<float> g(d.a.size());
@@ -88,6 +92,7 @@ void BM_PhotometricLoss(benchmark::State& st) {
 }
 
 void BM_AdamUpdate30k(benchmark::State& st) {
+  const bench::OmpThreads threads(st, 0);
   GaussianModel m = data().model;
   train::Adam adam;
   std::vector<std::vector<float>> grads;
@@ -107,6 +112,7 @@ void BM_AdamUpdate30k(benchmark::State& st) {
 }
 
 void BM_TrainStep(benchmark::State& st) {
+  const bench::OmpThreads threads(st, 0);
   auto& d = data();
   train::TrainConfig cfg;
   cfg.densify = false;
@@ -125,9 +131,9 @@ void BM_TrainStep(benchmark::State& st) {
 
 }  // namespace
 
-BENCHMARK(BM_SsimForward)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_SsimForwardBackward)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_PhotometricLoss)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_AdamUpdate30k)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_TrainStep)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_SsimForward)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_SsimForwardBackward)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_PhotometricLoss)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_AdamUpdate30k)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_TrainStep)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_MAIN();

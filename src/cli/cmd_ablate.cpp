@@ -35,7 +35,7 @@ using nlohmann::json;
 struct AblateArgs {
   std::vector<std::string> scenes;
   std::string out, rows = "all", protocol = "auto", mode = "object", relevancy = "lerf", scl_background = "auto";
-  int iters = 3000, downscale = 1, threads = 0, seeds = 1;
+  int iters = 3000, downscale = 1, threads = 0, seeds = 1, objects_per_step = 0;
   uint64_t seed = 0;
   bool eq15_row = false, quiet = false;
 };
@@ -113,6 +113,7 @@ json train_and_evaluate(const AblateArgs& a, const Scene& scene, const std::stri
   hc.use_bro = row.bro;
   hc.lambda_rgb = row.lambda_rgb;
   hc.scl_background = a.scl_background;
+  hc.objects_per_step = a.objects_per_step;
   train::TrainConfig cfg = train::TrainConfig{}.scaled_to(a.iters);
   cfg.method = "hybrid";
   cfg.seed = seed;
@@ -140,7 +141,8 @@ json train_and_evaluate(const AblateArgs& a, const Scene& scene, const std::stri
     for (auto& r : evaluate_model(s, eo)) reports.push_back(std::move(r));
   }
   eval::write_reports(dir / "report.json", dir / "report.md", reports);
-  json run = {{"train_seconds", train_s}, {"iters", a.iters}, {"seed", seed}, {"results", json::object()}};
+  json run = {{"train_seconds", train_s}, {"iters", a.iters}, {"seed", seed}, {"objects_per_step", a.objects_per_step},
+              {"results", json::object()}};
   for (const auto& r : reports) {
     const eval::MeanRow m = eval::scene_mean(r);
     auto num = [](double v) { return std::isfinite(v) ? json(v) : json(nullptr); };
@@ -206,7 +208,8 @@ void run_ablate(const AblateArgs& a) {
     for (const auto& p : a.scenes) abs_scenes.push_back(fs::absolute(p).lexically_normal().string());
     const json j = {{"scenes", abs_scenes}, {"seeds", a.seeds}, {"first_seed", a.seed}, {"iters", a.iters},
                     {"protocols", protocols}, {"mode", a.mode}, {"relevancy", a.relevancy},
-                    {"scl_background", a.scl_background}, {"summary", summary}, {"runs", runs}};
+                    {"scl_background", a.scl_background}, {"objects_per_step", a.objects_per_step},
+                    {"summary", summary}, {"runs", runs}};
     atomic_write_text(fs::path(a.out) / "ablation.json", j.dump(2) + "\n");
     atomic_write_text(fs::path(a.out) / "ablation.md", md);
     return md;
@@ -224,7 +227,8 @@ void run_ablate(const AblateArgs& a) {
         if (fs::exists(prev)) {  // an earlier, interrupted ablation: reuse when it ran what is asked now
           try {
             json p = json::parse(read_file_text(prev));
-            bool ok = p.at("iters").get<int>() == a.iters;
+            bool ok = p.at("iters").get<int>() == a.iters &&
+                      p.value("objects_per_step", 0) == a.objects_per_step;
             for (const auto& proto : protocols)
               for (const char* m : {"object", "pixel"})
                 if ((a.mode == "both" || a.mode == m) && !p.at("results").contains(proto + "/" + m)) ok = false;
@@ -273,6 +277,8 @@ CommandRegistration reg({"ablate", "Train and evaluate the OF/SCL/BRO ablation r
       ->check(CLI::IsMember({"lerf", "foreground"}))->capture_default_str();
   sub.add_option("--scl-background", a->scl_background, "As `hgs train --scl-background` (every row)")
       ->check(CLI::IsMember({"auto", "on", "off"}))->capture_default_str();
+  sub.add_option("--objects-per-step", a->objects_per_step, "As `hgs train --objects-per-step` (every row)")
+      ->check(CLI::Range(0, 65535))->capture_default_str();
   sub.add_option("--seeds", a->seeds, "Training seeds per scene: --seed, --seed + 1, ...")
       ->check(CLI::Range(1, 1000))->capture_default_str();
   sub.add_option("--seed", a->seed, "First training seed")->capture_default_str();

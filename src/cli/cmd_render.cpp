@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli/command.h"
+#include "cli/test_score.h"
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/progress.h"
@@ -14,7 +15,6 @@
 #include "render/camera_from_view.h"
 #include "render/renderer.h"
 #include "scene/scene.h"
-#include "train/loss.h"
 #include "train/ssim.h"
 
 namespace hgs::cli {
@@ -71,12 +71,9 @@ void run_render(const RenderArgs& a) {
     const View& v = scene.views[idx[k]];
     Image gt = scene.load_image(v.index);
     renderer.forward(render::camera_from_view(v), in, rs, ro);
-    Image img(v.width, v.height, 3);
-    for (size_t i = 0; i < img.px.size(); ++i) img.px[i] = std::clamp(ro.rgb[i], 0.f, 1.f);
-    double se = 0;
-    for (size_t i = 0; i < img.px.size(); ++i) se += double(img.px[i] - gt.px[i]) * (img.px[i] - gt.px[i]);
-    float psnr = train::psnr_from_mse(se / double(img.px.size()));
-    float ssim = train::ssim(img.px.data(), gt.px.data(), v.height, v.width, 3, (float*)nullptr, ws);
+    Image img;
+    const ViewScore score = score_view(ro.rgb, gt, img, ws);
+    const float psnr = score.psnr, ssim = score.ssim;
     sum_psnr += psnr;
     sum_ssim += ssim;
     per_view.push_back({{"name", v.name}, {"psnr", psnr}, {"ssim", ssim}});

@@ -13,6 +13,7 @@
 #include <chrono>
 
 #include "cli/command.h"
+#include "cli/test_score.h"
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/progress.h"
@@ -32,7 +33,7 @@ struct TrainArgs {
   hybrid::HybridConfig hybrid;
   bool no_of = false, no_scl = false, no_bro = false;
   std::string lang_storage = "half", bro_gradient = "scale-invariant", bro_norm = "image", unconfident = "unobserved";
-  int iters = 30000, downscale = 1, threads = 0, sh_degree = 3, save_every = 0, batch = 1;
+  int iters = 30000, downscale = 1, threads = 0, sh_degree = 3, save_every = 0, batch = 1, test_every = 0;
   uint64_t seed = 0;
   bool no_densify = false, white_bg = false, quiet = false;
 };
@@ -119,6 +120,14 @@ void run_train(const TrainArgs& a) {
   std::vector<std::pair<std::string, double>> ema_terms;  // each weighted term, in the objective's order
   train::StepTimes parts;  // summed over the steps of this run
   auto t0 = std::chrono::steady_clock::now();
+  // --test-every: the held-out views' PSNR / SSIM every N images seen, against the training time so far (the
+  // scoring itself excluded), for curves and time-to-quality figures.
+  const std::vector<int> test_idx = a.test_every > 0 && writer ? scene.test_indices() : std::vector<int>{};
+  if (a.test_every > 0 && writer && test_idx.empty())
+    fail("--test-every: {} has no held-out views (its split puts every view in training)", a.scene);
+  std::vector<Image> test_images;
+  nlohmann::json test_curve = nlohmann::json::array();
+  double test_seconds = 0;  // spent scoring, not training
   std::string last_ckpt = a.resume;  // the newest checkpoint on disk, for the message of a failed step
   // Test hook (tests/dist): HGS_TEST_KILL=<rank>:<images> kills that rank with SIGKILL once it has seen that many
   // images, as a crashed machine would.
@@ -149,6 +158,16 @@ void run_train(const TrainArgs& a) {
     ema_psnr = first ? s.psnr : 0.4 * s.psnr + 0.6 * ema_psnr;
     const int it = trainer.iteration();
     if (kill_at > 0 && it >= kill_at) std::raise(SIGKILL);
+    if (!test_idx.empty() && (it / a.test_every > (it - G) / a.test_every || it >= a.iters)) {
+      const auto ts = std::chrono::steady_clock::now();
+      const ViewScore sc = score_views(scene, test_idx, trainer.model(), a.white_bg, test_images);
+      const double train_s = std::chrono::duration<double>(ts - t0).count() - test_seconds;
+      test_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
+      test_curve.push_back({{"iteration", it}, {"train_seconds", train_s}, {"test_psnr", sc.psnr}, {"test_ssim", sc.ssim},
+                            {"num_gaussians", trainer.model().n}});
+      bar.note(fmt::format("test {:>7}: PSNR {:.2f} dB, SSIM {:.4f} ({} views) after {} of training", it, sc.psnr,
+                           sc.ssim, test_idx.size(), format_duration(train_s)));
+    }
     if (writer && a.save_every > 0 && it % a.save_every == 0 && it < a.iters) {
       ensure_dir(out / "checkpoints");
       trainer.save_checkpoint(out / "checkpoints" / fmt::format("iter_{}.ckpt", it));
@@ -177,10 +196,12 @@ void run_train(const TrainArgs& a) {
   nlohmann::json stats = {{"iterations", trainer.iteration()},
                           {"iterations_this_run", trainer.iteration() - start},
                           {"median_ms_per_iter", sorted.empty() ? 0.0 : sorted[sorted.size() / 2]},
-                          {"mean_ms_per_iter", ms.empty() ? 0.0 : wall * 1000.0 / ms.size()},
+                          {"mean_ms_per_iter", ms.empty() ? 0.0 : (wall - test_seconds) * 1000.0 / ms.size()},
                           {"peak_rss_mb", peak_rss_mb()},
                           {"num_gaussians", trainer.model().n},
                           {"wall_time_s", wall},
+                          {"test_seconds", test_seconds},  // of wall_time_s, spent on --test-every
+                          {"test_curve", test_curve},
                           {"final_train_loss_ema", ema_loss},
                           {"final_train_loss_terms_ema", [&] {
                              nlohmann::json j = nlohmann::json::object();  // weighted: they sum to the total
@@ -236,6 +257,10 @@ CommandRegistration reg({"train", "Optimise Hybrid Gaussians (or plain 3DGS with
                  "see hybrid/config.h")
       ->check(CLI::IsMember({"auto", "on", "off"}))->capture_default_str();
   sub.add_option("--fusion-every", h.fusion_every, "Rebuild the observation table every R iterations")->capture_default_str();
+  sub.add_option("--objects-per-step", h.objects_per_step,
+                 "Approximation for speed: score M randomly drawn objects of each view per step in eqs. 6 and 14 "
+                 "(an unbiased estimate; 0 = every object, exact; see hybrid/config.h)")
+      ->check(CLI::Range(0, 65535))->capture_default_str();
   sub.add_option("--bro-kernel", h.bro_kernel, "Side of the square structuring element of BRO")->check(CLI::Range(1, 63))->capture_default_str();
   sub.add_option("--unconfident", a->unconfident,
                  "What a mask pixel below --tau1 tells Observation Fusion: unobserved (nothing; see hybrid/fusion.h) "
@@ -272,6 +297,10 @@ CommandRegistration reg({"train", "Optimise Hybrid Gaussians (or plain 3DGS with
   sub.add_option("--threads", a->threads, "Worker threads (0 = all cores)")->check(CLI::Range(0, 1024));
   sub.add_option("--seed", a->seed, "Random seed (view order, split sampling)")->capture_default_str();
   sub.add_option("--sh-degree", a->sh_degree, "Maximum SH degree")->check(CLI::Range(0, 3))->capture_default_str();
+  sub.add_option("--test-every", a->test_every,
+                 "Score the held-out views (PSNR, SSIM) every N images seen and at the end; the curve, with the "
+                 "training time to each point, goes to train_stats.json (0 = off)")
+      ->check(CLI::Range(0, 10000000))->capture_default_str();
   sub.add_option("--save-every", a->save_every, "Write a checkpoint and a PLY every N iterations (0 = off; a multiple of the views per step)")
       ->check(CLI::Range(0, 10000000))->capture_default_str();
   sub.add_option("--resume", a->resume, "Continue from a checkpoint (MODEL/checkpoints/iter_N.ckpt)");

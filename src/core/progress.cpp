@@ -55,6 +55,14 @@ void Progress::update(long done, const std::string& status) {
   std::fflush(stderr);
 }
 
+void Progress::note(const std::string& line) {
+  if (!enabled_) return;
+  if (tty_) fmt::print(stderr, "\r{}\x1b[K\n", line);
+  else fmt::print(stderr, "{}\n", line);
+  std::fflush(stderr);
+  last_print_ = std::chrono::steady_clock::time_point{};  // redraw the bar at the next update
+}
+
 void Progress::finish(const std::string& status) {
   if (!enabled_ || finished_) return;
   // Print the final state unless that exact line is already on screen (non-TTY logs).

@@ -13,6 +13,8 @@ class Progress {
   // Sets the current count and an optional status text (e.g. "loss 0.031 psnr 27.1").
   void update(long done, const std::string& status = "");
   void finish(const std::string& status = "");
+  // Prints one line of its own (e.g. a periodic test score) above the bar; the bar is redrawn at the next update.
+  void note(const std::string& line);
   double elapsed_seconds() const;
 
  private:

@@ -8,7 +8,8 @@ namespace hgs::hybrid {
   X(use_of) X(use_scl) X(use_bro) X(lambda_rgb) X(lambda_app) X(lambda_sem) X(lambda_bro) X(lambda_dssim) X(tau1) \
   X(unconfident_unobserved) X(occlusion_test) X(background_vote)                                                  \
   X(temperature) X(fusion_eps) X(tau2) X(scl_background) X(fusion_every) X(bro_kernel) X(bro_scale_invariant) X(bro_image_norm)      \
-  X(sem_geometry) X(bro_eps) X(min_mask_pixels) X(lr_lang) X(lang_half) X(lr_view) X(lang_init_std)
+  X(sem_geometry) X(bro_eps) X(min_mask_pixels) X(lr_lang) X(lang_half) X(lr_view) X(lang_init_std) \
+  X(objects_per_step)
 
 nlohmann::json HybridConfig::to_json() const {
   nlohmann::json j;
@@ -30,6 +31,7 @@ HybridConfig HybridConfig::from_json(const nlohmann::json& j) {
   if (!j.is_null() && !j.contains("scl_background")) c.scl_background = "off";
   if (c.scl_background != "auto" && c.scl_background != "on" && c.scl_background != "off")
     fail("hybrid configuration: scl_background must be auto, on or off (got '{}')", c.scl_background);
+  if (c.objects_per_step < 0) fail("hybrid configuration: objects_per_step must be >= 0 (got {})", c.objects_per_step);
   return c;
 }
 

@@ -70,6 +70,13 @@ struct HybridConfig {
   bool lang_half = true;
   float lr_view = 1e-2f;      // Adam learning rate of the view reliability logits
   float lang_init_std = 0.1f;
+  // An approximation of eqs. 6 and 14 for speed (0 = off, the exact sums). Each step renders and scores only M
+  // of the J objects present in the view, drawn uniformly without replacement from the view's random stream;
+  // both terms are means over the objects scored (1/M instead of 1/J), so the step's loss and gradient are
+  // unbiased estimates of the exact ones (every object is drawn with probability M/J and then weighs J/M times
+  // more; the test ObjectSampling.* checks the expectation over all subsets). The object channels of the render
+  // shrink from 4J to 4M. See docs/performance.md for the speed and the accuracy measured.
+  int objects_per_step = 0;
 
   nlohmann::json to_json() const;
   static HybridConfig from_json(const nlohmann::json& j);

@@ -71,7 +71,7 @@ void HybridMethod::prepare(train::StepContext& c) {
   parallel_fill(dq_, 0.f);
   // Object channels from the renderer's SH colours of this view (0 for culled Gaussians), plus f for the no-SCL
   // ablation's full semantic render.
-  objects_ = data_.views[u].present;
+  objects_ = sample_objects(data_.views[u].present, cfg_.objects_per_step, *c.rng);  // all unless approximating
   const std::vector<int>& anchors = semantic_.anchors_of(u);
   const int J = static_cast<int>(objects_.size());
   const int sem = (!cfg_.use_scl && cfg_.lambda_sem > 0) ? data_.dim : 0;

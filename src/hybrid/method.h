@@ -69,7 +69,7 @@ class HybridMethod final : public train::Method {
   ObjectLosses object_losses_;
   SemanticPass semantic_;
   ObjectLayout layout_;
-  std::vector<int> objects_;      // labels present in this step's view
+  std::vector<int> objects_;      // labels scored in this step: present in the view (all, or a sample)
   std::vector<float> channels_;   // [N, C] object channels (+ f for the no-SCL ablation)
   std::vector<float> d_channels_; // [H, W, C] dL/d the rendered channels
   std::vector<float> dq_;         // [N, L]

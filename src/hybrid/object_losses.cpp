@@ -8,6 +8,22 @@
 
 namespace hgs::hybrid {
 
+std::vector<int> sample_objects(const std::vector<int>& present, int m, std::mt19937_64& rng) {
+  const int J = static_cast<int>(present.size());
+  if (m <= 0 || m >= J) return present;
+  std::vector<int> idx(J);
+  for (int j = 0; j < J; ++j) idx[j] = j;
+  for (int j = 0; j < m; ++j) {
+    std::uniform_int_distribution<int> pick(j, J - 1);
+    std::swap(idx[j], idx[pick(rng)]);
+  }
+  idx.resize(m);
+  std::sort(idx.begin(), idx.end());
+  std::vector<int> out(m);
+  for (int j = 0; j < m; ++j) out[j] = present[idx[j]];
+  return out;
+}
+
 void ObjectLosses::release() {
   for (auto* v : {&pred_, &grad_, &opac_}) std::vector<float>().swap(*v);
 }

@@ -6,6 +6,7 @@
 // convolution, each object's images stay in one core's cache), and the gradients go back interleaved.
 // Loss values are summed in object order (deterministic).
 #pragma once
+#include <random>
 #include <vector>
 
 #include "core/image.h"
@@ -19,6 +20,11 @@ struct ObjectLossValues {
   double app = 0;  // mean of eq. 6 over the objects
   double bro = 0;  // mean of eq. 14 over the objects, each weighted by the scale rule (the term as optimised)
 };
+
+// The objects scored in one step under HybridConfig::objects_per_step = m: m of `present` [J] drawn uniformly
+// without replacement (partial Fisher-Yates on rng), returned in their order in `present`; all of them when m is 0
+// or m >= J.
+std::vector<int> sample_objects(const std::vector<int>& present, int m, std::mt19937_64& rng);
 
 class ObjectLosses {
  public:

@@ -36,9 +36,19 @@ test::TempDir* TrainCli::dir_ = nullptr;
 
 TEST_F(TrainCli, RgbConvergesAndWritesOutputs) {
   test::TempDir out;
-  auto r = test::run_hgs("train " + scene() + " --method rgb --out " + (out / "m").string() + " --iters 1000 --quiet");
+  auto r = test::run_hgs("train " + scene() + " --method rgb --out " + (out / "m").string() +
+                         " --iters 1000 --test-every 250 --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   auto stats = read_json(out / "m" / "train_stats.json");
+  // --test-every 250: the held-out score at 250, 500, 750 and 1000 images, against the training time so far.
+  const auto& curve = stats["test_curve"];
+  ASSERT_EQ(curve.size(), 4u) << curve.dump();
+  for (size_t k = 0; k < 4; ++k) {
+    EXPECT_EQ(curve[k]["iteration"], 250 * int(k + 1));
+    if (k > 0) EXPECT_GT(curve[k]["train_seconds"].get<double>(), curve[k - 1]["train_seconds"].get<double>());
+  }
+  EXPECT_GT(curve[3]["test_psnr"].get<double>(), curve[0]["test_psnr"].get<double>() + 1.0);  // it learns
+  EXPECT_LT(stats["test_seconds"].get<double>(), stats["wall_time_s"].get<double>());
   for (auto key : {"iterations", "median_ms_per_iter", "peak_rss_mb", "num_gaussians", "wall_time_s", "mean_ms_per_part"})
     EXPECT_TRUE(stats.contains(key)) << key;
   EXPECT_EQ(stats["iterations"], 1000);
@@ -56,6 +66,7 @@ TEST_F(TrainCli, RgbConvergesAndWritesOutputs) {
   EXPECT_EQ(metrics["num_views"], 3);
   ASSERT_EQ(metrics["views"].size(), 3u);
   double psnr = metrics["mean_psnr"].get<double>();
+  EXPECT_NEAR(curve[3]["test_psnr"].get<double>(), psnr, 1e-4);  // the curve's last point is `hgs render`'s score
   EXPECT_GE(psnr, 22.0) << "test-view PSNR after 1000 iterations";
   EXPECT_GE(metrics["mean_ssim"].get<double>(), 0.75);
   std::string stem = metrics["views"][0]["name"].get<std::string>();

@@ -1,0 +1,170 @@
+// Cost at real-capture scale: one RGB and one hybrid training step at 1000x700 pixels with 300k Gaussians (a
+// LERF scene at full resolution), and how it grows with the pixels and with the Gaussians (0.25x, 1x and 4x of
+// each), with the peak resident memory of each case. Scene: bench_hybrid_scene.h at W x H with n Gaussians
+// (scales / cbrt(n / 30k), so the box is covered alike), two views, K = 8 objects, D = 512, densification off.
+// Every case runs in a child process (this program re-runs itself with --case), so each peak RSS is that case's
+// own: the model, the optimiser, the renderer's buffers and the two training images. Prints a markdown table
+// (README "Benchmarks") and, with --json FILE, the figures as JSON.
+//   build/bench_scale [--steps 4] [--threads 2] [--objects-per-step M] [--json FILE]
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <omp.h>
+
+#include "bench_hybrid_scene.h"
+#include "hybrid/method.h"
+#include "train/trainer.h"
+
+using namespace hgs;
+using nlohmann::json;
+
+namespace {
+
+constexpr int kBaseW = 1000, kBaseH = 700, kBaseN = 300000;
+
+struct Args {
+  int steps = 4, threads = 2, objects_per_step = hybrid::HybridConfig{}.objects_per_step;
+  std::string json_out;
+};
+
+double peak_rss_mb() {
+  rusage ru;
+  getrusage(RUSAGE_SELF, &ru);
+  return ru.ru_maxrss / 1024.0;
+}
+
+// One case in this process: one warm-up step, then `steps` timed steps. Prints one JSON line.
+int run_case(const std::string& method, double pixels, double gaussians, const Args& a) {
+  omp_set_num_threads(a.threads);
+  const int W = int(std::lround(kBaseW * std::sqrt(pixels))), H = int(std::lround(kBaseH * std::sqrt(pixels)));
+  const int n = int(std::lround(kBaseN * gaussians));
+  bench::HybridScene s(W, H, n, 1.f / std::cbrt(float(n) / float(bench::kN)));
+  train::TrainConfig cfg;
+  cfg.densify = false;
+  cfg.sh_increase_every = 0;  // full SH degree 3 from the first step
+  cfg.iters = 1000000;
+  std::unique_ptr<train::Method> m;
+  if (method == "hybrid") {
+    hybrid::HybridConfig hc;
+    hc.objects_per_step = a.objects_per_step;
+    m = std::make_unique<hybrid::HybridMethod>(hc, s.data, cfg.seed);
+  }
+  train::Trainer trainer(cfg, std::move(s.model), s.views, 5.f, std::move(m));
+  trainer.step();
+  std::vector<double> ms;
+  for (int i = 0; i < a.steps; ++i) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const train::StepInfo info = trainer.step();
+    ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    if (!std::isfinite(info.total)) {
+      std::fprintf(stderr, "bench_scale: the %s step's loss is not finite\n", method.c_str());
+      return 1;
+    }
+  }
+  std::sort(ms.begin(), ms.end());
+  const json j = {{"method", method}, {"width", W}, {"height", H}, {"gaussians", n},
+                  {"ms_median", ms[ms.size() / 2]}, {"ms_min", ms.front()}, {"peak_rss_mb", peak_rss_mb()}};
+  std::printf("%s\n", j.dump().c_str());
+  return 0;
+}
+
+std::string self_path() {
+  char buf[4096];
+  const ssize_t k = readlink("/proc/self/exe", buf, sizeof(buf) - 1);
+  if (k <= 0) return "bench_scale";
+  buf[k] = 0;
+  return buf;
+}
+
+json run_child(const std::string& method, double pixels, double gaussians, const Args& a) {
+  const std::string cmd = fmt::format("'{}' --case {} {} {} --steps {} --threads {} --objects-per-step {}", self_path(),
+                                      method, pixels, gaussians, a.steps, a.threads, a.objects_per_step);
+  FILE* p = popen(cmd.c_str(), "r");
+  if (!p) return nullptr;
+  std::string out;
+  char buf[1024];
+  while (std::fgets(buf, sizeof(buf), p)) out += buf;
+  if (pclose(p) != 0) return nullptr;
+  try {
+    return json::parse(out);
+  } catch (const std::exception&) {
+    return nullptr;
+  }
+}
+
+int usage(const char* why) {
+  std::fprintf(stderr, "bench_scale: %s\nusage: bench_scale [--steps N] [--threads T] [--objects-per-step M] [--json FILE]\n", why);
+  return 2;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Args a;
+  std::string case_method;
+  double case_p = 0, case_g = 0;
+  for (int i = 1; i < argc; ++i) {
+    const std::string k = argv[i];
+    auto next = [&]() -> const char* { return i + 1 < argc ? argv[++i] : nullptr; };
+    const char* v = nullptr;
+    if (k == "--help" || k == "-h") {
+      std::printf("Training step time and peak memory at 1000x700 / 300k Gaussians and at 0.25x and 4x the pixels\n"
+                  "and the Gaussians (one child process per case).\n"
+                  "usage: bench_scale [--steps N] [--threads T] [--objects-per-step M] [--json FILE]\n");
+      return 0;
+    } else if (k == "--case") {
+      if (i + 3 >= argc) return usage("--case needs METHOD PIXELS GAUSSIANS");
+      case_method = argv[++i];
+      case_p = std::atof(argv[++i]);
+      case_g = std::atof(argv[++i]);
+    } else if (k == "--steps" && (v = next())) {
+      a.steps = std::max(1, std::atoi(v));
+    } else if (k == "--threads" && (v = next())) {
+      a.threads = std::max(1, std::atoi(v));
+    } else if (k == "--objects-per-step" && (v = next())) {
+      a.objects_per_step = std::max(0, std::atoi(v));
+    } else if (k == "--json" && (v = next())) {
+      a.json_out = v;
+    } else {
+      return usage(("unknown or incomplete option " + k).c_str());
+    }
+  }
+  if (!case_method.empty()) return run_case(case_method, case_p, case_g, a);
+
+  std::printf("%d threads, median of %d steps after one warm-up, hybrid objects_per_step %d (0 = exact)\n\n", a.threads,
+              a.steps, a.objects_per_step);
+  std::printf("| pixels | Gaussians | RGB ms/step | hybrid ms/step | hybrid / RGB | RGB peak RSS MB | hybrid peak RSS MB |\n");
+  std::printf("|---|---|---|---|---|---|---|\n");
+  json all = json::array();
+  const double cases[][2] = {{1, 1}, {0.25, 1}, {4, 1}, {1, 0.25}, {1, 4}};
+  for (const auto& c : cases) {
+    const json r = run_child("rgb", c[0], c[1], a), h = run_child("hybrid", c[0], c[1], a);
+    auto ms = [](const json& j) { return j.is_null() ? std::string("failed") : fmt::format("{:.0f}", j["ms_median"].get<double>()); };
+    auto mb = [](const json& j) { return j.is_null() ? std::string("-") : fmt::format("{:.0f}", j["peak_rss_mb"].get<double>()); };
+    const json& any = r.is_null() ? h : r;
+    const std::string px = any.is_null() ? "?" : fmt::format("{}x{} ({}x)", any["width"].get<int>(), any["height"].get<int>(), c[0]);
+    const std::string ng = any.is_null() ? "?" : fmt::format("{}k ({}x)", any["gaussians"].get<int>() / 1000, c[1]);
+    const std::string ratio = r.is_null() || h.is_null() ? "-" : fmt::format("{:.2f}x", h["ms_median"].get<double>() / r["ms_median"].get<double>());
+    std::printf("| %s | %s | %s | %s | %s | %s | %s |\n", px.c_str(), ng.c_str(), ms(r).c_str(), ms(h).c_str(), ratio.c_str(),
+                mb(r).c_str(), mb(h).c_str());
+    std::fflush(stdout);
+    all.push_back({{"pixels", c[0]}, {"gaussians", c[1]}, {"rgb", r}, {"hybrid", h}});
+  }
+  if (!a.json_out.empty()) {
+    FILE* f = std::fopen(a.json_out.c_str(), "w");
+    if (!f) return usage(("cannot write " + a.json_out).c_str());
+    std::fprintf(f, "%s\n", all.dump(2).c_str());
+    std::fclose(f);
+  }
+  return 0;
+}
