@@ -32,6 +32,7 @@ struct TrainArgs {
   std::string scene, out, method = "hybrid", resume;
   hybrid::HybridConfig hybrid;
   bool no_of = false, no_scl = false, no_bro = false;
+  std::string batch_lr = "none";
   std::string lang_storage = "half", bro_gradient = "scale-invariant", bro_norm = "image", unconfident = "unobserved";
   int iters = 30000, downscale = 1, threads = 0, sh_degree = 3, save_every = 0, batch = 1, test_every = 0;
   uint64_t seed = 0;
@@ -74,6 +75,7 @@ void run_train(const TrainArgs& a) {
   cfg.white_bg = a.white_bg;
   cfg.save_every = a.save_every;
   cfg.batch = a.batch;
+  cfg.batch_lr = a.batch_lr;
 
   std::optional<hybrid::HybridConfig> hc;
   if (a.method == "hybrid") {
@@ -297,6 +299,10 @@ CommandRegistration reg({"train", "Optimise Hybrid Gaussians (or plain 3DGS with
   sub.add_option("--threads", a->threads, "Worker threads (0 = all cores)")->check(CLI::Range(0, 1024));
   sub.add_option("--seed", a->seed, "Random seed (view order, split sampling)")->capture_default_str();
   sub.add_option("--sh-degree", a->sh_degree, "Maximum SH degree")->check(CLI::Range(0, 3))->capture_default_str();
+  sub.add_option("--batch-lr", a->batch_lr,
+                 "Learning-rate rule for several views per step (--batch x ranks = G): none (rates and Adam betas "
+                 "as at one view) or sqrt (rates x sqrt(G), betas^G, as Grendel; see train/config.h)")
+      ->check(CLI::IsMember({"none", "sqrt"}))->capture_default_str();
   sub.add_option("--test-every", a->test_every,
                  "Score the held-out views (PSNR, SSIM) every N images seen and at the end; the curve, with the "
                  "training time to each point, goes to train_stats.json (0 = off)")

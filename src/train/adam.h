@@ -48,6 +48,7 @@ struct AdamParam {
 class Adam {
  public:
   float beta1 = 0.9f, beta2 = 0.999f;
+  float lr_scale = 1.f;  // multiplies every learning rate (the batch rule of TrainConfig::batch_lr)
   std::deque<AdamParam> params;  // a deque: references returned by add() stay valid
 
   // A per-Gaussian parameter [n, dim] (moments zero).

@@ -145,6 +145,7 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
     c.iters = cfg_.iters;
     c.save_every = cfg_.save_every;
     c.batch = cfg_.batch;  // a run may resume with another batch or number of ranks
+    c.batch_lr = cfg_.batch_lr;  // and its rule (the optimiser was set up with it)
     GaussianModel m;
     m.sh_degree = h.at("sh_degree").get<int>();
     m.resize(h.at("n").get<int>());

@@ -53,7 +53,8 @@ nlohmann::json TrainConfig::to_json() const {
           {"min_opacity", densify_cfg.min_opacity},
           {"max_world_scale", densify_cfg.max_world_scale},
           {"save_every", save_every},
-          {"batch", batch}};
+          {"batch", batch},
+          {"batch_lr", batch_lr}};
 }
 
 TrainConfig TrainConfig::from_json(const nlohmann::json& j, const std::string& where) {
@@ -101,6 +102,8 @@ TrainConfig TrainConfig::from_json(const nlohmann::json& j, const std::string& w
   get("save_every", c.save_every);
   get("batch", c.batch);
   if (c.batch < 1 || c.batch > 4096) fail("{}: 'batch' must be 1..4096, got {}", where, c.batch);
+  get("batch_lr", c.batch_lr);
+  if (c.batch_lr != "none" && c.batch_lr != "sqrt") fail("{}: 'batch_lr' must be none or sqrt, got '{}'", where, c.batch_lr);
   return c;
 }
 

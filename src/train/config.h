@@ -31,6 +31,11 @@ struct TrainConfig {
   // Views per step on this process (--batch); a step of R MPI ranks sees R x batch views. Every iteration count
   // here (iters, the schedules, save_every) counts training images seen, so it does not depend on the batch.
   int batch = 1;
+  // Learning-rate rule for G = batch x ranks views per step. "none": every rate and Adam's betas as at one view
+  // (the gradient is the mean over the G views). "sqrt": Grendel's rule (Zhao et al. 2024, "On Scaling Up 3D
+  // Gaussian Splatting Training"): every rate times sqrt(G) and betas beta^G, so that after the same number
+  // of images the moments have decayed as much as with one view per step. G = 1 is the same either way.
+  std::string batch_lr = "none";
 
   // Copy for a run of `iterations` with the 30k densification schedule scaled by f = iterations / 30000:
   // densify_until = 15000 f; for short runs (f < 1) three floors keep the 3DGS dynamics, because compressing
