@@ -16,7 +16,7 @@ namespace fs = std::filesystem;
 struct ClickArgs {
   std::string scene, sam, view, out;
   std::vector<std::string> points, negatives, boxes;
-  int downscale = 1, threads = 0, decoder_heads = 0;
+  int downscale = 1, threads = 0, decoder_heads = 0, vit_heads = 0;
   bool single = false;
 };
 
@@ -70,7 +70,7 @@ void run_click(const ClickArgs& a) {
     p.boxes.push_back({v[0], v[1], v[2], v[3]});
   }
   if (p.points.empty() && p.boxes.empty()) fail("masks click: give at least one --point, --negative or --box");
-  sam::SamModel m = sam::SamModel::load(a.sam, {a.decoder_heads});
+  sam::SamModel m = sam::SamModel::load(a.sam, {a.decoder_heads, a.vit_heads});
   Image img = s.load_image(vi);
   sam::ImageEmbedding e = m.embed(img);
   sam::Prediction r = m.predict(e, p);
@@ -110,6 +110,10 @@ MasksSubcommandRegistration reg({"click", "One SAM mask from point / box prompts
     sub.add_flag("--single", a->single, "Use SAM's single-mask output");
     sub.add_option("--out", a->out, "Output PNG (default <stem>_mask.png)");
     sub.add_option("--downscale", a->downscale, "Integer image downscale factor")->capture_default_str()->check(CLI::Range(1, 64));
+    sub.add_option("--vit-heads", a->vit_heads,
+                   "Image encoder heads per layer (0 = from the relative-position tables, else config.json; given, "
+                   "it must agree with the tables and serves layers without them)")
+        ->check(CLI::Range(0, 4096))->capture_default_str();
     sub.add_option("--decoder-heads", a->decoder_heads, "Mask decoder heads (0 = config.json beside the weights, else 8)")
         ->capture_default_str();
     sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();

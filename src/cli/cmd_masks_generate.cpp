@@ -21,7 +21,7 @@ namespace fs = std::filesystem;
 struct GenerateArgs {
   std::string scene, sam, out;
   sam::AmgOptions amg;
-  int downscale = 1, threads = 0, decoder_heads = 0;
+  int downscale = 1, threads = 0, decoder_heads = 0, vit_heads = 0;
   bool force = false, quiet = false;
 };
 
@@ -43,7 +43,7 @@ nlohmann::json to_json(const std::vector<sam::AmgMask>& ms, int w, int h) {
 void run_generate(const GenerateArgs& a) {
   clip::set_num_threads(a.threads);
   Scene s = load_scene(a.scene, {a.downscale, false});
-  sam::SamModel m = sam::SamModel::load(a.sam, {a.decoder_heads});
+  sam::SamModel m = sam::SamModel::load(a.sam, {a.decoder_heads, a.vit_heads});
   if (!a.quiet) fmt::print(stderr, "model: {}\n", m.describe());
   const fs::path out_dir = a.out.empty() ? s.root / "sam" : fs::path(a.out);
   const int n = a.amg.points_per_side * a.amg.points_per_side;
@@ -103,6 +103,10 @@ MasksSubcommandRegistration reg({"generate", "Run SAM's automatic mask generator
                    "Fill holes and drop islands below this many pixels, then NMS again (0 = off, as segment-anything)")
         ->capture_default_str()->check(CLI::Range(0, 1 << 30));
     sub.add_option("--downscale", a->downscale, "Integer image downscale factor before SAM")->capture_default_str()->check(CLI::Range(1, 64));
+    sub.add_option("--vit-heads", a->vit_heads,
+                   "Image encoder heads per layer (0 = from the relative-position tables, else config.json; given, "
+                   "it must agree with the tables and serves layers without them)")
+        ->check(CLI::Range(0, 4096))->capture_default_str();
     sub.add_option("--decoder-heads", a->decoder_heads, "Mask decoder heads (0 = config.json beside the weights, else 8)")
         ->capture_default_str();
     sub.add_flag("--force", a->force, "Recompute views whose file exists");

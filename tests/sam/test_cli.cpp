@@ -113,6 +113,9 @@ TEST(SamCli, BadInputIsOneLineError) {
   r = run_hgs("masks click " + s.string() + " --sam " + w + " --view 0 --point 3:4");
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.err.find("--point"), std::string::npos) << r.err;
+  r = run_hgs("masks click " + s.string() + " --sam " + w + " --view 0 --point 3,4 --vit-heads 5");  // not the tables'
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.err.find("5 heads given"), std::string::npos) << r.err;
   std::ofstream(t / "bad.safetensors") << "not a model";
   r = run_hgs("masks generate " + s.string() + " --sam " + (t / "bad.safetensors").string() + " --quiet");
   EXPECT_NE(r.exit_code, 0);
