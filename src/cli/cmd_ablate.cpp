@@ -47,12 +47,13 @@ struct Row {
 };
 
 std::vector<Row> make_rows(const AblateArgs& a) {
-  if (a.rows != "all" && a.rows != "ends" && a.rows != "middle") fail("--rows: all, ends or middle");
+  if (a.rows != "all" && a.rows != "ends" && a.rows != "middle" && a.rows != "full")
+    fail("--rows: all, ends, middle or full");
   const float lambda_rgb = hybrid::HybridConfig{}.lambda_rgb;
   std::vector<Row> rows;
   for (int r = 0; r < 8; ++r) {
     const bool end = r == 0 || r == 7;
-    if ((a.rows == "ends" && !end) || (a.rows == "middle" && end)) continue;
+    if ((a.rows == "ends" && !end) || (a.rows == "middle" && end) || (a.rows == "full" && r != 7)) continue;
     const bool of = r & 1, scl = r & 2, bro = r & 4;
     rows.push_back({fmt::format("of{}_scl{}_bro{}", int(of), int(scl), int(bro)), of, scl, bro, lambda_rgb});
   }
@@ -262,9 +263,10 @@ CommandRegistration reg({"ablate", "Train and evaluate the OF/SCL/BRO ablation r
   sub.add_option("SCENE", a->scenes, "Scene folders with masks/ and features/ (mean and std over scenes x seeds)")->required();
   sub.add_option("--out", a->out, "Output folder")->required();
   sub.add_option("--iters", a->iters, "Iterations per row")->check(CLI::Range(1, 10000000))->capture_default_str();
-  sub.add_option("--rows", a->rows, "all (8 rows), ends (all-off and all-on only) or middle (the six others); the summaries cover the "
+  sub.add_option("--rows", a->rows, "all (8 rows), ends (all-off and all-on only), middle (the six others) or full (the full method "
+                 "alone); the summaries cover the "
                  "rows asked, and --rows all on the same --out later reuses every run on disk")
-      ->check(CLI::IsMember({"all", "ends", "middle"}))->capture_default_str();
+      ->check(CLI::IsMember({"all", "ends", "middle", "full"}))->capture_default_str();
   sub.add_flag("--eq15-row", a->eq15_row,
                "Add the full method trained on eq. 15 alone (--lambda-rgb 0); the other rows keep the default "
                "full-image photometric loss");
