@@ -301,8 +301,9 @@ CommandRegistration reg({"train", "Optimise Hybrid Gaussians (or plain 3DGS with
   sub.add_option("--sh-degree", a->sh_degree, "Maximum SH degree")->check(CLI::Range(0, 3))->capture_default_str();
   sub.add_option("--batch-lr", a->batch_lr,
                  "Learning-rate rule for several views per step (--batch x ranks = G): none (rates and Adam betas "
-                 "as at one view) or sqrt (rates x sqrt(G), betas^G, as Grendel; see train/config.h)")
-      ->check(CLI::IsMember({"none", "sqrt"}))->capture_default_str();
+                 "as at one view), sqrt (rates x sqrt(G), betas^G, as Grendel) or sqrt-rates (rates x sqrt(G) only); see "
+                 "train/config.h")
+      ->check(CLI::IsMember({"none", "sqrt", "sqrt-rates"}))->capture_default_str();
   sub.add_option("--test-every", a->test_every,
                  "Score the held-out views (PSNR, SSIM) every N images seen and at the end; the curve, with the "
                  "training time to each point, goes to train_stats.json (0 = off)")

@@ -103,7 +103,8 @@ TrainConfig TrainConfig::from_json(const nlohmann::json& j, const std::string& w
   get("batch", c.batch);
   if (c.batch < 1 || c.batch > 4096) fail("{}: 'batch' must be 1..4096, got {}", where, c.batch);
   get("batch_lr", c.batch_lr);
-  if (c.batch_lr != "none" && c.batch_lr != "sqrt") fail("{}: 'batch_lr' must be none or sqrt, got '{}'", where, c.batch_lr);
+  if (c.batch_lr != "none" && c.batch_lr != "sqrt" && c.batch_lr != "sqrt-rates")
+    fail("{}: 'batch_lr' must be none, sqrt or sqrt-rates, got '{}'", where, c.batch_lr);
   return c;
 }
 

@@ -34,7 +34,8 @@ struct TrainConfig {
   // Learning-rate rule for G = batch x ranks views per step. "none": every rate and Adam's betas as at one view
   // (the gradient is the mean over the G views). "sqrt": Grendel's rule (Zhao et al. 2024, "On Scaling Up 3D
   // Gaussian Splatting Training"): every rate times sqrt(G) and betas beta^G, so that after the same number
-  // of images the moments have decayed as much as with one view per step. G = 1 is the same either way.
+  // of images the moments have decayed as much as with one view per step. "sqrt-rates": the rates times sqrt(G),
+  // the betas unchanged. G = 1 is the same step under every rule.
   std::string batch_lr = "none";
 
   // Copy for a run of `iterations` with the 30k densification schedule scaled by f = iterations / 30000:

@@ -381,7 +381,14 @@ TEST(TrainerBatch, SqrtRuleScalesTheRatesBySqrtGAndRaisesTheBetasToG) {
     ++checked;
   }
   EXPECT_GT(checked, 10);
+  // sqrt-rates: the rates only.
+  cfg.batch_lr = "sqrt-rates";
+  Trainer rates(cfg, t.model, {t.views[1], t.views[1]}, 1.f);
+  EXPECT_FLOAT_EQ(rates.adam().lr_scale, std::sqrt(2.f));
+  EXPECT_EQ(rates.adam().beta1, 0.9f);
+  EXPECT_EQ(rates.adam().beta2, 0.999f);
   // One view per step: the rule changes nothing.
+  cfg.batch_lr = "sqrt";
   cfg.batch = 1;
   Trainer one(cfg, t.model, {t.views[1]}, 1.f);
   EXPECT_EQ(one.adam().lr_scale, 1.f);
