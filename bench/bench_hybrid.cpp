@@ -12,7 +12,6 @@
 //   build/bench_hybrid --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
 #include <benchmark/benchmark.h>
 
-#include <sys/resource.h>
 
 #include <cmath>
 #include <random>
@@ -20,6 +19,7 @@
 #include "bench_hybrid_scene.h"
 #include "bench_scene.h"
 #include "bench_threads.h"
+#include "core/process.h"
 #include "hybrid/fusion.h"
 #include "hybrid/object_channels.h"
 #include "hybrid/scl.h"
@@ -34,7 +34,6 @@ using namespace hgs;
 
 namespace {
 
-using bench::bench_camera;
 using bench::bench_model;
 using bench::kH;
 using bench::kN;
@@ -43,12 +42,6 @@ using bench::kD;
 using bench::kK;
 using bench::kViews;
 using Setup = bench::HybridScene;
-
-double peak_rss_mb() {
-  rusage ru;
-  getrusage(RUSAGE_SELF, &ru);
-  return ru.ru_maxrss / 1024.0;
-}
 
 Setup& setup() {
   static Setup s;

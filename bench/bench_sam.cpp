@@ -7,11 +7,11 @@
 //   ./build/bench_sam --benchmark_min_time=1
 #include <benchmark/benchmark.h>
 #include <cblas.h>
-#include <sys/resource.h>
 
 #include <cmath>
 #include <random>
 
+#include "core/process.h"
 #include "sam/amg.h"
 #include "sam/model.h"
 
@@ -90,12 +90,6 @@ const SamModel& vit_b() {
     return s;
   }();
   return m;
-}
-
-double peak_rss_mb() {
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return u.ru_maxrss / 1024.0;
 }
 
 // Multiply-add FLOPs (2 per MAC) of the image encoder.

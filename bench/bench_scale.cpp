@@ -6,7 +6,6 @@
 // own: the model, the optimiser, the renderer's buffers and the two training images. Prints a markdown table
 // (README "Benchmarks") and, with --json FILE, the figures as JSON.
 //   build/bench_scale [--steps 4] [--threads 2] [--objects-per-step M] [--json FILE]
-#include <sys/resource.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -22,6 +21,7 @@
 #include <omp.h>
 
 #include "bench_hybrid_scene.h"
+#include "core/process.h"
 #include "hybrid/method.h"
 #include "train/trainer.h"
 
@@ -36,12 +36,6 @@ struct Args {
   int steps = 4, threads = 2, objects_per_step = hybrid::HybridConfig{}.objects_per_step;
   std::string json_out;
 };
-
-double peak_rss_mb() {
-  rusage ru;
-  getrusage(RUSAGE_SELF, &ru);
-  return ru.ru_maxrss / 1024.0;
-}
 
 // One case in this process: one warm-up step, then `steps` timed steps. Prints one JSON line.
 int run_case(const std::string& method, double pixels, double gaussians, const Args& a) {

@@ -2,7 +2,6 @@
 // MODEL/point_cloud.ply (3DGS layout), MODEL/config.json, MODEL/train_stats.json and, with --save-every,
 // MODEL/checkpoints/iter_<N>.ckpt (+ the final one) for --resume.
 #include <omp.h>
-#include <sys/resource.h>
 
 #include <csignal>
 #include <cstdio>
@@ -17,6 +16,7 @@
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/progress.h"
+#include "core/process.h"
 #include "dist/mpi.h"
 #include "model/ply.h"
 #include "scene/scene.h"
@@ -38,12 +38,6 @@ struct TrainArgs {
   uint64_t seed = 0;
   bool no_densify = false, white_bg = false, quiet = false;
 };
-
-double peak_rss_mb() {
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return double(u.ru_maxrss) / 1024.0;  // ru_maxrss is in KiB on Linux
-}
 
 void run_train(const TrainArgs& a) {
   // Under mpirun every rank runs this same function on the same scene and configuration; rank 0 alone writes

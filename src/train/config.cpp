@@ -57,6 +57,8 @@ nlohmann::json TrainConfig::to_json() const {
           {"batch_lr", batch_lr}};
 }
 
+bool is_batch_lr_rule(const std::string& r) { return r == "none" || r == "sqrt" || r == "sqrt-rates"; }
+
 TrainConfig TrainConfig::from_json(const nlohmann::json& j, const std::string& where) {
   TrainConfig c;
   if (!j.is_object()) fail("{}: training configuration is not a JSON object", where);
@@ -103,7 +105,7 @@ TrainConfig TrainConfig::from_json(const nlohmann::json& j, const std::string& w
   get("batch", c.batch);
   if (c.batch < 1 || c.batch > 4096) fail("{}: 'batch' must be 1..4096, got {}", where, c.batch);
   get("batch_lr", c.batch_lr);
-  if (c.batch_lr != "none" && c.batch_lr != "sqrt" && c.batch_lr != "sqrt-rates")
+  if (!is_batch_lr_rule(c.batch_lr))
     fail("{}: 'batch_lr' must be none, sqrt or sqrt-rates, got '{}'", where, c.batch_lr);
   return c;
 }

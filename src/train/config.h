@@ -10,6 +10,9 @@
 
 namespace hgs::train {
 
+// Whether r names a rule of TrainConfig::batch_lr (none, sqrt, sqrt-rates).
+bool is_batch_lr_rule(const std::string& r);
+
 struct TrainConfig {
   std::string method = "rgb";
   int iters = 30000;

@@ -21,16 +21,15 @@ Trainer::Trainer(const TrainConfig& cfg, GaussianModel model, std::vector<TrainV
   reducer_ = reducer ? reducer : &local_reducer_;
   if (views_.empty()) fail("train: no training views");
   if (cfg_.batch < 1) fail("train: the batch must be at least 1 view, got {}", cfg_.batch);
-  const bool known_rule = cfg_.batch_lr == "none" || cfg_.batch_lr == "sqrt" || cfg_.batch_lr == "sqrt-rates";
-  if (known_rule && cfg_.batch_lr != "none" && step_views() > 1) {  // config.h: the batch rules
+  if (!is_batch_lr_rule(cfg_.batch_lr))
+    fail("train: unknown batch learning-rate rule '{}' (none, sqrt or sqrt-rates)", cfg_.batch_lr);
+  if (cfg_.batch_lr != "none" && step_views() > 1) {  // config.h: the batch rules
     const int G = step_views();
     adam_.lr_scale = float(std::sqrt(double(G)));
     if (cfg_.batch_lr == "sqrt") {
       adam_.beta1 = float(std::pow(double(adam_.beta1), G));
       adam_.beta2 = float(std::pow(double(adam_.beta2), G));
     }
-  } else if (!known_rule) {
-    fail("train: unknown batch learning-rate rule '{}' (none, sqrt or sqrt-rates)", cfg_.batch_lr);
   }
   if (model_.n == 0) fail("train: the model has no Gaussians");
   if (cfg_.sh_degree > model_.sh_degree) cfg_.sh_degree = model_.sh_degree;

@@ -48,6 +48,8 @@ TEST(TrainConfig, PositionLrDecaysLogLinearly) {
   TrainConfig r = TrainConfig::from_json(c.to_json(), "test");
   EXPECT_EQ(r.to_json(), c.to_json());
   EXPECT_THROW(TrainConfig::from_json(nlohmann::json{{"iters", "many"}}, "x.json"), Error);
+  EXPECT_THROW(TrainConfig::from_json(nlohmann::json{{"batch_lr", "linear"}}, "x.json"), Error);
+  EXPECT_EQ(TrainConfig::from_json(nlohmann::json{{"batch_lr", "sqrt-rates"}}, "x.json").batch_lr, "sqrt-rates");
 }
 
 // A tiny problem: 40 Gaussians in front of a 32x24 camera, target = render of a different random model.
