@@ -35,8 +35,13 @@ Attention attn(int c, int inner, std::mt19937& rng) { return {lin(inner, c, rng)
 Mlp mlp(int in, int hidden, int out, std::mt19937& rng) { return {{lin(hidden, in, rng), lin(hidden, hidden, rng), lin(out, hidden, rng)}}; }
 Upconv upconv(int in, int out, std::mt19937& rng) { return {in, out, randn(size_t(in) * 4 * out, 1.f / std::sqrt(float(in)), rng), randn(out, 0.02f, rng)}; }
 
-const SamModel& vit_b() {
-  static SamModel m = [] {
+const SamModel& vit_b(int bf16 = 0) {
+  static SamModel models[2];
+  static bool made[2] = {false, false};
+  if (made[bf16]) return models[bf16];
+  made[bf16] = true;
+  SamModel& m = models[bf16];
+  m = [] {
     std::mt19937 rng(1);
     SamModel s;
     VisionEncoder& v = s.vision;
@@ -89,7 +94,13 @@ const SamModel& vit_b() {
     d.iou_head = mlp(kOut, 256, 4, rng);
     return s;
   }();
+  m.set_precision(bf16 ? clip::Precision::BF16 : clip::Precision::F32);
   return m;
+}
+
+// Benchmark argument 0 = float32, 1 = bfloat16 products; the label names the precision (and oneDNN's kernel).
+void label(benchmark::State& state, int bf16) {
+  state.SetLabel(bf16 ? "bf16 " + clip::bf16_kernel_name() : "f32");
 }
 
 // Multiply-add FLOPs (2 per MAC) of the image encoder.
@@ -127,17 +138,19 @@ double decoder_flops(int B) {
 }
 
 void BM_ImageEmbedding1024(benchmark::State& state) {
-  const SamModel& m = vit_b();
+  const SamModel& m = vit_b(int(state.range(0)));
+  label(state, int(state.range(0)));
   std::mt19937 rng(2);
   auto x = randn(size_t(1024) * 1024 * 3, 1.f, rng);
   for (auto _ : state) benchmark::DoNotOptimize(m.encode(x.data()));
   state.counters["FLOPS"] = benchmark::Counter(encoder_flops(), benchmark::Counter::kIsIterationInvariantRate);
   state.counters["peak_RSS_MB"] = peak_rss_mb();
 }
-BENCHMARK(BM_ImageEmbedding1024)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(2);
+BENCHMARK(BM_ImageEmbedding1024)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(2);
 
 void BM_Decoder64Prompts(benchmark::State& state) {
-  const SamModel& m = vit_b();
+  const SamModel& m = vit_b(int(state.range(0)));
+  label(state, int(state.range(0)));
   std::mt19937 rng(3);
   ImageEmbedding e;
   e.grid = kGrid, e.channels = kOut, e.orig_h = 768, e.orig_w = 1024, e.input_h = 768, e.input_w = 1024;
@@ -155,11 +168,12 @@ void BM_Decoder64Prompts(benchmark::State& state) {
   state.counters["FLOPS"] = benchmark::Counter(decoder_flops(64), benchmark::Counter::kIsIterationInvariantRate);
   state.counters["peak_RSS_MB"] = peak_rss_mb();
 }
-BENCHMARK(BM_Decoder64Prompts)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(2);
+BENCHMARK(BM_Decoder64Prompts)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(2);
 
 // A whole automatic-mask image: embedding + 32 x 32 points in batches of 64, segment-anything's thresholds.
 void BM_AutomaticMasksImage(benchmark::State& state) {
-  const SamModel& m = vit_b();
+  const SamModel& m = vit_b(int(state.range(0)));
+  label(state, int(state.range(0)));
   Image img(1024, 768, 3);
   std::mt19937 rng(4);
   std::uniform_real_distribution<float> U(0.f, 1.f);
@@ -173,7 +187,7 @@ void BM_AutomaticMasksImage(benchmark::State& state) {
   state.counters["FLOPS"] = benchmark::Counter(encoder_flops() + 16 * decoder_flops(64), benchmark::Counter::kIsIterationInvariantRate);
   state.counters["peak_RSS_MB"] = peak_rss_mb();
 }
-BENCHMARK(BM_AutomaticMasksImage)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1);
+BENCHMARK(BM_AutomaticMasksImage)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1);
 
 // The reference rate: one sgemm with the shape of the ViT-B MLP up-projection, [n, 768] x [768, 3072].
 void BM_SgemmReference(benchmark::State& state) {
@@ -188,6 +202,21 @@ void BM_SgemmReference(benchmark::State& state) {
   state.counters["FLOPS"] = benchmark::Counter(2.0 * n * k * o, benchmark::Counter::kIsIterationInvariantRate);
 }
 BENCHMARK(BM_SgemmReference)->Arg(4096)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// The same product in bfloat16 (clip/gemm_bf16.h: the operands rounded beforehand, float32 accumulation).
+void BM_Bf16GemmReference(benchmark::State& state) {
+  const int n = int(state.range(0)), k = 768, o = 3072;
+  std::mt19937 rng(5);
+  auto a = clip::to_bf16(randn(size_t(n) * k, 1.f, rng)), b = clip::to_bf16(randn(size_t(o) * k, 1.f, rng));
+  std::vector<float> c(size_t(n) * o);
+  for (auto _ : state) {
+    clip::gemm_bf16(n, o, k, a.data(), k, b.data(), k, true, 1.f, nullptr, 0.f, c.data(), o);
+    benchmark::DoNotOptimize(c.data());
+  }
+  state.SetLabel(clip::bf16_kernel_name());
+  state.counters["FLOPS"] = benchmark::Counter(2.0 * n * k * o, benchmark::Counter::kIsIterationInvariantRate);
+}
+BENCHMARK(BM_Bf16GemmReference)->Arg(4096)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 }  // namespace
 

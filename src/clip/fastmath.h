@@ -9,6 +9,11 @@
 #include <cstdint>
 #include <cstring>
 
+// A kernel marked HGS_AVX512_CLONE is compiled twice, for AVX-512 (x86-64-v4) and for the build's baseline
+// (x86-64-v3), and the dynamic loader picks the clone the CPU runs (GCC function multiversioning): the element-wise
+// loops of the transformers run twice as wide where AVX-512 exists, and the binary still runs where it does not.
+#define HGS_AVX512_CLONE __attribute__((target_clones("arch=x86-64-v4", "default")))
+
 namespace hgs::clip {
 
 inline float fast_exp(float x) {

@@ -6,6 +6,7 @@
 //   std::vector<float> t = m.embed_text({"a photo of a cat"});   // [T, D], L2-normalised
 //   hgs::clip::DenseFeatures f = m.dense_features(image);          // [h, w, D]
 #pragma once
+#include <cstdint>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -36,6 +37,7 @@ struct Linear {
   int in = 0, out = 0;
   std::vector<float> w;  // [out, in]
   std::vector<float> b;  // [out]
+  std::vector<uint16_t> w16 = {};  // [out, in] w rounded to bfloat16 when the model runs in bf16, else empty
 };
 
 struct LayerNorm {

@@ -27,10 +27,13 @@ struct Workspace {
   void reserve(int n, int width, int mlp_width, int max_len);
 };
 
-// y [N, out] = x [N, in] W^T + b.
+// y [N, out] = x [N, in] W^T + b. With l.w16 set (use_bf16), products of more than a few rows run in bfloat16
+// (gemm_bf16.h: x rounded to bf16, float32 accumulation); otherwise float32 sgemm.
 void linear(const Linear& l, const float* x, int n, float* y);
 // y [N, out] += x [N, in] W^T + b.
 void linear_add(const Linear& l, const float* x, int n, float* y);
+// Rounds l.w to bfloat16 (l.w16) so that linear / linear_add run in bf16; l.w stays for few-row products.
+void use_bf16(Linear& l);
 // y [N, C] = LayerNorm(x [N, C]) with eps 1e-5 unless given (in place allowed).
 void layer_norm(const LayerNorm& ln, const float* x, int n, int c, float* y, float eps = 1e-5f);
 void activation(Activation a, float* x, size_t count);  // in place
@@ -45,6 +48,14 @@ void softmax_rows(float* s, int rows, int cols, bool causal, int row0 = 0);
 void multi_head_attention(const float* q, int ldq, const float* k, int ldk, const float* v, int ldv, int nq, int nk,
                           int heads, int hd, float scale, float* out, int ldo, float* scores, bool causal = false,
                           const std::function<void(int, float*)>& bias = {});
+
+// The same attention with bfloat16 products (gemm_bf16.h): k and v already rounded to bf16 and split by head,
+// [heads, nk, hd] each (split_heads_bf16; contiguous operands let oneDNN use its AMX kernels, strided ones
+// measured 20x slower); the queries (unscaled, as `bias` may need them) and the softmax probabilities are
+// rounded here, per head.
+void multi_head_attention_bf16(const float* q, int ldq, const uint16_t* k, const uint16_t* v, int nq, int nk,
+                               int heads, int hd, float scale, float* out, int ldo, float* scores,
+                               bool causal = false, const std::function<void(int, float*)>& bias = {});
 
 // One block applied in place to x [N, width].
 void block_forward(const Block& b, int heads, Activation act, const std::vector<Segment>& segs, bool causal, float* x,

@@ -6,13 +6,14 @@
 #include <algorithm>
 #include <cmath>
 
+#include "clip/gemm_bf16.h"
 #include "clip/thread_pool.h"
 #include "clip/transformer.h"
 
 namespace hgs::sam {
 
 void attend_few_queries(const Attention& a, int heads, const float* qin, int nq, const float* xk, const float* xv,
-                        int n, float* out, AttnWork& w) {
+                        int n, float* out, AttnWork& w, bool bf16) {
   const int C = a.q.in, I = a.q.out, hd = I / heads, R = heads * nq;
   const float scale = 1.f / std::sqrt(float(hd));
   w.q.resize(size_t(nq) * I);
@@ -23,10 +24,23 @@ void attend_few_queries(const Attention& a, int heads, const float* qin, int nq,
     cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, nq, C, hd, scale, w.q.data() + h * hd, I,
                 a.k.w.data() + size_t(h) * hd * C, C, 0.f, w.qk.data() + size_t(h) * nq * C, C);
   w.s.resize(size_t(R) * n);
-  cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, R, n, C, 1.f, w.qk.data(), C, xk, C, 0.f, w.s.data(), n);
-  clip::softmax_rows(w.s.data(), R, n, false);
   w.z.resize(size_t(R) * C);  // P X_v
-  cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, R, C, n, 1.f, w.s.data(), n, xv, C, 0.f, w.z.data(), C);
+  if (bf16) {
+    w.a16.resize(size_t(R) * C);
+    w.b16.resize(size_t(n) * C);
+    clip::convert_to_bf16_serial(w.qk.data(), R, C, C, w.a16.data());
+    clip::convert_to_bf16_serial(xk, n, C, C, w.b16.data());
+    clip::gemm_bf16(R, n, C, w.a16.data(), C, w.b16.data(), C, true, 1.f, nullptr, 0.f, w.s.data(), n);
+    clip::softmax_rows(w.s.data(), R, n, false);
+    w.a16.resize(size_t(R) * n);
+    clip::convert_to_bf16_serial(w.s.data(), R, n, n, w.a16.data());
+    clip::convert_to_bf16_serial(xv, n, C, C, w.b16.data());
+    clip::gemm_bf16(R, C, n, w.a16.data(), n, w.b16.data(), C, false, 1.f, nullptr, 0.f, w.z.data(), C);
+  } else {
+    cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, R, n, C, 1.f, w.qk.data(), C, xk, C, 0.f, w.s.data(), n);
+    clip::softmax_rows(w.s.data(), R, n, false);
+    cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, R, C, n, 1.f, w.s.data(), n, xv, C, 0.f, w.z.data(), C);
+  }
   // o [nq, I]: head h's columns = Z_h W_v[h rows]^T + b_v[h]
   w.o.resize(size_t(nq) * I);
   for (int h = 0; h < heads; ++h) {
@@ -40,7 +54,7 @@ void attend_few_queries(const Attention& a, int heads, const float* qin, int nq,
 }
 
 void attend_few_keys(const Attention& a, int heads, const float* xq, const float* qproj, int n, const float* kin,
-                     const float* vin, int nk, float* out, AttnWork& w) {
+                     const float* vin, int nk, float* out, AttnWork& w, bool bf16) {
   const int C = a.q.in, I = a.q.out, hd = I / heads, R = heads * nk;
   const float scale = 1.f / std::sqrt(float(hd));
   if (!qproj) {
@@ -63,8 +77,16 @@ void attend_few_keys(const Attention& a, int heads, const float* xq, const float
     cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, n, nk, hd, scale, qproj + h * hd, I, w.k.data() + h * hd, I,
                 0.f, w.s.data() + h * nk, R);
   clip::softmax_rows(w.s.data(), n * heads, nk, false);  // [n, heads, nk] = [n * heads, nk] row-major
-  for (int i = 0; i < n; ++i) std::copy(a.out.b.begin(), a.out.b.end(), out + size_t(i) * C);
-  cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, n, C, R, 1.f, w.s.data(), R, w.vo.data(), C, 1.f, out, C);
+  if (bf16) {
+    w.a16.resize(size_t(n) * R);
+    w.c16.resize(size_t(R) * C);
+    clip::convert_to_bf16_serial(w.s.data(), n, R, R, w.a16.data());
+    clip::convert_to_bf16_serial(w.vo.data(), R, C, C, w.c16.data());
+    clip::gemm_bf16(n, C, R, w.a16.data(), R, w.c16.data(), C, false, 1.f, a.out.b.data(), 0.f, out, C);
+  } else {
+    for (int i = 0; i < n; ++i) std::copy(a.out.b.begin(), a.out.b.end(), out + size_t(i) * C);
+    cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, n, C, R, 1.f, w.s.data(), R, w.vo.data(), C, 1.f, out, C);
+  }
 }
 
 }  // namespace hgs::sam

@@ -17,15 +17,18 @@ namespace hgs::sam {
 
 struct AttnWork {
   std::vector<float> q, k, v, qk, s, z, o, vo;
+  std::vector<uint16_t> a16, b16, c16;  // operands rounded to bfloat16 (bf16 = true)
 };
 
-// out [nq, C] = attention(qin [nq, C] -> keys xk [n, C], values xv [n, C]), nq small.
+// out [nq, C] = attention(qin [nq, C] -> keys xk [n, C], values xv [n, C]), nq small. With `bf16`, the two
+// products over the n image tokens run in bfloat16 (clip/gemm_bf16.h; xk, xv and the scores rounded).
 void attend_few_queries(const Attention& a, int heads, const float* qin, int nq, const float* xk, const float* xv,
-                        int n, float* out, AttnWork& w);
+                        int n, float* out, AttnWork& w, bool bf16 = false);
 
 // out [n, C] = attention(queries xq [n, C] -> kin [nk, C], vin [nk, C]), nk small; `qproj` [n, inner] is
-// q_proj(xq) when already computed (else nullptr).
+// q_proj(xq) when already computed (else nullptr). With `bf16`, the product of the probabilities with the
+// projected values runs in bfloat16 (the q projection follows a.q's own precision).
 void attend_few_keys(const Attention& a, int heads, const float* xq, const float* qproj, int n, const float* kin,
-                     const float* vin, int nk, float* out, AttnWork& w);
+                     const float* vin, int nk, float* out, AttnWork& w, bool bf16 = false);
 
 }  // namespace hgs::sam

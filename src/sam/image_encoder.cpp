@@ -13,6 +13,7 @@
 #include <cblas.h>
 #include <cmath>
 #include <functional>
+#include <omp.h>
 
 #include "clip/thread_pool.h"
 #include "clip/transformer.h"
@@ -51,12 +52,13 @@ void add_rel_pos(const float* q, int ldq, int row0, int nq, int s, int hd, const
 
 struct VitWork {
   std::vector<float> h, win, qkv, attn, out, mlp;
+  std::vector<uint16_t> k16, v16;  // [windows, heads, n, hd] keys and values in bf16 (Precision::BF16)
 };
 
 // Attention of one layer on the normalised tokens h [g * g, C]; adds proj(attn) to x [g * g, C]. The layer's
 // own attention width I = qkv.out / 3 = heads * hd (pruned models differ per layer) sets the widths of q, k, v
 // and of the attention output (proj: I -> C).
-void vit_attention(const VitLayer& l, int g, int C, int heads, const float* h, float* x, VitWork& w) {
+void vit_attention(const VitLayer& l, int g, int C, int heads, bool bf16, const float* h, float* x, VitWork& w) {
   const int I = l.qkv.out / 3, hd = I / heads;
   const float scale = 1.f / std::sqrt(float(hd));
   const int s = l.window > 0 ? l.window : g;       // side of one attention grid
@@ -75,6 +77,15 @@ void vit_attention(const VitLayer& l, int g, int C, int heads, const float* h, f
   w.qkv.resize(size_t(M) * 3 * I);
   clip::linear(l.qkv, w.win.data(), M, w.qkv.data());
   w.attn.resize(size_t(M) * I);
+  if (bf16) {  // keys and values rounded once for every query block, each window's heads contiguous
+    w.k16.resize(size_t(M) * I);
+    w.v16.resize(size_t(M) * I);
+    for (int wi = 0; wi < nw * nw; ++wi) {
+      const float* base = w.qkv.data() + size_t(wi) * n * 3 * I;
+      clip::split_heads_bf16(base + I, n, 3 * I, heads, hd, w.k16.data() + size_t(wi) * n * I);
+      clip::split_heads_bf16(base + 2 * I, n, 3 * I, heads, hd, w.v16.data() + size_t(wi) * n * I);
+    }
+  }
   // Query blocks keep the score matrix [rows, n] within ~2 MB (cache) for the global layers. The (window,
   // block) units are independent: one per thread with single-threaded OpenBLAS (one hand-off per layer instead
   // of several per head).
@@ -84,6 +95,9 @@ void vit_attention(const VitLayer& l, int g, int C, int heads, const float* h, f
   const int blas_threads = openblas_get_num_threads();
   if (split) openblas_set_num_threads(1);
   auto run = [&](long u0, long u1) {
+    // oneDNN's products (bf16) run on OpenMP threads of the calling thread: one each when units are split.
+    const int omp_threads = omp_get_max_threads();
+    if (split) omp_set_num_threads(1);
     std::vector<float> scores(size_t(rows) * n), th, tw;
     for (long u = u0; u < u1; ++u) {
       const int wi = int(u / blocks), r0 = int(u % blocks) * rows, nq = std::min(rows, n - r0);
@@ -94,9 +108,16 @@ void vit_attention(const VitLayer& l, int g, int C, int heads, const float* h, f
         bias = [&](int head, float* sc) {
           add_rel_pos(qb + head * hd, 3 * I, r0, nq, s, hd, l.rel_h.data(), l.rel_w.data(), sc, th, tw);
         };
-      clip::multi_head_attention(qb, 3 * I, base + I, 3 * I, base + 2 * I, 3 * I, nq, n, heads, hd, scale,
-                                 w.attn.data() + (size_t(wi) * n + r0) * I, I, scores.data(), false, bias);
+      float* out = w.attn.data() + (size_t(wi) * n + r0) * I;
+      if (bf16) {
+        clip::multi_head_attention_bf16(qb, 3 * I, w.k16.data() + size_t(wi) * n * I, w.v16.data() + size_t(wi) * n * I,
+                                        nq, n, heads, hd, scale, out, I, scores.data(), false, bias);
+      } else {
+        clip::multi_head_attention(qb, 3 * I, base + I, 3 * I, base + 2 * I, 3 * I, nq, n, heads, hd, scale, out, I,
+                                   scores.data(), false, bias);
+      }
     }
+    if (split) omp_set_num_threads(omp_threads);
   };
   if (split) clip::parallel_for(units, 2, run);
   else run(0, units);
@@ -155,7 +176,8 @@ std::vector<float> SamModel::encode(const float* x, std::vector<std::vector<floa
   w.h.resize(size_t(N) * C);
   for (const VitLayer& l : v.layers) {
     clip::layer_norm(l.ln1, tok.data(), N, C, w.h.data(), kVitEps);
-    vit_attention(l, g, C, l.heads > 0 ? l.heads : v.heads, w.h.data(), tok.data(), w);
+    vit_attention(l, g, C, l.heads > 0 ? l.heads : v.heads, precision == clip::Precision::BF16, w.h.data(),
+                  tok.data(), w);
     clip::layer_norm(l.ln2, tok.data(), N, C, w.h.data(), kVitEps);
     w.mlp.resize(size_t(N) * l.fc1.out);
     clip::linear(l.fc1, w.h.data(), N, w.mlp.data());

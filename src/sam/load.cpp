@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "clip/safetensors.h"
+#include "clip/transformer.h"
 #include "core/error.h"
 #include "sam/model.h"
 
@@ -299,7 +300,31 @@ SamModel SamModel::load(const std::filesystem::path& path, const SamOptions& opt
     if (l.token_to_image.q.out % heads || C % heads)
       fail("{}: {} decoder heads do not divide the attention widths ({} and {})", file, heads, C, l.token_to_image.q.out);
   m.decoder.heads = heads;
+  m.set_precision(opt.precision);
   return m;
+}
+
+void SamModel::set_precision(clip::Precision p) {
+  precision = p;
+  VisionEncoder& v = vision;
+  std::vector<clip::Linear*> large{&v.patch_embed, &v.neck1, &v.neck2};
+  for (VitLayer& l : v.layers)
+    for (clip::Linear* x : {&l.qkv, &l.proj, &l.fc1, &l.fc2}) large.push_back(x);
+  // The decoder's projections of the image tokens (its few-token ones stay float32: kFewRows in clip::linear).
+  MaskDecoder& d = decoder;
+  auto attention = [&](Attention& a) {
+    for (clip::Linear* x : {&a.q, &a.k, &a.v, &a.out}) large.push_back(x);
+  };
+  for (TwoWayLayer& l : d.layers) {
+    attention(l.token_to_image);
+    attention(l.image_to_token);
+  }
+  attention(d.final_attn);
+  for (clip::Linear* l : large) {
+    if (p == clip::Precision::BF16) clip::use_bf16(*l);
+    else l->w16.clear();
+  }
+  for (Upconv* u : {&d.up1, &d.up2}) u->w16 = p == clip::Precision::BF16 ? clip::to_bf16(u->w) : std::vector<uint16_t>{};
 }
 
 std::string SamModel::describe() const {
@@ -320,7 +345,8 @@ std::string SamModel::describe() const {
                      "neck {}; decoder {} layers, {} heads, {} mask tokens",
                      naming == Naming::HuggingFace ? "Hugging Face" : "segment-anything", vision.hidden,
                      vision.layers.size(), vit, vision.patch, image_size(), windows.empty() ? "-" : windows,
-                     global, vision.out, decoder.layers.size(), decoder.heads, decoder.tokens);
+                     global, vision.out, decoder.layers.size(), decoder.heads, decoder.tokens) +
+         (precision == clip::Precision::BF16 ? fmt::format("; bf16 products ({})", clip::bf16_kernel_name()) : "");
 }
 
 }  // namespace hgs::sam

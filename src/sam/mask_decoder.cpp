@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cblas.h>
 #include <cmath>
+#include <omp.h>
 
 #include "clip/thread_pool.h"
 #include "clip/transformer.h"
@@ -73,10 +74,22 @@ std::vector<float> run_mlp(const Mlp& m, const float* x) {
   return a;
 }
 
-// x [g, g, in] -> [2g, 2g, out]: the 2x2 stride-2 transposed convolution as one product with u.w [in, 4 out].
-std::vector<float> upconv(const Upconv& u, const float* x, int g) {
-  std::vector<float> y(size_t(g) * g * 4 * u.out), out(size_t(4) * g * g * u.out);
-  clip::matmul(x, g * g, u.in, u.w.data(), 4 * u.out, y.data());
+// out [2g, 2g, u.out] = the 2x2 stride-2 transposed convolution of x [g, g, u.in] as one product with
+// u.w [in, 4 out] into y [g * g, 4 out] (in bfloat16 when u.w16 is set, on the calling thread: the decoder
+// runs one prompt per thread). Buffers are the caller's, reused from prompt to prompt: allocating them per
+// prompt cost page faults and zeroing (~15 % of a batch).
+void upconv(const Upconv& u, const float* x, int g, std::vector<float>& y, std::vector<uint16_t>& x16,
+            std::vector<float>& out) {
+  y.resize(size_t(g) * g * 4 * u.out);
+  out.resize(size_t(4) * g * g * u.out);
+  if (!u.w16.empty()) {
+    x16.resize(size_t(g) * g * u.in);
+    clip::convert_to_bf16_serial(x, g * g, u.in, u.in, x16.data());
+    clip::gemm_bf16(g * g, 4 * u.out, u.in, x16.data(), u.in, u.w16.data(), 4 * u.out, false, 1.f, nullptr, 0.f,
+                    y.data(), 4 * u.out);
+  } else {
+    clip::matmul(x, g * g, u.in, u.w.data(), 4 * u.out, y.data());
+  }
   const int G = 2 * g;
   for (int i = 0; i < g; ++i)
     for (int j = 0; j < g; ++j)
@@ -85,7 +98,6 @@ std::vector<float> upconv(const Upconv& u, const float* x, int g) {
         float* o = out.data() + (size_t(2 * i + d / 2) * G + 2 * j + d % 2) * u.out;
         for (int c = 0; c < u.out; ++c) o[c] = s[c] + u.b[c];
       }
-  return out;
 }
 
 }  // namespace
@@ -117,10 +129,15 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
   const bool per_prompt = B > 1 && clip::pool_threads() > 1;
   const int blas_threads = openblas_get_num_threads();
   if (per_prompt) openblas_set_num_threads(1);
+  const bool bf16 = precision == clip::Precision::BF16;
   auto body = [&](long b0, long b1) {
+    // oneDNN's products (bf16) run on OpenMP threads of the calling thread: one each when prompts are split.
+    const int omp_threads = omp_get_max_threads();
+    if (per_prompt) omp_set_num_threads(1);
     Proj w;
     AttnWork aw;
-    std::vector<float> scores, q(size_t(Tt) * C), qpe, keys, tmp, qq, kk, mlp;
+    std::vector<float> scores, q(size_t(Tt) * C), qpe, keys, tmp, qq, kk, mlp, y, u1, u2;
+    std::vector<uint16_t> x16;
     for (long b = b0; b < b1; ++b) {
       std::copy(d.iou_token.begin(), d.iou_token.end(), q.begin());
       std::copy(d.mask_tokens.begin(), d.mask_tokens.end(), q.begin() + C);
@@ -144,7 +161,7 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
           attend(l.token_to_image, heads, qq.data(), Tt, nullptr, nullptr, N, tmp.data(), w, scores, &kv0);
         } else {
           add(keys.data(), pe.data(), keys.size(), kk);
-          attend_few_queries(l.token_to_image, heads, qq.data(), Tt, kk.data(), keys.data(), N, tmp.data(), aw);
+          attend_few_queries(l.token_to_image, heads, qq.data(), Tt, kk.data(), keys.data(), N, tmp.data(), aw, bf16);
         }
         for (size_t i = 0; i < q.size(); ++i) q[i] += tmp[i];
         clip::layer_norm(l.ln2, q.data(), Tt, C, q.data(), d.ln_eps);
@@ -154,23 +171,23 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
         clip::linear_add(l.mlp2, mlp.data(), Tt, q.data());
         clip::layer_norm(l.ln3, q.data(), Tt, C, q.data(), d.ln_eps);
         add(q.data(), qpe.data(), q.size(), qq);
-        if (li > 0) add(keys.data(), pe.data(), keys.size(), kk);
+        // kk = keys + pe is still current for li > 0 (the token-to-image attention changed the tokens only).
         attend_few_keys(l.image_to_token, heads, li == 0 ? nullptr : kk.data(), li == 0 ? q0.data() : nullptr, N,
-                        qq.data(), q.data(), Tt, tmp.data(), aw);
+                        qq.data(), q.data(), Tt, tmp.data(), aw, bf16);
         for (size_t i = 0; i < keys.size(); ++i) keys[i] += tmp[i];
         clip::layer_norm(l.ln4, keys.data(), N, C, keys.data(), d.ln_eps);
       }
       add(q.data(), qpe.data(), q.size(), qq);
       add(keys.data(), pe.data(), keys.size(), kk);
-      attend_few_queries(d.final_attn, heads, qq.data(), Tt, kk.data(), keys.data(), N, tmp.data(), aw);
+      attend_few_queries(d.final_attn, heads, qq.data(), Tt, kk.data(), keys.data(), N, tmp.data(), aw, bf16);
       for (size_t i = 0; i < q.size(); ++i) q[i] += tmp[i];
       clip::layer_norm(d.ln_final, q.data(), Tt, C, q.data(), d.ln_final_eps);
 
       // Upscaling: [g, g, C] -> [2g, 2g, C/4] (LN, GELU) -> [4g, 4g, C/8] (GELU).
-      std::vector<float> u1 = upconv(d.up1, keys.data(), g);
+      upconv(d.up1, keys.data(), g, y, x16, u1);
       clip::layer_norm(d.up_ln, u1.data(), 4 * N, d.up1.out, u1.data(), 1e-6f);
       clip::activation(clip::Activation::GELU, u1.data(), u1.size());
-      std::vector<float> u2 = upconv(d.up2, u1.data(), 2 * g);
+      upconv(d.up2, u1.data(), 2 * g, y, x16, u2);
       clip::activation(clip::Activation::GELU, u2.data(), u2.size());
       const int D = d.up2.out, P = 16 * N;
       std::vector<float> hyper(size_t(d.tokens) * D);
@@ -188,6 +205,7 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
                   r.lowres.data(), P);
       r.iou = run_mlp(d.iou_head, q.data());
     }
+    if (per_prompt) omp_set_num_threads(omp_threads);
   };
   if (per_prompt) clip::parallel_for(B, 2, body);
   else body(0, B);

@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "clip/gemm_bf16.h"
 #include "clip/model.h"
 #include "core/image.h"
 
@@ -31,6 +32,10 @@ struct SamOptions {
   // relative-position tables; for a layer without tables `vision_config.num_attention_heads` of config.json).
   // Given, it must agree with every layer's tables and serves the layers without tables.
   int vit_heads = 0;
+  // F32: every product in float32 (the reference path). BF16: the image encoder's and mask decoder's large
+  // products in bfloat16 with float32 accumulation (clip/gemm_bf16.h), an approximation; docs/sam.md has its
+  // error and speed.
+  clip::Precision precision = clip::Precision::F32;
 };
 
 // One ViT layer. Its widths are its own (SlimSAM's pruned models differ per layer): attention width
@@ -83,6 +88,7 @@ struct Upconv {
   int in = 0, out = 0;
   std::vector<float> w;  // [in, 4 * out]
   std::vector<float> b;  // [out]
+  std::vector<uint16_t> w16 = {};  // [in, 4 * out] w in bfloat16 when the model runs in bf16, else empty
 };
 
 struct MaskDecoder {
@@ -126,10 +132,14 @@ class SamModel {
   static SamModel load(const std::filesystem::path& path, const SamOptions& opt = {});
 
   Naming naming = Naming::HuggingFace;
+  clip::Precision precision = clip::Precision::F32;
   VisionEncoder vision;
   PromptEncoder prompt;
   MaskDecoder decoder;
   std::filesystem::path path;
+
+  // Rounds the weights of the large products to bfloat16 (BF16) or drops the rounded copies (F32).
+  void set_precision(clip::Precision p);
 
   int image_size() const { return vision.grid * vision.patch; }
   int channels() const { return vision.out; }

@@ -75,6 +75,42 @@ TEST(SamCli, GenerateWritesSamJsonMatchingTheLibraryAndResumes) {
   EXPECT_NE(r.out.find("imported 3 of 3 views"), std::string::npos) << r.out;
 }
 
+TEST(SamCli, GenerateInBf16SaysSoAndWritesMasks) {
+  TempDir t;
+  const fs::path s = make_scene(t), out = t / "sam";
+  const std::string w = sam_data("tiny_sam.safetensors").string();
+  auto r = run_hgs("masks generate " + s.string() + " --sam " + w + " --out " + out.string() + kAmgArgs +
+                   " --precision bf16");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.err.find("bf16 products"), std::string::npos) << r.err;
+  EXPECT_NE(r.out.find("wrote 3 SAM mask files"), std::string::npos) << r.out;
+  // The masks of view 0 against the library's float32 masks: the same count (the thresholds are 0) and each
+  // mask nearly the same pixels.
+  Scene sc = load_scene(s);
+  Image img = sc.load_image(0);
+  sam::AmgOptions o;
+  o.points_per_side = 4, o.points_per_batch = 5, o.pred_iou_thresh = 0.f, o.stability_score_thresh = 0.f;
+  o.stability_score_offset = 0.05f, o.box_nms_thresh = 0.9f;
+  std::vector<sam::AmgMask> ms = sam::generate_masks(tiny_sam(), tiny_sam().embed(img), o);
+  nlohmann::json j = nlohmann::json::parse(std::ifstream(out / (sc.views[0].stem + ".json")));
+  ASSERT_FALSE(ms.empty());
+  EXPECT_EQ(j.size(), ms.size());
+  size_t differ = 0, total = 0;
+  for (size_t k = 0; k < std::min(ms.size(), j.size()); ++k) {
+    masks::Rle rle;
+    rle.height = j[k]["segmentation"]["size"][0];
+    rle.width = j[k]["segmentation"]["size"][1];
+    rle.counts = masks::rle_counts_from_string(j[k]["segmentation"]["counts"], "test");
+    const std::vector<uint8_t> m16 = masks::rle_decode(rle, "test");
+    for (size_t i = 0; i < m16.size(); ++i) differ += m16[i] != ms[k].mask[i];
+    total += m16.size();
+  }
+  EXPECT_LT(double(differ) / double(total), 0.02) << differ << " of " << total;
+  r = run_hgs("masks click " + s.string() + " --sam " + w + " --view 0 --point 3,4 --precision f16");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.err.find("--precision"), std::string::npos) << r.err;
+}
+
 TEST(SamCli, ClickWritesTheBestMultimaskOutput) {
   TempDir t;
   const fs::path s = make_scene(t);
