@@ -14,7 +14,7 @@ namespace {
 namespace fs = std::filesystem;
 
 struct FeaturesArgs {
-  std::string scene, clip, act = "auto";
+  std::string scene, clip, act = "auto", precision = "f32";
   int input_size = 448, downscale = 1, tile = 0, max_tokens = 2304, threads = 0;
   bool raw = false, skip_existing = false, quiet = false;
 };
@@ -26,6 +26,7 @@ void run_features(const FeaturesArgs& a) {
   opt.activation = clip::parse_activation(a.act);
   clip::ClipModel m = clip::ClipModel::load(a.clip, opt);
   if (!m.has_vision) fail("{}: the model has no vision tower", a.clip);
+  m.set_precision(clip::parse_precision(a.precision, "--precision"));
   if (!a.quiet) fmt::print(stderr, "model: {}\n", m.describe());
   clip::DenseOptions d;
   d.input_size = a.input_size;
@@ -73,6 +74,10 @@ CommandRegistration reg({"features", "Extract dense CLIP (MaskCLIP) features of 
                            sub.add_flag("--raw", a->raw, "Do not L2-normalise the features");
                            sub.add_flag("--skip-existing", a->skip_existing, "Keep feature files that already exist");
                            sub.add_option("--act", a->act, "Activation: auto, gelu, quick_gelu")->capture_default_str();
+                           sub.add_option("--precision", a->precision,
+                                          "f32 (exact) or bf16: the vision tower's linear layers in bfloat16 with "
+                                          "float32 sums, faster with AMX / AVX512-BF16 (an approximation: docs/clip.md)")
+                               ->check(CLI::IsMember({"f32", "bf16"}))->capture_default_str();
                            sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();
                            sub.add_flag("--quiet", a->quiet, "No progress bar");
                            return [a] { run_features(*a); };

@@ -14,6 +14,8 @@
 
 #include "core/image.h"
 
+#include "clip/gemm_bf16.h"
+
 namespace hgs::clip {
 
 enum class Naming { OpenClip, HuggingFace };
@@ -103,6 +105,12 @@ class ClipModel {
 
   int image_size() const { return vision.grid * vision.patch; }
   std::string describe() const;  // one line: naming, widths, layers, heads, patch, D, activation
+
+  // BF16: the vision tower's linear layers (patch embedding, every block's qkv / out / MLP, the MaskCLIP value
+  // path) run in bfloat16 with float32 sums (gemm_bf16.h), an approximation; attention, LayerNorm and the text
+  // tower stay float32. F32 (the default) drops the rounded weights again.
+  void set_precision(Precision p);
+  Precision precision = Precision::F32;
 
   // --- text ---
   // L2-normalised embeddings of `phrases` (tokenised with Tokenizer::shared()): [T, D].

@@ -8,6 +8,7 @@
 
 #include "clip/model.h"
 #include "clip/safetensors.h"
+#include "clip/transformer.h"
 #include "core/error.h"
 
 namespace hgs::clip {
@@ -236,6 +237,17 @@ ClipModel ClipModel::load(const std::filesystem::path& path, const ClipOptions& 
   return m;
 }
 
+void ClipModel::set_precision(Precision p) {
+  precision = p;
+  std::vector<Linear*> ls{&vision.patch_embed, &vision.last_value};
+  for (Block& b : vision.tr.blocks)
+    for (Linear* l : {&b.qkv, &b.out, &b.fc, &b.proj}) ls.push_back(l);
+  for (Linear* l : ls) {
+    if (p == Precision::BF16 && !l->w.empty()) use_bf16(*l);
+    else l->w16.clear();
+  }
+}
+
 std::string ClipModel::describe() const {
   std::string s = fmt::format("{} naming, D = {}, {}", naming == Naming::OpenClip ? "open_clip" : "Hugging Face", embed_dim,
                               act == Activation::GELU ? "GELU" : "QuickGELU");
@@ -245,6 +257,7 @@ std::string ClipModel::describe() const {
   if (has_text)
     s += fmt::format("; text width {} x {} layers, {} heads, context {}, vocab {}", text.tr.width, text.tr.blocks.size(),
                      text.tr.heads, text.context, text.vocab);
+  if (precision == Precision::BF16) s += fmt::format("; vision linear layers in bf16 ({})", bf16_kernel_name());
   return s;
 }
 

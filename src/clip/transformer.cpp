@@ -187,6 +187,8 @@ void layer_norm(const LayerNorm& ln, const float* x, int n, int c, float* y, flo
                [&](long r0, long r1) { layer_norm_rows(x, r0, r1, c, ln.g.data(), ln.b.data(), eps, y); });
 }
 
+void gelu_serial(float* x, long n) { gelu_range(x, 0, n); }
+
 void activation(Activation a, float* x, size_t count) {
   parallel_for(long(count), 65536, [&](long b, long e) {
     if (a == Activation::GELU) gelu_range(x, b, e);

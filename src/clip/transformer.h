@@ -37,6 +37,7 @@ void use_bf16(Linear& l);
 // y [N, C] = LayerNorm(x [N, C]) with eps 1e-5 unless given (in place allowed).
 void layer_norm(const LayerNorm& ln, const float* x, int n, int c, float* y, float eps = 1e-5f);
 void activation(Activation a, float* x, size_t count);  // in place
+void gelu_serial(float* x, long n);  // GELU in place on the calling thread only
 // Row-wise softmax of s [rows, cols]; with `causal`, row i keeps columns 0..row0+i only (others set to 0).
 void softmax_rows(float* s, int rows, int cols, bool causal, int row0 = 0);
 

@@ -27,6 +27,14 @@ struct Proj {
   std::vector<float> q, k, v, o;
 };
 
+// One thread's buffers for SamModel::decode.
+struct Work {
+  Proj w;
+  AttnWork aw;
+  std::vector<float> scores, q, qpe, keys, tmp, qq, kk, mlp, y, u1, u2;
+  std::vector<uint16_t> x16;
+};
+
 void add(const float* a, const float* b, size_t n, std::vector<float>& out) {
   out.resize(n);
   for (size_t i = 0; i < n; ++i) out[i] = a[i] + b[i];
@@ -134,10 +142,14 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
     // oneDNN's products (bf16) run on OpenMP threads of the calling thread: one each when prompts are split.
     const int omp_threads = omp_get_max_threads();
     if (per_prompt) omp_set_num_threads(1);
-    Proj w;
-    AttnWork aw;
-    std::vector<float> scores, q(size_t(Tt) * C), qpe, keys, tmp, qq, kk, mlp, y, u1, u2;
-    std::vector<uint16_t> x16;
+    // Work buffers of this thread, kept from batch to batch (fresh ones cost page faults and zeroing).
+    thread_local Work work;
+    Proj& w = work.w;
+    AttnWork& aw = work.aw;
+    std::vector<float>&scores = work.scores, &q = work.q, &qpe = work.qpe, &keys = work.keys, &tmp = work.tmp,
+                      &qq = work.qq, &kk = work.kk, &mlp = work.mlp, &y = work.y, &u1 = work.u1, &u2 = work.u2;
+    std::vector<uint16_t>& x16 = work.x16;
+    q.resize(size_t(Tt) * C);
     for (long b = b0; b < b1; ++b) {
       std::copy(d.iou_token.begin(), d.iou_token.end(), q.begin());
       std::copy(d.mask_tokens.begin(), d.mask_tokens.end(), q.begin() + C);
@@ -188,7 +200,6 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
       clip::layer_norm(d.up_ln, u1.data(), 4 * N, d.up1.out, u1.data(), 1e-6f);
       clip::activation(clip::Activation::GELU, u1.data(), u1.size());
       upconv(d.up2, u1.data(), 2 * g, y, x16, u2);
-      clip::activation(clip::Activation::GELU, u2.data(), u2.size());
       const int D = d.up2.out, P = 16 * N;
       std::vector<float> hyper(size_t(d.tokens) * D);
       for (int t = 0; t < d.tokens; ++t) {
@@ -200,9 +211,25 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
       r.tokens = d.tokens;
       r.size = 4 * g;
       r.lowres.resize(size_t(d.tokens) * P);
-      // masks [tokens, P] = hyper [tokens, D] x u2^T [D, P]
-      cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, d.tokens, P, D, 1.f, hyper.data(), D, u2.data(), D, 0.f,
-                  r.lowres.data(), P);
+      // masks [tokens, P] = hyper [tokens, D] x GELU(u2)^T [D, P], the GELU and the dot products of a block of
+      // pixels in one pass while the block is in cache (a separate GELU pass and sgemm read u2 twice).
+      constexpr int kBlock = 128;
+      for (int p0 = 0; p0 < P; p0 += kBlock) {
+        const int np = std::min(kBlock, P - p0);
+        float* px = u2.data() + size_t(p0) * D;
+        clip::gelu_serial(px, long(np) * D);
+        for (int t = 0; t < d.tokens; ++t) {
+          const float* h = hyper.data() + size_t(t) * D;
+          float* o = r.lowres.data() + size_t(t) * P + p0;
+          for (int i = 0; i < np; ++i) {
+            const float* x = px + size_t(i) * D;
+            float acc = 0.f;
+#pragma omp simd reduction(+ : acc)
+            for (int c = 0; c < D; ++c) acc += h[c] * x[c];
+            o[i] = acc;
+          }
+        }
+      }
       r.iou = run_mlp(d.iou_head, q.data());
     }
     if (per_prompt) omp_set_num_threads(omp_threads);

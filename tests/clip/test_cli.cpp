@@ -100,6 +100,15 @@ TEST(ClipCli, FeaturesWritesF16Grids) {
     auto got = a.to_float();
     for (size_t i = 0; i < got.size(); ++i) EXPECT_EQ(got[i], half_to_float(float_to_half(f.data[i])));
   }
+  // --precision bf16 (its error is bounded in ClipModel.Bf16DenseFeaturesWithinBoundOfFloat32): the command
+  // takes it and says so; a precision it does not know is refused.
+  r = test::run_hgs("features " + t.path.string() + " --clip " + kModel + " --input-size 96 --precision bf16");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.err.find("bf16"), std::string::npos) << r.err;
+  EXPECT_EQ(read_npy(t.path / "features" / "a.npy").shape[2], 32u);
+  r = test::run_hgs("features " + t.path.string() + " --clip " + kModel + " --precision int8");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.err.find("--precision"), std::string::npos) << r.err;
   // A missing scene is a one-line error.
   r = test::run_hgs("features " + (t / "nope").string() + " --clip " + kModel);
   EXPECT_EQ(r.exit_code, 1);

@@ -206,6 +206,31 @@ TEST(ClipModel, TiledDenseFeatures) {
   EXPECT_GT(max_rel_err(m.dense_features(img, o).data, sum), 1e-4);
 }
 
+// --precision bf16: the vision tower's linear layers in bfloat16. On 36 patches (+ CLS: above clip::linear's
+// few-row float32 path) the dense features stay within a bound of float32 (observed relative RMS ~3e-3) and
+// differ from them (the rounding ran); back to F32 they are float32's bit for bit.
+TEST(ClipModel, Bf16DenseFeaturesWithinBoundOfFloat32) {
+  ClipModel m = model("hf_f32");
+  std::vector<float> x(96 * 96 * 3);
+  for (size_t i = 0; i < x.size(); ++i) x[i] = float((i * 7919) % 1000) / 500.f - 1.f;
+  const std::vector<float> f32 = m.dense_tensor(x.data(), 96, 96);
+  m.set_precision(Precision::BF16);
+  EXPECT_NE(m.describe().find("bf16"), std::string::npos) << m.describe();
+  const std::vector<float> b16 = m.dense_tensor(x.data(), 96, 96);
+  ASSERT_EQ(b16.size(), f32.size());
+  double num = 0, den = 0;
+  for (size_t i = 0; i < f32.size(); ++i) {
+    num += (double(b16[i]) - f32[i]) * (double(b16[i]) - f32[i]);
+    den += double(f32[i]) * f32[i];
+  }
+  const double rel = std::sqrt(num / den);
+  std::printf("bf16 CLIP dense features: relative RMS error %.2e\n", rel);
+  EXPECT_LT(rel, 2e-2);
+  EXPECT_GT(rel, 1e-6);
+  m.set_precision(Precision::F32);
+  EXPECT_EQ(m.dense_tensor(x.data(), 96, 96), f32);
+}
+
 TEST(ClipModel, LoadErrors) {
   test::TempDir t;
   std::vector<float> v(4, 0.f);
