@@ -1,6 +1,7 @@
 // SAM (Segment Anything) read from safetensors in the Hugging Face `SamModel` naming or segment-anything's own
 // state-dict naming, with the sizes read from the tensors; forward passes in float32 on the CPU, every matrix
-// product an OpenBLAS sgemm through src/clip's kernels (linear, layer norm, multi-head attention, GELU).
+// product an OpenBLAS sgemm through src/clip's kernels (linear, layer norm, multi-head attention, GELU), or
+// with SamOptions::precision = BF16 the large products in bfloat16 on oneDNN (clip/gemm_bf16.h).
 //
 //   auto m = hgs::sam::SamModel::load("model.safetensors");
 //   hgs::sam::ImageEmbedding e = m.embed(image);                    // preprocessing + ViT + neck
