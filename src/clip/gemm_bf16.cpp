@@ -120,7 +120,10 @@ void gemm_bf16(int m, int n, int k, const uint16_t* a, int lda, const uint16_t* 
   if (beta != 0.f && beta != 1.f) fail("gemm_bf16: beta must be 0 or 1, not {}", beta);
   if (k <= 0) {  // empty sum: c = bias + beta * c
     for (int i = 0; i < m; ++i)
-      for (int j = 0; j < n; ++j) c[size_t(i) * ldc + j] = (beta != 0.f ? c[size_t(i) * ldc + j] : 0.f) + (bias ? bias[j] : 0.f);
+      for (int j = 0; j < n; ++j) {
+        float& o = c[size_t(i) * ldc + j];
+        o = (beta != 0.f ? o : 0.f) + (bias ? bias[j] : 0.f);
+      }
     return;
   }
   // oneDNN scales the bias with the output scale (alpha (a b + bias)): with alpha != 1 the bias is added here.
