@@ -101,7 +101,7 @@ TEST(GemmBf16, MatchesBruteForceOnTheRoundedOperands) {
       {1, 1, 1, 0, 0, 0, true, false, 1.f, 0.f},      {5, 7, 3, 0, 0, 0, false, false, 1.f, 0.f},
       {37, 19, 64, 3, 5, 2, true, true, 1.f, 0.f},    {64, 33, 100, 0, 7, 1, false, true, 0.125f, 0.f},
       {130, 70, 17, 9, 0, 4, true, false, 1.f, 1.f},  {16, 300, 256, 0, 0, 0, false, true, 1.f, 1.f},
-      {200, 64, 4096, 0, 0, 0, true, false, 0.3f, 0.f},
+      {200, 64, 4096, 0, 0, 0, true, false, 0.3f, 0.f}, {3, 4, 0, 0, 0, 0, true, true, 1.f, 1.f},  // empty sum
   };
   for (const Case& cs : cases) {
     const int lda = cs.k + cs.pad_a, ldb = (cs.trans_b ? cs.k : cs.n) + cs.pad_b, ldc = cs.n + cs.pad_c;
