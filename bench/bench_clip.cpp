@@ -108,6 +108,22 @@ void BM_ImageDense(benchmark::State& state) {
 }
 BENCHMARK(BM_ImageDense)->Arg(224)->Arg(448)->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// The dense features with the vision tower's linear layers in bfloat16 (--precision bf16).
+void BM_ImageDenseBf16(benchmark::State& state) {
+  static ClipModel m = [] {
+    ClipModel c = vit_b16();
+    c.set_precision(Precision::BF16);
+    return c;
+  }();
+  const int side = int(state.range(0));
+  std::mt19937 rng(2);
+  auto x = randn(size_t(side) * side * 3, 1.f, rng);
+  for (auto _ : state) benchmark::DoNotOptimize(m.dense_tensor(x.data(), side, side));
+  state.SetLabel(bf16_kernel_name());
+  state.counters["FLOPS"] = benchmark::Counter(vision_flops(side, true), benchmark::Counter::kIsIterationInvariantRate);
+}
+BENCHMARK(BM_ImageDenseBf16)->Arg(448)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 void BM_ImageGlobal(benchmark::State& state) {
   const ClipModel& m = vit_b16();
   const int side = int(state.range(0));
