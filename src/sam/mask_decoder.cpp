@@ -131,13 +131,23 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
   std::vector<float> q0(size_t(N) * i0.q.out);
   clip::linear(i0.q, kpe.data(), N, q0.data());
 
+  // bf16: the first block's keys and values split by head and rounded once per batch (multi_head_attention_bf16).
+  const bool bf16 = precision == clip::Precision::BF16;
+  const int I0 = a0.q.out, hd0 = I0 / heads;
+  std::vector<uint16_t> k0_16, v0_16;
+  if (bf16) {
+    k0_16.resize(size_t(N) * I0);
+    v0_16.resize(size_t(N) * I0);
+    clip::split_heads_bf16(kv0.k.data(), N, I0, heads, hd0, k0_16.data());
+    clip::split_heads_bf16(kv0.v.data(), N, I0, heads, hd0, v0_16.data());
+  }
+
   std::vector<Prediction> res(B);
   // Several prompts: one prompt per thread with single-threaded OpenBLAS (one hand-off per batch instead of one
   // per matrix product; on a shared machine the per-call thread hand-offs cost more than the products).
   const bool per_prompt = B > 1 && clip::pool_threads() > 1;
   const int blas_threads = openblas_get_num_threads();
   if (per_prompt) openblas_set_num_threads(1);
-  const bool bf16 = precision == clip::Precision::BF16;
   auto body = [&](long b0, long b1) {
     // oneDNN's products (bf16) run on OpenMP threads of the calling thread: one each when prompts are split.
     const int omp_threads = omp_get_max_threads();
@@ -169,7 +179,16 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
         }
         clip::layer_norm(l.ln1, q.data(), Tt, C, q.data(), d.ln_eps);
         add(q.data(), qpe.data(), q.size(), qq);
-        if (li == 0) {
+        if (li == 0 && bf16) {
+          const Attention& a = l.token_to_image;
+          w.q.resize(size_t(Tt) * I0);
+          w.o.resize(size_t(Tt) * I0);
+          scores.resize(size_t(Tt) * N);
+          clip::linear(a.q, qq.data(), Tt, w.q.data());
+          clip::multi_head_attention_bf16(w.q.data(), I0, k0_16.data(), v0_16.data(), Tt, N, heads, hd0,
+                                          1.f / std::sqrt(float(hd0)), w.o.data(), I0, scores.data());
+          clip::linear(a.out, w.o.data(), Tt, tmp.data());
+        } else if (li == 0) {
           attend(l.token_to_image, heads, qq.data(), Tt, nullptr, nullptr, N, tmp.data(), w, scores, &kv0);
         } else {
           add(keys.data(), pe.data(), keys.size(), kk);
