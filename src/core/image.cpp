@@ -4,7 +4,9 @@
 #include <zlib.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cstring>
+#include <string>
 
 #include "core/error.h"
 #include "core/fs.h"
@@ -16,11 +18,33 @@ namespace {
 // 2^24 x 2^24 pixels (stb's own limit), which decoding would try to allocate.
 constexpr int64_t kMaxImagePixels = int64_t(1) << 28;  // 268 megapixels (1 GiB as floats per channel)
 
+// A PNG's chunk lengths against the bytes that follow them: stb_image reserves memory for a chunk's stated
+// length before reading it, so a 239-byte file claiming a 2 GB chunk had it allocate 2 GB (fuzz_image).
+void check_png_chunks(const std::vector<uint8_t>& bytes, const std::filesystem::path& path) {
+  static const uint8_t sig[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1A, '\n'};
+  if (bytes.size() < 8 || std::memcmp(bytes.data(), sig, 8) != 0) return;
+  size_t pos = 8;
+  while (pos + 8 <= bytes.size()) {
+    const uint32_t len = uint32_t(bytes[pos]) << 24 | uint32_t(bytes[pos + 1]) << 16 | uint32_t(bytes[pos + 2]) << 8 |
+                         uint32_t(bytes[pos + 3]);
+    const size_t left = bytes.size() - pos - 8;  // after the length and the type
+    std::string type(reinterpret_cast<const char*>(bytes.data() + pos + 4), 4);
+    for (char& ch : type)
+      if (!std::isalpha(static_cast<unsigned char>(ch))) ch = '?';
+    if (size_t(len) + 4 > left)  // data + CRC
+      fail("{}: PNG chunk '{}' at byte {} claims {} bytes but only {} follow (truncated or corrupt file)",
+           path.string(), type, pos, len, left >= 4 ? left - 4 : 0);
+    if (type == "IEND") return;
+    pos += 12 + size_t(len);
+  }
+}
+
 void check_header_size(const std::vector<uint8_t>& bytes, const std::filesystem::path& path) {
   int w = 0, h = 0, c = 0;
-  if (!stbi_info_from_memory(bytes.data(), static_cast<int>(bytes.size()), &w, &h, &c)) return;  // decoding says why
-  if (w < 1 || h < 1 || int64_t(w) * h > kMaxImagePixels)
+  if (stbi_info_from_memory(bytes.data(), static_cast<int>(bytes.size()), &w, &h, &c) &&
+      (w < 1 || h < 1 || int64_t(w) * h > kMaxImagePixels))
     fail("{}: image of {}x{} pixels is too large (at most {} pixels)", path.string(), w, h, kMaxImagePixels);
+  check_png_chunks(bytes, path);  // (when the header cannot be read, decoding says why)
 }
 }  // namespace
 
@@ -55,12 +79,12 @@ void image_size(const std::filesystem::path& path, int& width, int& height) {
 
 LabelMap load_label_png(const std::filesystem::path& path) {
   auto bytes = read_file_bytes(path);
+  check_header_size(bytes, path);
   int w, h, c;
   if (!stbi_info_from_memory(bytes.data(), static_cast<int>(bytes.size()), &w, &h, &c))
     fail("{}: cannot decode label PNG ({})", path.string(), stbi_failure_reason());
   if (c != 1)
     fail("{}: label map must be a single-channel (greyscale) 8- or 16-bit PNG, found {} channels", path.string(), c);
-  check_header_size(bytes, path);
   LabelMap m(w, h);
   if (stbi_is_16_bit_from_memory(bytes.data(), static_cast<int>(bytes.size()))) {
     uint16_t* p = stbi_load_16_from_memory(bytes.data(), static_cast<int>(bytes.size()), &w, &h, &c, 1);

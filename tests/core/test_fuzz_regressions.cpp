@@ -78,3 +78,22 @@ TEST(FuzzRegressions, PngHeaderClaimsTooManyPixels) {
   EXPECT_FILE_ERROR(load_label_png(f), f, "too large");
   EXPECT_FILE_ERROR(load_image(f, 3), f, "too large");
 }
+
+// fuzz_image (out of memory): a 239-byte PNG (two IHDR, then an IDAT claiming 2032624932 bytes) made
+// stb_image allocate 2 GB for that chunk before reading it; chunk lengths are now checked against the file.
+TEST(FuzzRegressions, PngChunkLongerThanTheFile) {
+  test::TempDir t;
+  const std::string hex =
+      "89504e470d0a1a0a0000000d494844520000000c000000081002000000121655e5000000594944415478da6360606060"
+      "6460627ec1fc92f915fb05f68bec97b87770efe4dec5bf807f21ff22e10ee14ee12ef102f142f122e989504e470d0a1a"
+      "0a0000000d494844520000000c00000008080400000067edd67a00000008e948e92879077947792765244944415478da"
+      "636060e4e40d654d652d750175417521ad1f5a3fb57e308c1a34920d0200492da441356257b20000000049454e44ae42"
+      "6012129696518251d5d53333b777f0f00c0c8a8a4e4e61185a1200068a2581c02461b90000000049454e44ae426082";
+  std::string bytes;
+  for (size_t i = 0; i + 1 < hex.size(); i += 2) bytes += char(std::stoi(hex.substr(i, 2), nullptr, 16));
+  ASSERT_EQ(bytes.size(), 239u);
+  const auto f = t / "chunk.png";
+  atomic_write_bytes(f, bytes.data(), bytes.size());
+  EXPECT_FILE_ERROR(load_image(f, 3), f, "claims 2032624932 bytes");
+  EXPECT_FILE_ERROR(load_label_png(f), f, "PNG chunk");
+}
