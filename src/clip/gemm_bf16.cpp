@@ -49,6 +49,11 @@ HGS_AVX512_CLONE void convert_rows(const float* x, long r0, long r1, int cols, i
   }
 }
 
+HGS_AVX512_CLONE void sum_rows(const float* a, const float* b, size_t n, uint16_t* out) {
+#pragma omp simd
+  for (size_t i = 0; i < n; ++i) out[i] = round_bf16(a[i] + b[i]);
+}
+
 dnnl::engine& engine() {
   static dnnl::engine e(dnnl::engine::kind::cpu, 0);
   return e;
@@ -107,6 +112,8 @@ void split_heads_bf16(const float* x, int n, int ld, int heads, int hd, uint16_t
 void convert_to_bf16_serial(const float* x, int rows, int cols, int ld, uint16_t* out, float scale) {
   convert_rows(x, 0, rows, cols, ld, out, scale);
 }
+
+void sum_to_bf16_serial(const float* a, const float* b, size_t n, uint16_t* out) { sum_rows(a, b, n, out); }
 
 std::vector<uint16_t> to_bf16(const std::vector<float>& x) {
   std::vector<uint16_t> out(x.size());

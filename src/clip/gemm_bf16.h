@@ -24,6 +24,8 @@ std::vector<uint16_t> to_bf16(const std::vector<float>& x);
 void split_heads_bf16(const float* x, int n, int ld, int heads, int hd, uint16_t* out);
 // The same on the calling thread only (for callers that already run one unit of work per thread).
 void convert_to_bf16_serial(const float* x, int rows, int cols, int ld, uint16_t* out, float scale = 1.f);
+// out [n] = bf16(a [n] + b [n]) on the calling thread (a sum rounded once, without a float32 copy).
+void sum_to_bf16_serial(const float* a, const float* b, size_t n, uint16_t* out);
 
 // c [m, n] = alpha * a [m, k] op(b) + bias [n] + beta * c, with a [m, k] (row stride lda) and b bfloat16:
 // op(b) = b^T for b [n, k] (row stride ldb) when trans_b, else b [k, n] (row stride ldb). beta is 0 or 1,

@@ -13,7 +13,7 @@
 namespace hgs::sam {
 
 void attend_few_queries(const Attention& a, int heads, const float* qin, int nq, const float* xk, const float* xv,
-                        int n, float* out, AttnWork& w, bool bf16) {
+                        int n, float* out, AttnWork& w, bool bf16, const uint16_t* xk16, const uint16_t* xv16) {
   const int C = a.q.in, I = a.q.out, hd = I / heads, R = heads * nq;
   const float scale = 1.f / std::sqrt(float(hd));
   w.q.resize(size_t(nq) * I);
@@ -27,15 +27,22 @@ void attend_few_queries(const Attention& a, int heads, const float* qin, int nq,
   w.z.resize(size_t(R) * C);  // P X_v
   if (bf16) {
     w.a16.resize(size_t(R) * C);
-    w.b16.resize(size_t(n) * C);
     clip::convert_to_bf16_serial(w.qk.data(), R, C, C, w.a16.data());
-    clip::convert_to_bf16_serial(xk, n, C, C, w.b16.data());
-    clip::gemm_bf16(R, n, C, w.a16.data(), C, w.b16.data(), C, true, 1.f, nullptr, 0.f, w.s.data(), n);
+    if (!xk16) {
+      w.b16.resize(size_t(n) * C);
+      clip::convert_to_bf16_serial(xk, n, C, C, w.b16.data());
+      xk16 = w.b16.data();
+    }
+    clip::gemm_bf16(R, n, C, w.a16.data(), C, xk16, C, true, 1.f, nullptr, 0.f, w.s.data(), n);
     clip::softmax_rows(w.s.data(), R, n, false);
     w.a16.resize(size_t(R) * n);
     clip::convert_to_bf16_serial(w.s.data(), R, n, n, w.a16.data());
-    clip::convert_to_bf16_serial(xv, n, C, C, w.b16.data());
-    clip::gemm_bf16(R, C, n, w.a16.data(), n, w.b16.data(), C, false, 1.f, nullptr, 0.f, w.z.data(), C);
+    if (!xv16) {
+      w.c16.resize(size_t(n) * C);
+      clip::convert_to_bf16_serial(xv, n, C, C, w.c16.data());
+      xv16 = w.c16.data();
+    }
+    clip::gemm_bf16(R, C, n, w.a16.data(), n, xv16, C, false, 1.f, nullptr, 0.f, w.z.data(), C);
   } else {
     cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, R, n, C, 1.f, w.qk.data(), C, xk, C, 0.f, w.s.data(), n);
     clip::softmax_rows(w.s.data(), R, n, false);

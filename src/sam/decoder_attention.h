@@ -22,8 +22,11 @@ struct AttnWork {
 
 // out [nq, C] = attention(qin [nq, C] -> keys xk [n, C], values xv [n, C]), nq small. With `bf16`, the two
 // products over the n image tokens run in bfloat16 (clip/gemm_bf16.h; xk, xv and the scores rounded).
+// xk16 / xv16 (optional, bf16 only): xk and xv already rounded, [n, C] each (the caller shares them between
+// products); xk / xv may then be null.
 void attend_few_queries(const Attention& a, int heads, const float* qin, int nq, const float* xk, const float* xv,
-                        int n, float* out, AttnWork& w, bool bf16 = false);
+                        int n, float* out, AttnWork& w, bool bf16 = false, const uint16_t* xk16 = nullptr,
+                        const uint16_t* xv16 = nullptr);
 
 // out [n, C] = attention(queries xq [n, C] -> kin [nk, C], vin [nk, C]), nk small; `qproj` [n, inner] is
 // q_proj(xq) when already computed (else nullptr). With `bf16`, the product of the probabilities with the

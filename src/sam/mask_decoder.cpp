@@ -31,8 +31,8 @@ struct Proj {
 struct Work {
   Proj w;
   AttnWork aw;
-  std::vector<float> scores, q, qpe, keys, tmp, qq, kk, mlp, y, u1, u2;
-  std::vector<uint16_t> x16;
+  std::vector<float> scores, q, qpe, keys, tmp, qq, kk, mlp, y, u1, u2, qproj;
+  std::vector<uint16_t> x16, kk16, keys16;  // bf16: keys + pe and keys rounded once for all their products
 };
 
 void add(const float* a, const float* b, size_t n, std::vector<float>& out) {
@@ -86,14 +86,18 @@ std::vector<float> run_mlp(const Mlp& m, const float* x) {
 // u.w [in, 4 out] into y [g * g, 4 out] (in bfloat16 when u.w16 is set, on the calling thread: the decoder
 // runs one prompt per thread). Buffers are the caller's, reused from prompt to prompt: allocating them per
 // prompt cost page faults and zeroing (~15 % of a batch).
+// `rounded` (optional, bf16): x already rounded to bf16.
 void upconv(const Upconv& u, const float* x, int g, std::vector<float>& y, std::vector<uint16_t>& x16,
-            std::vector<float>& out) {
+            std::vector<float>& out, const uint16_t* rounded = nullptr) {
   y.resize(size_t(g) * g * 4 * u.out);
   out.resize(size_t(4) * g * g * u.out);
   if (!u.w16.empty()) {
-    x16.resize(size_t(g) * g * u.in);
-    clip::convert_to_bf16_serial(x, g * g, u.in, u.in, x16.data());
-    clip::gemm_bf16(g * g, 4 * u.out, u.in, x16.data(), u.in, u.w16.data(), 4 * u.out, false, 1.f, nullptr, 0.f,
+    if (!rounded) {
+      x16.resize(size_t(g) * g * u.in);
+      clip::convert_to_bf16_serial(x, g * g, u.in, u.in, x16.data());
+      rounded = x16.data();
+    }
+    clip::gemm_bf16(g * g, 4 * u.out, u.in, rounded, u.in, u.w16.data(), 4 * u.out, false, 1.f, nullptr, 0.f,
                     y.data(), 4 * u.out);
   } else {
     clip::matmul(x, g * g, u.in, u.w.data(), 4 * u.out, y.data());
@@ -158,7 +162,19 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
     AttnWork& aw = work.aw;
     std::vector<float>&scores = work.scores, &q = work.q, &qpe = work.qpe, &keys = work.keys, &tmp = work.tmp,
                       &qq = work.qq, &kk = work.kk, &mlp = work.mlp, &y = work.y, &u1 = work.u1, &u2 = work.u2;
-    std::vector<uint16_t>& x16 = work.x16;
+    std::vector<uint16_t>&x16 = work.x16, &kk16 = work.kk16, &keys16 = work.keys16;
+    std::vector<float>& qproj = work.qproj;
+    // kk (f32) or kk16 and keys16 (bf16) from the current keys.
+    auto image_operands = [&] {
+      if (bf16) {
+        kk16.resize(keys.size());
+        keys16.resize(keys.size());
+        clip::sum_to_bf16_serial(keys.data(), pe.data(), keys.size(), kk16.data());
+        clip::convert_to_bf16_serial(keys.data(), N, C, C, keys16.data());
+      } else {
+        add(keys.data(), pe.data(), keys.size(), kk);
+      }
+    };
     q.resize(size_t(Tt) * C);
     for (long b = b0; b < b1; ++b) {
       std::copy(d.iou_token.begin(), d.iou_token.end(), q.begin());
@@ -191,8 +207,9 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
         } else if (li == 0) {
           attend(l.token_to_image, heads, qq.data(), Tt, nullptr, nullptr, N, tmp.data(), w, scores, &kv0);
         } else {
-          add(keys.data(), pe.data(), keys.size(), kk);
-          attend_few_queries(l.token_to_image, heads, qq.data(), Tt, kk.data(), keys.data(), N, tmp.data(), aw, bf16);
+          image_operands();
+          attend_few_queries(l.token_to_image, heads, qq.data(), Tt, kk.data(), keys.data(), N, tmp.data(), aw, bf16,
+                             kk16.data(), keys16.data());
         }
         for (size_t i = 0; i < q.size(); ++i) q[i] += tmp[i];
         clip::layer_norm(l.ln2, q.data(), Tt, C, q.data(), d.ln_eps);
@@ -203,19 +220,28 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
         clip::layer_norm(l.ln3, q.data(), Tt, C, q.data(), d.ln_eps);
         add(q.data(), qpe.data(), q.size(), qq);
         // kk = keys + pe is still current for li > 0 (the token-to-image attention changed the tokens only).
-        attend_few_keys(l.image_to_token, heads, li == 0 ? nullptr : kk.data(), li == 0 ? q0.data() : nullptr, N,
-                        qq.data(), q.data(), Tt, tmp.data(), aw, bf16);
+        const float* qp = li == 0 ? q0.data() : nullptr;
+        if (li > 0 && bf16) {  // the query projection from the rounded kk16 of the token-to-image attention
+          const Linear& lq = l.image_to_token.q;
+          qproj.resize(size_t(N) * lq.out);
+          clip::gemm_bf16(N, lq.out, C, kk16.data(), C, lq.w16.data(), C, true, 1.f, lq.b.data(), 0.f, qproj.data(),
+                          lq.out);
+          qp = qproj.data();
+        }
+        attend_few_keys(l.image_to_token, heads, qp ? nullptr : kk.data(), qp, N, qq.data(), q.data(), Tt, tmp.data(),
+                        aw, bf16);
         for (size_t i = 0; i < keys.size(); ++i) keys[i] += tmp[i];
         clip::layer_norm(l.ln4, keys.data(), N, C, keys.data(), d.ln_eps);
       }
       add(q.data(), qpe.data(), q.size(), qq);
-      add(keys.data(), pe.data(), keys.size(), kk);
-      attend_few_queries(d.final_attn, heads, qq.data(), Tt, kk.data(), keys.data(), N, tmp.data(), aw, bf16);
+      image_operands();
+      attend_few_queries(d.final_attn, heads, qq.data(), Tt, kk.data(), keys.data(), N, tmp.data(), aw, bf16,
+                         kk16.data(), keys16.data());
       for (size_t i = 0; i < q.size(); ++i) q[i] += tmp[i];
       clip::layer_norm(d.ln_final, q.data(), Tt, C, q.data(), d.ln_final_eps);
 
       // Upscaling: [g, g, C] -> [2g, 2g, C/4] (LN, GELU) -> [4g, 4g, C/8] (GELU).
-      upconv(d.up1, keys.data(), g, y, x16, u1);
+      upconv(d.up1, keys.data(), g, y, x16, u1, bf16 ? keys16.data() : nullptr);  // keys16 is still current
       clip::layer_norm(d.up_ln, u1.data(), 4 * N, d.up1.out, u1.data(), 1e-6f);
       clip::activation(clip::Activation::GELU, u1.data(), u1.size());
       upconv(d.up2, u1.data(), 2 * g, y, x16, u2);
