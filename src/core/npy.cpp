@@ -51,9 +51,28 @@ std::vector<float> NpyArray::to_float() const {
   return out;
 }
 
-namespace {
+std::vector<size_t> parse_npy_shape(const std::string& s, size_t element_bytes, const std::string& name) {
+  // reject anything in the shape tuple other than digits, commas and spaces
+  for (char c : s)
+    if (!(std::isdigit(static_cast<unsigned char>(c)) || c == ',' || c == ' '))
+      fail("{}: malformed NPY shape '({})'", name, s.substr(0, 80));
+  // Dimensions and the body size in bytes must fit a size_t (checked here, before anything is allocated).
+  std::vector<size_t> shape;
+  std::regex num(R"(\s*(\d+)\s*,?)");
+  size_t bytes = element_bytes;
+  for (std::sregex_iterator it(s.begin(), s.end(), num), end; it != end; ++it) {
+    const std::string d = (*it)[1];
+    size_t v = 0;
+    for (char c : d)
+      if (__builtin_mul_overflow(v, size_t(10), &v) || __builtin_add_overflow(v, size_t(c - '0'), &v))
+        fail("{}: NPY dimension {} is too large", name, d.substr(0, 40));
+    if (__builtin_mul_overflow(bytes, v, &bytes)) fail("{}: NPY shape ({}) is too large", name, s.substr(0, 80));
+    shape.push_back(v);
+  }
+  return shape;
+}
 
-constexpr size_t kMaxHeader = 65536;  // numpy itself refuses headers above 10000 bytes by default
+namespace {
 
 struct Header {
   DType dtype;
@@ -76,7 +95,7 @@ Header parse_header(const uint8_t* b, size_t size, const std::string& name) {
   } else {
     fail("{}: unsupported NPY version {}", name, major);
   }
-  if (hlen > kMaxHeader) fail("{}: NPY header of {} bytes is too long (at most {})", name, hlen, kMaxHeader);
+  if (hlen > kMaxNpyHeader) fail("{}: NPY header of {} bytes is too long (at most {})", name, hlen, kMaxNpyHeader);
   if (hstart + hlen > size) fail("{}: truncated NPY header", name);
   std::string h(reinterpret_cast<const char*>(b + hstart), hlen);
   std::smatch m;
@@ -95,24 +114,7 @@ Header parse_header(const uint8_t* b, size_t size, const std::string& name) {
   if (m[1] == "True") fail("{}: Fortran-order NPY arrays are not supported (save with C order)", name);
   if (!std::regex_search(h, m, std::regex(R"('shape'\s*:\s*\(([^)]*)\))")))
     fail("{}: NPY header has no 'shape'", name);
-  std::vector<size_t> shape;
-  std::string s = m[1];
-  // reject anything in the shape tuple other than digits, commas and spaces
-  for (char c : s)
-    if (!(std::isdigit(static_cast<unsigned char>(c)) || c == ',' || c == ' '))
-      fail("{}: malformed NPY shape '({})'", name, s.substr(0, 80));
-  // Dimensions and the body size in bytes must fit a size_t (checked here, before anything is allocated).
-  std::regex num(R"(\s*(\d+)\s*,?)");
-  size_t bytes = dtype_size(t);
-  for (std::sregex_iterator it(s.begin(), s.end(), num), end; it != end; ++it) {
-    const std::string d = (*it)[1];
-    size_t v = 0;
-    for (char c : d)
-      if (__builtin_mul_overflow(v, size_t(10), &v) || __builtin_add_overflow(v, size_t(c - '0'), &v))
-        fail("{}: NPY dimension {} is too large", name, d.substr(0, 40));
-    if (__builtin_mul_overflow(bytes, v, &bytes)) fail("{}: NPY shape ({}) is too large", name, s.substr(0, 80));
-    shape.push_back(v);
-  }
+  std::vector<size_t> shape = parse_npy_shape(m[1], dtype_size(t), name);
   return {t, shape, hstart + hlen};
 }
 

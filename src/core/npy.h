@@ -27,6 +27,12 @@ struct NpyArray {
   std::vector<float> to_float() const;  // any dtype, converted element by element
 };
 
+// Headers above this many bytes are refused (numpy itself writes at most 10000 by default).
+constexpr size_t kMaxNpyHeader = 65536;
+// The dimensions of the inside of an NPY 'shape' tuple ("3, 4" or "7,"): digits, commas and spaces only; each
+// dimension and the body size (element_bytes times their product) must fit a size_t. Errors name `name`.
+std::vector<size_t> parse_npy_shape(const std::string& tuple, size_t element_bytes, const std::string& name);
+
 NpyArray read_npy(const std::filesystem::path& path);
 // Parses an in-memory .npy file; `name` is used in error messages.
 NpyArray parse_npy(const uint8_t* bytes, size_t size, const std::string& name);

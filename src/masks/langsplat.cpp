@@ -29,6 +29,7 @@ std::vector<int64_t> read_npy_integers(const fs::path& file, std::vector<size_t>
     hlen = b[8] | (b[9] << 8) | (b[10] << 16) | (size_t(b[11]) << 24);
     hstart = 12;
   } else fail("{}: unsupported NPY version {}", name, int(b[6]));
+  if (hlen > kMaxNpyHeader) fail("{}: NPY header of {} bytes is too long (at most {})", name, hlen, kMaxNpyHeader);
   if (hstart + hlen > b.size()) fail("{}: truncated NPY header", name);
   const std::string h(reinterpret_cast<const char*>(b.data() + hstart), hlen);
   std::smatch m;
@@ -40,14 +41,11 @@ std::vector<int64_t> read_npy_integers(const fs::path& file, std::vector<size_t>
   if (!ok) fail("{}: unsupported NPY dtype {}{}", name, kind, bytes);
   if (std::regex_search(h, m, std::regex(R"('fortran_order'\s*:\s*True)"))) fail("{}: Fortran-order NPY arrays are not supported", name);
   if (!std::regex_search(h, m, std::regex(R"('shape'\s*:\s*\(([^)]*)\))"))) fail("{}: NPY header has no 'shape'", name);
-  shape.clear();
-  const std::string s = m[1];
-  std::regex num(R"((\d+))");
-  for (std::sregex_iterator it(s.begin(), s.end(), num), end; it != end; ++it) shape.push_back(std::stoull((*it)[1]));
+  shape = parse_npy_shape(m[1], size_t(bytes), name);  // dimensions and body size checked against overflow
   size_t n = 1;
   for (size_t d : shape) n *= d;
   const size_t off = hstart + hlen;
-  if (off + n * bytes > b.size()) fail("{}: truncated NPY body", name);
+  if (n * bytes > b.size() - off) fail("{}: truncated NPY body", name);
   std::vector<int64_t> out(n);
   const uint8_t* p = b.data() + off;
   for (size_t i = 0; i < n; ++i, p += bytes) {

@@ -31,3 +31,28 @@ TEST(FuzzRegressions, LangSplatIndexOutOfInt64Range) {
   std::vector<size_t> shape;
   EXPECT_FILE_ERROR(masks::read_npy_integers(f, shape), f, "out of range");
 }
+
+// fuzz_langsplat: the seg map reader had its own NPY shape parser, which took any digits inside the tuple and
+// let std::stoull throw out_of_range on a 23-digit dimension (and could overflow the element count); it now
+// uses core's checked parse_npy_shape. (The fuzz input is fuzz/corpus/langsplat/finding_shape_not_digits.)
+TEST(FuzzRegressions, LangSplatShapeDimensionTooLarge) {
+  test::TempDir t;
+  auto npy = [&](const std::string& shape) {
+    std::string h = "{'descr': '<f4', 'fortran_order': False, 'shape': (" + shape + "), }";
+    h.resize(118, ' ');
+    h += '\n';
+    std::string b = "\x93NUMPY\x01";
+    b += '\0';
+    b += char(h.size() & 0xFF);
+    b += char(h.size() >> 8);
+    return b + h;
+  };
+  const auto f = t / "frame_00001_s.npy";
+  std::vector<size_t> shape;
+  atomic_write_text(f, npy("99999999999999999999999, 2"));
+  EXPECT_FILE_ERROR(masks::read_npy_integers(f, shape), f, "too large");
+  atomic_write_text(f, npy("4294967296, 4294967296, 4"));  // the element count overflows 64 bits
+  EXPECT_FILE_ERROR(masks::read_npy_integers(f, shape), f, "too large");
+  atomic_write_text(f, npy("4,\xe0\xcd" "6, 3"));  // not digits
+  EXPECT_FILE_ERROR(masks::read_npy_integers(f, shape), f, "malformed NPY shape");
+}
