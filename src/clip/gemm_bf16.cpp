@@ -10,6 +10,7 @@
 #include <mutex>
 #include <tuple>
 #include <unordered_map>
+#include <vector>
 
 #include "clip/fastmath.h"
 #include "clip/thread_pool.h"
@@ -70,6 +71,9 @@ dnnl::matmul::primitive_desc make_pd(int m, int n, int k, int lda, int ldb, bool
   const dnnl::memory::desc c({m, n}, dt::f32, dims{ldc, 1});
   const dnnl::memory::desc bd({1, n}, dt::f32, dims{n, 1});
   dnnl::primitive_attr attr;
+  // The caller's scratchpad (per calling thread, see gemm_bf16): with the library's own, two threads running
+  // the same cached primitive at once (the decoder's one prompt per thread) sometimes got wrong products.
+  attr.set_scratchpad_mode(dnnl::scratchpad_mode::user);
   if (alpha != 1.f) attr.set_output_scales(0, {alpha});
   if (beta != 0.f) {
     dnnl::post_ops po;
@@ -80,16 +84,22 @@ dnnl::matmul::primitive_desc make_pd(int m, int n, int k, int lda, int ldb, bool
   return dnnl::matmul::primitive_desc(d, attr, engine());
 }
 
-dnnl::matmul& primitive(const Key& key) {
+struct Cached {
+  dnnl::matmul mm;
+  size_t scratch = 0;  // bytes of scratchpad it needs
+};
+
+const Cached& primitive(const Key& key) {
   static std::mutex mu;
-  static std::map<Key, dnnl::matmul> cache;
+  static std::map<Key, Cached> cache;
   std::lock_guard<std::mutex> lock(mu);
   auto it = cache.find(key);
   if (it != cache.end()) return it->second;
   const auto [m, n, k, lda, ldb, ldc, trans_b, alpha, bias, beta, threads] = key;
   (void)threads;  // part of the key: oneDNN fixes a primitive's thread split when it creates it
   try {
-    return cache.emplace(key, dnnl::matmul(make_pd(m, n, k, lda, ldb, trans_b, alpha, bias, beta, ldc))).first->second;
+    const dnnl::matmul::primitive_desc pd = make_pd(m, n, k, lda, ldb, trans_b, alpha, bias, beta, ldc);
+    return cache.emplace(key, Cached{dnnl::matmul(pd), pd.scratchpad_desc().get_size()}).first->second;
   } catch (const dnnl::error& e) {
     fail("bf16 matrix product [{} x {}] x [{} x {}]: not available on this CPU (oneDNN: {}); use --precision f32", m,
          k, k, n, e.what());
@@ -137,7 +147,7 @@ void gemm_bf16(int m, int n, int k, const uint16_t* a, int lda, const uint16_t* 
   const float* late_bias = alpha != 1.f ? bias : nullptr;
   if (late_bias) bias = nullptr;
   const Key key{m, n, k, lda, ldb, ldc, trans_b, alpha, bias != nullptr, beta, omp_get_max_threads()};
-  dnnl::matmul& mm = primitive(key);
+  const Cached& prim = primitive(key);
   using dt = dnnl::memory::data_type;
   using dims = dnnl::memory::dims;
   dnnl::engine& eng = engine();
@@ -146,8 +156,14 @@ void gemm_bf16(int m, int n, int k, const uint16_t* a, int lda, const uint16_t* 
   const dnnl::memory C({{m, n}, dt::f32, dims{ldc, 1}}, eng, c);
   std::unordered_map<int, dnnl::memory> args{{DNNL_ARG_SRC, A}, {DNNL_ARG_WEIGHTS, B}, {DNNL_ARG_DST, C}};
   if (bias) args.emplace(DNNL_ARG_BIAS, dnnl::memory({{1, n}, dt::f32, dims{n, 1}}, eng, const_cast<float*>(bias)));
+  thread_local std::vector<uint8_t> scratch;
+  if (prim.scratch > 0) {
+    if (scratch.size() < prim.scratch + 64) scratch.resize(prim.scratch + 64);
+    void* p = scratch.data() + (64 - reinterpret_cast<uintptr_t>(scratch.data()) % 64) % 64;  // 64-byte aligned
+    args.emplace(DNNL_ARG_SCRATCHPAD, dnnl::memory({{dnnl::memory::dim(prim.scratch)}, dt::u8, dims{1}}, eng, p));
+  }
   dnnl::stream s(eng);
-  mm.execute(s, args);
+  prim.mm.execute(s, args);
   s.wait();
   if (late_bias)
     for (int i = 0; i < m; ++i)
