@@ -51,7 +51,8 @@ struct GaussianModel {
   std::vector<Field> fields();
   // Allocates every array for `count` Gaussians (zero-filled; quaternions identity).
   void resize(int count);
-  // Adds an extra group filled with `fill` (half precision when f16); fails if the name exists.
+  // Adds an extra group filled with `fill` (half precision when f16); fails if the name exists. The reference
+  // (like any into `extras`) is invalidated by the next add_extra.
   ExtraGroup& add_extra(const std::string& name, int dim, float fill = 0.f, bool f16 = false);
   ExtraGroup* find_extra(const std::string& name);
   const ExtraGroup* find_extra(const std::string& name) const;

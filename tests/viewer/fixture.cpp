@@ -43,9 +43,11 @@ ViewerFixture make_viewer_fixture(const fs::path& dir) {
     }
   }
   const int D = int(s.text_embeddings.begin()->second.size());
-  ExtraGroup& q = m.add_extra("obj", K + 1);
-  ExtraGroup& z = m.add_extra("obj_id", 1);
-  ExtraGroup& lang = m.add_extra("lang", D);
+  // (References taken after the last add_extra: each may reallocate m.extras.)
+  m.add_extra("obj", K + 1);
+  m.add_extra("obj_id", 1);
+  m.add_extra("lang", D);
+  ExtraGroup &q = *m.find_extra("obj"), &z = *m.find_extra("obj_id"), &lang = *m.find_extra("lang");
   for (int i = 0; i < N; ++i) {
     const int* vi = &votes[size_t(i) * (K + 1)];
     const int k = int(std::max_element(vi, vi + K + 1) - vi);
