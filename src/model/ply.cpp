@@ -160,8 +160,10 @@ GaussianModel read_model_ply(const std::filesystem::path& path) {
     } else if (kw == "element") {
       std::string name;
       long c = -1;
+      std::string extra;
       ls >> name >> c;
-      if (ls.fail() || c < 0) fail("{}: header line {}: malformed element line '{}'", where, lineno, line);
+      // (A count like "0.2" used to be read as 0, the rest ignored.)
+      if (ls.fail() || c < 0 || (ls >> extra)) fail("{}: header line {}: malformed element line '{}'", where, lineno, line);
       if (in_vertex) vertex_done = true;
       in_vertex = name == "vertex";
       if (in_vertex) {
@@ -239,28 +241,30 @@ GaussianModel read_model_ply(const std::filesystem::path& path) {
   GaussianModel m;
   m.sh_degree = degree;
   m.resize(int(count));
+  // Destination of one property: element i goes to (*v)[i * stride + offset]. (Offsets, not pointers: with
+  // zero Gaussians the arrays are empty and `data() + c` would offset a null pointer, which UBSan reports.)
   struct Slot {
     const Prop* p;
-    float* dst;
-    size_t stride;
+    std::vector<float>* v;
+    size_t offset, stride;
   };
   std::vector<Slot> slots;
   const int S = m.sh_stride();
-  for (int c = 0; c < 3; ++c) slots.push_back({need(std::string(1, "xyz"[c])), m.mean.data() + c, 3});
-  for (int c = 0; c < 3; ++c) slots.push_back({need(fmt::format("f_dc_{}", c)), m.sh.data() + c, size_t(S) * 3});
+  for (int c = 0; c < 3; ++c) slots.push_back({need(std::string(1, "xyz"[c])), &m.mean, size_t(c), 3});
+  for (int c = 0; c < 3; ++c) slots.push_back({need(fmt::format("f_dc_{}", c)), &m.sh, size_t(c), size_t(S) * 3});
   for (int c = 0; c < 3; ++c)
     for (int j = 1; j < S; ++j)
-      slots.push_back({need(fmt::format("f_rest_{}", c * (S - 1) + j - 1)), m.sh.data() + j * 3 + c, size_t(S) * 3});
-  slots.push_back({need("opacity"), m.opacity_logit.data(), 1});
-  for (int c = 0; c < 3; ++c) slots.push_back({need(fmt::format("scale_{}", c)), m.log_scale.data() + c, 3});
-  for (int c = 0; c < 4; ++c) slots.push_back({need(fmt::format("rot_{}", c)), m.quat.data() + c, 4});
+      slots.push_back({need(fmt::format("f_rest_{}", c * (S - 1) + j - 1)), &m.sh, size_t(j * 3 + c), size_t(S) * 3});
+  slots.push_back({need("opacity"), &m.opacity_logit, 0, 1});
+  for (int c = 0; c < 3; ++c) slots.push_back({need(fmt::format("scale_{}", c)), &m.log_scale, size_t(c), 3});
+  for (int c = 0; c < 4; ++c) slots.push_back({need(fmt::format("rot_{}", c)), &m.quat, size_t(c), 4});
   for (auto& gname : group_order) {
     auto& g = groups[gname];
     int dim = int(g.size());
     for (int i = 0; i < dim; ++i)
       if (!g.count(i)) fail("{}: extra channel group '{}' has {} channels but no index {}", where, gname, dim, i);
     m.add_extra(gname, dim);
-    for (int i = 0; i < dim; ++i) slots.push_back({g[i], nullptr, size_t(dim)});
+    for (int i = 0; i < dim; ++i) slots.push_back({g[i], nullptr, size_t(i), size_t(dim)});
   }
   // Resolve extra destinations now that `extras` no longer reallocates.
   {
@@ -268,7 +272,7 @@ GaussianModel read_model_ply(const std::filesystem::path& path) {
     for (int gi = int(m.extras.size()) - 1; gi >= 0; --gi) {
       auto& e = m.extras[gi];
       s -= e.dim;
-      for (int i = 0; i < e.dim; ++i) slots[s + i].dst = e.data.data() + i;
+      for (int i = 0; i < e.dim; ++i) slots[s + i].v = &e.data;
     }
   }
   const uint8_t* base = bytes.data() + pos;
@@ -279,7 +283,7 @@ GaussianModel read_model_ply(const std::filesystem::path& path) {
     for (auto& s : slots) {
       float v = decode(r + s.p->offset, s.p->type);
       nonfinite = nonfinite || !std::isfinite(v);
-      s.dst[size_t(i) * s.stride] = v;
+      (*s.v)[size_t(i) * s.stride + s.offset] = v;
     }
   }
   if (nonfinite) fail("{}: the body holds NaN or infinite values", where);

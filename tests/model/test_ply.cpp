@@ -225,6 +225,31 @@ TEST(Ply, MalformedHeaderAsciiTruncated) {
   EXPECT_NE(error_of(dir / "absent.ply").find("absent.ply"), std::string::npos);
 }
 
+// fuzz_ply (UBSan): a header with "element vertex 0.2" was read as 0 Gaussians, and the reader then formed
+// `data() + c` on the empty arrays (an offset applied to a null pointer). Counts with trailing characters are
+// refused; a model with no Gaussians (with an extra group too) reads back empty.
+TEST(Ply, ZeroGaussiansAndCountsWithTrailingCharacters) {
+  test::TempDir dir;
+  write_raw(dir / "f.ply", kMinimal, 0, {}, "binary_little_endian 1.0");
+  std::string text = read_file_text(dir / "f.ply");
+  const size_t at = text.find("element vertex 0");
+  ASSERT_NE(at, std::string::npos);
+  text.insert(at + 16, ".2");
+  atomic_write_text(dir / "g.ply", text);
+  EXPECT_NE(error_of(dir / "g.ply").find("malformed element line 'element vertex 0.2'"), std::string::npos)
+      << error_of(dir / "g.ply");
+  GaussianModel m;
+  m.sh_degree = 1;
+  m.resize(0);
+  m.add_extra("obj", 3);
+  write_model_ply(dir / "empty.ply", m);
+  const GaussianModel r = read_model_ply(dir / "empty.ply");
+  EXPECT_EQ(r.n, 0);
+  EXPECT_EQ(r.sh_degree, 1);
+  ASSERT_NE(r.find_extra("obj"), nullptr);
+  EXPECT_EQ(r.find_extra("obj")->dim, 3);
+}
+
 TEST(Ply, WriteIsAtomicAndRejectsBadGroupName) {
   test::TempDir dir;
   GaussianModel m = random_model(4, 1, 3);
