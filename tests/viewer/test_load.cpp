@@ -244,7 +244,13 @@ TEST_F(ViewerLoad, ConcurrentClientsGetSequentialAnswersAndMemoryStaysFlat) {
   EXPECT_EQ(long(lat.size()), total);
   // Flat: what the last three quarters of the run added is small (a leak of even 1 kB per request would show
   // at 10,000 requests; the margin covers allocator arenas settling).
+#if defined(__SANITIZE_ADDRESS__)
+  // AddressSanitizer keeps freed blocks in its quarantine (256 MB by default), so RSS grows without a leak; its
+  // own leak check at exit covers this build instead.
+  std::printf("RSS check skipped under AddressSanitizer (quarantine)\n");
+#else
   EXPECT_LT(rss_end - rss_warm.load(), 8.0) << "RSS grew from " << rss_warm.load() << " MB to " << rss_end << " MB";
+#endif
 }
 
 TEST_F(ViewerLoad, SlowClientsDoNotBlockOthersAndStalledOnesAreDropped) {
