@@ -113,7 +113,7 @@ void write_model_ply(const std::filesystem::path& path, const GaussianModel& m) 
     FILE* f = std::fopen(tmp.c_str(), "wb");
     if (!f) fail("{}: cannot open for writing", path.string());
     bool ok = std::fwrite(header.data(), 1, header.size(), f) == header.size() &&
-              std::fwrite(body.data(), sizeof(float), body.size(), f) == body.size();
+              (body.empty() || std::fwrite(body.data(), sizeof(float), body.size(), f) == body.size());
     ok = (std::fclose(f) == 0) && ok;
     if (!ok) fail("{}: write failed (disk full?)", path.string());
   });
