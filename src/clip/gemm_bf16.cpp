@@ -15,6 +15,7 @@
 #include "clip/fastmath.h"
 #include "clip/thread_pool.h"
 #include "core/error.h"
+#include "core/half.h"
 
 namespace hgs::clip {
 
@@ -28,31 +29,23 @@ const char* precision_name(Precision p) { return p == Precision::BF16 ? "bf16" :
 
 namespace {
 
-// Round to nearest even; NaN stays a (quiet) NaN, infinities stay infinite.
-inline uint16_t round_bf16(float f) {
-  uint32_t u;
-  __builtin_memcpy(&u, &f, 4);
-  const uint16_t r = uint16_t((u + 0x7FFFu + ((u >> 16) & 1u)) >> 16);
-  return (u & 0x7FFFFFFFu) > 0x7F800000u ? uint16_t(0x7FC0u) : r;
-}
-
 HGS_AVX512_CLONE void convert_rows(const float* x, long r0, long r1, int cols, int ld, uint16_t* out, float scale) {
   for (long i = r0; i < r1; ++i) {
     const float* s = x + size_t(i) * ld;
     uint16_t* o = out + size_t(i) * cols;
     if (scale == 1.f) {
 #pragma omp simd
-      for (int j = 0; j < cols; ++j) o[j] = round_bf16(s[j]);
+      for (int j = 0; j < cols; ++j) o[j] = float_to_bf16(s[j]);
     } else {
 #pragma omp simd
-      for (int j = 0; j < cols; ++j) o[j] = round_bf16(scale * s[j]);
+      for (int j = 0; j < cols; ++j) o[j] = float_to_bf16(scale * s[j]);
     }
   }
 }
 
 HGS_AVX512_CLONE void sum_rows(const float* a, const float* b, size_t n, uint16_t* out) {
 #pragma omp simd
-  for (size_t i = 0; i < n; ++i) out[i] = round_bf16(a[i] + b[i]);
+  for (size_t i = 0; i < n; ++i) out[i] = float_to_bf16(a[i] + b[i]);
 }
 
 dnnl::engine& engine() {
@@ -124,6 +117,14 @@ void convert_to_bf16_serial(const float* x, int rows, int cols, int ld, uint16_t
 }
 
 void sum_to_bf16_serial(const float* a, const float* b, size_t n, uint16_t* out) { sum_rows(a, b, n, out); }
+
+const uint16_t* rounded_or_convert(const uint16_t* given, const float* x, int rows, int cols,
+                                   std::vector<uint16_t>& buf) {
+  if (given) return given;
+  buf.resize(size_t(rows) * cols);
+  convert_rows(x, 0, rows, cols, cols, buf.data(), 1.f);
+  return buf.data();
+}
 
 std::vector<uint16_t> to_bf16(const std::vector<float>& x) {
   std::vector<uint16_t> out(x.size());

@@ -24,6 +24,10 @@ std::vector<uint16_t> to_bf16(const std::vector<float>& x);
 void split_heads_bf16(const float* x, int n, int ld, int heads, int hd, uint16_t* out);
 // The same on the calling thread only (for callers that already run one unit of work per thread).
 void convert_to_bf16_serial(const float* x, int rows, int cols, int ld, uint16_t* out, float scale = 1.f);
+// `given` when the caller already has x [rows, cols] (contiguous) rounded, else x rounded into buf on the calling
+// thread: buf.data().
+const uint16_t* rounded_or_convert(const uint16_t* given, const float* x, int rows, int cols,
+                                   std::vector<uint16_t>& buf);
 // out [n] = bf16(a [n] + b [n]) on the calling thread (a sum rounded once, without a float32 copy).
 void sum_to_bf16_serial(const float* a, const float* b, size_t n, uint16_t* out);
 

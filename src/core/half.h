@@ -36,11 +36,13 @@ inline uint16_t float_to_half_stochastic(float f, uint32_t r) {
   return _cvtss_sh(f, _MM_FROUND_TO_ZERO | _MM_FROUND_NO_EXC);
 }
 
-// float -> bfloat16, round to nearest even (finite inputs).
+// float -> bfloat16, round to nearest even; NaN stays a (quiet) NaN, infinities stay infinite. Branch-free
+// (a select), so loops over it vectorise.
 inline uint16_t float_to_bf16(float f) {
   uint32_t u;
   __builtin_memcpy(&u, &f, 4);
-  return static_cast<uint16_t>((u + 0x7FFFu + ((u >> 16) & 1u)) >> 16);
+  const uint16_t r = static_cast<uint16_t>((u + 0x7FFFu + ((u >> 16) & 1u)) >> 16);
+  return (u & 0x7FFFFFFFu) > 0x7F800000u ? uint16_t(0x7FC0u) : r;
 }
 
 // A counter-based 32-bit hash (murmur3 finaliser) for reproducible per-element random bits.

@@ -28,20 +28,12 @@ void attend_few_queries(const Attention& a, int heads, const float* qin, int nq,
   if (bf16) {
     w.a16.resize(size_t(R) * C);
     clip::convert_to_bf16_serial(w.qk.data(), R, C, C, w.a16.data());
-    if (!xk16) {
-      w.b16.resize(size_t(n) * C);
-      clip::convert_to_bf16_serial(xk, n, C, C, w.b16.data());
-      xk16 = w.b16.data();
-    }
+    xk16 = clip::rounded_or_convert(xk16, xk, n, C, w.b16);
     clip::gemm_bf16(R, n, C, w.a16.data(), C, xk16, C, true, 1.f, nullptr, 0.f, w.s.data(), n);
     clip::softmax_rows(w.s.data(), R, n, false);
     w.a16.resize(size_t(R) * n);
     clip::convert_to_bf16_serial(w.s.data(), R, n, n, w.a16.data());
-    if (!xv16) {
-      w.c16.resize(size_t(n) * C);
-      clip::convert_to_bf16_serial(xv, n, C, C, w.c16.data());
-      xv16 = w.c16.data();
-    }
+    xv16 = clip::rounded_or_convert(xv16, xv, n, C, w.c16);
     clip::gemm_bf16(R, C, n, w.a16.data(), n, xv16, C, false, 1.f, nullptr, 0.f, w.z.data(), C);
   } else {
     cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, R, n, C, 1.f, w.qk.data(), C, xk, C, 0.f, w.s.data(), n);

@@ -92,11 +92,7 @@ void upconv(const Upconv& u, const float* x, int g, std::vector<float>& y, std::
   y.resize(size_t(g) * g * 4 * u.out);
   out.resize(size_t(4) * g * g * u.out);
   if (!u.w16.empty()) {
-    if (!rounded) {
-      x16.resize(size_t(g) * g * u.in);
-      clip::convert_to_bf16_serial(x, g * g, u.in, u.in, x16.data());
-      rounded = x16.data();
-    }
+    rounded = clip::rounded_or_convert(rounded, x, g * g, u.in, x16);
     clip::gemm_bf16(g * g, 4 * u.out, u.in, rounded, u.in, u.w16.data(), 4 * u.out, false, 1.f, nullptr, 0.f,
                     y.data(), 4 * u.out);
   } else {
