@@ -33,7 +33,6 @@
 #include <vector>
 
 #include "render/binning.h"
-#include "render/simd.h"
 
 namespace hgs::render {
 
@@ -87,17 +86,35 @@ struct RasterGrads {
   T* extra = nullptr;          // [N, C] out (may be null)
 };
 
-// Scratch reused between calls; backward must get the workspace of the forward it differentiates (grown, never shrunk): per-thread tile buffers and per-pair gradients.
+// Grow-only, 128-byte-aligned scratch memory viewed as an array of U. The two kernel compilations
+// (raster_isa.h) each have their own pack types (simd.h), so the workspace holds bytes and each kernel names its
+// own type.
+class RasterScratch {
+ public:
+  template <class U> U* get(size_t count) {  // at least count U's; the contents are kept when it grows
+    const size_t bytes = count * sizeof(U);
+    if (blocks_.size() * sizeof(Block) < bytes) blocks_.resize((bytes + sizeof(Block) - 1) / sizeof(Block));
+    return reinterpret_cast<U*>(blocks_.data());
+  }
+
+ private:
+  struct alignas(128) Block {
+    unsigned char b[128];
+  };
+  std::vector<Block> blocks_;
+};
+
+// Scratch reused between calls; backward must get the workspace of the forward it differentiates (grown, never
+// shrunk): per-thread tile buffers and per-pair gradients.
 template <class T>
 struct RasterWorkspace {
   struct PerThread {
-    std::vector<simd::Pack<T>> acc;         // backward accumulators [n, F]
-    std::vector<int> vk;                    // per-batch visit lists of a tile: Gaussian [visits]
-    std::vector<simd::Pack<T>> vw;          // ... and its weight (forward) or extra-channel dot (backward)
-    std::vector<simd::Pack<T>> wacc;        // forward weight-sum accumulators [n, J]
-    std::vector<T> dw;                      // backward d(weight_sums) of the tile's Gaussians [n, J]
-    std::vector<simd::Pack<T>> bstate;      // per-batch state [32, 7 + C + J]
-    std::vector<simd::Mask<T>> blast;       // per-batch active / last-contributor masks [2, 32]
+    RasterScratch vk;      // per-batch visit lists of a tile: Gaussian index (int) [visits]
+    RasterScratch vw;      // ... and its weight (forward) or extra-channel dot (backward), packs [visits]
+    RasterScratch wacc;    // forward weight-sum accumulators, packs [n, J]
+    RasterScratch dw;      // backward d(weight_sums) of the tile's Gaussians, T [n, J]
+    RasterScratch bstate;  // per-batch state, packs [batches, 7 + C + J]
+    RasterScratch blast;   // per-batch active / last-contributor masks [2, batches]
   };
   std::vector<PerThread> threads;
   std::vector<T> records;       // [N, 16] per-Gaussian records built by forward, reused by backward

@@ -6,18 +6,19 @@
 // skipped as in forward. Extra-channel dots are precomputed per visit (extra_dots) and the channel gradients
 // summed per Gaussian afterwards (extra_grads). Per-(tile, Gaussian) slots are reduced per Gaussian in a fixed
 // order, so the result is bitwise deterministic for any thread count.
-#include "render/rasterize.h"
+#include "render/raster_isa.h"
 
 #include <omp.h>
 
 #include <algorithm>
 #include <cstring>
+#include <tuple>
 
 #include "render/rasterize_common.h"
 
 #pragma GCC diagnostic ignored "-Wpsabi"
 
-namespace hgs::render {
+namespace hgs::render::HGS_RASTER_NS {
 using namespace detail;
 namespace {
 
@@ -76,21 +77,18 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
   const int n = td.n;
   const uint32_t* masks = ws_masks + bins.tile_start[tile];
   const int J = g.d_weight_sums ? in.num_weights : 0;
+  T* DW = J > 0 ? w.dw.template get<T>(size_t(n) * J) : nullptr;
   if (J > 0) {
-    if (w.dw.size() < size_t(n) * J) w.dw.resize(size_t(n) * J);
     const int s0 = bins.tile_start[tile];
     for (int k = 0; k < n; ++k)
       for (int jj = 0; jj < J; ++jj)
-        w.dw[size_t(k) * J + jj] = g.d_weight_sums[size_t(bins.tile_gauss[s0 + k]) * J + jj];
+        DW[size_t(k) * J + jj] = g.d_weight_sums[size_t(bins.tile_gauss[s0 + k]) * J + jj];
   }
-  const T* DW = w.dw.data();
   // per-batch state: [Tc, S, gr, gg, gb, gd, Tbg, GE[C], MW[J]]
   enum { bT, bS, bR, bG, bB, bD, bBg, kBatchFixed };
   const int BS = kBatchFixed + C + J;
-  if (w.bstate.size() < size_t(kBatches) * BS) w.bstate.resize(size_t(kBatches) * BS);
-  if (w.blast.size() < size_t(kBatches)) w.blast.resize(kBatches);
-  P* bst = w.bstate.data();
-  M* blast = w.blast.data();
+  P* bst = w.bstate.template get<P>(size_t(kBatches) * BS);
+  M* blast = w.blast.template get<M>(kBatches);
   int kmax[kBatches];
   uint32_t jmask[kBatches];  // pixel-weight maps present in each batch (for_batch_maps)
   uint32_t live = 0;  // batches with at least one contributor
@@ -143,9 +141,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
   P* vdot = nullptr;
   if (kExtra) {
     int vcnt[kBatches] = {};
-    size_visit_lists(w, masks, n, live, voff);
-    vk = w.vk.data();
-    vdot = w.vw.data();
+    std::tie(vk, vdot) = size_visit_lists<P>(w, masks, n, live, voff);
     for (int k = 0; k < n; ++k)
       for (uint32_t mb = masks[k] & live; mb; mb &= mb - 1) {
         const int bt = __builtin_ctz(mb);
@@ -296,4 +292,4 @@ template void rasterize_backward<float>(const RasterInputs<float>&, const Binnin
 template void rasterize_backward<double>(const RasterInputs<double>&, const Binning&, RasterWorkspace<double>&,
                                          const double*, const int32_t*, const RasterGrads<double>&);
 
-}  // namespace hgs::render
+}  // namespace hgs::render::HGS_RASTER_NS

@@ -7,10 +7,12 @@
 
 #include <algorithm>
 #include <cstring>
+#include <utility>
 
 #include "render/rasterize.h"
+#include "render/simd.h"
 
-namespace hgs::render::detail {
+namespace hgs::render::HGS_RASTER_NS::detail {
 
 using simd::kLanes;
 constexpr int kBatchesPerRow = kTileSize / kLanes;
@@ -42,18 +44,18 @@ bool load_records(const Binning& bins, const T* records, T* tile_records, bool g
   return true;
 }
 
-// Per-batch visit lists of a tile in the thread's scratch (w.vk, w.vw): offsets [33] into one flat array sized
-// by the bits `batches` of the masks of Gaussians [0, n) (an upper bound on the visits of every batch).
-template <class PerThread>
-void size_visit_lists(PerThread& w, const uint32_t* masks, int n, uint32_t batches, int* off) {
+// Per-batch visit lists of a tile in the thread's scratch (w.vk, w.vw): offsets [33] into one flat
+// array sized by the bits `batches` of the masks of Gaussians [0, n) (an upper bound on the visits of every
+// batch). Returns the visit arrays: Gaussian indices and packs.
+template <class P, class PerThread>
+std::pair<int*, P*> size_visit_lists(PerThread& w, const uint32_t* masks, int n, uint32_t batches, int* off) {
   int cnt[kBatches] = {};
   for (int k = 0; k < n; ++k)
     for (uint32_t mb = masks[k] & batches; mb; mb &= mb - 1) ++cnt[__builtin_ctz(mb)];
   off[0] = 0;
   for (int b = 0; b < kBatches; ++b) off[b + 1] = off[b] + cnt[b];
   const size_t nv = size_t(off[kBatches]);
-  if (w.vk.size() < nv) w.vk.resize(nv);
-  if (w.vw.size() < nv) w.vw.resize(nv);
+  return {w.vk.template get<int>(nv), w.vw.template get<P>(nv)};
 }
 
 // Pixel-weight maps of a batch: bit j of `present` is set when map j is non-zero at one of its pixels
@@ -95,4 +97,4 @@ void ensure_threads(RasterWorkspace<T>& ws) {
   if (ws.threads.size() < nt) ws.threads.resize(nt);
 }
 
-}  // namespace hgs::render::detail
+}  // namespace hgs::render::HGS_RASTER_NS::detail

@@ -6,18 +6,19 @@
 // kTransmittanceMin, else w = alpha T is accumulated into colour / depth / pixel-weight sums. Extra channels are
 // summed afterwards from each batch's recorded visits (composite_extras). Saves final T and the last contributor
 // per pixel for backward; per-pair weight sums are reduced per Gaussian in a fixed order.
-#include "render/rasterize.h"
+#include "render/raster_isa.h"
 
 #include <omp.h>
 
 #include <algorithm>
 #include <cstring>
+#include <tuple>
 
 #include "render/rasterize_common.h"
 
 #pragma GCC diagnostic ignored "-Wpsabi"
 
-namespace hgs::render {
+namespace hgs::render::HGS_RASTER_NS {
 using namespace detail;
 namespace {
 
@@ -140,13 +141,10 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   // per-batch state: [T, R, G, B, D, E[C], MW[J]] + active / last masks
   enum { bT, bR, bG, bB, bD, kBatchFixed };
   const int BS = kBatchFixed + C + J;
-  if (w.bstate.size() < size_t(kBatches) * BS) w.bstate.resize(size_t(kBatches) * BS);
-  if (w.blast.size() < size_t(2) * kBatches) w.blast.resize(size_t(2) * kBatches);
-  if (J > 0 && w.wacc.size() < size_t(n) * J) w.wacc.resize(size_t(n) * J);
-  P* bst = w.bstate.data();
-  M* bact = w.blast.data();
+  P* bst = w.bstate.template get<P>(size_t(kBatches) * BS);
+  M* bact = w.blast.template get<M>(size_t(2) * kBatches);
   M* blast = bact + kBatches;
-  P* wacc = w.wacc.data();
+  P* wacc = J > 0 ? w.wacc.template get<P>(size_t(n) * J) : nullptr;
   const P lane = simd::iota_pack<T>();
   const M lane_i = __builtin_convertvector(lane, M);
   uint32_t alive = 0;
@@ -174,11 +172,7 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   int voff[kBatches + 1], vcnt[kBatches] = {};
   int* vk = nullptr;
   P* vw = nullptr;
-  if (kExtra && n > 0) {
-    size_visit_lists(w, masks, n, all_batches, voff);
-    vk = w.vk.data();
-    vw = w.vw.data();
-  }
+  if (kExtra && n > 0) std::tie(vk, vw) = size_visit_lists<P>(w, masks, n, all_batches, voff);
   int kend = 0;  // Gaussians [kend, n) were never reached (all batches terminated)
   for (int k = 0; k < n && alive; ++k) {
     kend = k + 1;
@@ -305,4 +299,4 @@ template void rasterize_forward<float>(const RasterInputs<float>&, const Binning
 template void rasterize_forward<double>(const RasterInputs<double>&, const Binning&, RasterWorkspace<double>&,
                                         const RasterOutputs<double>&);
 
-}  // namespace hgs::render
+}  // namespace hgs::render::HGS_RASTER_NS

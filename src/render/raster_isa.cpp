@@ -1,0 +1,82 @@
+// Run-time choice between the AVX2 and AVX-512 compilations of the rasterizer kernels (raster_isa.h), and the
+// public rasterize_forward / rasterize_backward that dispatch to them.
+#include "render/raster_isa.h"
+
+#include <atomic>
+#include <cstdlib>
+
+#include "core/error.h"
+
+namespace hgs::render {
+namespace {
+
+int detect() {  // RasterIsa as int
+  if (const char* e = std::getenv("HGS_RASTER_ISA"); e && *e) {
+    const RasterIsa isa = parse_raster_isa(e);
+    if (!raster_isa_supported(isa)) fail("HGS_RASTER_ISA={}: this CPU does not support it", e);
+    return int(isa);
+  }
+  return int(raster_isa_supported(RasterIsa::kAvx512) ? RasterIsa::kAvx512 : RasterIsa::kAvx2);
+}
+
+std::atomic<int>& current() {
+  static std::atomic<int> c{detect()};
+  return c;
+}
+
+}  // namespace
+
+bool raster_isa_supported(RasterIsa isa) {
+  if (isa == RasterIsa::kAvx2) return true;  // the build's baseline
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw") &&
+         __builtin_cpu_supports("avx512cd") && __builtin_cpu_supports("avx512dq") &&
+         __builtin_cpu_supports("avx512vl");
+}
+
+std::vector<RasterIsa> supported_raster_isas() {
+  std::vector<RasterIsa> r{RasterIsa::kAvx2};
+  if (raster_isa_supported(RasterIsa::kAvx512)) r.push_back(RasterIsa::kAvx512);
+  return r;
+}
+
+RasterIsa raster_isa() { return RasterIsa(current().load(std::memory_order_relaxed)); }
+
+void set_raster_isa(RasterIsa isa) {
+  if (!raster_isa_supported(isa)) fail("rasterizer: this CPU does not support {}", raster_isa_name(isa));
+  current().store(int(isa), std::memory_order_relaxed);
+}
+
+const char* raster_isa_name(RasterIsa isa) { return isa == RasterIsa::kAvx512 ? "avx512" : "avx2"; }
+
+RasterIsa parse_raster_isa(const std::string& name) {
+  if (name == "avx2") return RasterIsa::kAvx2;
+  if (name == "avx512") return RasterIsa::kAvx512;
+  fail("unknown rasterizer ISA '{}' (avx2 or avx512)", name);
+}
+
+template <class T>
+void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws,
+                       const RasterOutputs<T>& out) {
+  if (raster_isa() == RasterIsa::kAvx512) avx512::rasterize_forward(in, bins, ws, out);
+  else avx2::rasterize_forward(in, bins, ws, out);
+}
+
+template <class T>
+void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws, const T* final_T,
+                        const int32_t* last, const RasterGrads<T>& g) {
+  // Both compilations lay out the workspace alike, so either may differentiate the other's forward.
+  if (raster_isa() == RasterIsa::kAvx512) avx512::rasterize_backward(in, bins, ws, final_T, last, g);
+  else avx2::rasterize_backward(in, bins, ws, final_T, last, g);
+}
+
+template void rasterize_forward<float>(const RasterInputs<float>&, const Binning&, RasterWorkspace<float>&,
+                                       const RasterOutputs<float>&);
+template void rasterize_forward<double>(const RasterInputs<double>&, const Binning&, RasterWorkspace<double>&,
+                                        const RasterOutputs<double>&);
+template void rasterize_backward<float>(const RasterInputs<float>&, const Binning&, RasterWorkspace<float>&,
+                                        const float*, const int32_t*, const RasterGrads<float>&);
+template void rasterize_backward<double>(const RasterInputs<double>&, const Binning&, RasterWorkspace<double>&,
+                                         const double*, const int32_t*, const RasterGrads<double>&);
+
+}  // namespace hgs::render

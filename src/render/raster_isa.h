@@ -1,0 +1,46 @@
+// Which compilation of the rasterizer kernels runs. rasterize_forward.cpp / rasterize_backward.cpp are compiled
+// twice (CMakeLists.txt): with the build's baseline flags (namespace avx2: the portable x86-64-v3 build) and with
+// -march=x86-64-v4 (namespace avx512: the same 8-pixel batches and the same arithmetic, with AVX-512's 32 vector
+// registers, so the walks' accumulators stay in registers, and mask registers for the lane selects).
+// rasterize_forward / rasterize_backward (rasterize.h) run the one chosen here: avx512 on CPUs with AVX-512 (F,
+// BW, CD, DQ, VL), else avx2. HGS_RASTER_ISA=avx2|avx512 in the environment (read once) or set_raster_isa()
+// overrides the choice. Both do the same IEEE operations in the same order (no contraction into FMA: the
+// build is ISO C++, -ffp-contract=off), so their results are bitwise equal (test_isa.cpp checks it).
+// (Batches of 16 pixels, one AVX-512 register of floats, were measured too: forward 1.2x faster than avx2,
+// backward 1.2x slower, the whole step no faster, on a 2-core Xeon with AMX; not kept.)
+#pragma once
+#include <string>
+#include <vector>
+
+#include "render/rasterize.h"
+
+namespace hgs::render {
+
+enum class RasterIsa { kAvx2, kAvx512 };
+
+bool raster_isa_supported(RasterIsa isa);  // by this CPU
+std::vector<RasterIsa> supported_raster_isas();
+RasterIsa raster_isa();                    // the one rasterize_forward uses now
+void set_raster_isa(RasterIsa isa);        // fails when the CPU does not support it
+const char* raster_isa_name(RasterIsa isa);  // "avx2" / "avx512"
+RasterIsa parse_raster_isa(const std::string& name);  // "avx2" / "avx512"; fails otherwise
+
+// The two compilations (called through rasterize_forward / rasterize_backward).
+namespace avx2 {
+template <class T>
+void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws,
+                       const RasterOutputs<T>& out);
+template <class T>
+void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws, const T* final_T,
+                        const int32_t* last, const RasterGrads<T>& g);
+}  // namespace avx2
+namespace avx512 {
+template <class T>
+void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws,
+                       const RasterOutputs<T>& out);
+template <class T>
+void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws, const T* final_T,
+                        const int32_t* last, const RasterGrads<T>& g);
+}  // namespace avx512
+
+}  // namespace hgs::render
