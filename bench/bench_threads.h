@@ -5,6 +5,8 @@
 #include <benchmark/benchmark.h>
 #include <omp.h>
 
+#include "render/raster_isa.h"
+
 namespace hgs::bench {
 
 // Sets the OpenMP thread count to the benchmark's argument `arg` for the benchmark's lifetime.
@@ -20,6 +22,10 @@ class OmpThreads {
  private:
   int prev_;
 };
+
+// The rasterizer compilation in use (render/raster_isa.h; HGS_RASTER_ISA=avx2|avx512 chooses), in the run's header.
+inline const bool kRasterIsaContext =
+    (benchmark::AddCustomContext("raster_isa", render::raster_isa_name(render::raster_isa())), true);
 
 // A benchmark without other arguments at 1 and 2 threads.
 inline void at_1_and_2_threads(benchmark::internal::Benchmark* b) { b->ArgName("threads")->Arg(1)->Arg(2); }

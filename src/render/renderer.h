@@ -6,6 +6,7 @@
 //   sh.{h,cpp}        spherical-harmonics colour per view direction (degree 0..3), clamped at 0 as in 3DGS
 //   binning.{h,cpp}   16x16 tile binning, per-tile front-to-back depth order
 //   rasterize.{h,cpp} per-pixel front-to-back alpha compositing of RGB, alpha, depth and C extra channels
+//   raster_isa.{h,cpp} the AVX2 or the AVX-512 compilation of the rasterizer kernels, chosen at run time
 //   simd.h            8-lane packs (GCC vector extensions) and the fast exp used by the rasterizer
 // GaussianRenderer (= RendererT<float>) ties them together in two phases and keeps every buffer between calls
 // (renderer_state.h); renderer_preprocess.cpp and renderer_composite.cpp hold the phases, renderer.cpp the rest.
