@@ -1,7 +1,8 @@
 // Which compilation of the rasterizer kernels runs. rasterize_forward.cpp / rasterize_backward.cpp are compiled
 // twice (CMakeLists.txt): with the build's baseline flags (namespace avx2: the portable x86-64-v3 build) and with
-// -march=x86-64-v4 (namespace avx512: the same 8-pixel batches and the same arithmetic, with AVX-512's 32 vector
-// registers, so the walks' accumulators stay in registers, and mask registers for the lane selects).
+// AVX-512 enabled for the kernels (namespace avx512, raster_isa_begin.h: the same 8-pixel batches and the same
+// arithmetic, with 32 vector registers, so the walks' accumulators stay in registers, and mask registers for the
+// lane selects).
 // rasterize_forward / rasterize_backward (rasterize.h) run the one chosen here: avx512 on CPUs with AVX-512 (F,
 // BW, CD, DQ, VL), else avx2. HGS_RASTER_ISA=avx2|avx512 in the environment (read once) or set_raster_isa()
 // overrides the choice. Both do the same IEEE operations in the same order (no contraction into FMA: the

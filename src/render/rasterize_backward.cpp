@@ -18,6 +18,8 @@
 
 #pragma GCC diagnostic ignored "-Wpsabi"
 
+#include "render/raster_isa_begin.h"
+
 namespace hgs::render::HGS_RASTER_NS {
 using namespace detail;
 namespace {
@@ -293,3 +295,5 @@ template void rasterize_backward<double>(const RasterInputs<double>&, const Binn
                                          const double*, const int32_t*, const RasterGrads<double>&);
 
 }  // namespace hgs::render::HGS_RASTER_NS
+
+#include "render/raster_isa_end.h"

@@ -18,6 +18,8 @@
 
 #pragma GCC diagnostic ignored "-Wpsabi"
 
+#include "render/raster_isa_begin.h"
+
 namespace hgs::render::HGS_RASTER_NS {
 using namespace detail;
 namespace {
@@ -300,3 +302,5 @@ template void rasterize_forward<double>(const RasterInputs<double>&, const Binni
                                         const RasterOutputs<double>&);
 
 }  // namespace hgs::render::HGS_RASTER_NS
+
+#include "render/raster_isa_end.h"

@@ -1,9 +1,9 @@
 // Tiny SIMD layer for the rasterizer: fixed 8-lane packs built on GCC vector extensions, so the same template
 // code runs as float x 8 (one AVX2 register; the production path) and double x 8 (the exact test path).
-// The kernels that use it are compiled twice (render/raster_isa.h): for the portable x86-64-v3 baseline and for
-// x86-64-v4 (the same 8-lane packs with AVX-512's 32 vector registers and mask registers). Each compilation
-// keeps its own copy of these helpers in its own inline namespace (avx2 / avx512, HGS_RASTER_NS), so the
-// linker can never hand one compilation's code to the other.
+// The kernels that use it are compiled twice (render/raster_isa.h): for the portable x86-64-v3 baseline and with
+// AVX-512 (the same 8-lane packs with 32 vector registers and mask registers). Each compilation keeps these
+// helpers in its own inline namespace (avx2 / avx512, HGS_RASTER_NS). They are compiled for the baseline and
+// inlined into the AVX-512 kernels (raster_isa_begin.h), so no out-of-line copy ever holds AVX-512 code.
 // Masks are integer vectors of the same lane size (-1 = true), `m ? a : b` selects lane-wise.
 // vexp(float pack) is a Cephes-style polynomial exp (about 1 ulp on the rasterizer's range, x <= 0);
 // vexp(double pack) calls std::exp per lane so double instantiations are exact references.
@@ -17,9 +17,6 @@
 
 // The namespace of the kernels compiled with these helpers (hgs::render::avx2 / avx512, raster_isa.h).
 #if defined(HGS_RASTER_AVX512)
-#if !defined(__AVX512F__) || !defined(__AVX512VL__)
-#error "the avx512 rasterizer compilation needs -march=x86-64-v4"
-#endif
 #define HGS_RASTER_NS avx512
 #else
 #define HGS_RASTER_NS avx2
