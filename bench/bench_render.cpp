@@ -120,6 +120,17 @@ void BM_ShForward(benchmark::State& state) {
     sh_forward(s.n, 3, 16, s.sh.data(), s.mean.data(), st.cam.campos, st.radius.data(), st.colors.data());
 }
 
+void BM_ShBackward(benchmark::State& state) {
+  const bench::OmpThreads threads(state, 0);
+  BenchScene& s = scene();
+  Stages& st = stages();
+  std::vector<float> dcolors(3 * s.n), dsh(s.sh.size()), dmean(3 * s.n);
+  for (size_t i = 0; i < dcolors.size(); ++i) dcolors[i] = 0.01f * float(i % 7) - 0.03f;
+  for (auto _ : state)
+    sh_backward(s.n, 3, 16, s.sh.data(), s.mean.data(), st.cam.campos, st.radius.data(), dcolors.data(), dsh.data(),
+                dmean.data());
+}
+
 void BM_Binning(benchmark::State& state) {
   const bench::OmpThreads threads(state, 0);
   BenchScene& s = scene();
@@ -211,6 +222,7 @@ void BM_RenderForwardBackward(benchmark::State& state) {
 
 BENCHMARK(BM_Project)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_ShForward)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ShBackward)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_Binning)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_RasterizeForward)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_RasterizeBackward)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();

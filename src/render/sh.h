@@ -3,7 +3,9 @@
 // colour_c = max(sum_k B_k(d) sh[k, c] + 0.5, 0) with d = normalise(mean - campos) and B_k the 3DGS basis
 // (constants C0..C3 of the reference implementation). Backward gives dL/dsh for the active coefficients and
 // dL/dmean through the direction (basis derivative, then the normalisation); clamped channels pass no gradient.
-// Templated on the scalar so tests run it in double; the production path is T = float.
+// Templated on the scalar so tests run it in double; the production path is T = float, which sh.cpp runs 8
+// Gaussians at a time by instantiating these same templates on a pack of 8 floats (compiled without FMA
+// contraction, so its bits are those of T = float one Gaussian at a time; test_sh_simd.cpp).
 #pragma once
 #include <cmath>
 
@@ -12,6 +14,17 @@ namespace hgs::render {
 constexpr int kMaxShCoeffs = 16;
 
 inline constexpr int sh_num_coeffs(int degree) { return (degree + 1) * (degree + 1); }
+
+// The two steps of the per-Gaussian templates below that are not plain arithmetic, as functions so the templates
+// also run on sh.cpp's pack of 8 Gaussians (one float lane each), which overloads them lane-wise.
+template <class T>
+inline T sh_sqrt(T x) {
+  return std::sqrt(x);
+}
+template <class T>
+inline T sh_if_positive(T c, T a, T b) {  // c > 0 ? a : b
+  return c > T(0) ? a : b;
+}
 
 // Basis values b [16] at unit direction (x, y, z) and, when db != null, their derivatives db [16, 3].
 template <class T>
@@ -71,8 +84,8 @@ inline void sh_basis(int degree, T x, T y, T z, T* b, T* db) {
 // color [3] = max(raw + 0.5, 0); raw [3] (optional) receives the value before the clamp.
 template <class T>
 inline void sh_eval_one(int degree, const T* sh, const T* dir, T* color, T* raw = nullptr) {
-  const T len = std::sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
-  const T il = len > T(0) ? T(1) / len : T(0);
+  const T len = sh_sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
+  const T il = sh_if_positive(len, T(1) / len, T(0));
   T b[kMaxShCoeffs];
   sh_basis(degree, dir[0] * il, dir[1] * il, dir[2] * il, b, (T*)nullptr);
   const int K = sh_num_coeffs(degree);
@@ -81,7 +94,7 @@ inline void sh_eval_one(int degree, const T* sh, const T* dir, T* color, T* raw 
     for (int k = 0; k < K; ++k) v += b[k] * sh[3 * k + c];
     v += T(0.5);
     if (raw) raw[c] = v;
-    color[c] = v > T(0) ? v : T(0);
+    color[c] = sh_if_positive(v, v, T(0));
   }
 }
 
@@ -89,8 +102,8 @@ inline void sh_eval_one(int degree, const T* sh, const T* dir, T* color, T* raw 
 // adds dL/d(dir) to ddir [3].
 template <class T>
 inline void sh_backward_one(int degree, const T* sh, const T* dir, const T* dcolor, T* dsh, T* ddir) {
-  const T len = std::sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
-  const T il = len > T(0) ? T(1) / len : T(0);
+  const T len = sh_sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
+  const T il = sh_if_positive(len, T(1) / len, T(0));
   const T n[3] = {dir[0] * il, dir[1] * il, dir[2] * il};
   T b[kMaxShCoeffs], db[kMaxShCoeffs * 3];
   sh_basis(degree, n[0], n[1], n[2], b, db);
@@ -99,7 +112,7 @@ inline void sh_backward_one(int degree, const T* sh, const T* dir, const T* dcol
   for (int c = 0; c < 3; ++c) {
     T v = 0;
     for (int k = 0; k < K; ++k) v += b[k] * sh[3 * k + c];
-    g[c] = v + T(0.5) > T(0) ? dcolor[c] : T(0);  // clamp at 0 passes no gradient
+    g[c] = sh_if_positive(v + T(0.5), dcolor[c], T(0));  // clamp at 0 passes no gradient
   }
   T dn[3] = {0, 0, 0};
   for (int k = 0; k < K; ++k) {
