@@ -5,8 +5,9 @@
 // lane selects).
 // rasterize_forward / rasterize_backward (rasterize.h) run the one chosen here: avx512 on CPUs with AVX-512 (F,
 // BW, CD, DQ, VL), else avx2. HGS_RASTER_ISA=avx2|avx512 in the environment (read once) or set_raster_isa()
-// overrides the choice. Both do the same IEEE operations in the same order (no contraction into FMA: the
-// build is ISO C++, -ffp-contract=off), so their results are bitwise equal (test_isa.cpp checks it).
+// overrides the choice. Both compile the same source with the same compiler, which fuses the same a * b + c into
+// FMA in both (GCC contracts by default in C++; both instruction sets have FMA), so their results are bitwise
+// equal; not a language guarantee, so test_isa.cpp checks it on every build.
 // (Batches of 16 pixels, one AVX-512 register of floats, were measured too: forward 1.2x faster than avx2,
 // backward 1.2x slower, the whole step no faster, on a 2-core Xeon with AMX; not kept.)
 #pragma once
