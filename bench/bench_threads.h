@@ -5,6 +5,9 @@
 #include <benchmark/benchmark.h>
 #include <omp.h>
 
+#include <exception>
+#include <string>
+
 #include "render/raster_isa.h"
 
 namespace hgs::bench {
@@ -24,8 +27,14 @@ class OmpThreads {
 };
 
 // The rasterizer compilation in use (render/raster_isa.h; HGS_RASTER_ISA=avx2|avx512 chooses), in the run's header.
-inline const bool kRasterIsaContext =
-    (benchmark::AddCustomContext("raster_isa", render::raster_isa_name(render::raster_isa())), true);
+inline std::string raster_isa_context() {
+  try {
+    return render::raster_isa_name(render::raster_isa());
+  } catch (const std::exception& e) {  // a bad HGS_RASTER_ISA: say so here, the first render fails with it
+    return e.what();
+  }
+}
+inline const bool kRasterIsaContext = (benchmark::AddCustomContext("raster_isa", raster_isa_context()), true);
 
 // A benchmark without other arguments at 1 and 2 threads.
 inline void at_1_and_2_threads(benchmark::internal::Benchmark* b) { b->ArgName("threads")->Arg(1)->Arg(2); }

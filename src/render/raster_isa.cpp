@@ -10,17 +10,8 @@
 namespace hgs::render {
 namespace {
 
-int detect() {  // RasterIsa as int
-  if (const char* e = std::getenv("HGS_RASTER_ISA"); e && *e) {
-    const RasterIsa isa = parse_raster_isa(e);
-    if (!raster_isa_supported(isa)) fail("HGS_RASTER_ISA={}: this CPU does not support it", e);
-    return int(isa);
-  }
-  return int(raster_isa_supported(RasterIsa::kAvx512) ? RasterIsa::kAvx512 : RasterIsa::kAvx2);
-}
-
 std::atomic<int>& current() {
-  static std::atomic<int> c{detect()};
+  static std::atomic<int> c{int(raster_isa_from_env(std::getenv("HGS_RASTER_ISA")))};
   return c;
 }
 
@@ -48,6 +39,16 @@ void set_raster_isa(RasterIsa isa) {
 }
 
 const char* raster_isa_name(RasterIsa isa) { return isa == RasterIsa::kAvx512 ? "avx512" : "avx2"; }
+
+RasterIsa raster_isa_from_env(const char* value) {
+  if (!value || !*value)
+    return raster_isa_supported(RasterIsa::kAvx512) ? RasterIsa::kAvx512 : RasterIsa::kAvx2;
+  const std::string v = value;
+  if (v != "avx2" && v != "avx512") fail("HGS_RASTER_ISA={}: unknown rasterizer ISA (avx2 or avx512)", v);
+  const RasterIsa isa = parse_raster_isa(v);
+  if (!raster_isa_supported(isa)) fail("HGS_RASTER_ISA={}: this CPU does not support it", v);
+  return isa;
+}
 
 RasterIsa parse_raster_isa(const std::string& name) {
   if (name == "avx2") return RasterIsa::kAvx2;

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cstring>
+#include <string>
 
 #include "core/error.h"
 #include "fd_util.h"
@@ -109,10 +110,22 @@ TEST(RasterIsa, NamesAndChoice) {
   EXPECT_TRUE(raster_isa_supported(RasterIsa::kAvx2));
   set_raster_isa(RasterIsa::kAvx2);
   EXPECT_EQ(raster_isa(), RasterIsa::kAvx2);
+  // HGS_RASTER_ISA: unset / empty = the best the CPU has; bad values fail naming the variable.
+  EXPECT_EQ(raster_isa_from_env(nullptr), have_avx512() ? RasterIsa::kAvx512 : RasterIsa::kAvx2);
+  EXPECT_EQ(raster_isa_from_env(""), raster_isa_from_env(nullptr));
+  EXPECT_EQ(raster_isa_from_env("avx2"), RasterIsa::kAvx2);
+  try {
+    raster_isa_from_env("avx3");
+    ADD_FAILURE() << "HGS_RASTER_ISA=avx3 was accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("HGS_RASTER_ISA=avx3"), std::string::npos) << e.what();
+  }
   if (have_avx512()) {
+    EXPECT_EQ(raster_isa_from_env("avx512"), RasterIsa::kAvx512);
     set_raster_isa(RasterIsa::kAvx512);
     EXPECT_EQ(raster_isa(), RasterIsa::kAvx512);
   } else {
+    EXPECT_THROW(raster_isa_from_env("avx512"), Error);
     EXPECT_THROW(set_raster_isa(RasterIsa::kAvx512), Error);
   }
 }
