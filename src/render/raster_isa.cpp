@@ -25,12 +25,6 @@ bool raster_isa_supported(RasterIsa isa) {
          __builtin_cpu_supports("avx512vl");
 }
 
-std::vector<RasterIsa> supported_raster_isas() {
-  std::vector<RasterIsa> r{RasterIsa::kAvx2};
-  if (raster_isa_supported(RasterIsa::kAvx512)) r.push_back(RasterIsa::kAvx512);
-  return r;
-}
-
 RasterIsa raster_isa() { return RasterIsa(current().load(std::memory_order_relaxed)); }
 
 void set_raster_isa(RasterIsa isa) {

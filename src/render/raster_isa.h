@@ -12,7 +12,6 @@
 // backward 1.2x slower, the whole step no faster, on a 2-core Xeon with AMX; not kept.)
 #pragma once
 #include <string>
-#include <vector>
 
 #include "render/rasterize.h"
 
@@ -21,7 +20,6 @@ namespace hgs::render {
 enum class RasterIsa { kAvx2, kAvx512 };
 
 bool raster_isa_supported(RasterIsa isa);  // by this CPU
-std::vector<RasterIsa> supported_raster_isas();
 RasterIsa raster_isa();                    // the one rasterize_forward uses now
 void set_raster_isa(RasterIsa isa);        // fails when the CPU does not support it
 const char* raster_isa_name(RasterIsa isa);  // "avx2" / "avx512"
