@@ -20,6 +20,7 @@
 #include "render/renderer.h"
 #include "render/sh.h"
 #include "render_ref.h"
+#include "render_run.h"
 
 namespace hgs::render::test {
 namespace {
@@ -406,24 +407,6 @@ TEST(RenderGrad, Mean2dIsTheProjectedCentreGradient) {
 }
 
 // ---------------------------------------------------------------------------------------------------------
-template <class T>
-void run(const Scene& s, RendererT<T>& r, RenderOutputsT<T>& out, GaussianGradsT<T>& g, uint32_t seed) {
-  std::vector<std::vector<T>> store;
-  r.forward(s.cam, s.inputs<T>(store), s.settings, out);
-  std::mt19937 rng(seed);
-  std::vector<T> wr, wa, wd, we;
-  for (double v : random_weights(out.rgb.size(), rng)) wr.push_back(T(v));
-  for (double v : random_weights(out.alpha.size(), rng)) wa.push_back(T(v));
-  for (double v : random_weights(out.depth.size(), rng)) wd.push_back(T(v));
-  for (double v : random_weights(out.extra.size(), rng)) we.push_back(T(v));
-  OutputGradsT<T> d;
-  d.rgb = wr.data();
-  d.alpha = wa.data();
-  d.depth = wd.data();
-  d.extra = we.empty() ? nullptr : we.data();
-  r.backward(d, g);
-}
-
 template <class A, class B>
 void expect_close_group(const char* name, const std::vector<A>& a, const std::vector<B>& b, double rel) {
   ASSERT_EQ(a.size(), b.size()) << name;
@@ -447,8 +430,8 @@ TEST(RenderGrad, FloatPathAgreesWithDouble) {
     RenderOutputsT<double> od;
     GaussianGradsT<float> gf;
     GaussianGradsT<double> gd;
-    run(s, rf, of, gf, 9);
-    run(s, rd, od, gd, 9);
+    render_with_random_grads(s, rf, of, gf, 9);
+    render_with_random_grads(s, rd, od, gd, 9);
     expect_close_group("rgb", of.rgb, od.rgb, 1e-5);
     expect_close_group("extra image", of.extra, od.extra, 1e-5);
     expect_close_group("mean", gf.mean, gd.mean, 2e-4);
@@ -468,28 +451,25 @@ TEST(RenderDeterminism, BitwiseEqualAcrossRunsAndThreadCounts) {
   RenderOutputsT<float> o1, o2, o3;
   GaussianGradsT<float> g1, g2, g3;
   omp_set_num_threads(2);
-  run(s, r, o1, g1, 1);
-  run(s, r, o2, g2, 1);
+  render_with_random_grads(s, r, o1, g1, 1);
+  render_with_random_grads(s, r, o2, g2, 1);
   omp_set_num_threads(1);
-  run(s, r, o3, g3, 1);
+  render_with_random_grads(s, r, o3, g3, 1);
   omp_set_num_threads(saved);
-  auto same = [](const std::vector<float>& a, const std::vector<float>& b) {
-    return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0);
-  };
   for (const auto* o : {&o2, &o3}) {
-    EXPECT_TRUE(same(o1.rgb, o->rgb));
-    EXPECT_TRUE(same(o1.alpha, o->alpha));
-    EXPECT_TRUE(same(o1.depth, o->depth));
-    EXPECT_TRUE(same(o1.extra, o->extra));
+    EXPECT_TRUE(bitwise_equal(o1.rgb, o->rgb));
+    EXPECT_TRUE(bitwise_equal(o1.alpha, o->alpha));
+    EXPECT_TRUE(bitwise_equal(o1.depth, o->depth));
+    EXPECT_TRUE(bitwise_equal(o1.extra, o->extra));
   }
   for (const auto* g : {&g2, &g3}) {
-    EXPECT_TRUE(same(g1.mean, g->mean));
-    EXPECT_TRUE(same(g1.log_scale, g->log_scale));
-    EXPECT_TRUE(same(g1.quat, g->quat));
-    EXPECT_TRUE(same(g1.opacity_logit, g->opacity_logit));
-    EXPECT_TRUE(same(g1.sh, g->sh));
-    EXPECT_TRUE(same(g1.extra, g->extra));
-    EXPECT_TRUE(same(g1.mean2d, g->mean2d));
+    EXPECT_TRUE(bitwise_equal(g1.mean, g->mean));
+    EXPECT_TRUE(bitwise_equal(g1.log_scale, g->log_scale));
+    EXPECT_TRUE(bitwise_equal(g1.quat, g->quat));
+    EXPECT_TRUE(bitwise_equal(g1.opacity_logit, g->opacity_logit));
+    EXPECT_TRUE(bitwise_equal(g1.sh, g->sh));
+    EXPECT_TRUE(bitwise_equal(g1.extra, g->extra));
+    EXPECT_TRUE(bitwise_equal(g1.mean2d, g->mean2d));
   }
   double gsum = 0;
   for (float v : g1.mean) gsum += std::abs(v);

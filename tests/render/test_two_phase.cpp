@@ -18,15 +18,10 @@
 #include "render/renderer.h"
 #include "render/sh.h"
 #include "render_ref.h"
+#include "render_run.h"
 
 namespace hgs::render::test {
 namespace {
-
-template <class T>
-bool bitwise_equal(const std::vector<T>& a, const std::vector<T>& b) {
-  // (memcmp of empty vectors would pass null pointers: undefined, UBSan reports it)
-  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
-}
 
 template <class T>
 std::vector<T> to(const std::vector<double>& v) {

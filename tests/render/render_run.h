@@ -1,0 +1,44 @@
+// Test helpers shared by the render tests that compare whole renders: a forward + backward of a Scene with
+// random upstream gradients, and bitwise equality of two arrays.
+#pragma once
+#include <cstring>
+#include <random>
+#include <vector>
+
+#include "fd_util.h"
+#include "render/renderer.h"
+#include "render_ref.h"
+
+namespace hgs::render::test {
+
+// True when a and b hold the same bits. (memcmp of empty vectors would pass null pointers: undefined, UBSan
+// reports it.)
+template <class T>
+bool bitwise_equal(const std::vector<T>& a, const std::vector<T>& b) {
+  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
+}
+
+// Renders s with r into out, then runs the backward of random upstream gradients (from seed) on rgb, alpha,
+// depth and extra into g.
+template <class T>
+void render_with_random_grads(const Scene& s, RendererT<T>& r, RenderOutputsT<T>& out, GaussianGradsT<T>& g,
+                              uint32_t seed) {
+  std::vector<std::vector<T>> store;
+  r.forward(s.cam, s.inputs<T>(store), s.settings, out);
+  std::mt19937 rng(seed);
+  auto weights = [&](size_t n) {
+    std::vector<T> w;
+    for (double v : random_weights(n, rng)) w.push_back(T(v));
+    return w;
+  };
+  const std::vector<T> wr = weights(out.rgb.size()), wa = weights(out.alpha.size()), wd = weights(out.depth.size()),
+                       we = weights(out.extra.size());
+  OutputGradsT<T> d;
+  d.rgb = wr.data();
+  d.alpha = wa.data();
+  d.depth = wd.data();
+  d.extra = we.empty() ? nullptr : we.data();
+  r.backward(d, g);
+}
+
+}  // namespace hgs::render::test
