@@ -121,9 +121,5 @@ inline __attribute__((always_inline)) Pack<float> vrecip(Pack<float> x) {
 }
 inline __attribute__((always_inline)) Pack<double> vrecip(Pack<double> x) { return 1.0 / x; }
 
-// Scalar exp matching the pack version lane-for-lane (used by scalar code paths that must agree bitwise).
-inline float exp_like_pack(float x) { return vexp(splat(x))[0]; }
-inline double exp_like_pack(double x) { return std::exp(x); }
-
 }  // namespace avx2 / avx512
 }  // namespace hgs::render::simd
