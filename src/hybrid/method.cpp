@@ -18,7 +18,6 @@ void HybridMethod::attach(GaussianModel& model, train::Adam& optim, const std::v
   const int L = data_.num_labels, D = data_.dim;
   if (data_.masks.size() != views.size() || data_.views.size() != views.size())
     fail("hybrid: {} training views but masks/features for {}", views.size(), data_.masks.size());
-  model_ = &model;
   ExtraGroup* q = model.find_extra(kAssociationGroup);
   if (!q) {
     q = &model.add_extra(kAssociationGroup, L, 0.f);
@@ -27,6 +26,22 @@ void HybridMethod::attach(GaussianModel& model, train::Adam& optim, const std::v
     fail("hybrid: the model has {} object channels but the masks have {} labels", q->dim, L);
   }
   if (!model.find_extra(kHardIdGroup)) model.add_extra(kHardIdGroup, 1, 0.f);
+  init_language(model);
+  // f_n: a per-Gaussian parameter optimised row-sparse without a gradient buffer (semantic.h); by default stored
+  // in half precision with bfloat16 moments. Its values live in the model (checkpoints save them there).
+  train::AdamParam& p = optim.add(SemanticPass::kParam, D, model.n, cfg_.lr_lang, cfg_.lang_half);
+  p.values = [&model] {
+    ExtraGroup* g = model.find_extra(kLanguageGroup);
+    return g->f16 ? train::ParamValues{nullptr, &g->half} : train::ParamValues{&g->data, nullptr};
+  };
+  assoc_.attach(optim);
+  HybridFields fields = HybridFields::bind(model, "hybrid");
+  assoc_.refresh(model, fields);
+}
+
+// f: random (seeded) for a new model; a model's own f is kept, converted to the configured storage.
+void HybridMethod::init_language(GaussianModel& model) const {
+  const int D = data_.dim;
   ExtraGroup* f = model.find_extra(kLanguageGroup);
   if (!f) {
     f = &model.add_extra(kLanguageGroup, D, 0.f, cfg_.lang_half);
@@ -50,65 +65,54 @@ void HybridMethod::attach(GaussianModel& model, train::Adam& optim, const std::v
       std::vector<uint16_t>().swap(f->half);
     }
   }
-  // f_n: a per-Gaussian parameter optimised row-sparse without a gradient buffer (semantic.h); by default stored
-  // in half precision with bfloat16 moments. Its values live in the model (checkpoints save them there).
-  train::AdamParam& p = optim.add(SemanticPass::kParam, D, model.n, cfg_.lr_lang, cfg_.lang_half);
-  p.values = [this] {
-    ExtraGroup* g = model_->find_extra(kLanguageGroup);
-    return g->f16 ? train::ParamValues{nullptr, &g->half} : train::ParamValues{&g->data, nullptr};
-  };
-  assoc_.attach(optim);
-  fields_ = HybridFields::bind(model, "hybrid");
-  assoc_.refresh(model, fields_);
 }
 
-void HybridMethod::prepare(train::StepContext& c) {
-  GaussianModel& m = *c.model;
-  fields_ = HybridFields::bind(m, "hybrid");  // the model's groups may have moved (checkpoint load)
-  const int n = m.n, u = c.view_index, L = data_.num_labels;
-  if (cfg_.use_of && c.slot == 0) assoc_.fuse(n, fields_);  // q from the logits: the same for every view of a step
+void HybridMethod::prepare(const train::ViewStep& v, const train::PrepareIO& io) {
+  HybridFields fields = HybridFields::bind(v.model, "hybrid");
+  const int n = v.model.n, u = v.view_index, L = data_.num_labels;
+  if (cfg_.use_of && v.slot == 0) assoc_.fuse(n, fields);  // q from the logits: the same for every view of a step
   dq_.resize(size_t(n) * L);
   parallel_fill(dq_, 0.f);
   // Object channels from the renderer's SH colours of this view (0 for culled Gaussians), plus f for the no-SCL
   // ablation's full semantic render.
-  objects_ = sample_objects(data_.views[u].present, cfg_.objects_per_step, *c.rng);  // all unless approximating
+  objects_ = sample_objects(data_.views[u].present, cfg_.objects_per_step, v.rng);  // all unless approximating
   const std::vector<int>& anchors = semantic_.anchors_of(u);
   const int J = static_cast<int>(objects_.size());
   const int sem = (!cfg_.use_scl && cfg_.lambda_sem > 0) ? data_.dim : 0;
   layout_ = ObjectLayout{J, sem};
   const int C = layout_.total();
   channels_.resize(size_t(n) * C);
-  object_channels(n, L, layout_, objects_.data(), fields_.q->data.data(), c.projected->colors, channels_.data());
+  object_channels(n, L, layout_, objects_.data(), fields.q->data.data(), io.projected.colors, channels_.data());
   if (sem) {
-    const ExtraGroup& f = *fields_.f;
+    const ExtraGroup& f = *fields.f;
 #pragma omp parallel for schedule(static)
     for (int i = 0; i < n; ++i) f.row(i, &channels_[size_t(i) * C + layout_.other()]);
   }
-  c.channels->extra = channels_.data();
-  c.channels->num_extra = C;
+  io.channels.extra = channels_.data();
+  io.channels.num_extra = C;
   // Pixel weights M_k of the SCL anchors: the rasterizer returns a_{n,k} = sum_p M_k(p) alpha_n T_n.
+  pixel_weights_ = static_cast<int>(anchors.size());
   if (!anchors.empty()) {
-    c.settings->pixel_weights = semantic_.pixel_weights(u);
-    c.settings->num_pixel_weights = static_cast<int>(anchors.size());
+    io.settings.pixel_weights = semantic_.pixel_weights(u);
+    io.settings.num_pixel_weights = pixel_weights_;
   }
 }
 
-void HybridMethod::losses(train::StepContext& c) {
-  const train::TrainView& view = *c.view;
-  const render::RenderOutputs& out = *c.out;
-  const int W = view.cam.width, H = view.cam.height, C = layout_.total(), u = c.view_index, n = c.model->n;
+void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
+  HybridFields fields = HybridFields::bind(v.model, "hybrid");
+  const int W = v.view.cam.width, H = v.view.cam.height, C = layout_.total(), u = v.view_index, n = v.model.n;
   d_channels_.resize(size_t(W) * H * C);
   parallel_fill(d_channels_, 0.f);
   const auto t0 = std::chrono::steady_clock::now();
-  const ObjectLossValues ov = object_losses_(view.image, data_.masks[u].labels, out.extra.data(), layout_, objects_,
-                                             d_channels_.data());
+  const ObjectLossValues ov = object_losses_(v.view.image, data_.masks[u].labels, io.out.extra.data(), layout_,
+                                             objects_, d_channels_.data());
   last_.app = float(ov.app);
   last_.bro = float(ov.bro);
-  c.objective->add("app", cfg_.lambda_app, ov.app);
-  c.objective->add("bro", cfg_.use_bro ? cfg_.lambda_bro : 0.f, ov.bro);
+  io.objective.add("app", cfg_.lambda_app, ov.app);
+  io.objective.add("bro", cfg_.use_bro ? cfg_.lambda_bro : 0.f, ov.bro);
   const auto t1 = std::chrono::steady_clock::now();
   SemanticValues sv;
-  const int Jf = c.settings->num_pixel_weights;
+  const int Jf = pixel_weights_;
   if (cfg_.lambda_sem > 0) {
     if (cfg_.use_scl) {
       float* da = nullptr;
@@ -116,57 +120,66 @@ void HybridMethod::losses(train::StepContext& c) {
         d_wsum_.resize(size_t(n) * Jf);
         da = d_wsum_.data();
       }
-      sv = semantic_.contrastive(u, n, fields_, Jf > 0 ? out.weight_sums.data() : nullptr, dq_.data(), da, *c.rng,
-                                 c.slot == 0);
-      if (da && sv.anchors > 0) c.dout->weight_sums = da;
+      sv = semantic_.contrastive(u, n, fields, Jf > 0 ? io.out.weight_sums.data() : nullptr, dq_.data(), da, v.rng,
+                                 v.slot == 0);
+      if (da && sv.anchors > 0) io.dout.weight_sums = da;
     } else {
-      sv = semantic_.cosine(u, W, H, out.extra.data(), C, layout_.other(), d_channels_.data());
+      sv = semantic_.cosine(u, W, H, io.out.extra.data(), C, layout_.other(), d_channels_.data());
     }
   }
   last_.sem = float(sv.loss);
   last_.anchors = sv.anchors;
-  c.objective->add("sem", cfg_.lambda_sem, sv.loss);
+  io.objective.add("sem", cfg_.lambda_sem, sv.loss);
   const auto t2 = std::chrono::steady_clock::now();
   last_.ms_app = std::chrono::duration<double, std::milli>(t1 - t0).count();
   last_.ms_sem = std::chrono::duration<double, std::milli>(t2 - t1).count();
-  c.dout->extra = d_channels_.data();
-  c.dout->extra_grad_channels = layout_.grad_channels();  // the opacity channels only shape BRO's constant band
+  io.dout.extra = d_channels_.data();
+  io.dout.extra_grad_channels = layout_.grad_channels();  // the opacity channels only shape BRO's constant band
 }
 
-void HybridMethod::backward(train::StepContext& c) {
-  const int n = c.model->n;
-  render::ProjectedGrads& g = *c.pgrads;
+void HybridMethod::backward(const train::ViewStep& v, const train::BackwardIO& io) {
+  HybridFields fields = HybridFields::bind(v.model, "hybrid");
+  const int n = v.model.n;
   // Object channels -> dq and dc, added to the RGB path's colour gradient before the renderer's
   // preprocess_backward takes it through SH.
-  object_channels_backward(n, data_.num_labels, layout_, objects_.data(), fields_.q->data.data(), c.projected->colors,
-                           g.extra.data(), dq_.data(), g.colors.data());
-  assoc_.backward(n, fields_, dq_.data(), c.slot == 0);
+  object_channels_backward(n, data_.num_labels, layout_, objects_.data(), fields.q->data.data(),
+                           io.projected.colors, io.grads.extra.data(), dq_.data(), io.grads.colors.data());
+  assoc_.backward(n, fields, dq_.data(), v.slot == 0);
   if (!cfg_.use_scl && cfg_.lambda_sem > 0)
-    semantic_.add_channel_grads(n, g.extra.data(), layout_.total(), layout_.other(), c.slot == 0);
+    semantic_.add_channel_grads(n, io.grads.extra.data(), layout_.total(), layout_.other(), v.slot == 0);
 }
 
-void HybridMethod::reduce(train::StepContext& c) {
-  assoc_.reduce(*c.reducer);
-  semantic_.reduce(*c.reducer);
+void HybridMethod::reduce(train::Reducer& reducer) {
+  assoc_.reduce(reducer);
+  semantic_.reduce(reducer);
 }
 
-void HybridMethod::update(train::StepContext& c) {
-  assoc_.update(*c.optim, c.grad_scale);
-  semantic_.update(c.model->n, fields_, *c.optim, c.grad_scale);
+void HybridMethod::update(const train::UpdateIO& io) {
+  assoc_.update(io.optim, io.grad_scale);
+  HybridFields fields = HybridFields::bind(io.model, "hybrid");
+  semantic_.update(io.model.n, fields, io.optim, io.grad_scale);
 }
 
-void HybridMethod::after_step(train::StepContext& c, bool densified) {
-  fields_ = HybridFields::bind(*c.model, "hybrid");
+void HybridMethod::after_step(const train::StepEnd& end) {
+  HybridFields fields = HybridFields::bind(end.model, "hybrid");
   // The table is rebuilt every fusion_every images seen: in the step that covers a multiple of it.
-  const int prev = c.iteration - 1, cur = prev + c.step_views, fe = cfg_.fusion_every;
-  if (densified || (fe > 0 && cur / fe > prev / fe)) assoc_.refresh(*c.model, fields_);
-  else assoc_.update_hard_ids(c.model->n, fields_);
+  const int prev = end.iteration - 1, cur = end.images_seen, fe = cfg_.fusion_every;
+  if (end.densified || (fe > 0 && cur / fe > prev / fe)) assoc_.refresh(end.model, fields);
+  else assoc_.update_hard_ids(end.model.n, fields);
 }
 
 void HybridMethod::release() {
   object_losses_.release();
   semantic_.release();
   for (auto* v : {&dq_, &channels_, &d_channels_, &d_wsum_}) std::vector<float>().swap(*v);
+}
+
+train::MethodStats HybridMethod::stats() const {
+  train::MethodStats s;
+  s.values = {{"app", last_.app},       {"bro", last_.bro},       {"sem", last_.sem},
+              {"anchors", last_.anchors}, {"ms_app", last_.ms_app}, {"ms_sem", last_.ms_sem}};
+  s.arrays = {{"view_weights", assoc_.weights()}};
+  return s;
 }
 
 std::vector<std::pair<std::string, std::vector<float>>> HybridMethod::state() const {

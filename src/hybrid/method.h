@@ -1,20 +1,23 @@
 // HybridMethod: the full Hybrid Gaussians objective (paper eq. 15) as a train::Method plugged into the 3DGS
-// trainer. Per step, for training view u:
-//  prepare   Observation Fusion: q = softmax(s(w)/T) (association.h; the table is rebuilt every R iterations
-//            and after densification, q is recomputed every step so the gradient reaches the view logits
-//            exactly). From the renderer's SH colours c_n of the visible Gaussians (its preprocess phase), 4
-//            channels per object present in u's mask, (q c, q) (object_channels.h), composited in the same
-//            rasterization as the RGB image; for SCL the rasterizer also accumulates
-//            a_{n,k} = sum_p M_k alpha T for every anchor object.
-//  losses    terms "app" (eq. 6) and "bro" (eq. 14) per object (object_losses.h), "sem" (SCL, eqs. 9-10, or
-//            the no-SCL cosine; semantic.h, which also takes f's Adam step). The trainer adds "rgb" (3DGS
-//            photometric loss, weight lambda_rgb).
-//  backward  object channels -> dq, and dc added to the renderer's colour gradient (its preprocess_backward
-//            takes it through SH); dq -> view logits through the fusion and their Adam step.
-//  update    f's Adam step for the no-SCL ablation.
-//  after_step  refresh the observation table (every R iterations, after densification) or z = argmax q.
+// trainer. Per view u of a step:
+//  prepare   Observation Fusion: q = softmax(s(w)/T) (association.h; recomputed from the view logits once per
+//            step, so the gradient reaches them exactly). From the renderer's SH colours c_n of the visible
+//            Gaussians (its preprocess phase), 4 channels per object present in u's mask (or a sample of them,
+//            --objects-per-step), (q_k c, q_k) (object_channels.h), composited in the same
+//            rasterization as the RGB image; for SCL the rasterizer also accumulates a_{n,k} = sum_p M_k alpha T
+//            for every anchor object.
+//  losses    terms "app" (eq. 6) and "bro" (eq. 14) per object (object_losses.h), "sem" (SCL, eqs. 9-10, or the
+//            no-SCL cosine; semantic.h). The trainer adds "rgb" (3DGS photometric loss, weight lambda_rgb).
+//  backward  object channels -> dq, and dc added to the renderer's colour gradient (its preprocess_backward takes
+//            it through SH); dq -> the view logits' gradient through the fusion (eqs. 4-5), summed over the step.
+// Once per step:
+//  reduce      the view logits' gradients and f's factored gradients across ranks
+//  update      the view logits' Adam step and f's row-sparse Adam step (semantic.h)
+//  after_step  rebuild the observation table (every R images seen, after densification) or refresh z = argmax q.
 // Parameters registered in the trainer's optimiser: "lang" (f, per Gaussian, row-sparse, bfloat16 moments with
-// half storage) and "view_logits" (array). Model extra groups: q, z, f (fields.h).
+// half storage) and "view_logits" (array). Model extra groups: q, z, f (fields.h), bound from the model each hook
+// receives. stats(): the last view's unweighted terms ("app", "bro", "sem"), SCL anchors ("anchors"), the wall
+// time of the object losses and the semantic pass ("ms_app", "ms_sem"), and the view weights w ("view_weights").
 #pragma once
 #include <vector>
 
@@ -27,13 +30,6 @@
 
 namespace hgs::hybrid {
 
-struct HybridLossValues {
-  float app = 0, sem = 0, bro = 0;  // unweighted terms (bro with the scale rule's weights)
-  int anchors = 0;
-  // Wall time of the object-conditioned losses (+ BRO) and of the semantic pass (+ f's Adam step with SCL).
-  double ms_app = 0, ms_sem = 0;
-};
-
 class HybridMethod final : public train::Method {
  public:
   HybridMethod(const HybridConfig& cfg, HybridData data, uint64_t seed);
@@ -41,40 +37,42 @@ class HybridMethod final : public train::Method {
   std::string name() const override { return "hybrid"; }
   void attach(GaussianModel& model, train::Adam& optim, const std::vector<train::TrainView>& views) override;
   float rgb_weight() const override { return cfg_.lambda_rgb; }
-  void prepare(train::StepContext& c) override;
-  void losses(train::StepContext& c) override;
-  void backward(train::StepContext& c) override;
-  void reduce(train::StepContext& c) override;
-  void update(train::StepContext& c) override;
-  void after_step(train::StepContext& c, bool densified) override;
+  void prepare(const train::ViewStep& v, const train::PrepareIO& io) override;
+  void losses(const train::ViewStep& v, const train::LossIO& io) override;
+  void backward(const train::ViewStep& v, const train::BackwardIO& io) override;
+  void reduce(train::Reducer& reducer) override;
+  void update(const train::UpdateIO& io) override;
+  void after_step(const train::StepEnd& end) override;
   void release() override;
+  train::MethodStats stats() const override;
   nlohmann::json config() const override { return cfg_.to_json(); }
   std::vector<std::pair<std::string, std::vector<float>>> state() const override;
   void state_loaded(const std::string& where, const nlohmann::json& config, int n,
                     std::map<std::string, std::vector<float>>& arrays) override;
 
-  const HybridConfig& hybrid_config() const { return cfg_; }
-  const std::vector<float>& view_weights() const { return assoc_.weights(); }
-  const std::vector<float>& view_logits() const { return assoc_.logits(); }
-  const HybridLossValues& last_losses() const { return last_; }
-  const ObjectAssociation& association() const { return assoc_; }
-
  private:
+  // The last view's loss values (unweighted) and the wall time of its two loss parts (stats()).
+  struct LastLosses {
+    float app = 0, sem = 0, bro = 0;
+    int anchors = 0;
+    double ms_app = 0, ms_sem = 0;
+  };
+  void init_language(GaussianModel& model) const;
+
   HybridConfig cfg_;
   HybridData data_;
   uint64_t seed_;
-  GaussianModel* model_ = nullptr;
-  HybridFields fields_;
   ObjectAssociation assoc_;
   ObjectLosses object_losses_;
   SemanticPass semantic_;
   ObjectLayout layout_;
-  std::vector<int> objects_;      // labels scored in this step: present in the view (all, or a sample)
-  std::vector<float> channels_;   // [N, C] object channels (+ f for the no-SCL ablation)
-  std::vector<float> d_channels_; // [H, W, C] dL/d the rendered channels
-  std::vector<float> dq_;         // [N, L]
-  std::vector<float> d_wsum_;     // [N, Jf]
-  HybridLossValues last_;
+  std::vector<int> objects_;       // labels scored in this view: present in its mask (all, or a sample)
+  int pixel_weights_ = 0;          // Jf: SCL anchors with pixel weights in this view
+  std::vector<float> channels_;    // [N, C] object channels (+ f for the no-SCL ablation)
+  std::vector<float> d_channels_;  // [H, W, C] dL/d the rendered channels
+  std::vector<float> dq_;          // [N, L]
+  std::vector<float> d_wsum_;      // [N, Jf]
+  LastLosses last_;
 };
 
 }  // namespace hgs::hybrid

@@ -9,6 +9,7 @@
 
 #include "core/error.h"
 #include "model/render_inputs.h"
+#include "train/gaussian_params.h"
 
 namespace hgs::train {
 
@@ -38,30 +39,42 @@ Trainer::Trainer(const TrainConfig& cfg, GaussianModel model, std::vector<TrainV
     if (v.image.width != v.cam.width || v.image.height != v.cam.height || v.image.channels != 3)
       fail("train: view '{}' image {}x{}x{} does not match its camera {}x{}", v.name, v.image.width, v.image.height,
            v.image.channels, v.cam.width, v.cam.height);
-  adam_.add("mean", 3, model_.n, cfg_.lr_position_init * extent_);
-  adam_.add("log_scale", 3, model_.n, cfg_.lr_scaling);
-  adam_.add("quat", 4, model_.n, cfg_.lr_rotation);
-  adam_.add("opacity", 1, model_.n, cfg_.lr_opacity);
-  AdamParam& sh = adam_.add("sh", model_.sh_stride() * 3, model_.n, cfg_.lr_sh_rest);
-  for (int c = 0; c < 3; ++c) sh.lr[c] = cfg_.lr_sh_dc;
-  for (auto [name, f] : std::initializer_list<std::pair<const char*, std::vector<float> GaussianModel::*>>{
-           {"mean", &GaussianModel::mean}, {"log_scale", &GaussianModel::log_scale}, {"quat", &GaussianModel::quat},
-           {"opacity", &GaussianModel::opacity_logit}, {"sh", &GaussianModel::sh}})
-    adam_.get(name).values = [this, f = f] { return ParamValues{&(model_.*f), nullptr}; };
+  register_gaussian_params();
   stats_.reset(model_.n);
   method_->attach(model_, adam_, views_);
-  if (const char* e = std::getenv("HGS_INJECT_NAN")) {  // test hook (numerical faults): "<iteration>:<group>"
-    const std::string spec = e;
-    const size_t colon = spec.find(':');
-    char* end = nullptr;
-    const long it = colon == std::string::npos ? 0 : std::strtol(spec.c_str(), &end, 10);
-    inject_group_ = colon == std::string::npos ? "" : spec.substr(colon + 1);
-    const bool known = inject_group_ == "loss" || inject_group_ == "mean" || inject_group_ == "log_scale" ||
-                       inject_group_ == "quat" || inject_group_ == "opacity" || inject_group_ == "sh";
-    if (it <= 0 || end != spec.c_str() + colon || !known)
-      fail("HGS_INJECT_NAN: expected <iteration>:<loss|mean|log_scale|quat|opacity|sh>, got '{}'", spec);
-    inject_iter_ = int(it);
+  parse_inject_nan();
+}
+
+void Trainer::register_gaussian_params() {
+  for (const GaussianParam& p : kGaussianParams) {
+    AdamParam& a = adam_.add(p.name, p.cols(model_), model_.n, cfg_.*p.lr * (p.times_extent ? extent_ : 1.f));
+    if (p.lr_dc)
+      for (int c = 0; c < 3; ++c) a.lr[c] = cfg_.*p.lr_dc;
+    a.values = [this, value = p.value] { return ParamValues{&(model_.*value), nullptr}; };
   }
+}
+
+void Trainer::parse_inject_nan() {
+  const char* e = std::getenv("HGS_INJECT_NAN");  // test hook (numerical faults): "<iteration>:<group>"
+  if (!e) return;
+  const std::string spec = e;
+  const size_t colon = spec.find(':');
+  char* end = nullptr;
+  const long it = colon == std::string::npos ? 0 : std::strtol(spec.c_str(), &end, 10);
+  inject_group_ = colon == std::string::npos ? "" : spec.substr(colon + 1);
+  const bool known = inject_group_ == "loss" || find_gaussian_param(inject_group_);
+  if (it <= 0 || end != spec.c_str() + colon || !known) {
+    std::string groups = "loss";
+    for (const GaussianParam& p : kGaussianParams) groups += fmt::format("|{}", p.name);
+    fail("HGS_INJECT_NAN: expected <iteration>:<{}>, got '{}'", groups, spec);
+  }
+  inject_iter_ = int(it);
+}
+
+void Trainer::inject_gradient_nan(int it) {
+  if (it != inject_iter_ || inject_group_ == "loss") return;
+  std::vector<float>& g = grads_.*(find_gaussian_param(inject_group_)->grad);
+  g[g.size() / 2] = std::nanf("");
 }
 
 void Trainer::check_finite(int it) const {
@@ -117,8 +130,8 @@ uint64_t view_seed(uint64_t seed, int iteration, int global_slot) {
 }
 
 template <class F>
-void each_grad(render::GaussianGrads& g, F&& f) {  // the 3DGS parameter gradients, in pack order
-  for (auto* v : {&g.mean, &g.log_scale, &g.quat, &g.opacity_logit, &g.sh}) f(*v);
+void each_grad(render::GaussianGrads& g, F&& f) {  // the 3DGS parameter gradients, in table order
+  for (const GaussianParam& p : kGaussianParams) f(g.*p.grad);
 }
 
 }  // namespace
@@ -152,120 +165,162 @@ void Trainer::reduce_and_scale(float grad_scale) {
     });
 }
 
-StepInfo Trainer::step() {
-  auto t0 = std::chrono::steady_clock::now();
-  StepInfo info;
-  auto tick = [&, tp = t0](double& part) mutable {  // adds the time since the previous tick to `part`
-    const auto now = std::chrono::steady_clock::now();
-    part += std::chrono::duration<double, std::milli>(now - tp).count();
-    tp = now;
-  };
-  if (model_.n == 0) fail("train: every Gaussian was pruned by iteration {}", it_);
-  const int B = cfg_.batch, G = step_views(), prev = it_;
-  const int it = prev + 1;  // 1-based, as in 3DGS: the step's first image
-  it_ += G;
-  adam_.clear_nonfinite();
-  adam_.get("mean").set_lr(cfg_.position_lr(it, extent_));
-  // The global batch: G views of the shared order (every rank draws all of them); this rank takes its B.
-  std::vector<int> batch_views(G);
-  for (int& vi : batch_views) vi = next_view();
+// Wall time of a step's parts: tick(part) adds the time since the previous tick to `part`.
+class Trainer::PartClock {
+ public:
+  using clock = std::chrono::steady_clock;
+  explicit PartClock(clock::time_point start) : last_(start) {}
+  void tick(double& part) {
+    const clock::time_point now = clock::now();
+    part += std::chrono::duration<double, std::milli>(now - last_).count();
+    last_ = now;
+  }
 
+ private:
+  clock::time_point last_;
+};
+
+// Which views a step takes and how it counts them.
+struct Trainer::StepPlan {
+  int prev = 0;       // images seen before the step
+  int iteration = 0;  // 1-based, as in 3DGS: the step's first image
+  int local_views = 1;  // B: this process's views
+  int step_views = 1;   // G: views of the global batch
+  float grad_scale = 1;  // 1 / G
+  bool gather_stats = false;  // densification statistics are gathered this step
+  std::vector<int> views;  // [G] view indices of the global batch (every rank draws all of them)
+};
+
+// This process's per-view results, summed over its views.
+struct Trainer::ViewSums {
+  LossValues loss;
+  std::vector<LossTerm> terms;
+};
+
+Trainer::StepPlan Trainer::plan_step() {
+  StepPlan p;
+  p.local_views = cfg_.batch;
+  p.step_views = step_views();
+  p.prev = it_;
+  p.iteration = it_ + 1;
+  p.grad_scale = p.step_views > 1 ? 1.f / float(p.step_views) : 1.f;
+  p.gather_stats = cfg_.densify && p.iteration < cfg_.densify_until;
+  p.views.resize(p.step_views);
+  for (int& vi : p.views) vi = next_view();
+  return p;
+}
+
+StepInfo Trainer::step() {
+  const auto t0 = std::chrono::steady_clock::now();
+  PartClock clock(t0);
+  StepInfo info;
+  if (model_.n == 0) fail("train: every Gaussian was pruned by iteration {}", it_);
+  adam_.clear_nonfinite();
+  const StepPlan plan = plan_step();
+  it_ += plan.step_views;
+  adam_.get("mean").set_lr(cfg_.position_lr(plan.iteration, extent_));
   render::GaussianInputs in = render_inputs(model_);
   // 3DGS raises the degree at iterations 1000, 2000, ... before rendering.
-  in.sh_degree = std::min(cfg_.sh_degree, cfg_.sh_increase_every > 0 ? it / cfg_.sh_increase_every : cfg_.sh_degree);
-  const float bg = cfg_.white_bg ? 1.f : 0.f;
-  StepContext c;
-  c.iteration = it;
-  c.model = &model_;
-  c.optim = &adam_;
-  c.inputs = &in;
-  c.grads = &grads_;
-  c.objective = &objective_;
-  c.sh_degree = in.sh_degree;
-  c.pgrads = &pgrads_;
-  c.step_views = G;
-  c.grad_scale = G > 1 ? 1.f / float(G) : 1.f;
-  c.reducer = reducer_;
-  if (!(cfg_.densify && it < cfg_.densify_until) && step_stats_.n > 0) step_stats_ = StepStats{};  // not gathering
-  std::vector<LossTerm> terms;  // summed over this process's views, then the mean
-  double mse = 0;
-  for (int b = 0; b < B; ++b) {
-    const int gs = reducer_->rank() * B + b, vi = batch_views[gs];
-    const TrainView& v = views_[vi];
-    const int W = v.cam.width, H = v.cam.height;
-    // One view per step draws from the trainer's own stream (as before batches existed: runs of earlier
-    // versions reproduce bit for bit); with several, each view has its own stream, because every rank must keep
-    // the shared one (view order, densification) in step with the others.
-    std::mt19937_64 view_rng(G > 1 ? view_seed(cfg_.seed, it, gs) : 0);
-    render::RenderSettings rs;
-    rs.background[0] = rs.background[1] = rs.background[2] = bg;
-    rs.want_depth = false;
-    render::OutputGrads dout;
-    objective_.clear();
-    c.view_index = vi;
-    c.view = &v;
-    c.slot = b;
-    c.global_slot = gs;
-    c.rng = G > 1 ? &view_rng : &rng_;
-    c.settings = &rs;
-    c.dout = &dout;
-    render::Channels channels;
-    c.channels = &channels;
-    renderer_.preprocess(v.cam, in);  // projection, SH of the visible Gaussians, tile binning
-    const render::ProjectedView<float> projected = renderer_.projected();
-    c.projected = &projected;
-    tick(info.times.forward);
-    method_->prepare(c);  // may build extra channels from the projected colours
-    tick(info.times.prepare);
-    renderer_.composite(channels, rs, out_);
-    c.out = &out_;
-    tick(info.times.forward);
+  in.sh_degree = std::min(cfg_.sh_degree,
+                          cfg_.sh_increase_every > 0 ? plan.iteration / cfg_.sh_increase_every : cfg_.sh_degree);
+  if (!plan.gather_stats && step_stats_.n > 0) step_stats_ = StepStats{};
+  ViewSums sums;
+  for (int b = 0; b < plan.local_views; ++b) train_view(plan, b, in, sums, clock, info.times);
+  average_views(sums, info);
+  inject_gradient_nan(plan.iteration);
+  reduce_step(plan, clock, info.times);
+  update_parameters(plan, clock, info.times, info);
+  densify_step(plan, info);
+  info.num_gaussians = model_.n;
+  method_->after_step({plan.iteration, it_, info.densified, model_});
+  clock.tick(info.times.densify);
+  info.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  return info;
+}
 
-    d_rgb_.resize(size_t(W) * H * 3);
-    const LossValues lv = loss_(out_.rgb.data(), v.image.px.data(), H, W, d_rgb_.data());
-    LossValues vl = lv;
-    const float w_rgb = method_->rgb_weight();
-    if (w_rgb != 1.f)
-      for (float& g : d_rgb_) g *= w_rgb;
-    if (it == inject_iter_ && inject_group_ == "loss") vl.total = d_rgb_[0] = std::nanf("");
-    objective_.add("rgb", w_rgb, vl.total);
-    dout.rgb = d_rgb_.data();
-    c.d_rgb = d_rgb_.data();
-    tick(info.times.loss);
-    method_->losses(c);
-    tick(info.times.method_loss);
-    renderer_.composite_backward(dout, pgrads_);
-    tick(info.times.backward);
-    method_->backward(c);  // may add to pgrads_.colors (its channels' colour gradient)
-    tick(info.times.param_grads);
-    renderer_.preprocess_backward(pgrads_, b == 0 ? grads_ : view_grads_);
-    if (b > 0) {  // the step's sum, in view order
-      std::vector<std::vector<float>*> sum, add;
-      each_grad(grads_, [&](std::vector<float>& x) { sum.push_back(&x); });
-      each_grad(view_grads_, [&](std::vector<float>& x) { add.push_back(&x); });
-      for (size_t k = 0; k < sum.size(); ++k) {
-        float* s = sum[k]->data();
-        const float* a = add[k]->data();
-#pragma omp parallel for simd schedule(static)
-        for (size_t e = 0; e < sum[k]->size(); ++e) s[e] += a[e];
-      }
-    }
-    if (cfg_.densify && it < cfg_.densify_until)
-      step_stats_.add_view(pgrads_.mean2d.data(), renderer_.radii().data(), model_.n, W, H, b == 0);
-    tick(info.times.backward);
+// One view of the step: render, losses, backward; its 3DGS gradients added to the step's sum.
+void Trainer::train_view(const StepPlan& plan, int slot, const render::GaussianInputs& in, ViewSums& sums,
+                         PartClock& clock, StepTimes& times) {
+  const int gs = reducer_->rank() * plan.local_views + slot, vi = plan.views[gs];
+  const TrainView& v = views_[vi];
+  // One view per step draws from the trainer's own stream; with several, each view has its own stream, because
+  // every rank must keep the shared one (view order, densification) in step with the others.
+  std::mt19937_64 view_rng(plan.step_views > 1 ? view_seed(cfg_.seed, plan.iteration, gs) : 0);
+  const ViewStep vs{plan.iteration, vi, v, slot, gs, plan.step_views > 1 ? view_rng : rng_, model_};
+  objective_.clear();
+  render_view(vs, in, cfg_.white_bg ? 1.f : 0.f, clock, times);
 
-    if (b == 0) {
-      info.loss = lv;
-      terms = objective_.terms();
-    } else {
-      info.loss.total += lv.total;
-      info.loss.l1 += lv.l1;
-      info.loss.ssim += lv.ssim;
-      info.loss.mse += lv.mse;
-      for (size_t k = 0; k < terms.size() && k < objective_.terms().size(); ++k)
-        terms[k].value += objective_.terms()[k].value;
-    }
+  const int W = v.cam.width, H = v.cam.height;
+  d_rgb_.resize(size_t(W) * H * 3);
+  const LossValues lv = loss_(out_.rgb.data(), v.image.px.data(), H, W, d_rgb_.data());
+  LossValues vl = lv;
+  const float w_rgb = method_->rgb_weight();
+  if (w_rgb != 1.f)
+    for (float& g : d_rgb_) g *= w_rgb;
+  if (plan.iteration == inject_iter_ && inject_group_ == "loss") vl.total = d_rgb_[0] = std::nanf("");
+  objective_.add("rgb", w_rgb, vl.total);
+  render::OutputGrads dout;
+  dout.rgb = d_rgb_.data();
+  clock.tick(times.loss);
+  method_->losses(vs, {out_, d_rgb_.data(), dout, objective_});
+  clock.tick(times.method_loss);
+
+  renderer_.composite_backward(dout, pgrads_);
+  clock.tick(times.backward);
+  method_->backward(vs, {renderer_.projected(), pgrads_});  // may add to pgrads_.colors (its channels' colour)
+  clock.tick(times.param_grads);
+  renderer_.preprocess_backward(pgrads_, slot == 0 ? grads_ : view_grads_);
+  add_view_gradients(slot);
+  if (plan.gather_stats)
+    step_stats_.add_view(pgrads_.mean2d.data(), renderer_.radii().data(), model_.n, W, H, slot == 0);
+  clock.tick(times.backward);
+
+  if (slot == 0) {
+    sums.loss = lv;
+    sums.terms = objective_.terms();
+  } else {
+    sums.loss.total += lv.total;
+    sums.loss.l1 += lv.l1;
+    sums.loss.ssim += lv.ssim;
+    sums.loss.mse += lv.mse;
+    for (size_t k = 0; k < sums.terms.size() && k < objective_.terms().size(); ++k)
+      sums.terms[k].value += objective_.terms()[k].value;
   }
+}
+
+// The renderer's two phases around the method's prepare: out_ holds the view's RGB and the method's channels.
+void Trainer::render_view(const ViewStep& vs, const render::GaussianInputs& in, float background, PartClock& clock,
+                          StepTimes& times) {
+  render::RenderSettings rs;
+  rs.background[0] = rs.background[1] = rs.background[2] = background;
+  rs.want_depth = false;
+  render::Channels channels;
+  renderer_.preprocess(vs.view.cam, in);  // projection, SH of the visible Gaussians, tile binning
+  clock.tick(times.forward);
+  method_->prepare(vs, {renderer_.projected(), channels, rs});  // may build extra channels from the colours
+  clock.tick(times.prepare);
+  renderer_.composite(channels, rs, out_);
+  clock.tick(times.forward);
+}
+
+// grads_ += view_grads_ for the second and later views of a step (the step's sum, in view order).
+void Trainer::add_view_gradients(int slot) {
+  if (slot == 0) return;
+  for (const GaussianParam& p : kGaussianParams) {
+    std::vector<float>& sum = grads_.*p.grad;
+    const std::vector<float>& add = view_grads_.*p.grad;
+    float* s = sum.data();
+    const float* a = add.data();
+#pragma omp parallel for simd schedule(static)
+    for (size_t e = 0; e < sum.size(); ++e) s[e] += a[e];
+  }
+}
+
+// The step's loss values and terms: the mean over this process's views.
+void Trainer::average_views(const ViewSums& sums, StepInfo& info) {
+  const int B = cfg_.batch;
+  info.loss = sums.loss;
+  std::vector<LossTerm> terms = sums.terms;
   if (B > 1) {
     info.loss.total /= B;
     info.loss.l1 /= B;
@@ -276,56 +331,46 @@ StepInfo Trainer::step() {
   info.psnr = psnr_from_mse(info.loss.mse);
   objective_.clear();
   for (const LossTerm& t : terms) objective_.add(t.name, t.weight, t.value);
+}
 
-  if (it == inject_iter_ && inject_group_ != "loss") {
-    std::vector<float>* g = inject_group_ == "mean" ? &grads_.mean : inject_group_ == "log_scale" ? &grads_.log_scale
-                            : inject_group_ == "quat" ? &grads_.quat : inject_group_ == "opacity" ? &grads_.opacity_logit
-                                                                                                   : &grads_.sh;
-    (*g)[g->size() / 2] = std::nanf("");
-  }
-
-  // The global batch: the ranks' sums added in rank order, then the mean.
+// The global batch: the ranks' sums added in rank order, then the mean.
+void Trainer::reduce_step(const StepPlan& plan, PartClock& clock, StepTimes& times) {
   const double comm_ms0 = reducer_->stats.ms;
-  reduce_and_scale(c.grad_scale);
-  method_->reduce(c);
-  info.times.reduce = reducer_->stats.ms - comm_ms0;
-  tick(info.times.update);
-  info.times.update -= info.times.reduce;
+  reduce_and_scale(plan.grad_scale);
+  method_->reduce(*reducer_);
+  times.reduce = reducer_->stats.ms - comm_ms0;
+  clock.tick(times.update);
+  times.update -= times.reduce;
+}
 
-  // Adam.
-  adam_.update(adam_.get("mean"), model_.mean.data(), grads_.mean.data(), model_.n);
-  adam_.update(adam_.get("log_scale"), model_.log_scale.data(), grads_.log_scale.data(), model_.n);
-  adam_.update(adam_.get("quat"), model_.quat.data(), grads_.quat.data(), model_.n);
-  adam_.update(adam_.get("opacity"), model_.opacity_logit.data(), grads_.opacity_logit.data(), model_.n);
-  adam_.update(adam_.get("sh"), model_.sh.data(), grads_.sh.data(), model_.n);
-  method_->update(c);
+// Adam on the 3DGS parameters, then the method's updates; stops on a non-finite loss or gradient.
+void Trainer::update_parameters(const StepPlan& plan, PartClock& clock, StepTimes& times, StepInfo& info) {
+  for (const GaussianParam& p : kGaussianParams)
+    adam_.update(adam_.get(p.name), (model_.*p.value).data(), (grads_.*p.grad).data(), model_.n);
+  method_->update({plan.iteration, plan.step_views, plan.grad_scale, model_, adam_, grads_});
   // Numerical faults: every loss term finite and every gradient value the optimiser saw this step (the method's
   // parameters too) finite; else stop before densification and before anything is saved (hgs train keeps its
   // last checkpoint).
-  check_finite(it);
+  check_finite(plan.iteration);
   adam_.clear_nonfinite();
-  tick(info.times.update);
+  clock.tick(times.update);
   info.terms = objective_.terms();
   info.total = objective_.total();
+}
 
-  // Densification (3DGS schedule in images seen; statistics are gathered until densify_until).
-  if (cfg_.densify && it < cfg_.densify_until) {
-    stats_.add(step_stats_);
-    if (it_ > cfg_.densify_from && crosses(prev, it_, cfg_.densify_every)) {
-      release_step_buffers();
-      float screen = it_ > cfg_.opacity_reset_every ? cfg_.screen_limit : 0.f;
-      info.densify = densify_and_prune(model_, adam_, stats_, cfg_.densify_cfg, extent_, screen, rng_);
-      info.densified = true;
-    }
-    if (crosses(prev, it_, cfg_.opacity_reset_every) ||
-        (cfg_.white_bg && prev < cfg_.densify_from && it_ >= cfg_.densify_from))
-      reset_opacity(model_, adam_, 0.01f);
+// Densification and opacity resets on the 3DGS schedule in images seen (statistics gathered until densify_until).
+void Trainer::densify_step(const StepPlan& plan, StepInfo& info) {
+  if (!plan.gather_stats) return;
+  stats_.add(step_stats_);
+  if (it_ > cfg_.densify_from && crosses(plan.prev, it_, cfg_.densify_every)) {
+    release_step_buffers();
+    const float screen = it_ > cfg_.opacity_reset_every ? cfg_.screen_limit : 0.f;
+    info.densify = densify_and_prune(model_, adam_, stats_, cfg_.densify_cfg, extent_, screen, rng_);
+    info.densified = true;
   }
-  info.num_gaussians = model_.n;
-  method_->after_step(c, info.densified);
-  tick(info.times.densify);
-  info.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-  return info;
+  if (crosses(plan.prev, it_, cfg_.opacity_reset_every) ||
+      (cfg_.white_bg && plan.prev < cfg_.densify_from && it_ >= cfg_.densify_from))
+    reset_opacity(model_, adam_, 0.01f);
 }
 
 }  // namespace hgs::train

@@ -1,15 +1,16 @@
 // Trainer: the 3DGS optimisation loop for one GaussianModel over a set of posed training images, with a Method
 // (train/method.h) plugged in by composition. One call to step() takes the next G views of a seeded shuffled
-// order (G = cfg.batch x ranks; G = 1 by default), and for each of this process's views: method.prepare,
-// render, photometric loss L = 0.8 L1 + 0.2 (1 - SSIM) (weighted by the method's rgb_weight), method.losses,
-// render backward, method.backward, gradients summed in view order. Then the Reducer adds the ranks' sums in
-// rank order, and once per step: Adam on the 3DGS parameters with the batch mean (lrs of TrainConfig, position
-// lr decaying with the images seen), method.reduce and method.update, SH degree schedule, densification and
-// opacity resets, method.after_step. Every schedule counts training images seen (iteration() advances by G per
-// step), so a run with a larger batch sees the same views at the same schedule points in fewer steps; the
-// learning rates stay as they are (Adam's step does not grow with the batch: the gradient is the mean). The trainer owns the model, the optimiser registry (the method registers
-// its parameters there), the renderer and the schedule; checkpoints hold everything needed to resume
-// bit-for-bit (model, every registered parameter and its moments, statistics, RNG, view order, method state).
+// order (G = cfg.batch x ranks; G = 1 by default), and for each of this process's views: the renderer's
+// preprocess, method.prepare, composite, photometric loss L = 0.8 L1 + 0.2 (1 - SSIM) (weighted by the method's
+// rgb_weight), method.losses, composite_backward, method.backward, preprocess_backward, gradients summed in view
+// order. Then, once per step: the Reducer adds the ranks' sums in rank order (method.reduce its own), Adam on
+// the 3DGS parameters (gaussian_params.h) with the batch mean (learning rates of TrainConfig, the position rate
+// decaying with the images seen, the batch rule of TrainConfig::batch_lr), method.update, densification and
+// opacity resets, method.after_step. Every schedule counts training images seen (iteration() advances by G per step), so
+// a run with a larger batch sees the same views at the same schedule points in fewer steps. The trainer owns the
+// model, the optimiser (the method registers its parameters there), the renderer and the schedule; checkpoints
+// hold everything needed to resume bit for bit (model, every registered parameter and its moments, statistics,
+// RNG, view order, method state).
 #pragma once
 #include <filesystem>
 #include <map>
@@ -92,6 +93,7 @@ class Trainer {
   const std::vector<TrainView>& views() const { return views_; }
   Method& method() { return *method_; }
   Reducer& reducer() { return *reducer_; }
+  const Reducer& reducer() const { return *reducer_; }
   const Method& method() const { return *method_; }
 
   // Binary checkpoint (see checkpoint.cpp for the layout). Writes atomically.
@@ -129,6 +131,24 @@ class Trainer {
   int inject_iter_ = 0;     // HGS_INJECT_NAN=<iteration>:<group> (a test hook, see docs/reliability.md)
   std::string inject_group_;
 
+  // The phases of step(), in order (trainer.cpp).
+  struct StepPlan;
+  struct ViewSums;
+  class PartClock;
+  StepPlan plan_step();
+  void train_view(const StepPlan& plan, int slot, const render::GaussianInputs& in, ViewSums& sums,
+                  PartClock& clock, StepTimes& times);
+  void render_view(const ViewStep& vs, const render::GaussianInputs& in, float background, PartClock& clock,
+                   StepTimes& times);
+  void add_view_gradients(int slot);
+  void average_views(const ViewSums& sums, StepInfo& info);
+  void reduce_step(const StepPlan& plan, PartClock& clock, StepTimes& times);
+  void update_parameters(const StepPlan& plan, PartClock& clock, StepTimes& times, StepInfo& info);
+  void densify_step(const StepPlan& plan, StepInfo& info);
+
+  void register_gaussian_params();
+  void parse_inject_nan();
+  void inject_gradient_nan(int it);
   int next_view();
   // Sums the gradients and statistics of the step over the ranks, then scales the gradients by 1 / G.
   void reduce_and_scale(float grad_scale);

@@ -65,7 +65,11 @@ struct Tiny {
   }
 };
 
-hybrid::HybridMethod& hm(train::Trainer& t) { return dynamic_cast<hybrid::HybridMethod&>(t.method()); }
+// What the method reports of its last step (train::Method::stats) and the options it trains with.
+train::MethodStats stats(const train::Trainer& t) { return t.method().stats(); }
+hybrid::HybridConfig hybrid_config(const train::Trainer& t) { return hybrid::HybridConfig::from_json(t.method().config()); }
+// The view logits, a parameter registered in the trainer's optimiser.
+const std::vector<float>& view_logits(const train::Trainer& t) { return *t.adam().find("view_logits")->values().f32; }
 
 // Ground-truth label of every Gaussian from the analytic world the scene was rendered from: in every view of
 // the scene (training and held-out), a ray from the camera centre through the Gaussian's centre is cast into
@@ -204,8 +208,8 @@ TEST(HybridTrainer, LearnsAssociationsAndLanguage) {
   for (int it = 0; it < 300; ++it) {
     train::StepInfo s = tr->step();
     ASSERT_TRUE(std::isfinite(s.loss.total));
-    if (it < 20) first_app += hm(*tr).last_losses().app;
-    if (it >= 280) last_app += hm(*tr).last_losses().app;
+    if (it < 20) first_app += stats(*tr).value("app");
+    if (it >= 280) last_app += stats(*tr).value("app");
   }
   EXPECT_LT(last_app, 0.7f * first_app) << "object-conditioned loss did not decrease";
   // (The view weights' gradient is checked against finite differences in ViewLogitGradientThroughTheStep.)
@@ -255,7 +259,10 @@ TEST(HybridTrainer, AblationsRun) {
     hc.use_bro = mask & 4;
     auto tr = t.trainer(hc, 20);
     for (int it = 0; it < 20; ++it) ASSERT_TRUE(std::isfinite(tr->step().total)) << "ablation " << mask;
-    if (!hc.use_of) EXPECT_EQ(hm(*tr).view_weights()[0], hm(*tr).view_weights()[1]);  // no view weights learned
+    if (!hc.use_of) {  // no view weights learned
+      const std::vector<float> w = stats(*tr).array("view_weights");
+      EXPECT_EQ(w[0], w[1]);
+    }
   }
 }
 
@@ -276,9 +283,9 @@ TEST(HybridTrainer, CheckpointResumesBitForBit) {
   auto b = t.trainer(other, 40, 5);
   b->load_checkpoint(t.tmp / "h.ckpt");
   EXPECT_EQ(b->iteration(), 12);
-  EXPECT_EQ(hm(*b).hybrid_config().lambda_bro, 0.7f);
+  EXPECT_EQ(hybrid_config(*b).lambda_bro, 0.7f);
   for (int it = 0; it < 10; ++it) b->step();
-  EXPECT_EQ(hm(*a).view_logits(), hm(*b).view_logits());
+  EXPECT_EQ(view_logits(*a), view_logits(*b));
   for (const char* g : {"obj", "obj_id"}) EXPECT_EQ(a->model().find_extra(g)->data, b->model().find_extra(g)->data) << g;
   EXPECT_EQ(a->model().find_extra("lang")->half, b->model().find_extra("lang")->half);
   EXPECT_FALSE(a->model().find_extra("lang")->half.empty());
@@ -341,7 +348,7 @@ TEST(HybridTrainer, SemanticLossMovesGeometryOnlyWhenAsked) {
     int anchors = 0;
     for (int it = 0; it < 3; ++it) {
       tr->step();
-      anchors += hm(*tr).last_losses().anchors;
+      anchors += int(stats(*tr).value("anchors"));
     }
     ASSERT_GT(anchors, 0);
     EXPECT_NE(tr->model().find_extra("lang")->to_float(), f0) << "f not trained";
@@ -363,7 +370,7 @@ TEST(MethodRegistry, BuildsTheNamedMethodWithItsOptions) {
   hc.lambda_bro = 0.7f;
   auto tr = train::make_trainer(t.scene, t.train, cfg, "hybrid", hc.to_json(), false);
   EXPECT_EQ(tr->method().name(), "hybrid");
-  EXPECT_EQ(hm(*tr).hybrid_config().lambda_bro, 0.7f);
+  EXPECT_EQ(hybrid_config(*tr).lambda_bro, 0.7f);
   EXPECT_EQ(tr->views().size(), t.train.size());
   EXPECT_TRUE(hybrid::HybridFields::present(tr->model()));
   EXPECT_EQ(train::make_trainer(t.scene, t.train, cfg, "rgb", nullptr, false)->method().name(), "rgb");

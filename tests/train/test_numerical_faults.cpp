@@ -114,20 +114,24 @@ class Poison final : public Method {
   void attach(GaussianModel&, Adam& optim, const std::vector<TrainView>&) override {
     optim.add_array("poison_logits", 1, 4, 0.01f).values = [this] { return ParamValues{&logits_, nullptr}; };
   }
-  void losses(StepContext& c) override {
-    c.objective->add("extra", 0.5f, where_ == kLossTerm && c.iteration == at_ ? double(kNan) : 0.1);
+  void losses(const ViewStep& v, const LossIO& io) override {
+    io.objective.add("extra", 0.5f, where_ == kLossTerm && v.iteration == at_ ? double(kNan) : 0.1);
   }
-  void backward(StepContext& c) override {
-    if (where_ == kColourGradient && c.iteration == at_)  // flows into SH
-      std::fill(c.pgrads->colors.begin(), c.pgrads->colors.end(), kInf);
+  void backward(const ViewStep& v, const BackwardIO& io) override {
+    if (where_ == kColourGradient && v.iteration == at_)  // flows into SH
+      std::fill(io.grads.colors.begin(), io.grads.colors.end(), kInf);
+    iteration_ = v.iteration;
+  }
+  void update(const UpdateIO& io) override {
     std::vector<float> g(4, 0.1f);
-    if (where_ == kArrayGradient && c.iteration == at_) g[2] = kNan;
-    c.optim->update(c.optim->get("poison_logits"), logits_.data(), g.data(), 4);
+    if (where_ == kArrayGradient && iteration_ == at_) g[2] = kNan;
+    io.optim.update(io.optim.get("poison_logits"), logits_.data(), g.data(), 4);
   }
 
  private:
   Where where_;
   int at_;
+  int iteration_ = 0;
   std::vector<float> logits_ = std::vector<float>(4, 0.f);
 };
 

@@ -206,29 +206,29 @@ struct Probe : Method {
     optim.add_array("bias", 1, 2, 0.1f).values = [this] { return ParamValues{&bias, nullptr}; };
   }
   float rgb_weight() const override { return 0.5f; }
-  void prepare(StepContext& c) override { calls.push_back("prepare"); }
-  void losses(StepContext& c) override {
+  void prepare(const ViewStep&, const PrepareIO&) override { calls.push_back("prepare"); }
+  void losses(const ViewStep& v, const LossIO& io) override {
     calls.push_back("losses");
     const float t[2] = {3.f, -2.f};
-    double v = 0;
+    double value = 0;
     dbias.resize(2);
     for (int k = 0; k < 2; ++k) {
-      v += double(bias[k] - t[k]) * (bias[k] - t[k]);
+      value += double(bias[k] - t[k]) * (bias[k] - t[k]);
       dbias[k] = 0.25f * 2 * (bias[k] - t[k]);  // weight 0.25
     }
-    const std::vector<float>& p = c.model->find_extra("probe")->data;
+    const std::vector<float>& p = v.model.find_extra("probe")->data;
     dprobe.resize(p.size());
     for (size_t i = 0; i < p.size(); ++i) dprobe[i] = p[i] - 1.f;
-    last_value = v;
-    c.objective->add("probe", 0.25f, v);
+    last_value = value;
+    io.objective.add("probe", 0.25f, value);
   }
-  void backward(StepContext& c) override { calls.push_back("backward"); }
-  void update(StepContext& c) override {
+  void backward(const ViewStep&, const BackwardIO&) override { calls.push_back("backward"); }
+  void update(const UpdateIO& io) override {
     calls.push_back("update");
-    c.optim->update(c.optim->get("bias"), bias.data(), dbias.data(), 2);
-    c.optim->update(c.optim->get("probe"), c.model->find_extra("probe")->data.data(), dprobe.data(), c.model->n);
+    io.optim.update(io.optim.get("bias"), bias.data(), dbias.data(), 2);
+    io.optim.update(io.optim.get("probe"), io.model.find_extra("probe")->data.data(), dprobe.data(), io.model.n);
   }
-  void after_step(StepContext& c, bool densified) override { calls.push_back(densified ? "densified" : "after_step"); }
+  void after_step(const StepEnd& end) override { calls.push_back(end.densified ? "densified" : "after_step"); }
 };
 
 TEST(Method, HooksRunInOrderAndTheirTermsAreOptimised) {
@@ -308,14 +308,14 @@ struct GradTap : Method {
   std::vector<int> densified_at;  // iteration() after the steps that densified
   const Trainer* tr = nullptr;
   std::string name() const override { return "tap"; }
-  void prepare(StepContext& c) override { views.push_back(c.view_index); }
-  void update(StepContext& c) override {
-    mean_grad = c.grads->mean;
-    sh_grad = c.grads->sh;
-    step_views.push_back(c.step_views);
+  void prepare(const ViewStep& v, const PrepareIO&) override { views.push_back(v.view_index); }
+  void update(const UpdateIO& io) override {
+    mean_grad = io.grads.mean;
+    sh_grad = io.grads.sh;
+    step_views.push_back(io.step_views);
   }
-  void after_step(StepContext& c, bool densified) override {
-    if (densified) densified_at.push_back(c.iteration - 1 + c.step_views);
+  void after_step(const StepEnd& end) override {
+    if (end.densified) densified_at.push_back(end.images_seen);
   }
 };
 

@@ -12,7 +12,6 @@
 #include "hybrid/config.h"
 #include "hybrid/register.h"
 #include "train/registry.h"
-#include "hybrid/method.h"
 #include "object_stats.h"
 #include "query/query.h"
 #include "scene/scene.h"
@@ -45,7 +44,6 @@ int main(int argc, char** argv) try {
   if (iters < 1 || every < 1) throw std::runtime_error("ITERS and EVERY must be positive");
   hybrid::register_method();
   auto tr = train::make_trainer(sc, sc.train_indices(), cfg, "hybrid", hc.to_json(), false);
-  auto& ht = dynamic_cast<hybrid::HybridMethod&>(tr->method());
   auto names = eval::load_object_names(sc.root);
   render::GaussianRenderer r;
   for (int it = 1; it <= iters; ++it) {
@@ -59,11 +57,12 @@ int main(int argc, char** argv) try {
     std::vector<int> cnt(L, 0);
     for (int i = 0; i < m.n; ++i)
       if (int(z->data[i]) < L) cnt[int(z->data[i])]++;
-    const auto& w = ht.view_weights();
+    const train::MethodStats ms = tr->method().stats();
+    const std::vector<float>& w = ms.array("view_weights");
     double wmax = 0, wmin = 1, ent = 0;
     for (float x : w) { wmax = std::max<double>(wmax, x); wmin = std::min<double>(wmin, x); ent -= x > 0 ? x * std::log(x) : 0; }
-    const auto& ls = ht.last_losses();
-    printf("it %5d N %6d app %.4f bro %.4f sem %.3f | w %.4f..%.4f H/Hmax %.3f | A_in:", it, m.n, ls.app, ls.bro, ls.sem, wmin, wmax, ent / std::log(double(w.size())));
+    printf("it %5d N %6d app %.4f bro %.4f sem %.3f | w %.4f..%.4f H/Hmax %.3f | A_in:", it, m.n, ms.value("app"),
+           ms.value("bro"), ms.value("sem"), wmin, wmax, ent / std::log(double(w.size())));
     double miou = 0;
     for (int k = 1; k < L; ++k) {
       printf(" %.2f", st.a_in(k));
