@@ -14,7 +14,7 @@
 #include <limits>
 
 #include "core/error.h"
-#include "fd_util.h"
+#include "fd_check.h"
 #include "render/renderer.h"
 #include "render/sh.h"
 #include "render_ref.h"
@@ -22,6 +22,8 @@
 
 namespace hgs::render::test {
 namespace {
+
+using namespace hgs::test;
 
 template <class T>
 std::vector<T> to(const std::vector<double>& v) {
