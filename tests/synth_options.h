@@ -12,16 +12,6 @@ namespace hgs::test {
 
 class SmallSynth {
  public:
-  SmallSynth() {
-    o_.views = 16;
-    o_.width = 96;
-    o_.height = 72;
-    o_.objects = 4;
-    o_.points = 3000;
-    o_.feature_dim = 32;
-    o_.supersample = 1;
-    o_.progress = false;
-  }
   SmallSynth& seed(uint64_t v) { o_.seed = v; return *this; }
   SmallSynth& views(int v) { o_.views = v; return *this; }
   SmallSynth& image_size(int width, int height) { o_.width = width; o_.height = height; return *this; }
@@ -32,7 +22,8 @@ class SmallSynth {
   operator synth::SynthOptions() const { return o_; }
 
  private:
-  synth::SynthOptions o_;
+  synth::SynthOptions o_{.views = 16, .width = 96, .height = 72, .objects = 4, .points = 3000, .feature_dim = 32,
+                         .supersample = 1, .progress = false};
 };
 
 }  // namespace hgs::test
