@@ -4,6 +4,7 @@
 #include <cstdlib>
 #include <system_error>
 
+#include "../tests/synth_options.h"
 #include "core/error.h"
 #include "core/fs.h"
 #include "fuzz.h"
@@ -62,17 +63,8 @@ std::vector<std::string_view> split(const uint8_t* data, size_t size, size_t n) 
 const fs::path& tiny_scene() {
   static const fs::path dir = [] {
     fs::path d = root() / "tiny_scene";
-    synth::SynthOptions o;
-    o.views = 4;
-    o.width = 32;
-    o.height = 24;
-    o.objects = 3;
-    o.points = 200;
-    o.feature_dim = 8;
-    o.noise = "none";
-    o.supersample = 1;
-    o.progress = false;
-    synth::generate(d, o);
+    synth::generate(
+        d, hgs::test::SmallSynth().views(4).image_size(32, 24).objects(3).points(200).feature_dim(8).noise("none"));
     return d;
   }();
   return dir;

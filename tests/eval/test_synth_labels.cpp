@@ -14,6 +14,7 @@
 #include "eval/instances.h"
 #include "eval/labels.h"
 #include "synth/synth.h"
+#include "synth_options.h"
 #include "test_util.h"
 
 using namespace hgs;
@@ -51,15 +52,7 @@ Mask fill_holes(const Mask& m, int w, int h) {
 
 TEST(EvalSynthLabels, PolygonsAndSegmentationsMatchInstanceMasks) {
   hgs::test::TempDir tmp;
-  synth::SynthOptions o;
-  o.views = 16;
-  o.width = 96;
-  o.height = 72;
-  o.objects = 4;
-  o.points = 500;
-  o.feature_dim = 16;
-  o.supersample = 1;
-  o.progress = false;
+  const synth::SynthOptions o = hgs::test::SmallSynth().points(500).feature_dim(16);
   const fs::path scene = tmp / "scene";
   synth::generate(scene, o);
 

@@ -1,8 +1,8 @@
 // Regression for the full method on a harder generated scene (tabletop, high mask noise, 10 objects, 160x120):
 // object-mode mIoU and mBIoU on the held-out views (instances protocol, objects picked by text) of the full
-// method (OF + SCL + BRO) must not fall below the all-off row. Before BRO's scale-invariant gradient and scale rule
-// (hybrid/bro.h), SCL without geometry gradients and T = 0.05, the full method fell far below it on every scene of
-// docs/results.md. Kept short for CI (24 views, D = 32, 800 iterations).
+// method (OF + SCL + BRO) must not fall below the all-off row; BRO's scale-invariant gradient and scale rule
+// (hybrid/bro.h), SCL without geometry gradients and T = 0.05 are what keep it there. Sized for CI (24 views,
+// D = 32, 800 iterations).
 #include <gtest/gtest.h>
 
 #include "eval/report.h"
@@ -13,6 +13,7 @@
 #include "model/ply.h"
 #include "query/session.h"
 #include "synth/synth.h"
+#include "synth_options.h"
 #include "test_util.h"
 
 using namespace hgs;
@@ -41,18 +42,8 @@ eval::MeanRow train_and_evaluate(const std::filesystem::path& scene_dir, const S
 
 TEST(HybridAblation, FullMethodNotBelowAllOffOnAHarderScene) {
   test::TempDir tmp;
-  synth::SynthOptions o;
-  o.seed = 11;
-  o.views = 24;
-  o.width = 160;
-  o.height = 120;
-  o.objects = 10;
-  o.points = 10000;
-  o.noise = "high";
-  o.feature_dim = 32;
-  o.supersample = 1;
-  o.progress = false;
-  synth::generate(tmp / "s", o);
+  synth::generate(tmp / "s",
+                  test::SmallSynth().seed(11).views(24).image_size(160, 120).objects(10).points(10000).noise("high"));
   const Scene scene = load_scene(tmp / "s");
   const eval::MeanRow off = train_and_evaluate(tmp / "s", scene, false, 800, tmp / "off.ply");
   const eval::MeanRow full = train_and_evaluate(tmp / "s", scene, true, 800, tmp / "full.ply");

@@ -6,6 +6,7 @@
 #include <functional>
 #include <random>
 
+#include "fd_check.h"
 #include "hybrid/bro.h"
 #include "hybrid/fusion.h"
 #include "hybrid/object_channels.h"
@@ -16,25 +17,13 @@ using namespace hgs::hybrid;
 
 namespace {
 
-// Central differences of f at x for every coordinate; compares with `analytic` by relative error.
-void check_grad(std::vector<double>& x, const std::function<double()>& f, const std::vector<double>& analytic,
-                double h = 1e-6, double tol = 1e-6) {
-  ASSERT_EQ(x.size(), analytic.size());
-  double max_abs = 1e-12;
-  for (double g : analytic) max_abs = std::max(max_abs, std::abs(g));
-  int checked_nonzero = 0;
-  for (size_t i = 0; i < x.size(); ++i) {
-    const double x0 = x[i];
-    x[i] = x0 + h;
-    const double fp = f();
-    x[i] = x0 - h;
-    const double fm = f();
-    x[i] = x0;
-    const double num = (fp - fm) / (2 * h);
-    EXPECT_NEAR(analytic[i], num, tol * max_abs + 1e-9) << "coordinate " << i;
-    checked_nonzero += std::abs(num) > 1e-8;
-  }
-  EXPECT_GT(checked_nonzero, 0) << "the check would pass for a zero gradient";
+// Central differences of f at x for every coordinate, within 1e-6 of the largest |analytic| plus 1e-9 of
+// `analytic`; some difference must exceed 1e-8 (a zero gradient would pass otherwise).
+void check_grad(std::vector<double>& x, const std::function<double()>& f, const std::vector<double>& analytic) {
+  const test::FdStats st = test::fd_check("coordinate", x, test::all_indices(x.size()), analytic, f,
+                                          {.h = 1e-6, .rtol = 0, .scale_atol = 1e-6, .atol = 1e-9,
+                                           .noise_atol = 0, .nonzero_fd = 1e-8});
+  EXPECT_GT(st.nonzero, 0) << "the check would pass for a zero gradient";
 }
 
 std::vector<double> randv(size_t n, std::mt19937& rng, double lo = -1, double hi = 1) {

@@ -11,6 +11,7 @@
 #include <functional>
 #include <random>
 
+#include "fd_check.h"
 #include "hybrid/bro.h"
 #include "hybrid/fusion.h"
 #include "hybrid/object_channels.h"
@@ -69,23 +70,14 @@ struct Scene {
   }
 };
 
+// Central differences within rtol of max(|fd|, |analytic|) plus 1e-7 of the largest |analytic|; more than a
+// quarter of the differences must exceed 1e-9 for the check to mean something.
 void check(const char* name, std::vector<double>& x, const std::function<double()>& f, const std::vector<double>& an,
            double h = 1e-6, double rtol = 1e-5) {
-  double scale = 1e-12;
-  for (double g : an) scale = std::max(scale, std::abs(g));
-  int nonzero = 0;
-  for (size_t i = 0; i < x.size(); ++i) {
-    const double x0 = x[i];
-    x[i] = x0 + h;
-    const double fp = f();
-    x[i] = x0 - h;
-    const double fm = f();
-    x[i] = x0;
-    const double fd = (fp - fm) / (2 * h);
-    EXPECT_NEAR(an[i], fd, rtol * std::max(std::abs(fd), std::abs(an[i])) + 1e-7 * scale) << name << "[" << i << "]";
-    nonzero += std::abs(fd) > 1e-9;
-  }
-  EXPECT_GT(nonzero, int(x.size()) / 4) << name << ": too few non-zero gradients to be a meaningful check";
+  const test::FdStats st = test::fd_check(name, x, test::all_indices(x.size()), an, f,
+                                          {.h = h, .rtol = rtol, .scale_atol = 1e-7, .noise_atol = 0,
+                                           .nonzero_fd = 1e-9});
+  EXPECT_GT(st.nonzero, int(x.size()) / 4) << name << ": too few non-zero gradients to be a meaningful check";
 }
 
 }  // namespace

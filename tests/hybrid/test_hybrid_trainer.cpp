@@ -20,6 +20,7 @@
 #include "render/camera_from_view.h"
 #include "scene/scene.h"
 #include "synth/synth.h"
+#include "synth_options.h"
 #include "test_util.h"
 
 using namespace hgs;
@@ -32,16 +33,7 @@ struct Tiny {
   Scene scene;
   std::vector<int> train;
   explicit Tiny(const std::string& noise = "low", int objects = 4, uint64_t seed = 3) {
-    opt.seed = seed;
-    opt.views = 16;
-    opt.width = 96;
-    opt.height = 72;
-    opt.objects = objects;
-    opt.points = 3000;
-    opt.noise = noise;
-    opt.feature_dim = 32;
-    opt.supersample = 1;
-    opt.progress = false;
+    opt = test::SmallSynth().objects(objects).noise(noise).seed(seed);
     synth::generate(tmp / "s", opt);
     scene = load_scene(tmp / "s");
     train = scene.train_indices();

@@ -5,7 +5,7 @@
 #include <random>
 #include <vector>
 
-#include "fd_util.h"
+#include "fd_check.h"
 #include "render/renderer.h"
 #include "render_ref.h"
 
@@ -28,7 +28,7 @@ void render_with_random_grads(const Scene& s, RendererT<T>& r, RenderOutputsT<T>
   std::mt19937 rng(seed);
   auto weights = [&](size_t n) {
     std::vector<T> w;
-    for (double v : random_weights(n, rng)) w.push_back(T(v));
+    for (double v : hgs::test::random_weights(n, rng)) w.push_back(T(v));
     return w;
   };
   const std::vector<T> wr = weights(out.rgb.size()), wa = weights(out.alpha.size()), wd = weights(out.depth.size()),

@@ -5,7 +5,7 @@
 // Discontinuities (alpha = 1/255 skip, 0.99 clamp, T < 1e-4 stop, near-plane culling, the 1.3x FOV clamp, the SH
 // clamp at 0, integer radii / tile rects): scenes are random, so instead of hoping to avoid them every +-h
 // evaluation is paired with the reference renderer's decision signature and coordinates whose perturbation flips
-// any decision are skipped (fd_util.h); at most 10% may be skipped. The x/y clamp, SH clamp, near-plane and
+// any decision are skipped (tests/fd_check.h); at most 10% may be skipped. The x/y clamp, SH clamp, near-plane and
 // behind-camera Gaussians, tile-border overlap and the T cut-off are all present in these scenes (asserted).
 #include <gtest/gtest.h>
 #include <omp.h>
@@ -13,7 +13,7 @@
 #include <cstring>
 
 #include "core/error.h"
-#include "fd_util.h"
+#include "fd_check.h"
 #include "render/binning.h"
 #include "render/project.h"
 #include "render/rasterize.h"
@@ -24,6 +24,8 @@
 
 namespace hgs::render::test {
 namespace {
+
+using namespace hgs::test;
 
 // ---------------------------------------------------------------------------------------------------------
 TEST(RenderGrad, ProjectionFiniteDifferences) {
@@ -53,7 +55,7 @@ TEST(RenderGrad, ProjectionFiniteDifferences) {
     };
     std::vector<double> an(10);
     project_one_backward(cam, tr, &w[0], wc, w[5], &an[0], &an[3], &an[6]);
-    fd_check("projection g" + std::to_string(i), p, all_indices(10), an, eval, 1e-6, 1e-6);
+    fd_check("projection g" + std::to_string(i), p, all_indices(10), an, eval, {.rtol = 1e-6});
   }
   EXPECT_GT(tested, 50);
   EXPECT_GT(clamped, 3);  // the clamped-Jacobian branch is exercised
@@ -87,7 +89,7 @@ TEST(RenderGrad, ShFiniteDifferences) {
       std::vector<int> idx;
       for (int k = 0; k < 3 * sh_num_coeffs(deg); ++k) idx.push_back(k);
       if (deg > 0) idx.insert(idx.end(), {48, 49, 50});
-      fd_check("sh deg " + std::to_string(deg), p, idx, an, eval, 1e-6, 1e-7);
+      fd_check("sh deg " + std::to_string(deg), p, idx, an, eval, {.rtol = 1e-7});
     }
   }
   EXPECT_GT(clamped, 0);
@@ -210,7 +212,7 @@ TEST(RenderGrad, RasterizeFiniteDifferences) {
     g.extra = ge.data();
     rasterize_backward(r.inputs(), r.bins, r.ws, r.finalT.data(), r.last.data(), g);
     fd_check("raster mean2d", r.mean2d, all_indices(r.mean2d.size()), gm, eval);
-    fd_check("raster conic", r.conic, all_indices(r.conic.size()), gc, eval, 1e-7);
+    fd_check("raster conic", r.conic, all_indices(r.conic.size()), gc, eval, {.h = 1e-7});
     fd_check("raster opacity", r.opacity, all_indices(r.opacity.size()), go, eval);
     fd_check("raster color", r.color, all_indices(r.color.size()), gcol, eval);
     fd_check("raster depth", r.depth, all_indices(r.depth.size()), gd, eval);

@@ -3,8 +3,8 @@
 //   channels, pixel weights, forward-only channels), also when the phases run on a warm renderer;
 // - a caller building extra channels from projected().colors between the phases (the hybrid method's q_k * c)
 //   and adding their colour gradient before preprocess_backward() gets the exact gradient of the whole chain
-//   (finite differences in double), bitwise the same as the old route (SH on every Gaussian by hand, colours
-//   passed as precomputed, sh_backward by hand);
+//   (finite differences in double), bitwise the same as the precomputed-colour route (SH on every Gaussian by
+//   hand, colours passed as precomputed, sh_backward by hand);
 // - culled Gaussians get colour 0 without evaluating SH and no SH / mean gradient, whatever is added to their
 //   colour gradient.
 #include <gtest/gtest.h>
@@ -14,7 +14,7 @@
 #include <limits>
 
 #include "core/error.h"
-#include "fd_util.h"
+#include "fd_check.h"
 #include "render/renderer.h"
 #include "render/sh.h"
 #include "render_ref.h"
@@ -22,6 +22,8 @@
 
 namespace hgs::render::test {
 namespace {
+
+using namespace hgs::test;
 
 template <class T>
 std::vector<T> to(const std::vector<double>& v) {
@@ -197,9 +199,9 @@ TEST(RenderTwoPhase, ChannelsFromProjectedColoursFiniteDifferences) {
   EXPECT_GT(diff, 1e-3 * scale);
 }
 
-// The old route of the hybrid method (sh_forward on all N, colours passed as precomputed with the channels made
-// from them, sh_backward by hand) and the two-phase route give bitwise the same float render and gradients (up
-// to the sign of zero for culled Gaussians, which the old route ran SH on with a zero colour gradient).
+// The precomputed-colour route (sh_forward on all N, colours passed as precomputed with the channels made from
+// them, sh_backward by hand) and the two-phase route give bitwise the same float render and gradients (up to the
+// sign of zero for culled Gaussians, which the precomputed-colour route runs SH on with a zero colour gradient).
 TEST(RenderTwoPhase, MatchesPrecomputedColourRoute) {
   Scene s = random_scene(400, 64, 48, 44, 0.9, 4);
   std::vector<std::vector<float>> store;
@@ -212,7 +214,7 @@ TEST(RenderTwoPhase, MatchesPrecomputedColourRoute) {
 
   GaussianRenderer r_old, r_now;
   RenderOutputs o_old, o_now;
-  // old route
+  // precomputed-colour route
   r_old.preprocess(s.cam, g);  // only for the camera centre
   float campos[3];
   for (int k = 0; k < 3; ++k) campos[k] = r_old.projected().campos[k];

@@ -1,3 +1,5 @@
+// The synthetic scene generator: complete and deterministic output, ground truth that matches the images, masks
+// and features, noise levels, surface masks.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -12,6 +14,7 @@
 #include "scene/colmap.h"
 #include "scene/scene.h"
 #include "synth/synth.h"
+#include "synth_options.h"
 #include "test_util.h"
 
 using namespace hgs;
@@ -19,19 +22,9 @@ namespace fs = std::filesystem;
 
 namespace {
 
-synth::SynthOptions tiny(const std::string& noise = "medium", uint64_t seed = 7) {
-  synth::SynthOptions o;
-  o.seed = seed;
-  o.views = 16;
-  o.width = 96;
-  o.height = 72;
-  o.objects = 5;
-  o.points = 1500;
-  o.noise = noise;
-  o.feature_dim = 32;
-  o.supersample = 1;
-  o.progress = false;
-  return o;
+// 16 views of 96x72, 5 objects, 1500 points, 32-dimensional features.
+test::SmallSynth tiny(const std::string& noise = "medium", uint64_t seed = 7) {
+  return test::SmallSynth().objects(5).points(1500).noise(noise).seed(seed);
 }
 
 std::map<std::string, std::vector<uint8_t>> all_files(const fs::path& root) {
@@ -57,7 +50,7 @@ TEST(Synth, SameSeedSameBytes) {
 
 TEST(Synth, SceneIsCompleteAndConsistent) {
   test::TempDir tmp;
-  auto o = tiny();
+  const synth::SynthOptions o = tiny();
   synth::generate(tmp / "s", o);
   Scene s = load_scene(tmp / "s");
   ASSERT_EQ(s.views.size(), 16u);
@@ -108,13 +101,7 @@ TEST(Synth, FeaturesPointAtTheRightObject) {
   // For every 16-px patch mostly covered by one object, that object's class-name embedding must be the most
   // similar among the scene's objects far more often than chance (1/5).
   test::TempDir tmp;
-  auto o = tiny("low");
-  o.width = 320;
-  o.height = 240;
-  o.views = 6;
-  o.points = 300;
-  o.feature_dim = 64;
-  synth::generate(tmp / "s", o);
+  synth::generate(tmp / "s", tiny("low").image_size(320, 240).views(6).points(300).feature_dim(64));
   Scene s = load_scene(tmp / "s");
   int correct = 0, total = 0;
   for (int vi = 0; vi < 6; ++vi) {
@@ -174,12 +161,7 @@ TEST(Synth, MaskNoiseFollowsTheRequestedLevel) {
   test::TempDir tmp;
   // At the default resolution (objects a few thousand pixels) jitter of 2 px is a modest error.
   for (auto lvl : {"none", "medium", "high"}) {
-    auto o = tiny(lvl);
-    o.width = 320;
-    o.height = 240;
-    o.views = 8;
-    o.points = 300;
-    synth::generate(tmp / lvl, o);
+    synth::generate(tmp / lvl, tiny(lvl).image_size(320, 240).views(8).points(300));
   }
   EXPECT_DOUBLE_EQ(mask_iou(tmp / "none", 8, 200), 1.0);
   EXPECT_FALSE(fs::exists(tmp / "none" / "masks" / "frame_00001.conf.npy"));

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <random>
 
+#include "fd_check.h"
 #include "train/loss.h"
 #include "train/ssim.h"
 
@@ -19,6 +20,9 @@ std::vector<double> random_image(int H, int W, int C, unsigned seed) {
   for (auto& x : v) x = u(rng);
   return v;
 }
+
+// SSIM gradients are checked within 1e-7 of their largest magnitude.
+constexpr test::FdOptions kSsimFd{.h = 1e-6, .rtol = 0, .scale_atol = 1e-7, .noise_atol = 0};
 
 // Direct definition: 2D window w(i) w(j) over an 11x11 neighbourhood with zero padding, per channel.
 double brute_ssim(const std::vector<double>& x, const std::vector<double>& y, int H, int W, int C) {
@@ -71,19 +75,11 @@ TEST(Ssim, GradientMatchesFiniteDifferences) {
     for (size_t i = 0; i < y.size(); ++i) y[i] = 0.5 * x[i] + 0.5 * y[i];
     std::vector<double> g(x.size());
     ssim(x.data(), y.data(), H, W, C, g.data(), ws);
-    const double h = 1e-6;
-    double max_err = 0, max_g = 0;
-    for (size_t i = 0; i < x.size(); i += (x.size() > 200 ? 2 : 1)) {
-      auto xp = x, xm = x;
-      xp[i] += h;
-      xm[i] -= h;
-      double fd = (ssim(xp.data(), y.data(), H, W, C, (double*)nullptr, ws) -
-                   ssim(xm.data(), y.data(), H, W, C, (double*)nullptr, ws)) / (2 * h);
-      max_err = std::max(max_err, std::abs(fd - g[i]));
-      max_g = std::max(max_g, std::abs(g[i]));
-    }
-    EXPECT_GT(max_g, 1e-4);
-    EXPECT_LT(max_err, 1e-7 * max_g) << "max |grad| " << max_g;
+    const int h = H, w = W;
+    auto f = [&] { return ssim(x.data(), y.data(), h, w, C, (double*)nullptr, ws); };
+    const test::FdStats st = test::fd_check("ssim", x, test::all_indices(x.size(), x.size() > 200 ? 2 : 1), g, f,
+                                            kSsimFd);
+    EXPECT_GT(st.max_analytic, 1e-4);
   }
 }
 
@@ -111,22 +107,15 @@ TEST(Ssim, RowBandsAreExactAndThreadIndependent) {
   EXPECT_NEAR(values[0], brute_ssim(x, y, H, W, C), 1e-12);
   omp_set_num_threads(std::max(2, saved));
   SsimWorkspace<double> ws;
-  const double h = 1e-4;  // gradients here are ~1e-3 (1/(HWC) scale): a larger step keeps rounding noise small
-  double max_err = 0, max_g = 0;
+  std::vector<int> idx;
   for (int row : {0, 22, 23, 24, 34, 35, 36, 46, 47, 69})
-    for (int j = 0; j < W * C; j += 4) {
-      const size_t i = size_t(row) * W * C + j;
-      auto xp = x, xm = x;
-      xp[i] += h;
-      xm[i] -= h;
-      const double fd = (ssim(xp.data(), y.data(), H, W, C, (double*)nullptr, ws) -
-                         ssim(xm.data(), y.data(), H, W, C, (double*)nullptr, ws)) / (2 * h);
-      max_err = std::max(max_err, std::abs(fd - grads[0][i]));
-      max_g = std::max(max_g, std::abs(grads[0][i]));
-    }
+    for (int j = 0; j < W * C; j += 4) idx.push_back(row * W * C + j);
+  auto f = [&] { return ssim(x.data(), y.data(), H, W, C, (double*)nullptr, ws); };
+  test::FdOptions o = kSsimFd;
+  o.h = 1e-4;  // gradients here are ~1e-3 (1/(HWC) scale): a larger step keeps rounding noise small
+  const test::FdStats st = test::fd_check("ssim", x, idx, grads[0], f, o);
   omp_set_num_threads(saved);
-  EXPECT_GT(max_g, 1e-5);
-  EXPECT_LT(max_err, 1e-7 * max_g);
+  EXPECT_GT(st.max_analytic, 1e-5);
 }
 
 TEST(Ssim, FloatMatchesDouble) {
@@ -156,15 +145,11 @@ TEST(L1, ValueAndGradient) {
   for (size_t i = 0; i < a.size(); ++i) ref += std::abs(a[i] - b[i]);
   EXPECT_NEAR(v, ref / a.size(), 1e-15);
   EXPECT_EQ(g[4], 0.0);
-  const double h = 1e-7;
-  for (size_t i = 0; i < a.size(); ++i) {
-    if (i == 4) continue;
-    auto ap = a, am = a;
-    ap[i] += h;
-    am[i] -= h;
-    double fd = 2.0 * (l1_loss(ap.data(), b.data(), a.size(), (double*)nullptr) - l1_loss(am.data(), b.data(), a.size(), (double*)nullptr)) / (2 * h);
-    EXPECT_NEAR(g[i], fd, 1e-7 * std::abs(fd)) << i;
-  }
+  std::vector<int> idx = test::all_indices(a.size());
+  idx.erase(idx.begin() + 4);
+  auto f = [&] { return 2.0 * l1_loss(a.data(), b.data(), a.size(), (double*)nullptr); };
+  test::fd_check("l1", a, idx, g, f,
+                 {.h = 1e-7, .rtol = 1e-7, .rtol_of_fd = true, .scale_atol = 0, .noise_atol = 0});
 }
 
 TEST(PhotometricLoss, CombinesL1AndSsimGradients) {

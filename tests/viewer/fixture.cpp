@@ -1,8 +1,15 @@
+// The viewer fixture and the helpers of fixture.h.
 #include "fixture.h"
 
+#include <arpa/inet.h>
+#include <fmt/format.h>
 #include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <vector>
 
 #include "core/error.h"
@@ -10,7 +17,6 @@
 #include "model/gaussian_model.h"
 #include "model/ply.h"
 #include "scene/scene.h"
-#include "test_util.h"
 
 namespace hgs::test {
 namespace fs = std::filesystem;
@@ -60,6 +66,79 @@ ViewerFixture make_viewer_fixture(const fs::path& dir) {
   }
   write_model_ply(f.model, m);
   return f;
+}
+
+void ViewerServerTest::make_fixture() {
+  dir_ = new TempDir();
+  fix_ = new ViewerFixture(make_viewer_fixture(dir_->path));
+}
+
+void ViewerServerTest::start_server(viewer::ServerOptions opt) {
+  session_ = new query::Session(fix_->scene, fix_->model, 1, "");
+  opt.port = 0;
+  server_ = new viewer::Server(*session_, opt);
+  port_ = server_->start();
+}
+
+void ViewerServerTest::TearDownTestSuite() {
+  delete server_;
+  delete session_;
+  delete fix_;
+  delete dir_;
+  server_ = nullptr;
+  session_ = nullptr;
+  fix_ = nullptr;
+  dir_ = nullptr;
+}
+
+std::string url_encode(const std::string& s) {
+  std::string o;
+  for (unsigned char c : s) {
+    if (std::isalnum(c) || c == '-' || c == '_' || c == '.') o += char(c);
+    else o += fmt::format("%{:02X}", c);
+  }
+  return o;
+}
+
+int connect_loopback(int port) {
+  int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_port = htons(uint16_t(port));
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  if (::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) {
+    ::close(fd);
+    return -1;
+  }
+  timeval tv{20, 0};
+  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+  return fd;
+}
+
+std::string raw(int port, const std::string& request) {
+  const int fd = connect_loopback(port);
+  if (fd < 0) return "";
+  for (size_t done = 0; done < request.size();) {
+    const ssize_t n = ::send(fd, request.data() + done, request.size() - done, MSG_NOSIGNAL);
+    if (n <= 0) break;  // the server may close early (oversize input): read what it said
+    done += size_t(n);
+  }
+  std::string out;
+  char buf[4096];
+  for (ssize_t n; (n = ::read(fd, buf, sizeof buf)) > 0;) {
+    out.append(buf, size_t(n));
+    const size_t h = out.find("\r\n\r\n");
+    if (h == std::string::npos) continue;
+    const size_t cl = out.find("Content-Length: ");
+    if (cl == std::string::npos || cl > h || out.size() >= h + 4 + std::stoul(out.substr(cl + 16))) break;
+  }
+  ::close(fd);
+  return out;
+}
+
+int status_of(const std::string& response) {
+  if (response.rfind("HTTP/1.1 ", 0) != 0) return -1;
+  return std::stoi(response.substr(9, 3));
 }
 
 }  // namespace hgs::test

@@ -13,11 +13,9 @@
 #include "test_util.h"
 #include "viewer/server.h"
 
-#include <arpa/inet.h>
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <httplib.h>
-#include <netinet/in.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -51,57 +49,6 @@ double rss_mb() {  // resident set of this process (server and clients)
   return double(resident) * double(::sysconf(_SC_PAGESIZE)) / (1024.0 * 1024.0);
 }
 
-std::string url_encode(const std::string& s) {
-  std::string o;
-  for (unsigned char c : s) {
-    if (std::isalnum(c) || c == '-' || c == '_' || c == '.') o += char(c);
-    else o += fmt::format("%{:02X}", c);
-  }
-  return o;
-}
-
-int connect_loopback(int port) {
-  int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_port = htons(uint16_t(port));
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  if (::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) {
-    ::close(fd);
-    return -1;
-  }
-  timeval tv{20, 0};
-  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
-  return fd;
-}
-
-// Sends raw bytes, returns what the server answered until it closed or one response arrived.
-std::string raw(int port, const std::string& request) {
-  const int fd = connect_loopback(port);
-  if (fd < 0) return "";
-  for (size_t done = 0; done < request.size();) {
-    const ssize_t n = ::send(fd, request.data() + done, request.size() - done, MSG_NOSIGNAL);
-    if (n <= 0) break;  // the server may close early (oversize input): read what it said
-    done += size_t(n);
-  }
-  std::string out;
-  char buf[4096];
-  for (ssize_t n; (n = ::read(fd, buf, sizeof buf)) > 0;) {
-    out.append(buf, size_t(n));
-    const size_t h = out.find("\r\n\r\n");
-    if (h == std::string::npos) continue;
-    const size_t cl = out.find("Content-Length: ");
-    if (cl == std::string::npos || cl > h || out.size() >= h + 4 + std::stoul(out.substr(cl + 16))) break;
-  }
-  ::close(fd);
-  return out;
-}
-
-int status_of(const std::string& response) {
-  if (response.rfind("HTTP/1.1 ", 0) != 0) return -1;
-  return std::stoi(response.substr(9, 3));
-}
-
 struct Req {
   std::string method, path, body;
 };
@@ -114,29 +61,19 @@ std::string canonical(const std::string& body, const std::string& content_type) 
   return j.dump();
 }
 
-class ViewerLoad : public ::testing::Test {
+class ViewerLoad : public ViewerServerTest {
  protected:
   static void SetUpTestSuite() {
-    dir_ = new TempDir();
-    fix_ = new ViewerFixture(make_viewer_fixture(dir_->path));
+    make_fixture();
     fs::create_directories(dir_->path / "www");
     atomic_write_text(dir_->path / "www" / "index.html", "<html>hgs load page</html>");
     atomic_write_text(dir_->path / "secret.txt", "TOP-SECRET");
     fs::create_directories(dir_->path / "outside");
     atomic_write_text(dir_->path / "outside" / "inner.txt", "TOP-SECRET");
     fs::create_directory_symlink(dir_->path / "outside", dir_->path / "www" / "linkdir");
-    session_ = new query::Session(fix_->scene, fix_->model, 1, "");
-    viewer::ServerOptions opt;  // the defaults of `hgs view`, on a free port
-    opt.port = 0;
+    viewer::ServerOptions opt;  // the defaults of `hgs view`
     opt.static_dir = dir_->path / "www";
-    server_ = new viewer::Server(*session_, opt);
-    port_ = server_->start();
-  }
-  static void TearDownTestSuite() {
-    delete server_;
-    delete session_;
-    delete fix_;
-    delete dir_;
+    start_server(opt);
   }
 
   // The request mix: every object in every kind of request, over a few views.
@@ -164,18 +101,7 @@ class ViewerLoad : public ::testing::Test {
   static httplib::Result send(httplib::Client& c, const Req& q) {
     return q.method == "GET" ? c.Get(q.path.c_str()) : c.Post(q.path.c_str(), q.body, "application/json");
   }
-
-  static TempDir* dir_;
-  static ViewerFixture* fix_;
-  static query::Session* session_;
-  static viewer::Server* server_;
-  static int port_;
 };
-TempDir* ViewerLoad::dir_ = nullptr;
-ViewerFixture* ViewerLoad::fix_ = nullptr;
-query::Session* ViewerLoad::session_ = nullptr;
-viewer::Server* ViewerLoad::server_ = nullptr;
-int ViewerLoad::port_ = 0;
 
 TEST_F(ViewerLoad, ConcurrentClientsGetSequentialAnswersAndMemoryStaysFlat) {
   const std::vector<Req> reqs = mix();

@@ -12,13 +12,8 @@
 #include "test_util.h"
 #include "viewer/server.h"
 
-#include <arpa/inet.h>
-#include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <httplib.h>
-#include <netinet/in.h>
-#include <sys/socket.h>
-#include <unistd.h>
 
 #include <nlohmann/json.hpp>
 
@@ -27,39 +22,20 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-std::string url_encode(const std::string& s) {
-  std::string o;
-  for (unsigned char c : s) {
-    if (std::isalnum(c) || c == '-' || c == '_' || c == '.') o += char(c);
-    else o += fmt::format("%{:02X}", c);
-  }
-  return o;
-}
-
-class ViewerApi : public ::testing::Test {
+class ViewerApi : public ViewerServerTest {
  protected:
   static void SetUpTestSuite() {
-    dir_ = new TempDir();
-    fix_ = new ViewerFixture(make_viewer_fixture(dir_->path));
+    make_fixture();
     // Static folder with one page, and a secret file beside it that must never be served.
     fs::create_directories(dir_->path / "www" / "assets");
     atomic_write_text(dir_->path / "www" / "index.html", "<html>hgs test page</html>");
     atomic_write_text(dir_->path / "www" / "assets" / "app.js", "console.log(1)");
     atomic_write_text(dir_->path / "secret.txt", "TOP-SECRET");
     fs::create_symlink(dir_->path / "secret.txt", dir_->path / "www" / "link.txt");
-    session_ = new query::Session(fix_->scene, fix_->model, 1, "");
     viewer::ServerOptions opt;
-    opt.port = 0;
     opt.static_dir = dir_->path / "www";
     opt.max_body = 4096;
-    server_ = new viewer::Server(*session_, opt);
-    port_ = server_->start();
-  }
-  static void TearDownTestSuite() {
-    delete server_;
-    delete session_;
-    delete fix_;
-    delete dir_;
+    start_server(opt);
   }
   static httplib::Client client() {
     httplib::Client c("127.0.0.1", port_);
@@ -92,48 +68,7 @@ class ViewerApi : public ::testing::Test {
     atomic_write_bytes(f, r->body.data(), r->body.size());
     return read_model_ply(f);
   }
-  // Raw request bytes over a socket (for requests an HTTP client would normalise); returns the response.
-  static std::string raw(const std::string& request) {
-    int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_port = htons(uint16_t(port_));
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    if (::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) {
-      ::close(fd);
-      return "";
-    }
-    (void)!::write(fd, request.data(), request.size());
-    timeval tv{20, 0};
-    ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
-    std::string out;
-    char buf[4096];
-    for (ssize_t n; (n = ::read(fd, buf, sizeof buf)) > 0;) {  // until one whole response has arrived
-      out.append(buf, size_t(n));
-      const size_t h = out.find("\r\n\r\n");
-      if (h == std::string::npos) continue;
-      const size_t cl = out.find("Content-Length: ");
-      if (cl == std::string::npos || cl > h || out.size() >= h + 4 + std::stoul(out.substr(cl + 16))) break;
-    }
-    ::close(fd);
-    return out;
-  }
-  static int status_of(const std::string& response) {
-    if (response.rfind("HTTP/1.1 ", 0) != 0) return -1;
-    return std::stoi(response.substr(9, 3));
-  }
-
-  static TempDir* dir_;
-  static ViewerFixture* fix_;
-  static query::Session* session_;
-  static viewer::Server* server_;
-  static int port_;
 };
-TempDir* ViewerApi::dir_ = nullptr;
-ViewerFixture* ViewerApi::fix_ = nullptr;
-query::Session* ViewerApi::session_ = nullptr;
-viewer::Server* ViewerApi::server_ = nullptr;
-int ViewerApi::port_ = 0;
 
 TEST_F(ViewerApi, DefaultsBindLoopback) {
   viewer::ServerOptions o;
@@ -363,7 +298,7 @@ TEST_F(ViewerApi, BadRequestsGet4xxWithMessage) {
   EXPECT_EQ(big->status, 413);
   EXPECT_NE(big->body.find("too large"), std::string::npos);
   // Garbage on the socket: 400 from the HTTP layer.
-  EXPECT_EQ(status_of(raw("THIS IS NOT HTTP\r\n\r\n")), 400);
+  EXPECT_EQ(status_of(raw(port_, "THIS IS NOT HTTP\r\n\r\n")), 400);
   // And the server still answers.
   EXPECT_EQ(get_json("/api/query?text=red%20mug")["chosen"][0]["name"], "red mug");
 }
@@ -383,7 +318,7 @@ TEST_F(ViewerApi, StaticFilesOnlyFromTheViewerFolder) {
       "/..%2fsecret.txt", "/..%5csecret.txt", "/%2e%2e%2fsecret.txt", "//secret.txt", "/link.txt",
       "/assets/..", "/" + (dir_->path / "secret.txt").string(), "/secret.txt%00.html", "/./index.html/../../secret.txt"};
   for (const std::string& a : attacks) {
-    const std::string resp = raw("GET " + a + " HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
+    const std::string resp = raw(port_, "GET " + a + " HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
     const int st = status_of(resp);
     EXPECT_GE(st, 400) << a;
     EXPECT_LT(st, 500) << a;
