@@ -114,30 +114,145 @@ void Trainer::save_checkpoint(const std::filesystem::path& path) const {
   });
 }
 
+namespace {
+
+using nlohmann::json;
+
+// The JSON header after the magic bytes; `file_size` bounds every size read from the file.
+json read_header(FILE* fp, const std::string& where, uint64_t file_size) {
+  char magic[8];
+  uint64_t len = 0;
+  if (std::fread(magic, 1, 8, fp) != 8 || std::memcmp(magic, kMagic, 8) != 0) fail("{}: not an hgs checkpoint", where);
+  if (std::fread(&len, 8, 1, fp) != 1 || len > file_size - std::min<uint64_t>(file_size, 16))
+    fail("{}: truncated checkpoint header", where);
+  std::string hs(len, '\0');
+  if (std::fread(hs.data(), 1, len, fp) != len) fail("{}: truncated checkpoint header", where);
+  try {
+    return json::parse(hs);
+  } catch (const std::exception& e) {
+    fail("{}: corrupt checkpoint header", where);
+  }
+}
+
+// The model of the checkpoint, sized by its header (values read later).
+GaussianModel header_model(const json& h) {
+  GaussianModel m;
+  m.sh_degree = h.at("sh_degree").get<int>();
+  m.resize(h.at("n").get<int>());
+  for (auto& e : h.at("extras"))
+    m.add_extra(e.at("name").get<std::string>(), e.at("dim").get<int>(), 0.f, e.value("f16", false));
+  return m;
+}
+
+// The optimiser's parameters, read into copies of the registered ones (same names, same kind) so that their value
+// bindings stay; per-Gaussian ones are sized by the checkpoint's Gaussian count `n`. `values` receives an empty
+// buffer "param/<name>" for every array parameter.
+std::deque<AdamParam> header_params(const json& h, const std::string& where, const std::deque<AdamParam>& registered,
+                                    int n, std::map<std::string, std::vector<float>>& values) {
+  const json& hp = h.at("adam").at("params");
+  if (hp.size() != registered.size())
+    fail("{}: the checkpoint holds {} optimiser parameters, this trainer has {} (written by another hgs version?)",
+         where, hp.size(), registered.size());
+  std::deque<AdamParam> a;
+  for (size_t i = 0; i < hp.size(); ++i) {
+    const json& p = hp[i];
+    const AdamParam& cur = registered[i];
+    const std::string name = p.at("name").get<std::string>();
+    const bool array = p.value("scope", std::string("gaussian")) == "array";
+    if (name != cur.name || p.at("dim").get<int>() != cur.dim || array != (cur.scope == ParamScope::Array) ||
+        p.value("bf16", false) != cur.bf16)
+      fail("{}: optimiser parameter {} is '{}' [{}], this trainer's is '{}' [{}]", where, i, name, p.at("dim").get<int>(),
+           cur.name, cur.dim);
+    AdamParam ap;
+    ap.name = cur.name;
+    ap.dim = cur.dim;
+    ap.scope = cur.scope;
+    ap.bf16 = cur.bf16;
+    ap.values = cur.values;
+    ap.step = p.contains("step") ? p.at("step").get<long>() : h.at("adam").at("step").get<long>();
+    ap.eps = p.value("eps", cur.eps);
+    ap.lr = p.at("lr").get<std::vector<float>>();
+    if (int(ap.lr.size()) != ap.dim) fail("{}: parameter '{}' has {} learning rates for {} columns", where, ap.name, ap.lr.size(), ap.dim);
+    const size_t rows = array ? cur.rows() : size_t(n);
+    if (ap.bf16) {
+      ap.m16.resize(rows * ap.dim);
+      ap.v16.resize(rows * ap.dim);
+    } else {
+      ap.m.resize(rows * ap.dim);
+      ap.v.resize(rows * ap.dim);
+    }
+    if (array) values["param/" + ap.name].resize(rows * ap.dim);
+    a.push_back(std::move(ap));
+  }
+  return a;
+}
+
+// Where each named array of the file goes: float32 buffers (sized, except the method's state, which the file
+// sizes), and 16-bit ones stored as float32 in the file (half-precision extras, bfloat16 moments): {array, is fp16}.
+struct ArrayTargets {
+  std::map<std::string, std::vector<float>*> f32;
+  std::map<std::string, std::pair<std::vector<uint16_t>*, bool>> f16;
+};
+
+// Reads the arrays the header lists into `t`; every target must be filled exactly once.
+void read_arrays(FILE* fp, const json& h, const std::string& where, uint64_t file_size, const ArrayTargets& t) {
+  size_t seen = 0;
+  std::vector<float> chunk;
+  for (auto& ar : h.at("arrays")) {
+    std::string name = ar.at("name").get<std::string>();
+    size_t count = ar.at("count").get<size_t>();
+    auto it = t.f32.find(name);
+    auto it16 = t.f16.find(name);
+    if (it == t.f32.end() && it16 == t.f16.end()) fail("{}: unexpected array '{}'", where, name);
+    if (it != t.f32.end()) {
+      if (name.rfind("method/", 0) == 0) {  // sizes checked by method_state_loaded; here only against the file
+        const long pos = std::ftell(fp);
+        if (pos < 0 || count > (file_size - uint64_t(pos)) / 4) fail("{}: truncated checkpoint (array '{}')", where, name);
+        it->second->resize(count);
+      }
+      if (it->second->size() != count) fail("{}: array '{}' has {} values, expected {}", where, name, count, it->second->size());
+      if (std::fread(it->second->data(), 4, count, fp) != count) fail("{}: truncated checkpoint (array '{}')", where, name);
+    } else {
+      std::vector<uint16_t>& d = *it16->second.first;
+      const bool fp16 = it16->second.second;
+      if (d.size() != count) fail("{}: array '{}' has {} values, expected {}", where, name, count, d.size());
+      for (size_t i = 0; i < count; i += kChunk) {
+        const size_t c = std::min(kChunk, count - i);
+        chunk.resize(c);
+        if (std::fread(chunk.data(), 4, c, fp) != c) fail("{}: truncated checkpoint (array '{}')", where, name);
+        for (size_t k = 0; k < c; ++k)  // exact: the values were written from these 16-bit formats
+          d[i + k] = fp16 ? float_to_half(chunk[k]) : float_to_bf16(chunk[k]);
+      }
+    }
+    ++seen;
+  }
+  if (seen != t.f32.size() + t.f16.size())
+    fail("{}: checkpoint holds {} arrays, expected {}", where, seen, t.f32.size() + t.f16.size());
+}
+
+// The densification counts, written from ints: anything else is corruption (and casting it undefined).
+void take_counts(const std::vector<float>& counts, const std::string& where, DensifyStats& st) {
+  for (size_t i = 0; i < counts.size(); ++i) {
+    const float c = counts[i];
+    if (!(c >= 0 && c <= float(1 << 24) && c == std::floor(c)))
+      fail("{}: corrupt densification statistics (count {} of Gaussian {})", where, c, i);
+    st.count[i] = int(c);
+  }
+}
+
+}  // namespace
+
 void Trainer::load_checkpoint(const std::filesystem::path& path) {
-  using nlohmann::json;
   const std::string where = path.string();
   // Streamed from the file (a 300k x 512 checkpoint is ~2 GB: never held in memory as a whole).
   std::unique_ptr<FILE, FileCloser> file(std::fopen(path.c_str(), "rb"));
   if (!file) fail("{}: cannot open checkpoint", where);
   FILE* fp = file.get();
-  char magic[8];
-  uint64_t len = 0;
-  if (std::fread(magic, 1, 8, fp) != 8 || std::memcmp(magic, kMagic, 8) != 0) fail("{}: not an hgs checkpoint", where);
   // Sizes from the file are checked against the file's own size before anything is allocated by them.
   std::error_code size_ec;
   const uint64_t file_size = std::filesystem::file_size(path, size_ec);
   if (size_ec) fail("{}: cannot read checkpoint size ({})", where, size_ec.message());
-  if (std::fread(&len, 8, 1, fp) != 1 || len > file_size - std::min<uint64_t>(file_size, 16))
-    fail("{}: truncated checkpoint header", where);
-  std::string hs(len, '\0');
-  if (std::fread(hs.data(), 1, len, fp) != len) fail("{}: truncated checkpoint header", where);
-  json h;
-  try {
-    h = json::parse(hs);
-  } catch (const std::exception& e) {
-    fail("{}: corrupt checkpoint header", where);
-  }
+  const json h = read_header(fp, where, file_size);
   try {
     if (h.at("num_views").get<size_t>() != views_.size())
       fail("{}: checkpoint was trained on {} views, this scene has {}", where, h.at("num_views").get<size_t>(), views_.size());
@@ -146,115 +261,39 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
     c.save_every = cfg_.save_every;
     c.batch = cfg_.batch;  // a run may resume with another batch or number of ranks
     c.batch_lr = cfg_.batch_lr;  // and its rule (the optimiser was set up with it)
-    GaussianModel m;
-    m.sh_degree = h.at("sh_degree").get<int>();
-    m.resize(h.at("n").get<int>());
-    for (auto& e : h.at("extras"))
-      m.add_extra(e.at("name").get<std::string>(), e.at("dim").get<int>(), 0.f, e.value("f16", false));
-    // (Checkpoints written before the method registry carry no name: a method configuration means hybrid.)
+    GaussianModel m = header_model(h);
+    // A checkpoint without a method name is hybrid when it holds a method configuration (files written before
+    // the method registry), else rgb.
     const std::string trained = h.value("method", std::string(h.contains("method_config") ? "hybrid" : "rgb"));
     if (trained != method_->name())
       fail("{}: the checkpoint was trained with the {} method, not {}", where, trained, method_->name());
-    // The optimiser's parameters are read into copies of the registered ones (same names, same kind), so that
-    // their value bindings stay; per-Gaussian ones are sized by the checkpoint's Gaussian count.
-    const json& hp = h.at("adam").at("params");
-    if (hp.size() != adam_.params.size())
-      fail("{}: the checkpoint holds {} optimiser parameters, this trainer has {} (written by another hgs version?)",
-           where, hp.size(), adam_.params.size());
-    std::deque<AdamParam> a;
     std::map<std::string, std::vector<float>> values;  // param/<name> of array parameters
-    for (size_t i = 0; i < hp.size(); ++i) {
-      const json& p = hp[i];
-      const AdamParam& cur = adam_.params[i];
-      const std::string name = p.at("name").get<std::string>();
-      const bool array = p.value("scope", std::string("gaussian")) == "array";
-      if (name != cur.name || p.at("dim").get<int>() != cur.dim || array != (cur.scope == ParamScope::Array) ||
-          p.value("bf16", false) != cur.bf16)
-        fail("{}: optimiser parameter {} is '{}' [{}], this trainer's is '{}' [{}]", where, i, name, p.at("dim").get<int>(),
-             cur.name, cur.dim);
-      AdamParam ap;
-      ap.name = cur.name;
-      ap.dim = cur.dim;
-      ap.scope = cur.scope;
-      ap.bf16 = cur.bf16;
-      ap.values = cur.values;
-      ap.step = p.contains("step") ? p.at("step").get<long>() : h.at("adam").at("step").get<long>();
-      ap.eps = p.value("eps", cur.eps);
-      ap.lr = p.at("lr").get<std::vector<float>>();
-      if (int(ap.lr.size()) != ap.dim) fail("{}: parameter '{}' has {} learning rates for {} columns", where, ap.name, ap.lr.size(), ap.dim);
-      const size_t rows = array ? cur.rows() : size_t(m.n);
-      if (ap.bf16) {
-        ap.m16.resize(rows * ap.dim);
-        ap.v16.resize(rows * ap.dim);
-      } else {
-        ap.m.resize(rows * ap.dim);
-        ap.v.resize(rows * ap.dim);
-      }
-      if (array) values["param/" + ap.name].resize(rows * ap.dim);
-      a.push_back(std::move(ap));
-    }
+    std::deque<AdamParam> a = header_params(h, where, adam_.params, m.n, values);
     DensifyStats st;
     st.reset(m.n);
     std::vector<float> counts(m.n);
-    std::map<std::string, std::vector<float>*> dst;
-    // 16-bit arrays (half-precision extras, bfloat16 moments), stored as float32 in the file: {array, is fp16}
-    std::map<std::string, std::pair<std::vector<uint16_t>*, bool>> dst16;
-    for (auto& f : m.fields()) dst["model/" + f.name] = f.data;
+    ArrayTargets t;
+    for (auto& f : m.fields()) t.f32["model/" + f.name] = f.data;
     for (auto& e : m.extras)
-      if (e.f16) dst16["model/" + e.name] = {&e.half, true};
-    for (auto& [name, v] : values) dst[name] = &v;
+      if (e.f16) t.f16["model/" + e.name] = {&e.half, true};
+    for (auto& [name, v] : values) t.f32[name] = &v;
     for (auto& p : a) {
       if (p.bf16) {
-        dst16["adam_m/" + p.name] = {&p.m16, false};
-        dst16["adam_v/" + p.name] = {&p.v16, false};
+        t.f16["adam_m/" + p.name] = {&p.m16, false};
+        t.f16["adam_v/" + p.name] = {&p.v16, false};
       } else {
-        dst["adam_m/" + p.name] = &p.m;
-        dst["adam_v/" + p.name] = &p.v;
+        t.f32["adam_m/" + p.name] = &p.m;
+        t.f32["adam_v/" + p.name] = &p.v;
       }
     }
     // The method's own state is read into copies (sized by the file) and handed to method_state_loaded.
     std::map<std::string, std::vector<float>> method;
-    for (auto& [name, arr] : method_->state()) dst["method/" + name] = &(method[name] = std::vector<float>(arr.size()));
-    dst["stats/grad_accum"] = &st.grad_accum;
-    dst["stats/count"] = &counts;
-    dst["stats/max_radius"] = &st.max_radius;
-    size_t seen = 0;
-    std::vector<float> chunk;
-    for (auto& ar : h.at("arrays")) {
-      std::string name = ar.at("name").get<std::string>();
-      size_t count = ar.at("count").get<size_t>();
-      auto it = dst.find(name);
-      auto it16 = dst16.find(name);
-      if (it == dst.end() && it16 == dst16.end()) fail("{}: unexpected array '{}'", where, name);
-      if (it != dst.end()) {
-        if (name.rfind("method/", 0) == 0) {  // sizes checked by method_state_loaded; here only against the file
-          const long pos = std::ftell(fp);
-          if (pos < 0 || count > (file_size - uint64_t(pos)) / 4) fail("{}: truncated checkpoint (array '{}')", where, name);
-          it->second->resize(count);
-        }
-        if (it->second->size() != count) fail("{}: array '{}' has {} values, expected {}", where, name, count, it->second->size());
-        if (std::fread(it->second->data(), 4, count, fp) != count) fail("{}: truncated checkpoint (array '{}')", where, name);
-      } else {
-        std::vector<uint16_t>& d = *it16->second.first;
-        const bool fp16 = it16->second.second;
-        if (d.size() != count) fail("{}: array '{}' has {} values, expected {}", where, name, count, d.size());
-        for (size_t i = 0; i < count; i += kChunk) {
-          const size_t c = std::min(kChunk, count - i);
-          chunk.resize(c);
-          if (std::fread(chunk.data(), 4, c, fp) != c) fail("{}: truncated checkpoint (array '{}')", where, name);
-          for (size_t k = 0; k < c; ++k)  // exact: the values were written from these 16-bit formats
-            d[i + k] = fp16 ? float_to_half(chunk[k]) : float_to_bf16(chunk[k]);
-        }
-      }
-      ++seen;
-    }
-    if (seen != dst.size() + dst16.size()) fail("{}: checkpoint holds {} arrays, expected {}", where, seen, dst.size() + dst16.size());
-    for (int i = 0; i < m.n; ++i) {  // written from ints: anything else is corruption (and casting it undefined)
-      const float c = counts[i];
-      if (!(c >= 0 && c <= float(1 << 24) && c == std::floor(c)))
-        fail("{}: corrupt densification statistics (count {} of Gaussian {})", where, c, i);
-      st.count[i] = int(c);
-    }
+    for (auto& [name, arr] : method_->state()) t.f32["method/" + name] = &(method[name] = std::vector<float>(arr.size()));
+    t.f32["stats/grad_accum"] = &st.grad_accum;
+    t.f32["stats/count"] = &counts;
+    t.f32["stats/max_radius"] = &st.max_radius;
+    read_arrays(fp, h, where, file_size, t);
+    take_counts(counts, where, st);
     std::istringstream rs(h.at("rng").get<std::string>());
     std::mt19937_64 rng;
     rs >> rng;
