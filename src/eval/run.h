@@ -4,8 +4,9 @@
 //
 // Frames: LERF-OVS label files are matched to views by stem (label/frame_00009.json <-> the view whose
 // name without extension is frame_00009), falling back to info.name; 3D-OVS folders by view index in the
-// name-sorted view list; `instances` uses the test views and every object of masks/objects.json visible
-// in the view (objects absent from a view are not queried, as in LERF-OVS). Labels are loaded at the scene's
+// name-sorted view list; `instances` uses the test views and every object of gt/objects.json (masks/objects.json
+// for a scene without it; the report's extra.object_names says which) visible in the view (objects absent from a
+// view are not queried, as in LERF-OVS). Labels are loaded at the scene's
 // downscale and must match the view size.
 //
 // PNG output (when overlay_dir is set), per frame stem and query (query names sanitised for file names):

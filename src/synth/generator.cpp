@@ -1,8 +1,9 @@
-// Orchestrates `hgs synth`: builds the world, renders every view, simulates masks and features, samples
-// SfM-like points with visibility tracks, writes the COLMAP model, labels for the held-out views (LERF-OVS
-// JSON polygons and 3D-OVS PNGs) and a synth.json record. --mask-ids per-view / --mask-style sam add
-// gt/mask_ids.json (what each per-view id truly is) and, for sam, sam/<stem>.json (SAM JSON, COCO RLE). Everything is written into a temporary folder
-// beside the output and renamed at the end, so a failure leaves nothing behind.
+// Orchestrates `hgs synth`: builds the world, renders every view (with gt/instances and gt/objects.json, the
+// truth's names), simulates masks and features, samples SfM-like points with visibility tracks, writes the COLMAP
+// model, labels for the held-out views (LERF-OVS JSON polygons and 3D-OVS PNGs) and a synth.json record.
+// --mask-ids per-view / --mask-style sam add gt/mask_ids.json (what each per-view id truly is) and, for sam,
+// sam/<stem>.json (SAM JSON, COCO RLE). Everything is written into a temporary folder beside the output and
+// renamed at the end, so a failure leaves nothing behind. Each phase is one function, called in order by generate.
 #include <algorithm>
 #include <cmath>
 #include <map>
