@@ -6,11 +6,24 @@
 #include "cli/command.h"
 #include "core/error.h"
 #include "core/npy.h"
+#include "eval/instances.h"
 #include "scene/scene.h"
 
 namespace hgs::cli {
 namespace {
 namespace fs = std::filesystem;
+
+// gt/instances/: how many maps, and the file the instances protocol takes their objects' names from.
+void print_ground_truth(const fs::path& root) {
+  const fs::path dir = root / "gt" / "instances";
+  if (!fs::is_directory(dir)) return;
+  size_t maps = 0;
+  for (auto& e : fs::recursive_directory_iterator(dir)) maps += e.is_regular_file();
+  const fs::path names = eval::object_names_file(root);
+  fmt::print("ground truth gt/instances/ ({} maps), names {}\n", maps,
+             fs::exists(names) ? "from " + fs::relative(names, root).generic_string()
+                               : std::string("missing (no gt/objects.json or masks/objects.json)"));
+}
 
 void run_info(const std::string& path, int downscale) {
   Scene s = load_scene(path, {downscale, false});
@@ -88,7 +101,7 @@ void run_info(const std::string& path, int downscale) {
     for (auto& e : fs::directory_iterator(s.segmentation_dir())) n += e.is_directory();
     fmt::print("segmentations {} 3D-OVS views in segmentations/\n", n);
   }
-  if (fs::is_directory(s.root / "gt" / "instances")) fmt::print("ground truth gt/instances/ (synthetic scene)\n");
+  print_ground_truth(s.root);
   if (problems.empty()) {
     fmt::print("problems     none\n");
   } else {
