@@ -25,9 +25,8 @@ void print_ground_truth(const fs::path& root) {
                                : std::string("missing (no gt/objects.json or masks/objects.json)"));
 }
 
-void run_info(const std::string& path, int downscale) {
-  Scene s = load_scene(path, {downscale, false});
-  std::vector<std::string> problems = s.warnings;
+// Views, resolutions, intrinsics and points.
+void print_cameras(const Scene& s, int downscale) {
   fmt::print("scene        {}\n", fs::absolute(s.root).lexically_normal().string());
   fmt::print("views        {} ({} train, {} test; split: {})\n", s.views.size(), s.train_indices().size(),
              s.test_indices().size(), s.split_source);
@@ -45,19 +44,24 @@ void run_info(const std::string& path, int downscale) {
   }
   fmt::print("\n");
   fmt::print("points       {}\n", s.points.size());
-  // Image files: check each header decodes and matches the camera.
-  int bad = 0;
+}
+
+// Image files: each header must decode and match its camera.
+void check_images(const Scene& s, std::vector<std::string>& problems) {
   for (auto& v : s.views) {
     int w, h;
     try {
       image_size(v.image_path, w, h);
       if (w / (v.image_path.parent_path().filename().string().rfind("images_", 0) == 0 ? 1 : s.downscale) != v.width)
-        problems.push_back(fmt::format("{}: {}x{} does not match its camera", v.image_path.string(), w, h)), ++bad;
+        problems.push_back(fmt::format("{}: {}x{} does not match its camera", v.image_path.string(), w, h));
     } catch (const Error& e) {
       problems.push_back(e.what());
-      ++bad;
     }
   }
+}
+
+// Masks, confidences, object names and features.
+void print_masks_and_features(const Scene& s, std::vector<std::string>& problems) {
   size_t n_masks = 0, n_conf = 0, n_feat = 0;
   for (auto& v : s.views) { n_masks += v.mask_path.has_value(); n_conf += v.conf_path.has_value(); n_feat += v.feature_path.has_value(); }
   fmt::print("masks        {} of {} views", n_masks, s.views.size());
@@ -88,6 +92,10 @@ void run_info(const std::string& path, int downscale) {
     break;
   }
   fmt::print("\n");
+}
+
+// Text embeddings, LERF-OVS labels, 3D-OVS segmentations and gt/instances.
+void print_labels(const Scene& s) {
   if (!s.text_embeddings.empty())
     fmt::print("text         {} phrases in text_embeddings.json (D = {})\n", s.text_embeddings.size(), s.text_embeddings.begin()->second.size());
   else
@@ -102,6 +110,15 @@ void run_info(const std::string& path, int downscale) {
     fmt::print("segmentations {} 3D-OVS views in segmentations/\n", n);
   }
   print_ground_truth(s.root);
+}
+
+void run_info(const std::string& path, int downscale) {
+  Scene s = load_scene(path, {downscale, false});
+  std::vector<std::string> problems = s.warnings;
+  print_cameras(s, downscale);
+  check_images(s, problems);
+  print_masks_and_features(s, problems);
+  print_labels(s);
   if (problems.empty()) {
     fmt::print("problems     none\n");
   } else {
@@ -109,7 +126,6 @@ void run_info(const std::string& path, int downscale) {
     for (size_t i = 0; i < problems.size() && i < 20; ++i) fmt::print("  - {}\n", problems[i]);
     if (problems.size() > 20) fmt::print("  ... and {} more\n", problems.size() - 20);
   }
-  (void)bad;
 }
 
 CommandRegistration reg({"info", "Print what a scene folder holds (views, cameras, masks, features, labels) and any problem", 90,
