@@ -16,7 +16,10 @@ std::vector<CommandSpec>& masks_registry() {
 
 namespace {
 
-CommandRegistration reg({"masks", "Per-view masks: make them with SAM, import them from SAM / SAM2 / LangSplat, associate their ids across views, score them", 15,
+CommandRegistration reg({"masks",
+                         "Per-view masks: make them with SAM, import them from SAM / SAM2 / LangSplat, associate their "
+                         "ids across views, score them",
+                         15,
                          [](CLI::App& sub) {
                            sub.require_subcommand(1);
                            auto& subs = masks_registry();

@@ -22,7 +22,8 @@ fs::path object_names_file(const fs::path& scene) {
 std::map<int, std::string> load_object_names(const fs::path& scene) {
   const fs::path file = object_names_file(scene);
   if (!fs::is_regular_file(file))
-    fail("{}: file not found (object names; {} was tried first)", file.string(), (scene / "gt" / "objects.json").string());
+    fail("{}: file not found (object names; {} was tried first)", file.string(),
+         (scene / "gt" / "objects.json").string());
   const nlohmann::json j = read_json_file(file);
   if (!j.is_object()) fail("{}: expected an object {{\"id\": \"name\", ...}}", file.string());
   std::map<int, std::string> names;

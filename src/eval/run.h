@@ -46,7 +46,8 @@ EvalReport run_lerf_ovs(const Scene& scene, const RelevancyFn& fn, const RunOpti
 EvalReport run_lerf_ovs_masks(const Scene& scene, const MaskFn& fn, const RunOptions& opt = {});
 // 3D-OVS: per-pixel argmax over the classes of segmentations/classes.txt, per-class IoU with absent = 0.
 EvalReport run_3dovs(const Scene& scene, const ClassRelevancyFn& fn, const RunOptions& opt = {});
-// Synthetic scenes: every visible object's name against gt/instances on the test views. mode "object".
+// Scenes with gt/instances: every visible object's name (object_names_file, instances.h) against gt/instances
+// on the test views. mode "object"; extra.object_names: the names' file relative to the scene.
 EvalReport run_instances(const Scene& scene, const MaskFn& fn, const RunOptions& opt = {});
 
 // File-name-safe version of a query: characters other than letters, digits, '-', '_', '.' become '_'.

@@ -289,7 +289,8 @@ NodeSet read_nodes(const AssociateOptions& opt, const Scene& s, const fs::path& 
                    const Correspondences& cc, AssociateSummary& sum) {
   const size_t V = s.views.size();
   NodeSet ns;
-  ns.view_root.resize(V), ns.view_node.resize(V), ns.labels.resize(V), ns.reflattened_conf.resize(V), ns.cores.resize(V);
+  ns.view_root.resize(V), ns.view_node.resize(V), ns.labels.resize(V);
+  ns.reflattened_conf.resize(V), ns.cores.resize(V);
   ns.point_obs.resize(cc.model.points.size());
   for (auto& p : cc.model.points) ns.point_xyz.push_back(p.xyz);
   Progress bar("associate: read masks", long(V), opt.progress);
@@ -475,7 +476,8 @@ void attach_left_out(std::vector<Node>& nodes, Objects& obj, AssociateSummary& s
 // 3D spread of each object's voted points relative to all points (robust: a few stray points do not count), over
 // COLMAP's points only (--surface-spread is calibrated on them; lifted depth pixels sample the views' visible
 // surfaces evenly, which weighs large backgrounds differently). obj_points: every voted point, depth ones too.
-std::vector<double> object_spread(const NodeSet& ns, const Objects& obj, size_t colmap_points, std::vector<long>& obj_points) {
+std::vector<double> object_spread(const NodeSet& ns, const Objects& obj, size_t colmap_points,
+                                  std::vector<long>& obj_points) {
   const int K = obj.count;
   std::vector<double> spread(K, 0);
   obj_points.assign(K, 0);
@@ -677,7 +679,8 @@ void write_output(const AssociateOptions& opt, const Scene& s, const Folders& f,
                       {"spread", std::round(o.spread * 1000) / 1000}, {"surface", o.surface}});
     }
     atomic_write_text(tmp / "objects.json", objects.dump(2) + "\n");
-    atomic_write_text(tmp / "associate.json", report_json(opt, f, cc.images_file, sum, list, dropped, views).dump(1) + "\n");
+    const json report = report_json(opt, f, cc.images_file, sum, list, dropped, views);
+    atomic_write_text(tmp / "associate.json", report.dump(1) + "\n");
     if (f.in_place) {
       keep_input(f, tmp);
       sum.backup_dir = f.masks_dir / "per_view";

@@ -225,8 +225,9 @@ Scene load_scene(const fs::path& root_in, const SceneOptions& opt) {
   for (size_t i = 0; i < s.views.size(); ++i) s.views[i].index = static_cast<int>(i);
   split_views(s);
   load_points(s, m, sparse);
-  if (const fs::path objects = s.root / "masks" / "objects.json"; path_exists(objects)) s.object_names = read_object_names(objects);
-  if (const fs::path te = s.root / "text_embeddings.json"; path_exists(te)) s.text_embeddings = read_text_embeddings(te);
+  const fs::path objects = s.root / "masks" / "objects.json", te = s.root / "text_embeddings.json";
+  if (path_exists(objects)) s.object_names = read_object_names(objects);
+  if (path_exists(te)) s.text_embeddings = read_text_embeddings(te);
   if (opt.cache_downscaled && s.downscale > 1) cache_downscaled(s, s.root / fmt::format("images_{}", s.downscale));
   return s;
 }

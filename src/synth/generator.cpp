@@ -227,7 +227,8 @@ void write_masks_and_features(Generation& g, const std::vector<RenderedView>& vi
     int gh, gw;
     auto feat = simulate_features(views[i], g.concepts.vectors, g.concepts.context, g.nl.feature, opt.feature_dim,
                                   mix(opt.seed, 2, i), gh, gw);
-    write_npy(g.tmp / "features" / (stem_of(views[i]) + ".npy"), make_npy_f16({size_t(gh), size_t(gw), size_t(opt.feature_dim)}, feat.data()));
+    write_npy(g.tmp / "features" / (stem_of(views[i]) + ".npy"),
+              make_npy_f16({size_t(gh), size_t(gw), size_t(opt.feature_dim)}, feat.data()));
     bar.update(i + 1);
   }
   bar.finish();
@@ -455,7 +456,8 @@ void generate(const fs::path& out, const SynthOptions& opt) {
   ensure_dir(parent);
   fs::path tmp = parent / (out.filename().string() + fmt::format(".tmp{:x}", mix(opt.seed, std::random_device{}()) & 0xffffff));
   Generation g{opt, tmp, world, concepts, noise_level(opt.noise), make_intrinsics(opt.width, opt.height), opt.objects,
-               opt.mask_style == "sam", opt.mask_ids == "per-view", std::vector<char>(opt.objects, 0), json::object(), {}};
+               opt.mask_style == "sam", opt.mask_ids == "per-view", std::vector<char>(opt.objects, 0), json::object(),
+               {}};
   for (int k = 0; k < g.K; ++k) g.split[k] = mix(opt.seed, 7, k) & 1;
   try {
     ensure_dir(tmp);

@@ -118,6 +118,7 @@ TEST(EvalInstanceNames, ErrorsNameGtObjectsJson) {
     load_object_names(tmp / "s");
     FAIL() << "no error for a malformed gt/objects.json";
   } catch (const Error& e) {
-    EXPECT_NE(std::string(e.what()).find(f.string() + ": key \"x\" is not an object id"), std::string::npos) << e.what();
+    const std::string what = e.what();
+    EXPECT_NE(what.find(f.string() + ": key \"x\" is not an object id"), std::string::npos) << what;
   }
 }

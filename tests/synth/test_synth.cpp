@@ -338,7 +338,8 @@ TEST(Synth, GtObjectsJsonNamesTheInstanceIdsInEveryMaskMode) {
   synth::SynthOptions base = tiny("low");
   base.views = 6;
   nlohmann::json expected = nlohmann::json::object();
-  for (auto& o : synth::make_world(base.preset, base.objects, base.seed).objects) expected[std::to_string(o.id)] = o.name;
+  for (auto& o : synth::make_world(base.preset, base.objects, base.seed).objects)
+    expected[std::to_string(o.id)] = o.name;
   for (const char* mode : {"label", "surface", "per-view", "sam", "sam-per-view"}) {
     synth::SynthOptions o = base;
     const std::string m = mode;
