@@ -6,15 +6,27 @@
 #include "cli/command.h"
 #include "core/error.h"
 #include "core/npy.h"
+#include "eval/instances.h"
 #include "scene/scene.h"
 
 namespace hgs::cli {
 namespace {
 namespace fs = std::filesystem;
 
-void run_info(const std::string& path, int downscale) {
-  Scene s = load_scene(path, {downscale, false});
-  std::vector<std::string> problems = s.warnings;
+// gt/instances/: how many maps, and the file the instances protocol takes their objects' names from.
+void print_ground_truth(const fs::path& root) {
+  const fs::path dir = root / "gt" / "instances";
+  if (!fs::is_directory(dir)) return;
+  size_t maps = 0;
+  for (auto& e : fs::recursive_directory_iterator(dir)) maps += e.is_regular_file();
+  const fs::path names = eval::object_names_file(root);
+  fmt::print("ground truth gt/instances/ ({} maps), names {}\n", maps,
+             fs::exists(names) ? "from " + fs::relative(names, root).generic_string()
+                               : std::string("missing (no gt/objects.json or masks/objects.json)"));
+}
+
+// Views, resolutions, intrinsics and points.
+void print_cameras(const Scene& s, int downscale) {
   fmt::print("scene        {}\n", fs::absolute(s.root).lexically_normal().string());
   fmt::print("views        {} ({} train, {} test; split: {})\n", s.views.size(), s.train_indices().size(),
              s.test_indices().size(), s.split_source);
@@ -32,19 +44,24 @@ void run_info(const std::string& path, int downscale) {
   }
   fmt::print("\n");
   fmt::print("points       {}\n", s.points.size());
-  // Image files: check each header decodes and matches the camera.
-  int bad = 0;
+}
+
+// Image files: each header must decode and match its camera.
+void check_images(const Scene& s, std::vector<std::string>& problems) {
   for (auto& v : s.views) {
     int w, h;
     try {
       image_size(v.image_path, w, h);
       if (w / (v.image_path.parent_path().filename().string().rfind("images_", 0) == 0 ? 1 : s.downscale) != v.width)
-        problems.push_back(fmt::format("{}: {}x{} does not match its camera", v.image_path.string(), w, h)), ++bad;
+        problems.push_back(fmt::format("{}: {}x{} does not match its camera", v.image_path.string(), w, h));
     } catch (const Error& e) {
       problems.push_back(e.what());
-      ++bad;
     }
   }
+}
+
+// Masks, confidences, object names and features.
+void print_masks_and_features(const Scene& s, std::vector<std::string>& problems) {
   size_t n_masks = 0, n_conf = 0, n_feat = 0;
   for (auto& v : s.views) { n_masks += v.mask_path.has_value(); n_conf += v.conf_path.has_value(); n_feat += v.feature_path.has_value(); }
   fmt::print("masks        {} of {} views", n_masks, s.views.size());
@@ -75,6 +92,10 @@ void run_info(const std::string& path, int downscale) {
     break;
   }
   fmt::print("\n");
+}
+
+// Text embeddings, LERF-OVS labels, 3D-OVS segmentations and gt/instances.
+void print_labels(const Scene& s) {
   if (!s.text_embeddings.empty())
     fmt::print("text         {} phrases in text_embeddings.json (D = {})\n", s.text_embeddings.size(), s.text_embeddings.begin()->second.size());
   else
@@ -88,7 +109,16 @@ void run_info(const std::string& path, int downscale) {
     for (auto& e : fs::directory_iterator(s.segmentation_dir())) n += e.is_directory();
     fmt::print("segmentations {} 3D-OVS views in segmentations/\n", n);
   }
-  if (fs::is_directory(s.root / "gt" / "instances")) fmt::print("ground truth gt/instances/ (synthetic scene)\n");
+  print_ground_truth(s.root);
+}
+
+void run_info(const std::string& path, int downscale) {
+  Scene s = load_scene(path, {downscale, false});
+  std::vector<std::string> problems = s.warnings;
+  print_cameras(s, downscale);
+  check_images(s, problems);
+  print_masks_and_features(s, problems);
+  print_labels(s);
   if (problems.empty()) {
     fmt::print("problems     none\n");
   } else {
@@ -96,7 +126,6 @@ void run_info(const std::string& path, int downscale) {
     for (size_t i = 0; i < problems.size() && i < 20; ++i) fmt::print("  - {}\n", problems[i]);
     if (problems.size() > 20) fmt::print("  ... and {} more\n", problems.size() - 20);
   }
-  (void)bad;
 }
 
 CommandRegistration reg({"info", "Print what a scene folder holds (views, cameras, masks, features, labels) and any problem", 90,

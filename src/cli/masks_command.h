@@ -1,7 +1,7 @@
-// Sub-subcommands of `hgs masks` (import, associate, ...). Each lives in its own src/cli/cmd_masks_<name>.cpp and
-// registers itself with a static `MasksSubcommandRegistration`, like top-level commands do (command.h);
-// cmd_masks.cpp builds `hgs masks` from this registry. To add `hgs masks associate`, write
-// src/cli/cmd_masks_associate.cpp with one registration — nothing else changes.
+// Sub-subcommands of `hgs masks` (generate, click, import, associate, score). Each lives in its own
+// src/cli/cmd_masks_<name>.cpp and registers itself with a static `MasksSubcommandRegistration`, like top-level
+// commands do (command.h); cmd_masks.cpp builds `hgs masks` from this registry and lists the names in its
+// description. A new one is one file with one registration; nothing else changes.
 #pragma once
 #include "cli/command.h"
 

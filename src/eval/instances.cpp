@@ -1,5 +1,5 @@
-// Instance ground truth of synthetic scenes: objects.json parsing with clear errors and per-object masks from
-// the instance label map.
+// Instance ground truth: the objects' names (gt/objects.json, else masks/objects.json) parsed with clear errors,
+// and per-object masks from the instance label map.
 #include "eval/instances.h"
 
 #include <algorithm>
@@ -14,9 +14,16 @@ namespace hgs::eval {
 
 namespace fs = std::filesystem;
 
+fs::path object_names_file(const fs::path& scene) {
+  const fs::path truth = scene / "gt" / "objects.json";
+  return fs::exists(truth) ? truth : scene / "masks" / "objects.json";
+}
+
 std::map<int, std::string> load_object_names(const fs::path& scene) {
-  const fs::path file = scene / "masks" / "objects.json";
-  if (!fs::is_regular_file(file)) fail("{}: file not found (object names)", file.string());
+  const fs::path file = object_names_file(scene);
+  if (!fs::is_regular_file(file))
+    fail("{}: file not found (object names; {} was tried first)", file.string(),
+         (scene / "gt" / "objects.json").string());
   const nlohmann::json j = read_json_file(file);
   if (!j.is_object()) fail("{}: expected an object {{\"id\": \"name\", ...}}", file.string());
   std::map<int, std::string> names;

@@ -1,6 +1,7 @@
-// Ground truth of synthetic scenes for the `instances` protocol: object names from SCENE/masks/objects.json
-// ({"1": "red mug", ...}) and the exact instance maps SCENE/gt/instances/<stem>.png, or <view name> when that
-// is missing (label PNG, 0 = background, k = object k).
+// Ground truth for the `instances` protocol: the names of the objects of SCENE/gt/objects.json ({"1": "red mug",
+// ...}; written by `hgs synth`) and the exact instance maps SCENE/gt/instances/<stem>.png, or <view name> when that
+// is missing (label PNG, 0 = background, k = object k). A scene without gt/objects.json (a real capture whose
+// masks/objects.json names the ids of gt/instances) takes the names from masks/objects.json.
 #pragma once
 #include <filesystem>
 #include <map>
@@ -11,7 +12,10 @@
 
 namespace hgs::eval {
 
-// id -> name. Keys must be integers in 1..65535, values non-empty strings.
+// The file the objects' names come from: SCENE/gt/objects.json, else SCENE/masks/objects.json (the fallback for
+// scenes without gt/objects.json; it names the training masks' ids, which must then be gt/instances' ids).
+std::filesystem::path object_names_file(const std::filesystem::path& scene);
+// id -> name, from object_names_file(scene). Keys must be integers in 1..65535, values non-empty strings.
 std::map<int, std::string> load_object_names(const std::filesystem::path& scene);
 
 struct InstanceLabels {

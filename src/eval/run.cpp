@@ -159,6 +159,8 @@ EvalReport run_instances(const Scene& scene, const MaskFn& fn, const RunOptions&
   rep.protocol = "instances";
   rep.scene = scene.root.filename().string();
   rep.mode = "object";
+  // Where the objects' names come from: gt/objects.json, or masks/objects.json for a scene without it.
+  rep.extra = {{"object_names", fs::relative(object_names_file(scene.root), scene.root).generic_string()}};
   Progress bar("eval instances", static_cast<long>(test.size()), opt.progress);
   for (size_t i = 0; i < test.size(); ++i) {
     const View& view = scene.views[test[i]];

@@ -4,8 +4,9 @@
 //
 // Frames: LERF-OVS label files are matched to views by stem (label/frame_00009.json <-> the view whose
 // name without extension is frame_00009), falling back to info.name; 3D-OVS folders by view index in the
-// name-sorted view list; `instances` uses the test views and every object of masks/objects.json visible
-// in the view (objects absent from a view are not queried, as in LERF-OVS). Labels are loaded at the scene's
+// name-sorted view list; `instances` uses the test views and every object of gt/objects.json (masks/objects.json
+// for a scene without it; the report's extra.object_names says which) visible in the view (objects absent from a
+// view are not queried, as in LERF-OVS). Labels are loaded at the scene's
 // downscale and must match the view size.
 //
 // PNG output (when overlay_dir is set), per frame stem and query (query names sanitised for file names):
@@ -45,7 +46,8 @@ EvalReport run_lerf_ovs(const Scene& scene, const RelevancyFn& fn, const RunOpti
 EvalReport run_lerf_ovs_masks(const Scene& scene, const MaskFn& fn, const RunOptions& opt = {});
 // 3D-OVS: per-pixel argmax over the classes of segmentations/classes.txt, per-class IoU with absent = 0.
 EvalReport run_3dovs(const Scene& scene, const ClassRelevancyFn& fn, const RunOptions& opt = {});
-// Synthetic scenes: every visible object's name against gt/instances on the test views. mode "object".
+// Scenes with gt/instances: every visible object's name (object_names_file, instances.h) against gt/instances
+// on the test views. mode "object"; extra.object_names: the names' file relative to the scene.
 EvalReport run_instances(const Scene& scene, const MaskFn& fn, const RunOptions& opt = {});
 
 // File-name-safe version of a query: characters other than letters, digits, '-', '_', '.' become '_'.

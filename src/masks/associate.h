@@ -48,7 +48,7 @@ struct AssociateOptions {
   // own times an edge ramp over this many pixels (edge_ramp_confidence, per_view.h); 0 = the input's as they are.
   // Per-pixel confidences of other sources are always kept.
   int edge_ramp = 4;
-  double part_fraction = 0.5;       // with SAM's masks still at import.json's source: part_of recomputed at this overlap           // use import.json's part_of (see above)
+  double part_fraction = 0.5;       // with SAM's masks still at import.json's source: part_of recomputed at this overlap
   bool drop_surfaces = false;       // drop objects whose 3D spread is larger than surface_spread (walls, floor, table)
   double surface_spread = 0.17;     // spread of an object's points / spread of all points (robust_spread, per_view.h)
   // Optional dense correspondences: z-depth [H, W] of a view (empty = none for that view; <= 0 = no depth at a

@@ -110,7 +110,10 @@ double cluster_affinity(const MaskGraph& g, const std::vector<int>& x, const std
   return affinity(make_cluster(g, x, opt), make_cluster(g, y, opt), s);
 }
 
-Clustering cluster_masks(const MaskGraph& g, const ClusterOptions& opt) {
+namespace {
+
+// Every node a cluster of its own, with the containment sums of its neighbours.
+std::vector<Cluster> single_node_clusters(const MaskGraph& g, const ClusterOptions& opt) {
   const int N = int(g.node_view.size());
   std::vector<Cluster> cl(static_cast<size_t>(N));
   for (int a = 0; a < N; ++a) cl[a] = make_cluster(g, {a}, opt);
@@ -120,25 +123,31 @@ Clustering cluster_masks(const MaskGraph& g, const ClusterOptions& opt) {
     cl[a].nbr[b] = {sab, sba};
     cl[b].nbr[a] = {sba, sab};
   }
-  // Merges cluster b into cluster a (counts, nodes, neighbour sums).
-  auto merge = [&](int a, int b) {
-    Cluster& A = cl[a];
-    Cluster& B = cl[b];
-    for (int v = 0; v < g.num_views; ++v) A.count[v] += B.count[v], A.visible[v] += B.visible[v];
-    A.nodes.insert(A.nodes.end(), B.nodes.begin(), B.nodes.end());
-    for (auto& [c, xy] : B.nbr) {
-      if (c == a) continue;
-      auto& ac = A.nbr[c];
-      ac.first += xy.first, ac.second += xy.second;
-      cl[c].nbr.erase(b);
-      auto& ca = cl[c].nbr[a];
-      ca.first += xy.second, ca.second += xy.first;
-    }
-    A.nbr.erase(b);
-    B.nbr.clear();
-    B.alive = false;
-    ++A.stamp;
-  };
+  return cl;
+}
+
+// Merges cluster b into cluster a (counts, nodes, neighbour sums).
+void merge(const MaskGraph& g, std::vector<Cluster>& cl, int a, int b) {
+  Cluster& A = cl[a];
+  Cluster& B = cl[b];
+  for (int v = 0; v < g.num_views; ++v) A.count[v] += B.count[v], A.visible[v] += B.visible[v];
+  A.nodes.insert(A.nodes.end(), B.nodes.begin(), B.nodes.end());
+  for (auto& [c, xy] : B.nbr) {
+    if (c == a) continue;
+    auto& ac = A.nbr[c];
+    ac.first += xy.first, ac.second += xy.second;
+    cl[c].nbr.erase(b);
+    auto& ca = cl[c].nbr[a];
+    ca.first += xy.second, ca.second += xy.first;
+  }
+  A.nbr.erase(b);
+  B.nbr.clear();
+  B.alive = false;
+  ++A.stamp;
+}
+
+// Greedy: the pair of clusters with the highest affinity (>= min_affinity, no view in common) merges first.
+void merge_by_affinity(const MaskGraph& g, const ClusterOptions& opt, std::vector<Cluster>& cl) {
   // Max-heap on affinity; equal affinities: smaller (a, b) first.
   using Item = std::tuple<double, int, int, int, int>;  // affinity, a, b, stamp a, stamp b
   auto worse = [](const Item& p, const Item& q) {
@@ -151,7 +160,7 @@ Clustering cluster_masks(const MaskGraph& g, const ClusterOptions& opt) {
     const double s = affinity(cl[a], cl[b], cl[a].nbr.at(b));
     if (s >= opt.min_affinity && !share_a_view(cl[a], cl[b])) heap.emplace(s, a, b, cl[a].stamp, cl[b].stamp);
   };
-  for (int a = 0; a < N; ++a)
+  for (int a = 0; a < int(cl.size()); ++a)
     for (auto& [b, n] : cl[a].nbr)
       if (b > a) push(a, b);
   while (!heap.empty()) {
@@ -159,75 +168,89 @@ Clustering cluster_masks(const MaskGraph& g, const ClusterOptions& opt) {
     heap.pop();
     if (!cl[a].alive || !cl[b].alive || cl[a].stamp != sa || cl[b].stamp != sb) continue;
     if (share_a_view(cl[a], cl[b])) continue;
-    merge(a, b);
+    merge(g, cl, a, b);
     for (auto& [c, xy] : cl[a].nbr) push(a, c);
   }
-  // Parts: a cluster whose points lie inside another cluster's whole masks (nodes that parts were folded into)
-  // is a part of that object that SAM kept apart in some views; best pair first.
-  if (opt.part_merge > 0 && !g.whole.empty()) {
-    std::unordered_map<uint64_t, int64_t> core_in;  // (a, b) -> core points of a inside b
-    for (auto& [ab, n] : g.inter) {
-      core_in[(uint64_t(ab.first) << 32) | uint64_t(ab.second)] = n.first;
-      core_in[(uint64_t(ab.second) << 32) | uint64_t(ab.first)] = n.second;
+}
+
+// What part merging reads: the core points of each node inside each other node.
+struct PartContext {
+  const MaskGraph& g;
+  const ClusterOptions& opt;
+  const std::vector<Cluster>& cl;
+  std::unordered_map<uint64_t, int64_t> core_in;  // (a, b) -> core points of a inside b
+
+  int wholes(int x) const {
+    int n = 0;
+    for (int a : cl[x].nodes) n += g.whole[a];
+    return n;
+  }
+
+  // Mean containment of y in x's whole nodes, or -1 when y does not lie inside enough of them.
+  double part_score(int x, int y) const {
+    double sum = 0;
+    int pairs = 0, holding = 0;  // holding: whole nodes of x that hold y on average
+    for (int a : cl[x].nodes) {
+      if (!g.whole[a]) continue;
+      double sa = 0;
+      int pa = 0;
+      for (int b : cl[y].nodes) {
+        if (!visible_in(g, b, g.node_view[a], opt)) continue;
+        ++pa;
+        auto it = core_in.find((uint64_t(b) << 32) | uint64_t(a));
+        if (it != core_in.end()) sa += containment(g, b, a, it->second, opt);
+      }
+      sum += sa, pairs += pa;
+      holding += pa > 0 && sa >= opt.part_merge * pa;
     }
-    auto wholes = [&](int x) {
-      int n = 0;
-      for (int a : cl[x].nodes) n += g.whole[a];
-      return n;
-    };
-    // Mean containment of y in x's whole nodes, or -1 when y does not lie inside enough of them.
-    auto part_score = [&](int x, int y) -> double {
-      double sum = 0;
-      int pairs = 0, holding = 0;  // holding: whole nodes of x that hold y on average
-      for (int a : cl[x].nodes) {
-        if (!g.whole[a]) continue;
-        double sa = 0;
-        int pa = 0;
-        for (int b : cl[y].nodes) {
-          if (!visible_in(g, b, g.node_view[a], opt)) continue;
-          ++pa;
-          auto it = core_in.find((uint64_t(b) << 32) | uint64_t(a));
-          if (it != core_in.end()) sa += containment(g, b, a, it->second, opt);
-        }
-        sum += sa, pairs += pa;
-        holding += pa > 0 && sa >= opt.part_merge * pa;
-      }
-      // A stray whole mask clustered into the wrong object must not pull another object in: the parts must
-      // lie inside at least two of x's wholes and an eighth of x's masks.
-      if (pairs < 2 || holding < 2 || 8 * holding < int(cl[x].nodes.size())) return -1;
-      return sum / pairs;
-    };
-    std::map<std::pair<int, int>, double> score;  // (x, y): y would join x; only neighbours sharing points
-    auto rescore = [&](int x, int y) {
-      const double c = wholes(x) >= 2 ? part_score(x, y) : -1;
-      if (c >= opt.part_merge) score[{x, y}] = c;
-      else score.erase({x, y});
-    };
-    for (int x = 0; x < N; ++x)
-      if (cl[x].alive && wholes(x) >= 2)
-        for (auto& [y, xy] : cl[x].nbr) rescore(x, y);
-    while (!score.empty()) {
-      auto best = score.begin();
-      for (auto it = score.begin(); it != score.end(); ++it)
-        if (it->second > best->second) best = it;  // ties: the smallest (x, y)
-      const auto [x, y] = best->first;
-      merge(x, y);
-      for (auto it = score.begin(); it != score.end();)
-        it = it->first.first == x || it->first.second == x || it->first.first == y || it->first.second == y ? score.erase(it) : std::next(it);
-      for (auto& [c, xy] : cl[x].nbr) {
-        rescore(x, c);
-        rescore(c, x);
-      }
+    // A stray whole mask clustered into the wrong object must not pull another object in: the parts must
+    // lie inside at least two of x's wholes and an eighth of x's masks.
+    if (pairs < 2 || holding < 2 || 8 * holding < int(cl[x].nodes.size())) return -1;
+    return sum / pairs;
+  }
+};
+
+// Parts: a cluster whose points lie inside another cluster's whole masks (nodes that parts were folded into)
+// is a part of that object that SAM kept apart in some views; best pair first.
+void merge_parts(const MaskGraph& g, const ClusterOptions& opt, std::vector<Cluster>& cl) {
+  PartContext pc{g, opt, cl, {}};
+  for (auto& [ab, n] : g.inter) {
+    pc.core_in[(uint64_t(ab.first) << 32) | uint64_t(ab.second)] = n.first;
+    pc.core_in[(uint64_t(ab.second) << 32) | uint64_t(ab.first)] = n.second;
+  }
+  std::map<std::pair<int, int>, double> score;  // (x, y): y would join x; only neighbours sharing points
+  auto rescore = [&](int x, int y) {
+    const double c = pc.wholes(x) >= 2 ? pc.part_score(x, y) : -1;
+    if (c >= opt.part_merge) score[{x, y}] = c;
+    else score.erase({x, y});
+  };
+  for (int x = 0; x < int(cl.size()); ++x)
+    if (cl[x].alive && pc.wholes(x) >= 2)
+      for (auto& [y, xy] : cl[x].nbr) rescore(x, y);
+  while (!score.empty()) {
+    auto best = score.begin();
+    for (auto it = score.begin(); it != score.end(); ++it)
+      if (it->second > best->second) best = it;  // ties: the smallest (x, y)
+    const auto [x, y] = best->first;
+    merge(g, cl, x, y);
+    for (auto it = score.begin(); it != score.end();)
+      it = it->first.first == x || it->first.second == x || it->first.first == y || it->first.second == y ? score.erase(it) : std::next(it);
+    for (auto& [c, xy] : cl[x].nbr) {
+      rescore(x, c);
+      rescore(c, x);
     }
   }
-  // Objects: clusters seen in at least min_views views, ordered by views, points, first node.
+}
+
+// Objects: clusters seen in at least min_views views, ordered by views, points, first node.
+Clustering number_objects(const MaskGraph& g, const ClusterOptions& opt, const std::vector<Cluster>& cl) {
   struct Obj {
     int views;
     int64_t points;
     std::vector<int> nodes;
   };
   std::vector<Obj> objs;
-  for (int a = 0; a < N; ++a) {
+  for (size_t a = 0; a < cl.size(); ++a) {
     if (!cl[a].alive) continue;
     int views = 0;
     for (int64_t c : cl[a].count) views += c > 0;
@@ -244,13 +267,22 @@ Clustering cluster_masks(const MaskGraph& g, const ClusterOptions& opt) {
     return p.nodes.front() < q.nodes.front();
   });
   Clustering r;
-  r.cluster.assign(size_t(N), -1);
+  r.cluster.assign(cl.size(), -1);
   r.num_objects = int(objs.size());
   for (int k = 0; k < r.num_objects; ++k) {
     for (int n : objs[k].nodes) r.cluster[n] = k;
     r.members.push_back(std::move(objs[k].nodes));
   }
   return r;
+}
+
+}  // namespace
+
+Clustering cluster_masks(const MaskGraph& g, const ClusterOptions& opt) {
+  std::vector<Cluster> cl = single_node_clusters(g, opt);
+  merge_by_affinity(g, opt, cl);
+  if (opt.part_merge > 0 && !g.whole.empty()) merge_parts(g, opt, cl);
+  return number_objects(g, opt, cl);
 }
 
 std::vector<NodeMatch> nearest_objects(const MaskGraph& g, const Clustering& c, const std::vector<int>& nodes,

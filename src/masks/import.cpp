@@ -106,9 +106,8 @@ bool non_empty_dir(const fs::path& d) { return fs::is_directory(d) && !fs::is_em
 
 json score_json(double v) { return v >= 0 ? json(v) : json(nullptr); }
 
-}  // namespace
-
-ImportSummary import_masks(const ImportOptions& opt) {
+// Checks the options; returns the LangSplat level's index.
+int check_options(const ImportOptions& opt) {
   const auto& formats = import_formats();
   if (std::find(formats.begin(), formats.end(), opt.from) == formats.end())
     fail("--from: unknown format '{}' (sam-json, sam-png, sam2-png or langsplat)", opt.from);
@@ -116,15 +115,124 @@ ImportSummary import_masks(const ImportOptions& opt) {
   const int level = langsplat_level(opt.level);
   if (opt.feature_stride < 1 || opt.feature_stride > 256) fail("--feature-stride: must be between 1 and 256, got {}", opt.feature_stride);
   if (!fs::is_directory(opt.dir)) fail("{}: mask folder not found", opt.dir.string());
+  return level;
+}
+
+// Where the imported files go: temporary folders beside masks/ (and features/), swapped in at the end.
+struct Output {
+  fs::path masks_dir, feat_dir;  // SCENE/masks, SCENE/features
+  fs::path tmp_masks, tmp_feat;
+  std::string suffix;            // of the temporary and old folders' names
+};
+
+// LangSplat, one view: the label map of `level` and the feature grid; returns the view's import.json record.
+json import_langsplat_view(const ImportOptions& opt, int level, const Job& j, const View& v, const Output& out,
+                           ImportSummary& sum) {
+  LangSplatView ls = read_langsplat(j.file, j.file2, level, v.width, v.height, opt.feature_stride);
+  save_label_png(out.tmp_masks / (v.stem + ".png"), ls.labels);
+  write_npy(out.tmp_feat / (v.stem + ".npy"),
+            make_npy_f16({size_t(ls.grid_h), size_t(ls.grid_w), size_t(ls.dim)}, ls.grid.data()));
+  sum.masks += ls.num_masks;
+  sum.features = true;
+  sum.feature_dim = ls.dim, sum.grid_w = ls.grid_w, sum.grid_h = ls.grid_h;
+  return {{"file", j.file.string()}, {"num_masks", ls.num_masks}, {"features", j.file2.string()}};
+}
+
+// SAM's masks (JSON or amg.py PNG folder), one view: flattened into a label map and its confidence; returns the
+// view's import.json record (every mask with its area, visible pixels, part_of and scores).
+json import_sam_view(const ImportOptions& opt, const Job& j, const View& v, const Output& out, ImportSummary& sum) {
+  std::vector<SourceMask> src = opt.from == "sam-json" ? read_sam_json(j.file, v.width, v.height)
+                                                       : read_sam_png_folder(j.file, v.width, v.height);
+  Flattened f = flatten_masks(src, v.width, v.height);
+  save_label_png(out.tmp_masks / (v.stem + ".png"), f.labels);
+  if (!f.confidence.empty()) {
+    write_npy(out.tmp_masks / (v.stem + ".conf.npy"), make_npy_f32({size_t(v.height), size_t(v.width)}, f.confidence.data()));
+    sum.confidence = true;
+  }
+  const std::vector<int> parent = part_of(src);
+  json list = json::array();
+  for (size_t i = 0; i < src.size(); ++i) {
+    list.push_back({{"id", i + 1}, {"source", src[i].source}, {"area", rle_area(src[i].rle)}, {"visible", f.visible[i]},
+                    {"part_of", parent[i] >= 0 ? json(parent[i] + 1) : json(nullptr)},
+                    {"predicted_iou", score_json(src[i].predicted_iou)},
+                    {"stability_score", score_json(src[i].stability_score)}});
+    sum.hidden += f.visible[i] == 0;
+  }
+  sum.masks += src.size();
+  return {{"file", j.file.string()}, {"masks", list}};
+}
+
+// masks/import.json: the format, the source folder, what the ids mean, the overlap rule and every view's record.
+json import_record(const ImportOptions& opt, const json& views) {
+  const bool langsplat = opt.from == "langsplat";
+  json meta = {{"format", opt.from},
+               {"source", fs::absolute(opt.dir).lexically_normal().string()},
+               {"ids", langsplat ? "index into LangSplat's concatenated mask list + 1 (per view)"
+                       : opt.from == "sam2-png" ? "as in the label maps (SAM2's object ids)"
+                                                : "1 + position of the mask in the view's list (per view)"},
+               {"rule", opt.from == "sam2-png" ? "none (one label per pixel already)"
+                        : langsplat ? "LangSplat's: within a level, later masks overwrite earlier ones"
+                                    : "smallest mask wins; equal areas: the mask listed first"},
+               {"views", views}};
+  if (langsplat) meta["level"] = opt.level, meta["feature_stride"] = opt.feature_stride;
+  return meta;
+}
+
+// Swap in: the old folder moves aside, the new one into place, the old one is removed.
+void swap_in(const fs::path& root, const fs::path& tmp, const fs::path& dst, const std::string& suffix) {
+  const fs::path old = root / fmt::format(".{}.old-{}", dst.filename().string(), suffix);
+  std::error_code ec;
+  if (fs::exists(dst)) {
+    fs::rename(dst, old, ec);
+    if (ec) fail("{}: cannot move the old folder aside ({})", dst.string(), ec.message());
+  }
+  fs::rename(tmp, dst, ec);
+  if (ec) fail("{}: cannot move the imported folder into place ({})", dst.string(), ec.message());
+  fs::remove_all(old, ec);
+}
+
+// Imports every job's view into the temporary folders, writes import.json and swaps the folders in.
+void write_output(const ImportOptions& opt, int level, const Scene& s, const std::vector<Job>& jobs, const Output& out,
+                  ImportSummary& sum) {
+  const bool langsplat = opt.from == "langsplat";
+  ensure_dir(out.tmp_masks);
+  if (langsplat) ensure_dir(out.tmp_feat);
+  json views = json::object();
+  Progress bar("masks import", long(jobs.size()), opt.progress);
+  for (size_t ji = 0; ji < jobs.size(); ++ji) {
+    const Job& j = jobs[ji];
+    const View& v = s.views[j.view];
+    if (langsplat) {
+      views[v.stem] = import_langsplat_view(opt, level, j, v, out, sum);
+    } else if (opt.from == "sam2-png") {
+      save_label_png(out.tmp_masks / (v.stem + ".png"), read_sam2_png(j.file, v.width, v.height));
+      views[v.stem] = {{"file", j.file.string()}};
+    } else {
+      views[v.stem] = import_sam_view(opt, j, v, out, sum);
+    }
+    ++sum.imported;
+    bar.update(long(ji + 1), v.name);
+  }
+  bar.finish();
+  atomic_write_text(out.tmp_masks / "import.json", import_record(opt, views).dump(1) + "\n");
+  if (langsplat) swap_in(s.root, out.tmp_feat, out.feat_dir, out.suffix);
+  swap_in(s.root, out.tmp_masks, out.masks_dir, out.suffix);
+}
+
+}  // namespace
+
+ImportSummary import_masks(const ImportOptions& opt) {
+  const int level = check_options(opt);
   Scene s = load_scene(opt.scene);
   const fs::path model = fs::is_directory(s.root / "sparse" / "0") ? s.root / "sparse" / "0" : s.root / "sparse";
   std::vector<Job> jobs = match_files(s, opt, model);
   if (jobs.empty()) fail("{}: no {} files for any image of the scene", opt.dir.string(), opt.from);
   const bool langsplat = opt.from == "langsplat";
-  const fs::path masks_dir = s.root / "masks", feat_dir = s.root / "features";
-  if (!opt.force && non_empty_dir(masks_dir)) fail("{}: already holds masks; pass --force to replace them", masks_dir.string());
-  if (!opt.force && langsplat && non_empty_dir(feat_dir))
-    fail("{}: already holds features; pass --force to replace them", feat_dir.string());
+  Output out;
+  out.masks_dir = s.root / "masks", out.feat_dir = s.root / "features";
+  if (!opt.force && non_empty_dir(out.masks_dir)) fail("{}: already holds masks; pass --force to replace them", out.masks_dir.string());
+  if (!opt.force && langsplat && non_empty_dir(out.feat_dir))
+    fail("{}: already holds features; pass --force to replace them", out.feat_dir.string());
 
   ImportSummary sum;
   sum.views = int(s.views.size());
@@ -133,86 +241,15 @@ ImportSummary import_masks(const ImportOptions& opt) {
   for (auto& v : s.views)
     if (!has[v.index]) sum.missing.push_back(v.name);
 
-  const std::string suffix = fmt::format("{:08x}", std::random_device{}());
-  const fs::path tmp_masks = s.root / fmt::format(".masks.import-{}", suffix), tmp_feat = s.root / fmt::format(".features.import-{}", suffix);
+  out.suffix = fmt::format("{:08x}", std::random_device{}());
+  out.tmp_masks = s.root / fmt::format(".masks.import-{}", out.suffix);
+  out.tmp_feat = s.root / fmt::format(".features.import-{}", out.suffix);
   try {
-    ensure_dir(tmp_masks);
-    if (langsplat) ensure_dir(tmp_feat);
-    json views = json::object();
-    Progress bar("masks import", long(jobs.size()), opt.progress);
-    for (size_t ji = 0; ji < jobs.size(); ++ji) {
-      const Job& j = jobs[ji];
-      const View& v = s.views[j.view];
-      json info = json::object();
-      info["file"] = j.file.string();
-      if (langsplat) {
-        LangSplatView ls = read_langsplat(j.file, j.file2, level, v.width, v.height, opt.feature_stride);
-        save_label_png(tmp_masks / (v.stem + ".png"), ls.labels);
-        write_npy(tmp_feat / (v.stem + ".npy"),
-                  make_npy_f16({size_t(ls.grid_h), size_t(ls.grid_w), size_t(ls.dim)}, ls.grid.data()));
-        sum.masks += ls.num_masks;
-        sum.features = true;
-        sum.feature_dim = ls.dim, sum.grid_w = ls.grid_w, sum.grid_h = ls.grid_h;
-        info["num_masks"] = ls.num_masks;
-        info["features"] = j.file2.string();
-      } else if (opt.from == "sam2-png") {
-        LabelMap m = read_sam2_png(j.file, v.width, v.height);
-        save_label_png(tmp_masks / (v.stem + ".png"), m);
-      } else {
-        std::vector<SourceMask> src = opt.from == "sam-json" ? read_sam_json(j.file, v.width, v.height)
-                                                             : read_sam_png_folder(j.file, v.width, v.height);
-        Flattened f = flatten_masks(src, v.width, v.height);
-        save_label_png(tmp_masks / (v.stem + ".png"), f.labels);
-        if (!f.confidence.empty()) {
-          write_npy(tmp_masks / (v.stem + ".conf.npy"), make_npy_f32({size_t(v.height), size_t(v.width)}, f.confidence.data()));
-          sum.confidence = true;
-        }
-        const std::vector<int> parent = part_of(src);
-        json list = json::array();
-        for (size_t i = 0; i < src.size(); ++i) {
-          list.push_back({{"id", i + 1}, {"source", src[i].source}, {"area", rle_area(src[i].rle)}, {"visible", f.visible[i]},
-                          {"part_of", parent[i] >= 0 ? json(parent[i] + 1) : json(nullptr)},
-                          {"predicted_iou", score_json(src[i].predicted_iou)},
-                          {"stability_score", score_json(src[i].stability_score)}});
-          sum.hidden += f.visible[i] == 0;
-        }
-        sum.masks += src.size();
-        info["masks"] = list;
-      }
-      views[v.stem] = info;
-      ++sum.imported;
-      bar.update(long(ji + 1), v.name);
-    }
-    bar.finish();
-    json meta = {{"format", opt.from},
-                 {"source", fs::absolute(opt.dir).lexically_normal().string()},
-                 {"ids", langsplat ? "index into LangSplat's concatenated mask list + 1 (per view)"
-                         : opt.from == "sam2-png" ? "as in the label maps (SAM2's object ids)"
-                                                  : "1 + position of the mask in the view's list (per view)"},
-                 {"rule", opt.from == "sam2-png" ? "none (one label per pixel already)"
-                          : langsplat ? "LangSplat's: within a level, later masks overwrite earlier ones"
-                                      : "smallest mask wins; equal areas: the mask listed first"},
-                 {"views", views}};
-    if (langsplat) meta["level"] = opt.level, meta["feature_stride"] = opt.feature_stride;
-    atomic_write_text(tmp_masks / "import.json", meta.dump(1) + "\n");
-    // Swap in: the old folders move aside, the new ones into place, the old ones are removed.
-    auto swap_in = [&](const fs::path& tmp, const fs::path& dst) {
-      const fs::path old = s.root / fmt::format(".{}.old-{}", dst.filename().string(), suffix);
-      std::error_code ec;
-      if (fs::exists(dst)) {
-        fs::rename(dst, old, ec);
-        if (ec) fail("{}: cannot move the old folder aside ({})", dst.string(), ec.message());
-      }
-      fs::rename(tmp, dst, ec);
-      if (ec) fail("{}: cannot move the imported folder into place ({})", dst.string(), ec.message());
-      fs::remove_all(old, ec);
-    };
-    if (langsplat) swap_in(tmp_feat, feat_dir);
-    swap_in(tmp_masks, masks_dir);
+    write_output(opt, level, s, jobs, out, sum);
   } catch (...) {
     std::error_code ec;
-    fs::remove_all(tmp_masks, ec);
-    fs::remove_all(tmp_feat, ec);
+    fs::remove_all(out.tmp_masks, ec);
+    fs::remove_all(out.tmp_feat, ec);
     throw;
   }
   return sum;

@@ -1,3 +1,5 @@
+// Scene loading (scene.h): the COLMAP model, the views with their image / mask / confidence / feature paths, the
+// train/test split, object names and text embeddings; the per-view loaders of Scene.
 #include "scene/scene.h"
 
 #include <stb/stb_image_write.h>
@@ -63,66 +65,57 @@ json read_json(const fs::path& p) {
   }
 }
 
-}  // namespace
-
-Scene load_scene(const fs::path& root_in, const SceneOptions& opt) {
-  Scene s;
-  s.root = root_in;
-  s.downscale = std::max(1, opt.downscale);
-  if (!path_exists(s.root)) fail("{}: scene folder not found", s.root.string());
-  if (!fs::is_directory(s.root)) fail("{}: not a folder", s.root.string());
-  fs::path sparse = s.root / "sparse" / "0";
+// The COLMAP model's folder: sparse/0/, or sparse/ itself when it holds cameras.bin.
+fs::path find_model(const fs::path& root) {
+  fs::path sparse = root / "sparse" / "0";
   if (!fs::is_directory(sparse)) {
-    if (fs::is_directory(s.root / "sparse") && path_exists(s.root / "sparse" / "cameras.bin")) sparse = s.root / "sparse";
-    else fail("{}: no COLMAP model (expected sparse/0/ with cameras, images, points3D)", s.root.string());
+    if (fs::is_directory(root / "sparse") && path_exists(root / "sparse" / "cameras.bin")) sparse = root / "sparse";
+    else fail("{}: no COLMAP model (expected sparse/0/ with cameras, images, points3D)", root.string());
   }
-  fs::path images_dir = s.root / "images";
-  if (!fs::is_directory(images_dir)) fail("{}: images/ folder not found", s.root.string());
-  ColmapModel m = read_colmap(sparse);
-  if (m.images.empty()) fail("{}: the COLMAP model lists no images", sparse.string());
+  return sparse;
+}
 
-  const int F = s.downscale;
-  fs::path scaled_dir = s.root / fmt::format("images_{}", F);
-  for (auto& im : m.images) {
-    View v;
-    v.colmap_id = im.id;
-    v.name = im.name;
-    v.stem = strip_ext(im.name);
-    const ColmapCamera& cam = m.cameras.at(im.camera_id);
-    double fx, fy, cx, cy;
-    require_pinhole(cam, (sparse / "cameras").string(), fx, fy, cx, cy);
-    // Sizes and poses from the file are checked before anything is sized or rendered by them.
-    if (cam.width < 1 || cam.height < 1 || cam.width > kMaxSide || cam.height > kMaxSide)
-      fail("{}: camera {} is {}x{} pixels; expected 1..{} a side", (sparse / "cameras").string(), cam.id, cam.width,
-           cam.height, kMaxSide);
-    if (!(std::isfinite(fx) && std::isfinite(fy) && fx > 0 && fy > 0 && std::isfinite(cx) && std::isfinite(cy)))
-      fail("{}: camera {} has invalid intrinsics (fx {}, fy {}, cx {}, cy {})", (sparse / "cameras").string(), cam.id,
-           fx, fy, cx, cy);
-    if (!im.qvec.allFinite() || !im.tvec.allFinite() || im.qvec.norm() < 1e-12)
-      fail("{}: image '{}' has an invalid pose (non-finite or zero quaternion)", (sparse / "images").string(), im.name);
-    v.image_path = images_dir / im.name;
-    if (!path_exists(v.image_path))
-      fail("{}: image '{}' is listed in the COLMAP model but missing", v.image_path.string(), im.name);
-    // COLMAP puts the pixel-coordinate origin at the top-left corner of the top-left pixel, so an integer
-    // downscale divides every intrinsic by F exactly.
-    v.width = static_cast<int>(cam.width) / F;
-    v.height = static_cast<int>(cam.height) / F;
-    v.fx = fx / F; v.fy = fy / F; v.cx = cx / F; v.cy = cy / F;
-    if (F > 1 && path_exists(scaled_dir / im.name)) v.image_path = scaled_dir / im.name;
-    v.R = qvec_to_rotmat(im.qvec);
-    v.t = im.tvec;
-    fs::path mp = s.root / "masks" / (v.stem + ".png");
-    if (path_exists(mp)) v.mask_path = mp;
-    fs::path cp = s.root / "masks" / (v.stem + ".conf.npy");
-    if (path_exists(cp)) v.conf_path = cp;
-    fs::path fp = s.root / "features" / (v.stem + ".npy");
-    if (path_exists(fp)) v.feature_path = fp;
-    s.views.push_back(std::move(v));
-  }
-  std::sort(s.views.begin(), s.views.end(), [](const View& a, const View& b) { return a.name < b.name; });
-  for (size_t i = 0; i < s.views.size(); ++i) s.views[i].index = static_cast<int>(i);
+// One view of COLMAP image `im` at downscale F, with the paths of its image (images_F/ when there), mask,
+// confidence and features. Sizes and poses from the file are checked before anything is sized or rendered by them.
+View make_view(const fs::path& root, const fs::path& sparse, const ColmapModel& m, const ColmapImage& im, int F) {
+  const fs::path images_dir = root / "images", scaled_dir = root / fmt::format("images_{}", F);
+  View v;
+  v.colmap_id = im.id;
+  v.name = im.name;
+  v.stem = strip_ext(im.name);
+  const ColmapCamera& cam = m.cameras.at(im.camera_id);
+  double fx, fy, cx, cy;
+  require_pinhole(cam, (sparse / "cameras").string(), fx, fy, cx, cy);
+  if (cam.width < 1 || cam.height < 1 || cam.width > kMaxSide || cam.height > kMaxSide)
+    fail("{}: camera {} is {}x{} pixels; expected 1..{} a side", (sparse / "cameras").string(), cam.id, cam.width,
+         cam.height, kMaxSide);
+  if (!(std::isfinite(fx) && std::isfinite(fy) && fx > 0 && fy > 0 && std::isfinite(cx) && std::isfinite(cy)))
+    fail("{}: camera {} has invalid intrinsics (fx {}, fy {}, cx {}, cy {})", (sparse / "cameras").string(), cam.id,
+         fx, fy, cx, cy);
+  if (!im.qvec.allFinite() || !im.tvec.allFinite() || im.qvec.norm() < 1e-12)
+    fail("{}: image '{}' has an invalid pose (non-finite or zero quaternion)", (sparse / "images").string(), im.name);
+  v.image_path = images_dir / im.name;
+  if (!path_exists(v.image_path))
+    fail("{}: image '{}' is listed in the COLMAP model but missing", v.image_path.string(), im.name);
+  // COLMAP puts the pixel-coordinate origin at the top-left corner of the top-left pixel, so an integer
+  // downscale divides every intrinsic by F exactly.
+  v.width = static_cast<int>(cam.width) / F;
+  v.height = static_cast<int>(cam.height) / F;
+  v.fx = fx / F; v.fy = fy / F; v.cx = cx / F; v.cy = cy / F;
+  if (F > 1 && path_exists(scaled_dir / im.name)) v.image_path = scaled_dir / im.name;
+  v.R = qvec_to_rotmat(im.qvec);
+  v.t = im.tvec;
+  fs::path mp = root / "masks" / (v.stem + ".png");
+  if (path_exists(mp)) v.mask_path = mp;
+  fs::path cp = root / "masks" / (v.stem + ".conf.npy");
+  if (path_exists(cp)) v.conf_path = cp;
+  fs::path fp = root / "features" / (v.stem + ".npy");
+  if (path_exists(fp)) v.feature_path = fp;
+  return v;
+}
 
-  // Train/test split.
+// Train/test split: test.txt (image names or stems, one a line), else every 8th view (LLFF).
+void split_views(Scene& s) {
   fs::path test_txt = s.root / "test.txt";
   if (path_exists(test_txt)) {
     std::istringstream in(read_file_text(test_txt));
@@ -142,7 +135,9 @@ Scene load_scene(const fs::path& root_in, const SceneOptions& opt) {
     for (auto& v : s.views) v.is_test = (v.index % 8 == 0);
     s.split_source = "every 8th view (LLFF)";
   }
+}
 
+void load_points(Scene& s, const ColmapModel& m, const fs::path& sparse) {
   s.points.reserve(m.points.size());
   for (auto& p : m.points) {
     if (!p.xyz.cast<float>().allFinite())
@@ -150,60 +145,90 @@ Scene load_scene(const fs::path& root_in, const SceneOptions& opt) {
     s.points.emplace_back(p.xyz.cast<float>());
     s.point_colors.emplace_back(p.rgb[0] / 255.f, p.rgb[1] / 255.f, p.rgb[2] / 255.f);
   }
+}
 
-  fs::path objects = s.root / "masks" / "objects.json";
-  if (path_exists(objects)) {
-    json j = read_json(objects);
-    if (!j.is_object()) fail("{}: expected an object {{\"1\": \"name\", ...}}", objects.string());
-    for (auto& [k, val] : j.items()) {
-      int id;
-      try { id = std::stoi(k); } catch (...) { fail("{}: key '{}' is not an object id", objects.string(), k); }
-      if (!val.is_string()) fail("{}: name of object {} is not a string", objects.string(), k);
-      s.object_names[id] = val.get<std::string>();
-    }
+// masks/objects.json: {"1": "name", ...}.
+std::map<int, std::string> read_object_names(const fs::path& objects) {
+  std::map<int, std::string> names;
+  json j = read_json(objects);
+  if (!j.is_object()) fail("{}: expected an object {{\"1\": \"name\", ...}}", objects.string());
+  for (auto& [k, val] : j.items()) {
+    int id;
+    try { id = std::stoi(k); } catch (...) { fail("{}: key '{}' is not an object id", objects.string(), k); }
+    if (!val.is_string()) fail("{}: name of object {} is not a string", objects.string(), k);
+    names[id] = val.get<std::string>();
   }
-  fs::path te = s.root / "text_embeddings.json";
-  if (path_exists(te)) {
-    json j = read_json(te);
-    if (!j.is_object()) fail("{}: expected an object {{\"phrase\": [floats], ...}}", te.string());
-    size_t dim = 0;
-    for (auto& [k, val] : j.items()) {
-      if (!val.is_array() || val.empty() ||
-          !std::all_of(val.begin(), val.end(), [](const json& x) { return x.is_number(); }))
-        fail("{}: embedding of '{}' is not an array of numbers", te.string(), k);
-      std::vector<float> vec;
-      vec.reserve(val.size());
-      for (const json& x : val) {  // range-checked as double: a double -> float cast out of range is undefined
-        const double d = x.get<double>();
-        if (!(std::abs(d) <= std::numeric_limits<float>::max()))
-          fail("{}: embedding of '{}' holds {}, not a finite float", te.string(), k, x.dump());
-        vec.push_back(float(d));
-      }
-      if (dim && vec.size() != dim) fail("{}: embedding of '{}' has {} values, others have {}", te.string(), k, vec.size(), dim);
-      dim = vec.size();
-      s.text_embeddings[k] = std::move(vec);
-    }
-  }
+  return names;
+}
 
-  if (opt.cache_downscaled && F > 1) {
-    for (auto& v : s.views) {
-      if (v.image_path.parent_path() == scaled_dir / fs::path(v.name).parent_path()) continue;
-      Image img = s.load_image(v.index);
-      fs::path out = scaled_dir / v.name;
-      std::string ext = out.extension().string();
-      std::transform(ext.begin(), ext.end(), ext.begin(), ::tolower);
-      if (ext == ".png") {
-        save_png(out, img);
-      } else {
-        std::vector<uint8_t> b(img.px.size());
-        for (size_t i = 0; i < b.size(); ++i) b[i] = static_cast<uint8_t>(std::clamp(img.px[i], 0.f, 1.f) * 255.f + 0.5f);
-        atomic_write(out, [&](const fs::path& tmp) {
-          if (!stbi_write_jpg(tmp.c_str(), img.width, img.height, 3, b.data(), 95)) fail("{}: cannot write", out.string());
-        });
-      }
-      v.image_path = out;
+// text_embeddings.json: {"phrase": [D floats], ...}, every D the same.
+std::map<std::string, std::vector<float>> read_text_embeddings(const fs::path& te) {
+  std::map<std::string, std::vector<float>> out;
+  json j = read_json(te);
+  if (!j.is_object()) fail("{}: expected an object {{\"phrase\": [floats], ...}}", te.string());
+  size_t dim = 0;
+  for (auto& [k, val] : j.items()) {
+    if (!val.is_array() || val.empty() ||
+        !std::all_of(val.begin(), val.end(), [](const json& x) { return x.is_number(); }))
+      fail("{}: embedding of '{}' is not an array of numbers", te.string(), k);
+    std::vector<float> vec;
+    vec.reserve(val.size());
+    for (const json& x : val) {  // range-checked as double: a double -> float cast out of range is undefined
+      const double d = x.get<double>();
+      if (!(std::abs(d) <= std::numeric_limits<float>::max()))
+        fail("{}: embedding of '{}' holds {}, not a finite float", te.string(), k, x.dump());
+      vec.push_back(float(d));
     }
+    if (dim && vec.size() != dim) fail("{}: embedding of '{}' has {} values, others have {}", te.string(), k, vec.size(), dim);
+    dim = vec.size();
+    out[k] = std::move(vec);
   }
+  return out;
+}
+
+// Writes the downscaled copy of every image not read from images_F/ yet and points the view at it.
+void cache_downscaled(Scene& s, const fs::path& scaled_dir) {
+  for (auto& v : s.views) {
+    if (v.image_path.parent_path() == scaled_dir / fs::path(v.name).parent_path()) continue;
+    Image img = s.load_image(v.index);
+    fs::path out = scaled_dir / v.name;
+    std::string ext = out.extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), ::tolower);
+    if (ext == ".png") {
+      save_png(out, img);
+    } else {
+      std::vector<uint8_t> b(img.px.size());
+      for (size_t i = 0; i < b.size(); ++i) b[i] = static_cast<uint8_t>(std::clamp(img.px[i], 0.f, 1.f) * 255.f + 0.5f);
+      atomic_write(out, [&](const fs::path& tmp) {
+        if (!stbi_write_jpg(tmp.c_str(), img.width, img.height, 3, b.data(), 95)) fail("{}: cannot write", out.string());
+      });
+    }
+    v.image_path = out;
+  }
+}
+
+}  // namespace
+
+Scene load_scene(const fs::path& root_in, const SceneOptions& opt) {
+  Scene s;
+  s.root = root_in;
+  s.downscale = std::max(1, opt.downscale);
+  if (!path_exists(s.root)) fail("{}: scene folder not found", s.root.string());
+  if (!fs::is_directory(s.root)) fail("{}: not a folder", s.root.string());
+  const fs::path sparse = find_model(s.root);
+  if (!fs::is_directory(s.root / "images")) fail("{}: images/ folder not found", s.root.string());
+  ColmapModel m = read_colmap(sparse);
+  if (m.images.empty()) fail("{}: the COLMAP model lists no images", sparse.string());
+
+  for (auto& im : m.images) s.views.push_back(make_view(s.root, sparse, m, im, s.downscale));
+  std::sort(s.views.begin(), s.views.end(), [](const View& a, const View& b) { return a.name < b.name; });
+  for (size_t i = 0; i < s.views.size(); ++i) s.views[i].index = static_cast<int>(i);
+  split_views(s);
+  load_points(s, m, sparse);
+  const fs::path objects = s.root / "masks" / "objects.json", te = s.root / "text_embeddings.json";
+  if (path_exists(objects)) s.object_names = read_object_names(objects);
+  if (path_exists(te)) s.text_embeddings = read_text_embeddings(te);
+  if (opt.cache_downscaled && s.downscale > 1) cache_downscaled(s, s.root / fmt::format("images_{}", s.downscale));
   return s;
 }
 

@@ -36,9 +36,12 @@ std::vector<std::string> stems(const fs::path& scene) {
 }  // namespace
 
 TEST(MasksCli, HelpIsClear) {
-  auto r = test::run_hgs("masks --help");
+  auto r = test::run_hgs("--help");
+  EXPECT_NE(r.out.find("(subcommands: generate, click, import, associate, score)"), std::string::npos) << r.out;
+  r = test::run_hgs("masks --help");
   EXPECT_EQ(r.exit_code, 0);
-  EXPECT_NE(r.out.find("import"), std::string::npos);
+  for (const char* s : {"generate", "click", "import", "associate", "score"})
+    EXPECT_NE(r.out.find(s), std::string::npos) << s;
   r = test::run_hgs("masks import --help");
   EXPECT_EQ(r.exit_code, 0);
   for (const char* s : {"sam-json", "sam-png", "sam2-png", "langsplat", "--level", "--force", "smallest"})

@@ -252,6 +252,22 @@ TEST(Cli, InfoOnRealData) {
   EXPECT_NE(r.out.find("problems     none"), std::string::npos) << r.out;
 }
 
+TEST(Cli, InfoSaysWhereTheGroundTruthsNamesComeFrom) {
+  test::TempDir tmp;
+  const fs::path s = tmp / "s";
+  auto g = test::run_hgs("synth --out " + s.string() +
+                         " --views 6 --width 48 --height 32 --points 200 --feature-dim 8 --quiet");
+  ASSERT_EQ(g.exit_code, 0) << g.err;
+  auto r = test::run_hgs("info " + s.string());
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("ground truth gt/instances/ (6 maps), names from gt/objects.json"), std::string::npos) << r.out;
+  fs::remove(s / "gt" / "objects.json");  // a real capture's layout: the masks' objects.json names gt/instances
+  r = test::run_hgs("info " + s.string());
+  EXPECT_NE(r.out.find("ground truth gt/instances/ (6 maps), names from masks/objects.json"), std::string::npos)
+      << r.out;
+  EXPECT_EQ(r.out.find("synthetic"), std::string::npos) << r.out;
+}
+
 TEST(Cli, InfoOnBadSceneFailsCleanly) {
   test::TempDir tmp;
   auto r = test::run_hgs("info " + (tmp / "nope").string());

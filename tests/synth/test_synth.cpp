@@ -312,3 +312,31 @@ TEST(Synth, SurfaceMasksAddTheBackgroundSurfacesAndKeepTheObjectMasks) {
   }
   EXPECT_GT(surface_pixels, size_t(o.views) * 96 * 72 / 4);  // the table and floor fill much of every view
 }
+
+TEST(Synth, GtObjectsJsonNamesTheInstanceIdsInEveryMaskMode) {
+  // gt/objects.json (the instances protocol's truth) names exactly the ids gt/instances holds (the objects;
+  // surfaces are 0 there), also where masks/objects.json names more (surfaces, halves) or is not written.
+  test::TempDir tmp;
+  synth::SynthOptions base = tiny("low");
+  base.views = 6;
+  nlohmann::json expected = nlohmann::json::object();
+  for (auto& o : synth::make_world(base.preset, base.objects, base.seed).objects)
+    expected[std::to_string(o.id)] = o.name;
+  for (const char* mode : {"label", "surface", "per-view", "sam", "sam-per-view"}) {
+    synth::SynthOptions o = base;
+    const std::string m = mode;
+    o.surface_masks = m == "surface";
+    o.mask_style = m.starts_with("sam") ? "sam" : "label";
+    o.mask_ids = m.ends_with("per-view") ? "per-view" : "consistent";
+    const fs::path dir = tmp / m;
+    synth::generate(dir, o);
+    const nlohmann::json names = nlohmann::json::parse(read_file_text(dir / "gt" / "objects.json"));
+    EXPECT_EQ(names, expected) << mode;
+    EXPECT_EQ(fs::exists(dir / "masks" / "objects.json"), o.mask_ids == "consistent") << mode;
+    for (int i = 0; i < o.views; ++i) {
+      const LabelMap gt = load_label_png(dir / "gt" / "instances" / fmt::format("frame_{:05d}.png", i + 1));
+      for (uint16_t l : gt.v)
+        if (l) ASSERT_TRUE(names.contains(std::to_string(l))) << mode << ": id " << l << " of gt/instances unnamed";
+    }
+  }
+}
