@@ -13,6 +13,7 @@
 #include "eval/run.h"
 #include "scene/scene.h"
 #include "synth/synth.h"
+#include "synth_options.h"
 #include "test_util.h"
 
 using namespace hgs;
@@ -24,17 +25,7 @@ namespace {
 
 // A small scene (test views 0 and 8) and the truth's id -> name from synth.json.
 std::map<int, std::string> small_scene(const fs::path& dir) {
-  synth::SynthOptions o;
-  o.views = 9;
-  o.width = 96;
-  o.height = 72;
-  o.objects = 3;
-  o.points = 300;
-  o.feature_dim = 8;
-  o.supersample = 1;
-  o.noise = "none";
-  o.progress = false;
-  synth::generate(dir, o);
+  synth::generate(dir, test::SmallSynth().views(9).objects(3).points(300).feature_dim(8).noise("none"));
   std::map<int, std::string> truth;
   const json meta = json::parse(read_file_text(dir / "synth.json"));
   for (auto& e : meta["objects"]) truth[e["id"].get<int>()] = e["name"].get<std::string>();
