@@ -255,7 +255,9 @@ TEST(HybridTrainer, AblationsRun) {
     hc.use_bro = mask & 4;
     auto tr = t.trainer(hc, 20);
     for (int it = 0; it < 20; ++it) ASSERT_TRUE(std::isfinite(tr->step().total)) << "ablation " << mask;
-    if (!hc.use_of) EXPECT_EQ(hm(*tr).view_weights()[0], hm(*tr).view_weights()[1]);  // no view weights learned
+    if (!hc.use_of) {
+      EXPECT_EQ(hm(*tr).view_weights()[0], hm(*tr).view_weights()[1]);  // no view weights learned
+    }
   }
 }
 

@@ -198,7 +198,7 @@ struct Probe : Method {
   GaussianModel* model = nullptr;
   double last_value = 0;
   std::string name() const override { return "probe"; }
-  void attach(GaussianModel& m, Adam& optim, const std::vector<TrainView>& views) override {
+  void attach(GaussianModel& m, Adam& optim, const std::vector<TrainView>& /*views*/) override {
     model = &m;
     ExtraGroup& g = m.add_extra("probe", 1, 0.f);
     for (int i = 0; i < m.n; ++i) g.data[i] = float(i);
@@ -206,7 +206,7 @@ struct Probe : Method {
     optim.add_array("bias", 1, 2, 0.1f).values = [this] { return ParamValues{&bias, nullptr}; };
   }
   float rgb_weight() const override { return 0.5f; }
-  void prepare(StepContext& c) override { calls.push_back("prepare"); }
+  void prepare(StepContext& /*c*/) override { calls.push_back("prepare"); }
   void losses(StepContext& c) override {
     calls.push_back("losses");
     const float t[2] = {3.f, -2.f};
@@ -222,13 +222,15 @@ struct Probe : Method {
     last_value = v;
     c.objective->add("probe", 0.25f, v);
   }
-  void backward(StepContext& c) override { calls.push_back("backward"); }
+  void backward(StepContext& /*c*/) override { calls.push_back("backward"); }
   void update(StepContext& c) override {
     calls.push_back("update");
     c.optim->update(c.optim->get("bias"), bias.data(), dbias.data(), 2);
     c.optim->update(c.optim->get("probe"), c.model->find_extra("probe")->data.data(), dprobe.data(), c.model->n);
   }
-  void after_step(StepContext& c, bool densified) override { calls.push_back(densified ? "densified" : "after_step"); }
+  void after_step(StepContext& /*c*/, bool densified) override {
+    calls.push_back(densified ? "densified" : "after_step");
+  }
 };
 
 TEST(Method, HooksRunInOrderAndTheirTermsAreOptimised) {
@@ -314,7 +316,7 @@ struct GradTap : Method {
     sh_grad = c.grads->sh;
     step_views.push_back(c.step_views);
   }
-  void after_step(StepContext& c, bool densified) override {
+  void after_step(StepContext& /*c*/, bool densified) override {
     if (densified) densified_at.push_back(c.iteration - 1 + c.step_views);
   }
 };
