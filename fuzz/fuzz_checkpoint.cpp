@@ -1,6 +1,6 @@
 // Trainer checkpoints: `hgs train SCENE --resume FILE [--method rgb|hybrid]` -> make_trainer ->
 // Trainer::load_checkpoint. A fresh trainer per input and method, on the tiny scene, configured as
-// `hgs train --iters 20 --sh-degree 0 --threads 1` (how the seed checkpoints were written, see corpus/README.md).
+// `hgs train --iters 20 --sh-degree 0 --threads 1` (how fuzz/make_corpus writes the seed checkpoints).
 #include <memory>
 
 #include "core/error.h"

@@ -6,7 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli/command.h"
-#include "cli/test_score.h"
+#include "cli/held_out_score.h"
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/progress.h"

@@ -15,12 +15,12 @@
 #include <vector>
 
 #include "cli/command.h"
-#include "cli/test_score.h"
+#include "cli/held_out_score.h"
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/progress.h"
 #include "core/process.h"
-#include "dist/mpi.h"
+#include "mpi/session.h"
 #include "model/ply.h"
 #include "scene/scene.h"
 #include "hybrid/config.h"
@@ -162,7 +162,7 @@ class HeldOutCurve {
   double seconds_ = 0;
 };
 
-// Test hook (tests/dist): HGS_TEST_KILL=<rank>:<images> kills that rank with SIGKILL once it has seen that many
+// Test hook (tests/mpi): HGS_TEST_KILL=<rank>:<images> kills that rank with SIGKILL once it has seen that many
 // images, as a crashed machine would. Returns the images for this rank (0 = never).
 int kill_hook(int rank) {
   const char* k = std::getenv("HGS_TEST_KILL");
@@ -271,11 +271,11 @@ void train_loop(const TrainArgs& a, const Scene& scene, train::Trainer& trainer,
 void run_train(const TrainArgs& a) {
   // Under mpirun every rank runs this same function on the same scene and configuration; rank 0 alone writes
   // outputs and shows progress (docs/scaling.md).
-  dist::Session mpi;
+  mpi::Session mpi;
   const int R = mpi.size(), G = a.batch * R;
   const bool writer = mpi.rank() == 0, progress = !a.quiet && writer;
   // Ranks sharing a machine share its cores: by default each takes its share.
-  set_threads(a.threads == 0 && R > 1 ? std::max(1, omp_get_num_procs() / dist::local_ranks()) : a.threads);
+  set_threads(a.threads == 0 && R > 1 ? std::max(1, omp_get_num_procs() / mpi::local_ranks()) : a.threads);
   Scene scene = load_scene(a.scene, {a.downscale, false});
   const std::vector<int> train_idx = scene.train_indices();
   if (train_idx.empty()) fail("{}: the scene has no training views", a.scene);

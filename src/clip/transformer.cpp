@@ -131,7 +131,7 @@ HGS_AVX512_CLONE void quick_gelu_range(float* x, long b, long e) {
   for (long i = b; i < e; ++i) x[i] = x[i] / (1.f + fast_exp(-1.702f * x[i]));
 }
 
-// max of r[0, n), n >= 1. Written as a comparison: GCC vectorises this `reduction(max)` but left the former
+// max of r[0, n), n >= 1. Written as a comparison: GCC vectorises this `reduction(max)` but leaves a
 // std::max form scalar (one vmaxss per element, latency bound: 80 % of the softmax's time).
 inline float row_max(const float* r, int n) {
   float mx = r[0];

@@ -75,7 +75,7 @@ void ObjectAssociation::update_hard_ids(int n, HybridFields& h) const {
   }
 }
 
-void ObjectAssociation::backward(int n, const HybridFields& h, const float* dq, bool first) {
+void ObjectAssociation::backward(int /*n*/, const HybridFields& h, const float* dq, bool first) {
   if (!cfg_.use_of) return;
   const int U = static_cast<int>(logits_.size());
   FusionParams p{L_, cfg_.temperature, cfg_.fusion_eps, cfg_.background_vote};

@@ -11,7 +11,7 @@ struct HybridConfig {
   bool use_scl = true;   // Semantic Contrastive Learning (else per-pixel cosine on the full semantic render)
   bool use_bro = true;   // Boundary Reconstruction Optimization (else lambda_bro = 0)
   // Plain 3DGS photometric loss on the full image (not in eq. 15; 0 = eq. 15 alone). On by default: eq. 15 alone
-  // lost 8-15 object mIoU on both presets at medium and high noise (3 seeds; docs/ablation.md).
+  // loses object mIoU on both presets at medium and high noise (figures: docs/ablation.md, "λ_rgb").
   float lambda_rgb = 1.0f;
   float lambda_app = 1.0f, lambda_sem = 0.1f, lambda_bro = 1.0f;
   float lambda_dssim = 0.2f;  // lambda of eq. 6
@@ -21,23 +21,22 @@ struct HybridConfig {
   // and 14 keep M_{u,0} = 1 - OR_k M_{u,k} either way.
   bool unconfident_unobserved = true;
   // Observation Fusion counts a view only where the Gaussian's centre is visible (not behind the surface the
-  // current model renders there; fusion.h). On by default together with background_vote 0.5: alone it moved
-  // some objects' Gaussians towards their label and others away, and background_vote alone bloated objects at
-  // low noise through hidden views; together they were above eq. 4 as written on five of six scenes of three
-  // noise levels and 0.4 mIoU below it at low noise (docs/results.md section 8). Only with OF: the single-view
-  // assignment of the no-OF rows keeps eq. 3's V. false = eq. 3's V (positive depth, in the image).
+  // current model renders there; fusion.h). On by default together with background_vote 0.5: alone it moves
+  // some objects' Gaussians towards their label and others away, background_vote alone lets Gaussians hidden
+  // behind an object take its label, and together they beat eq. 4 as written except at low noise (figures:
+  // docs/results.md section 8). Only with OF: the single-view assignment of the no-OF rows keeps eq. 3's V.
+  // false = eq. 3's V (positive depth, in the image).
   bool occlusion_test = true;
   // T of eq. 5. s_{n,k} is a (weighted) fraction of views, so q_k / q_j = exp((s_k - s_j) / T): at T = 0.1 a label
   // that wins by 20 % of the views still leaves q_k ~ 0.88 and, under heavy mask noise, objects render below
-  // the 0.5 mask threshold. 0.05 measured better on three scenes of both presets (docs/results.md).
+  // the 0.5 mask threshold; 0.05 sharpens q (figures: docs/results.md section 3).
   float temperature = 0.05f;
   float fusion_eps = 1e-6f;   // epsilon of eq. 4
   // Weight of a background observation in eq. 4's numerator (fusion.h; 1 = the paper). M_{u,0} is the absence of
   // every mask, and under heavy mask noise missed and eroded small objects lose their own Gaussians to it; at 0.5
-  // an object wins with more than a third of the views that see it. Alone (without the occlusion test) 0.5 gained
-  // 0.4-3.6 mIoU on four high-noise scenes but lost 2.0 at low noise and 6.8 on the medium-noise demo scene:
-  // Gaussians hidden behind an object take its label. With the occlusion test it is the default
-  // (docs/results.md section 8).
+  // an object wins with more than a third of the views that see it. Alone (without the occlusion test) it helps
+  // at high noise but lets Gaussians hidden behind an object take its label, so it is the default together with
+  // the occlusion test (figures: docs/results.md section 8).
   float background_vote = 0.5f;
   float tau2 = 0.1f;          // InfoNCE temperature (eq. 10)
   // The background in SCL. Eq. 10 contrasts foreground objects only, so a view with fewer than two of them gives
@@ -49,9 +48,9 @@ struct HybridConfig {
   // "off": eq. 10 as written.
   std::string scl_background = "auto";
   // The semantic loss (eq. 10 through the pooled weights a_{n,k} = sum_p M_k alpha T) also moves opacities and
-  // geometry. Off by default: SCL then trains f and (through q) the view weights only. With it, the opacities of a
-  // high-noise scene's objects halved and objects fell below the mask threshold (docs/results.md); true = the full
-  // gradient.
+  // geometry. Off by default: SCL then trains f and (through q) the view weights only. With it, SCL lowers the
+  // opacities of a high-noise scene's objects until objects fall below the mask threshold (figures:
+  // docs/results.md section 3); true = the full gradient.
   bool sem_geometry = false;
   int fusion_every = 100;     // R: rebuild the observation table every R iterations (and after densification)
   int bro_kernel = 5;         // square structuring element of D and E (eq. 12)

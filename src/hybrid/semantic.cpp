@@ -133,7 +133,11 @@ std::vector<uint8_t> pack_views(const std::vector<V>& views) {
   std::vector<uint8_t> b;
   auto put = [&](const void* p, size_t bytes) {
     const auto* c = static_cast<const uint8_t*>(p);
+    // GCC 12 false positive: -Wstringop-overflow takes the insert into the empty vector as a write to 0 bytes.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wstringop-overflow"
     b.insert(b.end(), c, c + bytes);
+#pragma GCC diagnostic pop
   };
   const int32_t count = int32_t(views.size());
   put(&count, 4);

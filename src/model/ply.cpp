@@ -162,7 +162,7 @@ GaussianModel read_model_ply(const std::filesystem::path& path) {
       long c = -1;
       std::string extra;
       ls >> name >> c;
-      // (A count like "0.2" used to be read as 0, the rest ignored.)
+      // A count like "0.2" reads as 0 and leaves ".2", which `extra` catches.
       if (ls.fail() || c < 0 || (ls >> extra)) fail("{}: header line {}: malformed element line '{}'", where, lineno, line);
       if (in_vertex) vertex_done = true;
       in_vertex = name == "vertex";
@@ -266,7 +266,7 @@ GaussianModel read_model_ply(const std::filesystem::path& path) {
     m.add_extra(gname, dim);
     for (int i = 0; i < dim; ++i) slots.push_back({g[i], nullptr, size_t(i), size_t(dim)});
   }
-  // Resolve extra destinations now that `extras` no longer reallocates.
+  // Resolve extra destinations once every group is added (add_extra may reallocate `extras`).
   {
     size_t s = slots.size();
     for (int gi = int(m.extras.size()) - 1; gi >= 0; --gi) {

@@ -8,8 +8,8 @@
 // overrides the choice. Both compile the same source with the same compiler, which fuses the same a * b + c into
 // FMA in both (GCC contracts by default in C++; both instruction sets have FMA), so their results are bitwise
 // equal; not a language guarantee, so test_isa.cpp checks it on every build.
-// (Batches of 16 pixels, one AVX-512 register of floats, were measured too: forward 1.2x faster than avx2,
-// backward 1.2x slower, the whole step no faster, on a 2-core Xeon with AMX; not kept.)
+// Both process 8-pixel batches: 16-pixel batches (one AVX-512 register) make the whole step no faster
+// (docs/performance.md, "The RGB step").
 #pragma once
 #include <string>
 

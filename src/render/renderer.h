@@ -5,7 +5,8 @@
 //   project.{h,cpp}   EWA projection of 3D Gaussians to 2D conics (+0.3 px low-pass), depth, radius
 //   sh.{h,cpp}        spherical-harmonics colour per view direction (degree 0..3), clamped at 0 as in 3DGS
 //   binning.{h,cpp}   16x16 tile binning, per-tile front-to-back depth order
-//   rasterize.{h,cpp} per-pixel front-to-back alpha compositing of RGB, alpha, depth and C extra channels
+//   rasterize.h, rasterize_{forward,backward}.cpp (shared: rasterize_common.h)
+//                     per-pixel front-to-back alpha compositing of RGB, alpha, depth and C extra channels
 //   raster_isa.{h,cpp} the AVX2 or the AVX-512 compilation of the rasterizer kernels, chosen at run time
 //   simd.h            8-lane packs (GCC vector extensions) and the fast exp used by the rasterizer
 // GaussianRenderer (= RendererT<float>) ties them together in two phases and keeps every buffer between calls
@@ -19,8 +20,8 @@
 //       or the given colors as they are
 //   mean2d, conic, opacity, depth, radius --bin_gaussians--> per-tile lists sorted by (depth, index),
 //       Gaussian-major pair numbering, opacity-aware boxes
-//   projected() now shows mean2d, conic, depth, opacity, colors, radii and the camera centre; a caller may build
-//   extra channels from them (e.g. q_k * colour) before compositing.
+//   after preprocess, projected() shows mean2d, conic, depth, opacity, colors, radii and the camera centre; a
+//   caller may build extra channels from them (e.g. q_k * colour) before compositing.
 // composite(channels, settings, out):
 //   --rasterize_forward--> rgb [H,W,3], alpha [H,W], depth [H,W], extra [H,W,C], weight_sums [N,J];
 //       saved: final T [H,W], last contributor [H,W], per-Gaussian records, batch masks
@@ -29,7 +30,8 @@
 //   d rgb/alpha/depth/extra/weight_sums --rasterize_backward--> per (tile, Gaussian) pair slots, reduced per
 //       Gaussian in fixed order: ProjectedGrads d mean2d [N,2] (the densification statistic), d conic,
 //       d opacity, d colors, d depth, d extra
-//   (the caller may now add to pgrads.colors, e.g. the colour gradient of the extra channels it built)
+//   (between the two phases the caller may add to pgrads.colors, e.g. the colour gradient of the extra channels
+//   it built)
 // preprocess_backward(pgrads, grads):
 //   d opacity --sigmoid'--> d opacity_logit;  d colors --sh_backward, visible only--> d sh (+ d mean via the view
 //       direction), or d colors as they are when colours were given

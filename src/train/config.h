@@ -43,7 +43,8 @@ struct TrainConfig {
 
   // Copy for a run of `iterations` with the 30k densification schedule scaled by f = iterations / 30000:
   // densify_until = 15000 f; for short runs (f < 1) three floors keep the 3DGS dynamics, because compressing
-  // the schedule densifies unconverged Gaussians every few steps and multiplies the count tenfold (measured):
+  // the schedule densifies unconverged Gaussians every few steps and multiplies the count (docs/results.md,
+  // "Figures behind defaults"):
   //   densify_every = max(100 f, 100)   (the averaged gradient covers ~100 steps, as in 3DGS)
   //   densify_from  = max(500 f, min(500, iterations / 10))
   //   opacity_reset_every = max(3000 f, 10 x densify_every)

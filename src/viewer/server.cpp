@@ -237,7 +237,10 @@ struct Server::Impl {
       d.show = remove ? Show::remove : Show::isolate;
       d.keep_extras = true;
       std::string ids;
-      for (int k : d.objects) ids += (ids.empty() ? "" : "-") + std::to_string(k);
+      for (int k : d.objects) {
+        if (!ids.empty()) ids += '-';
+        ids += std::to_string(k);  // appended apart: GCC 12 reports a false -Wrestrict on "-" + std::to_string(k)
+      }
       name = remove ? "scene-without-" + ids + ".ply" : "object-" + ids + ".ply";
     } else {
       const std::string show = req.has_param("show") ? req.get_param_value("show") : "all";

@@ -16,7 +16,7 @@ namespace fs = std::filesystem;
 // std::filesystem_error ("File name too long") out of load_3dovs_view; a control character made a multi-line
 // message.
 TEST(FuzzRegressions, OvsClassNameTooLongOrWithControlCharacters) {
-  for (const std::string bad : {std::string(300, 'P'), std::string("mug\rcup")}) {
+  for (const std::string& bad : {std::string(300, 'P'), std::string("mug\rcup")}) {
     test::TempDir t;
     ensure_dir(t / "segmentations" / "0");
     atomic_write_text(t / "segmentations" / "classes.txt", "table\n" + bad + "\n");

@@ -88,8 +88,11 @@ TEST(EvalPolygon, SimplePolygonsCoverTheirClosedLatticePointsAndTheOutline) {
           on |= d < 1e-9;
           if ((yi > y) != (yj > y) && x < ex * (y - yi) / ey + xi) in = !in;
         }
-        if (in || on) ASSERT_EQ(m[y * W + x], 1) << "trial " << trial << " pixel " << x << "," << y;
-        else if (m[y * W + x]) ASSERT_LT(dist, 1.0) << "trial " << trial << " pixel " << x << "," << y;
+        if (in || on) {
+          ASSERT_EQ(m[y * W + x], 1) << "trial " << trial << " pixel " << x << "," << y;
+        } else if (m[y * W + x]) {
+          ASSERT_LT(dist, 1.0) << "trial " << trial << " pixel " << x << "," << y;
+        }
       }
   }
 }

@@ -146,7 +146,9 @@ TEST(EvalSynthLabels, PolygonsAndSegmentationsMatchInstanceMasks) {
     const InstanceLabels I2 = load_instance_masks(scene, views[V.index], names, o.width / 2, o.height / 2, 2);
     for (size_t c = 0; c < L.classes.size(); ++c)
       for (size_t k = 0; k < I2.names.size(); ++k)
-        if (I2.names[k] == L.classes[c]) EXPECT_EQ(D.masks[c], I2.masks[k]);
+        if (I2.names[k] == L.classes[c]) {
+          EXPECT_EQ(D.masks[c], I2.masks[k]);
+        }
   }
 }
 

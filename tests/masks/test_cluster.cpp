@@ -266,7 +266,9 @@ TEST(ClusterMasks, NearestObjectsAgreeWithTheAffinityOfEachObject) {
         if (a > best) best = a, best_k = k;
       }
       EXPECT_NEAR(near[n].affinity, best, 1e-12) << trial << " " << n;
-      if (best > 0) EXPECT_EQ(near[n].object, best_k) << trial << " " << n;
+      if (best > 0) {
+        EXPECT_EQ(near[n].object, best_k) << trial << " " << n;
+      }
     }
   }
 }

@@ -56,7 +56,9 @@ TEST(SamAmg, BoxNmsIsGreedyByScore) {
     std::vector<bool> kept(boxes.size(), false);
     for (size_t k = 0; k < keep.size(); ++k) {
       kept[keep[k]] = true;
-      if (k) EXPECT_GE(scores[keep[k - 1]], scores[keep[k]]);
+      if (k) {
+        EXPECT_GE(scores[keep[k - 1]], scores[keep[k]]);
+      }
       for (size_t j = 0; j < k; ++j) EXPECT_LE(iou(boxes[keep[j]], boxes[keep[k]]), th);
     }
     for (size_t i = 0; i < boxes.size(); ++i) {
@@ -81,7 +83,7 @@ TEST(SamAmg, MatchesTorchOnTheTinyModel) {
   o.box_nms_thresh = jo["box_nms_thresh"];
   sam::ImageEmbedding e = tiny_sam().embed(sam_image());
   int batches = 0;
-  std::vector<sam::AmgMask> got = sam::generate_masks(tiny_sam(), e, o, [&](int done, int total) {
+  std::vector<sam::AmgMask> got = sam::generate_masks(tiny_sam(), e, o, [&](int /*done*/, int total) {
     ++batches;
     EXPECT_EQ(total, 25);
   });

@@ -108,8 +108,9 @@ TEST(SamPruned, DecoderMatchesTorch) {
   for (size_t k = 0; k < r.prompts.size(); ++k) {
     sam::Prediction p = pruned_sam().predict(e, r.prompts[k]);
     EXPECT_EQ(p.size, 32);
-    if (k == 1 || k == 3)  // the low-res masks of two prompt sets keep the fixture small
+    if (k == 1 || k == 3) {  // the low-res masks of two prompt sets keep the fixture small
       EXPECT_LT(max_rel_err(p.lowres, pref("lowres" + std::to_string(k) + ".npy")), 1e-5) << "prompt " << k;
+    }
     EXPECT_LT(max_rel_err(p.iou, pref("iou" + std::to_string(k) + ".npy")), 5e-6) << "prompt " << k;
     // segment-anything naming: the two-way blocks' LayerNorm eps is 1e-5 (1e-6 in the reference), as for the
     // tiny model (SamWeights.SegmentAnythingNamingGivesTheSameModel).

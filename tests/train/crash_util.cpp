@@ -111,7 +111,7 @@ std::vector<std::string> incomplete_outputs(const fs::path& dir) {
         std::string why;
         if (!checkpoint_complete(p, &why)) bad.push_back(where + ": " + why);
       } else if (ext == ".json") {
-        (void)nlohmann::json::parse(read_file_text(p));
+        [[maybe_unused]] const auto j = nlohmann::json::parse(read_file_text(p));  // throws when malformed
       } else if (ext == ".png") {
         Image img = load_image(p);
         if (img.width <= 0 || img.height <= 0) bad.push_back(where + ": empty image");

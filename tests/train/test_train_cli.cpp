@@ -45,7 +45,9 @@ TEST_F(TrainCli, RgbConvergesAndWritesOutputs) {
   ASSERT_EQ(curve.size(), 4u) << curve.dump();
   for (size_t k = 0; k < 4; ++k) {
     EXPECT_EQ(curve[k]["iteration"], 250 * int(k + 1));
-    if (k > 0) EXPECT_GT(curve[k]["train_seconds"].get<double>(), curve[k - 1]["train_seconds"].get<double>());
+    if (k > 0) {
+      EXPECT_GT(curve[k]["train_seconds"].get<double>(), curve[k - 1]["train_seconds"].get<double>());
+    }
   }
   EXPECT_GT(curve[3]["test_psnr"].get<double>(), curve[0]["test_psnr"].get<double>() + 1.0);  // it learns
   EXPECT_LT(stats["test_seconds"].get<double>(), stats["wall_time_s"].get<double>());

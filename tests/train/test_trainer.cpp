@@ -198,7 +198,7 @@ struct Probe : Method {
   GaussianModel* model = nullptr;
   double last_value = 0;
   std::string name() const override { return "probe"; }
-  void attach(GaussianModel& m, Adam& optim, const std::vector<TrainView>& views) override {
+  void attach(GaussianModel& m, Adam& optim, const std::vector<TrainView>& /*views*/) override {
     model = &m;
     ExtraGroup& g = m.add_extra("probe", 1, 0.f);
     for (int i = 0; i < m.n; ++i) g.data[i] = float(i);

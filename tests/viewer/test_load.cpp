@@ -248,8 +248,9 @@ TEST_F(ViewerLoad, OversizeAndMalformedRequestsAreRefused) {
     EXPECT_TRUE(st == -1 ? resp.empty() : (st >= 400 && st < 500)) << what << ": " << resp.substr(0, 200);
     EXPECT_EQ(resp.find("TOP-SECRET"), std::string::npos) << what;
     const size_t h = resp.find("\r\n\r\n");
-    if (st >= 400 && h != std::string::npos && resp.find("application/json") < h)  // a JSON error is valid JSON
+    if (st >= 400 && h != std::string::npos && resp.find("application/json") < h) {  // a JSON error is valid JSON
       EXPECT_FALSE(json::parse(resp.substr(h + 4), nullptr, false).is_discarded()) << what << ": " << resp;
+    }
   };
   expect_4xx("request line of 20 kB", "GET /api/query?text=" + std::string(20000, 'a') + " HTTP/1.1\r\nHost: x\r\n\r\n");
   expect_4xx("header of 20 kB", "GET /api/objects HTTP/1.1\r\nHost: x\r\nX-Big: " + std::string(20000, 'b') + "\r\n\r\n");
@@ -266,9 +267,9 @@ TEST_F(ViewerLoad, OversizeAndMalformedRequestsAreRefused) {
     return raw(port, fmt::format("POST /api/query HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
                                   "Content-Length: {}\r\nConnection: close\r\n\r\n{}", body.size(), body));
   };
-  for (const std::string body : {std::string("{\"text\": \"red mug"), std::string("{\"text\": \"\xff\xfe\"}"),
-                                 std::string("{\"text\": \"red \xc0\xaf mug\"}"), std::string("\xef\xbb\xbf{]"),
-                                 std::string("{\"text\": \"\\ud800\"}"), std::string(64, '[')}) {
+  for (const std::string& body : {std::string("{\"text\": \"red mug"), std::string("{\"text\": \"\xff\xfe\"}"),
+                                  std::string("{\"text\": \"red \xc0\xaf mug\"}"), std::string("\xef\xbb\xbf{]"),
+                                  std::string("{\"text\": \"\\ud800\"}"), std::string(64, '[')}) {
     const std::string resp = post(body);
     EXPECT_EQ(status_of(resp), 400) << body << ": " << resp;
     const size_t h = resp.find("\r\n\r\n");

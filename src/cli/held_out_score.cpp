@@ -1,4 +1,4 @@
-#include "cli/test_score.h"
+#include "cli/held_out_score.h"
 
 #include <algorithm>
 

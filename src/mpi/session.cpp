@@ -3,7 +3,7 @@
 // and adds the slices in rank order) followed by MPI_Allgatherv of the summed slices. Each rank sends
 // 2 (R - 1) / R of the buffer, as a ring allreduce does; MPI_Allreduce itself is not used for sums because its
 // order of addition is the library's choice (it may depend on R, the message size and the algorithm picked).
-#include "dist/mpi.h"
+#include "mpi/session.h"
 
 #include <algorithm>
 #include <chrono>
@@ -19,7 +19,7 @@
 #include <mpi.h>
 #endif
 
-namespace hgs::dist {
+namespace hgs::mpi {
 
 bool launched_by_mpi() {
   for (const char* v : {"OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_RANK", "MPI_LOCALNRANKS"})
@@ -164,16 +164,16 @@ Session::~Session() {
   if (initialised_ && std::uncaught_exceptions() == 0) MPI_Finalize();
 }
 
-}  // namespace hgs::dist
+}  // namespace hgs::mpi
 
 #if defined(__SANITIZE_ADDRESS__)
 // LeakSanitizer's hook (sanitizer/lsan_interface.h): its exit check is skipped in a process that initialised MPI.
 // OpenMPI 4.1 keeps state past MPI_Finalize in plugins it has dlclose()d, so no suppression can name their frames;
 // every process that does not run MPI (single-process training included) keeps the check. Sanitizer builds only.
-extern "C" int __lsan_is_turned_off() { return hgs::dist::mpi_initialised ? 1 : 0; }
+extern "C" int __lsan_is_turned_off() { return hgs::mpi::mpi_initialised ? 1 : 0; }
 #endif
 
-namespace hgs::dist {
+namespace hgs::mpi {
 
 #else  // built without MPI
 
@@ -196,4 +196,4 @@ int Session::rank() const { return reducer_->rank(); }
 int Session::size() const { return reducer_->size(); }
 train::Reducer& Session::reducer() { return *reducer_; }
 
-}  // namespace hgs::dist
+}  // namespace hgs::mpi

@@ -9,7 +9,7 @@
 
 #include "train/reducer.h"
 
-namespace hgs::dist {
+namespace hgs::mpi {
 
 // True when an MPI launcher started this process (OpenMPI's, MPICH's or PMIx's environment).
 bool launched_by_mpi();
@@ -34,4 +34,4 @@ class Session {
   std::unique_ptr<train::Reducer> reducer_;
 };
 
-}  // namespace hgs::dist
+}  // namespace hgs::mpi
