@@ -57,7 +57,8 @@ const ClipModel& vit_b16() {
     v.proj = randn(size_t(w) * 512, 0.036f, rng);
     v.tr = random_transformer(w, 12, 12, rng);
     const Linear& qkv = v.tr.blocks.back().qkv;
-    v.last_value = {w, w, std::vector<float>(qkv.w.begin() + size_t(2) * w * w, qkv.w.end()), std::vector<float>(w, 0.f)};
+    v.last_value = {w, w, std::vector<float>(qkv.w.begin() + size_t(2) * w * w, qkv.w.end()),
+                    std::vector<float>(w, 0.f)};
     TextTower& t = c.text;
     t.context = 77;
     t.vocab = 49408;
@@ -130,7 +131,8 @@ void BM_ImageGlobal(benchmark::State& state) {
   std::mt19937 rng(3);
   auto x = randn(size_t(side) * side * 3, 1.f, rng);
   for (auto _ : state) benchmark::DoNotOptimize(m.embed_image_tensor(x.data(), side, side));
-  state.counters["FLOPS"] = benchmark::Counter(vision_flops(side, false), benchmark::Counter::kIsIterationInvariantRate);
+  state.counters["FLOPS"] =
+      benchmark::Counter(vision_flops(side, false), benchmark::Counter::kIsIterationInvariantRate);
 }
 BENCHMARK(BM_ImageGlobal)->Arg(224)->Unit(benchmark::kMillisecond)->UseRealTime();
 

@@ -12,7 +12,6 @@
 //   build/bench_hybrid --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
 #include <benchmark/benchmark.h>
 
-
 #include <cmath>
 #include <random>
 
@@ -21,9 +20,9 @@
 #include "bench_threads.h"
 #include "core/process.h"
 #include "hybrid/fusion.h"
+#include "hybrid/method.h"
 #include "hybrid/object_channels.h"
 #include "hybrid/scl.h"
-#include "hybrid/method.h"
 #include "model/gaussian_model.h"
 #include "model/render_inputs.h"
 #include "render/renderer.h"
@@ -67,9 +66,8 @@ struct PartTimes {
   }
   void report(benchmark::State& st) const {
     if (n == 0) return;
-    train::StepTimes::each([&](const char* name, double train::StepTimes::*m) {
-      st.counters[std::string("ms_") + name] = sum.*m / n;
-    });
+    train::StepTimes::each(
+        [&](const char* name, double train::StepTimes::*m) { st.counters[std::string("ms_") + name] = sum.*m / n; });
     if (app > 0 || sem > 0) {
       st.counters["ms_method_loss_objects"] = app / n;
       st.counters["ms_method_loss_semantic"] = sem / n;
@@ -218,17 +216,30 @@ void BM_ObjectSsim(benchmark::State& st) {
     } else {
       const size_t img = size_t(kW) * kH * 3;
       for (int l = 0; l < L; ++l)
-        benchmark::DoNotOptimize(train::ssim(a.data() + l * img, b.data() + l * img, kH, kW, 3, g.data() + l * img, ws));
+        benchmark::DoNotOptimize(
+            train::ssim(a.data() + l * img, b.data() + l * img, kH, kW, 3, g.data() + l * img, ws));
     }
   }
 }
 
 }  // namespace
 
-BENCHMARK(BM_RenderObjects)->ArgNames({"objects", "threads"})->ArgsProduct({{0, 1}, {1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_ObjectSsim)->ArgNames({"one_image", "threads"})->ArgsProduct({{0, 1}, {1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_RenderObjects)
+    ->ArgNames({"objects", "threads"})
+    ->ArgsProduct({{0, 1}, {1, 2}})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK(BM_ObjectSsim)
+    ->ArgNames({"one_image", "threads"})
+    ->ArgsProduct({{0, 1}, {1, 2}})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 BENCHMARK(BM_RgbStep)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_HybridStep)->ArgNames({"objects_per_step", "threads"})->ArgsProduct({{0, 4, 2}, {1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_HybridStep)
+    ->ArgNames({"objects_per_step", "threads"})
+    ->ArgsProduct({{0, 4, 2}, {1, 2}})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 BENCHMARK(BM_HybridStepMemory300k)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
 BENCHMARK(BM_Fuse)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_ObjectChannels)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();

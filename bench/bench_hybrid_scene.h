@@ -23,7 +23,8 @@ inline LabelMap grid_labels(int W, int H) {
   LabelMap lab(W, H, 0);
   const int b = W / 20;
   for (int y = b; y < H - b; ++y)
-    for (int x = b; x < W - b; ++x) lab.at(x, y) = uint16_t(1 + (x - b) * 4 / (W - 2 * b) + 4 * ((y - b) * 2 / (H - 2 * b)));
+    for (int x = b; x < W - b; ++x)
+      lab.at(x, y) = uint16_t(1 + (x - b) * 4 / (W - 2 * b) + 4 * ((y - b) * 2 / (H - 2 * b)));
   return lab;
 }
 

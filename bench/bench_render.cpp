@@ -82,8 +82,8 @@ struct Stages {
     cam = make_camera<float>(s.cam);
     mean2d.resize(2 * n), conic.resize(3 * n), depth.resize(n), opacity.resize(n), colors.resize(3 * n);
     radius.resize(n);
-    project_forward(cam, n, s.mean.data(), s.log_scale.data(), s.quat.data(), mean2d.data(), conic.data(),
-                    depth.data(), radius.data());
+    project_forward(cam, n, s.mean.data(), s.log_scale.data(), s.quat.data(), mean2d.data(), conic.data(), depth.data(),
+                    radius.data());
     for (int i = 0; i < n; ++i) opacity[i] = 1 / (1 + std::exp(-s.opacity_logit[i]));
     sh_forward(n, 3, 16, s.sh.data(), s.mean.data(), cam.campos, radius.data(), colors.data());
     bin_gaussians(s.cam.width, s.cam.height, n, mean2d.data(), conic.data(), opacity.data(), depth.data(),
@@ -108,8 +108,8 @@ void BM_Project(benchmark::State& state) {
   BenchScene& s = scene();
   Stages& st = stages();
   for (auto _ : state)
-    project_forward(st.cam, s.n, s.mean.data(), s.log_scale.data(), s.quat.data(), st.mean2d.data(),
-                    st.conic.data(), st.depth.data(), st.radius.data());
+    project_forward(st.cam, s.n, s.mean.data(), s.log_scale.data(), s.quat.data(), st.mean2d.data(), st.conic.data(),
+                    st.depth.data(), st.radius.data());
 }
 
 void BM_ShForward(benchmark::State& state) {
@@ -136,8 +136,8 @@ void BM_Binning(benchmark::State& state) {
   BenchScene& s = scene();
   Stages& st = stages();
   for (auto _ : state)
-    bin_gaussians(s.cam.width, s.cam.height, s.n, st.mean2d.data(), st.conic.data(), st.opacity.data(),
-                  st.depth.data(), st.radius.data(), st.bins);
+    bin_gaussians(s.cam.width, s.cam.height, s.n, st.mean2d.data(), st.conic.data(), st.opacity.data(), st.depth.data(),
+                  st.radius.data(), st.bins);
   state.counters["pairs"] = st.bins.num_pairs;
 }
 
@@ -154,7 +154,8 @@ double composited_per_pixel(const Stages& st) {
         const int g = b.tile_gauss[e];
         const double dx = st.mean2d[2 * g] - (x + 0.5), dy = st.mean2d[2 * g + 1] - (y + 0.5);
         const float* c = &st.conic[3 * g];
-        const double a = std::min(0.99, st.opacity[g] * std::exp(-0.5 * (c[0] * dx * dx + c[2] * dy * dy) - c[1] * dx * dy));
+        const double a =
+            std::min(0.99, st.opacity[g] * std::exp(-0.5 * (c[0] * dx * dx + c[2] * dy * dy) - c[1] * dx * dy));
         if (a < 1.0 / 255) continue;
         if (T * (1 - a) < 1e-4) break;
         T *= 1 - a;

@@ -29,11 +29,19 @@ std::vector<float> randn(size_t n, float scale, std::mt19937& rng) {
   return v;
 }
 
-Linear lin(int out, int in, std::mt19937& rng) { return {in, out, randn(size_t(out) * in, 1.f / std::sqrt(float(in)), rng), randn(out, 0.02f, rng)}; }
+Linear lin(int out, int in, std::mt19937& rng) {
+  return {in, out, randn(size_t(out) * in, 1.f / std::sqrt(float(in)), rng), randn(out, 0.02f, rng)};
+}
 LayerNorm ln(int c) { return {std::vector<float>(c, 1.f), std::vector<float>(c, 0.f)}; }
-Attention attn(int c, int inner, std::mt19937& rng) { return {lin(inner, c, rng), lin(inner, c, rng), lin(inner, c, rng), lin(c, inner, rng)}; }
-Mlp mlp(int in, int hidden, int out, std::mt19937& rng) { return {{lin(hidden, in, rng), lin(hidden, hidden, rng), lin(out, hidden, rng)}}; }
-Upconv upconv(int in, int out, std::mt19937& rng) { return {in, out, randn(size_t(in) * 4 * out, 1.f / std::sqrt(float(in)), rng), randn(out, 0.02f, rng)}; }
+Attention attn(int c, int inner, std::mt19937& rng) {
+  return {lin(inner, c, rng), lin(inner, c, rng), lin(inner, c, rng), lin(c, inner, rng)};
+}
+Mlp mlp(int in, int hidden, int out, std::mt19937& rng) {
+  return {{lin(hidden, in, rng), lin(hidden, hidden, rng), lin(out, hidden, rng)}};
+}
+Upconv upconv(int in, int out, std::mt19937& rng) {
+  return {in, out, randn(size_t(in) * 4 * out, 1.f / std::sqrt(float(in)), rng), randn(out, 0.02f, rng)};
+}
 
 const SamModel& vit_b(int bf16 = 0) {
   static SamModel models[2];
@@ -62,8 +70,10 @@ const SamModel& vit_b(int bf16 = 0) {
       l.rel_w = randn(size_t(2 * size - 1) * hd, 0.02f, rng);
       v.layers.push_back(std::move(l));
     }
-    v.neck1 = {kHidden, kOut, randn(size_t(kOut) * kHidden, 1.f / std::sqrt(float(kHidden)), rng), std::vector<float>(kOut, 0.f)};
-    v.neck2 = {9 * kOut, kOut, randn(size_t(kOut) * 9 * kOut, 1.f / std::sqrt(9.f * kOut), rng), std::vector<float>(kOut, 0.f)};
+    v.neck1 = {kHidden, kOut, randn(size_t(kOut) * kHidden, 1.f / std::sqrt(float(kHidden)), rng),
+               std::vector<float>(kOut, 0.f)};
+    v.neck2 = {9 * kOut, kOut, randn(size_t(kOut) * 9 * kOut, 1.f / std::sqrt(9.f * kOut), rng),
+               std::vector<float>(kOut, 0.f)};
     v.neck_ln1 = v.neck_ln2 = ln(kOut);
     PromptEncoder& p = s.prompt;
     p.gauss = randn(size_t(kOut), 1.f, rng);
@@ -99,9 +109,7 @@ const SamModel& vit_b(int bf16 = 0) {
 }
 
 // Benchmark argument 0 = float32, 1 = bfloat16 products; the label names the precision (and oneDNN's kernel).
-void label(benchmark::State& state, int bf16) {
-  state.SetLabel(bf16 ? "bf16 " + clip::bf16_kernel_name() : "f32");
-}
+void label(benchmark::State& state, int bf16) { state.SetLabel(bf16 ? "bf16 " + clip::bf16_kernel_name() : "f32"); }
 
 // Multiply-add FLOPs (2 per MAC) of the image encoder.
 double encoder_flops() {
@@ -112,10 +120,10 @@ double encoder_flops() {
   for (int i = 0; i < kLayers; ++i) {
     const bool global = i % 3 == 2;
     const double t = global ? N : M, s2 = global ? N : double(kWindow) * kWindow, wins = global ? 1 : double(nw) * nw;
-    f += 2 * t * C * 4 * C;                     // qkv, proj
-    f += 4 * wins * s2 * s2 * C;                // Q K^T and P V
+    f += 2 * t * C * 4 * C;                        // qkv, proj
+    f += 4 * wins * s2 * s2 * C;                   // Q K^T and P V
     f += 2 * 2 * t * (2 * std::sqrt(s2) - 1) * C;  // relative-position tables
-    f += 2 * N * C * 8 * C;                     // MLP
+    f += 2 * N * C * 8 * C;                        // MLP
   }
   f += 2 * N * C * kOut + 2 * N * 9.0 * kOut * kOut;  // neck
   return f;
@@ -125,15 +133,15 @@ double encoder_flops() {
 // the reassociated cross attentions of src/sam/decoder_attention.h; elementwise work not counted.
 double decoder_flops(int B) {
   const double C = kOut, I = kOut / 2, N = double(kGrid) * kGrid, Tt = 7, R = 8 * Tt;
-  const double shared = 3 * (2 * N * C * I);     // layer 0: token-to-image k, v; image-to-token q
+  const double shared = 3 * (2 * N * C * I);  // layer 0: token-to-image k, v; image-to-token q
   double per = 0;
-  per += 2 * (2 * Tt * N * I);                   // layer 0 token-to-image scores and values
-  per += 2 * N * Tt * I + 2 * N * R * C;         // layer 0 image-to-token scores, values through out_proj
-  per += 2 * (2 * R * N * C);                    // layer 1 token-to-image (few queries)
+  per += 2 * (2 * Tt * N * I);                            // layer 0 token-to-image scores and values
+  per += 2 * N * Tt * I + 2 * N * R * C;                  // layer 0 image-to-token scores, values through out_proj
+  per += 2 * (2 * R * N * C);                             // layer 1 token-to-image (few queries)
   per += 2 * N * C * I + 2 * N * Tt * I + 2 * N * R * C;  // layer 1 image-to-token
-  per += 2 * (2 * R * N * C);                    // final token-to-image
+  per += 2 * (2 * R * N * C);                             // final token-to-image
   per += 2 * N * C * 4 * (C / 4) + 2 * 4 * N * (C / 4) * 4 * (C / 8);  // upscaling
-  per += 2 * 4 * (C / 8) * 16 * N;               // mask dot products
+  per += 2 * 4 * (C / 8) * 16 * N;                                     // mask dot products
   return shared + B * per;
 }
 
@@ -184,7 +192,8 @@ void BM_AutomaticMasksImage(benchmark::State& state) {
     masks = generate_masks(m, e, AmgOptions{}).size();
   }
   state.counters["masks"] = double(masks);
-  state.counters["FLOPS"] = benchmark::Counter(encoder_flops() + 16 * decoder_flops(64), benchmark::Counter::kIsIterationInvariantRate);
+  state.counters["FLOPS"] =
+      benchmark::Counter(encoder_flops() + 16 * decoder_flops(64), benchmark::Counter::kIsIterationInvariantRate);
   state.counters["peak_RSS_MB"] = peak_rss_mb();
 }
 BENCHMARK(BM_AutomaticMasksImage)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1);

@@ -17,8 +17,8 @@
 #include <vector>
 
 #include <fmt/format.h>
-#include <nlohmann/json.hpp>
 #include <omp.h>
+#include <nlohmann/json.hpp>
 
 #include "bench_hybrid_scene.h"
 #include "core/process.h"
@@ -66,8 +66,13 @@ int run_case(const std::string& method, double pixels, double gaussians, const A
     }
   }
   std::sort(ms.begin(), ms.end());
-  const json j = {{"method", method}, {"width", W}, {"height", H}, {"gaussians", n},
-                  {"ms_median", ms[ms.size() / 2]}, {"ms_min", ms.front()}, {"peak_rss_mb", peak_rss_mb()}};
+  const json j = {{"method", method},
+                  {"width", W},
+                  {"height", H},
+                  {"gaussians", n},
+                  {"ms_median", ms[ms.size() / 2]},
+                  {"ms_min", ms.front()},
+                  {"peak_rss_mb", peak_rss_mb()}};
   std::printf("%s\n", j.dump().c_str());
   return 0;
 }
@@ -97,7 +102,9 @@ json run_child(const std::string& method, double pixels, double gaussians, const
 }
 
 int usage(const char* why) {
-  std::fprintf(stderr, "bench_scale: %s\nusage: bench_scale [--steps N] [--threads T] [--objects-per-step M] [--json FILE]\n", why);
+  std::fprintf(stderr,
+               "bench_scale: %s\nusage: bench_scale [--steps N] [--threads T] [--objects-per-step M] [--json FILE]\n",
+               why);
   return 2;
 }
 
@@ -112,9 +119,10 @@ int main(int argc, char** argv) {
     auto next = [&]() -> const char* { return i + 1 < argc ? argv[++i] : nullptr; };
     const char* v = nullptr;
     if (k == "--help" || k == "-h") {
-      std::printf("Training step time and peak memory at 1000x700 / 300k Gaussians and at 0.25x and 4x the pixels\n"
-                  "and the Gaussians (one child process per case).\n"
-                  "usage: bench_scale [--steps N] [--threads T] [--objects-per-step M] [--json FILE]\n");
+      std::printf(
+          "Training step time and peak memory at 1000x700 / 300k Gaussians and at 0.25x and 4x the pixels\n"
+          "and the Gaussians (one child process per case).\n"
+          "usage: bench_scale [--steps N] [--threads T] [--objects-per-step M] [--json FILE]\n");
       return 0;
     } else if (k == "--case") {
       if (i + 3 >= argc) return usage("--case needs METHOD PIXELS GAUSSIANS");
@@ -137,20 +145,28 @@ int main(int argc, char** argv) {
 
   std::printf("%d threads, median of %d steps after one warm-up, hybrid objects_per_step %d (0 = exact)\n\n", a.threads,
               a.steps, a.objects_per_step);
-  std::printf("| pixels | Gaussians | RGB ms/step | hybrid ms/step | hybrid / RGB | RGB peak RSS MB | hybrid peak RSS MB |\n");
+  std::printf(
+      "| pixels | Gaussians | RGB ms/step | hybrid ms/step | hybrid / RGB | RGB peak RSS MB | hybrid peak RSS MB |\n");
   std::printf("|---|---|---|---|---|---|---|\n");
   json all = json::array();
   const double cases[][2] = {{1, 1}, {0.25, 1}, {4, 1}, {1, 0.25}, {1, 4}};
   for (const auto& c : cases) {
     const json r = run_child("rgb", c[0], c[1], a), h = run_child("hybrid", c[0], c[1], a);
-    auto ms = [](const json& j) { return j.is_null() ? std::string("failed") : fmt::format("{:.0f}", j["ms_median"].get<double>()); };
-    auto mb = [](const json& j) { return j.is_null() ? std::string("-") : fmt::format("{:.0f}", j["peak_rss_mb"].get<double>()); };
+    auto ms = [](const json& j) {
+      return j.is_null() ? std::string("failed") : fmt::format("{:.0f}", j["ms_median"].get<double>());
+    };
+    auto mb = [](const json& j) {
+      return j.is_null() ? std::string("-") : fmt::format("{:.0f}", j["peak_rss_mb"].get<double>());
+    };
     const json& any = r.is_null() ? h : r;
-    const std::string px = any.is_null() ? "?" : fmt::format("{}x{} ({}x)", any["width"].get<int>(), any["height"].get<int>(), c[0]);
+    const std::string px =
+        any.is_null() ? "?" : fmt::format("{}x{} ({}x)", any["width"].get<int>(), any["height"].get<int>(), c[0]);
     const std::string ng = any.is_null() ? "?" : fmt::format("{}k ({}x)", any["gaussians"].get<int>() / 1000, c[1]);
-    const std::string ratio = r.is_null() || h.is_null() ? "-" : fmt::format("{:.2f}x", h["ms_median"].get<double>() / r["ms_median"].get<double>());
-    std::printf("| %s | %s | %s | %s | %s | %s | %s |\n", px.c_str(), ng.c_str(), ms(r).c_str(), ms(h).c_str(), ratio.c_str(),
-                mb(r).c_str(), mb(h).c_str());
+    const std::string ratio = r.is_null() || h.is_null()
+                                  ? "-"
+                                  : fmt::format("{:.2f}x", h["ms_median"].get<double>() / r["ms_median"].get<double>());
+    std::printf("| %s | %s | %s | %s | %s | %s | %s |\n", px.c_str(), ng.c_str(), ms(r).c_str(), ms(h).c_str(),
+                ratio.c_str(), mb(r).c_str(), mb(h).c_str());
     std::fflush(stdout);
     all.push_back({{"pixels", c[0]}, {"gaussians", c[1]}, {"rgb", r}, {"hybrid", h}});
   }

@@ -1,7 +1,7 @@
-// The benchmark scene shared by bench_train, bench_hybrid and bench_scale: a 320x240 camera (or W x H) at the origin looking down +z
-// (fx = fy = 300), optionally moved along x, and Gaussians uniform in the box [-2.5, 2.5] x [-1.9, 1.9] x
-// [3, 7] with log-uniform scales in [0.01, 0.06] x `scale`, random rotations, opacity U[0.05, 0.95], SH
-// degree 3 with DC N(0, 0.5) and higher coefficients N(0, 0.1).
+// The benchmark scene shared by bench_train, bench_hybrid and bench_scale: a 320x240 camera (or W x H) at the origin
+// looking down +z (fx = fy = 300), optionally moved along x, and Gaussians uniform in the box [-2.5, 2.5] x [-1.9, 1.9]
+// x [3, 7] with log-uniform scales in [0.01, 0.06] x `scale`, random rotations, opacity U[0.05, 0.95], SH degree 3 with
+// DC N(0, 0.5) and higher coefficients N(0, 0.1).
 #pragma once
 #include <cmath>
 #include <random>

@@ -100,7 +100,8 @@ void BM_AdamUpdate30k(benchmark::State& st) {
   std::normal_distribution<float> N(0, 1e-3f);
   for (auto& f : m.fields()) {
     train::AdamParam& p = adam.add(f.name, f.dim, m.n, 1e-3f);
-    if (f.name == "sh") for (int c = 0; c < 3; ++c) p.lr[c] = 2.5e-3f;
+    if (f.name == "sh")
+      for (int c = 0; c < 3; ++c) p.lr[c] = 2.5e-3f;
     grads.emplace_back(f.data->size());
     for (auto& g : grads.back()) g = N(rng);
   }

@@ -39,8 +39,8 @@ std::filesystem::path scene_skeleton(const std::string& sub);
 #ifdef HGS_LIBFUZZER
 #define HGS_FUZZ_TARGET(name) extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
 #else
-#define HGS_FUZZ_TARGET(name)                                                                \
-  static int hgs_fuzz_##name(const uint8_t* data, size_t size);                              \
-  static ::hgs::fuzz::Registration hgs_fuzz_registration_##name(#name, &hgs_fuzz_##name);   \
+#define HGS_FUZZ_TARGET(name)                                                             \
+  static int hgs_fuzz_##name(const uint8_t* data, size_t size);                           \
+  static ::hgs::fuzz::Registration hgs_fuzz_registration_##name(#name, &hgs_fuzz_##name); \
   static int hgs_fuzz_##name(const uint8_t* data, size_t size)
 #endif

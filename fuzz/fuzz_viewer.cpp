@@ -106,6 +106,7 @@ HGS_FUZZ_TARGET(viewer) {
   // A file outside the static folder was served: its content in the answer, unless the request itself holds it
   // (an error message may echo the request's path; libFuzzer learns the string from this very comparison).
   const std::string_view in(reinterpret_cast<const char*>(data), size);
-  if (s.out.find("TOP-SECRET") != std::string::npos && in.find("TOP-SECRET") == std::string_view::npos) __builtin_trap();
+  if (s.out.find("TOP-SECRET") != std::string::npos && in.find("TOP-SECRET") == std::string_view::npos)
+    __builtin_trap();
   return 0;
 }

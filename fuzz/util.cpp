@@ -63,8 +63,8 @@ std::vector<std::string_view> split(const uint8_t* data, size_t size, size_t n) 
 const fs::path& tiny_scene() {
   static const fs::path dir = [] {
     fs::path d = root() / "tiny_scene";
-    synth::generate(
-        d, hgs::test::SmallSynth().views(4).image_size(32, 24).objects(3).points(200).feature_dim(8).noise("none"));
+    synth::generate(d, hgs::test::SmallSynth().views(4).image_size(32, 24).objects(3).points(200).feature_dim(8).noise(
+                           "none"));
     return d;
   }();
   return dir;

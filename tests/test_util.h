@@ -29,6 +29,6 @@ std::filesystem::path shared_data(const std::string& name);
 
 }  // namespace hgs::test
 
-#define HGS_REQUIRE_SHARED(var, name)                                                          \
-  auto var = ::hgs::test::shared_data(name);                                                   \
+#define HGS_REQUIRE_SHARED(var, name)        \
+  auto var = ::hgs::test::shared_data(name); \
   if (var.empty()) GTEST_SKIP() << "../shared/data/" name " is absent: skipping real-data test"

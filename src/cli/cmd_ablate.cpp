@@ -142,13 +142,18 @@ json train_and_evaluate(const AblateArgs& a, const Scene& scene, const std::stri
     for (auto& r : evaluate_model(s, eo)) reports.push_back(std::move(r));
   }
   eval::write_reports(dir / "report.json", dir / "report.md", reports);
-  json run = {{"train_seconds", train_s}, {"iters", a.iters}, {"seed", seed}, {"objects_per_step", a.objects_per_step},
+  json run = {{"train_seconds", train_s},
+              {"iters", a.iters},
+              {"seed", seed},
+              {"objects_per_step", a.objects_per_step},
               {"results", json::object()}};
   for (const auto& r : reports) {
     const eval::MeanRow m = eval::scene_mean(r);
     auto num = [](double v) { return std::isfinite(v) ? json(v) : json(nullptr); };
     run["results"][r.protocol + "/" + r.mode] = {{"acc", num(eval::paper_accuracy(m, r.protocol))},
-                                                 {"miou", num(m.miou)}, {"mbiou", num(m.mbiou)}, {"records", m.count}};
+                                                 {"miou", num(m.miou)},
+                                                 {"mbiou", num(m.mbiou)},
+                                                 {"records", m.count}};
   }
   atomic_write_text(dir / "run.json", run.dump(2) + "\n");
   return run;
@@ -180,15 +185,17 @@ void run_ablate(const AblateArgs& a) {
         "# Ablation ({} iterations; {} scene(s) x {} seed(s); mean ± sample std over the runs)\n\nScenes: {}\n",
         a.iters, scenes.size(), a.seeds, fmt::join(a.scenes, ", "));
     for (const auto& key : keys) {
-      md += fmt::format("\n## {}{}\n\n| OF | SCL | BRO | λ_rgb | mAcc | mIoU | mBIoU | runs |\n|---|---|---|---|---|---|---|---|\n",
-                        key, key.find("pixel") != std::string::npos ? fmt::format(" (relevancy {})", a.relevancy) : "");
+      md += fmt::format(
+          "\n## {}{}\n\n| OF | SCL | BRO | λ_rgb | mAcc | mIoU | mBIoU | runs |\n|---|---|---|---|---|---|---|---|\n",
+          key, key.find("pixel") != std::string::npos ? fmt::format(" (relevancy {})", a.relevancy) : "");
       for (size_t r = 0; r < rows.size(); ++r) {
         auto it = acc[r].find(key);
         if (it == acc[r].end()) continue;
         const auto& v = it->second;
-        md += fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} |\n", rows[r].of ? "x" : "-", rows[r].scl ? "x" : "-",
-                          rows[r].bro ? "x" : "-", rows[r].lambda_rgb, pct_pm(mean_std(v.at("acc"))),
-                          pct_pm(mean_std(v.at("miou"))), pct_pm(mean_std(v.at("mbiou"))), v.at("miou").size());
+        md +=
+            fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} |\n", rows[r].of ? "x" : "-", rows[r].scl ? "x" : "-",
+                        rows[r].bro ? "x" : "-", rows[r].lambda_rgb, pct_pm(mean_std(v.at("acc"))),
+                        pct_pm(mean_std(v.at("miou"))), pct_pm(mean_std(v.at("mbiou"))), v.at("miou").size());
       }
     }
     for (size_t r = 0; r < rows.size(); ++r) {
@@ -202,15 +209,26 @@ void run_ablate(const AblateArgs& a) {
         }
         res[key] = k;
       }
-      summary.push_back({{"row", rows[r].name}, {"of", rows[r].of}, {"scl", rows[r].scl}, {"bro", rows[r].bro},
-                         {"lambda_rgb", rows[r].lambda_rgb}, {"results", res}});
+      summary.push_back({{"row", rows[r].name},
+                         {"of", rows[r].of},
+                         {"scl", rows[r].scl},
+                         {"bro", rows[r].bro},
+                         {"lambda_rgb", rows[r].lambda_rgb},
+                         {"results", res}});
     }
     std::vector<std::string> abs_scenes;
     for (const auto& p : a.scenes) abs_scenes.push_back(fs::absolute(p).lexically_normal().string());
-    const json j = {{"scenes", abs_scenes}, {"seeds", a.seeds}, {"first_seed", a.seed}, {"iters", a.iters},
-                    {"protocols", protocols}, {"mode", a.mode}, {"relevancy", a.relevancy},
-                    {"scl_background", a.scl_background}, {"objects_per_step", a.objects_per_step},
-                    {"summary", summary}, {"runs", runs}};
+    const json j = {{"scenes", abs_scenes},
+                    {"seeds", a.seeds},
+                    {"first_seed", a.seed},
+                    {"iters", a.iters},
+                    {"protocols", protocols},
+                    {"mode", a.mode},
+                    {"relevancy", a.relevancy},
+                    {"scl_background", a.scl_background},
+                    {"objects_per_step", a.objects_per_step},
+                    {"summary", summary},
+                    {"runs", runs}};
     atomic_write_text(fs::path(a.out) / "ablation.json", j.dump(2) + "\n");
     atomic_write_text(fs::path(a.out) / "ablation.md", md);
     return md;
@@ -228,8 +246,7 @@ void run_ablate(const AblateArgs& a) {
         if (fs::exists(prev)) {  // an earlier, interrupted ablation: reuse when it ran what is asked now
           try {
             json p = json::parse(read_file_text(prev));
-            bool ok = p.at("iters").get<int>() == a.iters &&
-                      p.value("objects_per_step", 0) == a.objects_per_step;
+            bool ok = p.at("iters").get<int>() == a.iters && p.value("objects_per_step", 0) == a.objects_per_step;
             for (const auto& proto : protocols)
               for (const char* m : {"object", "pixel"})
                 if ((a.mode == "both" || a.mode == m) && !p.at("results").contains(proto + "/" + m)) ok = false;
@@ -247,7 +264,8 @@ void run_ablate(const AblateArgs& a) {
           if (std::find(keys.begin(), keys.end(), key) == keys.end()) keys.push_back(key);
           for (const char* m : {"acc", "miou", "mbiou"})
             acc[r][key][m].push_back(v.at(m).is_null() ? NAN : v.at(m).get<double>());
-          line += fmt::format("  {} mIoU {} mBIoU {}", key, pct(acc[r][key]["miou"].back()), pct(acc[r][key]["mbiou"].back()));
+          line += fmt::format("  {} mIoU {} mBIoU {}", key, pct(acc[r][key]["miou"].back()),
+                              pct(acc[r][key]["mbiou"].back()));
         }
         if (!a.quiet) fmt::print("{}\n", line);
         runs.push_back({{"scene", sname}, {"seed", seed}, {"row", rows[r].name}, {"dir", dir.string()}, {"run", run}});
@@ -258,37 +276,47 @@ void run_ablate(const AblateArgs& a) {
   fmt::print("\n{}\nwrote {}/ablation.json and ablation.md\n", write_summary(), a.out);
 }
 
-CommandRegistration reg({"ablate", "Train and evaluate the OF/SCL/BRO ablation rows of the paper's Table 3", 35, [](CLI::App& sub) {
-  auto a = std::make_shared<AblateArgs>();
-  sub.add_option("SCENE", a->scenes, "Scene folders with masks/ and features/ (mean and std over scenes x seeds)")->required();
-  sub.add_option("--out", a->out, "Output folder")->required();
-  sub.add_option("--iters", a->iters, "Iterations per row")->check(CLI::Range(1, 10000000))->capture_default_str();
-  sub.add_option("--rows", a->rows, "all (8 rows), ends (all-off and all-on only), middle (the six others) or full (the full method "
-                 "alone); the summaries cover the "
-                 "rows asked, and --rows all on the same --out later reuses every run on disk")
-      ->check(CLI::IsMember({"all", "ends", "middle", "full"}))->capture_default_str();
-  sub.add_flag("--eq15-row", a->eq15_row,
-               "Add the full method trained on eq. 15 alone (--lambda-rgb 0); the other rows keep the default "
-               "full-image photometric loss");
-  sub.add_option("--protocol", a->protocol,
-                 "instances, 3d-ovs, lerf-ovs, or a comma-separated list of them; auto = instances when "
-                 "gt/instances/ exists, else lerf-ovs")->capture_default_str();
-  sub.add_option("--mode", a->mode, "object, pixel or both (cli/evaluate.h)")
-      ->check(CLI::IsMember({"object", "pixel", "both"}))->capture_default_str();
-  sub.add_option("--relevancy", a->relevancy, "Pixel mode: lerf (the published protocol) or foreground (ours)")
-      ->check(CLI::IsMember({"lerf", "foreground"}))->capture_default_str();
-  sub.add_option("--scl-background", a->scl_background, "As `hgs train --scl-background` (every row)")
-      ->check(CLI::IsMember({"auto", "on", "off"}))->capture_default_str();
-  sub.add_option("--objects-per-step", a->objects_per_step, "As `hgs train --objects-per-step` (every row)")
-      ->check(CLI::Range(0, 65535))->capture_default_str();
-  sub.add_option("--seeds", a->seeds, "Training seeds per scene: --seed, --seed + 1, ...")
-      ->check(CLI::Range(1, 1000))->capture_default_str();
-  sub.add_option("--seed", a->seed, "First training seed")->capture_default_str();
-  sub.add_option("--downscale", a->downscale, "Integer image downscale")->check(CLI::Range(1, 64));
-  sub.add_option("--threads", a->threads, "Worker threads (0 = all cores)");
-  sub.add_flag("--quiet", a->quiet, "No progress bars or per-run lines");
-  return [a] { run_ablate(*a); };
-}});
+CommandRegistration reg(
+    {"ablate", "Train and evaluate the OF/SCL/BRO ablation rows of the paper's Table 3", 35, [](CLI::App& sub) {
+       auto a = std::make_shared<AblateArgs>();
+       sub.add_option("SCENE", a->scenes, "Scene folders with masks/ and features/ (mean and std over scenes x seeds)")
+           ->required();
+       sub.add_option("--out", a->out, "Output folder")->required();
+       sub.add_option("--iters", a->iters, "Iterations per row")->check(CLI::Range(1, 10000000))->capture_default_str();
+       sub.add_option("--rows", a->rows,
+                      "all (8 rows), ends (all-off and all-on only), middle (the six others) or full (the full method "
+                      "alone); the summaries cover the "
+                      "rows asked, and --rows all on the same --out later reuses every run on disk")
+           ->check(CLI::IsMember({"all", "ends", "middle", "full"}))
+           ->capture_default_str();
+       sub.add_flag("--eq15-row", a->eq15_row,
+                    "Add the full method trained on eq. 15 alone (--lambda-rgb 0); the other rows keep the default "
+                    "full-image photometric loss");
+       sub.add_option("--protocol", a->protocol,
+                      "instances, 3d-ovs, lerf-ovs, or a comma-separated list of them; auto = instances when "
+                      "gt/instances/ exists, else lerf-ovs")
+           ->capture_default_str();
+       sub.add_option("--mode", a->mode, "object, pixel or both (cli/evaluate.h)")
+           ->check(CLI::IsMember({"object", "pixel", "both"}))
+           ->capture_default_str();
+       sub.add_option("--relevancy", a->relevancy, "Pixel mode: lerf (the published protocol) or foreground (ours)")
+           ->check(CLI::IsMember({"lerf", "foreground"}))
+           ->capture_default_str();
+       sub.add_option("--scl-background", a->scl_background, "As `hgs train --scl-background` (every row)")
+           ->check(CLI::IsMember({"auto", "on", "off"}))
+           ->capture_default_str();
+       sub.add_option("--objects-per-step", a->objects_per_step, "As `hgs train --objects-per-step` (every row)")
+           ->check(CLI::Range(0, 65535))
+           ->capture_default_str();
+       sub.add_option("--seeds", a->seeds, "Training seeds per scene: --seed, --seed + 1, ...")
+           ->check(CLI::Range(1, 1000))
+           ->capture_default_str();
+       sub.add_option("--seed", a->seed, "First training seed")->capture_default_str();
+       sub.add_option("--downscale", a->downscale, "Integer image downscale")->check(CLI::Range(1, 64));
+       sub.add_option("--threads", a->threads, "Worker threads (0 = all cores)");
+       sub.add_flag("--quiet", a->quiet, "No progress bars or per-run lines");
+       return [a] { run_ablate(*a); };
+     }});
 
 }  // namespace
 }  // namespace hgs::cli

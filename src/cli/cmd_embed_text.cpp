@@ -65,22 +65,26 @@ void run_embed_text(const EmbedTextArgs& a) {
   fmt::print("wrote {} phrases (D = {}) to {}\n", phrases.size(), m.embed_dim, a.out);
 }
 
-CommandRegistration reg({"embed-text", "Embed text phrases with a CLIP model (safetensors) into text_embeddings.json", 20,
-                         [](CLI::App& sub) {
-                           auto a = std::make_shared<EmbedTextArgs>();
-                           sub.add_option("--clip", a->clip, "CLIP weights (.safetensors, open_clip or Hugging Face naming)")
-                               ->required()
-                               ->check(CLI::ExistingFile);
-                           sub.add_option("--text", a->texts, "A phrase to embed (repeatable)");
-                           sub.add_option("--text-file", a->text_file, "File with one phrase per line")->check(CLI::ExistingFile);
-                           sub.add_flag("--canonical", a->canonical, "Also embed LERF's canonical phrases (object, things, stuff, texture)");
-                           sub.add_option("--out", a->out, "Output JSON {\"phrase\": [D floats]}")->required();
-                           sub.add_flag("--merge", a->merge, "Keep the phrases already in --out (replacing those embedded again)");
-                           sub.add_option("--act", a->act, "Activation: auto (config file, else GELU for open_clip / QuickGELU for HF naming), gelu, quick_gelu")
-                               ->capture_default_str();
-                           sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();
-                           return [a] { run_embed_text(*a); };
-                         }});
+CommandRegistration reg(
+    {"embed-text", "Embed text phrases with a CLIP model (safetensors) into text_embeddings.json", 20,
+     [](CLI::App& sub) {
+       auto a = std::make_shared<EmbedTextArgs>();
+       sub.add_option("--clip", a->clip, "CLIP weights (.safetensors, open_clip or Hugging Face naming)")
+           ->required()
+           ->check(CLI::ExistingFile);
+       sub.add_option("--text", a->texts, "A phrase to embed (repeatable)");
+       sub.add_option("--text-file", a->text_file, "File with one phrase per line")->check(CLI::ExistingFile);
+       sub.add_flag("--canonical", a->canonical,
+                    "Also embed LERF's canonical phrases (object, things, stuff, texture)");
+       sub.add_option("--out", a->out, "Output JSON {\"phrase\": [D floats]}")->required();
+       sub.add_flag("--merge", a->merge, "Keep the phrases already in --out (replacing those embedded again)");
+       sub.add_option(
+              "--act", a->act,
+              "Activation: auto (config file, else GELU for open_clip / QuickGELU for HF naming), gelu, quick_gelu")
+           ->capture_default_str();
+       sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();
+       return [a] { run_embed_text(*a); };
+     }});
 
 }  // namespace
 }  // namespace hgs::cli

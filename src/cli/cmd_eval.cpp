@@ -58,30 +58,35 @@ void run_eval(const EvalArgs& a) {
              a.no_png ? "" : fmt::format(" (overlays in {})", (dir / "overlays").string()));
 }
 
-CommandRegistration reg({"eval", "Evaluate a trained hybrid model: LERF-OVS, 3D-OVS or synthetic instance protocol", 50,
-  [](CLI::App& sub) {
-    auto a = std::make_shared<EvalArgs>();
-    sub.add_option("SCENE", a->scene, "Scene folder (with label/, segmentations/ or gt/instances/)")->required();
-    sub.add_option("MODEL", a->model, "Model folder (point_cloud.ply) or PLY file")->required();
-    sub.add_option("--protocol", a->protocol, "lerf-ovs, 3d-ovs or instances")
-        ->check(CLI::IsMember({"lerf-ovs", "3d-ovs", "instances"}))->capture_default_str();
-    sub.add_option("--out", a->out, "report.json path (report.md and overlays/ go beside it)")->required();
-    sub.add_option("--mode", a->mode,
-                   "object (each query's best object; on 3d-ovs background pixels take the language field's "
-                   "class, see cli/evaluate.h), pixel (relevancy of the rendered language map) or both")
-        ->check(CLI::IsMember({"object", "pixel", "both"}))->capture_default_str();
-    sub.add_option("--relevancy", a->relevancy,
-                   "Pixel mode: lerf (LERF's relevancy of the rendered language map, as LangSplat's evaluation) or "
-                   "foreground (ours: times the rendered foreground opacity; see query/query.h)")
-        ->check(CLI::IsMember({"lerf", "foreground"}))->capture_default_str();
-    sub.add_option("--mask-threshold", a->mask_threshold, "Object mode: mask = rendered object opacity > this")->capture_default_str();
-    sub.add_option("--clip", a->clip, "OpenCLIP weights to embed the query texts");
-    sub.add_option("--downscale", a->downscale, "Integer image downscale (as used for training)")->check(CLI::Range(1, 64));
-    sub.add_option("--threads", a->threads, "Worker threads (0 = all cores)");
-    sub.add_flag("--no-png", a->no_png, "Do not write overlay PNGs");
-    sub.add_flag("--quiet", a->quiet, "No progress bars");
-    return [a] { run_eval(*a); };
-  }});
+CommandRegistration reg(
+    {"eval", "Evaluate a trained hybrid model: LERF-OVS, 3D-OVS or synthetic instance protocol", 50, [](CLI::App& sub) {
+       auto a = std::make_shared<EvalArgs>();
+       sub.add_option("SCENE", a->scene, "Scene folder (with label/, segmentations/ or gt/instances/)")->required();
+       sub.add_option("MODEL", a->model, "Model folder (point_cloud.ply) or PLY file")->required();
+       sub.add_option("--protocol", a->protocol, "lerf-ovs, 3d-ovs or instances")
+           ->check(CLI::IsMember({"lerf-ovs", "3d-ovs", "instances"}))
+           ->capture_default_str();
+       sub.add_option("--out", a->out, "report.json path (report.md and overlays/ go beside it)")->required();
+       sub.add_option("--mode", a->mode,
+                      "object (each query's best object; on 3d-ovs background pixels take the language field's "
+                      "class, see cli/evaluate.h), pixel (relevancy of the rendered language map) or both")
+           ->check(CLI::IsMember({"object", "pixel", "both"}))
+           ->capture_default_str();
+       sub.add_option("--relevancy", a->relevancy,
+                      "Pixel mode: lerf (LERF's relevancy of the rendered language map, as LangSplat's evaluation) or "
+                      "foreground (ours: times the rendered foreground opacity; see query/query.h)")
+           ->check(CLI::IsMember({"lerf", "foreground"}))
+           ->capture_default_str();
+       sub.add_option("--mask-threshold", a->mask_threshold, "Object mode: mask = rendered object opacity > this")
+           ->capture_default_str();
+       sub.add_option("--clip", a->clip, "OpenCLIP weights to embed the query texts");
+       sub.add_option("--downscale", a->downscale, "Integer image downscale (as used for training)")
+           ->check(CLI::Range(1, 64));
+       sub.add_option("--threads", a->threads, "Worker threads (0 = all cores)");
+       sub.add_flag("--no-png", a->no_png, "Do not write overlay PNGs");
+       sub.add_flag("--quiet", a->quiet, "No progress bars");
+       return [a] { run_eval(*a); };
+     }});
 
 }  // namespace
 }  // namespace hgs::cli

@@ -46,17 +46,18 @@ void run_export(const ExportArgs& a) {
              objects.size() > 1 ? "s" : "", fmt::join(objects, ", "), a.out);
 }
 
-CommandRegistration reg({"export", "Write one object's Gaussians (or the scene without it) as a 3DGS PLY", 60, [](CLI::App& sub) {
-  auto a = std::make_shared<ExportArgs>();
-  sub.add_option("MODEL", a->model, "Model folder (point_cloud.ply) or PLY file")->required();
-  sub.add_option("--out", a->out, "Output PLY")->required();
-  sub.add_option("--text", a->texts, "Select the object that best matches this text (repeatable)");
-  sub.add_option("--object", a->objects, "Select object id(s) (repeatable)");
-  sub.add_option("--scene", a->scene, "Scene folder (text embeddings and names; needed with --text)");
-  sub.add_option("--clip", a->clip, "OpenCLIP weights to embed the text");
-  sub.add_flag("--remove", a->remove, "Write the scene without the selected object(s)");
-  return [a] { run_export(*a); };
-}});
+CommandRegistration reg(
+    {"export", "Write one object's Gaussians (or the scene without it) as a 3DGS PLY", 60, [](CLI::App& sub) {
+       auto a = std::make_shared<ExportArgs>();
+       sub.add_option("MODEL", a->model, "Model folder (point_cloud.ply) or PLY file")->required();
+       sub.add_option("--out", a->out, "Output PLY")->required();
+       sub.add_option("--text", a->texts, "Select the object that best matches this text (repeatable)");
+       sub.add_option("--object", a->objects, "Select object id(s) (repeatable)");
+       sub.add_option("--scene", a->scene, "Scene folder (text embeddings and names; needed with --text)");
+       sub.add_option("--clip", a->clip, "OpenCLIP weights to embed the text");
+       sub.add_flag("--remove", a->remove, "Write the scene without the selected object(s)");
+       return [a] { run_export(*a); };
+     }});
 
 }  // namespace
 }  // namespace hgs::cli

@@ -33,7 +33,8 @@ void run_features(const FeaturesArgs& a) {
   d.tile_size = a.tile;
   d.max_tokens = a.max_tokens;
   d.normalize = !a.raw;
-  if (d.input_size < m.vision.patch) fail("--input-size {} is smaller than the patch size {}", d.input_size, m.vision.patch);
+  if (d.input_size < m.vision.patch)
+    fail("--input-size {} is smaller than the patch size {}", d.input_size, m.vision.patch);
   const fs::path out_dir = s.root / "features";
   Progress bar("features", long(s.views.size()), !a.quiet);
   int done = 0, skipped = 0, h = 0, w = 0;
@@ -50,38 +51,40 @@ void run_features(const FeaturesArgs& a) {
     bar.update(++done, h ? fmt::format("{}x{} grid", w, h) : "");
   }
   bar.finish();
-  fmt::print("wrote {} feature maps to {} ({} skipped; D = {}{})\n", done - skipped, out_dir.string(), skipped, m.embed_dim,
-             h ? fmt::format(", last grid {}x{}", w, h) : "");
+  fmt::print("wrote {} feature maps to {} ({} skipped; D = {}{})\n", done - skipped, out_dir.string(), skipped,
+             m.embed_dim, h ? fmt::format(", last grid {}x{}", w, h) : "");
 }
 
-CommandRegistration reg({"features", "Extract dense CLIP (MaskCLIP) features of every view into SCENE/features/", 25,
-                         [](CLI::App& sub) {
-                           auto a = std::make_shared<FeaturesArgs>();
-                           sub.add_option("SCENE", a->scene, "Scene folder (images/, sparse/0/)")->required();
-                           sub.add_option("--clip", a->clip, "CLIP weights (.safetensors, open_clip or Hugging Face naming)")
-                               ->required()
-                               ->check(CLI::ExistingFile);
-                           sub.add_option("--input-size", a->input_size, "Shorter image side fed to the ViT, in pixels (grid = size / patch)")
-                               ->capture_default_str()
-                               ->check(CLI::Range(8, 4096));
-                           sub.add_option("--downscale", a->downscale, "Integer image downscale factor before extraction")
-                               ->capture_default_str()
-                               ->check(CLI::Range(1, 64));
-                           sub.add_option("--max-tokens", a->max_tokens, "Above this many patches, run overlapping square tiles")
-                               ->capture_default_str()
-                               ->check(CLI::Range(1, 1 << 20));
-                           sub.add_option("--tile", a->tile, "Tile side in pixels when tiling (0 = --input-size)")->capture_default_str();
-                           sub.add_flag("--raw", a->raw, "Do not L2-normalise the features");
-                           sub.add_flag("--skip-existing", a->skip_existing, "Keep feature files that already exist");
-                           sub.add_option("--act", a->act, "Activation: auto, gelu, quick_gelu")->capture_default_str();
-                           sub.add_option("--precision", a->precision,
-                                          "f32 (exact) or bf16: the vision tower's linear layers in bfloat16 with "
-                                          "float32 sums, faster with AMX / AVX512-BF16 (an approximation: docs/clip.md)")
-                               ->check(CLI::IsMember({"f32", "bf16"}))->capture_default_str();
-                           sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();
-                           sub.add_flag("--quiet", a->quiet, "No progress bar");
-                           return [a] { run_features(*a); };
-                         }});
+CommandRegistration reg(
+    {"features", "Extract dense CLIP (MaskCLIP) features of every view into SCENE/features/", 25, [](CLI::App& sub) {
+       auto a = std::make_shared<FeaturesArgs>();
+       sub.add_option("SCENE", a->scene, "Scene folder (images/, sparse/0/)")->required();
+       sub.add_option("--clip", a->clip, "CLIP weights (.safetensors, open_clip or Hugging Face naming)")
+           ->required()
+           ->check(CLI::ExistingFile);
+       sub.add_option("--input-size", a->input_size,
+                      "Shorter image side fed to the ViT, in pixels (grid = size / patch)")
+           ->capture_default_str()
+           ->check(CLI::Range(8, 4096));
+       sub.add_option("--downscale", a->downscale, "Integer image downscale factor before extraction")
+           ->capture_default_str()
+           ->check(CLI::Range(1, 64));
+       sub.add_option("--max-tokens", a->max_tokens, "Above this many patches, run overlapping square tiles")
+           ->capture_default_str()
+           ->check(CLI::Range(1, 1 << 20));
+       sub.add_option("--tile", a->tile, "Tile side in pixels when tiling (0 = --input-size)")->capture_default_str();
+       sub.add_flag("--raw", a->raw, "Do not L2-normalise the features");
+       sub.add_flag("--skip-existing", a->skip_existing, "Keep feature files that already exist");
+       sub.add_option("--act", a->act, "Activation: auto, gelu, quick_gelu")->capture_default_str();
+       sub.add_option("--precision", a->precision,
+                      "f32 (exact) or bf16: the vision tower's linear layers in bfloat16 with "
+                      "float32 sums, faster with AMX / AVX512-BF16 (an approximation: docs/clip.md)")
+           ->check(CLI::IsMember({"f32", "bf16"}))
+           ->capture_default_str();
+       sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();
+       sub.add_flag("--quiet", a->quiet, "No progress bar");
+       return [a] { run_features(*a); };
+     }});
 
 }  // namespace
 }  // namespace hgs::cli

@@ -63,13 +63,19 @@ void check_images(const Scene& s, std::vector<std::string>& problems) {
 // Masks, confidences, object names and features.
 void print_masks_and_features(const Scene& s, std::vector<std::string>& problems) {
   size_t n_masks = 0, n_conf = 0, n_feat = 0;
-  for (auto& v : s.views) { n_masks += v.mask_path.has_value(); n_conf += v.conf_path.has_value(); n_feat += v.feature_path.has_value(); }
+  for (auto& v : s.views) {
+    n_masks += v.mask_path.has_value();
+    n_conf += v.conf_path.has_value();
+    n_feat += v.feature_path.has_value();
+  }
   fmt::print("masks        {} of {} views", n_masks, s.views.size());
   if (n_masks) {
     try {
       int k = s.num_objects();
       fmt::print(", {} objects", k);
-    } catch (const Error& e) { problems.push_back(e.what()); }
+    } catch (const Error& e) {
+      problems.push_back(e.what());
+    }
   }
   if (n_conf) fmt::print(", {} confidence maps", n_conf);
   fmt::print("\n");
@@ -85,10 +91,12 @@ void print_masks_and_features(const Scene& s, std::vector<std::string>& problems
     try {
       NpyArray h = read_npy_header(*v.feature_path);
       if (h.shape.size() == 3)
-        fmt::print(" ({}x{} grid, D = {}, {})", h.shape[1], h.shape[0], h.shape[2], h.dtype == DType::F16 ? "float16" : "float32");
-      else
-        problems.push_back(fmt::format("{}: features must be [h, w, D]", v.feature_path->string()));
-    } catch (const Error& e) { problems.push_back(e.what()); }
+        fmt::print(" ({}x{} grid, D = {}, {})", h.shape[1], h.shape[0], h.shape[2],
+                   h.dtype == DType::F16 ? "float16" : "float32");
+      else problems.push_back(fmt::format("{}: features must be [h, w, D]", v.feature_path->string()));
+    } catch (const Error& e) {
+      problems.push_back(e.what());
+    }
     break;
   }
   fmt::print("\n");
@@ -97,13 +105,14 @@ void print_masks_and_features(const Scene& s, std::vector<std::string>& problems
 // Text embeddings, LERF-OVS labels, 3D-OVS segmentations and gt/instances.
 void print_labels(const Scene& s) {
   if (!s.text_embeddings.empty())
-    fmt::print("text         {} phrases in text_embeddings.json (D = {})\n", s.text_embeddings.size(), s.text_embeddings.begin()->second.size());
-  else
-    fmt::print("text         no text_embeddings.json\n");
+    fmt::print("text         {} phrases in text_embeddings.json (D = {})\n", s.text_embeddings.size(),
+               s.text_embeddings.begin()->second.size());
+  else fmt::print("text         no text_embeddings.json\n");
   size_t n_label = 0;
   if (fs::is_directory(s.label_dir()))
     for (auto& e : fs::directory_iterator(s.label_dir())) n_label += e.path().extension() == ".json";
-  fmt::print("labels       {}\n", n_label ? fmt::format("{} LERF-OVS frames in label/", n_label) : std::string("none (label/)"));
+  fmt::print("labels       {}\n",
+             n_label ? fmt::format("{} LERF-OVS frames in label/", n_label) : std::string("none (label/)"));
   if (fs::exists(s.segmentation_dir() / "classes.txt")) {
     size_t n = 0;
     for (auto& e : fs::directory_iterator(s.segmentation_dir())) n += e.is_directory();
@@ -128,14 +137,15 @@ void run_info(const std::string& path, int downscale) {
   }
 }
 
-CommandRegistration reg({"info", "Print what a scene folder holds (views, cameras, masks, features, labels) and any problem", 90,
-                         [](CLI::App& sub) {
-                           auto path = std::make_shared<std::string>();
-                           auto downscale = std::make_shared<int>(1);
-                           sub.add_option("SCENE", *path, "Scene folder (images/, sparse/0/, ...)")->required();
-                           sub.add_option("--downscale", *downscale, "Integer image downscale factor")->check(CLI::Range(1, 64));
-                           return [=] { run_info(*path, *downscale); };
-                         }});
+CommandRegistration reg(
+    {"info", "Print what a scene folder holds (views, cameras, masks, features, labels) and any problem", 90,
+     [](CLI::App& sub) {
+       auto path = std::make_shared<std::string>();
+       auto downscale = std::make_shared<int>(1);
+       sub.add_option("SCENE", *path, "Scene folder (images/, sparse/0/, ...)")->required();
+       sub.add_option("--downscale", *downscale, "Integer image downscale factor")->check(CLI::Range(1, 64));
+       return [=] { run_info(*path, *downscale); };
+     }});
 
 }  // namespace
 }  // namespace hgs::cli

@@ -19,11 +19,11 @@ namespace {
 CommandRegistration reg({"masks",
                          "Per-view masks: make them with SAM, import them from SAM / SAM2 / LangSplat, associate their "
                          "ids across views, score them",
-                         15,
-                         [](CLI::App& sub) {
+                         15, [](CLI::App& sub) {
                            sub.require_subcommand(1);
                            auto& subs = masks_registry();
-                           std::sort(subs.begin(), subs.end(), [](const CommandSpec& a, const CommandSpec& b) { return a.order < b.order; });
+                           std::sort(subs.begin(), subs.end(),
+                                     [](const CommandSpec& a, const CommandSpec& b) { return a.order < b.order; });
                            auto run = std::make_shared<std::function<void()>>();
                            std::string names;
                            for (auto& spec : subs) {

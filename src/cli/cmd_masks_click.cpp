@@ -97,34 +97,40 @@ void run_click(const ClickArgs& a) {
              img.height, a.single ? "single-mask" : "multimask", best, r.iou[best], area, path.string());
 }
 
-MasksSubcommandRegistration reg({"click", "One SAM mask from point / box prompts on one view (PNG)", 6,
-  [](CLI::App& sub) {
-    auto a = std::make_shared<ClickArgs>();
-    sub.footer("Coordinates are pixels of the view as loaded (after --downscale). Without --single the best of\n"
-               "SAM's three multimask outputs (highest predicted IoU) is written, as segment-anything's predictor does.\n"
-               "Example: hgs masks click SCENE --sam sam-vit-base.safetensors --view 0 --point 320,240 --out mug.png");
-    sub.add_option("SCENE", a->scene, "Scene folder (images/, sparse/0/)")->required();
-    sub.add_option("--sam", a->sam, "SAM weights (.safetensors)")->required()->check(CLI::ExistingFile);
-    sub.add_option("--view", a->view, "View name, stem or index")->required();
-    sub.add_option("--point", a->points, "Foreground point x,y (repeatable)");
-    sub.add_option("--negative", a->negatives, "Background point x,y (repeatable)");
-    sub.add_option("--box", a->boxes, "Box x0,y0,x1,y1 (repeatable)");
-    sub.add_flag("--single", a->single, "Use SAM's single-mask output");
-    sub.add_option("--out", a->out, "Output PNG (default <stem>_mask.png)");
-    sub.add_option("--downscale", a->downscale, "Integer image downscale factor")->capture_default_str()->check(CLI::Range(1, 64));
-    sub.add_option("--vit-heads", a->vit_heads,
-                   "Image encoder heads per layer (0 = from the relative-position tables, else config.json; given, "
-                   "it must agree with the tables and serves layers without them)")
-        ->check(CLI::Range(0, 4096))->capture_default_str();
-    sub.add_option("--precision", a->precision,
-                   "f32 (exact) or bf16: the large matrix products in bfloat16 with float32 sums, 2-4x faster with "
-                   "AMX / AVX512-BF16 (an approximation: docs/sam.md)")
-        ->check(CLI::IsMember({"f32", "bf16"}))->capture_default_str();
-    sub.add_option("--decoder-heads", a->decoder_heads, "Mask decoder heads (0 = config.json beside the weights, else 8)")
-        ->capture_default_str();
-    sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();
-    return [a] { run_click(*a); };
-  }});
+MasksSubcommandRegistration reg(
+    {"click", "One SAM mask from point / box prompts on one view (PNG)", 6, [](CLI::App& sub) {
+       auto a = std::make_shared<ClickArgs>();
+       sub.footer(
+           "Coordinates are pixels of the view as loaded (after --downscale). Without --single the best of\n"
+           "SAM's three multimask outputs (highest predicted IoU) is written, as segment-anything's predictor does.\n"
+           "Example: hgs masks click SCENE --sam sam-vit-base.safetensors --view 0 --point 320,240 --out mug.png");
+       sub.add_option("SCENE", a->scene, "Scene folder (images/, sparse/0/)")->required();
+       sub.add_option("--sam", a->sam, "SAM weights (.safetensors)")->required()->check(CLI::ExistingFile);
+       sub.add_option("--view", a->view, "View name, stem or index")->required();
+       sub.add_option("--point", a->points, "Foreground point x,y (repeatable)");
+       sub.add_option("--negative", a->negatives, "Background point x,y (repeatable)");
+       sub.add_option("--box", a->boxes, "Box x0,y0,x1,y1 (repeatable)");
+       sub.add_flag("--single", a->single, "Use SAM's single-mask output");
+       sub.add_option("--out", a->out, "Output PNG (default <stem>_mask.png)");
+       sub.add_option("--downscale", a->downscale, "Integer image downscale factor")
+           ->capture_default_str()
+           ->check(CLI::Range(1, 64));
+       sub.add_option("--vit-heads", a->vit_heads,
+                      "Image encoder heads per layer (0 = from the relative-position tables, else config.json; given, "
+                      "it must agree with the tables and serves layers without them)")
+           ->check(CLI::Range(0, 4096))
+           ->capture_default_str();
+       sub.add_option("--precision", a->precision,
+                      "f32 (exact) or bf16: the large matrix products in bfloat16 with float32 sums, 2-4x faster with "
+                      "AMX / AVX512-BF16 (an approximation: docs/sam.md)")
+           ->check(CLI::IsMember({"f32", "bf16"}))
+           ->capture_default_str();
+       sub.add_option("--decoder-heads", a->decoder_heads,
+                      "Mask decoder heads (0 = config.json beside the weights, else 8)")
+           ->capture_default_str();
+       sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();
+       return [a] { run_click(*a); };
+     }});
 
 }  // namespace
 }  // namespace hgs::cli

@@ -71,8 +71,8 @@ void run_generate(const GenerateArgs& a) {
     bar.update(long(done) * batches, fmt::format("{} masks", total));
   }
   bar.finish();
-  fmt::print("wrote {} SAM mask files to {} ({} skipped as already done): {} masks\n", done - skipped,
-             out_dir.string(), skipped, total);
+  fmt::print("wrote {} SAM mask files to {} ({} skipped as already done): {} masks\n", done - skipped, out_dir.string(),
+             skipped, total);
   fmt::print("  next: hgs masks import {} --from sam-json {}\n", a.scene, out_dir.string());
 }
 
@@ -82,44 +82,57 @@ const char* kDescription =
     "and writes SCENE/sam/<stem>.json: [{segmentation: {size, counts (COCO RLE)}, area, bbox, predicted_iou,\n"
     "point_coords, stability_score, crop_box}], sorted by predicted IoU. Views already written are skipped, so an\n"
     "interrupted run resumes. Weights: Hugging Face SamModel or segment-anything .safetensors (docs/sam.md).\n"
-    "Example: hgs masks generate SCENE --sam sam-vit-base.safetensors && hgs masks import SCENE --from sam-json SCENE/sam";
+    "Example: hgs masks generate SCENE --sam sam-vit-base.safetensors && hgs masks import SCENE --from sam-json "
+    "SCENE/sam";
 
-MasksSubcommandRegistration reg({"generate", "Run SAM's automatic mask generator on every view into SCENE/sam/<stem>.json", 5,
-  [](CLI::App& sub) {
-    auto a = std::make_shared<GenerateArgs>();
-    sub.footer(kDescription);
-    sub.add_option("SCENE", a->scene, "Scene folder (images/, sparse/0/)")->required();
-    sub.add_option("--sam", a->sam, "SAM weights (.safetensors)")->required()->check(CLI::ExistingFile);
-    sub.add_option("--out", a->out, "Output folder (default SCENE/sam)");
-    sub.add_option("--points-per-side", a->amg.points_per_side, "Grid of n x n prompt points")
-        ->capture_default_str()->check(CLI::Range(1, 256));
-    sub.add_option("--points-per-batch", a->amg.points_per_batch, "Points decoded together")
-        ->capture_default_str()->check(CLI::Range(1, 4096));
-    sub.add_option("--pred-iou-thresh", a->amg.pred_iou_thresh, "Keep masks whose predicted IoU is above this")->capture_default_str();
-    sub.add_option("--stability-thresh", a->amg.stability_score_thresh, "Keep masks whose stability score is above this")
-        ->capture_default_str();
-    sub.add_option("--stability-offset", a->amg.stability_score_offset, "Logit offset of the stability score")->capture_default_str();
-    sub.add_option("--box-nms-thresh", a->amg.box_nms_thresh, "Box IoU above which the lower-scored mask is dropped")
-        ->capture_default_str();
-    sub.add_option("--min-region-area", a->amg.min_mask_region_area,
-                   "Fill holes and drop islands below this many pixels, then NMS again (0 = off, as segment-anything)")
-        ->capture_default_str()->check(CLI::Range(0, 1 << 30));
-    sub.add_option("--downscale", a->downscale, "Integer image downscale factor before SAM")->capture_default_str()->check(CLI::Range(1, 64));
-    sub.add_option("--vit-heads", a->vit_heads,
-                   "Image encoder heads per layer (0 = from the relative-position tables, else config.json; given, "
-                   "it must agree with the tables and serves layers without them)")
-        ->check(CLI::Range(0, 4096))->capture_default_str();
-    sub.add_option("--precision", a->precision,
-                   "f32 (exact) or bf16: the large matrix products in bfloat16 with float32 sums, 2-4x faster with "
-                   "AMX / AVX512-BF16 (an approximation: docs/sam.md)")
-        ->check(CLI::IsMember({"f32", "bf16"}))->capture_default_str();
-    sub.add_option("--decoder-heads", a->decoder_heads, "Mask decoder heads (0 = config.json beside the weights, else 8)")
-        ->capture_default_str();
-    sub.add_flag("--force", a->force, "Recompute views whose file exists");
-    sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();
-    sub.add_flag("--quiet", a->quiet, "No progress bar");
-    return [a] { run_generate(*a); };
-  }});
+MasksSubcommandRegistration reg(
+    {"generate", "Run SAM's automatic mask generator on every view into SCENE/sam/<stem>.json", 5, [](CLI::App& sub) {
+       auto a = std::make_shared<GenerateArgs>();
+       sub.footer(kDescription);
+       sub.add_option("SCENE", a->scene, "Scene folder (images/, sparse/0/)")->required();
+       sub.add_option("--sam", a->sam, "SAM weights (.safetensors)")->required()->check(CLI::ExistingFile);
+       sub.add_option("--out", a->out, "Output folder (default SCENE/sam)");
+       sub.add_option("--points-per-side", a->amg.points_per_side, "Grid of n x n prompt points")
+           ->capture_default_str()
+           ->check(CLI::Range(1, 256));
+       sub.add_option("--points-per-batch", a->amg.points_per_batch, "Points decoded together")
+           ->capture_default_str()
+           ->check(CLI::Range(1, 4096));
+       sub.add_option("--pred-iou-thresh", a->amg.pred_iou_thresh, "Keep masks whose predicted IoU is above this")
+           ->capture_default_str();
+       sub.add_option("--stability-thresh", a->amg.stability_score_thresh,
+                      "Keep masks whose stability score is above this")
+           ->capture_default_str();
+       sub.add_option("--stability-offset", a->amg.stability_score_offset, "Logit offset of the stability score")
+           ->capture_default_str();
+       sub.add_option("--box-nms-thresh", a->amg.box_nms_thresh, "Box IoU above which the lower-scored mask is dropped")
+           ->capture_default_str();
+       sub.add_option(
+              "--min-region-area", a->amg.min_mask_region_area,
+              "Fill holes and drop islands below this many pixels, then NMS again (0 = off, as segment-anything)")
+           ->capture_default_str()
+           ->check(CLI::Range(0, 1 << 30));
+       sub.add_option("--downscale", a->downscale, "Integer image downscale factor before SAM")
+           ->capture_default_str()
+           ->check(CLI::Range(1, 64));
+       sub.add_option("--vit-heads", a->vit_heads,
+                      "Image encoder heads per layer (0 = from the relative-position tables, else config.json; given, "
+                      "it must agree with the tables and serves layers without them)")
+           ->check(CLI::Range(0, 4096))
+           ->capture_default_str();
+       sub.add_option("--precision", a->precision,
+                      "f32 (exact) or bf16: the large matrix products in bfloat16 with float32 sums, 2-4x faster with "
+                      "AMX / AVX512-BF16 (an approximation: docs/sam.md)")
+           ->check(CLI::IsMember({"f32", "bf16"}))
+           ->capture_default_str();
+       sub.add_option("--decoder-heads", a->decoder_heads,
+                      "Mask decoder heads (0 = config.json beside the weights, else 8)")
+           ->capture_default_str();
+       sub.add_flag("--force", a->force, "Recompute views whose file exists");
+       sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();
+       sub.add_flag("--quiet", a->quiet, "No progress bar");
+       return [a] { run_generate(*a); };
+     }});
 
 }  // namespace
 }  // namespace hgs::cli

@@ -75,7 +75,9 @@ void run_query(const QueryArgs& a) {
       ans = session.ask(text, qo);
       nlohmann::json scores = nlohmann::json::array();
       for (auto& s : ans.scores)
-        scores.push_back({{"object", s.object}, {"name", session.object_name(s.object)}, {"relevancy", s.relevancy},
+        scores.push_back({{"object", s.object},
+                          {"name", session.object_name(s.object)},
+                          {"relevancy", s.relevancy},
                           {"cosine", s.cosine}});
       nlohmann::json chosen = nlohmann::json::array();
       for (int k : ans.chosen) chosen.push_back({{"object", k}, {"name", session.object_name(k)}});
@@ -102,10 +104,12 @@ void run_query(const QueryArgs& a) {
       Image img = scene.load_image(vi);
       eval::save_mask_png(dir / (base + ".mask.png"), mask, v.width, v.height);
       eval::save_overlay_png(dir / (base + ".overlay.png"), img, mask, {});
-      eval::save_heatmap_png(dir / (base + ".heatmap.png"), heat, v.width, v.height, 0.f, a.mode == "object" ? 1.f : 0.f);
+      eval::save_heatmap_png(dir / (base + ".heatmap.png"), heat, v.width, v.height, 0.f,
+                             a.mode == "object" ? 1.f : 0.f);
       size_t area = 0;
       for (auto m : mask) area += m != 0;
-      outputs.push_back({{"view", v.name}, {"mask_pixels", area}, {"overlay", (dir / (base + ".overlay.png")).string()}});
+      outputs.push_back(
+          {{"view", v.name}, {"mask_pixels", area}, {"overlay", (dir / (base + ".overlay.png")).string()}});
       bar.update(++done);
     }
     q["views"] = outputs;
@@ -116,30 +120,41 @@ void run_query(const QueryArgs& a) {
   atomic_write_text(fs::path(a.out) / "result.json", result.dump(2) + "\n");
   for (auto& q : result["queries"]) {
     if (a.mode == "object" && !q["chosen"].empty())
-      fmt::print("\"{}\" -> object {} ({}), relevancy {:.3f}\n", q["text"].get<std::string>(), q["chosen"][0]["object"].get<int>(),
-                 q["chosen"][0]["name"].get<std::string>(), q["scores"][0]["relevancy"].get<float>());
+      fmt::print("\"{}\" -> object {} ({}), relevancy {:.3f}\n", q["text"].get<std::string>(),
+                 q["chosen"][0]["object"].get<int>(), q["chosen"][0]["name"].get<std::string>(),
+                 q["scores"][0]["relevancy"].get<float>());
   }
   fmt::print("wrote masks, overlays and heatmaps for {} view(s) to {}/ (result.json)\n", views.size(), a.out);
 }
 
-CommandRegistration reg({"query", "Answer text queries on a trained hybrid model: masks, overlays, heatmaps per view", 40,
-  [](CLI::App& sub) {
-    auto a = std::make_shared<QueryArgs>();
-    sub.add_option("SCENE", a->scene, "Scene folder")->required();
-    sub.add_option("MODEL", a->model, "Model folder (point_cloud.ply) or PLY file")->required();
-    sub.add_option("--text", a->texts, "Query text (repeatable)")->required();
-    sub.add_option("--out", a->out, "Output folder")->required();
-    sub.add_option("--view", a->view, "Only this view (image name or stem)");
-    sub.add_option("--split", a->split, "Views to render: test, train or all")->check(CLI::IsMember({"test", "train", "all"}))->capture_default_str();
-    sub.add_option("--mode", a->mode, "object (hybrid, default) or pixel (LERF-style relevancy map)")->check(CLI::IsMember({"object", "pixel"}))->capture_default_str();
-    sub.add_option("--min-relevancy", a->min_relevancy, "Object mode: also choose every object with relevancy >= this (0 = best only)")->capture_default_str();
-    sub.add_option("--mask-threshold", a->mask_threshold, "Object mode: mask = rendered object opacity > this")->capture_default_str();
-    sub.add_option("--clip", a->clip, "OpenCLIP weights (.safetensors) to embed the text (else SCENE/text_embeddings.json)");
-    sub.add_option("--downscale", a->downscale, "Integer image downscale (as used for training)")->check(CLI::Range(1, 64));
-    sub.add_option("--threads", a->threads, "Worker threads (0 = all cores)");
-    sub.add_flag("--quiet", a->quiet, "No progress bar");
-    return [a] { run_query(*a); };
-  }});
+CommandRegistration reg(
+    {"query", "Answer text queries on a trained hybrid model: masks, overlays, heatmaps per view", 40,
+     [](CLI::App& sub) {
+       auto a = std::make_shared<QueryArgs>();
+       sub.add_option("SCENE", a->scene, "Scene folder")->required();
+       sub.add_option("MODEL", a->model, "Model folder (point_cloud.ply) or PLY file")->required();
+       sub.add_option("--text", a->texts, "Query text (repeatable)")->required();
+       sub.add_option("--out", a->out, "Output folder")->required();
+       sub.add_option("--view", a->view, "Only this view (image name or stem)");
+       sub.add_option("--split", a->split, "Views to render: test, train or all")
+           ->check(CLI::IsMember({"test", "train", "all"}))
+           ->capture_default_str();
+       sub.add_option("--mode", a->mode, "object (hybrid, default) or pixel (LERF-style relevancy map)")
+           ->check(CLI::IsMember({"object", "pixel"}))
+           ->capture_default_str();
+       sub.add_option("--min-relevancy", a->min_relevancy,
+                      "Object mode: also choose every object with relevancy >= this (0 = best only)")
+           ->capture_default_str();
+       sub.add_option("--mask-threshold", a->mask_threshold, "Object mode: mask = rendered object opacity > this")
+           ->capture_default_str();
+       sub.add_option("--clip", a->clip,
+                      "OpenCLIP weights (.safetensors) to embed the text (else SCENE/text_embeddings.json)");
+       sub.add_option("--downscale", a->downscale, "Integer image downscale (as used for training)")
+           ->check(CLI::Range(1, 64));
+       sub.add_option("--threads", a->threads, "Worker threads (0 = all cores)");
+       sub.add_flag("--quiet", a->quiet, "No progress bar");
+       return [a] { run_query(*a); };
+     }});
 
 }  // namespace
 }  // namespace hgs::cli

@@ -51,7 +51,8 @@ void run_render(const RenderArgs& a) {
   std::vector<int> idx;
   if (a.split == "test") idx = scene.test_indices();
   else if (a.split == "train") idx = scene.train_indices();
-  else for (auto& v : scene.views) idx.push_back(v.index);
+  else
+    for (auto& v : scene.views) idx.push_back(v.index);
   if (idx.empty()) fail("{}: the {} split has no views", a.scene, a.split);
 
   const fs::path out = a.out;
@@ -106,19 +107,25 @@ void run_render(const RenderArgs& a) {
                (out / "metrics.json").string());
 }
 
-CommandRegistration reg({"render", "Render a trained model at a scene's views; PSNR/SSIM metrics", 30, [](CLI::App& sub) {
-  auto a = std::make_shared<RenderArgs>();
-  sub.add_option("SCENE", a->scene, "Scene folder")->required();
-  sub.add_option("MODEL", a->model, "Model folder (with point_cloud.ply) or a .ply file")->required();
-  sub.add_option("--out", a->out, "Output folder")->required();
-  sub.add_option("--split", a->split, "Views to render")->check(CLI::IsMember({"test", "train", "all"}))->capture_default_str();
-  sub.add_option("--downscale", a->downscale, "Integer image downscale factor")->check(CLI::Range(1, 64))->capture_default_str();
-  sub.add_option("--threads", a->threads, "Worker threads (0 = all cores)")->check(CLI::Range(0, 1024));
-  auto* w = sub.add_flag("--white-bg", a->white_bg, "White background (default: as in MODEL/config.json, else black)");
-  sub.add_flag("--black-bg", a->black_bg, "Black background")->excludes(w);
-  sub.add_flag("--quiet", a->quiet, "No progress output");
-  return [a] { run_render(*a); };
-}});
+CommandRegistration reg(
+    {"render", "Render a trained model at a scene's views; PSNR/SSIM metrics", 30, [](CLI::App& sub) {
+       auto a = std::make_shared<RenderArgs>();
+       sub.add_option("SCENE", a->scene, "Scene folder")->required();
+       sub.add_option("MODEL", a->model, "Model folder (with point_cloud.ply) or a .ply file")->required();
+       sub.add_option("--out", a->out, "Output folder")->required();
+       sub.add_option("--split", a->split, "Views to render")
+           ->check(CLI::IsMember({"test", "train", "all"}))
+           ->capture_default_str();
+       sub.add_option("--downscale", a->downscale, "Integer image downscale factor")
+           ->check(CLI::Range(1, 64))
+           ->capture_default_str();
+       sub.add_option("--threads", a->threads, "Worker threads (0 = all cores)")->check(CLI::Range(0, 1024));
+       auto* w =
+           sub.add_flag("--white-bg", a->white_bg, "White background (default: as in MODEL/config.json, else black)");
+       sub.add_flag("--black-bg", a->black_bg, "Black background")->excludes(w);
+       sub.add_flag("--quiet", a->quiet, "No progress output");
+       return [a] { run_render(*a); };
+     }});
 
 }  // namespace
 }  // namespace hgs::cli

@@ -9,47 +9,62 @@
 namespace hgs::cli {
 namespace {
 
-CommandRegistration reg({"synth", "Generate a synthetic benchmark scene (images, COLMAP model, simulated SAM2 masks and CLIP features, labels)", 10,
-  [](CLI::App& sub) {
-    auto o = std::make_shared<synth::SynthOptions>();
-    auto out = std::make_shared<std::string>();
-    auto threads = std::make_shared<int>(0);
-    sub.add_option("--out", *out, "Output scene folder (must not exist or be empty)")->required();
-    sub.add_option("--preset", o->preset, "Scene layout: tabletop or room")->check(CLI::IsMember({"tabletop", "room"}))->capture_default_str();
-    sub.add_option("--seed", o->seed, "Random seed (same seed, same bytes)")->capture_default_str();
-    sub.add_option("--views", o->views, "Number of views")->capture_default_str();
-    sub.add_option("--width", o->width, "Image width")->capture_default_str();
-    sub.add_option("--height", o->height, "Image height")->capture_default_str();
-    auto* objects = sub.add_option("--objects", o->objects, "Number of objects K (default 8 for tabletop, 12 for room)");
-    sub.add_option("--points", o->points, "Number of SfM points")->capture_default_str();
-    sub.add_option("--noise", o->noise, "Simulated 2D-model error level: none, low, medium, high")
-        ->check(CLI::IsMember({"none", "low", "medium", "high"}))->capture_default_str();
-    sub.add_option("--feature-dim", o->feature_dim, "Language feature dimension D")->capture_default_str();
-    sub.add_option("--mask-ids", o->mask_ids,
-                   "Mask ids: consistent (one id per object in every view, as SAM2 propagation gives) or per-view "
-                   "(shuffled in every view, as raw SAM gives; truth in gt/mask_ids.json, no masks/objects.json)")
-        ->check(CLI::IsMember({"consistent", "per-view"}))->capture_default_str();
-    sub.add_option("--mask-style", o->mask_style,
-                   "Masks: label (SAM2-like label maps) or sam (overlapping SAM masks: wholes, halves, background surfaces, "
-                   "as SAM JSON with COCO RLE in sam/<stem>.json; masks/ holds them flattened as `hgs masks import` does)")
-        ->check(CLI::IsMember({"label", "sam"}))->capture_default_str();
-    sub.add_flag("--surface-masks", o->surface_masks,
-                 "Label-style masks also hold the background surfaces (table, floor, walls) as objects K+1.., named "
-                 "in objects.json, as SAM2 propagation of everything SAM segmented gives (the object masks stay the same)");
-    sub.add_flag("--depth", o->write_depth, "Also write the exact depth of every view, gt/depth/<stem>.npy (camera z [H, W], float32; 0 = nothing)");
-    sub.add_option("--supersample", o->supersample, "Samples per pixel per axis for the RGB images")->check(CLI::Range(1, 8))->capture_default_str();
-    sub.add_option("--threads", *threads, "Worker threads (0 = all cores)");
-    sub.add_flag("--quiet", [o](int64_t n) { o->progress = n == 0; }, "No progress bars");
-    return [=] {
-      set_threads(*threads);
-      if (objects->count() == 0 && o->preset == "room") o->objects = 12;
-      auto t0 = std::chrono::steady_clock::now();
-      synth::generate(*out, *o);
-      double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      fmt::print("wrote {} ({} preset, {} views {}x{}, {} objects, {} points, noise {}, D = {}) in {:.1f}s\n", *out, o->preset,
-                 o->views, o->width, o->height, o->objects, o->points, o->noise, o->feature_dim, s);
-    };
-  }});
+CommandRegistration reg(
+    {"synth",
+     "Generate a synthetic benchmark scene (images, COLMAP model, simulated SAM2 masks and CLIP features, labels)", 10,
+     [](CLI::App& sub) {
+       auto o = std::make_shared<synth::SynthOptions>();
+       auto out = std::make_shared<std::string>();
+       auto threads = std::make_shared<int>(0);
+       sub.add_option("--out", *out, "Output scene folder (must not exist or be empty)")->required();
+       sub.add_option("--preset", o->preset, "Scene layout: tabletop or room")
+           ->check(CLI::IsMember({"tabletop", "room"}))
+           ->capture_default_str();
+       sub.add_option("--seed", o->seed, "Random seed (same seed, same bytes)")->capture_default_str();
+       sub.add_option("--views", o->views, "Number of views")->capture_default_str();
+       sub.add_option("--width", o->width, "Image width")->capture_default_str();
+       sub.add_option("--height", o->height, "Image height")->capture_default_str();
+       auto* objects =
+           sub.add_option("--objects", o->objects, "Number of objects K (default 8 for tabletop, 12 for room)");
+       sub.add_option("--points", o->points, "Number of SfM points")->capture_default_str();
+       sub.add_option("--noise", o->noise, "Simulated 2D-model error level: none, low, medium, high")
+           ->check(CLI::IsMember({"none", "low", "medium", "high"}))
+           ->capture_default_str();
+       sub.add_option("--feature-dim", o->feature_dim, "Language feature dimension D")->capture_default_str();
+       sub.add_option("--mask-ids", o->mask_ids,
+                      "Mask ids: consistent (one id per object in every view, as SAM2 propagation gives) or per-view "
+                      "(shuffled in every view, as raw SAM gives; truth in gt/mask_ids.json, no masks/objects.json)")
+           ->check(CLI::IsMember({"consistent", "per-view"}))
+           ->capture_default_str();
+       sub.add_option(
+              "--mask-style", o->mask_style,
+              "Masks: label (SAM2-like label maps) or sam (overlapping SAM masks: wholes, halves, background surfaces, "
+              "as SAM JSON with COCO RLE in sam/<stem>.json; masks/ holds them flattened as `hgs masks import` does)")
+           ->check(CLI::IsMember({"label", "sam"}))
+           ->capture_default_str();
+       sub.add_flag(
+           "--surface-masks", o->surface_masks,
+           "Label-style masks also hold the background surfaces (table, floor, walls) as objects K+1.., named "
+           "in objects.json, as SAM2 propagation of everything SAM segmented gives (the object masks stay the same)");
+       sub.add_flag(
+           "--depth", o->write_depth,
+           "Also write the exact depth of every view, gt/depth/<stem>.npy (camera z [H, W], float32; 0 = nothing)");
+       sub.add_option("--supersample", o->supersample, "Samples per pixel per axis for the RGB images")
+           ->check(CLI::Range(1, 8))
+           ->capture_default_str();
+       sub.add_option("--threads", *threads, "Worker threads (0 = all cores)");
+       sub.add_flag(
+           "--quiet", [o](int64_t n) { o->progress = n == 0; }, "No progress bars");
+       return [=] {
+         set_threads(*threads);
+         if (objects->count() == 0 && o->preset == "room") o->objects = 12;
+         auto t0 = std::chrono::steady_clock::now();
+         synth::generate(*out, *o);
+         double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+         fmt::print("wrote {} ({} preset, {} views {}x{}, {} objects, {} points, noise {}, D = {}) in {:.1f}s\n", *out,
+                    o->preset, o->views, o->width, o->height, o->objects, o->points, o->noise, o->feature_dim, s);
+       };
+     }});
 
 }  // namespace
 }  // namespace hgs::cli

@@ -18,13 +18,13 @@
 #include "cli/held_out_score.h"
 #include "core/error.h"
 #include "core/fs.h"
-#include "core/progress.h"
 #include "core/process.h"
-#include "mpi/session.h"
-#include "model/ply.h"
-#include "scene/scene.h"
+#include "core/progress.h"
 #include "hybrid/config.h"
 #include "hybrid/register.h"
+#include "model/ply.h"
+#include "mpi/session.h"
+#include "scene/scene.h"
 #include "train/registry.h"
 #include "train/trainer.h"
 
@@ -145,7 +145,10 @@ class HeldOutCurve {
     const ViewScore sc = score_views(scene, views_, trainer.model(), white_, images_);
     const double train_s = std::chrono::duration<double>(ts - t0).count() - seconds_;
     seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
-    curve_.push_back({{"iteration", it}, {"train_seconds", train_s}, {"test_psnr", sc.psnr}, {"test_ssim", sc.ssim},
+    curve_.push_back({{"iteration", it},
+                      {"train_seconds", train_s},
+                      {"test_psnr", sc.psnr},
+                      {"test_ssim", sc.ssim},
                       {"num_gaussians", trainer.model().n}});
     bar.note(fmt::format("test {:>7}: PSNR {:.2f} dB, SSIM {:.4f} ({} views) after {} of training", it, sc.psnr,
                          sc.ssim, views_.size(), format_duration(train_s)));
@@ -168,7 +171,8 @@ int kill_hook(int rank) {
   const char* k = std::getenv("HGS_TEST_KILL");
   if (!k) return 0;
   int r = -1, at = 0;
-  if (std::sscanf(k, "%d:%d", &r, &at) != 2 || r < 0 || at <= 0) fail("HGS_TEST_KILL: expected <rank>:<images>, got '{}'", k);
+  if (std::sscanf(k, "%d:%d", &r, &at) != 2 || r < 0 || at <= 0)
+    fail("HGS_TEST_KILL: expected <rank>:<images>, got '{}'", k);
   return r == rank ? at : 0;
 }
 
@@ -184,9 +188,9 @@ std::string save_snapshot(const fs::path& out, const train::Trainer& trainer, bo
 
 // What one run measured, for train_stats.json and the closing lines.
 struct RunTimes {
-  std::vector<float> ms;  // wall ms of each step of this run
+  std::vector<float> ms;   // wall ms of each step of this run
   train::StepTimes parts;  // summed over the steps
-  double wall = 0;        // seconds, test scoring included
+  double wall = 0;         // seconds, test scoring included
 };
 
 nlohmann::json train_stats(const train::Trainer& trainer, int start, const RunTimes& rt, const LossEma& ema,
@@ -226,8 +230,8 @@ void print_summary(const nlohmann::json& stats, const fs::path& ply, int ranks) 
              stats["median_ms_per_iter"].get<double>(), stats["num_gaussians"].get<int>(), ply.string());
   std::string part_line;  // in step order
   train::StepTimes::each([&](const char* name, double train::StepTimes::*) {
-    part_line += fmt::format("{}{} {:.1f}", part_line.empty() ? "" : ", ", name,
-                             stats["mean_ms_per_part"][name].get<double>());
+    part_line +=
+        fmt::format("{}{} {:.1f}", part_line.empty() ? "" : ", ", name, stats["mean_ms_per_part"][name].get<double>());
   });
   fmt::print("mean ms per step: {}\n", part_line);
   if (ranks > 1)
@@ -236,8 +240,8 @@ void print_summary(const nlohmann::json& stats, const fs::path& ply, int ranks) 
 }
 
 // The training loop of one run: steps until --iters, with progress, held-out scores and checkpoints.
-void train_loop(const TrainArgs& a, const Scene& scene, train::Trainer& trainer, int rank, bool writer,
-                bool progress, RunTimes& rt, LossEma& ema, HeldOutCurve& held_out) {
+void train_loop(const TrainArgs& a, const Scene& scene, train::Trainer& trainer, int rank, bool writer, bool progress,
+                RunTimes& rt, LossEma& ema, HeldOutCurve& held_out) {
   const fs::path out = a.out;
   const int start = trainer.iteration(), G = trainer.step_views(), kill_at = kill_hook(rank);
   rt.ms.reserve(a.iters - start);
@@ -295,8 +299,10 @@ void run_train(const TrainArgs& a) {
       fail("{}: checkpoint is at iteration {}, nothing to do for --iters {}", a.resume, trainer.iteration(), a.iters);
   }
   if ((a.iters - trainer.iteration()) % G != 0)
-    fail("--iters {}: the {} images left after iteration {} are not a multiple of the {} views of a step (--batch "
-         "{} x {} ranks)", a.iters, a.iters - trainer.iteration(), trainer.iteration(), G, a.batch, R);
+    fail(
+        "--iters {}: the {} images left after iteration {} are not a multiple of the {} views of a step (--batch "
+        "{} x {} ranks)",
+        a.iters, a.iters - trainer.iteration(), trainer.iteration(), G, a.batch, R);
   if (writer)
     atomic_write_text(out / "config.json",
                       run_config(a, scene, trainer, train_idx.size(), init_points, hc, R).dump(2) + "\n");
@@ -318,50 +324,65 @@ void run_train(const TrainArgs& a) {
 void add_hybrid_options(CLI::App& sub, TrainArgs& a) {
   auto& h = a.hybrid;
   sub.add_flag("--no-of", a.no_of, "Ablation: single-view hard association instead of Observation Fusion");
-  sub.add_flag("--no-scl", a.no_scl, "Ablation: per-pixel cosine semantic loss instead of Semantic Contrastive Learning");
+  sub.add_flag("--no-scl", a.no_scl,
+               "Ablation: per-pixel cosine semantic loss instead of Semantic Contrastive Learning");
   sub.add_flag("--no-bro", a.no_bro, "Ablation: no Boundary Reconstruction Optimization (lambda_bro = 0)");
-  sub.add_option("--lambda-rgb", h.lambda_rgb, "Weight of the full-image photometric loss (0 = eq. 15 alone)")->capture_default_str();
-  sub.add_option("--lambda-app", h.lambda_app, "Weight of the object-conditioned appearance loss (eq. 6)")->capture_default_str();
+  sub.add_option("--lambda-rgb", h.lambda_rgb, "Weight of the full-image photometric loss (0 = eq. 15 alone)")
+      ->capture_default_str();
+  sub.add_option("--lambda-app", h.lambda_app, "Weight of the object-conditioned appearance loss (eq. 6)")
+      ->capture_default_str();
   sub.add_option("--lambda-sem", h.lambda_sem, "Weight of the semantic loss (eq. 10)")->capture_default_str();
   sub.add_option("--lambda-bro", h.lambda_bro, "Weight of the boundary loss (eq. 14)")->capture_default_str();
   sub.add_option("--tau1", h.tau1, "Mask confidence threshold (eq. 2)")->capture_default_str();
-  sub.add_option("--fusion-temperature", h.temperature, "Temperature T of the association softmax (eq. 5)")->capture_default_str();
+  sub.add_option("--fusion-temperature", h.temperature, "Temperature T of the association softmax (eq. 5)")
+      ->capture_default_str();
   sub.add_option("--tau2", h.tau2, "InfoNCE temperature (eq. 10)")->capture_default_str();
   sub.add_option("--scl-background", h.scl_background,
                  "The background as a Semantic Contrastive Learning class: auto (in views with fewer than two "
                  "foreground objects, where eq. 10 has no negative), on (every view) or off (eq. 10 as written); "
                  "see hybrid/config.h")
-      ->check(CLI::IsMember({"auto", "on", "off"}))->capture_default_str();
-  sub.add_option("--fusion-every", h.fusion_every, "Rebuild the observation table every R iterations")->capture_default_str();
+      ->check(CLI::IsMember({"auto", "on", "off"}))
+      ->capture_default_str();
+  sub.add_option("--fusion-every", h.fusion_every, "Rebuild the observation table every R iterations")
+      ->capture_default_str();
   sub.add_option("--objects-per-step", h.objects_per_step,
                  "Approximation for speed: score M randomly drawn objects of each view per step in eqs. 6 and 14 "
                  "(an unbiased estimate; 0 = every object, exact; see hybrid/config.h)")
-      ->check(CLI::Range(0, 65535))->capture_default_str();
-  sub.add_option("--bro-kernel", h.bro_kernel, "Side of the square structuring element of BRO")->check(CLI::Range(1, 63))->capture_default_str();
+      ->check(CLI::Range(0, 65535))
+      ->capture_default_str();
+  sub.add_option("--bro-kernel", h.bro_kernel, "Side of the square structuring element of BRO")
+      ->check(CLI::Range(1, 63))
+      ->capture_default_str();
   sub.add_option("--unconfident", a.unconfident,
                  "What a mask pixel below --tau1 tells Observation Fusion: unobserved (nothing; see hybrid/fusion.h) "
                  "or background (eq. 2 as written)")
-      ->check(CLI::IsMember({"unobserved", "background"}))->capture_default_str();
+      ->check(CLI::IsMember({"unobserved", "background"}))
+      ->capture_default_str();
   sub.add_option("--background-vote", h.background_vote,
                  "Weight of a background observation in Observation Fusion's evidence (eq. 4; 1 = the paper; see "
-                 "hybrid/fusion.h)")->check(CLI::Range(0.0, 1.0))->capture_default_str();
+                 "hybrid/fusion.h)")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
   sub.add_flag("--occlusion-test,!--no-occlusion-test", h.occlusion_test,
                "Observation Fusion counts a view only where the Gaussian is not hidden behind the surface the "
                "model renders there (on by default; one extra render per view at each table rebuild; see "
                "hybrid/fusion.h). --no-occlusion-test = eq. 3's V");
   sub.add_option("--bro-gradient", a.bro_gradient,
                  "scale-invariant (BRO cannot fade a whole object; see hybrid/bro.h) or plain (eq. 14's own gradient)")
-      ->check(CLI::IsMember({"scale-invariant", "plain"}))->capture_default_str();
+      ->check(CLI::IsMember({"scale-invariant", "plain"}))
+      ->capture_default_str();
   sub.add_option("--bro-norm", a.bro_norm,
                  "image (eq. 14 weighted by its band's share of the image, like eq. 6; see hybrid/bro.h) or band "
                  "(eq. 14 as written)")
-      ->check(CLI::IsMember({"image", "band"}))->capture_default_str();
+      ->check(CLI::IsMember({"image", "band"}))
+      ->capture_default_str();
   sub.add_flag("--sem-geometry", h.sem_geometry,
                "Let the semantic loss (eq. 10) move opacities and geometry too (default: it trains f and q only)");
   sub.add_option("--lr-lang", h.lr_lang, "Adam learning rate of the language embeddings")->capture_default_str();
   sub.add_option("--lang-storage", a.lang_storage,
                  "Language embeddings in half precision with bfloat16 Adam moments (half), or all float32 (f32)")
-      ->check(CLI::IsMember({"half", "f32"}))->capture_default_str();
+      ->check(CLI::IsMember({"half", "f32"}))
+      ->capture_default_str();
   sub.add_option("--lr-view", h.lr_view, "Adam learning rate of the view reliability logits")->capture_default_str();
 }
 
@@ -370,40 +391,54 @@ void add_run_options(CLI::App& sub, TrainArgs& a) {
   sub.add_option("--batch", a.batch,
                  "Views per step on this process: their gradients are averaged (learning rates unchanged); under "
                  "mpirun each of R ranks takes this many, R x B per step (docs/scaling.md)")
-      ->check(CLI::Range(1, 4096))->capture_default_str();
-  sub.add_option("--iters", a.iters, "Training images to see (steps x views per step); the 30k densification schedule is scaled to this")
-      ->check(CLI::Range(1, 10000000))->capture_default_str();
-  sub.add_option("--downscale", a.downscale, "Integer image downscale factor")->check(CLI::Range(1, 64))->capture_default_str();
+      ->check(CLI::Range(1, 4096))
+      ->capture_default_str();
+  sub.add_option("--iters", a.iters,
+                 "Training images to see (steps x views per step); the 30k densification schedule is scaled to this")
+      ->check(CLI::Range(1, 10000000))
+      ->capture_default_str();
+  sub.add_option("--downscale", a.downscale, "Integer image downscale factor")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
   sub.add_option("--threads", a.threads, "Worker threads (0 = all cores)")->check(CLI::Range(0, 1024));
   sub.add_option("--seed", a.seed, "Random seed (view order, split sampling)")->capture_default_str();
   sub.add_option("--sh-degree", a.sh_degree, "Maximum SH degree")->check(CLI::Range(0, 3))->capture_default_str();
-  sub.add_option("--batch-lr", a.batch_lr,
-                 "Learning-rate rule for several views per step (--batch x ranks = G): none (rates and Adam betas "
-                 "as at one view), sqrt (rates x sqrt(G), betas^G, as Grendel) or sqrt-rates (rates x sqrt(G) only); see "
-                 "train/config.h")
-      ->check(CLI::IsMember({"none", "sqrt", "sqrt-rates"}))->capture_default_str();
+  sub.add_option(
+         "--batch-lr", a.batch_lr,
+         "Learning-rate rule for several views per step (--batch x ranks = G): none (rates and Adam betas "
+         "as at one view), sqrt (rates x sqrt(G), betas^G, as Grendel) or sqrt-rates (rates x sqrt(G) only); see "
+         "train/config.h")
+      ->check(CLI::IsMember({"none", "sqrt", "sqrt-rates"}))
+      ->capture_default_str();
   sub.add_option("--test-every", a.test_every,
                  "Score the held-out views (PSNR, SSIM) every N images seen and at the end; the curve, with the "
                  "training time to each point, goes to train_stats.json (0 = off)")
-      ->check(CLI::Range(0, 10000000))->capture_default_str();
-  sub.add_option("--save-every", a.save_every, "Write a checkpoint and a PLY every N iterations (0 = off; a multiple of the views per step)")
-      ->check(CLI::Range(0, 10000000))->capture_default_str();
+      ->check(CLI::Range(0, 10000000))
+      ->capture_default_str();
+  sub.add_option("--save-every", a.save_every,
+                 "Write a checkpoint and a PLY every N iterations (0 = off; a multiple of the views per step)")
+      ->check(CLI::Range(0, 10000000))
+      ->capture_default_str();
   sub.add_option("--resume", a.resume, "Continue from a checkpoint (MODEL/checkpoints/iter_N.ckpt)");
   sub.add_flag("--no-densify", a.no_densify, "Keep the Gaussian count fixed (no clone/split/prune/opacity reset)");
   sub.add_flag("--white-bg", a.white_bg, "White background (default black)");
   sub.add_flag("--quiet", a.quiet, "No progress output");
 }
 
-CommandRegistration reg({"train", "Optimise Hybrid Gaussians (or plain 3DGS with --method rgb) on a scene's training views", 20, [](CLI::App& sub) {
-  auto a = std::make_shared<TrainArgs>();
-  sub.add_option("SCENE", a->scene, "Scene folder (images/, sparse/0/, ...)")->required();
-  sub.add_option("--out", a->out, "Output model folder")->required();
-  sub.add_option("--method", a->method, "hybrid (Hybrid Gaussians: objects + language) or rgb (plain 3DGS)")
-      ->check(CLI::IsMember({"hybrid", "rgb"}))->capture_default_str();
-  add_hybrid_options(sub, *a);
-  add_run_options(sub, *a);
-  return [a] { run_train(*a); };
-}});
+CommandRegistration reg({"train",
+                         "Optimise Hybrid Gaussians (or plain 3DGS with --method rgb) on a scene's training views", 20,
+                         [](CLI::App& sub) {
+                           auto a = std::make_shared<TrainArgs>();
+                           sub.add_option("SCENE", a->scene, "Scene folder (images/, sparse/0/, ...)")->required();
+                           sub.add_option("--out", a->out, "Output model folder")->required();
+                           sub.add_option("--method", a->method,
+                                          "hybrid (Hybrid Gaussians: objects + language) or rgb (plain 3DGS)")
+                               ->check(CLI::IsMember({"hybrid", "rgb"}))
+                               ->capture_default_str();
+                           add_hybrid_options(sub, *a);
+                           add_run_options(sub, *a);
+                           return [a] { run_train(*a); };
+                         }});
 
 }  // namespace
 }  // namespace hgs::cli

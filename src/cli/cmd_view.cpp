@@ -41,19 +41,23 @@ void run_view(const ViewArgs& a) {
   server.wait();
 }
 
-CommandRegistration reg({"view", "Serve the web viewer: splats in the browser, text queries, object export", 70,
-  [](CLI::App& sub) {
-    auto a = std::make_shared<ViewArgs>();
-    sub.add_option("SCENE", a->scene, "Scene folder")->required();
-    sub.add_option("MODEL", a->model, "Trained hybrid model folder (point_cloud.ply) or PLY file")->required();
-    sub.add_option("--host", a->host, "Address to bind (loopback by default)")->capture_default_str();
-    sub.add_option("--port", a->port, "Port (0 = any free port)")->check(CLI::Range(0, 65535))->capture_default_str();
-    sub.add_option("--clip", a->clip, "OpenCLIP weights (.safetensors) to embed any query (else SCENE/text_embeddings.json)");
-    sub.add_option("--downscale", a->downscale, "Integer image downscale (as used for training)")->check(CLI::Range(1, 64));
-    sub.add_option("--static", a->static_dir, "Front-end folder (default: viewer/ beside the hgs binary)");
-    sub.add_option("--threads", a->threads, "Worker threads for rendering (0 = all cores)");
-    return [a] { run_view(*a); };
-  }});
+CommandRegistration reg(
+    {"view", "Serve the web viewer: splats in the browser, text queries, object export", 70, [](CLI::App& sub) {
+       auto a = std::make_shared<ViewArgs>();
+       sub.add_option("SCENE", a->scene, "Scene folder")->required();
+       sub.add_option("MODEL", a->model, "Trained hybrid model folder (point_cloud.ply) or PLY file")->required();
+       sub.add_option("--host", a->host, "Address to bind (loopback by default)")->capture_default_str();
+       sub.add_option("--port", a->port, "Port (0 = any free port)")
+           ->check(CLI::Range(0, 65535))
+           ->capture_default_str();
+       sub.add_option("--clip", a->clip,
+                      "OpenCLIP weights (.safetensors) to embed any query (else SCENE/text_embeddings.json)");
+       sub.add_option("--downscale", a->downscale, "Integer image downscale (as used for training)")
+           ->check(CLI::Range(1, 64));
+       sub.add_option("--static", a->static_dir, "Front-end folder (default: viewer/ beside the hgs binary)");
+       sub.add_option("--threads", a->threads, "Worker threads for rendering (0 = all cores)");
+       return [a] { run_view(*a); };
+     }});
 
 }  // namespace
 }  // namespace hgs::cli

@@ -74,9 +74,10 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
     if (o.protocol == "lerf-ovs") {
       reports.push_back(eval::run_lerf_ovs(s.scene(), pixel_fn, opt));
     } else if (o.protocol == "3d-ovs") {
-      reports.push_back(eval::run_3dovs(s.scene(), [&](int view, const std::vector<std::string>& classes) {
-        return s.pixel_relevancies(view, classes, rel);
-      }, opt));
+      reports.push_back(eval::run_3dovs(
+          s.scene(),
+          [&](int view, const std::vector<std::string>& classes) { return s.pixel_relevancies(view, classes, rel); },
+          opt));
     } else {
       reports.push_back(eval::run_instances(s.scene(), pixel_mask_fn, opt));
     }
@@ -88,9 +89,12 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
     if (o.protocol == "lerf-ovs") {
       reports.push_back(eval::run_lerf_ovs_masks(s.scene(), object_fn, opt));
     } else if (o.protocol == "3d-ovs") {
-      reports.push_back(eval::run_3dovs(s.scene(), [&](int view, const std::vector<std::string>& classes) {
-        return object_class_scores(s, renderer, view, classes);
-      }, opt));
+      reports.push_back(eval::run_3dovs(
+          s.scene(),
+          [&](int view, const std::vector<std::string>& classes) {
+            return object_class_scores(s, renderer, view, classes);
+          },
+          opt));
     } else {
       reports.push_back(eval::run_instances(s.scene(), object_fn, opt));
     }

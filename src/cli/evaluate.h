@@ -22,11 +22,11 @@
 namespace hgs::cli {
 
 struct EvaluateOptions {
-  std::string protocol = "instances";  // lerf-ovs | 3d-ovs | instances
-  bool object = true, pixel = true;    // modes
+  std::string protocol = "instances";                   // lerf-ovs | 3d-ovs | instances
+  bool object = true, pixel = true;                     // modes
   query::Relevancy relevancy = query::Relevancy::Lerf;  // pixel mode
-  float mask_threshold = 0.5f;         // object mode
-  std::filesystem::path overlay_dir;   // PNGs under <overlay_dir>/<mode>/ (empty: none)
+  float mask_threshold = 0.5f;                          // object mode
+  std::filesystem::path overlay_dir;                    // PNGs under <overlay_dir>/<mode>/ (empty: none)
   bool progress = true;
 };
 

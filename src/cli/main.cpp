@@ -22,7 +22,8 @@ void set_threads(int threads) {
 
 int main(int argc, char** argv) {
   using namespace hgs::cli;
-  CLI::App app{"hgs " HGS_VERSION " — Hybrid Gaussians: open-vocabulary 3D segmentation with Gaussian splatting, on the CPU"};
+  CLI::App app{"hgs " HGS_VERSION
+               " — Hybrid Gaussians: open-vocabulary 3D segmentation with Gaussian splatting, on the CPU"};
   app.set_version_flag("--version", std::string("hgs ") + HGS_VERSION);
   app.require_subcommand(1);
   app.fallthrough(false);

@@ -31,7 +31,7 @@
 namespace hgs::clip {
 
 inline float fast_exp(float x) {
-  x = std::min(std::max(x, -87.0f), 88.0f);  // min / max rather than branches: the loops vectorise
+  x = std::min(std::max(x, -87.0f), 88.0f);                // min / max rather than branches: the loops vectorise
   const float t = x * 1.44269504088896341f + 12582912.0f;  // round(x / ln2) in the low mantissa bits
   const float n = t - 12582912.0f;
   const int32_t ni = std::bit_cast<int32_t>(t) - 0x4B400000;

@@ -3,8 +3,8 @@
 // callers' pointers, nothing is copied except the rounding of operands by to_bf16.
 #include "clip/gemm_bf16.h"
 
-#include <oneapi/dnnl/dnnl.hpp>
 #include <omp.h>
+#include <oneapi/dnnl/dnnl.hpp>
 
 #include <map>
 #include <mutex>
@@ -94,8 +94,8 @@ const Cached& primitive(const Key& key) {
     const dnnl::matmul::primitive_desc pd = make_pd(m, n, k, lda, ldb, trans_b, alpha, bias, beta, ldc);
     return cache.emplace(key, Cached{dnnl::matmul(pd), pd.scratchpad_desc().get_size()}).first->second;
   } catch (const dnnl::error& e) {
-    fail("bf16 matrix product [{} x {}] x [{} x {}]: not available on this CPU (oneDNN: {}); use --precision f32", m,
-         k, k, n, e.what());
+    fail("bf16 matrix product [{} x {}] x [{} x {}]: not available on this CPU (oneDNN: {}); use --precision f32", m, k,
+         k, n, e.what());
   }
 }
 

@@ -28,7 +28,8 @@ void ClipModel::vision_forward(const float* img, int H, int W, bool dense, std::
       float* c = cols.data() + (size_t(gy) * gw + gx) * kk;
       for (int ch = 0; ch < 3; ++ch)
         for (int ky = 0; ky < p; ++ky)
-          for (int kx = 0; kx < p; ++kx) c[(ch * p + ky) * p + kx] = img[((size_t(gy) * p + ky) * W + gx * p + kx) * 3 + ch];
+          for (int kx = 0; kx < p; ++kx)
+            c[(ch * p + ky) * p + kx] = img[((size_t(gy) * p + ky) * W + gx * p + kx) * 3 + ch];
     }
   std::vector<float> x(size_t(n) * w);
   std::copy(vision.cls.begin(), vision.cls.end(), x.begin());  // x[0] = cls, x[1:] = cols Wpatch^T
@@ -108,12 +109,15 @@ std::vector<int> tile_starts(int total, int tile) {
 DenseFeatures ClipModel::dense_features(const Image& img, const DenseOptions& opt) const {
   if (!has_vision) fail("{}: the model has no vision tower", path.string());
   if (img.channels != 3) fail("dense features need an RGB image ({} channels given)", img.channels);
-  if (opt.input_size < vision.patch) fail("--input-size {} is smaller than the patch size {}", opt.input_size, vision.patch);
+  if (opt.input_size < vision.patch)
+    fail("--input-size {} is smaller than the patch size {}", opt.input_size, vision.patch);
   const int p = vision.patch, D = embed_dim;
   const double s = double(opt.input_size) / std::min(img.width, img.height);
-  const int gh = std::max(1, int(std::lround(img.height * s / p))), gw = std::max(1, int(std::lround(img.width * s / p)));
+  const int gh = std::max(1, int(std::lround(img.height * s / p))),
+            gw = std::max(1, int(std::lround(img.width * s / p)));
   const int H = gh * p, W = gw * p;
-  std::vector<float> x = (H == img.height && W == img.width) ? img.px : resize_aa(img.px.data(), img.height, img.width, 3, H, W);
+  std::vector<float> x =
+      (H == img.height && W == img.width) ? img.px : resize_aa(img.px.data(), img.height, img.width, 3, H, W);
   clip_normalize(x.data(), size_t(H) * W);
 
   DenseFeatures f;

@@ -37,8 +37,8 @@ struct ClipOptions {
 
 struct Linear {
   int in = 0, out = 0;
-  std::vector<float> w;  // [out, in]
-  std::vector<float> b;  // [out]
+  std::vector<float> w;            // [out, in]
+  std::vector<float> b;            // [out]
   std::vector<uint16_t> w16 = {};  // [out, in] w rounded to bfloat16 when the model runs in bf16, else empty
 };
 
@@ -60,30 +60,30 @@ struct Transformer {
 };
 
 struct VisionTower {
-  int patch = 0, grid = 0;        // native input is grid * patch pixels square
-  Linear patch_embed;             // [width, 3 * patch * patch] (conv weight flattened as c, ky, kx), zero bias
-  Linear last_value;              // the last block's value rows of qkv: [width, width] (MaskCLIP path)
-  std::vector<float> cls;         // [width]
-  std::vector<float> pos;         // [grid * grid + 1, width]
+  int patch = 0, grid = 0;  // native input is grid * patch pixels square
+  Linear patch_embed;       // [width, 3 * patch * patch] (conv weight flattened as c, ky, kx), zero bias
+  Linear last_value;        // the last block's value rows of qkv: [width, width] (MaskCLIP path)
+  std::vector<float> cls;   // [width]
+  std::vector<float> pos;   // [grid * grid + 1, width]
   LayerNorm ln_pre, ln_post;
-  std::vector<float> proj;        // [width, D]
+  std::vector<float> proj;  // [width, D]
   Transformer tr;
 };
 
 struct TextTower {
   int context = 0, vocab = 0;
-  std::vector<float> tok_emb;     // [vocab, width]
-  std::vector<float> pos;         // [context, width]
+  std::vector<float> tok_emb;  // [vocab, width]
+  std::vector<float> pos;      // [context, width]
   LayerNorm ln_final;
-  std::vector<float> proj;        // [width, D]
+  std::vector<float> proj;  // [width, D]
   Transformer tr;
 };
 
 struct DenseOptions {
-  int input_size = 448;    // the image's shorter side is resized to this (then both sides rounded to patches)
-  int max_tokens = 2304;   // above this many patches the image is processed in overlapping square tiles
-  int tile_size = 0;       // tile side in pixels (0 = input_size); tiles overlap by half a tile
-  bool normalize = true;   // L2-normalise each cell's feature
+  int input_size = 448;   // the image's shorter side is resized to this (then both sides rounded to patches)
+  int max_tokens = 2304;  // above this many patches the image is processed in overlapping square tiles
+  int tile_size = 0;      // tile side in pixels (0 = input_size); tiles overlap by half a tile
+  bool normalize = true;  // L2-normalise each cell's feature
 };
 
 struct DenseFeatures {

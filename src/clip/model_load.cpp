@@ -67,15 +67,16 @@ struct Loader {
   const SafeTensors& st;
   std::string file() const { return st.path().string(); }
 
-  std::vector<float> get(const std::string& name, const std::vector<int64_t>& shape) { return st.to_float(name, shape); }
+  std::vector<float> get(const std::string& name, const std::vector<int64_t>& shape) {
+    return st.to_float(name, shape);
+  }
   int64_t dim(const std::string& name, int i) {
     const auto& t = st.info(name);
-    if (int(t.shape.size()) <= i) fail("{}: tensor '{}' has shape {}, too few dimensions", file(), name, shape_str(t.shape));
+    if (int(t.shape.size()) <= i)
+      fail("{}: tensor '{}' has shape {}, too few dimensions", file(), name, shape_str(t.shape));
     return t.shape[i];
   }
-  LayerNorm ln(const std::string& prefix, int w) {
-    return {get(prefix + ".weight", {w}), get(prefix + ".bias", {w})};
-  }
+  LayerNorm ln(const std::string& prefix, int w) { return {get(prefix + ".weight", {w}), get(prefix + ".bias", {w})}; }
   Linear lin(const std::string& prefix, int out, int in) {
     return {in, out, get(prefix + ".weight", {out, in}), get(prefix + ".bias", {out})};
   }
@@ -166,11 +167,14 @@ ClipModel ClipModel::load(const std::filesystem::path& path, const ClipOptions& 
   m.path = path;
   if (st.has("visual.conv1.weight") || st.has("token_embedding.weight")) {
     m.naming = Naming::OpenClip;
-  } else if (st.has("vision_model.embeddings.patch_embedding.weight") || st.has("text_model.embeddings.token_embedding.weight")) {
+  } else if (st.has("vision_model.embeddings.patch_embedding.weight") ||
+             st.has("text_model.embeddings.token_embedding.weight")) {
     m.naming = Naming::HuggingFace;
   } else {
-    fail("{}: not a CLIP model in open_clip or Hugging Face CLIPModel naming (no 'visual.conv1.weight' or "
-         "'vision_model.embeddings.patch_embedding.weight')", file);
+    fail(
+        "{}: not a CLIP model in open_clip or Hugging Face CLIPModel naming (no 'visual.conv1.weight' or "
+        "'vision_model.embeddings.patch_embedding.weight')",
+        file);
   }
   const bool oc = m.naming == Naming::OpenClip;
   m.act = opt.activation ? *opt.activation : cfg.act ? *cfg.act : oc ? Activation::GELU : Activation::QuickGELU;
@@ -194,7 +198,8 @@ ClipModel ClipModel::load(const std::filesystem::path& path, const ClipOptions& 
     v.ln_pre = L.ln(oc ? "visual.ln_pre" : "vision_model.pre_layrnorm", w);
     v.ln_post = L.ln(oc ? "visual.ln_post" : "vision_model.post_layernorm", w);
     const int heads = heads_for(w, vh_req, file, "vision");
-    v.tr = oc ? L.openclip_tr("visual.transformer.resblocks.", w, heads) : L.hf_tr("vision_model.encoder.layers.", w, heads);
+    v.tr = oc ? L.openclip_tr("visual.transformer.resblocks.", w, heads)
+              : L.hf_tr("vision_model.encoder.layers.", w, heads);
     const Linear& qkv = v.tr.blocks.back().qkv;
     v.last_value = {w, w, std::vector<float>(qkv.w.begin() + size_t(2) * w * w, qkv.w.end()),
                     std::vector<float>(qkv.b.begin() + 2 * w, qkv.b.end())};
@@ -249,14 +254,14 @@ void ClipModel::set_precision(Precision p) {
 }
 
 std::string ClipModel::describe() const {
-  std::string s = fmt::format("{} naming, D = {}, {}", naming == Naming::OpenClip ? "open_clip" : "Hugging Face", embed_dim,
-                              act == Activation::GELU ? "GELU" : "QuickGELU");
+  std::string s = fmt::format("{} naming, D = {}, {}", naming == Naming::OpenClip ? "open_clip" : "Hugging Face",
+                              embed_dim, act == Activation::GELU ? "GELU" : "QuickGELU");
   if (has_vision)
-    s += fmt::format("; vision ViT width {} x {} layers, {} heads, patch {}, {}px", vision.tr.width, vision.tr.blocks.size(),
-                     vision.tr.heads, vision.patch, image_size());
+    s += fmt::format("; vision ViT width {} x {} layers, {} heads, patch {}, {}px", vision.tr.width,
+                     vision.tr.blocks.size(), vision.tr.heads, vision.patch, image_size());
   if (has_text)
-    s += fmt::format("; text width {} x {} layers, {} heads, context {}, vocab {}", text.tr.width, text.tr.blocks.size(),
-                     text.tr.heads, text.context, text.vocab);
+    s += fmt::format("; text width {} x {} layers, {} heads, context {}, vocab {}", text.tr.width,
+                     text.tr.blocks.size(), text.tr.heads, text.context, text.vocab);
   if (precision == Precision::BF16) s += fmt::format("; vision linear layers in bf16 ({})", bf16_kernel_name());
   return s;
 }

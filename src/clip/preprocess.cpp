@@ -146,7 +146,8 @@ std::vector<float> clip_preprocess(const Image& img, int size) {
   std::vector<float> out(size_t(size) * size * 3);
   for (int y = 0; y < size; ++y)
     for (int x = 0; x < size; ++x)
-      for (int ch = 0; ch < 3; ++ch) out[(size_t(y) * size + x) * 3 + ch] = r[(size_t(y + top) * ow + x + left) * 3 + ch];
+      for (int ch = 0; ch < 3; ++ch)
+        out[(size_t(y) * size + x) * 3 + ch] = r[(size_t(y + top) * ow + x + left) * 3 + ch];
   clip_normalize(out.data(), size_t(size) * size);
   return out;
 }

@@ -35,7 +35,8 @@ size_t TensorInfo::numel() const {
 
 std::string shape_str(const std::vector<int64_t>& shape) {
   std::string s = "[";
-  for (size_t i = 0; i < shape.size(); ++i) s += (i ? ", " : "") + (shape[i] < 0 ? std::string("*") : std::to_string(shape[i]));
+  for (size_t i = 0; i < shape.size(); ++i)
+    s += (i ? ", " : "") + (shape[i] < 0 ? std::string("*") : std::to_string(shape[i]));
   return s + "]";
 }
 
@@ -82,7 +83,8 @@ SafeTensors::SafeTensors(const std::filesystem::path& path) : path_(path) {
         continue;
       }
       if (!v.is_object() || !v.contains("dtype") || !v.contains("shape") || !v.contains("data_offsets") ||
-          !v["dtype"].is_string() || !v["shape"].is_array() || !v["data_offsets"].is_array() || v["data_offsets"].size() != 2)
+          !v["dtype"].is_string() || !v["shape"].is_array() || !v["data_offsets"].is_array() ||
+          v["data_offsets"].size() != 2)
         fail("{}: tensor '{}' has a malformed header entry", p, name);
       TensorInfo t;
       t.name = name;
@@ -96,10 +98,11 @@ SafeTensors::SafeTensors(const std::filesystem::path& path) : path_(path) {
         if (!o.is_number_unsigned()) fail("{}: tensor '{}' has bad data_offsets", p, name);
       t.begin = v["data_offsets"][0].get<size_t>();
       t.end = v["data_offsets"][1].get<size_t>();
-      if (t.begin > t.end) fail("{}: tensor '{}' has data_offsets [{}, {}] in the wrong order", p, name, t.begin, t.end);
+      if (t.begin > t.end)
+        fail("{}: tensor '{}' has data_offsets [{}, {}] in the wrong order", p, name, t.begin, t.end);
       if (t.end > data_size)
-        fail("{}: tensor '{}' ends at byte {} of the data section but the file holds only {} bytes there (truncated?)", p,
-             name, t.end, data_size);
+        fail("{}: tensor '{}' ends at byte {} of the data section but the file holds only {} bytes there (truncated?)",
+             p, name, t.end, data_size);
       if (t.dtype != StDType::Other && t.end - t.begin != t.numel() * dtype_bytes(t.dtype))
         fail("{}: tensor '{}' ({} {}) should take {} bytes but its data_offsets span {}", p, name, t.dtype_name,
              shape_str(t.shape), t.numel() * dtype_bytes(t.dtype), t.end - t.begin);
@@ -132,7 +135,9 @@ void SafeTensors::check_shape(const std::string& name, const std::vector<int64_t
   const TensorInfo& t = info(name);
   bool ok = t.shape.size() == shape.size();
   for (size_t i = 0; ok && i < shape.size(); ++i) ok = shape[i] < 0 || shape[i] == t.shape[i];
-  if (!ok) fail("{}: tensor '{}' has shape {} but {} was expected", path_.string(), name, shape_str(t.shape), shape_str(shape));
+  if (!ok)
+    fail("{}: tensor '{}' has shape {} but {} was expected", path_.string(), name, shape_str(t.shape),
+         shape_str(shape));
 }
 
 std::vector<float> SafeTensors::to_float(const std::string& name, const std::vector<int64_t>& shape) const {
@@ -142,9 +147,7 @@ std::vector<float> SafeTensors::to_float(const std::string& name, const std::vec
   std::vector<float> out(n);
   const uint8_t* src = map_ + data_start_ + t.begin;
   switch (t.dtype) {
-    case StDType::F32:
-      std::memcpy(out.data(), src, n * 4);
-      break;
+    case StDType::F32: std::memcpy(out.data(), src, n * 4); break;
     case StDType::F16:
       for (size_t i = 0; i < n; ++i) {
         uint16_t h;

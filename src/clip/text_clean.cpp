@@ -30,7 +30,10 @@ std::u32string utf8_decode(const std::string& s) {
     char32_t cp = len == 1 ? c : len == 2 ? (c & 0x1F) : len == 3 ? (c & 0x0F) : (c & 0x07);
     bool ok = true;
     for (int k = 1; k < len; ++k) {
-      if ((p[i + k] & 0xC0) != 0x80) { ok = false; break; }
+      if ((p[i + k] & 0xC0) != 0x80) {
+        ok = false;
+        break;
+      }
       cp = (cp << 6) | (p[i + k] & 0x3F);
     }
     // Reject overlong forms, surrogates and values past U+10FFFF.
@@ -80,32 +83,37 @@ namespace {
 const std::map<std::u32string, std::u32string>& entities() {
   static const std::map<std::u32string, std::u32string> table = [] {
     std::map<std::u32string, std::u32string> t;
-    struct E { const char* name; char32_t cp; bool legacy; };
+    struct E {
+      const char* name;
+      char32_t cp;
+      bool legacy;
+    };
     static const E list[] = {
-        {"amp", '&', true}, {"lt", '<', true}, {"gt", '>', true}, {"quot", '"', true}, {"apos", '\'', false},
-        {"AMP", '&', true}, {"LT", '<', true}, {"GT", '>', true}, {"QUOT", '"', true},
-        {"nbsp", 0xA0, true}, {"iexcl", 0xA1, true}, {"cent", 0xA2, true}, {"pound", 0xA3, true},
-        {"curren", 0xA4, true}, {"yen", 0xA5, true}, {"sect", 0xA7, true}, {"copy", 0xA9, true},
-        {"COPY", 0xA9, true}, {"laquo", 0xAB, true}, {"not", 0xAC, true}, {"shy", 0xAD, true}, {"reg", 0xAE, true},
-        {"REG", 0xAE, true}, {"deg", 0xB0, true}, {"plusmn", 0xB1, true}, {"sup2", 0xB2, true}, {"sup3", 0xB3, true},
-        {"micro", 0xB5, true}, {"para", 0xB6, true}, {"middot", 0xB7, true}, {"raquo", 0xBB, true},
-        {"frac14", 0xBC, true}, {"frac12", 0xBD, true}, {"frac34", 0xBE, true}, {"iquest", 0xBF, true},
-        {"Agrave", 0xC0, true}, {"Aacute", 0xC1, true}, {"Auml", 0xC4, true}, {"Ccedil", 0xC7, true},
-        {"Eacute", 0xC9, true}, {"Ntilde", 0xD1, true}, {"Ouml", 0xD6, true}, {"times", 0xD7, true},
-        {"Uuml", 0xDC, true}, {"szlig", 0xDF, true}, {"agrave", 0xE0, true}, {"aacute", 0xE1, true},
-        {"acirc", 0xE2, true}, {"auml", 0xE4, true}, {"ccedil", 0xE7, true}, {"egrave", 0xE8, true},
-        {"eacute", 0xE9, true}, {"ecirc", 0xEA, true}, {"iacute", 0xED, true}, {"ntilde", 0xF1, true},
-        {"oacute", 0xF3, true}, {"ouml", 0xF6, true}, {"divide", 0xF7, true}, {"uacute", 0xFA, true},
-        {"uuml", 0xFC, true}, {"ndash", 0x2013, false}, {"mdash", 0x2014, false}, {"lsquo", 0x2018, false},
-        {"rsquo", 0x2019, false}, {"sbquo", 0x201A, false}, {"ldquo", 0x201C, false}, {"rdquo", 0x201D, false},
-        {"bdquo", 0x201E, false}, {"bull", 0x2022, false}, {"hellip", 0x2026, false}, {"prime", 0x2032, false},
-        {"euro", 0x20AC, false}, {"trade", 0x2122, false}, {"larr", 0x2190, false}, {"rarr", 0x2192, false},
-        {"hearts", 0x2665, false}, {"star", 0x2606, false}, {"half", 0xBD, false}, {"tab", '\t', false},
-        {"NewLine", '\n', false}, {"excl", '!', false}, {"num", '#', false}, {"dollar", '$', false},
-        {"percnt", '%', false}, {"lpar", '(', false}, {"rpar", ')', false}, {"ast", '*', false},
-        {"plus", '+', false}, {"comma", ',', false}, {"period", '.', false}, {"sol", '/', false},
-        {"colon", ':', false}, {"semi", ';', false}, {"equals", '=', false}, {"quest", '?', false},
-        {"commat", '@', false}, {"lowbar", '_', false}, {"verbar", '|', false}, {"hyphen", 0x2010, false},
+        {"amp", '&', true},       {"lt", '<', true},         {"gt", '>', true},         {"quot", '"', true},
+        {"apos", '\'', false},    {"AMP", '&', true},        {"LT", '<', true},         {"GT", '>', true},
+        {"QUOT", '"', true},      {"nbsp", 0xA0, true},      {"iexcl", 0xA1, true},     {"cent", 0xA2, true},
+        {"pound", 0xA3, true},    {"curren", 0xA4, true},    {"yen", 0xA5, true},       {"sect", 0xA7, true},
+        {"copy", 0xA9, true},     {"COPY", 0xA9, true},      {"laquo", 0xAB, true},     {"not", 0xAC, true},
+        {"shy", 0xAD, true},      {"reg", 0xAE, true},       {"REG", 0xAE, true},       {"deg", 0xB0, true},
+        {"plusmn", 0xB1, true},   {"sup2", 0xB2, true},      {"sup3", 0xB3, true},      {"micro", 0xB5, true},
+        {"para", 0xB6, true},     {"middot", 0xB7, true},    {"raquo", 0xBB, true},     {"frac14", 0xBC, true},
+        {"frac12", 0xBD, true},   {"frac34", 0xBE, true},    {"iquest", 0xBF, true},    {"Agrave", 0xC0, true},
+        {"Aacute", 0xC1, true},   {"Auml", 0xC4, true},      {"Ccedil", 0xC7, true},    {"Eacute", 0xC9, true},
+        {"Ntilde", 0xD1, true},   {"Ouml", 0xD6, true},      {"times", 0xD7, true},     {"Uuml", 0xDC, true},
+        {"szlig", 0xDF, true},    {"agrave", 0xE0, true},    {"aacute", 0xE1, true},    {"acirc", 0xE2, true},
+        {"auml", 0xE4, true},     {"ccedil", 0xE7, true},    {"egrave", 0xE8, true},    {"eacute", 0xE9, true},
+        {"ecirc", 0xEA, true},    {"iacute", 0xED, true},    {"ntilde", 0xF1, true},    {"oacute", 0xF3, true},
+        {"ouml", 0xF6, true},     {"divide", 0xF7, true},    {"uacute", 0xFA, true},    {"uuml", 0xFC, true},
+        {"ndash", 0x2013, false}, {"mdash", 0x2014, false},  {"lsquo", 0x2018, false},  {"rsquo", 0x2019, false},
+        {"sbquo", 0x201A, false}, {"ldquo", 0x201C, false},  {"rdquo", 0x201D, false},  {"bdquo", 0x201E, false},
+        {"bull", 0x2022, false},  {"hellip", 0x2026, false}, {"prime", 0x2032, false},  {"euro", 0x20AC, false},
+        {"trade", 0x2122, false}, {"larr", 0x2190, false},   {"rarr", 0x2192, false},   {"hearts", 0x2665, false},
+        {"star", 0x2606, false},  {"half", 0xBD, false},     {"tab", '\t', false},      {"NewLine", '\n', false},
+        {"excl", '!', false},     {"num", '#', false},       {"dollar", '$', false},    {"percnt", '%', false},
+        {"lpar", '(', false},     {"rpar", ')', false},      {"ast", '*', false},       {"plus", '+', false},
+        {"comma", ',', false},    {"period", '.', false},    {"sol", '/', false},       {"colon", ':', false},
+        {"semi", ';', false},     {"equals", '=', false},    {"quest", '?', false},     {"commat", '@', false},
+        {"lowbar", '_', false},   {"verbar", '|', false},    {"hyphen", 0x2010, false},
     };
     for (const E& e : list) {
       std::u32string n;
@@ -120,10 +128,9 @@ const std::map<std::u32string, std::u32string>& entities() {
 
 // Windows-1252 meanings of the numeric references &#128; ... &#159; (HTML5 "invalid charrefs").
 char32_t cp1252_fix(uint32_t n) {
-  static const char32_t t[32] = {0x20AC, 0x81,   0x201A, 0x0192, 0x201E, 0x2026, 0x2020, 0x2021,
-                                 0x02C6, 0x2030, 0x0160, 0x2039, 0x0152, 0x8D,   0x017D, 0x8F,
-                                 0x90,   0x2018, 0x2019, 0x201C, 0x201D, 0x2022, 0x2013, 0x2014,
-                                 0x02DC, 0x2122, 0x0161, 0x203A, 0x0153, 0x9D,   0x017E, 0x0178};
+  static const char32_t t[32] = {0x20AC, 0x81,   0x201A, 0x0192, 0x201E, 0x2026, 0x2020, 0x2021, 0x02C6, 0x2030, 0x0160,
+                                 0x2039, 0x0152, 0x8D,   0x017D, 0x8F,   0x90,   0x2018, 0x2019, 0x201C, 0x201D, 0x2022,
+                                 0x2013, 0x2014, 0x02DC, 0x2122, 0x0161, 0x203A, 0x0153, 0x9D,   0x017E, 0x0178};
   return t[n - 0x80];
 }
 
@@ -237,8 +244,8 @@ struct Pcre {
   explicit Pcre(const char* pattern) {
     int err;
     PCRE2_SIZE off;
-    code = pcre2_compile(reinterpret_cast<PCRE2_SPTR>(pattern), PCRE2_ZERO_TERMINATED, PCRE2_UTF | PCRE2_UCP, &err, &off,
-                         nullptr);
+    code = pcre2_compile(reinterpret_cast<PCRE2_SPTR>(pattern), PCRE2_ZERO_TERMINATED, PCRE2_UTF | PCRE2_UCP, &err,
+                         &off, nullptr);
     if (!code) fail("internal error: cannot compile the whitespace pattern");
   }
   ~Pcre() { pcre2_code_free(code); }
@@ -250,7 +257,8 @@ std::string collapse_whitespace(const std::string& s) {
   std::string out;
   PCRE2_SIZE pos = 0;
   while (pos <= s.size()) {
-    int rc = pcre2_match(ws.code, reinterpret_cast<PCRE2_SPTR>(s.data()), s.size(), pos, PCRE2_NO_UTF_CHECK, md, nullptr);
+    int rc =
+        pcre2_match(ws.code, reinterpret_cast<PCRE2_SPTR>(s.data()), s.size(), pos, PCRE2_NO_UTF_CHECK, md, nullptr);
     if (rc < 0) break;
     PCRE2_SIZE* ov = pcre2_get_ovector_pointer(md);
     out.append(s, pos, ov[0] - pos);
@@ -287,16 +295,19 @@ std::string clean_text(const std::string& s) {
   // "Cased": a lower/upper case letter or one with another case form (approximates Unicode's Cased property).
   auto cased = [&](char32_t c) {
     if (c < 0x80) return (c | 0x20) >= 'a' && (c | 0x20) <= 'z';
-    return loc && (iswlower_l(wint_t(c), loc) || iswupper_l(wint_t(c), loc) || towlower_l(wint_t(c), loc) != wint_t(c) ||
-                   towupper_l(wint_t(c), loc) != wint_t(c));
+    return loc && (iswlower_l(wint_t(c), loc) || iswupper_l(wint_t(c), loc) ||
+                   towlower_l(wint_t(c), loc) != wint_t(c) || towupper_l(wint_t(c), loc) != wint_t(c));
   };
   // Case_Ignorable: general categories Mn, Me, Cf, Lm, Sk plus the word-break MidLetter / MidNumLet /
   // Single_Quote characters (Unicode's definition), tested with PCRE2's Unicode properties.
-  static Pcre ign("^[\\p{Mn}\\p{Me}\\p{Cf}\\p{Lm}\\p{Sk}'.:\\x{B7}\\x{387}\\x{55F}\\x{5F4}\\x{2018}\\x{2019}\\x{2024}\\x{2027}\\x{FE13}\\x{FE52}\\x{FE55}\\x{FF07}\\x{FF0E}\\x{FF1A}]$");
+  static Pcre ign(
+      "^[\\p{Mn}\\p{Me}\\p{Cf}\\p{Lm}\\p{Sk}'.:\\x{B7}\\x{387}\\x{55F}\\x{5F4}\\x{2018}\\x{2019}\\x{2024}\\x{2027}\\x{"
+      "FE13}\\x{FE52}\\x{FE55}\\x{FF07}\\x{FF0E}\\x{FF1A}]$");
   pcre2_match_data* md = pcre2_match_data_create_from_pattern(ign.code, nullptr);
   auto ignorable = [&](char32_t c) {
     std::string e = utf8_encode(c);
-    return pcre2_match(ign.code, reinterpret_cast<PCRE2_SPTR>(e.data()), e.size(), 0, PCRE2_NO_UTF_CHECK, md, nullptr) >= 0;
+    return pcre2_match(ign.code, reinterpret_cast<PCRE2_SPTR>(e.data()), e.size(), 0, PCRE2_NO_UTF_CHECK, md,
+                       nullptr) >= 0;
   };
   auto final_sigma = [&](size_t i) {
     size_t k = i;

@@ -10,7 +10,6 @@
 #pragma once
 #include <string>
 
-
 namespace hgs::clip {
 
 std::u32string utf8_decode(const std::string& s);  // invalid sequences -> U+FFFD

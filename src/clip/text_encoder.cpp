@@ -29,7 +29,8 @@ std::vector<float> ClipModel::embed_tokens(const std::vector<std::vector<int>>& 
   for (size_t s = 0; s < ids.size(); ++s)
     for (int i = 0; i < segs[s].len; ++i) {
       int id = ids[s][i];
-      if (id < 0 || id >= text.vocab) fail("{}: token id {} outside the vocabulary of {}", path.string(), id, text.vocab);
+      if (id < 0 || id >= text.vocab)
+        fail("{}: token id {} outside the vocabulary of {}", path.string(), id, text.vocab);
       float* r = x.data() + size_t(segs[s].start + i) * w;
       const float* e = text.tok_emb.data() + size_t(id) * w;
       const float* p = text.pos.data() + size_t(i) * w;

@@ -49,10 +49,16 @@ Tokenizer::Tokenizer(const std::filesystem::path& bpe_gz) : re_(std::make_unique
   std::vector<int> order;  // bytes in the order of bytes_to_unicode().values()
   auto printable = [](int b) { return (b >= '!' && b <= '~') || (b >= 0xA1 && b <= 0xAC) || (b >= 0xAE && b <= 0xFF); };
   for (int b = 0; b < 256; ++b)
-    if (printable(b)) { byte_enc_[b] = utf8_encode(char32_t(b)); order.push_back(b); }
+    if (printable(b)) {
+      byte_enc_[b] = utf8_encode(char32_t(b));
+      order.push_back(b);
+    }
   int extra = 0;
   for (int b = 0; b < 256; ++b)
-    if (!printable(b)) { byte_enc_[b] = utf8_encode(char32_t(256 + extra++)); order.push_back(b); }
+    if (!printable(b)) {
+      byte_enc_[b] = utf8_encode(char32_t(256 + extra++));
+      order.push_back(b);
+    }
 
   std::string text = read_gz(bpe_gz);
   std::vector<std::pair<std::string, std::string>> merges;
@@ -156,7 +162,8 @@ std::vector<int> Tokenizer::encode(const std::string& raw) const {
       continue;
     }
     std::string piece;
-    if (text.compare(ov[0], ov[1] - ov[0], "<|startoftext|>") == 0 || text.compare(ov[0], ov[1] - ov[0], "<|endoftext|>") == 0) {
+    if (text.compare(ov[0], ov[1] - ov[0], "<|startoftext|>") == 0 ||
+        text.compare(ov[0], ov[1] - ov[0], "<|endoftext|>") == 0) {
       piece = text.substr(ov[0], ov[1] - ov[0]);
     } else {
       for (PCRE2_SIZE i = ov[0]; i < ov[1]; ++i) piece += byte_enc_[static_cast<unsigned char>(text[i])];

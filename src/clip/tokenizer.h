@@ -35,10 +35,10 @@ class Tokenizer {
 
  private:
   std::vector<std::string> bpe(const std::string& piece) const;  // piece in byte-encoded form -> symbols
-  std::vector<std::string> byte_enc_;                // [256] UTF-8 of each byte's code point
-  std::vector<std::string> vocab_;                   // id -> string
-  std::unordered_map<std::string, int> encoder_;     // string -> id
-  std::unordered_map<std::string, int> merge_rank_;  // "a b" -> rank
+  std::vector<std::string> byte_enc_;                            // [256] UTF-8 of each byte's code point
+  std::vector<std::string> vocab_;                               // id -> string
+  std::unordered_map<std::string, int> encoder_;                 // string -> id
+  std::unordered_map<std::string, int> merge_rank_;              // "a b" -> rank
   struct Regex;
   std::unique_ptr<Regex> re_;
 };

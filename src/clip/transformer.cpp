@@ -7,9 +7,9 @@
 
 #include <cblas.h>
 
+#include <omp.h>
 #include <algorithm>
 #include <cmath>
-#include <omp.h>
 
 #include "core/error.h"
 
@@ -227,8 +227,8 @@ void multi_head_attention(const float* q, int ldq, const float* k, int ldk, cons
   }
 }
 
-void multi_head_attention_bf16(const float* q, int ldq, const uint16_t* k, const uint16_t* v, int nq, int nk,
-                               int heads, int hd, float scale, float* out, int ldo, float* scores, bool causal,
+void multi_head_attention_bf16(const float* q, int ldq, const uint16_t* k, const uint16_t* v, int nq, int nk, int heads,
+                               int hd, float scale, float* out, int ldo, float* scores, bool causal,
                                const std::function<void(int, float*)>& bias) {
   thread_local std::vector<uint16_t> q16, p16;
   thread_local std::vector<float> o;

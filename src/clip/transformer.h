@@ -19,10 +19,10 @@ struct Segment {
 };
 
 struct Workspace {
-  std::vector<float> h;     // [N, width]
-  std::vector<float> qkv;   // [N, 3 * width]
-  std::vector<float> attn;  // [N, width]
-  std::vector<float> mlp;   // [N, mlp]
+  std::vector<float> h;       // [N, width]
+  std::vector<float> qkv;     // [N, 3 * width]
+  std::vector<float> attn;    // [N, width]
+  std::vector<float> mlp;     // [N, mlp]
   std::vector<float> scores;  // [max_len, max_len]
   void reserve(int n, int width, int mlp_width, int max_len);
 };
@@ -37,7 +37,7 @@ void use_bf16(Linear& l);
 // y [N, C] = LayerNorm(x [N, C]) with eps 1e-5 unless given (in place allowed).
 void layer_norm(const LayerNorm& ln, const float* x, int n, int c, float* y, float eps = 1e-5f);
 void activation(Activation a, float* x, size_t count);  // in place
-void gelu_serial(float* x, long n);  // GELU in place on the calling thread only
+void gelu_serial(float* x, long n);                     // GELU in place on the calling thread only
 // Row-wise softmax of s [rows, cols]; with `causal`, row i keeps columns 0..row0+i only (others set to 0).
 void softmax_rows(float* s, int rows, int cols, bool causal, int row0 = 0);
 
@@ -54,9 +54,9 @@ void multi_head_attention(const float* q, int ldq, const float* k, int ldk, cons
 // [heads, nk, hd] each (split_heads_bf16; contiguous operands let oneDNN use its AMX kernels, strided ones
 // measured 20x slower); the queries (unscaled, as `bias` may need them) and the softmax probabilities are
 // rounded here, per head.
-void multi_head_attention_bf16(const float* q, int ldq, const uint16_t* k, const uint16_t* v, int nq, int nk,
-                               int heads, int hd, float scale, float* out, int ldo, float* scores,
-                               bool causal = false, const std::function<void(int, float*)>& bias = {});
+void multi_head_attention_bf16(const float* q, int ldq, const uint16_t* k, const uint16_t* v, int nq, int nk, int heads,
+                               int hd, float scale, float* out, int ldo, float* scores, bool causal = false,
+                               const std::function<void(int, float*)>& bias = {});
 
 // One block applied in place to x [N, width].
 void block_forward(const Block& b, int heads, Activation act, const std::vector<Segment>& segs, bool causal, float* x,

@@ -102,7 +102,10 @@ LabelMap load_label_png(const std::filesystem::path& path) {
 
 namespace {
 void put_be32(std::vector<uint8_t>& o, uint32_t v) {
-  o.push_back(v >> 24); o.push_back((v >> 16) & 255); o.push_back((v >> 8) & 255); o.push_back(v & 255);
+  o.push_back(v >> 24);
+  o.push_back((v >> 16) & 255);
+  o.push_back((v >> 8) & 255);
+  o.push_back(v & 255);
 }
 void put_chunk(std::vector<uint8_t>& o, const char* type, const uint8_t* data, size_t n) {
   put_be32(o, static_cast<uint32_t>(n));
@@ -126,7 +129,10 @@ std::vector<uint8_t> encode_png(int width, int height, int channels, int bit_dep
       std::memcpy(dst + 1, src + y * row, row);
     } else {  // PNG stores 16-bit samples big endian
       const uint16_t* s16 = reinterpret_cast<const uint16_t*>(src + y * row);
-      for (size_t i = 0; i < row / 2; ++i) { dst[1 + 2 * i] = s16[i] >> 8; dst[2 + 2 * i] = s16[i] & 255; }
+      for (size_t i = 0; i < row / 2; ++i) {
+        dst[1 + 2 * i] = s16[i] >> 8;
+        dst[2 + 2 * i] = s16[i] & 255;
+      }
     }
   }
   uLongf zlen = compressBound(static_cast<uLong>(raw.size()));
@@ -135,7 +141,12 @@ std::vector<uint8_t> encode_png(int width, int height, int channels, int bit_dep
   z.resize(zlen);
   std::vector<uint8_t> o = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
   uint8_t ihdr[13];
-  auto be = [](uint8_t* p, uint32_t v) { p[0] = v >> 24; p[1] = (v >> 16) & 255; p[2] = (v >> 8) & 255; p[3] = v & 255; };
+  auto be = [](uint8_t* p, uint32_t v) {
+    p[0] = v >> 24;
+    p[1] = (v >> 16) & 255;
+    p[2] = (v >> 8) & 255;
+    p[3] = v & 255;
+  };
   be(ihdr, width);
   be(ihdr + 4, height);
   ihdr[8] = static_cast<uint8_t>(bit_depth);
@@ -148,7 +159,8 @@ std::vector<uint8_t> encode_png(int width, int height, int channels, int bit_dep
 }
 
 void save_png(const std::filesystem::path& path, const Image& img) {
-  if (img.channels < 1 || img.channels > 4) fail("{}: cannot save a {}-channel image as PNG", path.string(), img.channels);
+  if (img.channels < 1 || img.channels > 4)
+    fail("{}: cannot save a {}-channel image as PNG", path.string(), img.channels);
   std::vector<uint8_t> b(img.px.size());
   for (size_t i = 0; i < b.size(); ++i) b[i] = static_cast<uint8_t>(std::clamp(img.px[i], 0.f, 1.f) * 255.f + 0.5f);
   auto png = encode_png(img.width, img.height, img.channels, 8, b.data());

@@ -42,11 +42,21 @@ std::vector<float> NpyArray::to_float() const {
   size_t n = size();
   std::vector<float> out(n);
   switch (dtype) {
-    case DType::F16: for (size_t i = 0; i < n; ++i) out[i] = half_to_float(as<uint16_t>()[i]); break;
-    case DType::F32: if (n) std::memcpy(out.data(), data.data(), n * 4); break;  // empty: both may be null
-    case DType::U8: for (size_t i = 0; i < n; ++i) out[i] = as<uint8_t>()[i]; break;
-    case DType::U16: for (size_t i = 0; i < n; ++i) out[i] = as<uint16_t>()[i]; break;
-    case DType::I32: for (size_t i = 0; i < n; ++i) out[i] = static_cast<float>(as<int32_t>()[i]); break;
+    case DType::F16:
+      for (size_t i = 0; i < n; ++i) out[i] = half_to_float(as<uint16_t>()[i]);
+      break;
+    case DType::F32:
+      if (n) std::memcpy(out.data(), data.data(), n * 4);
+      break;  // empty: both may be null
+    case DType::U8:
+      for (size_t i = 0; i < n; ++i) out[i] = as<uint8_t>()[i];
+      break;
+    case DType::U16:
+      for (size_t i = 0; i < n; ++i) out[i] = as<uint16_t>()[i];
+      break;
+    case DType::I32:
+      for (size_t i = 0; i < n; ++i) out[i] = static_cast<float>(as<int32_t>()[i]);
+      break;
   }
   return out;
 }
@@ -99,8 +109,7 @@ Header parse_header(const uint8_t* b, size_t size, const std::string& name) {
   if (hstart + hlen > size) fail("{}: truncated NPY header", name);
   std::string h(reinterpret_cast<const char*>(b + hstart), hlen);
   std::smatch m;
-  if (!std::regex_search(h, m, std::regex(R"('descr'\s*:\s*'([^']*)')")))
-    fail("{}: NPY header has no 'descr'", name);
+  if (!std::regex_search(h, m, std::regex(R"('descr'\s*:\s*'([^']*)')"))) fail("{}: NPY header has no 'descr'", name);
   std::string d = m[1];
   DType t;
   if (d == "<f2") t = DType::F16;
@@ -112,8 +121,7 @@ Header parse_header(const uint8_t* b, size_t size, const std::string& name) {
   if (!std::regex_search(h, m, std::regex(R"('fortran_order'\s*:\s*(True|False))")))
     fail("{}: NPY header has no 'fortran_order'", name);
   if (m[1] == "True") fail("{}: Fortran-order NPY arrays are not supported (save with C order)", name);
-  if (!std::regex_search(h, m, std::regex(R"('shape'\s*:\s*\(([^)]*)\))")))
-    fail("{}: NPY header has no 'shape'", name);
+  if (!std::regex_search(h, m, std::regex(R"('shape'\s*:\s*\(([^)]*)\))"))) fail("{}: NPY header has no 'shape'", name);
   std::vector<size_t> shape = parse_npy_shape(m[1], dtype_size(t), name);
   return {t, shape, hstart + hlen};
 }
@@ -152,14 +160,15 @@ NpyArray read_npy_header(const std::filesystem::path& path) {
 
 std::vector<uint8_t> encode_npy(const NpyArray& a) {
   std::string shape = "(";
-  for (size_t i = 0; i < a.shape.size(); ++i) shape += std::to_string(a.shape[i]) + (a.shape.size() == 1 ? "," : (i + 1 < a.shape.size() ? ", " : ""));
+  for (size_t i = 0; i < a.shape.size(); ++i)
+    shape += std::to_string(a.shape[i]) + (a.shape.size() == 1 ? "," : (i + 1 < a.shape.size() ? ", " : ""));
   shape += ")";
   std::string h = fmt::format("{{'descr': '{}', 'fortran_order': False, 'shape': {}, }}", dtype_descr(a.dtype), shape);
   size_t total = 10 + h.size() + 1;
   size_t pad = (64 - total % 64) % 64;
   h += std::string(pad, ' ') + "\n";
-  std::vector<uint8_t> out = {0x93, 'N', 'U', 'M', 'P', 'Y', 1, 0,
-                              static_cast<uint8_t>(h.size() & 0xff), static_cast<uint8_t>(h.size() >> 8)};
+  std::vector<uint8_t> out = {
+      0x93, 'N', 'U', 'M', 'P', 'Y', 1, 0, static_cast<uint8_t>(h.size() & 0xff), static_cast<uint8_t>(h.size() >> 8)};
   // GCC 12 false positive: -Warray-bounds / -Wstringop-overread take the vector's first 10 bytes for the whole
   // buffer of the insert.
 #pragma GCC diagnostic push
@@ -172,7 +181,8 @@ std::vector<uint8_t> encode_npy(const NpyArray& a) {
 }
 
 void write_npy(const std::filesystem::path& path, const NpyArray& a) {
-  if (a.data.size() != a.size() * dtype_size(a.dtype)) fail("{}: internal error: NPY data size mismatch", path.string());
+  if (a.data.size() != a.size() * dtype_size(a.dtype))
+    fail("{}: internal error: NPY data size mismatch", path.string());
   auto bytes = encode_npy(a);
   atomic_write_bytes(path, bytes.data(), bytes.size());
 }

@@ -21,9 +21,13 @@ struct NpyArray {
 
   size_t size() const;  // number of elements
   template <typename T>
-  const T* as() const { return reinterpret_cast<const T*>(data.data()); }
+  const T* as() const {
+    return reinterpret_cast<const T*>(data.data());
+  }
   template <typename T>
-  T* as() { return reinterpret_cast<T*>(data.data()); }
+  T* as() {
+    return reinterpret_cast<T*>(data.data());
+  }
   std::vector<float> to_float() const;  // any dtype, converted element by element
 };
 

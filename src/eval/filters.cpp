@@ -64,8 +64,9 @@ Mask majority_filter(const Mask& m, int width, int height, int k) {
   std::vector<long> sat(size_t(width + 1) * (height + 1), 0);
   for (int y = 0; y < height; ++y)
     for (int x = 0; x < width; ++x)
-      sat[size_t(y + 1) * (width + 1) + x + 1] = (m[size_t(y) * width + x] ? 1 : 0) + sat[size_t(y) * (width + 1) + x + 1] +
-                                                 sat[size_t(y + 1) * (width + 1) + x] - sat[size_t(y) * (width + 1) + x];
+      sat[size_t(y + 1) * (width + 1) + x + 1] =
+          (m[size_t(y) * width + x] ? 1 : 0) + sat[size_t(y) * (width + 1) + x + 1] +
+          sat[size_t(y + 1) * (width + 1) + x] - sat[size_t(y) * (width + 1) + x];
   Mask out(m.size());
   for (int y = 0; y < height; ++y) {
     const int y0 = std::max(0, y - r), y1 = std::min(height, y + r + 1);

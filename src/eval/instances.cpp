@@ -29,8 +29,9 @@ std::map<int, std::string> load_object_names(const fs::path& scene) {
   std::map<int, std::string> names;
   for (auto it = j.begin(); it != j.end(); ++it) {
     const std::string& key = it.key();
-    const bool digits = !key.empty() && key.size() <= 5 &&
-                        std::all_of(key.begin(), key.end(), [](char c) { return std::isdigit(static_cast<unsigned char>(c)); });
+    const bool digits = !key.empty() && key.size() <= 5 && std::all_of(key.begin(), key.end(), [](char c) {
+      return std::isdigit(static_cast<unsigned char>(c));
+    });
     const int id = digits ? std::stoi(key) : 0;
     if (id < 1 || id > 65535) fail("{}: key \"{}\" is not an object id in 1..65535", file.string(), key);
     if (!it.value().is_string() || it.value().get<std::string>().empty())

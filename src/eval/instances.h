@@ -27,7 +27,7 @@ struct InstanceLabels {
 // Masks of every named object in one view. downscale F >= 1 takes the centre pixel of each F x F block
 // (hgs::downscale_labels); expect_* > 0: the (downscaled) size must match.
 InstanceLabels load_instance_masks(const std::filesystem::path& scene, const std::string& view_name,
-                                   const std::map<int, std::string>& names, int expect_width = 0,
-                                   int expect_height = 0, int downscale = 1);
+                                   const std::map<int, std::string>& names, int expect_width = 0, int expect_height = 0,
+                                   int downscale = 1);
 
 }  // namespace hgs::eval

@@ -40,8 +40,13 @@ void draw_line(int64_t x0, int64_t y0, int64_t x1, int64_t y1, int width, int he
     if (x >= 0 && x < width && y >= 0 && y < height) mask[size_t(y) * width + size_t(x)] = 1;
     const bool step_minor = err < 0;
     err += -2 * minor + (step_minor ? 2 * major : 0);
-    if (y_major) { y += sy; if (step_minor) ++x; }
-    else { ++x; if (step_minor) y += sy; }
+    if (y_major) {
+      y += sy;
+      if (step_minor) ++x;
+    } else {
+      ++x;
+      if (step_minor) y += sy;
+    }
   }
 }
 
@@ -59,7 +64,9 @@ void fill_polygon(const std::vector<Point2>& poly, int width, int height, Mask& 
       const double x = poly[i][c];
       v[i][c] = std::isnan(x) ? 0 : static_cast<int64_t>(std::clamp(x, -kLimit, kLimit));  // truncates toward 0
     }
-  struct Edge { int64_t y0, y1, x, dx; };  // x: 16.16 fixed point at row y0
+  struct Edge {
+    int64_t y0, y1, x, dx;
+  };  // x: 16.16 fixed point at row y0
   std::vector<Edge> edges;
   int64_t ymin = v[0][1], ymax = v[0][1];
   for (size_t i = 0; i < n; ++i) {
@@ -168,16 +175,20 @@ LerfFrameLabels load_lerf_frame(const fs::path& file, int expect_width, int expe
       for (int k = 0; k < 4; ++k) b[k] = number(bb[k], file, fmt::format("{}.bbox[{}]", where, k));
     } else if (bb.is_array() && bb.size() == 2 && bb[0].is_array() && bb[0].size() == 2 && bb[1].is_array() &&
                bb[1].size() == 2) {  // [[x1, y1], [x2, y2]]
-      for (int k = 0; k < 4; ++k) b[k] = number(bb[k / 2][k % 2], file, fmt::format("{}.bbox[{}][{}]", where, k / 2, k % 2));
+      for (int k = 0; k < 4; ++k)
+        b[k] = number(bb[k / 2][k % 2], file, fmt::format("{}.bbox[{}][{}]", where, k / 2, k % 2));
     } else {
       fail("{}: {} (\"{}\"): bbox must be [x1, y1, x2, y2] or [[x1, y1], [x2, y2]]", file.string(), where, cat);
     }
     BBox box;
-    box.x1 = std::min(b[0], b[2]) * inv; box.x2 = std::max(b[0], b[2]) * inv;
-    box.y1 = std::min(b[1], b[3]) * inv; box.y2 = std::max(b[1], b[3]) * inv;
+    box.x1 = std::min(b[0], b[2]) * inv;
+    box.x2 = std::max(b[0], b[2]) * inv;
+    box.y1 = std::min(b[1], b[3]) * inv;
+    box.y2 = std::max(b[1], b[3]) * inv;
     if (!ob.contains("segmentation")) fail("{}: {} (\"{}\"): missing key \"segmentation\"", file.string(), where, cat);
     const json& seg = ob["segmentation"];
-    if (!seg.is_array()) fail("{}: {} (\"{}\"): segmentation must be a list of [x, y] points", file.string(), where, cat);
+    if (!seg.is_array())
+      fail("{}: {} (\"{}\"): segmentation must be a list of [x, y] points", file.string(), where, cat);
     // One polygon [[x, y], ...] or several [[[x, y], ...], ...].
     const bool multi = !seg.empty() && seg[0].is_array() && !seg[0].empty() && seg[0][0].is_array();
     std::vector<std::vector<Point2>> polys;
@@ -262,7 +273,8 @@ OvsLabelSet open_3dovs_labels(const fs::path& scene) {
       if (c.find('/') != std::string::npos || c.find('\\') != std::string::npos)
         fail("{}: line {}: class name \"{}\" contains a path separator", cfile.string(), line, c);
       // Each class names a file <class>.png: it must be a name the file system can hold, printable on one line.
-      if (c.size() > 200) fail("{}: line {}: class name of {} bytes is too long (at most 200)", cfile.string(), line, c.size());
+      if (c.size() > 200)
+        fail("{}: line {}: class name of {} bytes is too long (at most 200)", cfile.string(), line, c.size());
       if (std::any_of(c.begin(), c.end(), [](char ch) { return static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f; }))
         fail("{}: line {}: class name contains control characters", cfile.string(), line);
       if (!seen.insert(c).second) fail("{}: line {}: duplicate class \"{}\"", cfile.string(), line, c);
@@ -282,17 +294,18 @@ OvsLabelSet open_3dovs_labels(const fs::path& scene) {
     const int idx = std::stoi(name);
     auto [it, fresh] = views.emplace(idx, e.path());
     if (!fresh)
-      fail("{}: folders \"{}\" and \"{}\" both name view {}", L.dir.string(), it->second.filename().string(), name, idx);
+      fail("{}: folders \"{}\" and \"{}\" both name view {}", L.dir.string(), it->second.filename().string(), name,
+           idx);
   }
   if (views.empty()) fail("{}: no labelled views (numbered sub-folders)", L.dir.string());
   for (auto& [idx, p] : views) L.views.push_back({idx, p});
   return L;
 }
 
-OvsViewLabels load_3dovs_view(const OvsLabelSet& labels, size_t i, int expect_width, int expect_height,
-                              int downscale) {
+OvsViewLabels load_3dovs_view(const OvsLabelSet& labels, size_t i, int expect_width, int expect_height, int downscale) {
   if (downscale < 1) fail("{}: downscale factor must be >= 1, got {}", labels.dir.string(), downscale);
-  if (i >= labels.views.size()) fail("{}: view {} out of range ({} labelled views)", labels.dir.string(), i, labels.views.size());
+  if (i >= labels.views.size())
+    fail("{}: view {} out of range ({} labelled views)", labels.dir.string(), i, labels.views.size());
   const auto& v = labels.views[i];
   OvsViewLabels out;
   out.index = v.index;
@@ -300,7 +313,8 @@ OvsViewLabels load_3dovs_view(const OvsLabelSet& labels, size_t i, int expect_wi
   for (auto& c : labels.classes) {
     const fs::path p = v.dir / (c + ".png");
     std::error_code ec;
-    if (!fs::is_regular_file(p, ec)) fail("{}: missing class mask for \"{}\"{}", p.string(), c, ec ? " (" + ec.message() + ")" : "");
+    if (!fs::is_regular_file(p, ec))
+      fail("{}: missing class mask for \"{}\"{}", p.string(), c, ec ? " (" + ec.message() + ")" : "");
     const Image img = load_image(p, 1);
     if (out.masks.empty()) {
       full_w = img.width;

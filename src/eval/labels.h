@@ -35,8 +35,8 @@ struct BBox {
 
 struct LerfCategory {
   std::string name;
-  Mask mask;                  // [H, W] 0/1: OR of every polygon of the category
-  std::vector<BBox> bboxes;   // one per object entry, in file order
+  Mask mask;                                  // [H, W] 0/1: OR of every polygon of the category
+  std::vector<BBox> bboxes;                   // one per object entry, in file order
   std::vector<std::vector<Point2>> polygons;  // the polygons (downscaled if asked), in file order
 };
 
@@ -64,10 +64,10 @@ struct OvsLabelSet {
   std::filesystem::path dir;         // SCENE/segmentations
   std::vector<std::string> classes;  // sorted, unique, whitespace-trimmed, blank lines skipped
   struct View {
-    int index;                       // index in the name-sorted view list
-    std::filesystem::path dir;       // SCENE/segmentations/<folder>
+    int index;                  // index in the name-sorted view list
+    std::filesystem::path dir;  // SCENE/segmentations/<folder>
   };
-  std::vector<View> views;           // sorted by index
+  std::vector<View> views;  // sorted by index
 };
 OvsLabelSet open_3dovs_labels(const std::filesystem::path& scene);
 

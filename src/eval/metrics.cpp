@@ -80,7 +80,8 @@ Mask erode3x3(const Mask& m, int width, int height, int iterations, uint8_t outs
   for (int y = 0; y < height; ++y) {
     const uint8_t* row = &m[size_t(y) * width];
     uint8_t* dst = &tmp[size_t(y) * width];
-    erode_line(width, r, outside_value, [&](int x) { return row[x] != 0; }, [&](int x, uint8_t v) { dst[x] = v; });
+    erode_line(
+        width, r, outside_value, [&](int x) { return row[x] != 0; }, [&](int x, uint8_t v) { dst[x] = v; });
   }
   // Vertical pass, row by row: zeros[x] = zero samples of column x in rows [y - r, y + r].
   const int out_zero = outside_value ? 0 : 1;
@@ -115,7 +116,8 @@ double boundary_iou(const Mask& gt, const Mask& pred, int width, int height, int
   check(gt, width, height, "ground-truth");
   check(pred, width, height, "predicted");
   if (d <= 0) d = boundary_width(width, height);
-  const Confusion c = confusion(boundary_region(gt, width, height, d), boundary_region(pred, width, height, d), width, height);
+  const Confusion c =
+      confusion(boundary_region(gt, width, height, d), boundary_region(pred, width, height, d), width, height);
   const long uni = c.tp + c.fp + c.fn;
   return uni == 0 ? std::numeric_limits<double>::quiet_NaN() : double(c.tp) / double(uni);
 }

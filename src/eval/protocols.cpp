@@ -17,7 +17,8 @@ LerfPost lerf_postprocess(const std::vector<float>& v, int width, int height, co
   P.smoothed.resize(v.size());
   float lo = std::numeric_limits<float>::infinity(), hi = -lo;
   for (size_t i = 0; i < v.size(); ++i)
-    if (!std::isfinite(v[i])) fail("eval: relevancy map holds a non-finite value at pixel ({}, {})", i % width, i / width);
+    if (!std::isfinite(v[i]))
+      fail("eval: relevancy map holds a non-finite value at pixel ({}, {})", i % width, i / width);
   P.boxed = box_filter(v, width, height, opt.box);
   for (size_t i = 0; i < v.size(); ++i) {
     P.smoothed[i] = 0.5f * (P.boxed[i] + v[i]);
@@ -45,7 +46,10 @@ Localisation lerf_localise(const std::vector<float>& boxed, int width, int heigh
   for (int y = 0; y < height; ++y)
     for (int x = 0; x < width; ++x) {
       if (boxed[size_t(y) * width + x] != mx) continue;
-      if (L.x < 0) { L.x = x; L.y = y; }
+      if (L.x < 0) {
+        L.x = x;
+        L.y = y;
+      }
       for (auto& b : bboxes)
         if (b.contains_pixel(x, y)) {  // report the tied maximum that hits
           L.x = x;
@@ -73,12 +77,16 @@ std::vector<uint16_t> argmax_classes(const std::vector<std::vector<float>>& rel,
   if (rel.size() > 65535) fail("eval: too many classes ({})", rel.size());
   const size_t n = size_t(width) * height;
   for (size_t c = 0; c < rel.size(); ++c)
-    if (rel[c].size() != n) fail("eval: relevancy map of class {} holds {} values, expected {}x{}", c, rel[c].size(), width, height);
+    if (rel[c].size() != n)
+      fail("eval: relevancy map of class {} holds {} values, expected {}x{}", c, rel[c].size(), width, height);
   std::vector<uint16_t> pred(n, 0);
   for (size_t i = 0; i < n; ++i) {
     float best = rel[0][i];
     for (size_t c = 1; c < rel.size(); ++c)
-      if (rel[c][i] > best) { best = rel[c][i]; pred[i] = static_cast<uint16_t>(c); }
+      if (rel[c][i] > best) {
+        best = rel[c][i];
+        pred[i] = static_cast<uint16_t>(c);
+      }
   }
   return pred;
 }
@@ -91,7 +99,8 @@ OvsImageResult evaluate_3dovs_prediction(const std::vector<uint16_t>& prediction
   if (gt.empty()) fail("eval: 3D-OVS evaluation needs at least one class mask");
   const size_t C = gt.size();
   for (size_t c = 0; c < C; ++c)
-    if (gt[c].size() != n) fail("eval: ground-truth mask of class {} holds {} pixels, expected {}x{}", c, gt[c].size(), width, height);
+    if (gt[c].size() != n)
+      fail("eval: ground-truth mask of class {} holds {} pixels, expected {}x{}", c, gt[c].size(), width, height);
   if (boundary_d <= 0) boundary_d = boundary_width(width, height);
   OvsImageResult R;
   R.prediction = prediction;
@@ -112,7 +121,10 @@ OvsImageResult evaluate_3dovs_prediction(const std::vector<uint16_t>& prediction
     for (size_t c = 0; c < C && ok; ++c) ok = (gt[c][i] != 0) == (c == p);
     correct += ok;
   }
-  for (size_t c = 0; c < C; ++c) { R.miou += R.iou[c]; R.mbiou += R.biou[c]; }
+  for (size_t c = 0; c < C; ++c) {
+    R.miou += R.iou[c];
+    R.mbiou += R.biou[c];
+  }
   R.miou /= double(C);
   R.mbiou /= double(C);
   R.accuracy = double(correct) / double(n);

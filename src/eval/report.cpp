@@ -1,8 +1,8 @@
 // Report aggregation and writers (JSON via nlohmann-json, Markdown by hand), both written atomically.
 #include "eval/report.h"
 
-#include <cmath>
 #include <fmt/format.h>
+#include <cmath>
 
 #include "core/error.h"
 #include "core/fs.h"
@@ -17,7 +17,10 @@ struct Acc {
   double sum = 0;
   size_t n = 0;
   void add(double v) {
-    if (!std::isnan(v)) { sum += v; ++n; }
+    if (!std::isnan(v)) {
+      sum += v;
+      ++n;
+    }
   }
   double mean() const { return n ? sum / double(n) : kNaN; }
 };
@@ -72,9 +75,16 @@ double paper_accuracy(const MeanRow& m, const std::string& protocol) {
 namespace {
 
 json row_json(const MeanRow& m, const char* keyname, const std::string& protocol) {
-  json j = {{keyname, m.key}, {"count", m.count}, {"mIoU", num(m.miou)}, {"mBIoU", num(m.mbiou)},
-            {"mAcc", num(paper_accuracy(m, protocol))}, {"pixel_acc", num(m.macc)}};
-  if (m.loc_count) { j["loc_acc"] = num(m.loc_acc); j["loc_count"] = m.loc_count; }
+  json j = {{keyname, m.key},
+            {"count", m.count},
+            {"mIoU", num(m.miou)},
+            {"mBIoU", num(m.mbiou)},
+            {"mAcc", num(paper_accuracy(m, protocol))},
+            {"pixel_acc", num(m.macc)}};
+  if (m.loc_count) {
+    j["loc_acc"] = num(m.loc_acc);
+    j["loc_count"] = m.loc_count;
+  }
   if (!std::isnan(m.seconds)) j["mean_seconds"] = m.seconds;
   return j;
 }
@@ -131,7 +141,12 @@ std::vector<MeanRow> frame_means(const EvalReport& r) {
   for (auto& [f, a] : r.frame_accuracy) {
     bool present = false;
     for (auto& m : rows) present |= m.key == f;
-    if (!present) { MeanRow m; m.key = f; m.macc = a; rows.push_back(m); }
+    if (!present) {
+      MeanRow m;
+      m.key = f;
+      m.macc = a;
+      rows.push_back(m);
+    }
   }
   return rows;
 }
@@ -174,11 +189,13 @@ json report_json(const EvalReport& r) {
 }
 
 std::string report_markdown(const std::vector<EvalReport>& reports) {
-  std::string md = "# Evaluation report\n\nMetrics in percent; mIoU / mBIoU are means over (frame, query) pairs. "
-                   "mAcc is the accuracy the protocol's papers report: localisation accuracy for LERF-OVS, pixel "
-                   "accuracy otherwise.\n\n";
-  md += "| protocol | scene | mode | relevancy | pairs | mAcc | mIoU | mBIoU | pixel acc | loc. acc | ms/query |\n"
-        "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|\n";
+  std::string md =
+      "# Evaluation report\n\nMetrics in percent; mIoU / mBIoU are means over (frame, query) pairs. "
+      "mAcc is the accuracy the protocol's papers report: localisation accuracy for LERF-OVS, pixel "
+      "accuracy otherwise.\n\n";
+  md +=
+      "| protocol | scene | mode | relevancy | pairs | mAcc | mIoU | mBIoU | pixel acc | loc. acc | ms/query |\n"
+      "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|\n";
   for (auto& r : reports) {
     MeanRow s = scene_mean(r);
     const std::string rel = r.extra.contains("relevancy") ? r.extra["relevancy"].get<std::string>() : "-";
@@ -187,23 +204,29 @@ std::string report_markdown(const std::vector<EvalReport>& reports) {
                       pct(s.macc), pct(s.loc_acc),
                       std::isnan(s.seconds) ? std::string("-") : fmt::format("{:.1f}", 1000 * s.seconds));
   }
-  auto table = [&](const std::string& title, const char* keyname, const std::vector<MeanRow>& rows, const MeanRow& total) {
-    md += fmt::format("\n### {}\n\n| {} | n | pixel acc | mIoU | mBIoU | loc. acc |\n|---|---:|---:|---:|---:|---:|\n", title, keyname);
+  auto table = [&](const std::string& title, const char* keyname, const std::vector<MeanRow>& rows,
+                   const MeanRow& total) {
+    md += fmt::format("\n### {}\n\n| {} | n | pixel acc | mIoU | mBIoU | loc. acc |\n|---|---:|---:|---:|---:|---:|\n",
+                      title, keyname);
     for (auto& m : rows)
-      md += fmt::format("| {} | {} | {} | {} | {} | {} |\n", cell(m.key), m.count, pct(m.macc), pct(m.miou), pct(m.mbiou),
-                        pct(m.loc_acc));
+      md += fmt::format("| {} | {} | {} | {} | {} | {} |\n", cell(m.key), m.count, pct(m.macc), pct(m.miou),
+                        pct(m.mbiou), pct(m.loc_acc));
     md += fmt::format("| **scene mean** | {} | {} | {} | {} | {} |\n", total.count, pct(total.macc), pct(total.miou),
                       pct(total.mbiou), pct(total.loc_acc));
   };
   for (auto& r : reports) {
-    md += fmt::format("\n## {} — {}{}\n", cell(r.protocol), cell(r.scene), r.mode.empty() ? "" : " (" + cell(r.mode) + ")");
+    md += fmt::format("\n## {} — {}{}\n", cell(r.protocol), cell(r.scene),
+                      r.mode.empty() ? "" : " (" + cell(r.mode) + ")");
     const MeanRow s = scene_mean(r);
     table("Per query", "query", query_means(r), s);
     table("Per frame", "frame", frame_means(r), s);
     md += "\n### Per (frame, query)\n\n| frame | query | acc | IoU | BIoU | loc |\n|---|---|---:|---:|---:|:---:|\n";
     for (auto& q : r.records)
       md += fmt::format("| {} | {} | {} | {} | {} | {} |\n", cell(q.frame), cell(q.query), pct(q.acc), pct(q.iou),
-                        pct(q.biou), q.loc < 0 ? "-" : q.loc ? "hit" : "miss");
+                        pct(q.biou),
+                        q.loc < 0 ? "-"
+                        : q.loc   ? "hit"
+                                  : "miss");
   }
   return md;
 }

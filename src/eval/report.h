@@ -28,12 +28,12 @@ struct QueryRecord {
   std::string frame;  // view / image name
   std::string query;  // category, class or text
   double iou = kNaN, biou = kNaN, acc = kNaN;
-  int loc = -1;       // localisation: -1 not evaluated, 0 miss, 1 hit
+  int loc = -1;           // localisation: -1 not evaluated, 0 miss, 1 hit
   double seconds = kNaN;  // optional timing of the query
 };
 
 struct MeanRow {
-  std::string key;  // frame or query name; "scene" for the scene mean
+  std::string key;   // frame or query name; "scene" for the scene mean
   size_t count = 0;  // records
   double miou = kNaN, mbiou = kNaN, macc = kNaN;
   double loc_acc = kNaN;
@@ -44,9 +44,9 @@ struct MeanRow {
 struct EvalReport {
   std::string protocol;  // "lerf-ovs", "3d-ovs", "instances", ...
   std::string scene;
-  std::string mode;      // e.g. "pixel", "object"
+  std::string mode;  // e.g. "pixel", "object"
   std::vector<QueryRecord> records;
-  std::map<std::string, double> frame_accuracy;  // optional per-frame accuracy overriding the record mean
+  std::map<std::string, double> frame_accuracy;     // optional per-frame accuracy overriding the record mean
   nlohmann::json extra = nlohmann::json::object();  // free-form: options, timings, paths
 };
 

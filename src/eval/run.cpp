@@ -164,7 +164,8 @@ EvalReport run_instances(const Scene& scene, const MaskFn& fn, const RunOptions&
   Progress bar("eval instances", static_cast<long>(test.size()), opt.progress);
   for (size_t i = 0; i < test.size(); ++i) {
     const View& view = scene.views[test[i]];
-    const InstanceLabels gt = load_instance_masks(scene.root, view.name, names, view.width, view.height, scene.downscale);
+    const InstanceLabels gt =
+        load_instance_masks(scene.root, view.name, names, view.width, view.height, scene.downscale);
     const Image img = opt.overlay_dir.empty() ? Image() : scene.load_image(view.index);
     for (size_t k = 0; k < gt.ids.size(); ++k) {
       bool visible = false;

@@ -38,7 +38,8 @@ using RelevancyFn = std::function<std::vector<float>(int view, const std::string
 // callback may fill it ([H, W]) for the heatmap PNG.
 using MaskFn = std::function<Mask(int view, const std::string& query, std::vector<float>* heatmap)>;
 // Relevancy maps [C][H, W] of every class on scene.views[view]; argmax over classes is the prediction.
-using ClassRelevancyFn = std::function<std::vector<std::vector<float>>(int view, const std::vector<std::string>& classes)>;
+using ClassRelevancyFn =
+    std::function<std::vector<std::vector<float>>(int view, const std::vector<std::string>& classes)>;
 
 // LERF-OVS, pixel-level: relevancy -> LERF post-processing -> IoU / BIoU / acc / localisation. mode "pixel".
 EvalReport run_lerf_ovs(const Scene& scene, const RelevancyFn& fn, const RunOptions& opt = {});

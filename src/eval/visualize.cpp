@@ -12,12 +12,12 @@ namespace hgs::eval {
 namespace {
 
 // Turbo sampled at t = i / 16 from the polynomial approximation (see visualize.h).
-constexpr float kTurbo[17][3] = {
-    {0.1357f, 0.0914f, 0.1067f}, {0.2875f, 0.2441f, 0.6857f}, {0.2686f, 0.4148f, 0.9348f}, {0.1970f, 0.5855f, 0.9699f},
-    {0.1483f, 0.7405f, 0.8807f}, {0.1624f, 0.8664f, 0.7332f}, {0.2504f, 0.9528f, 0.5729f}, {0.4012f, 0.9925f, 0.4282f},
-    {0.5885f, 0.9819f, 0.3132f}, {0.7775f, 0.9209f, 0.2310f}, {0.9316f, 0.8139f, 0.1771f}, {1.0000f, 0.6697f, 0.1418f},
-    {1.0000f, 0.5017f, 0.1140f}, {0.9349f, 0.3288f, 0.0842f}, {0.7864f, 0.1749f, 0.0473f}, {0.6315f, 0.0701f, 0.0062f},
-    {0.5659f, 0.0504f, 0.0000f}};
+constexpr float kTurbo[17][3] = {{0.1357f, 0.0914f, 0.1067f}, {0.2875f, 0.2441f, 0.6857f}, {0.2686f, 0.4148f, 0.9348f},
+                                 {0.1970f, 0.5855f, 0.9699f}, {0.1483f, 0.7405f, 0.8807f}, {0.1624f, 0.8664f, 0.7332f},
+                                 {0.2504f, 0.9528f, 0.5729f}, {0.4012f, 0.9925f, 0.4282f}, {0.5885f, 0.9819f, 0.3132f},
+                                 {0.7775f, 0.9209f, 0.2310f}, {0.9316f, 0.8139f, 0.1771f}, {1.0000f, 0.6697f, 0.1418f},
+                                 {1.0000f, 0.5017f, 0.1140f}, {0.9349f, 0.3288f, 0.0842f}, {0.7864f, 0.1749f, 0.0473f},
+                                 {0.6315f, 0.0701f, 0.0062f}, {0.5659f, 0.0504f, 0.0000f}};
 
 }  // namespace
 
@@ -38,7 +38,10 @@ Image heatmap(const std::vector<float>& v, int width, int height, float lo, floa
     lo = std::numeric_limits<float>::infinity();
     hi = -lo;
     for (float x : v)
-      if (std::isfinite(x)) { lo = std::min(lo, x); hi = std::max(hi, x); }
+      if (std::isfinite(x)) {
+        lo = std::min(lo, x);
+        hi = std::max(hi, x);
+      }
     if (!(lo < hi)) hi = lo + 1.f;  // constant (or all non-finite): t = 0
   }
   Image out(width, height, 3);
@@ -61,7 +64,8 @@ Image overlay(const Image& img, const Mask& pred, const Mask& gt, const OverlayS
   if (img.channels != 1 && img.channels != 3 && img.channels != 4)
     fail("eval: overlay needs a 1-, 3- or 4-channel image, got {}", img.channels);
   if (pred.size() != n) fail("eval: overlay mask holds {} pixels, expected {}x{}", pred.size(), W, H);
-  if (!gt.empty() && gt.size() != n) fail("eval: overlay ground truth holds {} pixels, expected {}x{}", gt.size(), W, H);
+  if (!gt.empty() && gt.size() != n)
+    fail("eval: overlay ground truth holds {} pixels, expected {}x{}", gt.size(), W, H);
   Image out(W, H, 3);
   for (size_t i = 0; i < n; ++i)
     for (int k = 0; k < 3; ++k) {
@@ -90,12 +94,36 @@ Rgb class_color(int c) {
   const double f = h - std::floor(h), p = v * (1 - s), q = v * (1 - s * f), t = v * (1 - s * (1 - f));
   double r, g, b;
   switch (i) {
-    case 0: r = v; g = t; b = p; break;
-    case 1: r = q; g = v; b = p; break;
-    case 2: r = p; g = v; b = t; break;
-    case 3: r = p; g = q; b = v; break;
-    case 4: r = t; g = p; b = v; break;
-    default: r = v; g = p; b = q; break;
+    case 0:
+      r = v;
+      g = t;
+      b = p;
+      break;
+    case 1:
+      r = q;
+      g = v;
+      b = p;
+      break;
+    case 2:
+      r = p;
+      g = v;
+      b = t;
+      break;
+    case 3:
+      r = p;
+      g = q;
+      b = v;
+      break;
+    case 4:
+      r = t;
+      g = p;
+      b = v;
+      break;
+    default:
+      r = v;
+      g = p;
+      b = q;
+      break;
   }
   return {float(r), float(g), float(b)};
 }
@@ -104,7 +132,8 @@ Image class_overlay(const Image& img, const std::vector<uint16_t>& classes, floa
   const size_t n = size_t(img.width) * img.height;
   if (img.channels != 1 && img.channels != 3 && img.channels != 4)
     fail("eval: class overlay needs a 1-, 3- or 4-channel image, got {}", img.channels);
-  if (classes.size() != n) fail("eval: class map holds {} pixels, expected {}x{}", classes.size(), img.width, img.height);
+  if (classes.size() != n)
+    fail("eval: class map holds {} pixels, expected {}x{}", classes.size(), img.width, img.height);
   Image out(img.width, img.height, 3);
   for (size_t i = 0; i < n; ++i) {
     const Rgb c = class_color(classes[i]);

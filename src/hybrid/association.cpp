@@ -20,7 +20,10 @@ void hide_occluded_all(const GaussianModel& m, const std::vector<MaskView>& view
     render::Camera cam;
     cam.width = v.width;
     cam.height = v.height;
-    cam.fx = float(v.fx); cam.fy = float(v.fy); cam.cx = float(v.cx); cam.cy = float(v.cy);
+    cam.fx = float(v.fx);
+    cam.fy = float(v.fy);
+    cam.cx = float(v.cx);
+    cam.cy = float(v.cy);
     for (int k = 0; k < 9; ++k) cam.R[k] = float(v.R[k]);
     for (int k = 0; k < 3; ++k) cam.t[k] = float(v.t[k]);
     r.forward(cam, in, rs, out);

@@ -42,7 +42,7 @@ class ObjectAssociation {
   void reduce(train::Reducer& r);
   void update(train::Adam& optim, float scale);
 
-  const std::vector<float>& weights() const;  // [U] softmax of the current logits
+  const std::vector<float>& weights() const;                    // [U] softmax of the current logits
   const std::vector<float>& logits() const { return logits_; }  // [U]
   const ObservationTable& table() const { return table_; }
   // Restores a saved table (checked by the caller).
@@ -55,9 +55,9 @@ class ObjectAssociation {
   ObservationTable table_;
   std::vector<float> logits_, dw_, dlogits_, step_dlogits_;  // [U]
   bool step_set_ = false;
-  mutable std::vector<float> w_;              // [U] softmax(logits_)
-  std::vector<float> s_;                          // [N, L]
-  std::vector<uint8_t> valid_;                    // [N]
+  mutable std::vector<float> w_;  // [U] softmax(logits_)
+  std::vector<float> s_;          // [N, L]
+  std::vector<uint8_t> valid_;    // [N]
 };
 
 }  // namespace hgs::hybrid

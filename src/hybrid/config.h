@@ -7,9 +7,9 @@
 namespace hgs::hybrid {
 
 struct HybridConfig {
-  bool use_of = true;    // Observation Fusion (else single-view hard assignment)
-  bool use_scl = true;   // Semantic Contrastive Learning (else per-pixel cosine on the full semantic render)
-  bool use_bro = true;   // Boundary Reconstruction Optimization (else lambda_bro = 0)
+  bool use_of = true;   // Observation Fusion (else single-view hard assignment)
+  bool use_scl = true;  // Semantic Contrastive Learning (else per-pixel cosine on the full semantic render)
+  bool use_bro = true;  // Boundary Reconstruction Optimization (else lambda_bro = 0)
   // Plain 3DGS photometric loss on the full image (not in eq. 15; 0 = eq. 15 alone). On by default: eq. 15 alone
   // loses object mIoU on both presets at medium and high noise (figures: docs/ablation.md, "λ_rgb").
   float lambda_rgb = 1.0f;
@@ -31,14 +31,14 @@ struct HybridConfig {
   // that wins by 20 % of the views still leaves q_k ~ 0.88 and, under heavy mask noise, objects render below
   // the 0.5 mask threshold; 0.05 sharpens q (figures: docs/results.md section 3).
   float temperature = 0.05f;
-  float fusion_eps = 1e-6f;   // epsilon of eq. 4
+  float fusion_eps = 1e-6f;  // epsilon of eq. 4
   // Weight of a background observation in eq. 4's numerator (fusion.h; 1 = the paper). M_{u,0} is the absence of
   // every mask, and under heavy mask noise missed and eroded small objects lose their own Gaussians to it; at 0.5
   // an object wins with more than a third of the views that see it. Alone (without the occlusion test) it helps
   // at high noise but lets Gaussians hidden behind an object take its label, so it is the default together with
   // the occlusion test (figures: docs/results.md section 8).
   float background_vote = 0.5f;
-  float tau2 = 0.1f;          // InfoNCE temperature (eq. 10)
+  float tau2 = 0.1f;  // InfoNCE temperature (eq. 10)
   // The background in SCL. Eq. 10 contrasts foreground objects only, so a view with fewer than two of them gives
   // an anchor no negative (its InfoNCE is 0 and passes no gradient) and, in a one-object scene, f is never trained
   // against anything: pixel-mode relevancy inside the object stays noise. "auto": a view whose SCL objects are
@@ -52,8 +52,8 @@ struct HybridConfig {
   // opacities of a high-noise scene's objects until objects fall below the mask threshold (figures:
   // docs/results.md section 3); true = the full gradient.
   bool sem_geometry = false;
-  int fusion_every = 100;     // R: rebuild the observation table every R iterations (and after densification)
-  int bro_kernel = 5;         // square structuring element of D and E (eq. 12)
+  int fusion_every = 100;  // R: rebuild the observation table every R iterations (and after densification)
+  int bro_kernel = 5;      // square structuring element of D and E (eq. 12)
   // BRO's gradient without the component that scales a whole object render (bro.h): eq. 14's own gradient
   // fades objects on noisy masks. false = eq. 14's plain gradient.
   bool bro_scale_invariant = true;
@@ -62,12 +62,12 @@ struct HybridConfig {
   // HW / |band| (smaller objects, higher resolution). false = eq. 14 as written (a mean over the band).
   bool bro_image_norm = true;
   float bro_eps = 1e-6f;
-  int min_mask_pixels = 16;   // objects smaller than this in a view are not SCL anchors/candidates
-  float lr_lang = 2.5e-3f;    // Adam learning rate of f_n
+  int min_mask_pixels = 16;  // objects smaller than this in a view are not SCL anchors/candidates
+  float lr_lang = 2.5e-3f;   // Adam learning rate of f_n
   // f_n stored in IEEE half and its Adam moments in bfloat16, both written with stochastic rounding (at 300k x 512:
   // 900 MB instead of 1.8 GB); false = float32 for all three.
   bool lang_half = true;
-  float lr_view = 1e-2f;      // Adam learning rate of the view reliability logits
+  float lr_view = 1e-2f;  // Adam learning rate of the view reliability logits
   float lang_init_std = 0.1f;
   // An approximation of eqs. 6 and 14 for speed (0 = off, the exact sums). Each step renders and scores only M
   // of the J objects present in the view, drawn uniformly without replacement from the view's random stream;

@@ -21,14 +21,17 @@ std::vector<int> scl_classes(const std::vector<int>& fg, float background_area, 
 HybridData load_hybrid_data(const Scene& scene, const std::vector<int>& idx, const HybridConfig& cfg, bool progress) {
   HybridData d;
   const int K = scene.num_objects();
-  if (K == 0) fail("{}: the hybrid method needs object masks (masks/<stem>.png) but none were found", scene.root.string());
+  if (K == 0)
+    fail("{}: the hybrid method needs object masks (masks/<stem>.png) but none were found", scene.root.string());
   d.num_labels = K + 1;
   d.masks.resize(idx.size());
   d.views.resize(idx.size());
   for (int i : idx) {
     const View& v = scene.views[i];
     if (!v.mask_path) fail("{}: view '{}' has no mask (masks/{}.png)", scene.root.string(), v.name, v.stem);
-    if (!v.feature_path) fail("{}: view '{}' has no language features (features/{}.npy); run `hgs features` first", scene.root.string(), v.name, v.stem);
+    if (!v.feature_path)
+      fail("{}: view '{}' has no language features (features/{}.npy); run `hgs features` first", scene.root.string(),
+           v.name, v.stem);
   }
   d.dim = static_cast<int>(read_npy_header(*scene.views[idx[0]].feature_path).shape.back());
   parallel_for_progress("load masks+features", long(idx.size()), progress, [&](long j) {
@@ -36,7 +39,10 @@ HybridData load_hybrid_data(const Scene& scene, const std::vector<int>& idx, con
     MaskView& mv = d.masks[j];
     mv.width = v.width;
     mv.height = v.height;
-    mv.fx = v.fx; mv.fy = v.fy; mv.cx = v.cx; mv.cy = v.cy;
+    mv.fx = v.fx;
+    mv.fy = v.fy;
+    mv.cx = v.cx;
+    mv.cy = v.cy;
     for (int r = 0; r < 3; ++r) {
       for (int c = 0; c < 3; ++c) mv.R[3 * r + c] = v.R(r, c);
       mv.t[r] = v.t[r];
@@ -49,7 +55,8 @@ HybridData load_hybrid_data(const Scene& scene, const std::vector<int>& idx, con
     HybridView& hv = d.views[j];
     int D = 0, gh = 0, gw = 0;
     std::vector<float> grid = *scene.load_feature_grid(idx[j], gh, gw, D);  // read once, used twice below
-    if (D != d.dim) fail("{}: feature dimension {} differs from the first view's {}", v.feature_path->string(), D, d.dim);
+    if (D != d.dim)
+      fail("{}: feature dimension {} differs from the first view's {}", v.feature_path->string(), D, d.dim);
     const std::vector<float> feat =
         (gh == v.height && gw == v.width) ? grid : upsample_bilinear(grid.data(), gh, gw, D, v.height, v.width);
     hv.zref.assign(size_t(d.num_labels) * D, 0.f);

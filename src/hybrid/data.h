@@ -10,19 +10,19 @@
 namespace hgs::hybrid {
 
 struct HybridView {
-  std::vector<int> present;   // labels present in the filtered mask (background 0 included when present)
-  std::vector<int> fg;        // foreground labels with area >= min_mask_pixels
-  std::vector<int> scl;       // SCL classes (anchors / candidates): fg, plus 0 under cfg.scl_background
-  std::vector<float> area;    // [L] pixel count per label
-  std::vector<float> zref;    // [L, D] unit pooled reference features (zero rows where absent)
+  std::vector<int> present;  // labels present in the filtered mask (background 0 included when present)
+  std::vector<int> fg;       // foreground labels with area >= min_mask_pixels
+  std::vector<int> scl;      // SCL classes (anchors / candidates): fg, plus 0 under cfg.scl_background
+  std::vector<float> area;   // [L] pixel count per label
+  std::vector<float> zref;   // [L, D] unit pooled reference features (zero rows where absent)
   // Only for the no-SCL ablation: the raw patch-grid features, upsampled per step. [ph, pw, D]
   std::vector<float> patch_features;
   int ph = 0, pw = 0;
 };
 
 struct HybridData {
-  int num_labels = 0;  // K + 1
-  int dim = 0;         // D
+  int num_labels = 0;           // K + 1
+  int dim = 0;                  // D
   std::vector<MaskView> masks;  // per training view: camera + filtered labels (Observation Fusion input)
   std::vector<HybridView> views;
 };

@@ -49,7 +49,7 @@ struct MaskView {
   double fx = 0, fy = 0, cx = 0, cy = 0;
   double R[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};  // world -> camera, row-major
   double t[3] = {0, 0, 0};
-  LabelMap labels;  // [H, W] in 0..K
+  LabelMap labels;                // [H, W] in 0..K
   std::vector<uint8_t> observed;  // [H, W] 0 where the pixel is no observation (V = 0); empty = every pixel
 };
 
@@ -92,9 +92,9 @@ void softmax_backward(const T* y, const T* dy, int n, T* dx) {
 }
 
 struct FusionParams {
-  int num_labels = 2;     // K + 1
-  double temperature = 0.1;  // T of eq. 5
-  double eps = 1e-6;      // epsilon of eq. 4
+  int num_labels = 2;            // K + 1
+  double temperature = 0.1;      // T of eq. 5
+  double eps = 1e-6;             // epsilon of eq. 4
   double background_vote = 1.0;  // weight of a background observation in eq. 4's numerator (1 = the paper)
 };
 
@@ -120,7 +120,10 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
     T logits[256];
     T* lg = L <= 256 ? logits : nullptr;
     std::vector<T> big;
-    if (!lg) { big.resize(L); lg = big.data(); }
+    if (!lg) {
+      big.resize(L);
+      lg = big.data();
+    }
     for (int k = 0; k < L; ++k) {
       sn[k] *= inv;
       lg[k] = sn[k] / T(p.temperature);

@@ -1,7 +1,7 @@
 #include "hybrid/method.h"
 
-#include <cmath>
 #include <chrono>
+#include <cmath>
 #include <random>
 
 #include "core/error.h"
@@ -11,8 +11,12 @@
 namespace hgs::hybrid {
 
 HybridMethod::HybridMethod(const HybridConfig& cfg, HybridData data, uint64_t seed)
-    : cfg_(cfg), data_(std::move(data)), seed_(seed), assoc_(cfg, &data_.masks, data_.num_labels),
-      object_losses_(cfg), semantic_(cfg, &data_) {}
+    : cfg_(cfg),
+      data_(std::move(data)),
+      seed_(seed),
+      assoc_(cfg, &data_.masks, data_.num_labels),
+      object_losses_(cfg),
+      semantic_(cfg, &data_) {}
 
 void HybridMethod::attach(GaussianModel& model, train::Adam& optim, const std::vector<train::TrainView>& views) {
   const int L = data_.num_labels, D = data_.dim;
@@ -104,8 +108,8 @@ void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
   d_channels_.resize(size_t(W) * H * C);
   parallel_fill(d_channels_, 0.f);
   const auto t0 = std::chrono::steady_clock::now();
-  const ObjectLossValues ov = object_losses_(v.view.image, data_.masks[u].labels, io.out.extra.data(), layout_,
-                                             objects_, d_channels_.data());
+  const ObjectLossValues ov =
+      object_losses_(v.view.image, data_.masks[u].labels, io.out.extra.data(), layout_, objects_, d_channels_.data());
   last_.app = float(ov.app);
   last_.bro = float(ov.bro);
   io.objective.add("app", cfg_.lambda_app, ov.app);
@@ -142,8 +146,8 @@ void HybridMethod::backward(const train::ViewStep& v, const train::BackwardIO& i
   const int n = v.model.n;
   // Object channels -> dq and dc, added to the RGB path's colour gradient before the renderer's
   // preprocess_backward takes it through SH.
-  object_channels_backward(n, data_.num_labels, layout_, objects_.data(), fields.q->data.data(),
-                           io.projected.colors, io.grads.extra.data(), dq_.data(), io.grads.colors.data());
+  object_channels_backward(n, data_.num_labels, layout_, objects_.data(), fields.q->data.data(), io.projected.colors,
+                           io.grads.extra.data(), dq_.data(), io.grads.colors.data());
   assoc_.backward(n, fields, dq_.data(), v.slot == 0);
   if (!cfg_.use_scl && cfg_.lambda_sem > 0)
     semantic_.add_channel_grads(n, io.grads.extra.data(), layout_.total(), layout_.other(), v.slot == 0);
@@ -176,7 +180,7 @@ void HybridMethod::release() {
 
 train::MethodStats HybridMethod::stats() const {
   train::MethodStats s;
-  s.values = {{"app", last_.app},       {"bro", last_.bro},       {"sem", last_.sem},
+  s.values = {{"app", last_.app},         {"bro", last_.bro},       {"sem", last_.sem},
               {"anchors", last_.anchors}, {"ms_app", last_.ms_app}, {"ms_sem", last_.ms_sem}};
   s.arrays = {{"view_weights", assoc_.weights()}};
   return s;
@@ -197,7 +201,8 @@ void HybridMethod::state_loaded(const std::string& where, const nlohmann::json& 
   if (!config.is_null()) {
     c = HybridConfig::from_json(config);
     if (c.use_scl != cfg_.use_scl)
-      fail("{}: the checkpoint was trained {} --no-scl; resume with the same option", where, c.use_scl ? "without" : "with");
+      fail("{}: the checkpoint was trained {} --no-scl; resume with the same option", where,
+           c.use_scl ? "without" : "with");
   }
   const size_t U = data_.masks.size();
   const auto& table = arrays["observations"];

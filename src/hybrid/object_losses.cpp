@@ -77,7 +77,8 @@ ObjectLossValues ObjectLosses::operator()(const Image& image, const LabelMap& la
         bro_[j] = bro_loss(pred, w.gt.data(), 3, 3, w.band.data(), H, W, cfg_.bro_eps, grad, s_bro, band_total);
       } else {  // the same value; its gradient without the component that scales the whole render (bro.h)
         w.bgrad.assign(HW * 3, 0.f);
-        bro_[j] = bro_loss(pred, w.gt.data(), 3, 3, w.band.data(), H, W, cfg_.bro_eps, w.bgrad.data(), s_bro, band_total);
+        bro_[j] =
+            bro_loss(pred, w.gt.data(), 3, 3, w.band.data(), H, W, cfg_.bro_eps, w.bgrad.data(), s_bro, band_total);
         remove_scale_component(pred, HW * 3, w.bgrad.data());
         for (size_t i = 0; i < HW * 3; ++i) grad[i] += w.bgrad[i];
       }

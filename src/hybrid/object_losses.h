@@ -45,10 +45,10 @@ class ObjectLosses {
     std::vector<float> bgrad;              // [H, W, 3] BRO's gradient before its scale component is removed
   };
   HybridConfig cfg_;
-  std::vector<Scratch> scratch_;                      // [threads]
-  std::vector<float> pred_, grad_;                    // [J, H, W, 3] planar object renders / gradients
-  std::vector<float> opac_;                           // [J, H, W]
-  std::vector<double> app_, bro_;                     // [J]
+  std::vector<Scratch> scratch_;    // [threads]
+  std::vector<float> pred_, grad_;  // [J, H, W, 3] planar object renders / gradients
+  std::vector<float> opac_;         // [J, H, W]
+  std::vector<double> app_, bro_;   // [J]
 };
 
 }  // namespace hgs::hybrid

@@ -19,7 +19,8 @@ T normalize(T* v, int D) {
 template <class T>
 void pooled_prediction(int n, int D, int L, int J, const T* q, const T* f, const T* a, const int* objs, const T* mass,
                        T eps, T* P) {
-  pooled_prediction_rows(n, D, L, J, q, [&](long i, T*) { return f + size_t(i) * D; }, a, objs, mass, eps, P);
+  pooled_prediction_rows(
+      n, D, L, J, q, [&](long i, T*) { return f + size_t(i) * D; }, a, objs, mass, eps, P);
 }
 
 template <class T>
@@ -80,8 +81,15 @@ T cosine_loss(const T* S, int stride, const T* R, size_t P, int D, T* grad, T sc
     const T* s = S + p * stride;
     const T* r = R + p * D;
     double ss = 0, rr = 0, sr = 0;
-    for (int d = 0; d < D; ++d) { ss += double(s[d]) * s[d]; rr += double(r[d]) * r[d]; sr += double(s[d]) * r[d]; }
-    if (ss <= 1e-30 || rr <= 1e-30) { loss += 1; continue; }
+    for (int d = 0; d < D; ++d) {
+      ss += double(s[d]) * s[d];
+      rr += double(r[d]) * r[d];
+      sr += double(s[d]) * r[d];
+    }
+    if (ss <= 1e-30 || rr <= 1e-30) {
+      loss += 1;
+      continue;
+    }
     const double ns = std::sqrt(ss), nr = std::sqrt(rr), c = sr / (ns * nr);
     loss += 1 - c;
     if (grad) {
@@ -97,10 +105,15 @@ template float cosine_loss<float>(const float*, int, const float*, size_t, int, 
 template double cosine_loss<double>(const double*, int, const double*, size_t, int, double*, double);
 template float normalize<float>(float*, int);
 template double normalize<double>(double*, int);
-template void pooled_prediction<float>(int, int, int, int, const float*, const float*, const float*, const int*, const float*, float, float*);
-template void pooled_prediction<double>(int, int, int, int, const double*, const double*, const double*, const int*, const double*, double, double*);
-template void pooled_prediction_backward<float>(int, int, int, int, const float*, const float*, const float*, const int*, const float*, float, const float*, float*, float*, float*);
-template void pooled_prediction_backward<double>(int, int, int, int, const double*, const double*, const double*, const int*, const double*, double, const double*, double*, double*, double*);
+template void pooled_prediction<float>(int, int, int, int, const float*, const float*, const float*, const int*,
+                                       const float*, float, float*);
+template void pooled_prediction<double>(int, int, int, int, const double*, const double*, const double*, const int*,
+                                        const double*, double, double*);
+template void pooled_prediction_backward<float>(int, int, int, int, const float*, const float*, const float*,
+                                                const int*, const float*, float, const float*, float*, float*, float*);
+template void pooled_prediction_backward<double>(int, int, int, int, const double*, const double*, const double*,
+                                                 const int*, const double*, double, const double*, double*, double*,
+                                                 double*);
 template float info_nce<float>(const float*, int, const float*, int, int, float, float*, float);
 template double info_nce<double>(const double*, int, const double*, int, int, double, double*, double);
 

@@ -15,8 +15,8 @@ SemanticPass::SemanticPass(const HybridConfig& cfg, const HybridData* data)
     for (int l : data_->views[v].scl) views_with_[l].push_back(v);
 }
 
-std::vector<SclAnchor> draw_scl_anchors(const std::vector<int>& classes_u, const std::vector<std::vector<int>>& views_with,
-                                        int u, std::mt19937_64& rng) {
+std::vector<SclAnchor> draw_scl_anchors(const std::vector<int>& classes_u,
+                                        const std::vector<std::vector<int>>& views_with, int u, std::mt19937_64& rng) {
   std::vector<SclAnchor> anchors;
   for (int j = 0; j < int(classes_u.size()); ++j) {
     // Views holding the class other than u (u itself is in the ascending list, so draw among the others).
@@ -79,7 +79,8 @@ SemanticValues SemanticPass::contrastive(int u, int n, HybridFields& h, const fl
       std::copy(&o.zref[size_t(o.scl[r]) * D_], &o.zref[size_t(o.scl[r] + 1) * D_], &refs_[r * D_]);
       if (o.scl[r] == classes_[j]) pos = int(r);
     }
-    loss += info_nce(&P_[size_t(j) * D_], D_, refs_.data(), int(o.scl.size()), pos, cfg_.tau2, &dP_[size_t(j) * D_], scale);
+    loss +=
+        info_nce(&P_[size_t(j) * D_], D_, refs_.data(), int(o.scl.size()), pos, cfg_.tau2, &dP_[size_t(j) * D_], scale);
   }
   // One pass over the Gaussians: da and dq from the dot products with the current f_n. f's own gradient waits
   // for update(), in factored form: every view of the step sees the same f.
@@ -196,7 +197,8 @@ void SemanticPass::update(int n, HybridFields& h, train::Adam& optim, float scal
   train::AdamParam& p = optim.get(kParam);
   if (fgrad_set_) {  // no-SCL ablation: rows with a semantic gradient
     fgrad_set_ = false;
-    if (fgrad_.size() != size_t(n) * D) fail("hybrid: the semantic gradient holds {} rows, the model {}", fgrad_.size() / D, n);
+    if (fgrad_.size() != size_t(n) * D)
+      fail("hybrid: the semantic gradient holds {} rows, the model {}", fgrad_.size() / D, n);
     auto rows = [&](long i, float* g) {
       const float* src = &fgrad_[size_t(i) * D];
       bool any = false;

@@ -29,8 +29,8 @@ struct SclAnchor {
 // The anchors of view u: every class of classes_u that another view's SCL classes hold, its positive view drawn
 // uniformly among those other views. views_with [L]: ascending training views whose SCL classes hold each label
 // (u's own classes are in their lists). Classes held by no other view are skipped.
-std::vector<SclAnchor> draw_scl_anchors(const std::vector<int>& classes_u, const std::vector<std::vector<int>>& views_with,
-                                        int u, std::mt19937_64& rng);
+std::vector<SclAnchor> draw_scl_anchors(const std::vector<int>& classes_u,
+                                        const std::vector<std::vector<int>>& views_with, int u, std::mt19937_64& rng);
 
 struct SemanticValues {
   double loss = 0;  // mean InfoNCE over the anchors, or the mean cosine loss
@@ -68,10 +68,10 @@ class SemanticPass {
   int L_, D_;
   std::vector<std::vector<int>> views_with_;  // [L] training views whose SCL objects include l
   std::vector<int> classes_;
-  std::vector<float> pixel_w_;                // [H, W, Jf]
-  std::vector<float> P_, dP_, G_;             // [Jf, D] predictions, their gradient, dP / (m + eps)
-  std::vector<float> refs_;                   // [R, D] InfoNCE candidates of one anchor
-  std::vector<float> sref_;                   // [H, W, D] (no-SCL ablation)
+  std::vector<float> pixel_w_;     // [H, W, Jf]
+  std::vector<float> P_, dP_, G_;  // [Jf, D] predictions, their gradient, dP / (m + eps)
+  std::vector<float> refs_;        // [R, D] InfoNCE candidates of one anchor
+  std::vector<float> sref_;        // [H, W, D] (no-SCL ablation)
   // One view's f gradient in factored form: df_n = sum_j q_{n,objs[j]} a_{n,j} G_j.
   struct FactoredView {
     std::vector<int> objs;  // [Jf]

@@ -45,10 +45,10 @@ bool non_empty_dir(const fs::path& d) { return fs::is_directory(d) && !fs::is_em
 
 struct Node {
   int view = 0;
-  int label = 0;     // root id in the per-view map
-  long area = 0;     // pixels
+  int label = 0;            // root id in the per-view map
+  long area = 0;            // pixels
   std::vector<int> points;  // dense point indices inside the mask
-  std::string drop;  // reason when dropped before clustering
+  std::string drop;         // reason when dropped before clustering
   std::vector<int> ids;     // per-view ids folded into it (itself first)
 };
 
@@ -68,15 +68,16 @@ void check_options(const AssociateOptions& opt) {
   if (opt.min_views < 1) fail("--min-views: must be at least 1, got {}", opt.min_views);
   if (opt.min_points < 1) fail("--min-points: must be at least 1, got {}", opt.min_points);
   if (!(opt.max_area > 0 && opt.max_area <= 1)) fail("--max-area: must be in (0, 1], got {}", opt.max_area);
-  if (!(opt.min_affinity > 0 && opt.min_affinity <= 1)) fail("--min-affinity: must be in (0, 1], got {}", opt.min_affinity);
+  if (!(opt.min_affinity > 0 && opt.min_affinity <= 1))
+    fail("--min-affinity: must be in (0, 1], got {}", opt.min_affinity);
 }
 
 // Where the per-view masks are read from and where the associated ones go.
 struct Folders {
-  fs::path masks_dir;        // SCENE/masks
-  fs::path in;               // the per-view input: masks/, or masks/per_view/ once associated
-  bool associated = false;   // masks/associate.json exists
-  bool in_place = false;     // no --out-masks: the result replaces masks/
+  fs::path masks_dir;       // SCENE/masks
+  fs::path in;              // the per-view input: masks/, or masks/per_view/ once associated
+  bool associated = false;  // masks/associate.json exists
+  bool in_place = false;    // no --out-masks: the result replaces masks/
 };
 
 Folders find_folders(const AssociateOptions& opt, const Scene& s) {
@@ -88,8 +89,10 @@ Folders find_folders(const AssociateOptions& opt, const Scene& s) {
     fail("{}: masks are already associated (associate.json); pass --force to associate again from masks/per_view",
          f.masks_dir.string());
   f.in = f.associated ? f.masks_dir / "per_view" : f.masks_dir;
-  if (!fs::is_directory(f.in)) fail("{}: no masks folder (per-view masks/<stem>.png, e.g. from `hgs masks import`)", f.in.string());
-  if (f.associated && !fs::is_directory(f.in)) fail("{}: associate.json but no per_view/ folder with the original masks", f.masks_dir.string());
+  if (!fs::is_directory(f.in))
+    fail("{}: no masks folder (per-view masks/<stem>.png, e.g. from `hgs masks import`)", f.in.string());
+  if (f.associated && !fs::is_directory(f.in))
+    fail("{}: associate.json but no per_view/ folder with the original masks", f.masks_dir.string());
   if (!f.in_place && !opt.force && non_empty_dir(opt.out_masks))
     fail("{}: already exists and is not empty; pass --force to replace it", opt.out_masks.string());
   return f;
@@ -116,8 +119,10 @@ Correspondences read_correspondences(const Scene& s) {
     for (int64_t p : im.point3d_ids) observed += p >= 0 && cc.point_index.count(p);
   }
   if (observed == 0)
-    fail("{}: no keypoint observes a 3D point (the model has no 2D-3D correspondences; run COLMAP's mapper or point_triangulator)",
-         cc.images_file.string());
+    fail(
+        "{}: no keypoint observes a 3D point (the model has no 2D-3D correspondences; run COLMAP's mapper or "
+        "point_triangulator)",
+        cc.images_file.string());
   return cc;
 }
 
@@ -132,7 +137,8 @@ struct InputInfo {
 InputInfo read_input_info(const AssociateOptions& opt, const fs::path& in) {
   InputInfo ii;
   ii.names_file = opt.names.empty() ? json() : read_json(opt.names);
-  if (!opt.names.empty() && !ii.names_file.is_object()) fail("{}: expected {{\"<stem>\": {{\"<id>\": \"name\"}}}}", opt.names.string());
+  if (!opt.names.empty() && !ii.names_file.is_object())
+    fail("{}: expected {{\"<stem>\": {{\"<id>\": \"name\"}}}}", opt.names.string());
   if (fs::exists(in / "objects.json")) {
     json j = read_json(in / "objects.json");
     if (!j.is_object()) fail("{}: expected {{\"<id>\": \"name\"}}", (in / "objects.json").string());
@@ -150,13 +156,15 @@ void check_mask_stems(const Scene& s, const fs::path& in, const fs::path& model_
   std::map<std::string, int> by_stem;
   for (auto& v : s.views) by_stem[v.stem] = v.index;
   for (auto it = fs::recursive_directory_iterator(in); it != fs::recursive_directory_iterator(); ++it) {
-    if (it->is_directory() && (it->path().filename() == "per_view" || it->path().filename().string().starts_with("."))) {
+    if (it->is_directory() &&
+        (it->path().filename() == "per_view" || it->path().filename().string().starts_with("."))) {
       it.disable_recursion_pending();
       continue;
     }
     if (!it->is_regular_file() || it->path().extension() != ".png") continue;
     const std::string stem = fs::relative(it->path(), in).replace_extension().generic_string();
-    if (!by_stem.count(stem)) fail("{}: mask for an image that is not in the COLMAP model ({})", it->path().string(), model_dir.string());
+    if (!by_stem.count(stem))
+      fail("{}: mask for an image that is not in the COLMAP model ({})", it->path().string(), model_dir.string());
   }
 }
 
@@ -165,14 +173,14 @@ void check_mask_stems(const Scene& s, const fs::path& in, const fs::path& model_
 // The nodes of every view and what later phases read per view and per 3D point.
 struct NodeSet {
   std::vector<Node> nodes;
-  std::vector<std::map<int, int>> view_root;  // per view: per-view id -> root id
-  std::vector<std::map<int, int>> view_node;  // per view: root id -> node
-  std::vector<LabelMap> labels;               // per view: root ids [H, W]; empty for a view without masks
-  std::vector<std::vector<float>> reflattened_conf;  // [H, W] per view whose parts were clipped
+  std::vector<std::map<int, int>> view_root;             // per view: per-view id -> root id
+  std::vector<std::map<int, int>> view_node;             // per view: root id -> node
+  std::vector<LabelMap> labels;                          // per view: root ids [H, W]; empty for a view without masks
+  std::vector<std::vector<float>> reflattened_conf;      // [H, W] per view whose parts were clipped
   std::vector<std::vector<PointObservation>> point_obs;  // per 3D point; node: index into `nodes` or -1
-  std::vector<long> core_count;               // per node: keypoints in its core
-  std::vector<std::vector<uint8_t>> cores;    // per view: core pixels (core_pixels) [H, W]
-  std::vector<Eigen::Vector3d> point_xyz;     // [P] COLMAP's points, then the depth tracks' points
+  std::vector<long> core_count;                          // per node: keypoints in its core
+  std::vector<std::vector<uint8_t>> cores;               // per view: core pixels (core_pixels) [H, W]
+  std::vector<Eigen::Vector3d> point_xyz;                // [P] COLMAP's points, then the depth tracks' points
 };
 
 std::map<int, long> label_areas(const LabelMap& m) {
@@ -187,7 +195,8 @@ std::map<int, MaskInfo> import_mask_info(const json& jv, const fs::path& in, con
   std::map<int, MaskInfo> info;
   if (jv.contains("masks") && jv["masks"].is_array())
     for (auto& e : jv["masks"]) {
-      if (!e.is_object() || !e.contains("id")) fail("{}: view {}: mask entry without an id", (in / "import.json").string(), stem);
+      if (!e.is_object() || !e.contains("id"))
+        fail("{}: view {}: mask entry without an id", (in / "import.json").string(), stem);
       MaskInfo mi;
       mi.area = e.value("area", 0.0);
       mi.visible = e.value("visible", 0.0);
@@ -202,7 +211,8 @@ std::map<int, MaskInfo> import_mask_info(const json& jv, const fs::path& in, con
 std::map<int, int> join_view_parts(const AssociateOptions& opt, const InputInfo& ii, const fs::path& in, const View& v,
                                    LabelMap& m, std::map<int, long>& area, std::vector<float>& reflattened_conf) {
   const json& import_info = ii.import_info;
-  if (!(opt.join_parts && import_info.is_object() && import_info.contains("views") && import_info["views"].contains(v.stem)))
+  if (!(opt.join_parts && import_info.is_object() && import_info.contains("views") &&
+        import_info["views"].contains(v.stem)))
     return {};
   std::map<int, MaskInfo> info = import_mask_info(import_info["views"][v.stem], in, v.stem);
   // SAM's own masks still there: part_of again at --part-fraction (import.json's is at 90%, which boundary
@@ -211,7 +221,8 @@ std::map<int, int> join_view_parts(const AssociateOptions& opt, const InputInfo&
   const fs::path src_dir = import_info.value("source", "");
   const fs::path src = fmt_name == "sam-json" ? src_dir / (v.stem + ".json") : src_dir / v.stem;
   std::vector<SourceMask> sm;
-  if ((opt.part_fraction < 0.9 || opt.whole_pixels) && (fmt_name == "sam-json" || fmt_name == "sam-png") && fs::exists(src))
+  if ((opt.part_fraction < 0.9 || opt.whole_pixels) && (fmt_name == "sam-json" || fmt_name == "sam-png") &&
+      fs::exists(src))
     sm = fmt_name == "sam-json" ? read_sam_json(src, v.width, v.height) : read_sam_png_folder(src, v.width, v.height);
   if (opt.part_fraction < 0.9 && !sm.empty()) {
     const std::vector<int> parent = part_of(sm, opt.part_fraction);
@@ -251,7 +262,8 @@ void add_view_nodes(const AssociateOptions& opt, const View& v, const std::map<i
         else n.ids.push_back(l);
       }
     sum.joined_parts += int(n.ids.size()) - 1;
-    if (a > opt.max_area * px) n.drop = fmt::format("background: covers {:.0f}% of the image (> --max-area {})", 100.0 * a / px, opt.max_area);
+    if (a > opt.max_area * px)
+      n.drop = fmt::format("background: covers {:.0f}% of the image (> --max-area {})", 100.0 * a / px, opt.max_area);
     ns.view_node[v.index][r] = int(ns.nodes.size());
     ns.nodes.push_back(std::move(n));
   }
@@ -328,8 +340,10 @@ void add_depth_tracks(const AssociateOptions& opt, const Scene& s, NodeSet& ns, 
     pixels += long(v.width) * v.height;
   }
   const int views_with_depth = int(std::count_if(cams.begin(), cams.end(), [](auto& c) { return c.depth != nullptr; }));
-  const int stride = opt.depth_stride > 0 ? opt.depth_stride
-                                          : std::max(1, int(std::lround(std::sqrt(double(pixels) / std::max(1, views_with_depth) / 4096.0))));
+  const int stride =
+      opt.depth_stride > 0
+          ? opt.depth_stride
+          : std::max(1, int(std::lround(std::sqrt(double(pixels) / std::max(1, views_with_depth) / 4096.0))));
   DepthTracks dt = depth_tracks(cams, stride, opt.depth_tolerance);
   sum.depth_points = long(dt.xyz.size());
   ns.point_obs.resize(ns.point_xyz.size() + dt.xyz.size());
@@ -377,7 +391,8 @@ MaskGraph kept_graph(const AssociateOptions& opt, int num_views, NodeSet& ns, co
   std::vector<std::vector<PointObservation>> point_obs(ns.point_obs.size());
   for (size_t p = 0; p < ns.point_obs.size(); ++p)
     for (auto& o : ns.point_obs[p])
-      point_obs[p].push_back({o.view, o.node >= 0 ? kept_of[o.node] : -1, o.node < 0 || o.core || ns.core_count[o.node] < opt.min_points});
+      point_obs[p].push_back(
+          {o.view, o.node >= 0 ? kept_of[o.node] : -1, o.node < 0 || o.core || ns.core_count[o.node] < opt.min_points});
   MaskGraph g = build_mask_graph(num_views, kept_view, point_obs);
   g.whole.assign(node_of_kept.size(), 0);
   for (size_t k = 0; k < node_of_kept.size(); ++k) g.whole[k] = ns.nodes[node_of_kept[k]].ids.size() > 1;
@@ -406,10 +421,12 @@ Objects cluster_nodes(const AssociateOptions& opt, int num_views, NodeSet& ns, A
   const std::vector<NodeMatch> near = nearest_objects(g, c, alone, co);
   for (size_t i = 0; i < alone.size(); ++i) {
     const NodeMatch& m = near[i];
-    const std::string why = m.object < 0 ? "no 3D point shared with any object"
-                                         : fmt::format("closest object #{} at affinity {:.2f}{}", m.object + 1, m.affinity,
-                                                       m.same_view ? " already has a mask in this view" : " (< --min-affinity)");
-    ns.nodes[node_of_kept[alone[i]]].drop = fmt::format("seen in fewer than --min-views {} views; {}", opt.min_views, why);
+    const std::string why = m.object < 0
+                                ? "no 3D point shared with any object"
+                                : fmt::format("closest object #{} at affinity {:.2f}{}", m.object + 1, m.affinity,
+                                              m.same_view ? " already has a mask in this view" : " (< --min-affinity)");
+    ns.nodes[node_of_kept[alone[i]]].drop =
+        fmt::format("seen in fewer than --min-views {} views; {}", opt.min_views, why);
     ++sum.dropped_few_views;
   }
   return obj;
@@ -506,8 +523,8 @@ std::vector<std::string> member_names(const std::vector<int>& members, const std
     const std::string& stem = s.views[n.view].stem;
     for (int id : n.ids) {
       const std::string key = std::to_string(id);
-      if (names_file.is_object() && names_file.contains(stem) && names_file[stem].is_object() && names_file[stem].contains(key) &&
-          names_file[stem][key].is_string()) {
+      if (names_file.is_object() && names_file.contains(stem) && names_file[stem].is_object() &&
+          names_file[stem].contains(key) && names_file[stem][key].is_string()) {
         names.push_back(names_file[stem][key].get<std::string>());
         break;
       }
@@ -536,7 +553,8 @@ std::vector<int> number_objects(const AssociateOptions& opt, const Scene& s, con
     const bool surface = spread[k] > opt.surface_spread;
     if (surface && opt.drop_surfaces) {
       for (int ni : members[k])
-        nodes[ni].drop = fmt::format("surface: 3D spread {:.2f} of the scene's (> --surface-spread {})", spread[k], opt.surface_spread);
+        nodes[ni].drop = fmt::format("surface: 3D spread {:.2f} of the scene's (> --surface-spread {})", spread[k],
+                                     opt.surface_spread);
       ++sum.dropped_surface;
       continue;
     }
@@ -575,22 +593,26 @@ void write_confidence(const AssociateOptions& opt, const InputInfo& ii, const fs
   if (flat && opt.edge_ramp > 0) edge_ramp_confidence(out, opt.edge_ramp, conf);
   if (!conf.empty())
     write_npy(tmp / (v.stem + ".conf.npy"), make_npy_f32({size_t(v.height), size_t(v.width)}, conf.data()));
-  else if (fs::exists(conf_file))
-    fs::copy_file(conf_file, tmp / (v.stem + ".conf.npy"));
+  else if (fs::exists(conf_file)) fs::copy_file(conf_file, tmp / (v.stem + ".conf.npy"));
 }
 
 // Writes view v's mask with the final ids (and its confidence) into tmp; returns its per-view id -> final id
 // record and appends its dropped masks to `dropped`.
-json write_view(const AssociateOptions& opt, const InputInfo& ii, const fs::path& in, const fs::path& tmp, const View& v,
-                const Objects& obj, const std::vector<int>& final_id, NodeSet& ns, json& dropped) {
+json write_view(const AssociateOptions& opt, const InputInfo& ii, const fs::path& in, const fs::path& tmp,
+                const View& v, const Objects& obj, const std::vector<int>& final_id, NodeSet& ns, json& dropped) {
   std::map<int, int> new_id;  // root id -> final id (0 = dropped)
   json jv = json::object();
   for (auto& [r, ni] : ns.view_node[v.index]) {
     const Node& n = ns.nodes[ni];
     const int k = obj.object_of[ni];
     new_id[r] = k >= 0 ? final_id[k] : 0;
-    if (new_id[r] == 0) dropped.push_back({{"view", v.stem}, {"id", r}, {"ids", n.ids}, {"pixels", n.area},
-                                          {"points", n.points.size()}, {"reason", n.drop}});
+    if (new_id[r] == 0)
+      dropped.push_back({{"view", v.stem},
+                         {"id", r},
+                         {"ids", n.ids},
+                         {"pixels", n.area},
+                         {"points", n.points.size()},
+                         {"reason", n.drop}});
   }
   for (auto& [l, r] : ns.view_root[v.index]) jv[std::to_string(l)] = new_id[r] ? json(new_id[r]) : json(nullptr);
   LabelMap out = ns.labels[v.index];
@@ -603,18 +625,28 @@ json write_view(const AssociateOptions& opt, const InputInfo& ii, const fs::path
 }
 
 // associate.json: the options, the counts, the objects, the dropped masks and every view's id table.
-json report_json(const AssociateOptions& opt, const Folders& f, const fs::path& images_file, const AssociateSummary& sum,
-                 const json& list, const json& dropped, const json& views) {
+json report_json(const AssociateOptions& opt, const Folders& f, const fs::path& images_file,
+                 const AssociateSummary& sum, const json& list, const json& dropped, const json& views) {
   // Where the per-view input is after this run (in place: masks/per_view, whatever it was read from).
   return {{"source", fs::absolute(f.in_place ? f.masks_dir / "per_view" : f.in).lexically_normal().string()},
           {"colmap", images_file.string()},
-          {"options", {{"min_affinity", opt.min_affinity}, {"min_views", opt.min_views}, {"min_points", opt.min_points},
-                       {"max_area", opt.max_area}, {"core_margin", opt.core_margin}, {"attach", opt.attach},
-                       {"join_parts", opt.join_parts}, {"part_fraction", opt.part_fraction},
-                       {"part_merge", opt.part_merge}, {"whole_pixels", opt.whole_pixels}, {"edge_ramp", opt.edge_ramp},
-                       {"drop_surfaces", opt.drop_surfaces}, {"surface_spread", opt.surface_spread},
-                       {"depth", bool(opt.depth)}, {"depth_stride", opt.depth_stride},
-                       {"depth_tolerance", opt.depth_tolerance}}},
+          {"options",
+           {{"min_affinity", opt.min_affinity},
+            {"min_views", opt.min_views},
+            {"min_points", opt.min_points},
+            {"max_area", opt.max_area},
+            {"core_margin", opt.core_margin},
+            {"attach", opt.attach},
+            {"join_parts", opt.join_parts},
+            {"part_fraction", opt.part_fraction},
+            {"part_merge", opt.part_merge},
+            {"whole_pixels", opt.whole_pixels},
+            {"edge_ramp", opt.edge_ramp},
+            {"drop_surfaces", opt.drop_surfaces},
+            {"surface_spread", opt.surface_spread},
+            {"depth", bool(opt.depth)},
+            {"depth_stride", opt.depth_stride},
+            {"depth_tolerance", opt.depth_tolerance}}},
           {"colmap_points", sum.colmap_points},
           {"depth_points", sum.depth_points},
           {"views_with_masks", sum.views_with_masks},
@@ -675,8 +707,13 @@ void write_output(const AssociateOptions& opt, const Scene& s, const Folders& f,
     json objects = json::object(), list = json::array();
     for (auto& o : sum.objects) {
       objects[std::to_string(o.id)] = o.name;
-      list.push_back({{"id", o.id}, {"name", o.name}, {"views", o.views}, {"masks", o.masks}, {"points", o.points},
-                      {"spread", std::round(o.spread * 1000) / 1000}, {"surface", o.surface}});
+      list.push_back({{"id", o.id},
+                      {"name", o.name},
+                      {"views", o.views},
+                      {"masks", o.masks},
+                      {"points", o.points},
+                      {"spread", std::round(o.spread * 1000) / 1000},
+                      {"surface", o.surface}});
     }
     atomic_write_text(tmp / "objects.json", objects.dump(2) + "\n");
     const json report = report_json(opt, f, cc.images_file, sum, list, dropped, views);

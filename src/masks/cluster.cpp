@@ -49,8 +49,8 @@ MaskGraph build_mask_graph(int num_views, const std::vector<int>& node_view,
 namespace {
 
 struct Cluster {
-  std::vector<int64_t> count, visible;             // [V] nodes in view v, nodes visible in view v
-  std::map<int, std::pair<double, double>> nbr;    // other cluster -> (sum c(this -> other), sum c(other -> this))
+  std::vector<int64_t> count, visible;           // [V] nodes in view v, nodes visible in view v
+  std::map<int, std::pair<double, double>> nbr;  // other cluster -> (sum c(this -> other), sum c(other -> this))
   std::vector<int> nodes;
   int stamp = 0;
   bool alive = true;
@@ -63,7 +63,8 @@ bool visible_in(const MaskGraph& g, int a, int v, const ClusterOptions& opt) {
 
 double affinity(const Cluster& x, const Cluster& y, const std::pair<double, double>& s) {
   double pxy = 0, pyx = 0;
-  for (size_t v = 0; v < x.count.size(); ++v) pxy += double(x.visible[v]) * double(y.count[v]), pyx += double(y.visible[v]) * double(x.count[v]);
+  for (size_t v = 0; v < x.count.size(); ++v)
+    pxy += double(x.visible[v]) * double(y.count[v]), pyx += double(y.visible[v]) * double(x.count[v]);
   if (pxy <= 0 || pyx <= 0) return 0;
   return std::sqrt((s.first / pxy) * (s.second / pyx));
 }
@@ -94,7 +95,8 @@ double containment(const MaskGraph& g, int a, int b, int64_t inter, const Cluste
 
 }  // namespace
 
-double cluster_affinity(const MaskGraph& g, const std::vector<int>& x, const std::vector<int>& y, const ClusterOptions& opt) {
+double cluster_affinity(const MaskGraph& g, const std::vector<int>& x, const std::vector<int>& y,
+                        const ClusterOptions& opt) {
   std::vector<char> in_x(g.node_view.size(), 0), in_y(g.node_view.size(), 0);
   for (int a : x) in_x[a] = 1;
   for (int b : y) in_y[b] = 1;
@@ -234,7 +236,9 @@ void merge_parts(const MaskGraph& g, const ClusterOptions& opt, std::vector<Clus
     const auto [x, y] = best->first;
     merge(g, cl, x, y);
     for (auto it = score.begin(); it != score.end();)
-      it = it->first.first == x || it->first.second == x || it->first.first == y || it->first.second == y ? score.erase(it) : std::next(it);
+      it = it->first.first == x || it->first.second == x || it->first.first == y || it->first.second == y
+               ? score.erase(it)
+               : std::next(it);
     for (auto& [c, xy] : cl[x].nbr) {
       rescore(x, c);
       rescore(c, x);
@@ -296,7 +300,8 @@ std::vector<NodeMatch> nearest_objects(const MaskGraph& g, const Clustering& c, 
     }
   std::vector<char> wanted(g.node_view.size(), 0);
   for (int n : nodes) wanted[n] = 1;
-  std::vector<std::map<int, std::pair<double, double>>> sums(g.node_view.size());  // node -> object -> (c(n->o), c(o->n))
+  std::vector<std::map<int, std::pair<double, double>>> sums(
+      g.node_view.size());  // node -> object -> (c(n->o), c(o->n))
   for (auto& [ab, n] : g.inter) {
     const auto [a, b] = ab;
     if (wanted[a] && c.cluster[b] >= 0) {

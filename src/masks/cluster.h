@@ -41,9 +41,9 @@ namespace hgs::masks {
 
 struct MaskGraph {
   int num_views = 0;
-  std::vector<int> node_view;                          // [N] view of each node
-  std::vector<int64_t> points;                         // [N] core 3D points of each node
-  std::vector<std::vector<int32_t>> covis;             // [N, V] core points of the node that view v observes (0 at its own view)
+  std::vector<int> node_view;               // [N] view of each node
+  std::vector<int64_t> points;              // [N] core 3D points of each node
+  std::vector<std::vector<int32_t>> covis;  // [N, V] core points of the node that view v observes (0 at its own view)
   std::vector<char> whole;  // [N] optional: 1 = a whole mask whose parts were folded into it (SAM's whole + parts)
   // (a < b) -> (core points of a inside b, core points of b inside a), sorted by (a, b), only pairs sharing a point
   std::vector<std::pair<std::pair<int, int>, std::pair<int64_t, int64_t>>> inter;
@@ -62,11 +62,12 @@ MaskGraph build_mask_graph(int num_views, const std::vector<int>& node_view,
                            const std::vector<std::vector<PointObservation>>& point_obs);
 
 struct ClusterOptions {
-  double min_affinity = 0.3;   // smallest two-way containment (geometric mean) to merge
-  double min_covisible = 0.25; // a node is visible in view v when that share of its points (and min_points) is seen there
+  double min_affinity = 0.3;  // smallest two-way containment (geometric mean) to merge
+  double min_covisible =
+      0.25;  // a node is visible in view v when that share of its points (and min_points) is seen there
   int min_points = 3;
-  int min_views = 2;           // clusters seen in fewer views are dropped
-  double part_merge = 0.5;     // a cluster this contained in another's whole masks joins it as a part (0 = never)
+  int min_views = 2;        // clusters seen in fewer views are dropped
+  double part_merge = 0.5;  // a cluster this contained in another's whole masks joins it as a part (0 = never)
 };
 
 struct Clustering {
@@ -76,7 +77,8 @@ struct Clustering {
 };
 
 // Affinity of two node sets (exposed for tests and reports): geometric mean of the two average containments above.
-double cluster_affinity(const MaskGraph& g, const std::vector<int>& x, const std::vector<int>& y, const ClusterOptions& opt = {});
+double cluster_affinity(const MaskGraph& g, const std::vector<int>& x, const std::vector<int>& y,
+                        const ClusterOptions& opt = {});
 
 Clustering cluster_masks(const MaskGraph& g, const ClusterOptions& opt = {});
 

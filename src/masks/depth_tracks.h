@@ -16,10 +16,10 @@ namespace hgs::masks {
 
 struct DepthCamera {
   int width = 0, height = 0;
-  double fx = 0, fy = 0, cx = 0, cy = 0;             // pixel (x, y) has its centre at (x + 0.5, y + 0.5)
-  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();   // world -> camera
+  double fx = 0, fy = 0, cx = 0, cy = 0;            // pixel (x, y) has its centre at (x + 0.5, y + 0.5)
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  // world -> camera
   Eigen::Vector3d t = Eigen::Vector3d::Zero();
-  const float* depth = nullptr;                      // [H, W] camera z; <= 0 or non-finite = no depth; null = view has none
+  const float* depth = nullptr;  // [H, W] camera z; <= 0 or non-finite = no depth; null = view has none
 };
 
 struct DepthObservation {
@@ -28,8 +28,8 @@ struct DepthObservation {
 };
 
 struct DepthTracks {
-  std::vector<Eigen::Vector3d> xyz;                       // [P] lifted points
-  std::vector<std::vector<DepthObservation>> obs;         // [P][track] views that see it (its own view first)
+  std::vector<Eigen::Vector3d> xyz;                // [P] lifted points
+  std::vector<std::vector<DepthObservation>> obs;  // [P][track] views that see it (its own view first)
 };
 
 // Tracks of the pixels of every view on a `stride` grid (offset stride / 2). Points seen by no view but their

@@ -40,7 +40,7 @@ std::vector<int> part_of(const std::vector<SourceMask>& masks, double min_fracti
       pos += c[k];
     }
   }
-  std::sort(events.begin(), events.end());  // at one position ends (negative) come before starts
+  std::sort(events.begin(), events.end());          // at one position ends (negative) come before starts
   std::map<std::pair<int, int>, uint64_t> overlap;  // (i, j), i < j -> shared pixels
   std::vector<int> active;
   uint64_t last = 0;
@@ -70,7 +70,8 @@ Flattened flatten_masks(const std::vector<SourceMask>& masks, int width, int hei
   std::vector<size_t> order(M);
   std::iota(order.begin(), order.end(), 0);
   // Painted first = largest; among equal areas the later-listed mask first, so the earlier one wins.
-  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return area[a] != area[b] ? area[a] > area[b] : a > b; });
+  std::sort(order.begin(), order.end(),
+            [&](size_t a, size_t b) { return area[a] != area[b] ? area[a] > area[b] : a > b; });
   Flattened f;
   f.labels = LabelMap(width, height);
   for (size_t i : order) {
@@ -78,7 +79,8 @@ Flattened flatten_masks(const std::vector<SourceMask>& masks, int width, int hei
     uint64_t pos = 0;
     for (size_t k = 0; k < r.counts.size(); ++k) {
       if (k & 1)
-        for (uint64_t p = pos; p < pos + r.counts[k]; ++p) f.labels.v[(p % height) * width + p / height] = uint16_t(i + 1);
+        for (uint64_t p = pos; p < pos + r.counts[k]; ++p)
+          f.labels.v[(p % height) * width + p / height] = uint16_t(i + 1);
       pos += r.counts[k];
     }
   }
@@ -89,7 +91,10 @@ Flattened flatten_masks(const std::vector<SourceMask>& masks, int width, int hei
   std::vector<float> score(M + 1, 1.f);
   for (size_t i = 0; i < M; ++i) {
     const double c = mask_confidence(masks[i]);
-    if (c >= 0) { any_score = true; score[i + 1] = float(c); }
+    if (c >= 0) {
+      any_score = true;
+      score[i + 1] = float(c);
+    }
   }
   if (any_score) {
     f.confidence.resize(f.labels.v.size());

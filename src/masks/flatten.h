@@ -17,10 +17,10 @@
 namespace hgs::masks {
 
 struct SourceMask {
-  Rle rle;                       // the mask itself (column-major runs, see rle.h)
-  double predicted_iou = -1;     // SAM's scores when given (< 0 = absent)
+  Rle rle;                    // the mask itself (column-major runs, see rle.h)
+  double predicted_iou = -1;  // SAM's scores when given (< 0 = absent)
   double stability_score = -1;
-  std::string source;            // where it came from, e.g. "frame_00001.json[3]" or "frame_00001/3.png"
+  std::string source;  // where it came from, e.g. "frame_00001.json[3]" or "frame_00001/3.png"
 };
 
 // Pixels inside (the sum of the 1-runs).

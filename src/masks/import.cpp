@@ -60,7 +60,9 @@ std::vector<Job> match_files(const Scene& s, const ImportOptions& opt, const fs:
     std::map<std::string, int> by_key;
     for (auto& v : s.views) {
       auto [it, fresh] = by_key.emplace(langsplat_key(v.name), v.index);
-      if (!fresh) fail("{}: images '{}' and '{}' have the same LangSplat file name '{}'", opt.dir.string(), s.views[it->second].name, v.name, it->first);
+      if (!fresh)
+        fail("{}: images '{}' and '{}' have the same LangSplat file name '{}'", opt.dir.string(),
+             s.views[it->second].name, v.name, it->first);
     }
     std::map<int, Job> found;
     for (auto& e : fs::directory_iterator(opt.dir)) {
@@ -75,7 +77,8 @@ std::vector<Job> match_files(const Scene& s, const ImportOptions& opt, const fs:
     }
     for (auto& [v, j] : found) {
       if (j.file.empty()) fail("{}: no seg map {}_s.npy beside it", j.file2.string(), langsplat_key(s.views[v].name));
-      if (j.file2.empty()) fail("{}: no feature file {}_f.npy beside it", j.file.string(), langsplat_key(s.views[v].name));
+      if (j.file2.empty())
+        fail("{}: no feature file {}_f.npy beside it", j.file.string(), langsplat_key(s.views[v].name));
       jobs.push_back(j);
     }
     return jobs;
@@ -113,7 +116,8 @@ int check_options(const ImportOptions& opt) {
     fail("--from: unknown format '{}' (sam-json, sam-png, sam2-png or langsplat)", opt.from);
   if (opt.level_given && opt.from != "langsplat") fail("--level: only LangSplat output has levels (--from langsplat)");
   const int level = langsplat_level(opt.level);
-  if (opt.feature_stride < 1 || opt.feature_stride > 256) fail("--feature-stride: must be between 1 and 256, got {}", opt.feature_stride);
+  if (opt.feature_stride < 1 || opt.feature_stride > 256)
+    fail("--feature-stride: must be between 1 and 256, got {}", opt.feature_stride);
   if (!fs::is_directory(opt.dir)) fail("{}: mask folder not found", opt.dir.string());
   return level;
 }
@@ -122,7 +126,7 @@ int check_options(const ImportOptions& opt) {
 struct Output {
   fs::path masks_dir, feat_dir;  // SCENE/masks, SCENE/features
   fs::path tmp_masks, tmp_feat;
-  std::string suffix;            // of the temporary and old folders' names
+  std::string suffix;  // of the temporary and old folders' names
 };
 
 // LangSplat, one view: the label map of `level` and the feature grid; returns the view's import.json record.
@@ -146,13 +150,17 @@ json import_sam_view(const ImportOptions& opt, const Job& j, const View& v, cons
   Flattened f = flatten_masks(src, v.width, v.height);
   save_label_png(out.tmp_masks / (v.stem + ".png"), f.labels);
   if (!f.confidence.empty()) {
-    write_npy(out.tmp_masks / (v.stem + ".conf.npy"), make_npy_f32({size_t(v.height), size_t(v.width)}, f.confidence.data()));
+    write_npy(out.tmp_masks / (v.stem + ".conf.npy"),
+              make_npy_f32({size_t(v.height), size_t(v.width)}, f.confidence.data()));
     sum.confidence = true;
   }
   const std::vector<int> parent = part_of(src);
   json list = json::array();
   for (size_t i = 0; i < src.size(); ++i) {
-    list.push_back({{"id", i + 1}, {"source", src[i].source}, {"area", rle_area(src[i].rle)}, {"visible", f.visible[i]},
+    list.push_back({{"id", i + 1},
+                    {"source", src[i].source},
+                    {"area", rle_area(src[i].rle)},
+                    {"visible", f.visible[i]},
                     {"part_of", parent[i] >= 0 ? json(parent[i] + 1) : json(nullptr)},
                     {"predicted_iou", score_json(src[i].predicted_iou)},
                     {"stability_score", score_json(src[i].stability_score)}});
@@ -167,12 +175,12 @@ json import_record(const ImportOptions& opt, const json& views) {
   const bool langsplat = opt.from == "langsplat";
   json meta = {{"format", opt.from},
                {"source", fs::absolute(opt.dir).lexically_normal().string()},
-               {"ids", langsplat ? "index into LangSplat's concatenated mask list + 1 (per view)"
+               {"ids", langsplat                ? "index into LangSplat's concatenated mask list + 1 (per view)"
                        : opt.from == "sam2-png" ? "as in the label maps (SAM2's object ids)"
                                                 : "1 + position of the mask in the view's list (per view)"},
                {"rule", opt.from == "sam2-png" ? "none (one label per pixel already)"
-                        : langsplat ? "LangSplat's: within a level, later masks overwrite earlier ones"
-                                    : "smallest mask wins; equal areas: the mask listed first"},
+                        : langsplat            ? "LangSplat's: within a level, later masks overwrite earlier ones"
+                                               : "smallest mask wins; equal areas: the mask listed first"},
                {"views", views}};
   if (langsplat) meta["level"] = opt.level, meta["feature_stride"] = opt.feature_stride;
   return meta;
@@ -230,7 +238,8 @@ ImportSummary import_masks(const ImportOptions& opt) {
   const bool langsplat = opt.from == "langsplat";
   Output out;
   out.masks_dir = s.root / "masks", out.feat_dir = s.root / "features";
-  if (!opt.force && non_empty_dir(out.masks_dir)) fail("{}: already holds masks; pass --force to replace them", out.masks_dir.string());
+  if (!opt.force && non_empty_dir(out.masks_dir))
+    fail("{}: already holds masks; pass --force to replace them", out.masks_dir.string());
   if (!opt.force && langsplat && non_empty_dir(out.feat_dir))
     fail("{}: already holds features; pass --force to replace them", out.feat_dir.string());
 

@@ -20,14 +20,14 @@ struct ImportOptions {
 };
 
 struct ImportSummary {
-  int views = 0;                       // views in the COLMAP model
-  int imported = 0;                    // views that got a label map
-  size_t masks = 0;                    // source masks read (all views)
-  size_t hidden = 0;                   // of which no pixel is left after flattening
-  bool confidence = false;             // masks/<stem>.conf.npy written
-  bool features = false;               // features/<stem>.npy written
+  int views = 0;                                // views in the COLMAP model
+  int imported = 0;                             // views that got a label map
+  size_t masks = 0;                             // source masks read (all views)
+  size_t hidden = 0;                            // of which no pixel is left after flattening
+  bool confidence = false;                      // masks/<stem>.conf.npy written
+  bool features = false;                        // features/<stem>.npy written
   int feature_dim = 0, grid_w = 0, grid_h = 0;  // last feature grid
-  std::vector<std::string> missing;    // view names without a source file
+  std::vector<std::string> missing;             // view names without a source file
 };
 
 const std::vector<std::string>& import_formats();

@@ -21,10 +21,13 @@ namespace fs = std::filesystem;
 std::vector<int64_t> read_npy_integers(const fs::path& file, std::vector<size_t>& shape) {
   const std::string name = file.string();
   auto b = read_file_bytes(file);
-  if (b.size() < 10 || b[0] != 0x93 || std::string(b.begin() + 1, b.begin() + 6) != "NUMPY") fail("{}: not an NPY file", name);
+  if (b.size() < 10 || b[0] != 0x93 || std::string(b.begin() + 1, b.begin() + 6) != "NUMPY")
+    fail("{}: not an NPY file", name);
   size_t hlen, hstart;
-  if (b[6] == 1) { hlen = b[8] | (b[9] << 8); hstart = 10; }
-  else if (b[6] == 2 || b[6] == 3) {
+  if (b[6] == 1) {
+    hlen = b[8] | (b[9] << 8);
+    hstart = 10;
+  } else if (b[6] == 2 || b[6] == 3) {
     if (b.size() < 12) fail("{}: truncated NPY header", name);
     hlen = b[8] | (b[9] << 8) | (b[10] << 16) | (size_t(b[11]) << 24);
     hstart = 12;
@@ -33,13 +36,16 @@ std::vector<int64_t> read_npy_integers(const fs::path& file, std::vector<size_t>
   if (hstart + hlen > b.size()) fail("{}: truncated NPY header", name);
   const std::string h(reinterpret_cast<const char*>(b.data() + hstart), hlen);
   std::smatch m;
-  if (!std::regex_search(h, m, std::regex(R"('descr'\s*:\s*'([<|=]?)([fiu])(\d)')"))) fail("{}: NPY dtype is not a little-endian integer or float type", name);
+  if (!std::regex_search(h, m, std::regex(R"('descr'\s*:\s*'([<|=]?)([fiu])(\d)')")))
+    fail("{}: NPY dtype is not a little-endian integer or float type", name);
   const char kind = std::string(m[2])[0];
   const int bytes = std::stoi(m[3]);
-  const bool ok = (kind == 'f' && (bytes == 2 || bytes == 4 || bytes == 8)) || (kind == 'i' && (bytes == 1 || bytes == 2 || bytes == 4 || bytes == 8)) ||
+  const bool ok = (kind == 'f' && (bytes == 2 || bytes == 4 || bytes == 8)) ||
+                  (kind == 'i' && (bytes == 1 || bytes == 2 || bytes == 4 || bytes == 8)) ||
                   (kind == 'u' && (bytes == 1 || bytes == 2 || bytes == 4));
   if (!ok) fail("{}: unsupported NPY dtype {}{}", name, kind, bytes);
-  if (std::regex_search(h, m, std::regex(R"('fortran_order'\s*:\s*True)"))) fail("{}: Fortran-order NPY arrays are not supported", name);
+  if (std::regex_search(h, m, std::regex(R"('fortran_order'\s*:\s*True)")))
+    fail("{}: Fortran-order NPY arrays are not supported", name);
   if (!std::regex_search(h, m, std::regex(R"('shape'\s*:\s*\(([^)]*)\))"))) fail("{}: NPY header has no 'shape'", name);
   shape = parse_npy_shape(m[1], size_t(bytes), name);  // dimensions and body size checked against overflow
   size_t n = 1;
@@ -52,8 +58,11 @@ std::vector<int64_t> read_npy_integers(const fs::path& file, std::vector<size_t>
     double v;
     if (kind == 'f') {
       if (bytes == 2) v = half_to_float(uint16_t(p[0] | (p[1] << 8)));
-      else if (bytes == 4) { float f; std::memcpy(&f, p, 4); v = f; }
-      else std::memcpy(&v, p, 8);
+      else if (bytes == 4) {
+        float f;
+        std::memcpy(&f, p, 4);
+        v = f;
+      } else std::memcpy(&v, p, 8);
       if (!std::isfinite(v) || v != std::floor(v)) fail("{}: element {} is {}, not an integer", name, i, v);
       if (std::abs(v) > 9.0e18) fail("{}: element {} is {}, out of range", name, i, v);  // int64 cast undefined
       out[i] = int64_t(v);
@@ -71,19 +80,23 @@ std::vector<int64_t> read_npy_integers(const fs::path& file, std::vector<size_t>
   return out;
 }
 
-LangSplatView read_langsplat(const fs::path& seg_file, const fs::path& feat_file, int level, int width, int height, int stride) {
+LangSplatView read_langsplat(const fs::path& seg_file, const fs::path& feat_file, int level, int width, int height,
+                             int stride) {
   std::vector<size_t> shape;
   const std::vector<int64_t> seg = read_npy_integers(seg_file, shape);
-  if (shape.size() != 3) fail("{}: seg map must be [levels, h, w], found {} dimensions", seg_file.string(), shape.size());
+  if (shape.size() != 3)
+    fail("{}: seg map must be [levels, h, w], found {} dimensions", seg_file.string(), shape.size());
   const int L = int(shape[0]), h = int(shape[1]), w = int(shape[2]);
   if (level >= L) fail("{}: has {} levels, level {} asked", seg_file.string(), L, level);
   if (h <= 0 || w <= 0) fail("{}: empty seg map", seg_file.string());
   // LangSplat may have resized the image (to 1080 lines by default); accept the same aspect ratio.
   if (std::abs(double(w) / h - double(width) / height) > 0.02 * double(width) / height)
-    fail("{}: seg map is {}x{} but the image is {}x{} (a different aspect ratio)", seg_file.string(), w, h, width, height);
+    fail("{}: seg map is {}x{} but the image is {}x{} (a different aspect ratio)", seg_file.string(), w, h, width,
+         height);
   NpyArray f = read_npy(feat_file);
   if (f.shape.size() != 2) fail("{}: features must be [M, D], found {} dimensions", feat_file.string(), f.shape.size());
-  if (f.dtype != DType::F32 && f.dtype != DType::F16) fail("{}: features must be float16 or float32", feat_file.string());
+  if (f.dtype != DType::F32 && f.dtype != DType::F16)
+    fail("{}: features must be float16 or float32", feat_file.string());
   const int M = int(f.shape[0]), D = int(f.shape[1]);
   if (D <= 0) fail("{}: features have dimension 0", feat_file.string());
   if (M + 1 > 65535) fail("{}: {} masks do not fit in a 16-bit label map", feat_file.string(), M);
@@ -91,8 +104,8 @@ LangSplatView read_langsplat(const fs::path& seg_file, const fs::path& feat_file
   const int64_t* lv = seg.data() + size_t(level) * h * w;  // [h, w]
   for (size_t p = 0; p < size_t(h) * w; ++p)
     if (lv[p] < -1 || lv[p] >= M)
-      fail("{}: index {} at pixel ({}, {}) of level {} is beyond the feature list ({} has {} masks)", seg_file.string(), lv[p],
-           p % w, p / w, level, feat_file.string(), M);
+      fail("{}: index {} at pixel ({}, {}) of level {} is beyond the feature list ({} has {} masks)", seg_file.string(),
+           lv[p], p % w, p / w, level, feat_file.string(), M);
   LangSplatView out;
   out.num_masks = M;
   out.dim = D;
@@ -112,7 +125,10 @@ LangSplatView read_langsplat(const fs::path& seg_file, const fs::path& feat_file
       for (int y = gy * stride; y < std::min(h, (gy + 1) * stride); ++y)
         for (int x = gx * stride; x < std::min(w, (gx + 1) * stride); ++x) {
           const int64_t l = lv[size_t(y) * w + x];
-          if (l >= 0) { count[l]++; ++n; }
+          if (l >= 0) {
+            count[l]++;
+            ++n;
+          }
         }
       if (!n) continue;
       float* g = &out.grid[(size_t(gy) * out.grid_w + gx) * D];

@@ -17,7 +17,8 @@ std::vector<uint8_t> core_pixels(const LabelMap& m, int r) {
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
       uint16_t lo = 65535, hi = 0;
-      for (int dx = std::max(0, x - r); dx <= std::min(W - 1, x + r); ++dx) lo = std::min(lo, m.at(dx, y)), hi = std::max(hi, m.at(dx, y));
+      for (int dx = std::max(0, x - r); dx <= std::min(W - 1, x + r); ++dx)
+        lo = std::min(lo, m.at(dx, y)), hi = std::max(hi, m.at(dx, y));
       hmin[size_t(y) * W + x] = lo, hmax[size_t(y) * W + x] = hi;
     }
   for (int y = 0; y < H; ++y)

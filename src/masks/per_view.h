@@ -16,7 +16,7 @@ namespace hgs::masks {
 // pixel's label. Separable min / max filters over the labels: O(H W r).
 std::vector<uint8_t> core_pixels(const LabelMap& m, int r);
 
-struct MaskInfo {  // one id of import.json
+struct MaskInfo {      // one id of import.json
   double area = 0;     // the mask's own pixels
   double visible = 0;  // pixels it kept after flattening
   int part_of = 0;     // id of the whole it is a part of, 0 = none

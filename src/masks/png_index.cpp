@@ -47,7 +47,8 @@ LabelMap decode_index_png(const uint8_t* b, size_t size, const std::string& name
     if (len > size - p - 12) fail("{}: truncated PNG chunk", name);
     const std::string type(reinterpret_cast<const char*>(b + p + 4), 4);
     const uint8_t* data = b + p + 8;
-    if (be32(data + len) != uint32_t(crc32(0L, b + p + 4, uInt(len + 4)))) fail("{}: corrupt PNG (CRC of chunk {} is wrong)", name, type);
+    if (be32(data + len) != uint32_t(crc32(0L, b + p + 4, uInt(len + 4))))
+      fail("{}: corrupt PNG (CRC of chunk {} is wrong)", name, type);
     if (type == "IHDR") {
       if (len != 13) fail("{}: corrupt PNG (IHDR has {} bytes)", name, len);
       w = int(be32(data));
@@ -70,7 +71,8 @@ LabelMap decode_index_png(const uint8_t* b, size_t size, const std::string& name
   if (!have_iend) fail("{}: truncated PNG (no IEND chunk)", name);
   if (w <= 0 || h <= 0 || w > (1 << 20) || h > (1 << 20)) fail("{}: PNG size {}x{} is not valid", name, w, h);
   if (ctype == 2 || ctype == 6)
-    fail("{}: colour PNG ({}): a label map must be a palette (indexed) or greyscale PNG", name, ctype == 2 ? "RGB" : "RGBA");
+    fail("{}: colour PNG ({}): a label map must be a palette (indexed) or greyscale PNG", name,
+         ctype == 2 ? "RGB" : "RGBA");
   if (ctype == 4) fail("{}: grey+alpha PNG: a label map must be a palette (indexed) or greyscale PNG", name);
   if (ctype != 0 && ctype != 3) fail("{}: PNG colour type {} is not valid", name, ctype);
   if (ctype == 3 && !have_plte) fail("{}: palette PNG without a palette (no PLTE chunk)", name);

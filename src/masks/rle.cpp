@@ -24,7 +24,8 @@ std::vector<uint32_t> rle_counts_from_string(const std::string& s, const std::st
       if (!more && (ch & 0x10)) x |= -(int64_t(1) << (5 * k));  // sign of the last group
     }
     if (c.size() > 2) x += c[c.size() - 2];
-    if (x < 0 || x > int64_t(UINT32_MAX)) fail("{}: RLE count {} at position {} is negative or too large", where, x, c.size());
+    if (x < 0 || x > int64_t(UINT32_MAX))
+      fail("{}: RLE count {} at position {} is negative or too large", where, x, c.size());
     c.push_back(x);
   }
   return std::vector<uint32_t>(c.begin(), c.end());

@@ -31,8 +31,7 @@ MaskScore score_masks(const fs::path& scene, const fs::path& masks_dir, int min_
       if (pr.v[i]) ++c.pred_area[pr.v[i]];
       if (gt.v[i] && pr.v[i]) ++c.inter[{pr.v[i], gt.v[i]}];
     }
-    for (auto& [pg, n] : c.inter)
-      total[pg] += double(n) / double(c.pred_area[pg.first] + c.gt_area[pg.second] - n);
+    for (auto& [pg, n] : c.inter) total[pg] += double(n) / double(c.pred_area[pg.first] + c.gt_area[pg.second] - n);
     vc.push_back(std::move(c));
   }
   if (vc.empty()) fail("{}: no view has both a mask in {} and gt/instances/<name>", scene.string(), masks_dir.string());

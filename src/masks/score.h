@@ -10,12 +10,12 @@
 namespace hgs::masks {
 
 struct MaskScore {
-  int views = 0;                 // views with both a mask and a gt instance map
-  int pairs = 0;                 // (view, object) pairs scored
-  double mean_iou = 0;           // mean over the pairs
-  double object_mean_iou = 0;    // mean over objects of their mean over views
-  double pairs_above_half = 0;   // fraction of pairs with IoU >= 0.5
-  std::map<int, int> match;      // true object -> mask id (objects without a match absent)
+  int views = 0;                     // views with both a mask and a gt instance map
+  int pairs = 0;                     // (view, object) pairs scored
+  double mean_iou = 0;               // mean over the pairs
+  double object_mean_iou = 0;        // mean over objects of their mean over views
+  double pairs_above_half = 0;       // fraction of pairs with IoU >= 0.5
+  std::map<int, int> match;          // true object -> mask id (objects without a match absent)
   std::map<int, double> object_iou;  // true object -> mean IoU over its views
 };
 

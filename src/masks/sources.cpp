@@ -23,8 +23,10 @@ std::vector<std::string> split_csv_line(const std::string& line) {
   std::vector<std::string> out;
   std::string cur;
   for (char c : line) {
-    if (c == ',') { out.push_back(cur); cur.clear(); }
-    else if (c != '\r' && c != '"') cur.push_back(c);
+    if (c == ',') {
+      out.push_back(cur);
+      cur.clear();
+    } else if (c != '\r' && c != '"') cur.push_back(c);
   }
   out.push_back(cur);
   for (auto& s : out) {
@@ -60,7 +62,8 @@ std::vector<SourceMask> read_sam_json(const fs::path& file, int width, int heigh
     s.rle.height = sz[0].get<int>();
     s.rle.width = sz[1].get<int>();
     if (s.rle.height != height || s.rle.width != width)
-      fail("{}: RLE size {}x{} (h x w) does not match the image's {}x{}", where, s.rle.height, s.rle.width, height, width);
+      fail("{}: RLE size {}x{} (h x w) does not match the image's {}x{}", where, s.rle.height, s.rle.width, height,
+           width);
     const json& c = seg["counts"];
     if (c.is_string()) {
       s.rle.counts = rle_counts_from_string(c.get<std::string>(), where);
@@ -101,7 +104,8 @@ std::vector<SourceMask> read_sam_png_folder(const fs::path& folder, int width, i
     ++row;
     if (line.empty() || line == "\r") continue;
     const auto f = split_csv_line(line);
-    if (f.size() != header.size()) fail("{}: line {} has {} fields, the header {}", csv.string(), row, f.size(), header.size());
+    if (f.size() != header.size())
+      fail("{}: line {} has {} fields, the header {}", csv.string(), row, f.size(), header.size());
     auto number = [&](int col) -> double {
       if (col < 0) return -1;
       try {

@@ -24,10 +24,10 @@ LabelMap read_sam2_png(const std::filesystem::path& file, int width, int height)
 // as LangSplat saves it, or any integer type), -1 = no mask, else an index into the concatenated mask list of all
 // levels; `<key>_f.npy`: [M, D] float16/float32, one CLIP feature per mask.
 struct LangSplatView {
-  LabelMap labels;             // [height, width] (nearest resampling when h x w differs): index + 1, 0 = none
+  LabelMap labels;  // [height, width] (nearest resampling when h x w differs): index + 1, 0 = none
   int grid_h = 0, grid_w = 0, dim = 0;
-  std::vector<float> grid;     // [grid_h, grid_w, D]: mean feature over the labelled pixels of each cell
-  int num_masks = 0;           // M
+  std::vector<float> grid;  // [grid_h, grid_w, D]: mean feature over the labelled pixels of each cell
+  int num_masks = 0;        // M
 };
 // `stride`: cell size in pixels of the seg map for the feature grid (1 = one feature per pixel, exact).
 LangSplatView read_langsplat(const std::filesystem::path& seg_file, const std::filesystem::path& feat_file, int level,

@@ -85,7 +85,6 @@ bool is_compaction(const std::vector<int>& src, int n) {
   return true;
 }
 
-
 void GaussianModel::gather(const std::vector<int>& src) {
   for (auto& f : fields()) gather_rows(*f.data, f.dim, src);
   for (auto& e : extras)
@@ -106,7 +105,8 @@ void GaussianModel::validate(const std::string& where) const {
 
 GaussianModel init_from_points(const std::vector<Eigen::Vector3f>& points, const std::vector<Eigen::Vector3f>& colors,
                                int sh_degree) {
-  if (points.size() < 4) fail("init: the scene has {} SfM points; at least 4 are needed to initialise Gaussians", points.size());
+  if (points.size() < 4)
+    fail("init: the scene has {} SfM points; at least 4 are needed to initialise Gaussians", points.size());
   if (colors.size() != points.size()) fail("init: {} points but {} colours", points.size(), colors.size());
   GaussianModel m;
   m.sh_degree = sh_degree;

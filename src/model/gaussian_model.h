@@ -14,7 +14,7 @@
 namespace hgs {
 
 struct ExtraGroup {
-  std::string name;         // lower-case [a-z0-9_], e.g. "obj", "obj_id", "lang" (see docs/formats.md)
+  std::string name;  // lower-case [a-z0-9_], e.g. "obj", "obj_id", "lang" (see docs/formats.md)
   int dim = 1;
   std::vector<float> data;  // [N, dim] (empty when f16)
   // Half-precision storage: the values live in `half` (IEEE binary16) instead of `data`. The hybrid trainer
@@ -37,7 +37,7 @@ struct Field {
 
 struct GaussianModel {
   int n = 0;
-  int sh_degree = 3;               // maximum SH degree stored (0..3)
+  int sh_degree = 3;                 // maximum SH degree stored (0..3)
   std::vector<float> mean;           // [N, 3]
   std::vector<float> log_scale;      // [N, 3]
   std::vector<float> quat;           // [N, 4] (w, x, y, z)
@@ -94,8 +94,8 @@ inline float inverse_sigmoid(float y) { return std::log(y / (1.f - y)); }
 // 3DGS initialisation from SfM points: DC colour from the point colour, higher SH zero, isotropic scale
 // sqrt(mean squared distance to the 3 nearest neighbours) (squared distance clamped at 1e-7), identity
 // rotation, opacity 0.1. Fails when there are fewer than 4 points.
-GaussianModel init_from_points(const std::vector<Eigen::Vector3f>& points,      // [P, 3]
-                               const std::vector<Eigen::Vector3f>& colors,      // [P, 3] in [0, 1]
+GaussianModel init_from_points(const std::vector<Eigen::Vector3f>& points,  // [P, 3]
+                               const std::vector<Eigen::Vector3f>& colors,  // [P, 3] in [0, 1]
                                int sh_degree);
 
 }  // namespace hgs

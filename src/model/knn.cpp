@@ -38,7 +38,10 @@ struct Tree {
     nodes.push_back({b, e});
     if (e - b <= kLeaf) return id;
     Eigen::Vector3f lo = p[perm[b]], hi = lo;
-    for (int i = b + 1; i < e; ++i) { lo = lo.cwiseMin(p[perm[i]]); hi = hi.cwiseMax(p[perm[i]]); }
+    for (int i = b + 1; i < e; ++i) {
+      lo = lo.cwiseMin(p[perm[i]]);
+      hi = hi.cwiseMax(p[perm[i]]);
+    }
     int axis;
     (hi - lo).maxCoeff(&axis);
     if (hi[axis] - lo[axis] <= 0) return id;  // all points identical: keep as a (big) leaf
@@ -48,7 +51,10 @@ struct Tree {
     float split = p[perm[m]][axis];
     int l = build(b, m);
     int r = build(m, e);
-    nodes[id].left = l; nodes[id].right = r; nodes[id].axis = axis; nodes[id].split = split;
+    nodes[id].left = l;
+    nodes[id].right = r;
+    nodes[id].axis = axis;
+    nodes[id].split = split;
     return id;
   }
 
@@ -60,8 +66,13 @@ struct Tree {
     void push(float dist, int i) {
       if (count == k && dist >= d[k - 1]) return;
       int j = count < k ? count++ : k - 1;
-      while (j > 0 && d[j - 1] > dist) { d[j] = d[j - 1]; idx[j] = idx[j - 1]; --j; }
-      d[j] = dist; idx[j] = i;
+      while (j > 0 && d[j - 1] > dist) {
+        d[j] = d[j - 1];
+        idx[j] = idx[j - 1];
+        --j;
+      }
+      d[j] = dist;
+      idx[j] = i;
     }
   };
 

@@ -31,7 +31,8 @@ std::vector<std::string> property_names(const GaussianModel& m) {
   for (int i = 0; i < 4; ++i) names.push_back(fmt::format("rot_{}", i));
   for (auto& e : m.extras) {
     if (e.dim == 1) names.push_back(e.name);
-    else for (int i = 0; i < e.dim; ++i) names.push_back(fmt::format("f_{}_{}", e.name, i));
+    else
+      for (int i = 0; i < e.dim; ++i) names.push_back(fmt::format("f_{}_{}", e.name, i));
   }
   return names;
 }
@@ -52,14 +53,38 @@ const TypeInfo kTypes[] = {{{"float", "float32"}, 4}, {{"double", "float64"}, 8}
 
 float decode(const uint8_t* p, int type) {
   switch (type) {
-    case 0: { float v; std::memcpy(&v, p, 4); return v; }
-    case 1: { double v; std::memcpy(&v, p, 8); return float(v); }
+    case 0: {
+      float v;
+      std::memcpy(&v, p, 4);
+      return v;
+    }
+    case 1: {
+      double v;
+      std::memcpy(&v, p, 8);
+      return float(v);
+    }
     case 2: return float(*p);
     case 3: return float(int8_t(*p));
-    case 4: { uint16_t v; std::memcpy(&v, p, 2); return float(v); }
-    case 5: { int16_t v; std::memcpy(&v, p, 2); return float(v); }
-    case 6: { uint32_t v; std::memcpy(&v, p, 4); return float(v); }
-    default: { int32_t v; std::memcpy(&v, p, 4); return float(v); }
+    case 4: {
+      uint16_t v;
+      std::memcpy(&v, p, 2);
+      return float(v);
+    }
+    case 5: {
+      int16_t v;
+      std::memcpy(&v, p, 2);
+      return float(v);
+    }
+    case 6: {
+      uint32_t v;
+      std::memcpy(&v, p, 4);
+      return float(v);
+    }
+    default: {
+      int32_t v;
+      std::memcpy(&v, p, 4);
+      return float(v);
+    }
   }
 }
 
@@ -81,7 +106,8 @@ void write_model_ply(const std::filesystem::path& path, const GaussianModel& m) 
   m.validate(path.string());
   for (auto& e : m.extras)
     if (!valid_group_name(e.name))
-      fail("{}: extra channel group name '{}' is not writable (use [a-z0-9_], not starting with f_)", path.string(), e.name);
+      fail("{}: extra channel group name '{}' is not writable (use [a-z0-9_], not starting with f_)", path.string(),
+           e.name);
   auto names = property_names(m);
   std::string header = "ply\nformat binary_little_endian 1.0\ncomment written by hgs " HGS_VERSION "\n";
   header += fmt::format("element vertex {}\n", m.n);
@@ -163,7 +189,8 @@ GaussianModel read_model_ply(const std::filesystem::path& path) {
       std::string extra;
       ls >> name >> c;
       // A count like "0.2" reads as 0 and leaves ".2", which `extra` catches.
-      if (ls.fail() || c < 0 || (ls >> extra)) fail("{}: header line {}: malformed element line '{}'", where, lineno, line);
+      if (ls.fail() || c < 0 || (ls >> extra))
+        fail("{}: header line {}: malformed element line '{}'", where, lineno, line);
       if (in_vertex) vertex_done = true;
       in_vertex = name == "vertex";
       if (in_vertex) {
@@ -177,7 +204,8 @@ GaussianModel read_model_ply(const std::filesystem::path& path) {
       if (!in_vertex) continue;  // properties of ignored elements after vertex
       std::string type, name;
       ls >> type >> name;
-      if (type == "list") fail("{}: header line {}: list property in the vertex element is not supported", where, lineno);
+      if (type == "list")
+        fail("{}: header line {}: list property in the vertex element is not supported", where, lineno);
       if (ls.fail() || name.empty()) fail("{}: header line {}: malformed property line '{}'", where, lineno, line);
       int t = -1;
       for (int i = 0; i < 8; ++i)
@@ -196,7 +224,8 @@ GaussianModel read_model_ply(const std::filesystem::path& path) {
   if (count < 0) fail("{}: PLY has no vertex element", where);
   const size_t body = bytes.size() - pos;
   if (body < size_t(count) * row)
-    fail("{}: truncated body: {} vertices of {} bytes need {} bytes, file has {}", where, count, row, size_t(count) * row, body);
+    fail("{}: truncated body: {} vertices of {} bytes need {} bytes, file has {}", where, count, row,
+         size_t(count) * row, body);
 
   // Map properties to model slots.
   std::map<std::string, const Prop*> by_name;
@@ -206,15 +235,18 @@ GaussianModel read_model_ply(const std::filesystem::path& path) {
     if (it == by_name.end()) fail("{}: missing property '{}'", where, nm);
     return it->second;
   };
-  const char* required[] = {"x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
-                            "rot_0", "rot_1", "rot_2", "rot_3"};
+  const char* required[] = {"x",       "y",       "z",       "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
+                            "scale_0", "scale_1", "scale_2", "rot_0",  "rot_1",  "rot_2",  "rot_3"};
   for (auto r : required) need(r);
   int n_rest = 0;
   std::map<std::string, std::map<int, const Prop*>> groups;  // f_<name>_<i>
   std::vector<std::string> group_order;
   for (auto& p : props) {
     int idx;
-    if ((idx = suffix_index(p.name, "f_rest_")) >= 0) { n_rest = std::max(n_rest, idx + 1); continue; }
+    if ((idx = suffix_index(p.name, "f_rest_")) >= 0) {
+      n_rest = std::max(n_rest, idx + 1);
+      continue;
+    }
     bool standard = false;
     for (auto r : required) standard |= p.name == r;
     if (standard || p.name == "nx" || p.name == "ny" || p.name == "nz") continue;

@@ -182,8 +182,10 @@ Session::Session() {
     const char* n = std::getenv("OMPI_COMM_WORLD_SIZE");
     if (!n) n = std::getenv("PMI_SIZE");
     if (n && std::atoi(n) > 1)
-      fail("this hgs was built without MPI (libopenmpi-dev was missing at configure time: run scripts/setup, then "
-           "rebuild): it cannot train on {} ranks", n);
+      fail(
+          "this hgs was built without MPI (libopenmpi-dev was missing at configure time: run scripts/setup, then "
+          "rebuild): it cannot train on {} ranks",
+          n);
   }
   reducer_ = std::make_unique<train::Reducer>();
 }

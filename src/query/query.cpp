@@ -67,7 +67,8 @@ std::vector<float> render_object_opacity(render::GaussianRenderer& r, const Gaus
   const int J = static_cast<int>(ks.size()), L = q->dim;
   std::vector<float> ch(size_t(m.n) * J);
   for (int i = 0; i < m.n; ++i)
-    for (int j = 0; j < J; ++j) ch[size_t(i) * J + j] = (ks[j] >= 0 && ks[j] < L) ? q->data[size_t(i) * L + ks[j]] : 0.f;
+    for (int j = 0; j < J; ++j)
+      ch[size_t(i) * J + j] = (ks[j] >= 0 && ks[j] < L) ? q->data[size_t(i) * L + ks[j]] : 0.f;
   render::GaussianInputs in = render_inputs(m);
   in.extra = ch.data();
   in.num_extra = J;

@@ -60,8 +60,7 @@ float lerf_relevancy(const float* e, const float* query, const std::vector<std::
 }
 
 std::vector<float> lerf_relevancy_map(const float* features, size_t n, int dim, const float* query,
-                                      const std::vector<std::vector<float>>& canonical, float temperature,
-                                      int stride) {
+                                      const std::vector<std::vector<float>>& canonical, float temperature, int stride) {
   if (stride == 0) stride = dim;
   if (stride < dim) fail("eval: relevancy row stride {} is below the feature dimension {}", stride, dim);
   check_canonical(canonical, dim);
@@ -83,8 +82,8 @@ std::vector<float> lerf_relevancy_map(const float* features, size_t n, int dim, 
     const size_t p0 = size_t(blk) * kBlock, rows = std::min(kBlock, n - p0);
     Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>, 0, Eigen::OuterStride<>> F(
         features + p0 * stride, static_cast<Eigen::Index>(rows), dim, Eigen::OuterStride<>(stride));
-    const Eigen::MatrixXf dots = F * dirs;                   // [B, 1 + m]
-    const Eigen::VectorXf norms = F.rowwise().norm();       // [B]
+    const Eigen::MatrixXf dots = F * dirs;             // [B, 1 + m]
+    const Eigen::VectorXf norms = F.rowwise().norm();  // [B]
     std::vector<double> sc(m);
     for (size_t r = 0; r < rows; ++r) {
       const double ne = norms[r];

@@ -8,7 +8,9 @@ namespace hgs::query {
 
 Session::Session(const std::filesystem::path& scene, const std::filesystem::path& model_ply, int downscale,
                  const std::filesystem::path& clip_path)
-    : scene_(load_scene(scene, {downscale, false})), model_(read_model_ply(model_ply)), text_(scene_, clip_path),
+    : scene_(load_scene(scene, {downscale, false})),
+      model_(read_model_ply(model_ply)),
+      text_(scene_, clip_path),
       oe_(object_embeddings(model_)) {
   if (oe_.dim != text_.dim())
     fail("{}: the model's language embeddings have D = {} but the text embeddings have D = {}", model_ply.string(),
@@ -39,7 +41,8 @@ std::vector<float> Session::object_opacity(int view, const std::vector<int>& obj
   return sum;
 }
 
-eval::Mask Session::object_mask(int view, const std::vector<int>& objects, float threshold, std::vector<float>* opacity) {
+eval::Mask Session::object_mask(int view, const std::vector<int>& objects, float threshold,
+                                std::vector<float>* opacity) {
   std::vector<float> a = object_opacity(view, objects);
   eval::Mask m(a.size());
   for (size_t p = 0; p < a.size(); ++p) m[p] = a[p] > threshold;
@@ -53,8 +56,8 @@ eval::Mask Session::answer_mask(int view, const std::string& text, float thresho
 
 std::vector<float> Session::pixel_relevancy(int view, const std::string& text, Relevancy variant) {
   const auto& e = text_.embed(text);
-  return render_relevancy(renderer_, model_, render::camera_from_view(scene_.views.at(view)), e.data(), text_.canonical(),
-                          variant);
+  return render_relevancy(renderer_, model_, render::camera_from_view(scene_.views.at(view)), e.data(),
+                          text_.canonical(), variant);
 }
 
 std::vector<std::vector<float>> Session::pixel_relevancies(int view, const std::vector<std::string>& texts,

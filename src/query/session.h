@@ -16,8 +16,8 @@
 namespace hgs::query {
 
 struct QueryOptions {
-  float min_relevancy = 0.f;   // > 0: every object at or above it is chosen (at least the best one)
-  float mask_threshold = 0.5f; // object mode: mask = sum of chosen objects' opacity > threshold
+  float min_relevancy = 0.f;    // > 0: every object at or above it is chosen (at least the best one)
+  float mask_threshold = 0.5f;  // object mode: mask = sum of chosen objects' opacity > threshold
 };
 
 struct ObjectAnswer {

@@ -36,7 +36,8 @@ const std::vector<float>& TextEmbedder::embed(const std::string& phrase) {
   auto it = cache_.find(phrase);
   if (it != cache_.end()) return it->second;
   if (!clip_)
-    fail("{}: no embedding for \"{}\" (known phrases only without --clip; see `hgs info`)", scene_file_.string(), phrase);
+    fail("{}: no embedding for \"{}\" (known phrases only without --clip; see `hgs info`)", scene_file_.string(),
+         phrase);
   auto e = clip_->embed_text({phrase});
   return cache_[phrase] = std::move(e);
 }
@@ -47,8 +48,6 @@ std::vector<std::vector<float>> TextEmbedder::canonical() {
   return c;
 }
 
-std::string TextEmbedder::source() const {
-  return clip_ ? std::string("CLIP text encoder") : scene_file_.string();
-}
+std::string TextEmbedder::source() const { return clip_ ? std::string("CLIP text encoder") : scene_file_.string(); }
 
 }  // namespace hgs::query

@@ -35,16 +35,16 @@ struct Binning {
 // Bins N projected Gaussians (radius[i] == 0 means culled) for an image of width x height.
 template <class T>
 void bin_gaussians(int width, int height, int n,
-                   const T* mean2d,   // [N, 2]
-                   const T* conic,    // [N, 3]
-                   const T* opacity,  // [N] (after the sigmoid)
-                   const T* depth,    // [N]
-                   const int* radius, // [N]
+                   const T* mean2d,    // [N, 2]
+                   const T* conic,     // [N, 3]
+                   const T* opacity,   // [N] (after the sigmoid)
+                   const T* depth,     // [N]
+                   const int* radius,  // [N]
                    Binning& b);
 
 extern template void bin_gaussians<float>(int, int, int, const float*, const float*, const float*, const float*,
                                           const int*, Binning&);
-extern template void bin_gaussians<double>(int, int, int, const double*, const double*, const double*,
-                                           const double*, const int*, Binning&);
+extern template void bin_gaussians<double>(int, int, int, const double*, const double*, const double*, const double*,
+                                           const int*, Binning&);
 
 }  // namespace hgs::render

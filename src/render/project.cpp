@@ -4,8 +4,8 @@
 namespace hgs::render {
 
 template <class T>
-int project_forward(const CameraT<T>& cam, int n, const T* mean, const T* log_scale, const T* quat, T* mean2d,
-                    T* conic, T* depth, int* radius) {
+int project_forward(const CameraT<T>& cam, int n, const T* mean, const T* log_scale, const T* quat, T* mean2d, T* conic,
+                    T* depth, int* radius) {
   int visible = 0;
 #pragma omp parallel for schedule(static) reduction(+ : visible)
   for (int i = 0; i < n; ++i) {
@@ -28,9 +28,8 @@ int project_forward(const CameraT<T>& cam, int n, const T* mean, const T* log_sc
 }
 
 template <class T>
-void project_backward(const CameraT<T>& cam, int n, const T* mean, const T* log_scale, const T* quat,
-                      const int* radius, const T* dmean2d, const T* dconic, const T* ddepth, T* dmean,
-                      T* dlog_scale, T* dquat) {
+void project_backward(const CameraT<T>& cam, int n, const T* mean, const T* log_scale, const T* quat, const int* radius,
+                      const T* dmean2d, const T* dconic, const T* ddepth, T* dmean, T* dlog_scale, T* dquat) {
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
     if (radius[i] <= 0) {
@@ -47,10 +46,10 @@ void project_backward(const CameraT<T>& cam, int n, const T* mean, const T* log_
 
 template int project_forward<float>(const CameraT<float>&, int, const float*, const float*, const float*, float*,
                                     float*, float*, int*);
-template int project_forward<double>(const CameraT<double>&, int, const double*, const double*, const double*,
-                                     double*, double*, double*, int*);
-template void project_backward<float>(const CameraT<float>&, int, const float*, const float*, const float*,
-                                      const int*, const float*, const float*, const float*, float*, float*, float*);
+template int project_forward<double>(const CameraT<double>&, int, const double*, const double*, const double*, double*,
+                                     double*, double*, int*);
+template void project_backward<float>(const CameraT<float>&, int, const float*, const float*, const float*, const int*,
+                                      const float*, const float*, const float*, float*, float*, float*);
 template void project_backward<double>(const CameraT<double>&, int, const double*, const double*, const double*,
                                        const int*, const double*, const double*, const double*, double*, double*,
                                        double*);

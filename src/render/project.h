@@ -25,8 +25,8 @@ struct CameraT {
   T R[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};  // world -> camera, row-major
   T t[3] = {0, 0, 0};
   T near_plane = T(0.01);
-  T limx = 0, limy = 0;                   // 1.3 * tan(half FOV) in x and y
-  T campos[3] = {0, 0, 0};                // camera centre in world space (-R^T t)
+  T limx = 0, limy = 0;     // 1.3 * tan(half FOV) in x and y
+  T campos[3] = {0, 0, 0};  // camera centre in world space (-R^T t)
 };
 
 template <class T>
@@ -86,7 +86,8 @@ inline bool project_one(const CameraT<T>& cam, const T* mean, const T* log_scale
                         ProjectionTrace<T>& tr) {
   tr.radius = 0;
   const T* W = cam.R;
-  for (int r = 0; r < 3; ++r) tr.tc[r] = W[3 * r] * mean[0] + W[3 * r + 1] * mean[1] + W[3 * r + 2] * mean[2] + cam.t[r];
+  for (int r = 0; r < 3; ++r)
+    tr.tc[r] = W[3 * r] * mean[0] + W[3 * r + 1] * mean[1] + W[3 * r + 2] * mean[2] + cam.t[r];
   const T tx = tr.tc[0], ty = tr.tc[1], tz = tr.tc[2];
   if (!(tz >= cam.near_plane)) return false;
   const T iz = T(1) / tz;
@@ -140,8 +141,8 @@ inline bool project_one(const CameraT<T>& cam, const T* mean, const T* log_scale
 // Backward for one visible Gaussian: upstream dL/d(mean2d) [2], dL/d(conic) [3] (b counted once, as stored),
 // dL/d(depth). Writes dL/d(mean) [3], dL/d(log_scale) [3], dL/d(quat) [4] (overwrites).
 template <class T>
-inline void project_one_backward(const CameraT<T>& cam, const ProjectionTrace<T>& tr, const T* dmean2d,
-                                 const T* dconic, T ddepth, T* dmean, T* dlog_scale, T* dquat) {
+inline void project_one_backward(const CameraT<T>& cam, const ProjectionTrace<T>& tr, const T* dmean2d, const T* dconic,
+                                 T ddepth, T* dmean, T* dlog_scale, T* dquat) {
   const T* W = cam.R;
   const T tx = tr.tc[0], tz = tr.tc[2];
   const T ty = tr.tc[1];
@@ -244,15 +245,15 @@ void project_backward(const CameraT<T>& cam, int n,
                       T* dlog_scale,       // [N, 3] out
                       T* dquat);           // [N, 4] out
 
-extern template int project_forward<float>(const CameraT<float>&, int, const float*, const float*, const float*,
-                                           float*, float*, float*, int*);
-extern template int project_forward<double>(const CameraT<double>&, int, const double*, const double*,
-                                            const double*, double*, double*, double*, int*);
+extern template int project_forward<float>(const CameraT<float>&, int, const float*, const float*, const float*, float*,
+                                           float*, float*, int*);
+extern template int project_forward<double>(const CameraT<double>&, int, const double*, const double*, const double*,
+                                            double*, double*, double*, int*);
 extern template void project_backward<float>(const CameraT<float>&, int, const float*, const float*, const float*,
                                              const int*, const float*, const float*, const float*, float*, float*,
                                              float*);
-extern template void project_backward<double>(const CameraT<double>&, int, const double*, const double*,
-                                              const double*, const int*, const double*, const double*,
-                                              const double*, double*, double*, double*);
+extern template void project_backward<double>(const CameraT<double>&, int, const double*, const double*, const double*,
+                                              const int*, const double*, const double*, const double*, double*, double*,
+                                              double*);
 
 }  // namespace hgs::render

@@ -21,8 +21,7 @@ bool raster_isa_supported(RasterIsa isa) {
   if (isa == RasterIsa::kAvx2) return true;  // the build's baseline
   __builtin_cpu_init();
   return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw") &&
-         __builtin_cpu_supports("avx512cd") && __builtin_cpu_supports("avx512dq") &&
-         __builtin_cpu_supports("avx512vl");
+         __builtin_cpu_supports("avx512cd") && __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512vl");
 }
 
 RasterIsa raster_isa() { return RasterIsa(current().load(std::memory_order_relaxed)); }
@@ -35,8 +34,7 @@ void set_raster_isa(RasterIsa isa) {
 const char* raster_isa_name(RasterIsa isa) { return isa == RasterIsa::kAvx512 ? "avx512" : "avx2"; }
 
 RasterIsa raster_isa_from_env(const char* value) {
-  if (!value || !*value)
-    return raster_isa_supported(RasterIsa::kAvx512) ? RasterIsa::kAvx512 : RasterIsa::kAvx2;
+  if (!value || !*value) return raster_isa_supported(RasterIsa::kAvx512) ? RasterIsa::kAvx512 : RasterIsa::kAvx2;
   const std::string v = value;
   if (v != "avx2" && v != "avx512") fail("HGS_RASTER_ISA={}: unknown rasterizer ISA (avx2 or avx512)", v);
   const RasterIsa isa = parse_raster_isa(v);

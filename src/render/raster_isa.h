@@ -19,10 +19,10 @@ namespace hgs::render {
 
 enum class RasterIsa { kAvx2, kAvx512 };
 
-bool raster_isa_supported(RasterIsa isa);  // by this CPU
-RasterIsa raster_isa();                    // the one rasterize_forward uses now
-void set_raster_isa(RasterIsa isa);        // fails when the CPU does not support it
-const char* raster_isa_name(RasterIsa isa);  // "avx2" / "avx512"
+bool raster_isa_supported(RasterIsa isa);             // by this CPU
+RasterIsa raster_isa();                               // the one rasterize_forward uses now
+void set_raster_isa(RasterIsa isa);                   // fails when the CPU does not support it
+const char* raster_isa_name(RasterIsa isa);           // "avx2" / "avx512"
 RasterIsa parse_raster_isa(const std::string& name);  // "avx2" / "avx512"; fails otherwise
 // The choice for a value of HGS_RASTER_ISA (null or empty: the best the CPU supports); fails with a message
 // naming the variable when the value is unknown or the CPU lacks it.

@@ -37,10 +37,10 @@
 namespace hgs::render {
 
 // The 3DGS cut-offs above, shared by rasterize_forward.cpp, rasterize_backward.cpp and binning.cpp.
-constexpr double kAlphaMax = 0.99;                      // alpha = min(kAlphaMax, ...), no gradient through the clamp
-constexpr double kAlphaMinInverse = 255.0;              // binning tests opacity * 255 >= 1 and ln(255 opacity)
-constexpr double kAlphaMin = 1.0 / kAlphaMinInverse;    // a Gaussian is skipped at a pixel when alpha < 1/255
-constexpr double kTransmittanceMin = 1e-4;              // a pixel stops when T * (1 - alpha) < 1e-4
+constexpr double kAlphaMax = 0.99;                    // alpha = min(kAlphaMax, ...), no gradient through the clamp
+constexpr double kAlphaMinInverse = 255.0;            // binning tests opacity * 255 >= 1 and ln(255 opacity)
+constexpr double kAlphaMin = 1.0 / kAlphaMinInverse;  // a Gaussian is skipped at a pixel when alpha < 1/255
+constexpr double kTransmittanceMin = 1e-4;            // a pixel stops when T * (1 - alpha) < 1e-4
 
 template <class T>
 struct RasterInputs {
@@ -61,29 +61,29 @@ struct RasterInputs {
 
 template <class T>
 struct RasterOutputs {
-  T* rgb = nullptr;         // [H, W, 3]
-  T* alpha = nullptr;       // [H, W]
-  T* depth = nullptr;       // [H, W] (needed when inputs.depth != null)
-  T* extra = nullptr;       // [H, W, C]
-  T* final_T = nullptr;     // [H, W] saved for backward
-  int32_t* last = nullptr;  // [H, W] saved for backward: tile-local index + 1 of the last accumulated Gaussian
-  T* weight_sums = nullptr; // [N, J] sum_p M_j(p) alpha_n(p) T_n(p) (when num_weights > 0)
+  T* rgb = nullptr;          // [H, W, 3]
+  T* alpha = nullptr;        // [H, W]
+  T* depth = nullptr;        // [H, W] (needed when inputs.depth != null)
+  T* extra = nullptr;        // [H, W, C]
+  T* final_T = nullptr;      // [H, W] saved for backward
+  int32_t* last = nullptr;   // [H, W] saved for backward: tile-local index + 1 of the last accumulated Gaussian
+  T* weight_sums = nullptr;  // [N, J] sum_p M_j(p) alpha_n(p) T_n(p) (when num_weights > 0)
 };
 
 // Upstream gradients (null = zero) and per-Gaussian results (overwritten).
 template <class T>
 struct RasterGrads {
-  const T* d_rgb = nullptr;    // [H, W, 3]
-  const T* d_alpha = nullptr;  // [H, W]
-  const T* d_depth = nullptr;  // [H, W]
-  const T* d_extra = nullptr;  // [H, W, C]
+  const T* d_rgb = nullptr;          // [H, W, 3]
+  const T* d_alpha = nullptr;        // [H, W]
+  const T* d_depth = nullptr;        // [H, W]
+  const T* d_extra = nullptr;        // [H, W, C]
   const T* d_weight_sums = nullptr;  // [N, J]
-  T* mean2d = nullptr;         // [N, 2] out
-  T* conic = nullptr;          // [N, 3] out (b counted once)
-  T* opacity = nullptr;        // [N] out (w.r.t. opacity after the sigmoid)
-  T* color = nullptr;          // [N, 3] out
-  T* depth = nullptr;          // [N] out (may be null)
-  T* extra = nullptr;          // [N, C] out (may be null)
+  T* mean2d = nullptr;               // [N, 2] out
+  T* conic = nullptr;                // [N, 3] out (b counted once)
+  T* opacity = nullptr;              // [N] out (w.r.t. opacity after the sigmoid)
+  T* color = nullptr;                // [N, 3] out
+  T* depth = nullptr;                // [N] out (may be null)
+  T* extra = nullptr;                // [N, C] out (may be null)
 };
 
 // Grow-only, 128-byte-aligned scratch memory viewed as an array of U. The two kernel compilations
@@ -91,7 +91,8 @@ struct RasterGrads {
 // own type.
 class RasterScratch {
  public:
-  template <class U> U* get(size_t count) {  // at least count U's; the contents are kept when it grows
+  template <class U>
+  U* get(size_t count) {  // at least count U's; the contents are kept when it grows
     const size_t bytes = count * sizeof(U);
     if (blocks_.size() * sizeof(Block) < bytes) blocks_.resize((bytes + sizeof(Block) - 1) / sizeof(Block));
     return reinterpret_cast<U*>(blocks_.data());
@@ -130,18 +131,17 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
 
 template <class T>
 void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws,
-                        const T* final_T,      // [H, W] from forward
-                        const int32_t* last,   // [H, W] from forward
+                        const T* final_T,     // [H, W] from forward
+                        const int32_t* last,  // [H, W] from forward
                         const RasterGrads<T>& g);
 
 extern template void rasterize_forward<float>(const RasterInputs<float>&, const Binning&, RasterWorkspace<float>&,
                                               const RasterOutputs<float>&);
-extern template void rasterize_forward<double>(const RasterInputs<double>&, const Binning&,
-                                               RasterWorkspace<double>&, const RasterOutputs<double>&);
+extern template void rasterize_forward<double>(const RasterInputs<double>&, const Binning&, RasterWorkspace<double>&,
+                                               const RasterOutputs<double>&);
 extern template void rasterize_backward<float>(const RasterInputs<float>&, const Binning&, RasterWorkspace<float>&,
                                                const float*, const int32_t*, const RasterGrads<float>&);
-extern template void rasterize_backward<double>(const RasterInputs<double>&, const Binning&,
-                                                RasterWorkspace<double>&, const double*, const int32_t*,
-                                                const RasterGrads<double>&);
+extern template void rasterize_backward<double>(const RasterInputs<double>&, const Binning&, RasterWorkspace<double>&,
+                                                const double*, const int32_t*, const RasterGrads<double>&);
 
 }  // namespace hgs::render

@@ -55,7 +55,8 @@ template <class T>
 void extra_grads(const int* vb, const simd::Pack<T>* vw, int cnt, const simd::Pack<T>* base, int BS, int C, T* o) {
   for_channel_chunks(C, [&]<int CH>(int c0) {
     simd::Pack<T> acc[CH];
-    weighted_rows<CH>(vw, cnt, [&](int v) { return base + size_t(vb[v]) * BS; }, c0, acc);
+    weighted_rows<CH>(
+        vw, cnt, [&](int v) { return base + size_t(vb[v]) * BS; }, c0, acc);
     for (int i = 0; i < CH; ++i) o[c0 + i] = simd::hsum<T>(acc[i]);
   });
 }
@@ -64,10 +65,9 @@ void extra_grads(const int* vb, const simd::Pack<T>* vw, int cnt, const simd::Pa
 // the batches its mask names, whose per-pixel state (T, S) lives in per-thread scratch, while its gradient
 // sums stay in registers and are stored once per (tile, Gaussian) pair.
 template <class T, bool kDepth, bool kExtra>
-void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
-                   typename RasterWorkspace<T>::PerThread& w, const T* final_T, const int32_t* last,
-                   const RasterGrads<T>& g, const T* records, T* tile_records, const uint32_t* ws_masks,
-                   T* pair_grad) {
+void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typename RasterWorkspace<T>::PerThread& w,
+                   const T* final_T, const int32_t* last, const RasterGrads<T>& g, const T* records, T* tile_records,
+                   const uint32_t* ws_masks, T* pair_grad) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
   using I = typename std::remove_reference<decltype(M{}[0])>::type;
@@ -83,8 +83,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
   if (J > 0) {
     const int s0 = bins.tile_start[tile];
     for (int k = 0; k < n; ++k)
-      for (int jj = 0; jj < J; ++jj)
-        DW[size_t(k) * J + jj] = g.d_weight_sums[size_t(bins.tile_gauss[s0 + k]) * J + jj];
+      for (int jj = 0; jj < J; ++jj) DW[size_t(k) * J + jj] = g.d_weight_sums[size_t(bins.tile_gauss[s0 + k]) * J + jj];
   }
   // per-batch state: [Tc, S, gr, gg, gb, gd, Tbg, GE[C], MW[J]]
   enum { bT, bS, bR, bG, bB, bD, bBg, kBatchFixed };
@@ -93,7 +92,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile,
   M* blast = w.blast.template get<M>(kBatches);
   int kmax[kBatches];
   uint32_t jmask[kBatches];  // pixel-weight maps present in each batch (for_batch_maps)
-  uint32_t live = 0;  // batches with at least one contributor
+  uint32_t live = 0;         // batches with at least one contributor
   const T bg0 = in.background[0], bg1 = in.background[1], bg2 = in.background[2];
   for (int bt = 0; bt < kBatches; ++bt) {
     kmax[bt] = 0;

@@ -25,7 +25,7 @@ enum Field { kMx, kMy, kHa, kB, kHc, kA, kC, kOp, kCr, kCg, kCb, kZ, kMahal, kEy
 template <class T>
 struct TileData {
   int n = 0;
-  const T* rec = nullptr;      // [n, 16]
+  const T* rec = nullptr;  // [n, 16]
 };
 
 // Copies the tile's records into per-thread scratch. Returns false for an empty tile. (Extra channels are read

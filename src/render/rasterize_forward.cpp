@@ -67,7 +67,8 @@ template <class T>
 void composite_extras(const int* vk, const simd::Pack<T>* vw, int cnt, const T* ex, int C, int XS, simd::Pack<T>* dst) {
   for_channel_chunks(C, [&]<int CH>(int c0) {
     simd::Pack<T> acc[CH];  // local, so the sums stay in registers
-    weighted_rows<CH>(vw, cnt, [&](int v) { return ex + size_t(vk[v]) * XS; }, c0, acc);
+    weighted_rows<CH>(
+        vw, cnt, [&](int v) { return ex + size_t(vk[v]) * XS; }, c0, acc);
     for (int i = 0; i < CH; ++i) dst[c0 + i] = acc[i];
   });
 }
@@ -127,8 +128,7 @@ void build_masks(const Binning& bins, int tile, const TileData<T>& td, uint32_t*
 // when all its pixels hit the transmittance cut-off, the tile ends when no batch is left.
 template <class T, bool kDepth, bool kExtra>
 void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typename RasterWorkspace<T>::PerThread& w,
-                  const T* records, T* tile_records, uint32_t* ws_masks, T* pair_w,
-                  const RasterOutputs<T>& out) {
+                  const T* records, T* tile_records, uint32_t* ws_masks, T* pair_w, const RasterOutputs<T>& out) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
   using I = typename std::remove_reference<decltype(M{}[0])>::type;
@@ -230,7 +230,8 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
     const int py = ty0 + bt / kBatchesPerRow, px0 = tx0 + (bt % kBatchesPerRow) * kLanes;
     const int nvalid = std::min(kLanes, W - px0);
     P* st = bst + size_t(bt) * BS;
-    if (kExtra && vcnt[bt] > 0) composite_extras<T>(vk + voff[bt], vw + voff[bt], vcnt[bt], in.extra, C, XS, st + kBatchFixed);
+    if (kExtra && vcnt[bt] > 0)
+      composite_extras<T>(vk + voff[bt], vw + voff[bt], vcnt[bt], in.extra, C, XS, st + kBatchFixed);
     for (int l = 0; l < nvalid; ++l) {
       const size_t p = size_t(py) * W + px0 + l;
       const T Tr = st[bT][l];
@@ -269,7 +270,8 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
   if (ws.records.size() < size_t(in.n) * kRecord) ws.records.resize(size_t(in.n) * kRecord);
   build_records(in, bins, ws.records.data());
   const T* R = ws.records.data();
-  if (ws.tile_records.size() < size_t(bins.num_pairs) * kRecord) ws.tile_records.resize(size_t(bins.num_pairs) * kRecord);
+  if (ws.tile_records.size() < size_t(bins.num_pairs) * kRecord)
+    ws.tile_records.resize(size_t(bins.num_pairs) * kRecord);
   T* TR = ws.tile_records.data();
   const int J = in.num_weights;
   if (J > 0 && ws.pair_w.size() < size_t(bins.num_pairs) * J) ws.pair_w.resize(size_t(bins.num_pairs) * J);

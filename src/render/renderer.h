@@ -86,9 +86,9 @@ struct GaussianInputsT {
   const T* opacity_logit = nullptr;  // [N]
   const T* sh = nullptr;             // [N, sh_stride, 3]; may be null when `colors` is given
   int sh_stride = 1;
-  int sh_degree = 0;                 // active degree, 0..3
-  const T* colors = nullptr;         // [N, 3] optional precomputed colours (replace SH)
-  const T* extra = nullptr;          // [N, num_extra] optional; forward() only (passed on to composite())
+  int sh_degree = 0;          // active degree, 0..3
+  const T* colors = nullptr;  // [N, 3] optional precomputed colours (replace SH)
+  const T* extra = nullptr;   // [N, num_extra] optional; forward() only (passed on to composite())
   int num_extra = 0;
 };
 using GaussianInputs = GaussianInputsT<float>;
@@ -114,22 +114,22 @@ struct RenderSettings {
 
 template <class T>
 struct RenderOutputsT {
-  std::vector<T> rgb;    // [H, W, 3]
-  std::vector<T> alpha;  // [H, W]
-  std::vector<T> depth;  // [H, W] (empty when !want_depth)
-  std::vector<T> extra;  // [H, W, C] (empty when C = 0)
+  std::vector<T> rgb;          // [H, W, 3]
+  std::vector<T> alpha;        // [H, W]
+  std::vector<T> depth;        // [H, W] (empty when !want_depth)
+  std::vector<T> extra;        // [H, W, C] (empty when C = 0)
   std::vector<T> weight_sums;  // [N, J] when pixel weights were given (else empty)
-  int num_visible = 0;   // Gaussians that passed culling
+  int num_visible = 0;         // Gaussians that passed culling
 };
 using RenderOutputs = RenderOutputsT<float>;
 
 // Upstream gradients of a scalar loss with respect to the outputs. Null pointers mean zero.
 template <class T>
 struct OutputGradsT {
-  const T* rgb = nullptr;    // [H, W, 3]
-  const T* alpha = nullptr;  // [H, W]
-  const T* depth = nullptr;  // [H, W]
-  const T* extra = nullptr;  // [H, W, C]
+  const T* rgb = nullptr;          // [H, W, 3]
+  const T* alpha = nullptr;        // [H, W]
+  const T* depth = nullptr;        // [H, W]
+  const T* extra = nullptr;        // [H, W, C]
   const T* weight_sums = nullptr;  // [N, J]
   // Only channels [0, extra_grad_channels) of `extra` carry gradient; the others are forward-only (e.g. an
   // opacity render used as a constant) and backward skips them (their input gradient is 0). -1 = all.
@@ -162,8 +162,8 @@ struct GaussianGradsT {
                                  // empty when colours were given
   std::vector<T> colors;         // [N, 3] when precomputed colours were given (else empty)
   // Filled by backward() only (moved from its ProjectedGrads); preprocess_backward() leaves them empty.
-  std::vector<T> extra;          // [N, C]
-  std::vector<T> mean2d;         // [N, 2] dL/d(projected centre) in pixels (densification statistic)
+  std::vector<T> extra;   // [N, C]
+  std::vector<T> mean2d;  // [N, 2] dL/d(projected centre) in pixels (densification statistic)
 };
 using GaussianGrads = GaussianGradsT<float>;
 

@@ -102,8 +102,7 @@ void RendererT<T>::composite_backward(const OutputGradsT<T>& dout, ProjectedGrad
 }
 
 template void RendererT<float>::composite(const ChannelsT<float>&, const RenderSettings&, RenderOutputsT<float>&);
-template void RendererT<double>::composite(const ChannelsT<double>&, const RenderSettings&,
-                                           RenderOutputsT<double>&);
+template void RendererT<double>::composite(const ChannelsT<double>&, const RenderSettings&, RenderOutputsT<double>&);
 template void RendererT<float>::composite_backward(const OutputGradsT<float>&, ProjectedGradsT<float>&);
 template void RendererT<double>::composite_backward(const OutputGradsT<double>&, ProjectedGradsT<double>&);
 

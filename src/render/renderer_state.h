@@ -19,8 +19,8 @@ struct RendererT<T>::State {
   bool has_preprocess = false;
   int H = 0, W = 0, visible = 0;
   std::vector<T> mean2d, conic, depth, opacity, colors;  // [N,2], [N,3], [N], [N], [N,3]
-  std::vector<int> radius;                              // [N]
-  const T* color_ptr = nullptr;                         // colors.data() or the given colours
+  std::vector<int> radius;                               // [N]
+  const T* color_ptr = nullptr;                          // colors.data() or the given colours
   Binning bins;
   // composite()
   ChannelsT<T> ch;

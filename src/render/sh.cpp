@@ -27,8 +27,7 @@ struct G8 {
   G8() = default;
   G8(F8 x) : v(x) {}
   template <class S>
-    requires std::is_arithmetic_v<S>
-  G8(S s) {  // broadcast, rounded to float first like T(s) for T = float
+  requires std::is_arithmetic_v<S> G8(S s) {  // broadcast, rounded to float first like T(s) for T = float
     const float f = float(s);
     v = F8{f, f, f, f, f, f, f, f};
   }
@@ -66,7 +65,7 @@ inline void transpose4_halves(__m256& a, __m256& b, __m256& c, __m256& d) {
 // Lane l of out[j] = rows[l][j] for j < cols.
 void load_lanes(const float* const* rows,  // [8] rows of at least cols floats
                 int cols,
-                G8* out) {                 // [cols]
+                G8* out) {  // [cols]
   int j = 0;
 #if defined(__AVX__)
   for (; j + 8 <= cols; j += 8) {
@@ -85,7 +84,7 @@ void load_lanes(const float* const* rows,  // [8] rows of at least cols floats
 }
 
 // The inverse: rows[l][j] = lane l of in[j] for j < cols.
-void store_lanes(const G8* in,          // [cols]
+void store_lanes(const G8* in,  // [cols]
                  int cols,
                  float* const* rows) {  // [8] rows of at least cols floats
   int j = 0;
@@ -121,10 +120,8 @@ void each_active(int n, const int* active, Zero zero, Group group, One one) {
   for (int ch = 0; ch < chunks; ++ch) {
     int idx[kChunk], m = 0;
     for (int i = ch * kChunk, end = std::min(n, i + kChunk); i < end; ++i)
-      if (!active || active[i])
-        idx[m++] = i;
-      else
-        zero(i);
+      if (!active || active[i]) idx[m++] = i;
+      else zero(i);
     int j = 0;
     for (; j + kLanes <= m; j += kLanes) group(idx + j);
     for (; j < m; ++j) one(idx[j]);
@@ -224,7 +221,7 @@ template void sh_forward<float>(int, int, int, const float*, const float*, const
 template void sh_forward<double>(int, int, int, const double*, const double*, const double*, const int*, double*);
 template void sh_backward<float>(int, int, int, const float*, const float*, const float*, const int*, const float*,
                                  float*, float*);
-template void sh_backward<double>(int, int, int, const double*, const double*, const double*, const int*,
-                                  const double*, double*, double*);
+template void sh_backward<double>(int, int, int, const double*, const double*, const double*, const int*, const double*,
+                                  double*, double*);
 
 }  // namespace hgs::render

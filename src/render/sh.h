@@ -129,23 +129,23 @@ inline void sh_backward_one(int degree, const T* sh, const T* dir, const T* dcol
 // Array forward: colors [N, 3] for Gaussians with active[i] != 0 (all when active is null; others set to 0).
 template <class T>
 void sh_forward(int n, int degree, int stride,
-                const T* sh,       // [N, stride, 3]
-                const T* mean,     // [N, 3]
-                const T* campos,   // [3]
-                const int* active, // [N] or null (e.g. radii: nonzero = evaluate)
-                T* colors);        // [N, 3] out
+                const T* sh,        // [N, stride, 3]
+                const T* mean,      // [N, 3]
+                const T* campos,    // [3]
+                const int* active,  // [N] or null (e.g. radii: nonzero = evaluate)
+                T* colors);         // [N, 3] out
 
 // Array backward: dsh [N, stride, 3] overwritten (zero beyond the active degree and for inactive Gaussians);
 // dL/dmean through the view direction is ADDED to dmean [N, 3] when dmean is not null.
 template <class T>
 void sh_backward(int n, int degree, int stride,
-                 const T* sh,       // [N, stride, 3]
-                 const T* mean,     // [N, 3]
-                 const T* campos,   // [3]
-                 const int* active, // [N] or null
-                 const T* dcolors,  // [N, 3]
-                 T* dsh,            // [N, stride, 3] out
-                 T* dmean);         // [N, 3] accumulated, or null
+                 const T* sh,        // [N, stride, 3]
+                 const T* mean,      // [N, 3]
+                 const T* campos,    // [3]
+                 const int* active,  // [N] or null
+                 const T* dcolors,   // [N, 3]
+                 T* dsh,             // [N, stride, 3] out
+                 T* dmean);          // [N, 3] accumulated, or null
 
 extern template void sh_forward<float>(int, int, int, const float*, const float*, const float*, const int*, float*);
 extern template void sh_forward<double>(int, int, int, const double*, const double*, const double*, const int*,

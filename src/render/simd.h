@@ -30,27 +30,39 @@ inline namespace HGS_RASTER_NS {
 
 constexpr int kLanes = 8;  // pixels per batch (half a 16-pixel tile row)
 
-template <class T> struct PackTraits;
-template <> struct PackTraits<float> {
+template <class T>
+struct PackTraits;
+template <>
+struct PackTraits<float> {
   typedef float P __attribute__((vector_size(32)));
   typedef int32_t M __attribute__((vector_size(32)));
 };
-template <> struct PackTraits<double> {
+template <>
+struct PackTraits<double> {
   typedef double P __attribute__((vector_size(64)));
   typedef int64_t M __attribute__((vector_size(64)));
 };
-template <class T> using Pack = typename PackTraits<T>::P;
-template <class T> using Mask = typename PackTraits<T>::M;
+template <class T>
+using Pack = typename PackTraits<T>::P;
+template <class T>
+using Mask = typename PackTraits<T>::M;
 
-template <class T> inline __attribute__((always_inline)) Pack<T> splat(T v) { return Pack<T>{} + v; }
+template <class T>
+inline __attribute__((always_inline)) Pack<T> splat(T v) {
+  return Pack<T>{} + v;
+}
 
-template <class T> inline __attribute__((always_inline)) Pack<T> iota_pack() {
+template <class T>
+inline __attribute__((always_inline)) Pack<T> iota_pack() {
   Pack<T> p;
   for (int l = 0; l < kLanes; ++l) p[l] = T(l);
   return p;
 }
 
-template <class T> inline __attribute__((always_inline)) Pack<T> vmin(Pack<T> a, Pack<T> b) { return a < b ? a : b; }
+template <class T>
+inline __attribute__((always_inline)) Pack<T> vmin(Pack<T> a, Pack<T> b) {
+  return a < b ? a : b;
+}
 
 // True when any lane of the mask is set.
 inline __attribute__((always_inline)) bool any(Mask<float> m) {
@@ -71,7 +83,8 @@ inline __attribute__((always_inline)) bool any(Mask<double> m) {
 }
 
 // Lane sum in a fixed order (deterministic).
-template <class T> inline __attribute__((always_inline)) T hsum(Pack<T> p) {
+template <class T>
+inline __attribute__((always_inline)) T hsum(Pack<T> p) {
   T a = (p[0] + p[4]) + (p[2] + p[6]);
   T b = (p[1] + p[5]) + (p[3] + p[7]);
   return a + b;
@@ -121,5 +134,5 @@ inline __attribute__((always_inline)) Pack<float> vrecip(Pack<float> x) {
 }
 inline __attribute__((always_inline)) Pack<double> vrecip(Pack<double> x) { return 1.0 / x; }
 
-}  // namespace avx2 / avx512
+}  // namespace HGS_RASTER_NS
 }  // namespace hgs::render::simd

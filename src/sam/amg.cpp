@@ -29,7 +29,8 @@ float stability_score(const float* logits, size_t n, float thr, float offset) {
   return uni ? float(double(inter) / double(uni)) : 0.f;
 }
 
-std::vector<int> box_nms(const std::vector<std::array<float, 4>>& boxes, const std::vector<float>& scores, float thresh) {
+std::vector<int> box_nms(const std::vector<std::array<float, 4>>& boxes, const std::vector<float>& scores,
+                         float thresh) {
   std::vector<int> order(boxes.size());
   std::iota(order.begin(), order.end(), 0);
   std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return scores[a] > scores[b]; });

@@ -28,11 +28,11 @@ struct AmgOptions {  // segment-anything's defaults
 };
 
 struct AmgMask {
-  std::vector<uint8_t> mask;          // [H, W] 0/1 at the original image size
+  std::vector<uint8_t> mask;  // [H, W] 0/1 at the original image size
   int area = 0;
-  std::array<int, 4> bbox{};          // x, y, w, h (segment-anything's XYWH: w = x1 - x0 of inclusive bounds)
+  std::array<int, 4> bbox{};  // x, y, w, h (segment-anything's XYWH: w = x1 - x0 of inclusive bounds)
   float predicted_iou = 0, stability_score = 0;
-  std::array<float, 2> point{};       // the prompt point, original pixels
+  std::array<float, 2> point{};  // the prompt point, original pixels
 };
 
 // Grid points in [0, 1]^2: ((i + 0.5) / n, (j + 0.5) / n), x fastest: [n * n] of (x, y).
@@ -42,7 +42,8 @@ std::vector<std::array<float, 2>> point_grid(int n);
 float stability_score(const float* logits, size_t n, float thr, float offset);
 
 // Greedy NMS over boxes (x0, y0, x1, y1) by descending score: returns kept indices in that order.
-std::vector<int> box_nms(const std::vector<std::array<float, 4>>& boxes, const std::vector<float>& scores, float thresh);
+std::vector<int> box_nms(const std::vector<std::array<float, 4>>& boxes, const std::vector<float>& scores,
+                         float thresh);
 
 // Fills (holes = true: regions of 0s) or removes (false: regions of 1s) the 8-connected regions of mask [H, W]
 // smaller than `area` pixels; when every region of 1s is small, the largest is kept. Returns whether the mask

@@ -1,19 +1,19 @@
 // SAM's ViT image encoder and neck on HWC token matrices.
 //   patch embedding: im2col of the P x P patches (c, ky, kx) times the conv weight, plus the absolute positions;
 //   layer: x += proj(attn(LN1(x))); x += lin2(GELU(lin1(LN2(x)))), LayerNorm eps 1e-6; the attention and MLP
-//     widths and the head count are the layer's own (SlimSAM's pruned models), the residual width is shared. Windowed layers cut the
-//     normalised tokens into w x w windows after zero-padding the grid to a multiple of w (padded tokens take part
-//     as keys with value bias, as in SAM) and attend within each; global layers attend over the whole grid.
+//     widths and the head count are the layer's own (SlimSAM's pruned models), the residual width is shared. Windowed
+//     layers cut the normalised tokens into w x w windows after zero-padding the grid to a multiple of w (padded tokens
+//     take part as keys with value bias, as in SAM) and attend within each; global layers attend over the whole grid.
 //     Attention adds the decomposed relative positions before the softmax: for query (i, j) and key (k, l),
 //     q . Rh[i - k + s - 1] + q . Rw[j - l + s - 1] with the unscaled query (s = window or grid side); the two
 //     tables of dot products come from one sgemm each (q [n, hd] x R^T [hd, 2s - 1]) and are gathered. Global
 //     attention runs in blocks of query rows so that the scores stay in cache.
 //   neck: 1x1 conv, channel LayerNorm, 3x3 conv (pad 1, im2col), channel LayerNorm (eps 1e-6, no biases).
-#include <algorithm>
 #include <cblas.h>
+#include <omp.h>
+#include <algorithm>
 #include <cmath>
 #include <functional>
-#include <omp.h>
 
 #include "clip/thread_pool.h"
 #include "clip/transformer.h"
@@ -61,9 +61,9 @@ struct VitWork {
 void vit_attention(const VitLayer& l, int g, int C, int heads, bool bf16, const float* h, float* x, VitWork& w) {
   const int I = l.qkv.out / 3, hd = I / heads;
   const float scale = 1.f / std::sqrt(float(hd));
-  const int s = l.window > 0 ? l.window : g;       // side of one attention grid
+  const int s = l.window > 0 ? l.window : g;          // side of one attention grid
   const int nw = l.window > 0 ? (g + s - 1) / s : 1;  // windows per side
-  const int n = s * s, M = nw * nw * n;            // tokens per window, all (padded) tokens
+  const int n = s * s, M = nw * nw * n;               // tokens per window, all (padded) tokens
   // Gather windows: token (wy, wx, i, j) <- grid (wy * s + i, wx * s + j), zero outside the grid.
   w.win.assign(size_t(M) * C, 0.f);
   for (int wy = 0; wy < nw; ++wy)
@@ -163,7 +163,8 @@ std::vector<float> SamModel::encode(const float* x, std::vector<std::vector<floa
       float* o = cols.data() + (size_t(py) * g + px) * K;
       for (int c = 0; c < 3; ++c)
         for (int ky = 0; ky < P; ++ky)
-          for (int kx = 0; kx < P; ++kx) o[(c * P + ky) * P + kx] = x[((size_t(py) * P + ky) * S + px * P + kx) * 3 + c];
+          for (int kx = 0; kx < P; ++kx)
+            o[(c * P + ky) * P + kx] = x[((size_t(py) * P + ky) * S + px * P + kx) * 3 + c];
     }
   std::vector<float> tok(size_t(N) * C);
   clip::linear(v.patch_embed, cols.data(), N, tok.data());
@@ -176,8 +177,8 @@ std::vector<float> SamModel::encode(const float* x, std::vector<std::vector<floa
   w.h.resize(size_t(N) * C);
   for (const VitLayer& l : v.layers) {
     clip::layer_norm(l.ln1, tok.data(), N, C, w.h.data(), kVitEps);
-    vit_attention(l, g, C, l.heads > 0 ? l.heads : v.heads, precision == clip::Precision::BF16, w.h.data(),
-                  tok.data(), w);
+    vit_attention(l, g, C, l.heads > 0 ? l.heads : v.heads, precision == clip::Precision::BF16, w.h.data(), tok.data(),
+                  w);
     clip::layer_norm(l.ln2, tok.data(), N, C, w.h.data(), kVitEps);
     w.mlp.resize(size_t(N) * l.fc1.out);
     clip::linear(l.fc1, w.h.data(), N, w.mlp.data());

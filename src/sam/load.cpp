@@ -1,8 +1,9 @@
 // Loading SAM from safetensors: detects the naming (Hugging Face SamModel or segment-anything), reads every size
 // from the tensor shapes (ViT width, depth, each layer's own attention width, heads (attention width / the
-// relative-position width) and MLP width, window size and global layers from each layer's relative-position length, patch, grid, neck / decoder widths, MLP depths), converts
-// to float32 in one layout (Linear [out, in], convolutions as matrices for HWC tensors) and checks every shape:
-// a missing or mis-shaped tensor is a one-line error naming the file and the tensor.
+// relative-position width) and MLP width, window size and global layers from each layer's relative-position length,
+// patch, grid, neck / decoder widths, MLP depths), converts to float32 in one layout (Linear [out, in], convolutions as
+// matrices for HWC tensors) and checks every shape: a missing or mis-shaped tensor is a one-line error naming the file
+// and the tensor.
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -26,7 +27,8 @@ void replace_all(std::string& s, const std::string& a, const std::string& b) {
 
 // segment-anything's name of a tensor given its Hugging Face name (MLP heads are mapped by the caller).
 std::string sa_name(std::string n) {
-  if (n == "shared_image_embedding.positional_embedding") return "prompt_encoder.pe_layer.positional_encoding_gaussian_matrix";
+  if (n == "shared_image_embedding.positional_embedding")
+    return "prompt_encoder.pe_layer.positional_encoding_gaussian_matrix";
   replace_all(n, "vision_encoder.", "image_encoder.");
   replace_all(n, "patch_embed.projection.", "patch_embed.proj.");
   replace_all(n, "image_encoder.layers.", "image_encoder.blocks.");
@@ -56,7 +58,9 @@ struct Loader {
   }
   bool has(const std::string& hf) const { return st.has(key(hf)); }
 
-  std::vector<float> get(const std::string& hf, const std::vector<int64_t>& shape) const { return st.to_float(key(hf), shape); }
+  std::vector<float> get(const std::string& hf, const std::vector<int64_t>& shape) const {
+    return st.to_float(key(hf), shape);
+  }
   std::vector<int64_t> shape(const std::string& hf) const { return st.info(key(hf)).shape; }
   int64_t dim(const std::string& hf, size_t i) const {
     auto s = shape(hf);
@@ -77,10 +81,12 @@ struct Loader {
     std::vector<std::string> names;
     if (naming == Naming::HuggingFace) {
       names.push_back(p + ".proj_in");
-      for (int j = 0; has(fmt::format("{}.layers.{}.weight", p, j)); ++j) names.push_back(fmt::format("{}.layers.{}", p, j));
+      for (int j = 0; has(fmt::format("{}.layers.{}.weight", p, j)); ++j)
+        names.push_back(fmt::format("{}.layers.{}", p, j));
       names.push_back(p + ".proj_out");
     } else {
-      for (int j = 0; st.has(fmt::format("{}.layers.{}.weight", key(p), j)); ++j) names.push_back(fmt::format("{}.layers.{}", p, j));
+      for (int j = 0; st.has(fmt::format("{}.layers.{}.weight", key(p), j)); ++j)
+        names.push_back(fmt::format("{}.layers.{}", p, j));
       if (names.size() < 2) fail("{}: MLP '{}.layers.N' not found or shorter than 2 layers", file(), key(p));
     }
     Mlp m;
@@ -94,7 +100,8 @@ struct Loader {
   }
   Attention attn(const std::string& p, int c) const {
     const int inner = int(dim(p + ".q_proj.weight", 0));
-    return {lin(p + ".q_proj", inner, c), lin(p + ".k_proj", inner, c), lin(p + ".v_proj", inner, c), lin(p + ".out_proj", c, inner)};
+    return {lin(p + ".q_proj", inner, c), lin(p + ".k_proj", inner, c), lin(p + ".v_proj", inner, c),
+            lin(p + ".out_proj", c, inner)};
   }
   // ConvTranspose2d(in, out, 2, stride 2) weight [in, out, 2, 2] -> [in, (dy, dx, out)].
   Upconv upconv(const std::string& p, int in, int out) const {
@@ -164,7 +171,8 @@ void load_vision(const Loader& L, const ConfigHints& cfg, int given_heads, Visio
     const std::string qkv = p + (split ? "attn.q.weight" : "attn.qkv.weight");
     const int64_t rows = L.dim(qkv, 0);
     if (rows <= 0 || (!split && rows % 3))
-      fail("{}: tensor '{}' has shape {}, expected [3 * attention width, {}]", file, L.key(qkv), shape_str(L.shape(qkv)), C);
+      fail("{}: tensor '{}' has shape {}, expected [3 * attention width, {}]", file, L.key(qkv),
+           shape_str(L.shape(qkv)), C);
     const int I = int(split ? rows : rows / 3);
     if (split) {
       l.qkv = {C, 3 * I, {}, {}};
@@ -182,15 +190,18 @@ void load_vision(const Loader& L, const ConfigHints& cfg, int given_heads, Visio
       const auto rs = L.shape(rh);
       const int64_t rel = rs.size() == 2 ? rs[0] : 0, hd = rs.size() == 2 ? rs[1] : 0;
       if (rel <= 0 || hd <= 0 || I % hd || rel % 2 == 0)
-        fail("{}: tensor '{}' has shape {}, expected [2 * size - 1, head_dim] with head_dim dividing the attention "
-             "width {} ('{}' has shape {})", file, L.key(rh), shape_str(rs), I, L.key(qkv), shape_str(L.shape(qkv)));
+        fail(
+            "{}: tensor '{}' has shape {}, expected [2 * size - 1, head_dim] with head_dim dividing the attention "
+            "width {} ('{}' has shape {})",
+            file, L.key(rh), shape_str(rs), I, L.key(qkv), shape_str(L.shape(qkv)));
       l.heads = int(I / hd);
       if (given_heads > 0 && l.heads != given_heads)
         fail("{}: tensor '{}' has shape {} but [{}, {}] was expected ({} heads given, attention width {})", file,
              L.key(rh), shape_str(rs), rel, I % given_heads ? std::string("?") : std::to_string(I / given_heads),
              given_heads, I);
       const int size = int(rel + 1) / 2;
-      if (size > v.grid) fail("{}: tensor '{}' covers {} positions, more than the {}-token grid", file, L.key(rh), size, v.grid);
+      if (size > v.grid)
+        fail("{}: tensor '{}' covers {} positions, more than the {}-token grid", file, L.key(rh), size, v.grid);
       l.window = size == v.grid ? 0 : size;
       l.rel_h = L.get(rh, {rel, hd});
       l.rel_w = L.get(rw, {rel, hd});
@@ -198,8 +209,10 @@ void load_vision(const Loader& L, const ConfigHints& cfg, int given_heads, Visio
       // No relative positions: the head count given or from config.json, the window from config.json.
       const int heads = given_heads > 0 ? given_heads : cfg.vit_heads;
       if (heads <= 0 || !cfg.has_vision)
-        fail("{}: layer {} has no relative-position tables ('{}'), so its head count and window need config.json's "
-             "vision_config (num_attention_heads, window_size, global_attn_indexes) beside the weights", file, i, L.key(rh));
+        fail(
+            "{}: layer {} has no relative-position tables ('{}'), so its head count and window need config.json's "
+            "vision_config (num_attention_heads, window_size, global_attn_indexes) beside the weights",
+            file, i, L.key(rh));
       if (I % heads)
         fail("{}: tensor '{}' has shape {}: attention width {} is not a multiple of {} heads", file, L.key(qkv),
              shape_str(L.shape(qkv)), I, heads);
@@ -245,7 +258,9 @@ void load_decoder(const Loader& L, int C, MaskDecoder& d) {
   d.tokens = int(L.dim("mask_decoder.mask_tokens.weight", 0));
   d.mask_tokens = L.get("mask_decoder.mask_tokens.weight", {d.tokens, C});
   const int n = L.count("mask_decoder.transformer.layers.", "layer_norm1.weight");
-  if (n == 0) fail("{}: no mask decoder layers found ('{}')", file, L.key("mask_decoder.transformer.layers.0.layer_norm1.weight"));
+  if (n == 0)
+    fail("{}: no mask decoder layers found ('{}')", file,
+         L.key("mask_decoder.transformer.layers.0.layer_norm1.weight"));
   for (int i = 0; i < n; ++i) {
     const std::string p = fmt::format("mask_decoder.transformer.layers.{}.", i);
     TwoWayLayer l;
@@ -267,7 +282,8 @@ void load_decoder(const Loader& L, int C, MaskDecoder& d) {
   d.up1 = L.upconv("mask_decoder.upscale_conv1", C, C / 4);
   d.up_ln = L.ln("mask_decoder.upscale_layer_norm", C / 4);
   d.up2 = L.upconv("mask_decoder.upscale_conv2", C / 4, C / 8);
-  for (int i = 0; i < d.tokens; ++i) d.hyper.push_back(L.mlp(fmt::format("mask_decoder.output_hypernetworks_mlps.{}", i), C, C / 8));
+  for (int i = 0; i < d.tokens; ++i)
+    d.hyper.push_back(L.mlp(fmt::format("mask_decoder.output_hypernetworks_mlps.{}", i), C, C / 8));
   d.iou_head = L.mlp("mask_decoder.iou_prediction_head", C, d.tokens);
   d.ln_eps = L.naming == Naming::HuggingFace ? 1e-6f : 1e-5f;
   d.ln_final_eps = 1e-5f;
@@ -285,8 +301,10 @@ SamModel SamModel::load(const std::filesystem::path& path, const SamOptions& opt
   } else if (st.has("image_encoder.pos_embed") || st.has("image_encoder.module.pos_embed")) {
     m.naming = Naming::SegmentAnything;
   } else {
-    fail("{}: not a SAM model in Hugging Face SamModel or segment-anything naming (no 'vision_encoder.pos_embed' "
-         "or 'image_encoder.pos_embed')", file);
+    fail(
+        "{}: not a SAM model in Hugging Face SamModel or segment-anything naming (no 'vision_encoder.pos_embed' "
+        "or 'image_encoder.pos_embed')",
+        file);
   }
   Loader L{st, m.naming, !st.has("image_encoder.pos_embed") && st.has("image_encoder.module.pos_embed")};
   const ConfigHints cfg = read_config(path);
@@ -298,7 +316,8 @@ SamModel SamModel::load(const std::filesystem::path& path, const SamOptions& opt
   const int heads = opt.decoder_heads > 0 ? opt.decoder_heads : cfg.decoder_heads > 0 ? cfg.decoder_heads : 8;
   for (const TwoWayLayer& l : m.decoder.layers)
     if (l.token_to_image.q.out % heads || C % heads)
-      fail("{}: {} decoder heads do not divide the attention widths ({} and {})", file, heads, C, l.token_to_image.q.out);
+      fail("{}: {} decoder heads do not divide the attention widths ({} and {})", file, heads, C,
+           l.token_to_image.q.out);
   m.decoder.heads = heads;
   m.set_precision(opt.precision);
   return m;
@@ -324,7 +343,8 @@ void SamModel::set_precision(clip::Precision p) {
     if (p == clip::Precision::BF16) clip::use_bf16(*l);
     else l->w16.clear();
   }
-  for (Upconv* u : {&d.up1, &d.up2}) u->w16 = p == clip::Precision::BF16 ? clip::to_bf16(u->w) : std::vector<uint16_t>{};
+  for (Upconv* u : {&d.up1, &d.up2})
+    u->w16 = p == clip::Precision::BF16 ? clip::to_bf16(u->w) : std::vector<uint16_t>{};
 }
 
 std::string SamModel::describe() const {
@@ -337,15 +357,17 @@ std::string SamModel::describe() const {
     const int h = l.heads > 0 ? l.heads : vision.heads;
     widths += fmt::format("{}{}x{}/{}", i ? "," : "", h, h > 0 ? l.qkv.out / 3 / h : 0, l.fc1.out);
     const VitLayer& f = vision.layers[0];
-    uniform = uniform && h == (f.heads > 0 ? f.heads : vision.heads) && l.qkv.out == f.qkv.out && l.fc1.out == f.fc1.out;
+    uniform =
+        uniform && h == (f.heads > 0 ? f.heads : vision.heads) && l.qkv.out == f.qkv.out && l.fc1.out == f.fc1.out;
   }
-  const std::string vit = uniform ? fmt::format("{} heads", vision.heads)
-                                  : fmt::format("per-layer heads x head dim / MLP [{}]", widths);
-  return fmt::format("{} naming; ViT hidden {} x {} layers, {}, patch {}, {}px, window {}, global layers [{}]; "
-                     "neck {}; decoder {} layers, {} heads, {} mask tokens",
-                     naming == Naming::HuggingFace ? "Hugging Face" : "segment-anything", vision.hidden,
-                     vision.layers.size(), vit, vision.patch, image_size(), windows.empty() ? "-" : windows,
-                     global, vision.out, decoder.layers.size(), decoder.heads, decoder.tokens) +
+  const std::string vit =
+      uniform ? fmt::format("{} heads", vision.heads) : fmt::format("per-layer heads x head dim / MLP [{}]", widths);
+  return fmt::format(
+             "{} naming; ViT hidden {} x {} layers, {}, patch {}, {}px, window {}, global layers [{}]; "
+             "neck {}; decoder {} layers, {} heads, {} mask tokens",
+             naming == Naming::HuggingFace ? "Hugging Face" : "segment-anything", vision.hidden, vision.layers.size(),
+             vit, vision.patch, image_size(), windows.empty() ? "-" : windows, global, vision.out,
+             decoder.layers.size(), decoder.heads, decoder.tokens) +
          (precision == clip::Precision::BF16 ? fmt::format("; bf16 products ({})", clip::bf16_kernel_name()) : "");
 }
 

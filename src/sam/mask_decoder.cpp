@@ -9,10 +9,10 @@
 // Attention projects to an inner width (C / 2 in the cross attentions), splits heads, scales by 1/sqrt(head dim).
 // The first block's token-to-image keys and values and image-to-token queries depend on the image only and are
 // computed once per call; the other cross attentions use the reassociated forms of decoder_attention.h.
-#include <algorithm>
 #include <cblas.h>
-#include <cmath>
 #include <omp.h>
+#include <algorithm>
+#include <cmath>
 
 #include "clip/thread_pool.h"
 #include "clip/transformer.h"
@@ -93,8 +93,8 @@ void upconv(const Upconv& u, const float* x, int g, std::vector<float>& y, std::
   out.resize(size_t(4) * g * g * u.out);
   if (!u.w16.empty()) {
     rounded = clip::rounded_or_convert(rounded, x, g * g, u.in, x16);
-    clip::gemm_bf16(g * g, 4 * u.out, u.in, rounded, u.in, u.w16.data(), 4 * u.out, false, 1.f, nullptr, 0.f,
-                    y.data(), 4 * u.out);
+    clip::gemm_bf16(g * g, 4 * u.out, u.in, rounded, u.in, u.w16.data(), 4 * u.out, false, 1.f, nullptr, 0.f, y.data(),
+                    4 * u.out);
   } else {
     clip::matmul(x, g * g, u.in, u.w.data(), 4 * u.out, y.data());
   }
@@ -157,7 +157,7 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
     Proj& w = work.w;
     AttnWork& aw = work.aw;
     std::vector<float>&scores = work.scores, &q = work.q, &qpe = work.qpe, &keys = work.keys, &tmp = work.tmp,
-                      &qq = work.qq, &kk = work.kk, &mlp = work.mlp, &y = work.y, &u1 = work.u1, &u2 = work.u2;
+    &qq = work.qq, &kk = work.kk, &mlp = work.mlp, &y = work.y, &u1 = work.u1, &u2 = work.u2;
     std::vector<uint16_t>&x16 = work.x16, &kk16 = work.kk16, &keys16 = work.keys16;
     std::vector<float>& qproj = work.qproj;
     // kk (f32) or kk16 and keys16 (bf16) from the current keys.
@@ -245,7 +245,8 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
       std::vector<float> hyper(size_t(d.tokens) * D);
       for (int t = 0; t < d.tokens; ++t) {
         std::vector<float> h = run_mlp(d.hyper[t], q.data() + size_t(1 + t) * C);
-        if (int(h.size()) != D) fail("SAM hypernetwork {} gives {} values, the upscaled embedding has {}", t, h.size(), D);
+        if (int(h.size()) != D)
+          fail("SAM hypernetwork {} gives {} values, the upscaled embedding has {}", t, h.size(), D);
         std::copy(h.begin(), h.end(), hyper.begin() + size_t(t) * D);
       }
       Prediction& r = res[b];

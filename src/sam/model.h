@@ -43,29 +43,29 @@ struct SamOptions {
 // inner = qkv.out / 3 = heads * head_dim, MLP width fc1.out; only the residual width `hidden` is shared.
 struct VitLayer {
   LayerNorm ln1, ln2;
-  Linear qkv;                        // [3 * inner, hidden]: rows q, k, v (heads contiguous within each)
-  Linear proj;                       // [hidden, inner]
-  Linear fc1, fc2;                   // [mlp, hidden], [hidden, mlp]
-  std::vector<float> rel_h, rel_w;   // [2 * size - 1, head_dim]; empty = no relative positions
-  int window = 0;                    // 0 = global attention over the whole grid
-  int heads = 0;                     // 0 = VisionEncoder::heads; scale 1 / sqrt(head_dim)
+  Linear qkv;                       // [3 * inner, hidden]: rows q, k, v (heads contiguous within each)
+  Linear proj;                      // [hidden, inner]
+  Linear fc1, fc2;                  // [mlp, hidden], [hidden, mlp]
+  std::vector<float> rel_h, rel_w;  // [2 * size - 1, head_dim]; empty = no relative positions
+  int window = 0;                   // 0 = global attention over the whole grid
+  int heads = 0;                    // 0 = VisionEncoder::heads; scale 1 / sqrt(head_dim)
 };
 
 struct VisionEncoder {
   int patch = 0, grid = 0, hidden = 0, out = 0;
-  int heads = 0;                     // the layers' head count when they all agree (else 0: see VitLayer::heads)
-  Linear patch_embed;                // [hidden, 3 * patch * patch], conv weight flattened as (c, ky, kx)
-  std::vector<float> pos;            // [grid * grid, hidden]
+  int heads = 0;           // the layers' head count when they all agree (else 0: see VitLayer::heads)
+  Linear patch_embed;      // [hidden, 3 * patch * patch], conv weight flattened as (c, ky, kx)
+  std::vector<float> pos;  // [grid * grid, hidden]
   std::vector<VitLayer> layers;
-  Linear neck1;                      // [out, hidden], zero bias (1x1 conv)
-  Linear neck2;                      // [out, 9 * out] flattened as (ky, kx, c), zero bias (3x3 conv, pad 1)
-  LayerNorm neck_ln1, neck_ln2;      // channel LayerNorm, eps 1e-6
+  Linear neck1;                  // [out, hidden], zero bias (1x1 conv)
+  Linear neck2;                  // [out, 9 * out] flattened as (ky, kx, c), zero bias (3x3 conv, pad 1)
+  LayerNorm neck_ln1, neck_ln2;  // channel LayerNorm, eps 1e-6
 };
 
 struct PromptEncoder {
-  std::vector<float> gauss;                     // [2, C / 2] random Fourier matrix
-  std::array<std::vector<float>, 4> point;      // [C] each: negative, positive, box corner 1, box corner 2
-  std::vector<float> not_a_point, no_mask;      // [C]
+  std::vector<float> gauss;                 // [2, C / 2] random Fourier matrix
+  std::array<std::vector<float>, 4> point;  // [C] each: negative, positive, box corner 1, box corner 2
+  std::vector<float> not_a_point, no_mask;  // [C]
 };
 
 struct Attention {
@@ -87,31 +87,31 @@ struct Mlp {
 // gives its 2x2 output pixels, columns ordered (dy, dx, out channel).
 struct Upconv {
   int in = 0, out = 0;
-  std::vector<float> w;  // [in, 4 * out]
-  std::vector<float> b;  // [out]
+  std::vector<float> w;            // [in, 4 * out]
+  std::vector<float> b;            // [out]
   std::vector<uint16_t> w16 = {};  // [in, 4 * out] w in bfloat16 when the model runs in bf16, else empty
 };
 
 struct MaskDecoder {
-  int heads = 8, tokens = 4;     // mask tokens (1 single-mask + 3 multimask outputs)
-  std::vector<float> iou_token;  // [C]
+  int heads = 8, tokens = 4;       // mask tokens (1 single-mask + 3 multimask outputs)
+  std::vector<float> iou_token;    // [C]
   std::vector<float> mask_tokens;  // [tokens, C]
   std::vector<TwoWayLayer> layers;
   Attention final_attn;
   LayerNorm ln_final, up_ln;
   Upconv up1, up2;
-  std::vector<Mlp> hyper;        // one per mask token: C -> C / 8
-  Mlp iou_head;                  // C -> tokens
-  float ln_eps = 1e-6f;          // two-way blocks: 1e-6 in transformers, 1e-5 in segment-anything
+  std::vector<Mlp> hyper;  // one per mask token: C -> C / 8
+  Mlp iou_head;            // C -> tokens
+  float ln_eps = 1e-6f;    // two-way blocks: 1e-6 in transformers, 1e-5 in segment-anything
   float ln_final_eps = 1e-5f;
 };
 
 // An image after the encoder, with the geometry that prompts and post-processing need.
 struct ImageEmbedding {
   int grid = 0, channels = 0;
-  std::vector<float> data;         // [grid, grid, C]
-  int orig_h = 0, orig_w = 0;      // the image given
-  int input_h = 0, input_w = 0;    // after resizing its longest side to image_size() (top-left of the input)
+  std::vector<float> data;       // [grid, grid, C]
+  int orig_h = 0, orig_w = 0;    // the image given
+  int input_h = 0, input_w = 0;  // after resizing its longest side to image_size() (top-left of the input)
 };
 
 // Prompts in original image pixels: points [N, 2] (x, y) with labels (1 foreground, 0 background, -1 ignored)
@@ -123,9 +123,9 @@ struct Prompt {
 };
 
 struct Prediction {
-  int tokens = 0, size = 0;       // mask tokens, low-res side (4 * grid)
-  std::vector<float> lowres;      // [tokens, size, size] logits (token 0: single mask, 1..3: multimask)
-  std::vector<float> iou;         // [tokens]
+  int tokens = 0, size = 0;   // mask tokens, low-res side (4 * grid)
+  std::vector<float> lowres;  // [tokens, size, size] logits (token 0: single mask, 1..3: multimask)
+  std::vector<float> iou;     // [tokens]
 };
 
 class SamModel {

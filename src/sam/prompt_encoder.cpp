@@ -28,15 +28,15 @@ std::vector<float> SamModel::dense_pe() const {
   const int g = vision.grid, C = channels();
   std::vector<float> pe(size_t(g) * g * C);
   for (int i = 0; i < g; ++i)
-    for (int j = 0; j < g; ++j) fourier(prompt.gauss, C, (j + 0.5f) / g, (i + 0.5f) / g, pe.data() + (size_t(i) * g + j) * C);
+    for (int j = 0; j < g; ++j)
+      fourier(prompt.gauss, C, (j + 0.5f) / g, (i + 0.5f) / g, pe.data() + (size_t(i) * g + j) * C);
   return pe;
 }
 
 std::vector<float> SamModel::encode_prompt(const Prompt& p) const {
   const int C = channels();
   const float S = float(image_size());
-  if (p.points.size() != p.labels.size())
-    fail("SAM prompt: {} points but {} labels", p.points.size(), p.labels.size());
+  if (p.points.size() != p.labels.size()) fail("SAM prompt: {} points but {} labels", p.points.size(), p.labels.size());
   if (p.points.empty() && p.boxes.empty()) fail("SAM prompt: no point and no box");
   const bool pad = p.boxes.empty();
   const size_t T = p.points.size() + (pad ? 1 : 0) + 2 * p.boxes.size();

@@ -19,16 +19,27 @@ struct ModelInfo {
 };
 // COLMAP's camera model table (src/colmap/sensor/models.h).
 const ModelInfo kModels[] = {
-    {0, "SIMPLE_PINHOLE", 3}, {1, "PINHOLE", 4},       {2, "SIMPLE_RADIAL", 4},          {3, "RADIAL", 5},
-    {4, "OPENCV", 8},         {5, "OPENCV_FISHEYE", 8}, {6, "FULL_OPENCV", 12},          {7, "FOV", 5},
-    {8, "SIMPLE_RADIAL_FISHEYE", 4}, {9, "RADIAL_FISHEYE", 5}, {10, "THIN_PRISM_FISHEYE", 12}, {11, "RAD_TAN_THIN_PRISM_FISHEYE", 16},
+    {0, "SIMPLE_PINHOLE", 3},
+    {1, "PINHOLE", 4},
+    {2, "SIMPLE_RADIAL", 4},
+    {3, "RADIAL", 5},
+    {4, "OPENCV", 8},
+    {5, "OPENCV_FISHEYE", 8},
+    {6, "FULL_OPENCV", 12},
+    {7, "FOV", 5},
+    {8, "SIMPLE_RADIAL_FISHEYE", 4},
+    {9, "RADIAL_FISHEYE", 5},
+    {10, "THIN_PRISM_FISHEYE", 12},
+    {11, "RAD_TAN_THIN_PRISM_FISHEYE", 16},
 };
 const ModelInfo* model_by_id(int id) {
-  for (auto& m : kModels) if (m.id == id) return &m;
+  for (auto& m : kModels)
+    if (m.id == id) return &m;
   return nullptr;
 }
 const ModelInfo* model_by_name(const std::string& n) {
-  for (auto& m : kModels) if (n == m.name) return &m;
+  for (auto& m : kModels)
+    if (n == m.name) return &m;
   return nullptr;
 }
 
@@ -38,7 +49,8 @@ class Reader {
   Reader(std::filesystem::path p) : path_(std::move(p)), buf_(read_file_bytes(path_)) {}
   template <typename T>
   T get() {
-    if (pos_ + sizeof(T) > buf_.size()) fail("{}: truncated file (needed {} more bytes at offset {})", path_.string(), sizeof(T), pos_);
+    if (pos_ + sizeof(T) > buf_.size())
+      fail("{}: truncated file (needed {} more bytes at offset {})", path_.string(), sizeof(T), pos_);
     T v;
     std::memcpy(&v, buf_.data() + pos_, sizeof(T));
     pos_ += sizeof(T);
@@ -130,7 +142,8 @@ ColmapModel read_colmap_bin(const std::filesystem::path& dir) {
         im.point3d_ids[k] = r.get<int64_t>();
       }
       if (!m.cameras.count(im.camera_id))
-        fail("{}: image '{}' refers to camera {} which is not in cameras.bin", r.path().string(), im.name, im.camera_id);
+        fail("{}: image '{}' refers to camera {} which is not in cameras.bin", r.path().string(), im.name,
+             im.camera_id);
       m.images.push_back(std::move(im));
     }
     if (!r.at_end()) fail("{}: trailing bytes after {} images (corrupt file?)", r.path().string(), n);
@@ -190,7 +203,8 @@ ColmapModel read_colmap_txt(const std::filesystem::path& dir) {
       double v;
       while (ss >> v) c.params.push_back(v);
       if (int(c.params.size()) != mi->num_params)
-        fail("{}:{}: camera model {} needs {} parameters, found {}", path.string(), no, c.model, mi->num_params, c.params.size());
+        fail("{}:{}: camera model {} needs {} parameters, found {}", path.string(), no, c.model, mi->num_params,
+             c.params.size());
       m.cameras[c.id] = c;
     }
   }
@@ -218,7 +232,8 @@ ColmapModel read_colmap_txt(const std::filesystem::path& dir) {
         if (cur.name.empty()) fail("{}:{}: image line has no name", path.string(), no);
         if (has_control_char(cur.name)) fail("{}:{}: image name has control characters", path.string(), no);
         if (!m.cameras.count(cur.camera_id))
-          fail("{}:{}: image '{}' refers to camera {} which is not in cameras.txt", path.string(), no, cur.name, cur.camera_id);
+          fail("{}:{}: image '{}' refers to camera {} which is not in cameras.txt", path.string(), no, cur.name,
+               cur.camera_id);
         expect_points = true;
       } else {
         std::istringstream ss(line);
@@ -242,7 +257,9 @@ ColmapModel read_colmap_txt(const std::filesystem::path& dir) {
       int r, g, b;
       if (!(ss >> p.id >> p.xyz[0] >> p.xyz[1] >> p.xyz[2] >> r >> g >> b >> p.error))
         fail("{}:{}: malformed point line", path.string(), no);
-      p.rgb[0] = r; p.rgb[1] = g; p.rgb[2] = b;
+      p.rgb[0] = r;
+      p.rgb[1] = g;
+      p.rgb[2] = b;
       int32_t a, c;
       while (ss >> a >> c) p.track.emplace_back(a, c);
       m.points.push_back(std::move(p));
@@ -320,19 +337,21 @@ void write_colmap_txt(const std::filesystem::path& dir, const ColmapModel& m) {
     s += "\n";
   }
   atomic_write_text(dir / "cameras.txt", s);
-  s = "# Image list with two lines of data per image:\n#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n#   POINTS2D[] as (X, Y, POINT3D_ID)\n";
+  s = "# Image list with two lines of data per image:\n#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n#   "
+      "POINTS2D[] as (X, Y, POINT3D_ID)\n";
   for (auto& im : m.images) {
-    s += fmt::format("{} {:.17g} {:.17g} {:.17g} {:.17g} {:.17g} {:.17g} {:.17g} {} {}\n", im.id, im.qvec[0], im.qvec[1],
-                     im.qvec[2], im.qvec[3], im.tvec[0], im.tvec[1], im.tvec[2], im.camera_id, im.name);
+    s += fmt::format("{} {:.17g} {:.17g} {:.17g} {:.17g} {:.17g} {:.17g} {:.17g} {} {}\n", im.id, im.qvec[0],
+                     im.qvec[1], im.qvec[2], im.qvec[3], im.tvec[0], im.tvec[1], im.tvec[2], im.camera_id, im.name);
     for (size_t k = 0; k < im.xys.size(); ++k)
       s += fmt::format("{}{:.17g} {:.17g} {}", k ? " " : "", im.xys[k].x(), im.xys[k].y(), im.point3d_ids[k]);
     s += "\n";
   }
   atomic_write_text(dir / "images.txt", s);
-  s = "# 3D point list with one line of data per point:\n#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)\n";
+  s = "# 3D point list with one line of data per point:\n#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as "
+      "(IMAGE_ID, POINT2D_IDX)\n";
   for (auto& p : m.points) {
-    s += fmt::format("{} {:.17g} {:.17g} {:.17g} {} {} {} {:.17g}", p.id, p.xyz[0], p.xyz[1], p.xyz[2], p.rgb[0], p.rgb[1],
-                     p.rgb[2], p.error);
+    s += fmt::format("{} {:.17g} {:.17g} {:.17g} {} {} {} {:.17g}", p.id, p.xyz[0], p.xyz[1], p.xyz[2], p.rgb[0],
+                     p.rgb[1], p.rgb[2], p.error);
     for (auto& t : p.track) s += fmt::format(" {} {}", t.first, t.second);
     s += "\n";
   }
@@ -341,9 +360,14 @@ void write_colmap_txt(const std::filesystem::path& dir, const ColmapModel& m) {
 
 void require_pinhole(const ColmapCamera& c, const std::string& where, double& fx, double& fy, double& cx, double& cy) {
   if (c.model == "PINHOLE") {
-    fx = c.params[0]; fy = c.params[1]; cx = c.params[2]; cy = c.params[3];
+    fx = c.params[0];
+    fy = c.params[1];
+    cx = c.params[2];
+    cy = c.params[3];
   } else if (c.model == "SIMPLE_PINHOLE") {
-    fx = fy = c.params[0]; cx = c.params[1]; cy = c.params[2];
+    fx = fy = c.params[0];
+    cx = c.params[1];
+    cy = c.params[2];
   } else {
     fail("{}: camera {} uses the {} model; hgs needs PINHOLE or SIMPLE_PINHOLE: run `colmap image_undistorter` first",
          where, c.id, c.model);

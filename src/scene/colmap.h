@@ -13,7 +13,7 @@ namespace hgs {
 
 struct ColmapCamera {
   int id = 0;
-  std::string model;           // "PINHOLE", "SIMPLE_PINHOLE", "OPENCV", ...
+  std::string model;  // "PINHOLE", "SIMPLE_PINHOLE", "OPENCV", ...
   uint64_t width = 0, height = 0;
   std::vector<double> params;  // model-specific
 };

@@ -6,8 +6,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
@@ -23,12 +23,14 @@ using json = nlohmann::json;
 
 std::vector<int> Scene::train_indices() const {
   std::vector<int> r;
-  for (auto& v : views) if (!v.is_test) r.push_back(v.index);
+  for (auto& v : views)
+    if (!v.is_test) r.push_back(v.index);
   return r;
 }
 std::vector<int> Scene::test_indices() const {
   std::vector<int> r;
-  for (auto& v : views) if (v.is_test) r.push_back(v.index);
+  for (auto& v : views)
+    if (v.is_test) r.push_back(v.index);
   return r;
 }
 bool Scene::has_masks() const {
@@ -90,8 +92,8 @@ View make_view(const fs::path& root, const fs::path& sparse, const ColmapModel& 
     fail("{}: camera {} is {}x{} pixels; expected 1..{} a side", (sparse / "cameras").string(), cam.id, cam.width,
          cam.height, kMaxSide);
   if (!(std::isfinite(fx) && std::isfinite(fy) && fx > 0 && fy > 0 && std::isfinite(cx) && std::isfinite(cy)))
-    fail("{}: camera {} has invalid intrinsics (fx {}, fy {}, cx {}, cy {})", (sparse / "cameras").string(), cam.id,
-         fx, fy, cx, cy);
+    fail("{}: camera {} has invalid intrinsics (fx {}, fy {}, cx {}, cy {})", (sparse / "cameras").string(), cam.id, fx,
+         fy, cx, cy);
   if (!im.qvec.allFinite() || !im.tvec.allFinite() || im.qvec.norm() < 1e-12)
     fail("{}: image '{}' has an invalid pose (non-finite or zero quaternion)", (sparse / "images").string(), im.name);
   v.image_path = images_dir / im.name;
@@ -101,7 +103,10 @@ View make_view(const fs::path& root, const fs::path& sparse, const ColmapModel& 
   // downscale divides every intrinsic by F exactly.
   v.width = static_cast<int>(cam.width) / F;
   v.height = static_cast<int>(cam.height) / F;
-  v.fx = fx / F; v.fy = fy / F; v.cx = cx / F; v.cy = cy / F;
+  v.fx = fx / F;
+  v.fy = fy / F;
+  v.cx = cx / F;
+  v.cy = cy / F;
   if (F > 1 && path_exists(scaled_dir / im.name)) v.image_path = scaled_dir / im.name;
   v.R = qvec_to_rotmat(im.qvec);
   v.t = im.tvec;
@@ -127,9 +132,13 @@ void split_views(Scene& s) {
     }
     int found = 0;
     for (auto& v : s.views)
-      if (names.count(v.name) || names.count(v.stem)) { v.is_test = true; ++found; }
+      if (names.count(v.name) || names.count(v.stem)) {
+        v.is_test = true;
+        ++found;
+      }
     if (found != static_cast<int>(names.size()))
-      fail("{}: {} of the {} listed test images are not in the COLMAP model", test_txt.string(), names.size() - found, names.size());
+      fail("{}: {} of the {} listed test images are not in the COLMAP model", test_txt.string(), names.size() - found,
+           names.size());
     s.split_source = "test.txt";
   } else {
     for (auto& v : s.views) v.is_test = (v.index % 8 == 0);
@@ -154,7 +163,11 @@ std::map<int, std::string> read_object_names(const fs::path& objects) {
   if (!j.is_object()) fail("{}: expected an object {{\"1\": \"name\", ...}}", objects.string());
   for (auto& [k, val] : j.items()) {
     int id;
-    try { id = std::stoi(k); } catch (...) { fail("{}: key '{}' is not an object id", objects.string(), k); }
+    try {
+      id = std::stoi(k);
+    } catch (...) {
+      fail("{}: key '{}' is not an object id", objects.string(), k);
+    }
     if (!val.is_string()) fail("{}: name of object {} is not a string", objects.string(), k);
     names[id] = val.get<std::string>();
   }
@@ -179,7 +192,8 @@ std::map<std::string, std::vector<float>> read_text_embeddings(const fs::path& t
         fail("{}: embedding of '{}' holds {}, not a finite float", te.string(), k, x.dump());
       vec.push_back(float(d));
     }
-    if (dim && vec.size() != dim) fail("{}: embedding of '{}' has {} values, others have {}", te.string(), k, vec.size(), dim);
+    if (dim && vec.size() != dim)
+      fail("{}: embedding of '{}' has {} values, others have {}", te.string(), k, vec.size(), dim);
     dim = vec.size();
     out[k] = std::move(vec);
   }
@@ -200,7 +214,8 @@ void cache_downscaled(Scene& s, const fs::path& scaled_dir) {
       std::vector<uint8_t> b(img.px.size());
       for (size_t i = 0; i < b.size(); ++i) b[i] = static_cast<uint8_t>(std::clamp(img.px[i], 0.f, 1.f) * 255.f + 0.5f);
       atomic_write(out, [&](const fs::path& tmp) {
-        if (!stbi_write_jpg(tmp.c_str(), img.width, img.height, 3, b.data(), 95)) fail("{}: cannot write", out.string());
+        if (!stbi_write_jpg(tmp.c_str(), img.width, img.height, 3, b.data(), 95))
+          fail("{}: cannot write", out.string());
       });
     }
     v.image_path = out;
@@ -255,8 +270,10 @@ std::optional<std::vector<float>> Scene::load_confidence(int vi) const {
   const View& v = views.at(vi);
   if (!v.conf_path) return std::nullopt;
   NpyArray a = read_npy(*v.conf_path);
-  if (a.shape.size() != 2) fail("{}: confidence must be a 2-D [H, W] array, found {} dimensions", v.conf_path->string(), a.shape.size());
-  if (a.dtype != DType::F32 && a.dtype != DType::F16) fail("{}: confidence must be float16 or float32", v.conf_path->string());
+  if (a.shape.size() != 2)
+    fail("{}: confidence must be a 2-D [H, W] array, found {} dimensions", v.conf_path->string(), a.shape.size());
+  if (a.dtype != DType::F32 && a.dtype != DType::F16)
+    fail("{}: confidence must be float16 or float32", v.conf_path->string());
   int h = static_cast<int>(a.shape[0]), w = static_cast<int>(a.shape[1]);
   std::vector<float> c = a.to_float();
   if (w == v.width && h == v.height) return c;
@@ -265,7 +282,8 @@ std::optional<std::vector<float>> Scene::load_confidence(int vi) const {
     im.px = std::move(c);
     return downscale_area(im, downscale).px;
   }
-  fail("{}: confidence is {}x{} but its image is {}x{}", v.conf_path->string(), w, h, v.width * downscale, v.height * downscale);
+  fail("{}: confidence is {}x{} but its image is {}x{}", v.conf_path->string(), w, h, v.width * downscale,
+       v.height * downscale);
 }
 
 std::optional<std::vector<float>> Scene::load_features(int vi, int& dim) const {
@@ -281,8 +299,10 @@ std::optional<std::vector<float>> Scene::load_feature_grid(int vi, int& h, int& 
   const View& v = views.at(vi);
   if (!v.feature_path) return std::nullopt;
   NpyArray a = read_npy(*v.feature_path);
-  if (a.shape.size() != 3) fail("{}: features must be a 3-D [h, w, D] array, found {} dimensions", v.feature_path->string(), a.shape.size());
-  if (a.dtype != DType::F32 && a.dtype != DType::F16) fail("{}: features must be float16 or float32", v.feature_path->string());
+  if (a.shape.size() != 3)
+    fail("{}: features must be a 3-D [h, w, D] array, found {} dimensions", v.feature_path->string(), a.shape.size());
+  if (a.dtype != DType::F32 && a.dtype != DType::F16)
+    fail("{}: features must be float16 or float32", v.feature_path->string());
   h = static_cast<int>(a.shape[0]);
   w = static_cast<int>(a.shape[1]);
   dim = static_cast<int>(a.shape[2]);

@@ -14,36 +14,36 @@
 namespace hgs {
 
 struct View {
-  int index = 0;            // position in Scene::views (sorted by name)
+  int index = 0;  // position in Scene::views (sorted by name)
   int colmap_id = 0;
-  std::string name;         // as in the COLMAP model, relative to images/ (may contain sub-folders)
-  std::string stem;         // name without extension: masks/<stem>.png, features/<stem>.npy
-  int width = 0, height = 0;  // after downscaling
+  std::string name;                       // as in the COLMAP model, relative to images/ (may contain sub-folders)
+  std::string stem;                       // name without extension: masks/<stem>.png, features/<stem>.npy
+  int width = 0, height = 0;              // after downscaling
   double fx = 0, fy = 0, cx = 0, cy = 0;  // after downscaling (pixel-centre convention)
   Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  // world -> camera
   Eigen::Vector3d t = Eigen::Vector3d::Zero();
   bool is_test = false;
-  std::filesystem::path image_path;                  // file read for this view (maybe images_F/)
+  std::filesystem::path image_path;  // file read for this view (maybe images_F/)
   std::optional<std::filesystem::path> mask_path, conf_path, feature_path;
 
   Eigen::Vector3d camera_center() const { return -R.transpose() * t; }
 };
 
 struct SceneOptions {
-  int downscale = 1;            // integer area downscale of images (and masks, features follow the image)
+  int downscale = 1;              // integer area downscale of images (and masks, features follow the image)
   bool cache_downscaled = false;  // write SCENE/images_F/ for later runs
 };
 
 struct Scene {
   std::filesystem::path root;
   int downscale = 1;
-  std::vector<View> views;                          // sorted by name
-  std::vector<Eigen::Vector3f> points;              // [P, 3] sparse SfM points
-  std::vector<Eigen::Vector3f> point_colors;        // [P, 3] in [0, 1]
-  std::map<int, std::string> object_names;          // masks/objects.json
+  std::vector<View> views;                                    // sorted by name
+  std::vector<Eigen::Vector3f> points;                        // [P, 3] sparse SfM points
+  std::vector<Eigen::Vector3f> point_colors;                  // [P, 3] in [0, 1]
+  std::map<int, std::string> object_names;                    // masks/objects.json
   std::map<std::string, std::vector<float>> text_embeddings;  // text_embeddings.json
-  std::string split_source;                         // "test.txt" or "every 8th view (LLFF)"
-  std::vector<std::string> warnings;                // non-fatal problems found while loading
+  std::string split_source;                                   // "test.txt" or "every 8th view (LLFF)"
+  std::vector<std::string> warnings;                          // non-fatal problems found while loading
 
   std::vector<int> train_indices() const;
   std::vector<int> test_indices() const;
@@ -53,8 +53,8 @@ struct Scene {
   std::filesystem::path segmentation_dir() const { return root / "segmentations"; }
 
   // Pixel loading, resampled to the view's (downscaled) resolution.
-  Image load_image(int view) const;                   // [H, W, 3]
-  std::optional<LabelMap> load_mask(int view) const;  // [H, W] object ids, 0 = background
+  Image load_image(int view) const;                                   // [H, W, 3]
+  std::optional<LabelMap> load_mask(int view) const;                  // [H, W] object ids, 0 = background
   std::optional<std::vector<float>> load_confidence(int view) const;  // [H, W]
   // Dense features bilinearly upsampled to the image: [H, W, D] (D returned in `dim`).
   std::optional<std::vector<float>> load_features(int view, int& dim) const;

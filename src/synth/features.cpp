@@ -13,15 +13,18 @@ std::vector<float> concept_vector(const std::string& phrase, int dim) {
   Rng rng(hash_string("concept:" + phrase));
   std::vector<float> v(dim);
   double s = 0;
-  for (auto& x : v) { x = static_cast<float>(rng.normal()); s += double(x) * x; }
+  for (auto& x : v) {
+    x = static_cast<float>(rng.normal());
+    s += double(x) * x;
+  }
   float inv = static_cast<float>(1.0 / std::sqrt(s));
   for (auto& x : v) x *= inv;
   return v;
 }
 
 std::vector<float> simulate_features(const RenderedView& v, const std::vector<std::vector<float>>& concepts,
-                                     const std::vector<float>& context, double noise, int dim, uint64_t seed,
-                                     int& gh, int& gw) {
+                                     const std::vector<float>& context, double noise, int dim, uint64_t seed, int& gh,
+                                     int& gw) {
   const int P = 16, W = v.rgb.width, H = v.rgb.height;
   gh = (H + P - 1) / P;
   gw = (W + P - 1) / P;

@@ -35,7 +35,10 @@ std::vector<float> noisy(const std::vector<float>& base, double rel, Rng& rng) {
   std::vector<float> v(base);
   double s = 0;
   const double k = rel / std::sqrt(double(v.size()));
-  for (auto& x : v) { x += static_cast<float>(k * rng.normal()); s += double(x) * x; }
+  for (auto& x : v) {
+    x += static_cast<float>(k * rng.normal());
+    s += double(x) * x;
+  }
   for (auto& x : v) x = static_cast<float>(x / std::sqrt(s));
   return v;
 }
@@ -60,20 +63,24 @@ json shuffle_ids(LabelMap& mask, uint64_t seed) {
   for (size_t i = ids.size(); i > 1; --i) std::swap(ids[i - 1], ids[size_t(rng.integer(0, int(i) - 1))]);
   std::map<int, int> to;
   json truth = json::object();
-  for (size_t i = 0; i < present.size(); ++i) to[present[i]] = ids[i], truth[std::to_string(ids[i])] = {{"object", present[i]}};
+  for (size_t i = 0; i < present.size(); ++i)
+    to[present[i]] = ids[i], truth[std::to_string(ids[i])] = {{"object", present[i]}};
   for (auto& l : mask.v)
     if (l) l = uint16_t(to[l]);
   return truth;
 }
 
 void validate(const SynthOptions& o) {
-  if (o.mask_ids != "consistent" && o.mask_ids != "per-view") fail("--mask-ids: unknown value '{}' (consistent or per-view)", o.mask_ids);
-  if (o.mask_style != "label" && o.mask_style != "sam") fail("--mask-style: unknown value '{}' (label or sam)", o.mask_style);
+  if (o.mask_ids != "consistent" && o.mask_ids != "per-view")
+    fail("--mask-ids: unknown value '{}' (consistent or per-view)", o.mask_ids);
+  if (o.mask_style != "label" && o.mask_style != "sam")
+    fail("--mask-style: unknown value '{}' (label or sam)", o.mask_style);
   if (o.views < 2 || o.views > 10000) fail("--views: must be between 2 and 10000, got {}", o.views);
   if (o.width < 16 || o.height < 16 || o.width > 8192 || o.height > 8192)
     fail("--width/--height: must be between 16 and 8192, got {}x{}", o.width, o.height);
   if (o.points < 0 || o.points > 10000000) fail("--points: must be between 0 and 10000000, got {}", o.points);
-  if (o.feature_dim < 1 || o.feature_dim > 4096) fail("--feature-dim: must be between 1 and 4096, got {}", o.feature_dim);
+  if (o.feature_dim < 1 || o.feature_dim > 4096)
+    fail("--feature-dim: must be between 1 and 4096, got {}", o.feature_dim);
   noise_level(o.noise);
 }
 
@@ -91,7 +98,8 @@ Concepts make_concepts(const World& world, const SynthOptions& opt) {
   Concepts cc;
   cc.names = {"sky"};
   for (auto& p : world.prims)
-    if (std::find(cc.names.begin(), cc.names.end(), p.concept_name) == cc.names.end()) cc.names.push_back(p.concept_name);
+    if (std::find(cc.names.begin(), cc.names.end(), p.concept_name) == cc.names.end())
+      cc.names.push_back(p.concept_name);
   for (auto& c : cc.names) cc.vectors.push_back(concept_vector(c, opt.feature_dim));
   cc.surface_of.assign(cc.names.size(), 0);
   for (size_t c = 1; c < cc.names.size(); ++c) {
@@ -112,9 +120,9 @@ struct Generation {
   const Concepts& concepts;
   const NoiseLevel nl;
   const Intrinsics cam;
-  const int K;                  // objects
+  const int K;  // objects
   const bool sam_style, per_view;
-  std::vector<char> split;      // [K] --mask-style sam: objects that SAM also cuts into two halves
+  std::vector<char> split;         // [K] --mask-style sam: objects that SAM also cuts into two halves
   json mask_ids = json::object();  // per view: id in masks/<stem>.png -> what it truly is
   std::set<int> surface_used;      // --mask-style sam: concepts of the surfaces some view has a mask of
 };
@@ -151,7 +159,8 @@ json sam_entry(const SamMask& mask, int W, int H, masks::SourceMask& sm) {
   int x0 = W, y0 = H, x1 = -1, y1 = -1;
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x)
-      if (mask.inside[size_t(y) * W + x]) x0 = std::min(x0, x), y0 = std::min(y0, y), x1 = std::max(x1, x), y1 = std::max(y1, y);
+      if (mask.inside[size_t(y) * W + x])
+        x0 = std::min(x0, x), y0 = std::min(y0, y), x1 = std::max(x1, x), y1 = std::max(y1, y);
   return {{"segmentation", {{"size", {H, W}}, {"counts", masks::rle_counts_to_string(sm.rle.counts)}}},
           {"area", masks::rle_area(sm.rle)},
           {"bbox", {x0, y0, x1 - x0 + 1, y1 - y0 + 1}},
@@ -188,7 +197,9 @@ void write_sam_view(Generation& g, const RenderedView& rv, uint64_t seed) {
     for (auto& l : f.labels.v)
       if (l) l = uint16_t(sam[l - 1].entity);
   save_label_png(g.tmp / "masks" / (stem + ".png"), f.labels);
-  write_npy(g.tmp / "masks" / (stem + ".conf.npy"), make_npy_f32({size_t(H), size_t(W)}, f.confidence.empty() ? std::vector<float>(size_t(W) * H, 1.f).data() : f.confidence.data()));
+  write_npy(g.tmp / "masks" / (stem + ".conf.npy"),
+            make_npy_f32({size_t(H), size_t(W)},
+                         f.confidence.empty() ? std::vector<float>(size_t(W) * H, 1.f).data() : f.confidence.data()));
   g.mask_ids[stem] = ids;
 }
 
@@ -213,7 +224,8 @@ void write_label_view(Generation& g, int i, const RenderedView& rv) {
   }
   save_label_png(g.tmp / "masks" / (stem + ".png"), mask);
   if (!conf.empty())
-    write_npy(g.tmp / "masks" / (stem + ".conf.npy"), make_npy_f16({size_t(opt.height), size_t(opt.width)}, conf.data()));
+    write_npy(g.tmp / "masks" / (stem + ".conf.npy"),
+              make_npy_f16({size_t(opt.height), size_t(opt.width)}, conf.data()));
 }
 
 // Simulated SAM2 masks and confidences (or SAM-style overlapping masks with --mask-style sam) and CLIP-like
@@ -247,7 +259,8 @@ void write_mask_names(const Generation& g) {
   if (g.sam_style) {
     for (auto& o : g.world.objects)
       if (g.split[o.id - 1])
-        for (int h = 1; h <= 2; ++h) names[std::to_string(K + 2 * (o.id - 1) + h)] = fmt::format("{} (part {})", o.name, h);
+        for (int h = 1; h <= 2; ++h)
+          names[std::to_string(K + 2 * (o.id - 1) + h)] = fmt::format("{} (part {})", o.name, h);
     for (size_t c = 1; c < cc.names.size(); ++c)
       if (g.surface_used.count(int(c))) names[std::to_string(3 * K + int(c))] = cc.names[c];
   }
@@ -328,7 +341,8 @@ void place_points(const Generation& g, const std::vector<RenderedView>& views, C
     ColmapPoint p;
     p.id = model.points.size() + 1;
     p.xyz = X;
-    for (int c = 0; c < 3; ++c) p.rgb[c] = static_cast<uint8_t>(std::lround(rv.rgb.px[(size_t(y) * W + x) * 3 + c] * 255));
+    for (int c = 0; c < 3; ++c)
+      p.rgb[c] = static_cast<uint8_t>(std::lround(rv.rgb.px[(size_t(y) * W + x) * 3 + c] * 255));
     p.error = rng.uniform(0.3, 1.2);
     const auto obs = point_track(g, views, X, sigma);
     if (obs.size() < 2) continue;
@@ -349,7 +363,8 @@ void write_colmap_model(const Generation& g, const std::vector<RenderedView>& vi
   const SynthOptions& opt = g.opt;
   const Intrinsics& K_ = g.cam;
   ColmapModel model;
-  model.cameras[1] = ColmapCamera{1, "PINHOLE", uint64_t(opt.width), uint64_t(opt.height), {K_.fx, K_.fy, K_.cx, K_.cy}};
+  model.cameras[1] =
+      ColmapCamera{1, "PINHOLE", uint64_t(opt.width), uint64_t(opt.height), {K_.fx, K_.fy, K_.cx, K_.cy}};
   for (int i = 0; i < opt.views; ++i) {
     ColmapImage im;
     im.id = i + 1;
@@ -388,7 +403,10 @@ void write_view_labels(const Generation& g, int i, const RenderedView& rv) {
       int x1 = opt.width, y1 = opt.height, x2 = 0, y2 = 0;
       json pts = json::array();
       for (auto [x, y] : poly) {
-        x1 = std::min(x1, x); y1 = std::min(y1, y); x2 = std::max(x2, x); y2 = std::max(y2, y);
+        x1 = std::min(x1, x);
+        y1 = std::min(y1, y);
+        x2 = std::max(x2, x);
+        y2 = std::max(y2, y);
         pts.push_back({x, y});
       }
       objs.push_back({{"category", o.name}, {"bbox", {x1, y1, x2, y2}}, {"segmentation", pts}});
@@ -418,7 +436,10 @@ void write_record(const Generation& g) {
   const NoiseLevel& nl = g.nl;
   json objs = json::array();
   for (auto& o : g.world.objects)
-    objs.push_back({{"id", o.id}, {"name", o.name}, {"shape", o.shape}, {"position", {o.position.x(), o.position.y(), o.position.z()}}});
+    objs.push_back({{"id", o.id},
+                    {"name", o.name},
+                    {"shape", o.shape},
+                    {"position", {o.position.x(), o.position.y(), o.position.z()}}});
   json syn = json::object();
   for (auto& [s, n] : g.world.synonyms) syn[s] = n;
   json meta = {{"generator", "hgs synth " HGS_VERSION},
@@ -429,8 +450,13 @@ void write_record(const Generation& g) {
                {"height", opt.height},
                {"points", opt.points},
                {"noise", opt.noise},
-               {"noise_params", {{"miss", nl.miss}, {"jitter_px", nl.jitter}, {"merge", nl.merge}, {"swap", nl.swap},
-                                 {"confidence_noise", nl.conf_noise}, {"feature_noise", nl.feature}}},
+               {"noise_params",
+                {{"miss", nl.miss},
+                 {"jitter_px", nl.jitter},
+                 {"merge", nl.merge},
+                 {"swap", nl.swap},
+                 {"confidence_noise", nl.conf_noise},
+                 {"feature_noise", nl.feature}}},
                {"feature_dim", opt.feature_dim},
                {"feature_patch", 16},
                {"objects", objs},
@@ -454,9 +480,19 @@ void generate(const fs::path& out, const SynthOptions& opt) {
   const Concepts concepts = make_concepts(world, opt);
   fs::path parent = fs::absolute(out).parent_path();
   ensure_dir(parent);
-  fs::path tmp = parent / (out.filename().string() + fmt::format(".tmp{:x}", mix(opt.seed, std::random_device{}()) & 0xffffff));
-  Generation g{opt, tmp, world, concepts, noise_level(opt.noise), make_intrinsics(opt.width, opt.height), opt.objects,
-               opt.mask_style == "sam", opt.mask_ids == "per-view", std::vector<char>(opt.objects, 0), json::object(),
+  fs::path tmp =
+      parent / (out.filename().string() + fmt::format(".tmp{:x}", mix(opt.seed, std::random_device{}()) & 0xffffff));
+  Generation g{opt,
+               tmp,
+               world,
+               concepts,
+               noise_level(opt.noise),
+               make_intrinsics(opt.width, opt.height),
+               opt.objects,
+               opt.mask_style == "sam",
+               opt.mask_ids == "per-view",
+               std::vector<char>(opt.objects, 0),
+               json::object(),
                {}};
   for (int k = 0; k < g.K; ++k) g.split[k] = mix(opt.seed, 7, k) & 1;
   try {

@@ -33,7 +33,10 @@ std::vector<std::vector<std::pair<int, int>>> trace_polygons(const std::vector<u
             int nx = x + dx, ny = y + dy;
             if (nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
             size_t j = size_t(ny) * w + nx;
-            if (inside[j] && comp[j] < 0) { comp[j] = id; stack.push_back(static_cast<int>(j)); }
+            if (inside[j] && comp[j] < 0) {
+              comp[j] = id;
+              stack.push_back(static_cast<int>(j));
+            }
           }
       }
     }
@@ -53,9 +56,12 @@ std::vector<std::vector<std::pair<int, int>>> trace_polygons(const std::vector<u
       int found = -1;
       for (int k = 0; k < 8; ++k) {
         const int nd = (d + 6 + k) % 8;  // from "back-left" of the arrival direction, clockwise
-        if (in(x + DX[nd], y + DY[nd])) { found = nd; break; }
+        if (in(x + DX[nd], y + DY[nd])) {
+          found = nd;
+          break;
+        }
       }
-      if (found < 0) break;  // a single pixel
+      if (found < 0) break;                                 // a single pixel
       if (x == sx && y == sy && found == first_dir) break;  // Jacob's stopping criterion
       if (first_dir < 0) first_dir = found;
       x += DX[found];

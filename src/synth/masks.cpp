@@ -101,19 +101,24 @@ void simulate_masks(const LabelMap& gt, const NoiseLevel& nl, int num_objects, u
   std::vector<int> present;
   {
     std::vector<int> count(num_objects + 1, 0);
-    for (uint16_t l : gt.v) if (l && l <= num_objects) count[l]++;
-    for (int k = 1; k <= num_objects; ++k) if (count[k] > 0) present.push_back(k);
+    for (uint16_t l : gt.v)
+      if (l && l <= num_objects) count[l]++;
+    for (int k = 1; k <= num_objects; ++k)
+      if (count[k] > 0) present.push_back(k);
   }
   // 1. id swap (a propagation failure exchanges two identities in this view)
   if (present.size() >= 2 && rng.chance(nl.swap)) {
     int a = present[rng.integer(0, int(present.size()) - 1)], b;
-    do { b = present[rng.integer(0, int(present.size()) - 1)]; } while (b == a);
+    do {
+      b = present[rng.integer(0, int(present.size()) - 1)];
+    } while (b == a);
     for (auto& l : mask.v) l = l == a ? b : l == b ? a : l;
   }
   // 2-3. missed detections and boundary jitter
   for (int k : present) {
     if (rng.chance(nl.miss)) {
-      for (auto& l : mask.v) if (l == k) l = 0;
+      for (auto& l : mask.v)
+        if (l == k) l = 0;
       continue;
     }
     if (nl.jitter <= 0) continue;
@@ -135,12 +140,19 @@ void simulate_masks(const LabelMap& gt, const NoiseLevel& nl, int num_objects, u
       for (int x = 0; x < w; ++x) {
         int a = mask.at(x, y);
         if (!a) continue;
-        if (x + 1 < w) { int b = mask.at(x + 1, y); if (b && b != a) touching.insert({std::min(a, b), std::max(a, b)}); }
-        if (y + 1 < h) { int b = mask.at(x, y + 1); if (b && b != a) touching.insert({std::min(a, b), std::max(a, b)}); }
+        if (x + 1 < w) {
+          int b = mask.at(x + 1, y);
+          if (b && b != a) touching.insert({std::min(a, b), std::max(a, b)});
+        }
+        if (y + 1 < h) {
+          int b = mask.at(x, y + 1);
+          if (b && b != a) touching.insert({std::min(a, b), std::max(a, b)});
+        }
       }
     for (auto [a, b] : touching) {
       if (!rng.chance(nl.merge)) continue;
-      for (auto& l : mask.v) if (l == b) l = static_cast<uint16_t>(a);
+      for (auto& l : mask.v)
+        if (l == b) l = static_cast<uint16_t>(a);
     }
   }
   // 5. confidence

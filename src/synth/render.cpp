@@ -24,7 +24,9 @@ static std::pair<Eigen::Matrix3d, Eigen::Vector3d> look_at(const Vec3& C, const 
   r.normalize();
   Vec3 d = f.cross(r);
   Eigen::Matrix3d R;
-  R.row(0) = r; R.row(1) = d; R.row(2) = f;
+  R.row(0) = r;
+  R.row(1) = d;
+  R.row(2) = f;
   return {R, -R * C};
 }
 

@@ -27,10 +27,15 @@ class Rng {
   }
   uint64_t next() {
     uint64_t r = rotl(s_[1] * 5, 7) * 9, t = s_[1] << 17;
-    s_[2] ^= s_[0]; s_[3] ^= s_[1]; s_[1] ^= s_[2]; s_[0] ^= s_[3]; s_[2] ^= t; s_[3] = rotl(s_[3], 45);
+    s_[2] ^= s_[0];
+    s_[3] ^= s_[1];
+    s_[1] ^= s_[2];
+    s_[0] ^= s_[3];
+    s_[2] ^= t;
+    s_[3] = rotl(s_[3], 45);
     return r;
   }
-  double uniform() { return (next() >> 11) * 0x1.0p-53; }            // [0, 1)
+  double uniform() { return (next() >> 11) * 0x1.0p-53; }  // [0, 1)
   double uniform(double a, double b) { return a + (b - a) * uniform(); }
   int integer(int lo, int hi) { return lo + static_cast<int>(uniform() * (hi - lo + 1)); }  // [lo, hi]
   bool chance(double p) { return uniform() < p; }

@@ -49,9 +49,9 @@ struct RenderedView {
   std::string name;
   Eigen::Matrix3d R;  // world -> camera
   Eigen::Vector3d t;
-  Image rgb;          // [H, W, 3]
-  LabelMap instances; // [H, W]
-  std::vector<float> depth;  // [H, W], 0 where the ray hits nothing
+  Image rgb;                         // [H, W, 3]
+  LabelMap instances;                // [H, W]
+  std::vector<float> depth;          // [H, W], 0 where the ray hits nothing
   std::vector<uint16_t> concept_id;  // [H, W] index into the generator's concept list of the surface seen
 };
 
@@ -83,7 +83,8 @@ struct SamMask {
 std::vector<SamMask> simulate_sam_masks(const RenderedView& v, const Intrinsics& K, const World& world,
                                         const std::vector<char>& split, const NoiseLevel& nl, uint64_t seed);
 
-// Unit "concept" vector of a phrase in R^D, fixed by the phrase alone (the same in every scene, like a real text encoder).
+// Unit "concept" vector of a phrase in R^D, fixed by the phrase alone (the same in every scene, like a real text
+// encoder).
 std::vector<float> concept_vector(const std::string& phrase, int dim);
 // Simulated dense CLIP features on a 16-pixel patch grid: [ceil(H/16), ceil(W/16), D].
 std::vector<float> simulate_features(const RenderedView& v, const std::vector<std::vector<float>>& concepts,

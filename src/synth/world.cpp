@@ -24,7 +24,9 @@ Vec3 to_world(const Primitive& p, const Vec3& v) {
 
 // Ray vs axis-aligned box [-h, h]; returns entry/exit distances.
 bool slab(const Vec3& o, const Vec3& d, const Vec3& h, double& t0, double& t1, int& axis0, int& axis1) {
-  t0 = -1e30; t1 = 1e30; axis0 = axis1 = 0;
+  t0 = -1e30;
+  t1 = 1e30;
+  axis0 = axis1 = 0;
   for (int i = 0; i < 3; ++i) {
     if (std::abs(d[i]) < 1e-12) {
       if (o[i] < -h[i] || o[i] > h[i]) return false;
@@ -32,8 +34,14 @@ bool slab(const Vec3& o, const Vec3& d, const Vec3& h, double& t0, double& t1, i
     }
     double a = (-h[i] - o[i]) / d[i], b = (h[i] - o[i]) / d[i];
     if (a > b) std::swap(a, b);
-    if (a > t0) { t0 = a; axis0 = i; }
-    if (b < t1) { t1 = b; axis1 = i; }
+    if (a > t0) {
+      t0 = a;
+      axis0 = i;
+    }
+    if (b < t1) {
+      t1 = b;
+      axis1 = i;
+    }
     if (t0 > t1) return false;
   }
   return t1 > kEps;
@@ -110,7 +118,10 @@ bool hit_local(const Primitive& p, const Vec3& o, const Vec3& d, double tmax, do
           double tt = (side * p.c - o.z()) / d.z();
           if (tt < kEps || tt >= best) continue;
           Vec3 q = o + tt * d;
-          if (q.x() * q.x() + q.y() * q.y() <= p.a * p.a) { best = tt; bn = Vec3(0, 0, side); }
+          if (q.x() * q.x() + q.y() * q.y() <= p.a * p.a) {
+            best = tt;
+            bn = Vec3(0, 0, side);
+          }
         }
       }
       if (best > tmax) return false;
@@ -144,16 +155,20 @@ bool hit_local(const Primitive& p, const Vec3& o, const Vec3& d, double tmax, do
 }
 
 double hash3(int x, int y, int z) {
-  uint64_t h = static_cast<uint64_t>(x) * 73856093ULL ^ static_cast<uint64_t>(y) * 19349663ULL ^ static_cast<uint64_t>(z) * 83492791ULL;
+  uint64_t h = static_cast<uint64_t>(x) * 73856093ULL ^ static_cast<uint64_t>(y) * 19349663ULL ^
+               static_cast<uint64_t>(z) * 83492791ULL;
   return (splitmix64(h) >> 11) * 0x1.0p-53;
 }
 
 // Trilinear value noise in [0, 1].
 double value_noise(const Vec3& p) {
-  int x = static_cast<int>(std::floor(p.x())), y = static_cast<int>(std::floor(p.y())), z = static_cast<int>(std::floor(p.z()));
+  int x = static_cast<int>(std::floor(p.x())), y = static_cast<int>(std::floor(p.y())),
+      z = static_cast<int>(std::floor(p.z()));
   double fx = p.x() - x, fy = p.y() - y, fz = p.z() - z;
   auto sm = [](double t) { return t * t * (3 - 2 * t); };
-  fx = sm(fx); fy = sm(fy); fz = sm(fz);
+  fx = sm(fx);
+  fy = sm(fy);
+  fz = sm(fz);
   double r = 0;
   for (int dz = 0; dz < 2; ++dz)
     for (int dy = 0; dy < 2; ++dy)
@@ -200,7 +215,13 @@ Vec3 World::albedo(const Hit& h) const {
   switch (m.texture) {
     case Texture::Solid: f = 0; break;
     case Texture::Stripes: f = std::sin(q.z() * 3.14159) > 0.55 ? 1 : 0; break;
-    case Texture::Checker: f = ((static_cast<int>(std::floor(q.x())) + static_cast<int>(std::floor(q.y())) + static_cast<int>(std::floor(q.z()))) & 1) ? 1 : 0; break;
+    case Texture::Checker:
+      f = ((static_cast<int>(std::floor(q.x())) + static_cast<int>(std::floor(q.y())) +
+            static_cast<int>(std::floor(q.z()))) &
+           1)
+              ? 1
+              : 0;
+      break;
     case Texture::Noise: f = value_noise(q) * 0.7 + value_noise(q * 2.7) * 0.3; break;
     case Texture::Wood: {
       double r = std::sqrt(q.x() * q.x() * 0.02 + q.z() * q.z() * 4.0) * 2 + value_noise(q * 0.5) * 2;
@@ -264,28 +285,199 @@ struct ClassDef {
 };
 
 const ClassDef kPool[] = {
-    {"red mug", "coffee cup", ShapeKind::Cylinder, 0.045, 0, 0.05, {0.78, 0.1, 0.1}, {0.95, 0.9, 0.9}, Texture::Stripes, 30},
+    {"red mug",
+     "coffee cup",
+     ShapeKind::Cylinder,
+     0.045,
+     0,
+     0.05,
+     {0.78, 0.1, 0.1},
+     {0.95, 0.9, 0.9},
+     Texture::Stripes,
+     30},
     {"green apple", "apple", ShapeKind::Sphere, 0.05, 0, 0, {0.35, 0.75, 0.15}, {0.6, 0.85, 0.2}, Texture::Noise, 40},
-    {"blue book", "notebook", ShapeKind::Box, 0.1, 0.07, 0.02, {0.12, 0.2, 0.7}, {0.9, 0.9, 0.85}, Texture::Stripes, 60},
-    {"yellow rubber duck", "bath toy", ShapeKind::Sphere, 0.045, 0, 0, {0.95, 0.85, 0.1}, {0.95, 0.55, 0.05}, Texture::Dots, 35},
-    {"orange traffic cone", "safety cone", ShapeKind::Cone, 0.055, 0, 0.075, {0.95, 0.45, 0.05}, {0.97, 0.97, 0.97}, Texture::Stripes, 25},
-    {"purple donut", "doughnut", ShapeKind::Torus, 0.045, 0.02, 0, {0.55, 0.2, 0.65}, {0.95, 0.75, 0.85}, Texture::Dots, 70},
+    {"blue book",
+     "notebook",
+     ShapeKind::Box,
+     0.1,
+     0.07,
+     0.02,
+     {0.12, 0.2, 0.7},
+     {0.9, 0.9, 0.85},
+     Texture::Stripes,
+     60},
+    {"yellow rubber duck",
+     "bath toy",
+     ShapeKind::Sphere,
+     0.045,
+     0,
+     0,
+     {0.95, 0.85, 0.1},
+     {0.95, 0.55, 0.05},
+     Texture::Dots,
+     35},
+    {"orange traffic cone",
+     "safety cone",
+     ShapeKind::Cone,
+     0.055,
+     0,
+     0.075,
+     {0.95, 0.45, 0.05},
+     {0.97, 0.97, 0.97},
+     Texture::Stripes,
+     25},
+    {"purple donut",
+     "doughnut",
+     ShapeKind::Torus,
+     0.045,
+     0.02,
+     0,
+     {0.55, 0.2, 0.65},
+     {0.95, 0.75, 0.85},
+     Texture::Dots,
+     70},
     {"white teapot", "kettle", ShapeKind::Sphere, 0.065, 0, 0, {0.92, 0.92, 0.9}, {0.3, 0.45, 0.75}, Texture::Dots, 25},
-    {"black camera", "camera", ShapeKind::Box, 0.06, 0.04, 0.035, {0.08, 0.08, 0.09}, {0.35, 0.35, 0.38}, Texture::Checker, 40},
-    {"pink piggy bank", "piggy bank", ShapeKind::Sphere, 0.055, 0, 0, {0.95, 0.55, 0.7}, {0.85, 0.4, 0.55}, Texture::Noise, 30},
-    {"brown teddy bear", "stuffed bear", ShapeKind::Sphere, 0.06, 0, 0, {0.5, 0.3, 0.15}, {0.35, 0.2, 0.1}, Texture::Noise, 80},
-    {"cyan water bottle", "bottle", ShapeKind::Cylinder, 0.03, 0, 0.09, {0.2, 0.8, 0.85}, {0.9, 0.95, 0.95}, Texture::Stripes, 20},
-    {"silver tin can", "soda can", ShapeKind::Cylinder, 0.033, 0, 0.06, {0.7, 0.72, 0.75}, {0.5, 0.5, 0.55}, Texture::Stripes, 50},
-    {"golden ring", "ring", ShapeKind::Torus, 0.035, 0.012, 0, {0.85, 0.65, 0.15}, {0.95, 0.85, 0.4}, Texture::Noise, 90},
-    {"wooden toy block", "building block", ShapeKind::Box, 0.04, 0.04, 0.04, {0.75, 0.55, 0.3}, {0.6, 0.4, 0.2}, Texture::Wood, 15},
-    {"lime tennis ball", "tennis ball", ShapeKind::Sphere, 0.035, 0, 0, {0.75, 0.95, 0.2}, {0.95, 0.95, 0.9}, Texture::Stripes, 45},
-    {"magenta party hat", "party hat", ShapeKind::Cone, 0.045, 0, 0.07, {0.85, 0.1, 0.6}, {0.95, 0.9, 0.2}, Texture::Dots, 40},
-    {"navy backpack", "bag", ShapeKind::Box, 0.07, 0.045, 0.085, {0.1, 0.12, 0.35}, {0.2, 0.25, 0.5}, Texture::Checker, 30},
-    {"teal flower pot", "plant pot", ShapeKind::Cone, 0.06, 0, 0.06, {0.1, 0.5, 0.5}, {0.3, 0.65, 0.6}, Texture::Noise, 30},
-    {"red fire extinguisher", "extinguisher", ShapeKind::Cylinder, 0.035, 0, 0.1, {0.85, 0.05, 0.05}, {0.15, 0.15, 0.15}, Texture::Checker, 20},
+    {"black camera",
+     "camera",
+     ShapeKind::Box,
+     0.06,
+     0.04,
+     0.035,
+     {0.08, 0.08, 0.09},
+     {0.35, 0.35, 0.38},
+     Texture::Checker,
+     40},
+    {"pink piggy bank",
+     "piggy bank",
+     ShapeKind::Sphere,
+     0.055,
+     0,
+     0,
+     {0.95, 0.55, 0.7},
+     {0.85, 0.4, 0.55},
+     Texture::Noise,
+     30},
+    {"brown teddy bear",
+     "stuffed bear",
+     ShapeKind::Sphere,
+     0.06,
+     0,
+     0,
+     {0.5, 0.3, 0.15},
+     {0.35, 0.2, 0.1},
+     Texture::Noise,
+     80},
+    {"cyan water bottle",
+     "bottle",
+     ShapeKind::Cylinder,
+     0.03,
+     0,
+     0.09,
+     {0.2, 0.8, 0.85},
+     {0.9, 0.95, 0.95},
+     Texture::Stripes,
+     20},
+    {"silver tin can",
+     "soda can",
+     ShapeKind::Cylinder,
+     0.033,
+     0,
+     0.06,
+     {0.7, 0.72, 0.75},
+     {0.5, 0.5, 0.55},
+     Texture::Stripes,
+     50},
+    {"golden ring",
+     "ring",
+     ShapeKind::Torus,
+     0.035,
+     0.012,
+     0,
+     {0.85, 0.65, 0.15},
+     {0.95, 0.85, 0.4},
+     Texture::Noise,
+     90},
+    {"wooden toy block",
+     "building block",
+     ShapeKind::Box,
+     0.04,
+     0.04,
+     0.04,
+     {0.75, 0.55, 0.3},
+     {0.6, 0.4, 0.2},
+     Texture::Wood,
+     15},
+    {"lime tennis ball",
+     "tennis ball",
+     ShapeKind::Sphere,
+     0.035,
+     0,
+     0,
+     {0.75, 0.95, 0.2},
+     {0.95, 0.95, 0.9},
+     Texture::Stripes,
+     45},
+    {"magenta party hat",
+     "party hat",
+     ShapeKind::Cone,
+     0.045,
+     0,
+     0.07,
+     {0.85, 0.1, 0.6},
+     {0.95, 0.9, 0.2},
+     Texture::Dots,
+     40},
+    {"navy backpack",
+     "bag",
+     ShapeKind::Box,
+     0.07,
+     0.045,
+     0.085,
+     {0.1, 0.12, 0.35},
+     {0.2, 0.25, 0.5},
+     Texture::Checker,
+     30},
+    {"teal flower pot",
+     "plant pot",
+     ShapeKind::Cone,
+     0.06,
+     0,
+     0.06,
+     {0.1, 0.5, 0.5},
+     {0.3, 0.65, 0.6},
+     Texture::Noise,
+     30},
+    {"red fire extinguisher",
+     "extinguisher",
+     ShapeKind::Cylinder,
+     0.035,
+     0,
+     0.1,
+     {0.85, 0.05, 0.05},
+     {0.15, 0.15, 0.15},
+     Texture::Checker,
+     20},
     {"grey stone", "rock", ShapeKind::Sphere, 0.045, 0, 0, {0.5, 0.5, 0.48}, {0.35, 0.35, 0.33}, Texture::Noise, 60},
-    {"yellow sponge", "sponge", ShapeKind::Box, 0.05, 0.035, 0.02, {0.95, 0.9, 0.35}, {0.7, 0.65, 0.15}, Texture::Dots, 80},
-    {"orange basketball", "ball", ShapeKind::Sphere, 0.06, 0, 0, {0.9, 0.45, 0.1}, {0.15, 0.08, 0.05}, Texture::Stripes, 22},
+    {"yellow sponge",
+     "sponge",
+     ShapeKind::Box,
+     0.05,
+     0.035,
+     0.02,
+     {0.95, 0.9, 0.35},
+     {0.7, 0.65, 0.15},
+     Texture::Dots,
+     80},
+    {"orange basketball",
+     "ball",
+     ShapeKind::Sphere,
+     0.06,
+     0,
+     0,
+     {0.9, 0.45, 0.1},
+     {0.15, 0.08, 0.05},
+     Texture::Stripes,
+     22},
 };
 constexpr int kPoolSize = sizeof(kPool) / sizeof(kPool[0]);
 
@@ -293,7 +485,9 @@ Primitive make_box(Vec3 c, Vec3 half, Material m, const std::string& name) {
   Primitive p;
   p.kind = ShapeKind::Box;
   p.center = c;
-  p.a = half.x(); p.b = half.y(); p.c = half.z();
+  p.a = half.x();
+  p.b = half.y();
+  p.c = half.z();
   p.mat = m;
   p.concept_name = name;
   return p;
@@ -313,10 +507,23 @@ const char* shape_name(ShapeKind k) {
 // Footprint radius and height above the support of a class at a given scale.
 void extent(const ClassDef& c, double s, double& radius, double& half_height) {
   switch (c.shape) {
-    case ShapeKind::Sphere: radius = c.a * s; half_height = c.a * s; break;
-    case ShapeKind::Box: radius = std::hypot(c.a, c.b) * s; half_height = c.c * s; break;
-    case ShapeKind::Cylinder: case ShapeKind::Cone: radius = c.a * s; half_height = c.c * s; break;
-    case ShapeKind::Torus: radius = (c.a + c.b) * s; half_height = c.b * s; break;
+    case ShapeKind::Sphere:
+      radius = c.a * s;
+      half_height = c.a * s;
+      break;
+    case ShapeKind::Box:
+      radius = std::hypot(c.a, c.b) * s;
+      half_height = c.c * s;
+      break;
+    case ShapeKind::Cylinder:
+    case ShapeKind::Cone:
+      radius = c.a * s;
+      half_height = c.c * s;
+      break;
+    case ShapeKind::Torus:
+      radius = (c.a + c.b) * s;
+      half_height = c.b * s;
+      break;
   }
 }
 
@@ -340,14 +547,17 @@ World make_world(const std::string& preset, int num_objects, uint64_t seed) {
   Material wood{{0.62, 0.45, 0.28}, {0.45, 0.3, 0.17}, Texture::Wood, 6};
   Material floor_mat{{0.55, 0.55, 0.52}, {0.4, 0.4, 0.38}, Texture::Checker, 2.5};
   // Supports: (centre x, y, top z, half size x, y) of surfaces objects stand on.
-  struct Support { double x, y, z, hx, hy; };
+  struct Support {
+    double x, y, z, hx, hy;
+  };
   std::vector<Support> supports;
   if (!room) {
     const double tz = 0, th = 0.015, hx = 0.7, hy = 0.5, leg = 0.73;
     w.prims.push_back(make_box({0, 0, tz - th}, {hx, hy, th}, wood, "wooden table"));
     for (int sx : {-1, 1})
       for (int sy : {-1, 1})
-        w.prims.push_back(make_box({sx * (hx - 0.05), sy * (hy - 0.05), tz - 2 * th - leg / 2}, {0.025, 0.025, leg / 2}, wood, "wooden table"));
+        w.prims.push_back(make_box({sx * (hx - 0.05), sy * (hy - 0.05), tz - 2 * th - leg / 2}, {0.025, 0.025, leg / 2},
+                                   wood, "wooden table"));
     w.prims.push_back(make_box({0, 0, -0.76 - 0.01}, {4, 4, 0.01}, floor_mat, "floor"));
     supports.push_back({0, 0, 0, 0.42, 0.28});
     w.look_center = Vec3(0, 0, 0.05);
@@ -365,7 +575,8 @@ World make_world(const std::string& preset, int num_objects, uint64_t seed) {
     // Two low tables and a shelf-like block as background furniture.
     w.prims.push_back(make_box({0.9, 0.5, 0.22}, {0.45, 0.35, 0.22}, wood, "wooden table"));
     w.prims.push_back(make_box({-0.9, -0.6, 0.18}, {0.35, 0.5, 0.18}, wood, "wooden table"));
-    w.prims.push_back(make_box({-1.6, 1.3, 0.5}, {0.3, 0.6, 0.5}, Material{{0.35, 0.35, 0.4}, {0.25, 0.25, 0.3}, Texture::Checker, 5}, "shelf"));
+    w.prims.push_back(make_box({-1.6, 1.3, 0.5}, {0.3, 0.6, 0.5},
+                               Material{{0.35, 0.35, 0.4}, {0.25, 0.25, 0.3}, Texture::Checker, 5}, "shelf"));
     supports.push_back({0.9, 0.5, 0.44, 0.35, 0.25});
     supports.push_back({-0.9, -0.6, 0.36, 0.25, 0.4});
     supports.push_back({0.0, 0.0, 0.0, 1.6, 1.6});
@@ -374,7 +585,10 @@ World make_world(const std::string& preset, int num_objects, uint64_t seed) {
     w.ambient = 0.45;
   }
   // Place objects with rejection sampling (no interpenetration, some close enough to occlude each other).
-  struct Placed { double x, y, r; int support; };
+  struct Placed {
+    double x, y, r;
+    int support;
+  };
   std::vector<Placed> placed;
   for (int k = 0; k < num_objects; ++k) {
     const ClassDef& c = kPool[order[k]];
@@ -394,7 +608,10 @@ World make_world(const std::string& preset, int num_objects, uint64_t seed) {
       ok = true;
       for (auto& p : placed) {
         double gap = std::hypot(p.x - x, p.y - y) - p.r - r;
-        if (gap < 0.008 * s) { ok = false; break; }
+        if (gap < 0.008 * s) {
+          ok = false;
+          break;
+        }
       }
       if (room && si == 2) {  // keep floor objects off the furniture footprints
         if (std::abs(x - 0.9) < 0.45 + r && std::abs(y - 0.5) < 0.35 + r) ok = false;
@@ -402,11 +619,14 @@ World make_world(const std::string& preset, int num_objects, uint64_t seed) {
         if (std::abs(x + 1.6) < 0.3 + r && std::abs(y - 1.3) < 0.6 + r) ok = false;
       }
     }
-    if (!ok) fail("--objects {}: could not place {} objects without overlap; use fewer objects", num_objects, num_objects);
+    if (!ok)
+      fail("--objects {}: could not place {} objects without overlap; use fewer objects", num_objects, num_objects);
     placed.push_back({x, y, r, si});
     Primitive p;
     p.kind = c.shape;
-    p.a = c.a * s; p.b = c.b * s; p.c = c.c * s;
+    p.a = c.a * s;
+    p.b = c.b * s;
+    p.c = c.c * s;
     p.yaw = rng.uniform(0, 6.283185307);
     p.center = Vec3(x, y, supports[si].z + hh + 1e-4);
     p.mat = Material{c.base, c.second, c.tex, c.tex_scale / s};

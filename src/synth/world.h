@@ -30,7 +30,7 @@ struct Primitive {
   double yaw = 0;
   double a = 0, b = 0, c = 0;
   Material mat;
-  int instance = 0;  // 0 = background (table, floor, walls); k = object k
+  int instance = 0;          // 0 = background (table, floor, walls); k = object k
   std::string concept_name;  // name of the thing it is ("red mug", "wooden table", ...)
 };
 
@@ -50,10 +50,10 @@ struct ObjectInfo {
 
 struct World {
   std::vector<Primitive> prims;
-  std::vector<ObjectInfo> objects;       // ids 1..K in order
-  std::vector<std::string> unused_names; // pool entries not placed (distractor phrases)
+  std::vector<ObjectInfo> objects;                            // ids 1..K in order
+  std::vector<std::string> unused_names;                      // pool entries not placed (distractor phrases)
   std::vector<std::pair<std::string, std::string>> synonyms;  // (synonym, class name)
-  Vec3 light_dir{0.4, 0.3, 0.86};        // towards the light, unit
+  Vec3 light_dir{0.4, 0.3, 0.86};                             // towards the light, unit
   double ambient = 0.35;
   Vec3 sky_top{0.78, 0.82, 0.9}, sky_bottom{0.55, 0.55, 0.58};
   // Camera placement

@@ -105,7 +105,8 @@ void Adam::update(AdamParam& p, float* value, const float* grad, int n) const {
 
 void Adam::check_rows(const AdamParam& p, int n) const {
   if (p.rows() != size_t(n)) fail("adam: parameter '{}' has moments for {} rows, got {}", p.name, p.rows(), n);
-  if (p.dim > kMaxRowUpdateDim) fail("adam: parameter '{}' is {} wide (row updates take at most {})", p.name, p.dim, kMaxRowUpdateDim);
+  if (p.dim > kMaxRowUpdateDim)
+    fail("adam: parameter '{}' is {} wide (row updates take at most {})", p.name, p.dim, kMaxRowUpdateDim);
 }
 
 namespace {
@@ -120,7 +121,9 @@ inline uint32_t x_bits(uint32_t r) { return (r * 0x9E3779B1u) >> 19; }  // 13 bi
 
 #if defined(__AVX2__)
 inline __m256 load_x8(const float* x) { return _mm256_loadu_ps(x); }
-inline __m256 load_x8(const uint16_t* x) { return _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(x))); }
+inline __m256 load_x8(const uint16_t* x) {
+  return _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(x)));
+}
 inline void store_x8(float* x, __m256 v, __m256i) { _mm256_storeu_ps(x, v); }
 inline void store_x8(uint16_t* x, __m256 v, __m256i r) {
   const __m256i bits = _mm256_srli_epi32(_mm256_mullo_epi32(r, _mm256_set1_epi32(int(0x9E3779B1u))), 19);
@@ -152,7 +155,8 @@ void adam_row(const AdamParam& p, X* x, const float* g, float* m32, float* v32, 
   const __m256 vb1 = _mm256_set1_ps(b1), vb1c = _mm256_set1_ps(1 - b1), vb2 = _mm256_set1_ps(b2),
                vb2c = _mm256_set1_ps(1 - b2), vstep = _mm256_set1_ps(step), vbc2 = _mm256_set1_ps(inv_sqrt_bc2),
                veps = _mm256_set1_ps(e);
-  const __m256i lane = _mm256_mullo_epi32(_mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), _mm256_set1_epi32(int(0x9E3779B9u)));
+  const __m256i lane =
+      _mm256_mullo_epi32(_mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), _mm256_set1_epi32(int(0x9E3779B9u)));
   const __m256i low16 = _mm256_set1_epi32(0xFFFF);
   auto hash8 = [](__m256i h) {
     h = _mm256_xor_si256(h, _mm256_srli_epi32(h, 16));
@@ -170,8 +174,12 @@ void adam_row(const AdamParam& p, X* x, const float* g, float* m32, float* v32, 
     __m256i mo[2], vo[2];
     for (int h = 0; h < 2; ++h) {
       const int cc = c + 8 * h;
-      const __m256 mf = _mm256_castsi256_ps(_mm256_slli_epi32(_mm256_cvtepu16_epi32(h ? _mm256_extracti128_si256(m16, 1) : _mm256_castsi256_si128(m16)), 16));
-      const __m256 vf = _mm256_castsi256_ps(_mm256_slli_epi32(_mm256_cvtepu16_epi32(h ? _mm256_extracti128_si256(v16, 1) : _mm256_castsi256_si128(v16)), 16));
+      const __m256 mf = _mm256_castsi256_ps(
+          _mm256_slli_epi32(_mm256_cvtepu16_epi32(h ? _mm256_extracti128_si256(m16, 1) : _mm256_castsi256_si128(m16)),
+                            16));
+      const __m256 vf = _mm256_castsi256_ps(
+          _mm256_slli_epi32(_mm256_cvtepu16_epi32(h ? _mm256_extracti128_si256(v16, 1) : _mm256_castsi256_si128(v16)),
+                            16));
       const __m256 g8 = _mm256_loadu_ps(g + cc);
       const __m256 mi = _mm256_fmadd_ps(vb1, mf, _mm256_mul_ps(vb1c, g8));
       const __m256 vi = _mm256_fmadd_ps(vb2, vf, _mm256_mul_ps(vb2c, _mm256_mul_ps(g8, g8)));
@@ -219,8 +227,8 @@ int Adam::row_kernel(AdamParam& p, X* value, long row, const float* g, long ts) 
     adam_row(p, value + o, g, nullptr, nullptr, p.m16.data() + o, p.v16.data() + o, beta1, beta2, p.eps, step,
              inv_sqrt_bc2, base);
   else
-    adam_row(p, value + o, g, p.m.data() + o, p.v.data() + o, nullptr, nullptr, beta1, beta2, p.eps, step,
-             inv_sqrt_bc2, base);
+    adam_row(p, value + o, g, p.m.data() + o, p.v.data() + o, nullptr, nullptr, beta1, beta2, p.eps, step, inv_sqrt_bc2,
+             base);
   return bad;
 }
 

@@ -33,14 +33,14 @@ struct AdamParam {
   std::string name;
   int dim = 1;
   ParamScope scope = ParamScope::PerGaussian;
-  long step = 0;            // t of this parameter's last update
+  long step = 0;  // t of this parameter's last update
   float eps = 1e-15f;
   std::function<ParamValues()> values;  // null = not saved by checkpoints
-  std::vector<float> lr;    // [dim] learning rate of each column (changed by schedules)
-  std::vector<float> m, v;  // [N, dim] (float32 moments)
-  bool bf16 = false;        // moments stored in m16 / v16 instead of m / v
-  std::vector<uint16_t> m16, v16;  // [N, dim] (bfloat16 moments)
-  long nonfinite = 0;       // NaN / Inf gradient values seen by the updates since the last clear_nonfinite()
+  std::vector<float> lr;                // [dim] learning rate of each column (changed by schedules)
+  std::vector<float> m, v;              // [N, dim] (float32 moments)
+  bool bf16 = false;                    // moments stored in m16 / v16 instead of m / v
+  std::vector<uint16_t> m16, v16;       // [N, dim] (bfloat16 moments)
+  long nonfinite = 0;  // NaN / Inf gradient values seen by the updates since the last clear_nonfinite()
   void set_lr(float value) { lr.assign(dim, value); }
   size_t rows() const { return (bf16 ? m16.size() : m.size()) / size_t(dim); }
 };
@@ -48,7 +48,7 @@ struct AdamParam {
 class Adam {
  public:
   float beta1 = 0.9f, beta2 = 0.999f;
-  float lr_scale = 1.f;  // multiplies every learning rate (the batch rule of TrainConfig::batch_lr)
+  float lr_scale = 1.f;          // multiplies every learning rate (the batch rule of TrainConfig::batch_lr)
   std::deque<AdamParam> params;  // a deque: references returned by add() stay valid
 
   // A per-Gaussian parameter [n, dim] (moments zero).

@@ -7,16 +7,16 @@
 // (bfloat16 moments widened, exact), densification statistics, then the method's non-parameter state
 // ("method/<name>", e.g. the hybrid method's observation table). No per-method code: every parameter the method
 // registered is saved and restored by name. Read and written in streams (no whole-file buffer).
-#include <cmath>
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <memory>
 #include <sstream>
 
 #include "core/error.h"
-#include "core/half.h"
 #include "core/fs.h"
+#include "core/half.h"
 #include "train/trainer.h"
 
 namespace hgs::train {
@@ -27,7 +27,7 @@ constexpr size_t kChunk = size_t(1) << 20;  // values converted per chunk for bf
 struct FileCloser {
   void operator()(FILE* f) const { std::fclose(f); }
 };
-}
+}  // namespace
 
 void Trainer::save_checkpoint(const std::filesystem::path& path) const {
   using nlohmann::json;
@@ -79,8 +79,13 @@ void Trainer::save_checkpoint(const std::filesystem::path& path) const {
   for (auto& e : model_.extras) h["extras"].push_back({{"name", e.name}, {"dim", e.dim}, {"f16", e.f16}});
   h["adam"]["params"] = json::array();
   for (auto& p : adam_.params)
-    h["adam"]["params"].push_back({{"name", p.name}, {"dim", p.dim}, {"lr", p.lr}, {"bf16", p.bf16}, {"step", p.step},
-                                   {"eps", p.eps}, {"scope", p.scope == ParamScope::Array ? "array" : "gaussian"}});
+    h["adam"]["params"].push_back({{"name", p.name},
+                                   {"dim", p.dim},
+                                   {"lr", p.lr},
+                                   {"bf16", p.bf16},
+                                   {"step", p.step},
+                                   {"eps", p.eps},
+                                   {"scope", p.scope == ParamScope::Array ? "array" : "gaussian"}});
   std::ostringstream rs;
   rs << rng_;
   h["rng"] = rs.str();
@@ -161,8 +166,8 @@ std::deque<AdamParam> header_params(const json& h, const std::string& where, con
     const bool array = p.value("scope", std::string("gaussian")) == "array";
     if (name != cur.name || p.at("dim").get<int>() != cur.dim || array != (cur.scope == ParamScope::Array) ||
         p.value("bf16", false) != cur.bf16)
-      fail("{}: optimiser parameter {} is '{}' [{}], this trainer's is '{}' [{}]", where, i, name, p.at("dim").get<int>(),
-           cur.name, cur.dim);
+      fail("{}: optimiser parameter {} is '{}' [{}], this trainer's is '{}' [{}]", where, i, name,
+           p.at("dim").get<int>(), cur.name, cur.dim);
     AdamParam ap;
     ap.name = cur.name;
     ap.dim = cur.dim;
@@ -172,7 +177,8 @@ std::deque<AdamParam> header_params(const json& h, const std::string& where, con
     ap.step = p.contains("step") ? p.at("step").get<long>() : h.at("adam").at("step").get<long>();
     ap.eps = p.value("eps", cur.eps);
     ap.lr = p.at("lr").get<std::vector<float>>();
-    if (int(ap.lr.size()) != ap.dim) fail("{}: parameter '{}' has {} learning rates for {} columns", where, ap.name, ap.lr.size(), ap.dim);
+    if (int(ap.lr.size()) != ap.dim)
+      fail("{}: parameter '{}' has {} learning rates for {} columns", where, ap.name, ap.lr.size(), ap.dim);
     const size_t rows = array ? cur.rows() : size_t(n);
     if (ap.bf16) {
       ap.m16.resize(rows * ap.dim);
@@ -207,11 +213,14 @@ void read_arrays(FILE* fp, const json& h, const std::string& where, uint64_t fil
     if (it != t.f32.end()) {
       if (name.rfind("method/", 0) == 0) {  // sizes checked by method_state_loaded; here only against the file
         const long pos = std::ftell(fp);
-        if (pos < 0 || count > (file_size - uint64_t(pos)) / 4) fail("{}: truncated checkpoint (array '{}')", where, name);
+        if (pos < 0 || count > (file_size - uint64_t(pos)) / 4)
+          fail("{}: truncated checkpoint (array '{}')", where, name);
         it->second->resize(count);
       }
-      if (it->second->size() != count) fail("{}: array '{}' has {} values, expected {}", where, name, count, it->second->size());
-      if (std::fread(it->second->data(), 4, count, fp) != count) fail("{}: truncated checkpoint (array '{}')", where, name);
+      if (it->second->size() != count)
+        fail("{}: array '{}' has {} values, expected {}", where, name, count, it->second->size());
+      if (std::fread(it->second->data(), 4, count, fp) != count)
+        fail("{}: truncated checkpoint (array '{}')", where, name);
     } else {
       std::vector<uint16_t>& d = *it16->second.first;
       const bool fp16 = it16->second.second;
@@ -255,11 +264,12 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
   const json h = read_header(fp, where, file_size);
   try {
     if (h.at("num_views").get<size_t>() != views_.size())
-      fail("{}: checkpoint was trained on {} views, this scene has {}", where, h.at("num_views").get<size_t>(), views_.size());
+      fail("{}: checkpoint was trained on {} views, this scene has {}", where, h.at("num_views").get<size_t>(),
+           views_.size());
     TrainConfig c = TrainConfig::from_json(h.at("config"), where);
     c.iters = cfg_.iters;
     c.save_every = cfg_.save_every;
-    c.batch = cfg_.batch;  // a run may resume with another batch or number of ranks
+    c.batch = cfg_.batch;        // a run may resume with another batch or number of ranks
     c.batch_lr = cfg_.batch_lr;  // and its rule (the optimiser was set up with it)
     GaussianModel m = header_model(h);
     // A checkpoint without a method name is hybrid when it holds a method configuration (files written before
@@ -288,7 +298,8 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
     }
     // The method's own state is read into copies (sized by the file) and handed to method_state_loaded.
     std::map<std::string, std::vector<float>> method;
-    for (auto& [name, arr] : method_->state()) t.f32["method/" + name] = &(method[name] = std::vector<float>(arr.size()));
+    for (auto& [name, arr] : method_->state())
+      t.f32["method/" + name] = &(method[name] = std::vector<float>(arr.size()));
     t.f32["stats/grad_accum"] = &st.grad_accum;
     t.f32["stats/count"] = &counts;
     t.f32["stats/max_radius"] = &st.max_radius;

@@ -102,7 +102,8 @@ DensifyResult densify_and_prune(GaussianModel& model, Adam& adam, DensifyStats& 
                                 float extent, float screen_limit, std::mt19937_64& rng) {
   DensifyResult res;
   const int n0 = model.n;
-  if (int(stats.count.size()) != n0) fail("densify: statistics hold {} Gaussians, the model {}", stats.count.size(), n0);
+  if (int(stats.count.size()) != n0)
+    fail("densify: statistics hold {} Gaussians, the model {}", stats.count.size(), n0);
   std::vector<char> clone(n0, 0), split(n0, 0);
   for (int i = 0; i < n0; ++i) {
     float g = stats.count[i] > 0 ? stats.grad_accum[i] / float(stats.count[i]) : 0.f;

@@ -55,7 +55,6 @@ struct DensifyStats {
   void add(const StepStats& s);
 };
 
-
 struct DensifyResult {
   int cloned = 0, split = 0, pruned = 0;
 };

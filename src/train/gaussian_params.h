@@ -15,7 +15,7 @@ namespace hgs::train {
 
 struct GaussianParam {
   const char* name;
-  std::vector<float> GaussianModel::*value;        // [N, cols]
+  std::vector<float> GaussianModel::*value;         // [N, cols]
   std::vector<float> render::GaussianGrads::*grad;  // [N, cols]
   int (*cols)(const GaussianModel& m);
   float TrainConfig::*lr;     // the rate of every column, or of columns 3.. when lr_dc is set
@@ -26,15 +26,14 @@ struct GaussianParam {
 inline constexpr std::array<GaussianParam, 5> kGaussianParams = {{
     {"mean", &GaussianModel::mean, &render::GaussianGrads::mean, [](const GaussianModel&) { return 3; },
      &TrainConfig::lr_position_init, nullptr, true},
-    {"log_scale", &GaussianModel::log_scale, &render::GaussianGrads::log_scale,
-     [](const GaussianModel&) { return 3; }, &TrainConfig::lr_scaling, nullptr, false},
+    {"log_scale", &GaussianModel::log_scale, &render::GaussianGrads::log_scale, [](const GaussianModel&) { return 3; },
+     &TrainConfig::lr_scaling, nullptr, false},
     {"quat", &GaussianModel::quat, &render::GaussianGrads::quat, [](const GaussianModel&) { return 4; },
      &TrainConfig::lr_rotation, nullptr, false},
     {"opacity", &GaussianModel::opacity_logit, &render::GaussianGrads::opacity_logit,
      [](const GaussianModel&) { return 1; }, &TrainConfig::lr_opacity, nullptr, false},
-    {"sh", &GaussianModel::sh, &render::GaussianGrads::sh,
-     [](const GaussianModel& m) { return m.sh_stride() * 3; }, &TrainConfig::lr_sh_rest, &TrainConfig::lr_sh_dc,
-     false},
+    {"sh", &GaussianModel::sh, &render::GaussianGrads::sh, [](const GaussianModel& m) { return m.sh_stride() * 3; },
+     &TrainConfig::lr_sh_rest, &TrainConfig::lr_sh_dc, false},
 }};
 
 // The row of `name`, or null.

@@ -50,11 +50,11 @@ struct TrainView {
 
 // The view a per-view hook works on, and the model of the step.
 struct ViewStep {
-  int iteration;        // 1-based: training images seen before this step + 1 (the schedules count images)
-  int view_index;       // into the trainer's views
+  int iteration;   // 1-based: training images seen before this step + 1 (the schedules count images)
+  int view_index;  // into the trainer's views
   const TrainView& view;
-  int slot;             // this process's view number within the step, 0 .. batch - 1
-  int global_slot;      // the view's number within the global batch, rank x batch + slot
+  int slot;              // this process's view number within the step, 0 .. batch - 1
+  int global_slot;       // the view's number within the global batch, rank x batch + slot
   std::mt19937_64& rng;  // with one view per step the trainer's stream; with several this view's own, seeded from
                          // (seed, iteration, global_slot), so any split of a batch over ranks draws the same numbers
   GaussianModel& model;
@@ -93,7 +93,7 @@ struct UpdateIO {
 
 // after_step: once per step, after densification.
 struct StepEnd {
-  int iteration;   // the step's first image (1-based)
+  int iteration;    // the step's first image (1-based)
   int images_seen;  // after the step: iteration - 1 + G
   bool densified;
   GaussianModel& model;

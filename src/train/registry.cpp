@@ -17,8 +17,7 @@ std::mutex& registry_mutex() {
 
 std::vector<MethodFactory>& registry() {
   static std::vector<MethodFactory> r{
-      {"rgb", "plain 3DGS",
-       [](const Scene&, const std::vector<int>&, const TrainConfig&, const nlohmann::json&, bool) {
+      {"rgb", "plain 3DGS", [](const Scene&, const std::vector<int>&, const TrainConfig&, const nlohmann::json&, bool) {
          return std::unique_ptr<Method>(std::make_unique<RgbMethod>());
        }}};
   return r;
@@ -42,7 +41,8 @@ std::vector<std::string> method_names() {
 }
 
 std::unique_ptr<Trainer> make_trainer(const Scene& scene, const std::vector<int>& idx, const TrainConfig& cfg,
-                                      const std::string& method, const nlohmann::json& options, bool progress, Reducer* reducer) {
+                                      const std::string& method, const nlohmann::json& options, bool progress,
+                                      Reducer* reducer) {
   MethodFactory f;
   {
     std::lock_guard<std::mutex> lock(registry_mutex());

@@ -114,9 +114,9 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, T* g
   const T g = T(1) / T(size_t(H) * L);
   const bool back = grad_x != nullptr;
   buf.resize(size_t(kWin) * 8 * L + size_t(8) * L);
-  T* P = buf.data();                       // [11][5][L]
-  T* Q = P + size_t(kWin) * 5 * L;         // [11][3][L]
-  T* tmp = Q + size_t(kWin) * 3 * L;       // [8][L]: products, moments
+  T* P = buf.data();                  // [11][5][L]
+  T* Q = P + size_t(kWin) * 5 * L;    // [11][3][L]
+  T* tmp = Q + size_t(kWin) * 3 * L;  // [8][L]: products, moments
   auto prow = [&](int row, int map) { return P + (size_t(row % kWin) * 5 + map) * L; };
   auto qrow = [&](int row, int map) { return Q + (size_t(row % kWin) * 3 + map) * L; };
   const int ma = back ? std::max(0, y0 - kHalf) : y0, mb = back ? std::min(H, y1 + kHalf) : y1;

@@ -17,8 +17,13 @@ Trainer::~Trainer() = default;
 
 Trainer::Trainer(const TrainConfig& cfg, GaussianModel model, std::vector<TrainView> views, float extent,
                  std::unique_ptr<Method> method, Reducer* reducer)
-    : cfg_(cfg), model_(std::move(model)), views_(std::move(views)), extent_(extent), rng_(cfg.seed),
-      loss_(cfg.lambda_dssim), method_(method ? std::move(method) : std::make_unique<RgbMethod>()) {
+    : cfg_(cfg),
+      model_(std::move(model)),
+      views_(std::move(views)),
+      extent_(extent),
+      rng_(cfg.seed),
+      loss_(cfg.lambda_dssim),
+      method_(method ? std::move(method) : std::make_unique<RgbMethod>()) {
   reducer_ = reducer ? reducer : &local_reducer_;
   if (views_.empty()) fail("train: no training views");
   if (cfg_.batch < 1) fail("train: the batch must be at least 1 view, got {}", cfg_.batch);
@@ -182,13 +187,13 @@ class Trainer::PartClock {
 
 // Which views a step takes and how it counts them.
 struct Trainer::StepPlan {
-  int prev = 0;       // images seen before the step
-  int iteration = 0;  // 1-based, as in 3DGS: the step's first image
-  int local_views = 1;  // B: this process's views
-  int step_views = 1;   // G: views of the global batch
-  float grad_scale = 1;  // 1 / G
+  int prev = 0;               // images seen before the step
+  int iteration = 0;          // 1-based, as in 3DGS: the step's first image
+  int local_views = 1;        // B: this process's views
+  int step_views = 1;         // G: views of the global batch
+  float grad_scale = 1;       // 1 / G
   bool gather_stats = false;  // densification statistics are gathered this step
-  std::vector<int> views;  // [G] view indices of the global batch (every rank draws all of them)
+  std::vector<int> views;     // [G] view indices of the global batch (every rank draws all of them)
 };
 
 // This process's per-view results, summed over its views.
@@ -221,8 +226,8 @@ StepInfo Trainer::step() {
   adam_.get("mean").set_lr(cfg_.position_lr(plan.iteration, extent_));
   render::GaussianInputs in = render_inputs(model_);
   // 3DGS raises the degree at iterations 1000, 2000, ... before rendering.
-  in.sh_degree = std::min(cfg_.sh_degree,
-                          cfg_.sh_increase_every > 0 ? plan.iteration / cfg_.sh_increase_every : cfg_.sh_degree);
+  in.sh_degree =
+      std::min(cfg_.sh_degree, cfg_.sh_increase_every > 0 ? plan.iteration / cfg_.sh_increase_every : cfg_.sh_degree);
   if (!plan.gather_stats && step_stats_.n > 0) step_stats_ = StepStats{};
   ViewSums sums;
   for (int b = 0; b < plan.local_views; ++b) train_view(plan, b, in, sums, clock, info.times);

@@ -6,8 +6,8 @@
 // order. Then, once per step: the Reducer adds the ranks' sums in rank order (method.reduce its own), Adam on
 // the 3DGS parameters (gaussian_params.h) with the batch mean (learning rates of TrainConfig, the position rate
 // decaying with the images seen, the batch rule of TrainConfig::batch_lr), method.update, densification and
-// opacity resets, method.after_step. Every schedule counts training images seen (iteration() advances by G per step), so
-// a run with a larger batch sees the same views at the same schedule points in fewer steps. The trainer owns the
+// opacity resets, method.after_step. Every schedule counts training images seen (iteration() advances by G per step),
+// so a run with a larger batch sees the same views at the same schedule points in fewer steps. The trainer owns the
 // model, the optimiser (the method registers its parameters there), the renderer and the schedule; checkpoints
 // hold everything needed to resume bit for bit (model, every registered parameter and its moments, statistics,
 // RNG, view order, method state).
@@ -32,7 +32,6 @@
 
 namespace hgs::train {
 
-
 // Wall time of the parts of one step (ms), in step order.
 struct StepTimes {
   double prepare = 0;      // the method's per-view inputs (Method::prepare)
@@ -44,7 +43,8 @@ struct StepTimes {
   double reduce = 0;       // combining the ranks' gradients (Reducer; 0 on one process)
   double update = 0;       // Adam and the method's own updates (Method::update)
   double densify = 0;      // densification, opacity reset and after_step
-  template <class F> static void each(F&& f) {  // f(name, member pointer) for every part
+  template <class F>
+  static void each(F&& f) {  // f(name, member pointer) for every part
     f("prepare", &StepTimes::prepare);
     f("forward", &StepTimes::forward);
     f("loss", &StepTimes::loss);
@@ -58,10 +58,10 @@ struct StepTimes {
 };
 
 struct StepInfo {
-  LossValues loss;  // of the photometric term (total = its unweighted value); mean over this process's views
+  LossValues loss;   // of the photometric term (total = its unweighted value); mean over this process's views
   double total = 0;  // the optimised objective: sum of the weighted terms
   std::vector<LossTerm> terms;
-  float psnr = 0;   // of this step's training views (from the mean MSE)
+  float psnr = 0;  // of this step's training views (from the mean MSE)
   int num_gaussians = 0;
   double ms = 0;    // wall time of the step
   StepTimes times;  // ... and of its parts
@@ -119,7 +119,7 @@ class Trainer {
   render::GaussianGrads grads_;       // the step's sum over its views (then the mean)
   render::GaussianGrads view_grads_;  // of the second and later views of a step
   StepStats step_stats_;
-  std::vector<float> pack_;           // the gradients and statistic sums sent to the other ranks
+  std::vector<float> pack_;  // the gradients and statistic sums sent to the other ranks
   Reducer local_reducer_;
   Reducer* reducer_ = nullptr;
   render::ProjectedGrads pgrads_;
@@ -128,7 +128,7 @@ class Trainer {
   Objective objective_;
   std::unique_ptr<Method> method_;
 
-  int inject_iter_ = 0;     // HGS_INJECT_NAN=<iteration>:<group> (a test hook, see docs/reliability.md)
+  int inject_iter_ = 0;  // HGS_INJECT_NAN=<iteration>:<group> (a test hook, see docs/reliability.md)
   std::string inject_group_;
 
   // The phases of step(), in order (trainer.cpp).
@@ -136,8 +136,8 @@ class Trainer {
   struct ViewSums;
   class PartClock;
   StepPlan plan_step();
-  void train_view(const StepPlan& plan, int slot, const render::GaussianInputs& in, ViewSums& sums,
-                  PartClock& clock, StepTimes& times);
+  void train_view(const StepPlan& plan, int slot, const render::GaussianInputs& in, ViewSums& sums, PartClock& clock,
+                  StepTimes& times);
   void render_view(const ViewStep& vs, const render::GaussianInputs& in, float background, PartClock& clock,
                    StepTimes& times);
   void add_view_gradients(int slot);

@@ -8,8 +8,8 @@
 
 #include "core/error.h"
 #include "core/fs.h"
-#include "model/ply.h"
 #include "hybrid/fields.h"
+#include "model/ply.h"
 #include "query/query.h"
 
 namespace hgs::viewer {
@@ -40,8 +40,8 @@ GaussianModel display_model(const GaussianModel& m, const DisplayOptions& opt) {
 
 std::string ply_bytes(const GaussianModel& m) {
   static std::atomic<long> counter{0};
-  const fs::path tmp = fs::temp_directory_path() /
-                       ("hgs-view-" + std::to_string(::getpid()) + "-" + std::to_string(counter++) + ".ply");
+  const fs::path tmp =
+      fs::temp_directory_path() / ("hgs-view-" + std::to_string(::getpid()) + "-" + std::to_string(counter++) + ".ply");
   struct Remove {
     fs::path p;
     ~Remove() {

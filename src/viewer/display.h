@@ -12,12 +12,12 @@ namespace hgs::viewer {
 enum class Show { all, isolate, remove };
 
 struct DisplayOptions {
-  std::vector<int> objects;           // selected object ids (hard id obj_id)
-  Show show = Show::all;              // all Gaussians, only the selected, or all but the selected
-  bool tint = false;                  // blend the selected Gaussians' base colour toward `tint_rgb`
+  std::vector<int> objects;  // selected object ids (hard id obj_id)
+  Show show = Show::all;     // all Gaussians, only the selected, or all but the selected
+  bool tint = false;         // blend the selected Gaussians' base colour toward `tint_rgb`
   float tint_rgb[3] = {1.f, 0.45f, 0.f};
   float tint_amount = 0.6f;
-  bool keep_extras = false;           // downloads keep obj/obj_id/lang; the browser copy drops them
+  bool keep_extras = false;  // downloads keep obj/obj_id/lang; the browser copy drops them
 };
 
 // The model to display or download for these options. Fails (hgs::Error) when objects are given and the

@@ -40,7 +40,10 @@ bool valid_utf8(const std::string& s) {
     const unsigned c = p[i];
     int len = 0;
     unsigned cp = 0, min = 0;
-    if (c < 0x80) { ++i; continue; }
+    if (c < 0x80) {
+      ++i;
+      continue;
+    }
     if ((c & 0xE0) == 0xC0) len = 2, cp = c & 0x1F, min = 0x80;
     else if ((c & 0xF0) == 0xE0) len = 3, cp = c & 0x0F, min = 0x800;
     else if ((c & 0xF8) == 0xF0) len = 4, cp = c & 0x07, min = 0x10000;
@@ -142,9 +145,18 @@ struct Server::Impl {
         for (int k = 0; k < 3; ++k) R.push_back(v.R(r, k));
       const Eigen::Vector3d cc = v.camera_center();
       for (int r = 0; r < 3; ++r) t.push_back(v.t[r]), c.push_back(cc[r]);
-      views.push_back({{"index", v.index}, {"name", v.name}, {"width", v.width}, {"height", v.height},
-                       {"fx", v.fx}, {"fy", v.fy}, {"cx", v.cx}, {"cy", v.cy}, {"R", R}, {"t", t},
-                       {"center", c}, {"test", v.is_test}});
+      views.push_back({{"index", v.index},
+                       {"name", v.name},
+                       {"width", v.width},
+                       {"height", v.height},
+                       {"fx", v.fx},
+                       {"fy", v.fy},
+                       {"cx", v.cx},
+                       {"cy", v.cy},
+                       {"R", R},
+                       {"t", t},
+                       {"center", c},
+                       {"test", v.is_test}});
     }
     const GaussianModel& m = s.model();
     double mean[3] = {0, 0, 0};
@@ -154,7 +166,7 @@ struct Server::Impl {
     json phrases = json::array();
     for (auto& [k, v] : sc.text_embeddings) phrases.push_back(k);
     return {{"scene", sc.root.filename().string().empty() ? sc.root.parent_path().filename().string()
-                                                           : sc.root.filename().string()},
+                                                          : sc.root.filename().string()},
             {"gaussians", m.n},
             {"sh_degree", m.sh_degree},
             {"center", {mean[0], mean[1], mean[2]}},
@@ -170,8 +182,8 @@ struct Server::Impl {
     query::ObjectAnswer a = s.ask(text, {min_relevancy, 0.5f});
     json results = json::array(), chosen = json::array();
     for (auto& sc : a.scores)
-      results.push_back({{"id", sc.object}, {"name", s.object_name(sc.object)}, {"relevancy", sc.relevancy},
-                         {"cosine", sc.cosine}});
+      results.push_back(
+          {{"id", sc.object}, {"name", s.object_name(sc.object)}, {"relevancy", sc.relevancy}, {"cosine", sc.cosine}});
     for (int k : a.chosen) chosen.push_back({{"id", k}, {"name", s.object_name(k)}});
     const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return {{"text", text}, {"chosen", chosen}, {"results", results}, {"seconds", secs}};
@@ -302,7 +314,7 @@ Server::Server(query::Session& session, ServerOptions opt, std::unique_ptr<httpl
   });
   svr.set_error_handler([](const httplib::Request& req, httplib::Response& res) {
     if (!res.body.empty()) return;
-    std::string msg = res.status == 413 ? "request body too large"
+    std::string msg = res.status == 413   ? "request body too large"
                       : res.status == 404 ? "not found: " + req.path
                                           : fmt::format("HTTP {}", res.status);
     send_json(res, {{"error", msg}}, res.status);
@@ -313,54 +325,61 @@ Server::Server(query::Session& session, ServerOptions opt, std::unique_ptr<httpl
     for (const auto& [k, v] : req.headers) bytes += k.size() + v.size() + 4;
     if (req.headers.size() <= opt_.max_headers && bytes <= opt_.max_header_bytes)
       return httplib::Server::HandlerResponse::Unhandled;
-    send_json(res, {{"error", fmt::format("request header fields too large ({} fields, {} bytes; at most {} and {})",
-                                          req.headers.size(), bytes, opt_.max_headers, opt_.max_header_bytes)}},
+    send_json(res,
+              {{"error", fmt::format("request header fields too large ({} fields, {} bytes; at most {} and {})",
+                                     req.headers.size(), bytes, opt_.max_headers, opt_.max_header_bytes)}},
               431);
     res.set_header("Connection", "close");
     return httplib::Server::HandlerResponse::Handled;
   });
 
-  svr.Get("/api/scene", guard([&I](const httplib::Request&, httplib::Response& res) { send_json(res, I.scene_info()); }));
+  svr.Get("/api/scene",
+          guard([&I](const httplib::Request&, httplib::Response& res) { send_json(res, I.scene_info()); }));
   svr.Get("/api/objects", guard([&I](const httplib::Request&, httplib::Response& res) {
-    send_json(res, {{"objects", I.object_list()}});
-  }));
+            send_json(res, {{"objects", I.object_list()}});
+          }));
   svr.Get("/api/query", guard([&I](const httplib::Request& req, httplib::Response& res) {
-    if (!req.has_param("text")) throw HttpError(400, "missing text=<query>");
-    send_json(res, I.answer(I.checked_text(req.get_param_value("text")), 0.f));
-  }));
+            if (!req.has_param("text")) throw HttpError(400, "missing text=<query>");
+            send_json(res, I.answer(I.checked_text(req.get_param_value("text")), 0.f));
+          }));
   svr.Post("/api/query", guard([&I](const httplib::Request& req, httplib::Response& res) {
-    const json body = json::parse(req.body);
-    if (!body.is_object() || !body.contains("text") || !body["text"].is_string())
-      throw HttpError(400, "expected a JSON object {\"text\": \"...\"}");
-    float min_rel = 0.f;
-    if (body.contains("min_relevancy")) {
-      if (!body["min_relevancy"].is_number()) throw HttpError(400, "min_relevancy: expected a number");
-      min_rel = body["min_relevancy"].get<float>();
-      if (!(min_rel >= 0.f && min_rel <= 1.f)) throw HttpError(400, "min_relevancy: expected a number in [0, 1]");
-    }
-    send_json(res, I.answer(I.checked_text(body["text"].get<std::string>()), min_rel));
-  }));
-  svr.Get("/api/model.ply", guard([&I](const httplib::Request& req, httplib::Response& res) { I.model_ply(req, res, false); }));
-  svr.Get("/api/export.ply", guard([&I](const httplib::Request& req, httplib::Response& res) { I.model_ply(req, res, true); }));
+             const json body = json::parse(req.body);
+             if (!body.is_object() || !body.contains("text") || !body["text"].is_string())
+               throw HttpError(400, "expected a JSON object {\"text\": \"...\"}");
+             float min_rel = 0.f;
+             if (body.contains("min_relevancy")) {
+               if (!body["min_relevancy"].is_number()) throw HttpError(400, "min_relevancy: expected a number");
+               min_rel = body["min_relevancy"].get<float>();
+               if (!(min_rel >= 0.f && min_rel <= 1.f))
+                 throw HttpError(400, "min_relevancy: expected a number in [0, 1]");
+             }
+             send_json(res, I.answer(I.checked_text(body["text"].get<std::string>()), min_rel));
+           }));
+  svr.Get("/api/model.ply",
+          guard([&I](const httplib::Request& req, httplib::Response& res) { I.model_ply(req, res, false); }));
+  svr.Get("/api/export.ply",
+          guard([&I](const httplib::Request& req, httplib::Response& res) { I.model_ply(req, res, true); }));
   svr.Get(R"(/api/views/([^/]+)/(image|overlay|heatmap)\.png)",
           guard([&I](const httplib::Request& req, httplib::Response& res) { I.view_png(req, res); }));
   svr.Get("/api/.*", guard([](const httplib::Request& req, httplib::Response&) {
-    throw HttpError(404, "no such API endpoint: " + req.path);
-  }));
+            throw HttpError(404, "no such API endpoint: " + req.path);
+          }));
 
   // Static front end: only files inside the viewer folder.
   const std::filesystem::path root = opt_.static_dir;
   svr.Get("/.*", guard([root](const httplib::Request& req, httplib::Response& res) {
-    auto file = resolve_static(root, req.path);
-    if (!file) {
-      if (req.path == "/" || req.path == "/index.html")
-        throw HttpError(404, fmt::format("the viewer front end is not built ({} has no index.html); the JSON API "
-                                         "under /api/ works", root.string()));
-      throw HttpError(404, "not found: " + req.path);
-    }
-    std::vector<uint8_t> b = read_file_bytes(*file);
-    res.set_content(std::string(b.begin(), b.end()), mime_type(*file));
-  }));
+            auto file = resolve_static(root, req.path);
+            if (!file) {
+              if (req.path == "/" || req.path == "/index.html")
+                throw HttpError(404,
+                                fmt::format("the viewer front end is not built ({} has no index.html); the JSON API "
+                                            "under /api/ works",
+                                            root.string()));
+              throw HttpError(404, "not found: " + req.path);
+            }
+            std::vector<uint8_t> b = read_file_bytes(*file);
+            res.set_content(std::string(b.begin(), b.end()), mime_type(*file));
+          }));
 }
 
 Server::~Server() { stop(); }
@@ -370,7 +389,8 @@ int Server::start() {
     port_ = http_->bind_to_any_port(opt_.host);
     if (port_ <= 0) fail("cannot bind {} on any port", opt_.host);
   } else {
-    if (!http_->bind_to_port(opt_.host, opt_.port)) fail("cannot bind {}:{} (address in use or not local?)", opt_.host, opt_.port);
+    if (!http_->bind_to_port(opt_.host, opt_.port))
+      fail("cannot bind {}:{} (address in use or not local?)", opt_.host, opt_.port);
     port_ = opt_.port;
   }
   // Linux updates the backlog of a listening socket on a second listen(): the library listens with 5, which

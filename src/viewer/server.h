@@ -21,10 +21,10 @@ namespace hgs::viewer {
 
 struct ServerOptions {
   std::string host = "127.0.0.1";
-  int port = 7860;                       // 0 = any free port
-  std::filesystem::path static_dir;      // front end; empty = default_static_dir()
-  size_t max_body = 64 * 1024;           // request bodies above this get 413
-  size_t max_text = 256;                 // longest accepted query text (bytes of UTF-8)
+  int port = 7860;                   // 0 = any free port
+  std::filesystem::path static_dir;  // front end; empty = default_static_dir()
+  size_t max_body = 64 * 1024;       // request bodies above this get 413
+  size_t max_text = 256;             // longest accepted query text (bytes of UTF-8)
   // Connection limits (cpp-httplib 0.11: request line and each header line are capped at 8 kB by the library).
   // A connection holds one worker while it is open, so `threads` bounds the clients served at once, slow ones
   // included (a client sending nothing for `read_timeout_s` is dropped; see docs/reliability.md).

@@ -12,7 +12,9 @@
 
 namespace hgs::test {
 
-inline std::filesystem::path clip_data(const std::string& rel) { return std::filesystem::path(HGS_TEST_DATA) / "clip" / rel; }
+inline std::filesystem::path clip_data(const std::string& rel) {
+  return std::filesystem::path(HGS_TEST_DATA) / "clip" / rel;
+}
 
 inline std::vector<float> ref_array(const std::string& rel, std::vector<size_t>* shape = nullptr) {
   NpyArray a = read_npy(clip_data(rel));
@@ -24,7 +26,8 @@ inline std::vector<float> ref_array(const std::string& rel, std::vector<size_t>*
 inline double max_rel_err(const std::vector<float>& a, const std::vector<float>& b) {
   EXPECT_EQ(a.size(), b.size());
   double m = 0;
-  for (size_t i = 0; i < std::min(a.size(), b.size()); ++i) m = std::max(m, std::fabs(double(a[i]) - b[i]) / (1 + std::fabs(b[i])));
+  for (size_t i = 0; i < std::min(a.size(), b.size()); ++i)
+    m = std::max(m, std::fabs(double(a[i]) - b[i]) / (1 + std::fabs(b[i])));
   return m;
 }
 

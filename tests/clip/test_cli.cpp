@@ -49,7 +49,8 @@ void make_scene(const fs::path& root) {
 TEST(ClipCli, EmbedTextMatchesLibrary) {
   test::TempDir t;
   auto out = t / "text_embeddings.json";
-  auto r = test::run_hgs("embed-text --clip " + kModel + " --text 'a photo of a cat' --text chair --canonical --out " + out.string());
+  auto r = test::run_hgs("embed-text --clip " + kModel + " --text 'a photo of a cat' --text chair --canonical --out " +
+                         out.string());
   ASSERT_EQ(r.exit_code, 0) << r.err;
   auto j = nlohmann::json::parse(read_file_text(out));
   ASSERT_EQ(j.size(), 6u);

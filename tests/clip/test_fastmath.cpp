@@ -21,7 +21,8 @@ TEST(ClipFastMath, ExpMatchesLibm) {
 
 TEST(ClipFastMath, ErfMatchesLibm) {
   double worst = 0;
-  for (double x = -8; x <= 8; x += 0.0005) worst = std::max(worst, std::fabs(fast_erf(float(x)) - std::erf(double(float(x)))));
+  for (double x = -8; x <= 8; x += 0.0005)
+    worst = std::max(worst, std::fabs(fast_erf(float(x)) - std::erf(double(float(x)))));
   EXPECT_LT(worst, 5e-7);  // the formula is good to 1.5e-7; float evaluation adds the rest
   EXPECT_EQ(fast_erf(0.f), 0.f);
   EXPECT_FLOAT_EQ(fast_erf(-1.f), -fast_erf(1.f));

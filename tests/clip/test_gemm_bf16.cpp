@@ -56,7 +56,7 @@ TEST(GemmBf16, RoundsToNearestEvenAndKeepsSpecialValues) {
   const uint16_t nan = round1(std::numeric_limits<float>::quiet_NaN());
   EXPECT_TRUE(std::isnan(bf16_to_float(nan)));
   EXPECT_TRUE(std::isnan(bf16_to_float(round1(from_bits(0x7F800001u)))));  // a NaN whose payload would carry
-  EXPECT_EQ(round1(std::numeric_limits<float>::max()), 0x7F80);         // rounds up past the largest bf16
+  EXPECT_EQ(round1(std::numeric_limits<float>::max()), 0x7F80);            // rounds up past the largest bf16
   // Every value: the result is one of the two neighbours and at most half a unit away.
   std::mt19937 rng(3);
   for (float x : randn(10000, rng, 100.f)) {
@@ -98,9 +98,9 @@ TEST(GemmBf16, MatchesBruteForceOnTheRoundedOperands) {
     float alpha, beta;
   };
   const Case cases[] = {
-      {1, 1, 1, 0, 0, 0, true, false, 1.f, 0.f},      {5, 7, 3, 0, 0, 0, false, false, 1.f, 0.f},
-      {37, 19, 64, 3, 5, 2, true, true, 1.f, 0.f},    {64, 33, 100, 0, 7, 1, false, true, 0.125f, 0.f},
-      {130, 70, 17, 9, 0, 4, true, false, 1.f, 1.f},  {16, 300, 256, 0, 0, 0, false, true, 1.f, 1.f},
+      {1, 1, 1, 0, 0, 0, true, false, 1.f, 0.f},        {5, 7, 3, 0, 0, 0, false, false, 1.f, 0.f},
+      {37, 19, 64, 3, 5, 2, true, true, 1.f, 0.f},      {64, 33, 100, 0, 7, 1, false, true, 0.125f, 0.f},
+      {130, 70, 17, 9, 0, 4, true, false, 1.f, 1.f},    {16, 300, 256, 0, 0, 0, false, true, 1.f, 1.f},
       {200, 64, 4096, 0, 0, 0, true, false, 0.3f, 0.f}, {3, 4, 0, 0, 0, 0, true, true, 1.f, 1.f},  // empty sum
   };
   for (const Case& cs : cases) {
@@ -172,14 +172,15 @@ TEST(GemmBf16, LinearLayerWithinTheRoundingBoundOfFloat32) {
 TEST(GemmBf16, AttentionMatchesFloat32WithinBf16Accuracy) {
   std::mt19937 rng(5);
   const int nq = 20, nk = 33, heads = 3, hd = 16, w = heads * hd;
-  const std::vector<float> q = randn(size_t(nq) * w, rng), k = randn(size_t(nk) * w, rng), v = randn(size_t(nk) * w, rng);
+  const std::vector<float> q = randn(size_t(nq) * w, rng), k = randn(size_t(nk) * w, rng),
+                           v = randn(size_t(nk) * w, rng);
   std::vector<float> out32(size_t(nq) * w), out16(out32.size()), scores(size_t(nq) * nk);
   const float scale = 0.25f;
   auto bias = [&](int h, float* s) {  // any additive term: the same in both
     for (int i = 0; i < nq * nk; ++i) s[i] += 0.01f * float((i * 7 + h) % 13);
   };
-  multi_head_attention(q.data(), w, k.data(), w, v.data(), w, nq, nk, heads, hd, scale, out32.data(), w,
-                       scores.data(), false, bias);
+  multi_head_attention(q.data(), w, k.data(), w, v.data(), w, nq, nk, heads, hd, scale, out32.data(), w, scores.data(),
+                       false, bias);
   std::vector<uint16_t> k16(size_t(nk) * w), v16(k16.size());
   split_heads_bf16(k.data(), nk, w, heads, hd, k16.data());
   split_heads_bf16(v.data(), nk, w, heads, hd, v16.data());

@@ -45,7 +45,8 @@ std::vector<double> ref_block(const Block& b, int heads, Activation act, const s
       mean /= w;
       for (int j = 0; j < w; ++j) var += std::pow(in[size_t(i) * w + j] - mean, 2);
       var /= w;
-      for (int j = 0; j < w; ++j) o[size_t(i) * w + j] = (in[size_t(i) * w + j] - mean) / std::sqrt(var + 1e-5) * l.g[j] + l.b[j];
+      for (int j = 0; j < w; ++j)
+        o[size_t(i) * w + j] = (in[size_t(i) * w + j] - mean) / std::sqrt(var + 1e-5) * l.g[j] + l.b[j];
     }
     return o;
   };
@@ -87,7 +88,8 @@ std::vector<double> ref_block(const Block& b, int heads, Activation act, const s
   h = ln(b.ln2, x);
   Linear fc = b.fc;
   auto f = lin(fc, h);
-  for (auto& v : f) v = act == Activation::GELU ? 0.5 * v * (1 + std::erf(v / std::sqrt(2.0))) : v / (1 + std::exp(-1.702 * v));
+  for (auto& v : f)
+    v = act == Activation::GELU ? 0.5 * v * (1 + std::erf(v / std::sqrt(2.0))) : v / (1 + std::exp(-1.702 * v));
   std::vector<double> fo(size_t(n) * w);
   for (int i = 0; i < n; ++i)
     for (int r = 0; r < w; ++r) {
@@ -115,8 +117,7 @@ TEST(ClipKernels, NestedParallelForRunsInline) {
   omp_set_num_threads(2);
   std::atomic<long> total{0};
   parallel_for(8, 1, [&](long b, long e) {
-    for (long i = b; i < e; ++i)
-      parallel_for(1000, 1, [&](long b2, long e2) { total += e2 - b2; });
+    for (long i = b; i < e; ++i) parallel_for(1000, 1, [&](long b2, long e2) { total += e2 - b2; });
   });
   EXPECT_EQ(total.load(), 8000);
 }
@@ -132,19 +133,20 @@ TEST(ClipKernels, BlockMatchesBruteForce) {
   b.fc = rand_linear(w, 4 * w, 9);
   b.proj = rand_linear(4 * w, w, 11);
   for (int nn : {n, 11})  // sgemm path and few-rows path
-  for (bool causal : {false, true})
-    for (Activation act : {Activation::GELU, Activation::QuickGELU}) {
-      std::vector<Segment> segs = causal ? std::vector<Segment>{{0, nn * 2 / 5}, {nn * 2 / 5, nn - nn * 2 / 5}}
-                                         : std::vector<Segment>{{0, nn}};
-      auto x = randv(size_t(nn) * w, 1.f, 13);
-      auto ref = ref_block(b, heads, act, segs, causal, x, nn);
-      Workspace ws;
-      ws.reserve(nn, w, 4 * w, nn);
-      block_forward(b, heads, act, segs, causal, x.data(), nn, ws);
-      double worst = 0;
-      for (size_t i = 0; i < x.size(); ++i) worst = std::max(worst, std::fabs(x[i] - ref[i]) / (1 + std::fabs(ref[i])));
-      EXPECT_LT(worst, 2e-5) << "n " << nn << " causal " << causal << " act " << int(act);
-    }
+    for (bool causal : {false, true})
+      for (Activation act : {Activation::GELU, Activation::QuickGELU}) {
+        std::vector<Segment> segs = causal ? std::vector<Segment>{{0, nn * 2 / 5}, {nn * 2 / 5, nn - nn * 2 / 5}}
+                                           : std::vector<Segment>{{0, nn}};
+        auto x = randv(size_t(nn) * w, 1.f, 13);
+        auto ref = ref_block(b, heads, act, segs, causal, x, nn);
+        Workspace ws;
+        ws.reserve(nn, w, 4 * w, nn);
+        block_forward(b, heads, act, segs, causal, x.data(), nn, ws);
+        double worst = 0;
+        for (size_t i = 0; i < x.size(); ++i)
+          worst = std::max(worst, std::fabs(x[i] - ref[i]) / (1 + std::fabs(ref[i])));
+        EXPECT_LT(worst, 2e-5) << "n " << nn << " causal " << causal << " act " << int(act);
+      }
 }
 
 // linear / linear_add for few rows (own kernel) and many rows (sgemm) against a double loop.
@@ -181,7 +183,8 @@ TEST(ClipKernels, LayerNormAndSoftmaxLarge) {
     for (int j = 0; j < c; ++j) var += std::pow(x[size_t(i) * c + j] - mean, 2);
     var /= c;
     for (int j = 0; j < c; ++j)
-      EXPECT_NEAR(y[size_t(i) * c + j], (x[size_t(i) * c + j] - mean) / std::sqrt(var + 1e-5) * ln.g[j] + ln.b[j], 1e-5);
+      EXPECT_NEAR(y[size_t(i) * c + j], (x[size_t(i) * c + j] - mean) / std::sqrt(var + 1e-5) * ln.g[j] + ln.b[j],
+                  1e-5);
   }
   std::vector<float> s = x;
   softmax_rows(s.data(), n, c, true, 0);

@@ -5,8 +5,8 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
-#include <random>
 #include <nlohmann/json.hpp>
+#include <random>
 
 #include "clip/model.h"
 #include "clip/preprocess.h"
@@ -36,7 +36,8 @@ std::vector<std::string> phrases() {
 const ClipModel& model(const std::string& name) {
   static std::map<std::string, ClipModel> cache;
   auto it = cache.find(name);
-  if (it == cache.end()) it = cache.emplace(name, ClipModel::load(hgs::test::clip_data(name + "/model.safetensors"))).first;
+  if (it == cache.end())
+    it = cache.emplace(name, ClipModel::load(hgs::test::clip_data(name + "/model.safetensors"))).first;
   return it->second;
 }
 
@@ -257,7 +258,8 @@ TEST(ClipModel, LoadErrors) {
     ClipModel::load(t / "bad.safetensors");
     FAIL() << "expected an error";
   } catch (const Error& e) {
-    EXPECT_NE(std::string(e.what()).find("'vision_model.encoder.layers.1.mlp.fc2.bias' has shape [16, 4] but [64] was expected"),
+    EXPECT_NE(std::string(e.what()).find(
+                  "'vision_model.encoder.layers.1.mlp.fc2.bias' has shape [16, 4] but [64] was expected"),
               std::string::npos)
         << e.what();
   }
@@ -277,7 +279,8 @@ TEST(ClipModel, OtherShapesLoad) {
     for (auto d : shape) n *= size_t(d);
     std::vector<float> v(n);
     for (auto& x : v) x = nd(rng);
-    if (name.find("ln") != std::string::npos && name.find("weight") != std::string::npos) for (auto& x : v) x += 1.f;
+    if (name.find("ln") != std::string::npos && name.find("weight") != std::string::npos)
+      for (auto& x : v) x += 1.f;
     store.push_back(std::move(v));
     tw.push_back({name, shape, nullptr});
   };
@@ -307,8 +310,9 @@ TEST(ClipModel, OtherShapesLoad) {
   add("text_projection", {tw_, D});
   for (size_t i = 0; i < tw.size(); ++i) tw[i].data = store[i].data();
   write_safetensors(t / "m.safetensors", tw, StDType::BF16);
-  atomic_write_text(t / "open_clip_config.json",
-                    R"({"model_cfg": {"embed_dim": 24, "quick_gelu": true, "vision_cfg": {"width": 64, "head_width": 32},
+  atomic_write_text(
+      t / "open_clip_config.json",
+      R"({"model_cfg": {"embed_dim": 24, "quick_gelu": true, "vision_cfg": {"width": 64, "head_width": 32},
                         "text_cfg": {"heads": 4}}})");
   ClipModel m = ClipModel::load(t / "m.safetensors");
   EXPECT_EQ(m.vision.patch, 14);

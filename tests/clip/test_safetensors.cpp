@@ -68,11 +68,18 @@ TEST(SafeTensors, MalformedFilesGiveClearErrors) {
 
   EXPECT_NE(error_of([&] { SafeTensors st(t / "absent.safetensors"); }).find("file not found"), std::string::npos);
 
-  { std::ofstream f(p, std::ios::binary); f << "abc"; }
+  {
+    std::ofstream f(p, std::ios::binary);
+    f << "abc";
+  }
   EXPECT_NE(error_of(load).find("truncated"), std::string::npos);
 
   write_raw(p, "{\"a\": {\"dtype\": \"F32\", \"shape\": [2], \"data_offsets\": [0, 8]}}", 8);
-  { std::fstream f(p, std::ios::binary | std::ios::in | std::ios::out); uint64_t n = 1u << 30; f.write(reinterpret_cast<char*>(&n), 8); }
+  {
+    std::fstream f(p, std::ios::binary | std::ios::in | std::ios::out);
+    uint64_t n = 1u << 30;
+    f.write(reinterpret_cast<char*>(&n), 8);
+  }
   EXPECT_NE(error_of(load).find("header length"), std::string::npos);
 
   write_raw(p, "{not json", 0);

@@ -61,7 +61,8 @@ TEST(ClipTokenizer, MatchesPythonOnRandomUnicode) {
   int bad = 0;
   for (auto& c : cases) {
     std::string text = c["text"].get<std::string>();
-    if (tok.tokenize(text) != c["ids"].get<std::vector<int>>() && ++bad <= 5) ADD_FAILURE() << "text: " << c["text"].dump();
+    if (tok.tokenize(text) != c["ids"].get<std::vector<int>>() && ++bad <= 5)
+      ADD_FAILURE() << "text: " << c["text"].dump();
   }
   EXPECT_EQ(bad, 0);
 }
@@ -70,7 +71,7 @@ TEST(ClipTokenizer, HtmlUnescape) {
   EXPECT_EQ(html_unescape("&amp; &lt;b&gt; &quot;x&quot; &#39;y&#39; &#x263A;"), "& <b> \"x\" 'y' \xE2\x98\xBA");
   EXPECT_EQ(html_unescape("&amp;amp;"), "&amp;");
   EXPECT_EQ(html_unescape(html_unescape("&amp;amp;")), "&");
-  EXPECT_EQ(html_unescape("&copy 2024 &ampx"), "\xC2\xA9 2024 &x");  // legacy names without ';'
+  EXPECT_EQ(html_unescape("&copy 2024 &ampx"), "\xC2\xA9 2024 &x");        // legacy names without ';'
   EXPECT_EQ(html_unescape("&#128;&#0;&#1;"), "\xE2\x82\xAC\xEF\xBF\xBD");  // cp1252 fix, NUL -> U+FFFD, ^A dropped
   EXPECT_EQ(html_unescape("&unknownentity; & &# &#x;"), "&unknownentity; & &# &#x;");
   EXPECT_EQ(html_unescape("&#99999999999;"), "\xEF\xBF\xBD");
@@ -78,9 +79,13 @@ TEST(ClipTokenizer, HtmlUnescape) {
 
 TEST(ClipTokenizer, CleanText) {
   EXPECT_EQ(clean_text("  Hello\t\n  WORLD  "), "hello world");
-  EXPECT_EQ(clean_text("\xC3\x89T\xC3\x89 \xD0\x9F\xD0\xA0"), "\xC3\xA9t\xC3\xA9 \xD0\xBF\xD1\x80");  // ÉTÉ ПР -> été пр
+  EXPECT_EQ(clean_text("\xC3\x89T\xC3\x89 \xD0\x9F\xD0\xA0"),
+            "\xC3\xA9t\xC3\xA9 \xD0\xBF\xD1\x80");  // ÉTÉ ПР -> été пр
   EXPECT_EQ(clean_text("\xE2\x80\x9Cq\xE2\x80\x9D \xEF\xAC\x81"), "\"q\" fi");
-  EXPECT_EQ(clean_text("a\xC2\xA0" "b\xE3\x80\x80" "c"), "a b c");  // NBSP and ideographic space are whitespace
+  EXPECT_EQ(clean_text("a\xC2\xA0"
+                       "b\xE3\x80\x80"
+                       "c"),
+            "a b c");  // NBSP and ideographic space are whitespace
   EXPECT_EQ(clean_text("bad \xFF byte"), "bad \xEF\xBF\xBD byte");
 }
 

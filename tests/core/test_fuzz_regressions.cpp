@@ -31,7 +31,8 @@ std::string npy_bytes(const std::string& dict, const std::string& body) {
 TEST(FuzzRegressions, NpyDimensionTooLargeForSizeT) {
   test::TempDir tmp;
   const auto f = tmp / "big.npy";
-  atomic_write_text(f, npy_bytes("{'descr': '|u1', 'fortran_order': False, 'shape': (300000000000000000000000000000, 4), }", "x"));
+  atomic_write_text(
+      f, npy_bytes("{'descr': '|u1', 'fortran_order': False, 'shape': (300000000000000000000000000000, 4), }", "x"));
   EXPECT_FILE_ERROR(read_npy(f), f, "too large");
   EXPECT_FILE_ERROR(read_npy_header(f), f, "too large");
 }
@@ -40,7 +41,8 @@ TEST(FuzzRegressions, NpyDimensionTooLargeForSizeT) {
 TEST(FuzzRegressions, NpyShapeProductOverflows) {
   test::TempDir tmp;
   const auto f = tmp / "wrap.npy";
-  atomic_write_text(f, npy_bytes("{'descr': '<f4', 'fortran_order': False, 'shape': (4294967296, 4294967296, 2), }", ""));
+  atomic_write_text(f,
+                    npy_bytes("{'descr': '<f4', 'fortran_order': False, 'shape': (4294967296, 4294967296, 2), }", ""));
   EXPECT_FILE_ERROR(read_npy(f), f, "too large");
 }
 
@@ -71,8 +73,9 @@ TEST(FuzzRegressions, NpyHeaderTooLong) {
 // decoding (out of memory); header sizes are now checked first.
 TEST(FuzzRegressions, PngHeaderClaimsTooManyPixels) {
   test::TempDir t;
-  const unsigned char png[] = {0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a, 0x00, 0x00, 0x00, 0x0d, 0x49, 0x48, 0x44, 0x52,
-                               0x00, 0x00, 0x00, 0xdc, 0x00, 0x49, 0x48, 0x08, 0x10, 0x00, 0x00, 0x00, 0x00, 0x11, 0x3b};
+  const unsigned char png[] = {0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a, 0x00, 0x00, 0x00,
+                               0x0d, 0x49, 0x48, 0x44, 0x52, 0x00, 0x00, 0x00, 0xdc, 0x00, 0x49,
+                               0x48, 0x08, 0x10, 0x00, 0x00, 0x00, 0x00, 0x11, 0x3b};
   const auto f = t / "mask.png";
   atomic_write_bytes(f, png, sizeof(png));
   EXPECT_FILE_ERROR(load_label_png(f), f, "too large");

@@ -71,10 +71,11 @@ TEST(Image, AreaDownscaleAveragesBlocks) {
 
 TEST(Fs, AtomicWriteLeavesNothingOnFailure) {
   test::TempDir tmp;
-  EXPECT_THROW(atomic_write(tmp / "x.bin", [](const std::filesystem::path& p) {
-                 atomic_write_text(p, "partial");
-                 throw Error("boom");
-               }),
+  EXPECT_THROW(atomic_write(tmp / "x.bin",
+                            [](const std::filesystem::path& p) {
+                              atomic_write_text(p, "partial");
+                              throw Error("boom");
+                            }),
                Error);
   EXPECT_TRUE(std::filesystem::is_empty(tmp.path));
 }

@@ -104,7 +104,8 @@ void expect_error(const std::vector<uint8_t>& f, const std::string& needle) {
 
 TEST(Npy, RejectsBadInput) {
   expect_error({'n', 'o', 't', ' ', 'n', 'p', 'y', 0, 0, 0, 0}, "bad magic");
-  expect_error(with_header("{'descr': '<f8', 'fortran_order': False, 'shape': (2,), }", 16), "unsupported NPY dtype '<f8'");
+  expect_error(with_header("{'descr': '<f8', 'fortran_order': False, 'shape': (2,), }", 16),
+               "unsupported NPY dtype '<f8'");
   expect_error(with_header("{'descr': '>f4', 'fortran_order': False, 'shape': (2,), }", 8), "unsupported NPY dtype");
   expect_error(with_header("{'descr': '<f4', 'fortran_order': True, 'shape': (2, 2), }", 16), "Fortran");
   expect_error(with_header("{'descr': '<f4', 'fortran_order': False, 'shape': (4,), }", 8), "truncated NPY body");

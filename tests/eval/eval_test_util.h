@@ -31,7 +31,6 @@ inline Mask naive_erode_zero_pad(const Mask& m, int w, int h, int r) {
   return out;
 }
 
-
 // Independent reflect-101: mirror about the end samples until inside.
 inline int mirror(int i, int n) {
   if (n == 1) return 0;
@@ -63,7 +62,10 @@ inline Mask brute_majority(const Mask& m, int w, int h, int k) {
       int ones = 0, n = 0;
       for (int yy = y - r; yy <= y + r; ++yy)
         for (int xx = x - r; xx <= x + r; ++xx)
-          if (xx >= 0 && yy >= 0 && xx < w && yy < h) { ++n; ones += m[size_t(yy) * w + xx] != 0; }
+          if (xx >= 0 && yy >= 0 && xx < w && yy < h) {
+            ++n;
+            ones += m[size_t(yy) * w + xx] != 0;
+          }
       out[size_t(y) * w + x] = ones > n - ones;
     }
   return out;

@@ -46,7 +46,8 @@ TEST(EvalFilters, BoxFilterMatchesBruteForce) {
     std::vector<float> v(size_t(w) * h);
     for (auto& x : v) x = u(rng);
     auto fast = box_filter(v, w, h, k), ref = brute_box(v, w, h, k);
-    for (size_t i = 0; i < v.size(); ++i) ASSERT_NEAR(fast[i], ref[i], 1e-5) << w << "x" << h << " k " << k << " at " << i;
+    for (size_t i = 0; i < v.size(); ++i)
+      ASSERT_NEAR(fast[i], ref[i], 1e-5) << w << "x" << h << " k " << k << " at " << i;
   }
 }
 
@@ -72,6 +73,7 @@ TEST(EvalFilters, MajorityMatchesBruteForce) {
     Mask m(size_t(w) * h);
     std::bernoulli_distribution b(0.3 + 0.04 * trial);
     for (auto& x : m) x = b(rng);
-    for (int k : {1, 3, 5, 7}) ASSERT_EQ(majority_filter(m, w, h, k), brute_majority(m, w, h, k)) << trial << " k " << k;
+    for (int k : {1, 3, 5, 7})
+      ASSERT_EQ(majority_filter(m, w, h, k), brute_majority(m, w, h, k)) << trial << " k " << k;
   }
 }

@@ -1,5 +1,5 @@
-// Polygon rasterisation (cv2.fillPoly's rules: integer vertices, outline included, even-odd; border clipping) and the LERF-OVS /
-// 3D-OVS label loaders with valid and malformed files.
+// Polygon rasterisation (cv2.fillPoly's rules: integer vertices, outline included, even-odd; border clipping) and the
+// LERF-OVS / 3D-OVS label loaders with valid and malformed files.
 #include <gtest/gtest.h>
 
 #include <nlohmann/json.hpp>
@@ -23,8 +23,7 @@ TEST(EvalPolygon, IntegerVerticesAndOutlineIncludedAsOpenCV) {
   EXPECT_EQ(rasterize_polygon({{1, 1}, {3, 1}, {3, 3}, {1, 3}}, 5, 5),
             ascii({".....", ".###.", ".###.", ".###.", "....."}));
   // Triangle (0,0), (4,0), (0,4): rows 0..3 fill 0 .. 4 - y; row 4 is the outline's vertex (0, 4).
-  EXPECT_EQ(rasterize_polygon({{0, 0}, {4, 0}, {0, 4}}, 5, 5),
-            ascii({"#####", "####.", "###..", "##...", "#...."}));
+  EXPECT_EQ(rasterize_polygon({{0, 0}, {4, 0}, {0, 4}}, 5, 5), ascii({"#####", "####.", "###..", "##...", "#...."}));
   // Orientation does not matter.
   EXPECT_EQ(rasterize_polygon({{1, 3}, {3, 3}, {3, 1}, {1, 1}}, 5, 5),
             ascii({".....", ".###.", ".###.", ".###.", "....."}));
@@ -56,7 +55,7 @@ TEST(EvalPolygon, BorderAndOutsideAreClipped) {
   EXPECT_EQ(rasterize_polygon({{3, -5}, {100, -5}, {100, 100}, {3, 100}}, 5, 3), ascii({"...##", "...##", "...##"}));
   EXPECT_EQ(rasterize_polygon({{10, 10}, {20, 10}, {20, 20}}, 5, 3), Mask(15, 0));
   EXPECT_EQ(rasterize_polygon({{0, 0}, {4, 0}}, 5, 3), ascii({"#####", ".....", "....."}));  // 2 vertices: a line
-  EXPECT_EQ(rasterize_polygon({{1, 2}}, 5, 3), ascii({".....", ".....", ".#..."}));             // 1 vertex: a point
+  EXPECT_EQ(rasterize_polygon({{1, 2}}, 5, 3), ascii({".....", ".....", ".#..."}));          // 1 vertex: a point
   EXPECT_EQ(rasterize_polygon({}, 5, 3), Mask(15, 0));
   EXPECT_EQ(rasterize_polygon({{-1e300, -1e300}, {1e300, -1e300}, {1e300, 1e300}, {-1e300, 1e300}}, 5, 3), Mask(15, 1));
 }
@@ -65,7 +64,10 @@ TEST(EvalPolygon, SimplePolygonsCoverTheirClosedLatticePointsAndTheOutline) {
   // Random simple (star-shaped) polygons with integer vertices: every lattice point inside or on the boundary
   // is filled, and every other filled pixel is within one pixel of the boundary (an outline pixel).
   uint32_t s = 12345;
-  auto rnd = [&](int n) { s = s * 1664525u + 1013904223u; return int((s >> 8) % uint32_t(n)); };
+  auto rnd = [&](int n) {
+    s = s * 1664525u + 1013904223u;
+    return int((s >> 8) % uint32_t(n));
+  };
   for (int trial = 0; trial < 40; ++trial) {
     const int n = 3 + trial % 8, W = 24, H = 18;
     std::vector<Point2> p;
@@ -196,7 +198,8 @@ TEST(EvalLerfLabels, Downscale) {
   expect_error([&] { load_lerf_frame(tmp / "f.json", 9, 8, 2); }, (tmp / "f.json").string(),
                "label size 4x4 does not match the image size 9x8");
   expect_error([&] { load_lerf_frame(tmp / "f.json", 0, 0, 0); }, (tmp / "f.json").string(), "downscale factor");
-  expect_error([&] { load_lerf_frame(tmp / "f.json", 0, 0, 10); }, (tmp / "f.json").string(), "smaller than the downscale");
+  expect_error([&] { load_lerf_frame(tmp / "f.json", 0, 0, 10); }, (tmp / "f.json").string(),
+               "smaller than the downscale");
 }
 
 TEST(EvalLerfLabels, MalformedFilesGiveClearErrors) {
@@ -213,7 +216,8 @@ TEST(EvalLerfLabels, MalformedFilesGiveClearErrors) {
   check(R"({"info": {"width": 6, "height": 4}, "objects": []})", "info.name");
   check(R"({"info": {"name": "a", "height": 4}, "objects": []})", "missing key info.width");
   check(R"({"info": {"name": "a", "width": -6, "height": 4}, "objects": []})", "info.width must be a positive integer");
-  check(R"({"info": {"name": "a", "width": 6, "height": 4}, "objects": []})", "label size 6x4 does not match the image size 8x4", 8, 4);
+  check(R"({"info": {"name": "a", "width": 6, "height": 4}, "objects": []})",
+        "label size 6x4 does not match the image size 8x4", 8, 4);
   const std::string head = R"({"info": {"name": "a", "width": 6, "height": 4}, "objects": [)";
   check(head + R"({"bbox": [0,0,1,1], "segmentation": [[0,0],[1,0],[1,1]]}]})", "objects[0]: missing key \"category\"");
   check(head + R"({"category": "mug", "segmentation": [[0,0],[1,0],[1,1]]}]})", "missing key \"bbox\"");
@@ -233,7 +237,8 @@ TEST(EvalLerfLabels, MalformedFilesGiveClearErrors) {
   check(head + R"({"category": "mug", "bbox": [0,0,1,1], "segmentation": [[0,0],[1],[1,1]]}]})",
         "objects[0].segmentation[1] must be an [x, y] pair");
   expect_error([&] { load_lerf_frame(tmp / "missing.json"); }, (tmp / "missing.json").string(), "");
-  expect_error([&] { load_lerf_labels(tmp / "nothing"); }, (tmp / "nothing" / "label").string(), "no LERF-OVS label folder");
+  expect_error([&] { load_lerf_labels(tmp / "nothing"); }, (tmp / "nothing" / "label").string(),
+               "no LERF-OVS label folder");
   fs::create_directories(tmp / "empty/label");
   expect_error([&] { load_lerf_labels(tmp / "empty"); }, (tmp / "empty" / "label").string(), "no LERF-OVS label files");
 }
@@ -253,7 +258,8 @@ TEST(EvalOvsLabels, LoadsSortedClassesAndViews) {
   hgs::test::TempDir tmp;
   const fs::path seg = tmp / "scene/segmentations";
   write(seg / "classes.txt", "teddy bear\r\n  apple \n\nbook\n");
-  const Mask apple = ascii({"##..", "....", "...."}), bear = ascii({"..##", "..##", "...."}), book = ascii({"....", "....", "####"});
+  const Mask apple = ascii({"##..", "....", "...."}), bear = ascii({"..##", "..##", "...."}),
+             book = ascii({"....", "....", "####"});
   for (const char* v : {"03", "0"}) {
     write_mask_png(seg / v / "apple.png", apple, 4, 3);
     write_mask_png(seg / v / "teddy bear.png", bear, 4, 3);
@@ -310,7 +316,8 @@ TEST(EvalOvsLabels, MalformedInputsGiveClearErrors) {
                "mask size 4x2 does not match the view's other masks 3x2");
   write_mask_png(seg / "0" / "b.png", Mask(6, 1), 3, 2);
   EXPECT_EQ(load_3dovs_view(L, 0).masks.size(), 2u);
-  expect_error([&] { load_3dovs_view(L, 0, 4, 2); }, (seg / "0" / "a.png").string(), "does not match the image size 4x2");
+  expect_error([&] { load_3dovs_view(L, 0, 4, 2); }, (seg / "0" / "a.png").string(),
+               "does not match the image size 4x2");
   write(seg / "0" / "b.png", "not a png");
   expect_error([&] { load_3dovs_view(L, 0); }, (seg / "0" / "b.png").string(), "cannot decode");
   expect_error([&] { load_3dovs_view(L, 5); }, seg.string(), "out of range");

@@ -54,7 +54,11 @@ TEST(EvalMetrics, LargerDOnALargerSquare) {
   Mask g(121, 0);
   for (int y = 1; y <= 9; ++y)
     for (int x = 1; x <= 9; ++x) g[y * 11 + x] = 1;
-  auto count = [](const Mask& m) { long n = 0; for (auto v : m) n += v != 0; return n; };
+  auto count = [](const Mask& m) {
+    long n = 0;
+    for (auto v : m) n += v != 0;
+    return n;
+  };
   EXPECT_EQ(count(boundary_region(g, 11, 11, 1)), 32);
   EXPECT_EQ(count(boundary_region(g, 11, 11, 2)), 56);
   EXPECT_EQ(count(boundary_region(g, 11, 11, 3)), 72);
@@ -129,7 +133,8 @@ TEST(EvalMetrics, FastErosionMatchesNaiveIteratedErosion) {
             for (int dy = -1; dy <= 1; ++dy)
               for (int dx = -1; dx <= 1; ++dx) {
                 int xx = x + dx, yy = y + dy;
-                if (xx >= 0 && yy >= 0 && xx < w + 2 * d && yy < h + 2 * d) ok = ok && eb[size_t(yy) * (w + 2 * d) + xx];
+                if (xx >= 0 && yy >= 0 && xx < w + 2 * d && yy < h + 2 * d)
+                  ok = ok && eb[size_t(yy) * (w + 2 * d) + xx];
               }
             nb[size_t(y) * (w + 2 * d) + x] = ok;
           }

@@ -87,7 +87,8 @@ TEST(EvalLerfProtocol, MatchesIndependentReference) {
   std::vector<float> v(size_t(w) * h);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x)
-      v[size_t(y) * w + x] = 0.5f + 0.4f * std::exp(-((x - 40.f) * (x - 40.f) + (y - 20.f) * (y - 20.f)) / 150.f) + nd(rng);
+      v[size_t(y) * w + x] =
+          0.5f + 0.4f * std::exp(-((x - 40.f) * (x - 40.f) + (y - 20.f) * (y - 20.f)) / 150.f) + nd(rng);
   LerfPost P = lerf_postprocess(v, w, h);
   // Reference: brute-force box filter, the formulas in double, brute-force majority filter.
   auto box = hgs::eval::test::brute_box(v, w, h, 30);

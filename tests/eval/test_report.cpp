@@ -24,8 +24,10 @@ EvalReport sample() {
   r.protocol = "lerf-ovs";
   r.scene = "toy";
   r.mode = "pixel";
-  r.records = {{"f1", "mug", 0.5, 0.25, 0.9, 1}, {"f1", "plate", 1.0, 0.75, 1.0, 0},
-               {"f2", "mug", 0.0, 0.0, 0.8, 1}, {"f2", "cup | big", 0.3, kNaN, 0.7, -1}};
+  r.records = {{"f1", "mug", 0.5, 0.25, 0.9, 1},
+               {"f1", "plate", 1.0, 0.75, 1.0, 0},
+               {"f2", "mug", 0.0, 0.0, 0.8, 1},
+               {"f2", "cup | big", 0.3, kNaN, 0.7, -1}};
   return r;
 }
 
@@ -93,7 +95,9 @@ TEST(EvalReport, WritesJsonAndMarkdown) {
   EXPECT_NEAR(r["summary"]["mAcc"].get<double>(), 2.0 / 3.0, 1e-12);
   EXPECT_NEAR(r["summary"]["pixel_acc"].get<double>(), 0.85, 1e-12);
   EXPECT_NEAR(r["summary"]["loc_acc"].get<double>(), 2.0 / 3.0, 1e-12);
-  EXPECT_NE(md.find("| lerf-ovs | toy | pixel | - | 4 | 66.67 | 45.00 | 33.33 | 85.00 | 66.67 | 15.0 |"), std::string::npos) << md;
+  EXPECT_NE(md.find("| lerf-ovs | toy | pixel | - | 4 | 66.67 | 45.00 | 33.33 | 85.00 | 66.67 | 15.0 |"),
+            std::string::npos)
+      << md;
   EXPECT_NE(md.find("| lerf-ovs | toy | object |"), std::string::npos);
   EXPECT_NE(md.find("| mug | 2 | 85.00 | 25.00 | 12.50 | 100.00 |"), std::string::npos) << md;
   EXPECT_NE(md.find("| f2 | cup \\| big | 70.00 | 30.00 | - | - |"), std::string::npos) << md;

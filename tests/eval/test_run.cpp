@@ -64,8 +64,8 @@ TEST(EvalRun, LerfOvsWithTwoDFeatures) {
   ASSERT_GE(expected, 4u);
   EXPECT_EQ(r.records[0].frame, "frame_00001.png");
   const MeanRow s = scene_mean(r);
-  std::printf("2D-feature LERF-OVS baseline (320x240, D 256, noise low): mIoU %.3f mBIoU %.3f mAcc %.3f loc %.3f\n", s.miou,
-              s.mbiou, s.macc, s.loc_acc);
+  std::printf("2D-feature LERF-OVS baseline (320x240, D 256, noise low): mIoU %.3f mBIoU %.3f mAcc %.3f loc %.3f\n",
+              s.miou, s.mbiou, s.macc, s.loc_acc);
   // Measured 0.67 / 1.0 on this scene; a sign, scale or alignment error in the pipeline drops these near 0.
   EXPECT_GT(s.miou, 0.5);
   EXPECT_GE(s.loc_acc, 0.75);
@@ -133,7 +133,8 @@ TEST(EvalRun, ThreeDOvsWithTwoDFeatures) {
   ASSERT_EQ(r.records.size(), 2u * 6u);  // 2 labelled views x (4 objects + table + floor)
   ASSERT_EQ(r.frame_accuracy.size(), 2u);
   const MeanRow s = scene_mean(r);
-  std::printf("2D-feature 3D-OVS baseline (320x240, D 256, noise low): mIoU %.3f mBIoU %.3f mAcc %.3f\n", s.miou, s.mbiou, s.macc);
+  std::printf("2D-feature 3D-OVS baseline (320x240, D 256, noise low): mIoU %.3f mBIoU %.3f mAcc %.3f\n", s.miou,
+              s.mbiou, s.macc);
   // The table and the floor are classes too (as in the real 3D-OVS).
   EXPECT_GT(s.miou, 0.4);  // measured 0.57 (0.33 with the surfaces as background)
   EXPECT_GT(s.macc, 0.0);

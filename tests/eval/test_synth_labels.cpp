@@ -35,13 +35,22 @@ Mask fill_holes(const Mask& m, int w, int h) {
     reach[i] = 1;
     stack.push_back(static_cast<int>(i));
   };
-  for (int x = 0; x < w; ++x) { push(x, 0); push(x, h - 1); }
-  for (int y = 0; y < h; ++y) { push(0, y); push(w - 1, y); }
+  for (int x = 0; x < w; ++x) {
+    push(x, 0);
+    push(x, h - 1);
+  }
+  for (int y = 0; y < h; ++y) {
+    push(0, y);
+    push(w - 1, y);
+  }
   while (!stack.empty()) {
     const int i = stack.back();
     stack.pop_back();
     const int x = i % w, y = i / w;
-    push(x - 1, y); push(x + 1, y); push(x, y - 1); push(x, y + 1);
+    push(x - 1, y);
+    push(x + 1, y);
+    push(x, y - 1);
+    push(x, y + 1);
   }
   Mask out(m.size());
   for (size_t i = 0; i < m.size(); ++i) out[i] = reach[i] ? 0 : 1;

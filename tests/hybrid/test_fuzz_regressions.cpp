@@ -7,10 +7,10 @@
 #include "core/error.h"
 #include "core/fs.h"
 #include "expect_error.h"
-#include "scene/scene.h"
-#include "test_util.h"
 #include "hybrid/config.h"
 #include "hybrid/register.h"
+#include "scene/scene.h"
+#include "test_util.h"
 #include "train/registry.h"
 
 using namespace hgs;
@@ -36,8 +36,10 @@ TEST(FuzzRegressions, CheckpointCountOutOfRange) {
   train::TrainConfig cfg = base.scaled_to(20);
   cfg.method = "hybrid";
   hybrid::register_method();
-  auto trainer = train::make_trainer(scene, scene.train_indices(), cfg, "hybrid", hybrid::HybridConfig{}.to_json(), false);
-  const fs::path file = fs::path(HGS_SOURCE_DIR) / "tests" / "data" / "fuzz_findings" / "checkpoint_count_out_of_range.ckpt";
+  auto trainer =
+      train::make_trainer(scene, scene.train_indices(), cfg, "hybrid", hybrid::HybridConfig{}.to_json(), false);
+  const fs::path file =
+      fs::path(HGS_SOURCE_DIR) / "tests" / "data" / "fuzz_findings" / "checkpoint_count_out_of_range.ckpt";
   EXPECT_FILE_ERROR(trainer->load_checkpoint(file), file, "corrupt densification statistics");
 }
 
@@ -47,7 +49,7 @@ TEST(FuzzRegressions, CheckpointHeaderLongerThanTheFile) {
   test::TempDir t;
   ASSERT_NO_FATAL_FAILURE(write_tiny_scene(t / "tiny"));
   auto r = test::run_hgs("train " + (t / "tiny").string() + " --out " + (t / "m").string() +
-                    " --method rgb --iters 4 --save-every 4 --sh-degree 0 --threads 1 --quiet");
+                         " --method rgb --iters 4 --save-every 4 --sh-degree 0 --threads 1 --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const fs::path good = t / "m" / "checkpoints" / "iter_4.ckpt";
   std::vector<uint8_t> b = read_file_bytes(good);

@@ -9,19 +9,19 @@
 #include "eval/run.h"
 #include "hybrid/config.h"
 #include "hybrid/register.h"
-#include "train/registry.h"
 #include "model/ply.h"
 #include "query/session.h"
 #include "synth/synth.h"
 #include "synth_options.h"
 #include "test_util.h"
+#include "train/registry.h"
 
 using namespace hgs;
 
 namespace {
 
 eval::MeanRow train_and_evaluate(const std::filesystem::path& scene_dir, const Scene& scene, bool full, int iters,
-                                  const std::filesystem::path& ply) {
+                                 const std::filesystem::path& ply) {
   hybrid::HybridConfig hc;
   hc.use_of = hc.use_scl = hc.use_bro = full;
   train::TrainConfig cfg = train::TrainConfig{}.scaled_to(iters);
@@ -34,7 +34,9 @@ eval::MeanRow train_and_evaluate(const std::filesystem::path& scene_dir, const S
   query::Session s(scene_dir, ply, 1, "");
   eval::RunOptions opt;
   opt.progress = false;
-  auto fn = [&](int view, const std::string& q, std::vector<float>* heat) { return s.answer_mask(view, q, 0.5f, heat); };
+  auto fn = [&](int view, const std::string& q, std::vector<float>* heat) {
+    return s.answer_mask(view, q, 0.5f, heat);
+  };
   return eval::scene_mean(eval::run_instances(s.scene(), fn, opt));
 }
 

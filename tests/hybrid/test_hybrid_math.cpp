@@ -20,9 +20,9 @@ namespace {
 // Central differences of f at x for every coordinate, within 1e-6 of the largest |analytic| plus 1e-9 of
 // `analytic`; some difference must exceed 1e-8 (a zero gradient would pass otherwise).
 void check_grad(std::vector<double>& x, const std::function<double()>& f, const std::vector<double>& analytic) {
-  const test::FdStats st = test::fd_check("coordinate", x, test::all_indices(x.size()), analytic, f,
-                                          {.h = 1e-6, .rtol = 0, .scale_atol = 1e-6, .atol = 1e-9,
-                                           .noise_atol = 0, .nonzero_fd = 1e-8});
+  const test::FdStats st =
+      test::fd_check("coordinate", x, test::all_indices(x.size()), analytic, f,
+                     {.h = 1e-6, .rtol = 0, .scale_atol = 1e-6, .atol = 1e-9, .noise_atol = 0, .nonzero_fd = 1e-8});
   EXPECT_GT(st.nonzero, 0) << "the check would pass for a zero gradient";
 }
 
@@ -77,7 +77,8 @@ TEST(ObservationFusion, GradientToViewLogits) {
     softmax(logits.data(), U, w.data());
     fuse_backward(tab, w.data(), p, s.data(), q.data(), valid.data(), dq.data(), dw.data());
     softmax_backward(w.data(), dw.data(), U, dlogits.data());
-    check_grad(logits, [&] { return loss(nullptr, nullptr, nullptr); }, dlogits);
+    check_grad(
+        logits, [&] { return loss(nullptr, nullptr, nullptr); }, dlogits);
   }
 }
 
@@ -116,10 +117,10 @@ TEST(ObservationFusion, HandMadeCases) {
   MaskView bg = v;
   bg.labels = LabelMap(10, 10, 0);
   const float means[] = {
-      -0.2f, 0.f, 1.f,  // left -> 1
-      0.2f, 0.f, 1.f,   // right -> 2
-      0.f, 0.f, -1.f,   // behind the camera
-      3.f, 0.f, 1.f,    // outside the image
+      -0.2f, 0.f, 1.f,   // left -> 1
+      0.2f,  0.f, 1.f,   // right -> 2
+      0.f,   0.f, -1.f,  // behind the camera
+      3.f,   0.f, 1.f,   // outside the image
   };
   ObservationTable tab;
   observe(means, 4, {v, bg}, tab);
@@ -159,7 +160,7 @@ TEST(ObservationFusion, UnconfidentPixelsAreNoObservationNotBackground) {
   MaskView v = pinhole_view(1);
   std::vector<float> conf(100, 0.9f);
   std::vector<float> rim = conf;
-  rim[5 * 10 + 5] = 0.3f;  // the pixel (5, 5) the Gaussian projects to
+  rim[5 * 10 + 5] = 0.3f;                                  // the pixel (5, 5) the Gaussian projects to
   const float means[] = {0.f, 0.f, 1.f, 0.3f, 0.3f, 1.f};  // Gaussian 1 projects to (8, 8), confident everywhere
   FusionParams p{2, 0.05, 1e-9};
   const float w[] = {1.f / 3, 1.f / 3, 1.f / 3};
@@ -226,8 +227,8 @@ TEST(ObjectChannels, GradientToQAndColour) {
   std::vector<double> e(N * stride, -1.0);
   object_channels(N, L, lay, objs, q.data(), c.data(), e.data());
   EXPECT_EQ(e[9], -1.0);
-  EXPECT_EQ(e[lay.opacity(1)], q[2]);            // Gaussian 0, object 2
-  EXPECT_EQ(e[lay.color(2) + 1], q[4] * c[1]);   // Gaussian 0, object 4, green
+  EXPECT_EQ(e[lay.opacity(1)], q[2]);           // Gaussian 0, object 2
+  EXPECT_EQ(e[lay.color(2) + 1], q[4] * c[1]);  // Gaussian 0, object 4, green
   std::vector<double> dq(N * L, 0.0), dc(N * 3, 0.0);
   object_channels_backward(N, L, lay, objs, q.data(), c.data(), up.data(), dq.data(), dc.data());
   check_grad(q, loss, dq);
@@ -298,7 +299,8 @@ TEST(Scl, InfoNceValue) {
   double refs[] = {1, 0, 0, 1};
   double p[] = {3, 0};
   const double t = 0.5;
-  EXPECT_NEAR(info_nce(p, 2, refs, 2, 0, t, (double*)nullptr, 1.0), -std::log(std::exp(2.0) / (std::exp(2.0) + 1)), 1e-12);
+  EXPECT_NEAR(info_nce(p, 2, refs, 2, 0, t, (double*)nullptr, 1.0), -std::log(std::exp(2.0) / (std::exp(2.0) + 1)),
+              1e-12);
 }
 
 TEST(Bro, BandOnHandMadeMask) {

@@ -74,9 +74,9 @@ struct Scene {
 // quarter of the differences must exceed 1e-9 for the check to mean something.
 void check(const char* name, std::vector<double>& x, const std::function<double()>& f, const std::vector<double>& an,
            double h = 1e-6, double rtol = 1e-5) {
-  const test::FdStats st = test::fd_check(name, x, test::all_indices(x.size()), an, f,
-                                          {.h = h, .rtol = rtol, .scale_atol = 1e-7, .noise_atol = 0,
-                                           .nonzero_fd = 1e-9});
+  const test::FdStats st =
+      test::fd_check(name, x, test::all_indices(x.size()), an, f,
+                     {.h = h, .rtol = rtol, .scale_atol = 1e-7, .noise_atol = 0, .nonzero_fd = 1e-9});
   EXPECT_GT(st.nonzero, int(x.size()) / 4) << name << ": too few non-zero gradients to be a meaningful check";
 }
 
@@ -115,7 +115,10 @@ TEST(HybridRender, ObjectConditionedLossToViewLogitsAndColours) {
       bands.resize(size_t(J) * HW);
       std::vector<float> A(HW), M(HW), tmp;
       for (int j = 0; j < J; ++j) {
-        for (int p = 0; p < HW; ++p) { A[p] = float(out.extra[p * C + lay.opacity(j)]); M[p] = sc.labels.v[p] == objs[j]; }
+        for (int p = 0; p < HW; ++p) {
+          A[p] = float(out.extra[p * C + lay.opacity(j)]);
+          M[p] = sc.labels.v[p] == objs[j];
+        }
         boundary_band(A.data(), M.data(), sc.H, sc.W, 5, &bands[size_t(j) * HW], tmp);
       }
     }
@@ -132,7 +135,8 @@ TEST(HybridRender, ObjectConditionedLossToViewLogitsAndColours) {
       const double l1 = train::l1_loss(pred.data(), gtm.data(), pred.size(), g.data(), 0.8 / J);
       const double ss = train::ssim(pred.data(), gtm.data(), sc.H, sc.W, 3, gs.data(), ws);
       for (int i = 0; i < HW * 3; ++i) g[i] -= 0.2 / J * gs[i];
-      const double bro = bro_loss(pred.data(), gtm.data(), 3, 3, &bands[size_t(j) * HW], sc.H, sc.W, 1e-6, g.data(), 1.0 / J);
+      const double bro =
+          bro_loss(pred.data(), gtm.data(), 3, 3, &bands[size_t(j) * HW], sc.H, sc.W, 1e-6, g.data(), 1.0 / J);
       loss += (0.8 * l1 + 0.2 * (1 - ss) + bro) / J;
       for (int p = 0; p < HW; ++p)
         for (int c = 0; c < 3; ++c) d_extra[p * C + lay.color(j) + c] = g[p * 3 + c];
@@ -155,8 +159,10 @@ TEST(HybridRender, ObjectConditionedLossToViewLogitsAndColours) {
   };
   std::vector<double> dlogits, dcolors;
   run(&dlogits, &dcolors);
-  check("view logits", logits, [&] { return run(nullptr, nullptr); }, dlogits);
-  check("colours", sc.colors, [&] { return run(nullptr, nullptr); }, dcolors);
+  check(
+      "view logits", logits, [&] { return run(nullptr, nullptr); }, dlogits);
+  check(
+      "colours", sc.colors, [&] { return run(nullptr, nullptr); }, dcolors);
 }
 
 TEST(HybridRender, PoolingIdentityMatchesDirectSemanticRender) {
@@ -171,7 +177,10 @@ TEST(HybridRender, PoolingIdentityMatchesDirectSemanticRender) {
   std::vector<float> M(size_t(HW) * 2);
   std::vector<double> mass = {0, 0};
   for (int p = 0; p < HW; ++p)
-    for (int j = 0; j < 2; ++j) { M[p * 2 + j] = sc.labels.v[p] == objs[j]; mass[j] += M[p * 2 + j]; }
+    for (int j = 0; j < 2; ++j) {
+      M[p * 2 + j] = sc.labels.v[p] == objs[j];
+      mass[j] += M[p * 2 + j];
+    }
   // Identity side: a from the rasterizer's pixel-weighted sums.
   render::RendererT<double> r;
   auto in = sc.inputs();
@@ -222,7 +231,10 @@ TEST(HybridRender, SemanticContrastiveToOpacityFAndQ) {
   std::vector<float> M(size_t(HW) * 2);
   std::vector<double> mass = {0, 0};
   for (int p = 0; p < HW; ++p)
-    for (int j = 0; j < 2; ++j) { M[p * 2 + j] = sc.labels.v[p] == objs[j]; mass[j] += M[p * 2 + j]; }
+    for (int j = 0; j < 2; ++j) {
+      M[p * 2 + j] = sc.labels.v[p] == objs[j];
+      mass[j] += M[p * 2 + j];
+    }
   auto run = [&](std::vector<double>* dop, std::vector<double>* df, std::vector<double>* dq) {
     render::RendererT<double> r;
     auto in = sc.inputs();

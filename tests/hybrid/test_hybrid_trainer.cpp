@@ -13,8 +13,6 @@
 #include "hybrid/bro.h"
 #include "hybrid/method.h"
 #include "hybrid/register.h"
-#include "train/registry.h"
-#include "train/trainer.h"
 #include "model/ply.h"
 #include "query/query.h"
 #include "render/camera_from_view.h"
@@ -22,6 +20,8 @@
 #include "synth/synth.h"
 #include "synth_options.h"
 #include "test_util.h"
+#include "train/registry.h"
+#include "train/trainer.h"
 
 using namespace hgs;
 
@@ -42,7 +42,8 @@ struct Tiny {
   synth::World world() const { return synth::make_world(opt.preset, opt.objects, opt.seed); }
   std::unique_ptr<train::Trainer> trainer(const hybrid::HybridConfig& hc, int iters, int densify_every = 0) {
     std::vector<train::TrainView> views;
-    for (int i : train) views.push_back({scene.views[i].name, render::camera_from_view(scene.views[i]), scene.load_image(i)});
+    for (int i : train)
+      views.push_back({scene.views[i].name, render::camera_from_view(scene.views[i]), scene.load_image(i)});
     train::TrainConfig cfg = train::TrainConfig{}.scaled_to(iters);
     cfg.sh_degree = 1;
     if (densify_every > 0) {
@@ -59,7 +60,9 @@ struct Tiny {
 
 // What the method reports of its last step (train::Method::stats) and the options it trains with.
 train::MethodStats stats(const train::Trainer& t) { return t.method().stats(); }
-hybrid::HybridConfig hybrid_config(const train::Trainer& t) { return hybrid::HybridConfig::from_json(t.method().config()); }
+hybrid::HybridConfig hybrid_config(const train::Trainer& t) {
+  return hybrid::HybridConfig::from_json(t.method().config());
+}
 // The view logits, a parameter registered in the trainer's optimiser.
 const std::vector<float>& view_logits(const train::Trainer& t) { return *t.adam().find("view_logits")->values().f32; }
 
@@ -159,7 +162,8 @@ LanguageAccuracy language_accuracy(const GaussianModel& m, const std::vector<int
     for (const auto& [text, l] : cands) {
       double c = 0;  // f_n . e / |e| (|f_n| is common to every candidate)
       double e2 = 0;
-      for (int d = 0; d < g.dim; ++d) c += double(f[size_t(i) * g.dim + d]) * (*text)[d], e2 += double((*text)[d]) * (*text)[d];
+      for (int d = 0; d < g.dim; ++d)
+        c += double(f[size_t(i) * g.dim + d]) * (*text)[d], e2 += double((*text)[d]) * (*text)[d];
       c /= std::sqrt(e2);
       if (c > best) best = c, label = l;
     }
@@ -228,7 +232,10 @@ TEST(HybridTrainer, LearnsAssociationsAndLanguage) {
     for (int k = 1; k < oe.num_labels; ++k) {
       double c = 0;
       for (int d = 0; d < oe.dim; ++d) c += oe.e[size_t(k) * oe.dim + d] * text[d];
-      if (c > bs) { bs = c; best = k; }
+      if (c > bs) {
+        bs = c;
+        best = k;
+      }
     }
     right += best == id;
   }
@@ -263,8 +270,8 @@ TEST(HybridTrainer, CheckpointResumesBitForBit) {
   // a resumed run continues exactly as the uninterrupted one.
   Tiny t;
   hybrid::HybridConfig hc;
-  hc.fusion_every = 7;  // a table rebuild between the checkpoint and the end
-  hc.lambda_bro = 0.7f;  // a non-default option: the checkpoint's options are the ones that continue
+  hc.fusion_every = 7;            // a table rebuild between the checkpoint and the end
+  hc.lambda_bro = 0.7f;           // a non-default option: the checkpoint's options are the ones that continue
   auto a = t.trainer(hc, 40, 5);  // densification at 5, 10, 15, 20: the Gaussian count changes
   const int n0 = a->model().n;
   for (int it = 0; it < 12; ++it) a->step();
@@ -278,7 +285,8 @@ TEST(HybridTrainer, CheckpointResumesBitForBit) {
   EXPECT_EQ(hybrid_config(*b).lambda_bro, 0.7f);
   for (int it = 0; it < 10; ++it) b->step();
   EXPECT_EQ(view_logits(*a), view_logits(*b));
-  for (const char* g : {"obj", "obj_id"}) EXPECT_EQ(a->model().find_extra(g)->data, b->model().find_extra(g)->data) << g;
+  for (const char* g : {"obj", "obj_id"})
+    EXPECT_EQ(a->model().find_extra(g)->data, b->model().find_extra(g)->data) << g;
   EXPECT_EQ(a->model().find_extra("lang")->half, b->model().find_extra("lang")->half);
   EXPECT_FALSE(a->model().find_extra("lang")->half.empty());
   EXPECT_EQ(a->model().mean, b->model().mean);
@@ -317,7 +325,8 @@ TEST(HybridTrainer, BoundaryLossDoesNotFadeObjectsOnNoisyMasks) {
                 bro ? (fixed ? "default" : "as written") : "off", o.mask, o.inside);
     return o;
   };
-  const Opacity none = opacity_after(false, true), fixed = opacity_after(true, true), plain = opacity_after(true, false);
+  const Opacity none = opacity_after(false, true), fixed = opacity_after(true, true),
+                plain = opacity_after(true, false);
   EXPECT_GT(fixed.inside, none.inside - 0.01);
   EXPECT_GT(fixed.mask, none.mask - 0.01);
   EXPECT_LT(plain.inside, none.inside - 0.03) << "eq. 14 as written no longer fades objects: revisit hybrid/bro.h";
@@ -370,7 +379,8 @@ TEST(MethodRegistry, BuildsTheNamedMethodWithItsOptions) {
     train::make_trainer(t.scene, t.train, cfg, "nerf", nullptr, false);
     FAIL() << "no error";
   } catch (const hgs::Error& e) {
-    EXPECT_NE(std::string(e.what()).find("unknown training method 'nerf' (known: rgb, hybrid"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("unknown training method 'nerf' (known: rgb, hybrid"), std::string::npos)
+        << e.what();
   }
 }
 

@@ -31,10 +31,11 @@ TEST(ApplyConfidence, BelowTau1BecomesBackgroundAndTau1ItselfKeepsTheLabel) {
   // tau1 (equality included) and becomes background (0) below it, whatever its label.
   const float tau1 = 0.5f;
   const float just_below = std::nextafter(tau1, 0.f);
-  LabelMap m = label_map(3, 2, {0, 1, 2,    // [H = 2, W = 3]
-                                3, 1, 2});
+  LabelMap m = label_map(3, 2,
+                         {0, 1, 2,  // [H = 2, W = 3]
+                          3, 1, 2});
   const std::vector<float> conf = {0.1f, just_below, tau1,  // [H, W]
-                                   0.2f, 1.0f, 0.0f};
+                                   0.2f, 1.0f,       0.0f};
   apply_confidence(m, conf, tau1);
   // (0,0) background stays 0; (1,0) 0.4999999 < tau1 -> 0; (2,0) conf == tau1 keeps 2; (0,1) 0.2 -> 0;
   // (1,1) 1.0 keeps 1; (2,1) 0 -> 0.
@@ -45,7 +46,7 @@ TEST(ApplyConfidence, BelowTau1BecomesBackgroundAndTau1ItselfKeepsTheLabel) {
 
 TEST(ApplyConfidence, NoConfidenceMapLeavesLabelsAndExtremeThresholds) {
   LabelMap m = label_map(2, 2, {4, 0, 2, 1});  // [2, 2]
-  apply_confidence(m, {}, 0.9f);  // no confidence file: no filtering
+  apply_confidence(m, {}, 0.9f);               // no confidence file: no filtering
   EXPECT_EQ(m.v, (std::vector<uint16_t>{4, 0, 2, 1}));
   const std::vector<float> conf = {0.0f, 0.3f, 0.7f, 1.0f};
   LabelMap keep = m;
@@ -70,27 +71,24 @@ TEST(SingleViewAssignment, FirstViewThatSeesTheGaussianDecidesAndUnseenKeepTheir
                X, X, X,   // Gaussian 2: never observed -> keeps its previous q
                7, X, 1};  // Gaussian 3: label 7 >= L is not a label of this model -> the next valid view, 1
   std::vector<float> q = {0.2f, 0.3f, 0.5f,  // [N, L] previous q (soft, to see that a row is overwritten)
-                          0.1f, 0.1f, 0.8f,
-                          0.6f, 0.3f, 0.1f,
-                          0.3f, 0.3f, 0.4f};
+                          0.1f, 0.1f, 0.8f, 0.6f, 0.3f, 0.1f, 0.3f, 0.3f, 0.4f};
   single_view_assignment(tab, 3, q.data());
-  EXPECT_EQ(q, (std::vector<float>{0, 0, 1,  // one-hot of the first observation
-                                   1, 0, 0,
-                                   0.6f, 0.3f, 0.1f,  // unchanged
+  EXPECT_EQ(q, (std::vector<float>{0, 0, 1,                    // one-hot of the first observation
+                                   1, 0, 0, 0.6f, 0.3f, 0.1f,  // unchanged
                                    0, 1, 0}));
 }
 
 TEST(PoolReference, SumsFeaturesPerLabelThenNormalisesAndAbsentLabelsAreZero) {
   // Labels [H = 2, W = 3], L = 4 (0..3); label 2 is absent and label 7 >= L is ignored.
-  const LabelMap labels = label_map(3, 2, {0, 1, 1,
-                                           3, 0, 7});
+  const LabelMap labels = label_map(3, 2, {0, 1, 1, 3, 0, 7});
   // Features [H, W, D = 2], one row per pixel in the same order.
-  const std::vector<float> f = {3, 4,     // label 0
-                                1, 0,     // label 1
-                                0, 2,     // label 1
-                                -2, 0,    // label 3
-                                0, 1,     // label 0
-                                100, 100  // label 7: not pooled anywhere
+  const std::vector<float> f = {
+      3,   4,   // label 0
+      1,   0,   // label 1
+      0,   2,   // label 1
+      -2,  0,   // label 3
+      0,   1,   // label 0
+      100, 100  // label 7: not pooled anywhere
   };
   std::vector<float> z(4 * 2, 9.f), area(4, 9.f);  // [L, D], [L] pre-filled: every entry must be written
   pool_reference(f.data(), labels, 2, 4, z.data(), area.data());

@@ -17,8 +17,8 @@ using namespace hgs::hybrid;
 TEST(ObjectSampling, DrawsMDistinctObjectsInTheirOrderEachWithProbabilityMOverJ) {
   const std::vector<int> present = {0, 2, 3, 5, 7, 8};  // J = 6 labels
   std::mt19937_64 rng(11);
-  EXPECT_EQ(sample_objects(present, 0, rng), present);   // off: every object
-  EXPECT_EQ(sample_objects(present, 6, rng), present);   // M >= J: every object
+  EXPECT_EQ(sample_objects(present, 0, rng), present);  // off: every object
+  EXPECT_EQ(sample_objects(present, 6, rng), present);  // M >= J: every object
   EXPECT_EQ(sample_objects(present, 9, rng), present);
   const int M = 2, draws = 30000;
   std::vector<int> count(9, 0);
@@ -80,7 +80,8 @@ TEST(ObjectSampling, AveragedOverAllSubsetsTheLossAndGradientAreTheExactOnes) {
       std::vector<float> ex(HW * lay.total()), g(HW * lay.total(), 0.f);
       for (size_t p = 0; p < HW; ++p)
         for (int j = 0; j < M; ++j) {
-          for (int c = 0; c < 3; ++c) ex[p * lay.total() + lay.color(j) + c] = extra[p * full.total() + full.color(js[j]) + c];
+          for (int c = 0; c < 3; ++c)
+            ex[p * lay.total() + lay.color(j) + c] = extra[p * full.total() + full.color(js[j]) + c];
           ex[p * lay.total() + lay.opacity(j)] = extra[p * full.total() + full.opacity(js[j])];
         }
       ObjectLosses losses(cfg);

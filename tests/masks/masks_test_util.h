@@ -11,9 +11,11 @@
 namespace hgs::test {
 
 // SCENE with images/<name> (width x height grey PNGs) and sparse/0 listing them (one PINHOLE camera, no points).
-inline void make_tiny_scene(const std::filesystem::path& root, const std::vector<std::string>& names, int width, int height) {
+inline void make_tiny_scene(const std::filesystem::path& root, const std::vector<std::string>& names, int width,
+                            int height) {
   ColmapModel m;
-  m.cameras[1] = ColmapCamera{1, "PINHOLE", uint64_t(width), uint64_t(height), {double(width), double(width), width / 2.0, height / 2.0}};
+  m.cameras[1] = ColmapCamera{
+      1, "PINHOLE", uint64_t(width), uint64_t(height), {double(width), double(width), width / 2.0, height / 2.0}};
   int id = 1;
   for (auto& n : names) {
     ColmapImage im;

@@ -61,7 +61,8 @@ std::map<std::string, std::vector<uint8_t>> snapshot(const fs::path& dir) {
   return s;
 }
 
-void expect_same(const std::map<std::string, std::vector<uint8_t>>& a, const std::map<std::string, std::vector<uint8_t>>& b) {
+void expect_same(const std::map<std::string, std::vector<uint8_t>>& a,
+                 const std::map<std::string, std::vector<uint8_t>>& b) {
   std::vector<std::string> ka, kb;
   for (auto& [k, v] : a) ka.push_back(k);
   for (auto& [k, v] : b) kb.push_back(k);
@@ -80,7 +81,8 @@ bool hidden_leftovers(const fs::path& root) {
 TEST(MasksAssociate, HelpIsClear) {
   auto r = test::run_hgs("masks associate --help");
   EXPECT_EQ(r.exit_code, 0);
-  for (const char* s : {"images.bin", "--out-masks", "--names", "--min-views", "--max-area", "--force", "per_view", "associate.json"})
+  for (const char* s :
+       {"images.bin", "--out-masks", "--names", "--min-views", "--max-area", "--force", "per_view", "associate.json"})
     EXPECT_NE(r.out.find(s), std::string::npos) << s;
   r = test::run_hgs("masks --help");
   EXPECT_NE(r.out.find("associate"), std::string::npos);
@@ -91,7 +93,9 @@ TEST(MasksAssociate, HandMadeSceneGetsOneIdPerObject) {
   const fs::path s = t / "s";
   make_scene(s);
   const auto before = snapshot(s / "masks");
-  atomic_write_text(t / "names.json", json({{"v0", {{"1", "red mug"}, {"2", "book"}}}, {"v1", {{"2", "red mug"}, {"1", "blue book"}}}}).dump());
+  atomic_write_text(
+      t / "names.json",
+      json({{"v0", {{"1", "red mug"}, {"2", "book"}}}, {"v1", {{"2", "red mug"}, {"1", "blue book"}}}}).dump());
   auto r = test::run_hgs("masks associate " + s.string() + " --names " + (t / "names.json").string() + " --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.out.find("2 objects"), std::string::npos) << r.out;
@@ -102,7 +106,10 @@ TEST(MasksAssociate, HandMadeSceneGetsOneIdPerObject) {
     LabelMap l = load_label_png(s / "masks" / ("v" + std::to_string(v) + ".png"));
     for (int y = 0; y < kH; ++y)
       for (int x = 0; x < kW; ++x)
-        ASSERT_EQ(l.at(x, y), in_a(x, y) ? want[v][0] : in_b(x, y) ? want[v][1] : want[v][2]) << v << " " << x << "," << y;
+        ASSERT_EQ(l.at(x, y), in_a(x, y)   ? want[v][0]
+                              : in_b(x, y) ? want[v][1]
+                                           : want[v][2])
+            << v << " " << x << "," << y;
   }
   // Names by majority (ties: alphabetical); the input is kept as it was in per_view/; confidences follow.
   EXPECT_EQ(json::parse(read_file_text(s / "masks" / "objects.json")), json({{"1", "red mug"}, {"2", "blue book"}}));
@@ -142,7 +149,8 @@ TEST(MasksAssociate, HandMadeSceneGetsOneIdPerObject) {
   EXPECT_EQ(read_file_bytes(t / "out" / "v1.png"), first.at("v1.png"));
   EXPECT_FALSE(fs::exists(t / "out" / "per_view"));
   // --edge-confidence 0: the input's confidences as they were (none for v1).
-  r = test::run_hgs("masks associate " + s.string() + " --out-masks " + (t / "out0").string() + " --edge-confidence 0 --quiet");
+  r = test::run_hgs("masks associate " + s.string() + " --out-masks " + (t / "out0").string() +
+                    " --edge-confidence 0 --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(read_file_bytes(t / "out0" / "v0.conf.npy"), before.at("v0.conf.npy"));
   EXPECT_FALSE(fs::exists(t / "out0" / "v1.conf.npy"));
@@ -204,7 +212,8 @@ TEST(MasksAssociate, BadInputNamesTheFileAndChangesNothing) {
 
 namespace {
 
-const std::string kScene = "--views 16 --width 96 --height 72 --points 6000 --objects 5 --feature-dim 8 --supersample 1 --quiet --threads 2";
+const std::string kScene =
+    "--views 16 --width 96 --height 72 --points 6000 --objects 5 --feature-dim 8 --supersample 1 --quiet --threads 2";
 
 std::vector<std::string> stems(const fs::path& scene) {
   std::vector<std::string> s;
@@ -262,7 +271,8 @@ TEST(MasksAssociate, SynthPerViewIdsBecomeTheConsistentIds) {
       if (maps.back().first.v[i]) ++co[maps.back().first.v[i]][maps.back().second.v[i]];
   }
   std::map<int, int> perm;
-  for (auto& [c, m] : co) perm[c] = std::max_element(m.begin(), m.end(), [](auto& a, auto& b) { return a.second < b.second; })->first;
+  for (auto& [c, m] : co)
+    perm[c] = std::max_element(m.begin(), m.end(), [](auto& a, auto& b) { return a.second < b.second; })->first;
   long same = 0, labelled = 0;
   int exact_views = 0;
   for (auto& [c, a] : maps) {
@@ -274,11 +284,17 @@ TEST(MasksAssociate, SynthPerViewIdsBecomeTheConsistentIds) {
     }
     exact_views += exact;
   }
-  EXPECT_EQ(std::set<int>([&] { std::set<int> s; for (auto& [c, a] : perm) s.insert(a); return s; }()).size(), perm.size());
+  EXPECT_EQ(std::set<int>([&] {
+              std::set<int> s;
+              for (auto& [c, a] : perm) s.insert(a);
+              return s;
+            }())
+                .size(),
+            perm.size());
   EXPECT_GE(double(same) / labelled, 0.97) << same << " of " << labelled;  // measured 0.9997
-  EXPECT_GE(exact_views, 13) << "of 16";                                      // measured 14
-  std::cout << "per-view masks on the consistent object: " << f << "; pixels: " << double(same) / labelled << "; exact views "
-            << exact_views << " of " << maps.size() << "\n";
+  EXPECT_GE(exact_views, 13) << "of 16";                                   // measured 14
+  std::cout << "per-view masks on the consistent object: " << f << "; pixels: " << double(same) / labelled
+            << "; exact views " << exact_views << " of " << maps.size() << "\n";
 }
 
 TEST(MasksAssociate, DepthLiftsObjectsThatHoldTooFewColmapPoints) {
@@ -313,7 +329,8 @@ TEST(MasksAssociate, DepthLiftsObjectsThatHoldTooFewColmapPoints) {
   fs::create_directories(bad);
   std::vector<float> z(12, 1.f);
   write_npy(bad / "frame_00001.npy", make_npy_f32({3, 4}, z.data()));
-  r = test::run_hgs("masks associate " + pv.string() + " --quiet --out-masks " + (t / "x").string() + " --depth " + bad.string());
+  r = test::run_hgs("masks associate " + pv.string() + " --quiet --out-masks " + (t / "x").string() + " --depth " +
+                    bad.string());
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.err.find("frame_00001.npy"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(t / "x"));
@@ -323,7 +340,8 @@ TEST(MasksAssociate, SynthSamStyleWholesAndPartsBecomeObjects) {
   test::TempDir t;
   const fs::path s = t / "s";
   // 160 x 120: at 96 x 72 SAM's simulated boundary errors make halves larger than their wholes.
-  auto r = test::run_hgs("synth --out " + s.string() + " --views 16 --width 160 --height 120 --points 6000 --objects 5 --feature-dim 8 "
+  auto r = test::run_hgs("synth --out " + s.string() +
+                         " --views 16 --width 160 --height 120 --points 6000 --objects 5 --feature-dim 8 "
                          "--supersample 1 --quiet --threads 2 --noise medium --mask-style sam --mask-ids per-view");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   r = test::run_hgs("masks import " + s.string() + " --from sam-json " + (s / "sam").string() + " --force --quiet");
@@ -344,13 +362,15 @@ TEST(MasksAssociate, SynthSamStyleWholesAndPartsBecomeObjects) {
   EXPECT_GE(f_surf, 0.65);  // measured 0.72: the floor, seen at grazing angles, splits into runs of views
 
   // --drop-surfaces: the background surfaces lose their ids, the objects keep theirs.
-  r = test::run_hgs("masks associate " + s.string() + " --drop-surfaces --out-masks " + (t / "ds").string() + " --quiet");
+  r = test::run_hgs("masks associate " + s.string() + " --drop-surfaces --out-masks " + (t / "ds").string() +
+                    " --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const json ds = json::parse(read_file_text(t / "ds" / "associate.json"));
   int surf = 0, surf_dropped = 0;
   for (auto& [st, m] : truth.items())
     for (auto& [id, e] : m.items())
-      if (e.contains("surface") && ds["ids"].contains(st) && ds["ids"][st].contains(id)) ++surf, surf_dropped += ds["ids"][st][id].is_null();
+      if (e.contains("surface") && ds["ids"].contains(st) && ds["ids"][st].contains(id))
+        ++surf, surf_dropped += ds["ids"][st][id].is_null();
   EXPECT_GT(surf, 20);
   EXPECT_GE(double(surf_dropped) / surf, 0.9) << surf_dropped << " of " << surf;  // measured 32 of 32
   std::cout << "--drop-surfaces: " << surf_dropped << " of " << surf << " surface masks dropped\n";

@@ -77,7 +77,7 @@ TEST(MaskGraph, CountsCoreCovisibilityAndContainmentExactly) {
   EXPECT_EQ(g.covis[0][0], 0);
   EXPECT_EQ(g.covis[1][0], 6 + 3 + 1);
   ASSERT_EQ(g.inter.size(), 1u);
-  EXPECT_EQ(g.inter[0].second.first, 6);      // core points of a inside b
+  EXPECT_EQ(g.inter[0].second.first, 6);       // core points of a inside b
   EXPECT_EQ(g.inter[0].second.second, 6 + 1);  // core points of b inside a (the non-core point of a is inside a)
   // c(a -> b) = 6 / 9, c(b -> a) = 7 / 10; affinity = their geometric mean.
   EXPECT_NEAR(cluster_affinity(g, {0}, {1}), std::sqrt(6.0 / 9.0 * 7.0 / 10.0), 1e-12);
@@ -108,7 +108,8 @@ TEST(ClusterMasks, CleanObjectsGiveOneClusterEach) {
   Clustering c = cluster_masks(w.graph());
   ASSERT_EQ(c.num_objects, 2);
   // Objects are numbered by views, then points: A (160 points) before B (120).
-  EXPECT_EQ(named(w, c), (std::map<std::string, std::set<std::string>>{{"0", {"A0", "A1", "A2", "A3"}}, {"1", {"B0", "B1", "B2", "B3"}}}));
+  EXPECT_EQ(named(w, c), (std::map<std::string, std::set<std::string>>{{"0", {"A0", "A1", "A2", "A3"}},
+                                                                       {"1", {"B0", "B1", "B2", "B3"}}}));
 }
 
 TEST(ClusterMasks, MissedViewLeavesTheObjectWhole) {
@@ -117,7 +118,8 @@ TEST(ClusterMasks, MissedViewLeavesTheObjectWhole) {
   w.points(30, {{0, "B0"}, {1, "B1"}, {2, "B2"}, {3, "B3"}});
   Clustering c = cluster_masks(w.graph());
   // B is seen in 4 views, A in 3: B first.
-  EXPECT_EQ(named(w, c), (std::map<std::string, std::set<std::string>>{{"0", {"B0", "B1", "B2", "B3"}}, {"1", {"A0", "A1", "A3"}}}));
+  EXPECT_EQ(named(w, c),
+            (std::map<std::string, std::set<std::string>>{{"0", {"B0", "B1", "B2", "B3"}}, {"1", {"A0", "A1", "A3"}}}));
 }
 
 TEST(ClusterMasks, SplitObjectKeepsItsLargerPartAndNeverTwoMasksOfOneView) {
@@ -134,7 +136,8 @@ TEST(ClusterMasks, SplitObjectKeepsItsLargerPartAndNeverTwoMasksOfOneView) {
   EXPECT_NEAR(cluster_affinity(g, {w.id["a2_big"]}, {w.id["A0"], w.id["A1"], w.id["A3"]}), std::sqrt(0.6), 1e-12);
   EXPECT_NEAR(cluster_affinity(g, {w.id["a2_small"]}, {w.id["A0"], w.id["A1"], w.id["A3"]}), std::sqrt(0.4), 1e-12);
   Clustering c = cluster_masks(g);
-  EXPECT_EQ(named(w, c), (std::map<std::string, std::set<std::string>>{{"0", {"A0", "A1", "A3", "a2_big"}}, {"-", {"a2_small"}}}));
+  EXPECT_EQ(named(w, c),
+            (std::map<std::string, std::set<std::string>>{{"0", {"A0", "A1", "A3", "a2_big"}}, {"-", {"a2_small"}}}));
 }
 
 TEST(ClusterMasks, MergedPairJoinsTheObjectItMostlyHolds) {
@@ -146,7 +149,8 @@ TEST(ClusterMasks, MergedPairJoinsTheObjectItMostlyHolds) {
   w.points(24, {{0, "B0"}, {1, "B1"}, {2, "AB2"}, {3, "B3"}});
   w.points(80, {{0, ""}, {1, ""}, {2, ""}, {3, ""}});
   Clustering c = cluster_masks(w.graph());
-  EXPECT_EQ(named(w, c), (std::map<std::string, std::set<std::string>>{{"0", {"A0", "A1", "A3", "AB2"}}, {"1", {"B0", "B1", "B3"}}}));
+  EXPECT_EQ(named(w, c), (std::map<std::string, std::set<std::string>>{{"0", {"A0", "A1", "A3", "AB2"}},
+                                                                       {"1", {"B0", "B1", "B3"}}}));
 }
 
 TEST(ClusterMasks, BackgroundMaskHoldingAnObjectStaysOut) {
@@ -229,13 +233,16 @@ TEST(ClusterMasks, PartsKeptApartInSomeViewsJoinTheObjectWhoseWholesHoldThem) {
   ClusterOptions o;
   o.part_merge = 0;
   EXPECT_EQ(named(w, cluster_masks(g, o)),
-            (std::map<std::string, std::set<std::string>>{{"0", {"L2", "L3", "W0", "W1"}}, {"1", {"R2", "R3"}}, {"2", {"B0", "B2"}}}));
+            (std::map<std::string, std::set<std::string>>{{"0", {"L2", "L3", "W0", "W1"}},
+                                                          {"1", {"R2", "R3"}},
+                                                          {"2", {"B0", "B2"}}}));
   // Without whole marks nothing joins either (merged neighbours look the same).
   EXPECT_EQ(named(w, cluster_masks(g)), named(w, cluster_masks(g, o)));
   g.whole.assign(g.node_view.size(), 0);
   g.whole[w.id["W0"]] = g.whole[w.id["W1"]] = 1;
   EXPECT_EQ(named(w, cluster_masks(g)),
-            (std::map<std::string, std::set<std::string>>{{"0", {"L2", "L3", "R2", "R3", "W0", "W1"}}, {"1", {"B0", "B2"}}}));
+            (std::map<std::string, std::set<std::string>>{{"0", {"L2", "L3", "R2", "R3", "W0", "W1"}},
+                                                          {"1", {"B0", "B2"}}}));
 }
 
 TEST(ClusterMasks, NearestObjectsAgreeWithTheAffinityOfEachObject) {

@@ -19,7 +19,8 @@ using json = nlohmann::json;
 
 namespace {
 
-const std::string kTiny = "--views 6 --width 64 --height 48 --objects 4 --points 400 --feature-dim 8 --supersample 1 --quiet --threads 2";
+const std::string kTiny =
+    "--views 6 --width 64 --height 48 --objects 4 --points 400 --feature-dim 8 --supersample 1 --quiet --threads 2";
 
 void synth(const fs::path& out, const std::string& extra) {
   auto r = test::run_hgs("synth --out " + out.string() + " " + kTiny + " " + extra);
@@ -104,7 +105,8 @@ TEST(MasksCli, SynthSamConsistentMatchesUpToAPerViewPermutation) {
   EXPECT_GT(names.size(), 4u);  // objects, halves and background surfaces are named
   std::map<std::string, LabelMap> synth_masks;
   for (auto& st : stems(s)) synth_masks[st] = load_label_png(s / "masks" / (st + ".png"));
-  auto r = test::run_hgs("masks import " + s.string() + " --from sam-json " + (s / "sam").string() + " --force --quiet");
+  auto r =
+      test::run_hgs("masks import " + s.string() + " --from sam-json " + (s / "sam").string() + " --force --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   for (auto& [st, want] : synth_masks) {
     LabelMap got = load_label_png(s / "masks" / (st + ".png"));
@@ -129,7 +131,8 @@ TEST(MasksCli, SynthPerViewLabelIdsMapBackToTheConsistentMasks) {
   EXPECT_FALSE(fs::exists(t / "b" / "masks" / "objects.json"));
   bool some_differ = false;
   for (auto& st : stems(t / "a")) {
-    LabelMap a = load_label_png(t / "a" / "masks" / (st + ".png")), b = load_label_png(t / "b" / "masks" / (st + ".png"));
+    LabelMap a = load_label_png(t / "a" / "masks" / (st + ".png")),
+             b = load_label_png(t / "b" / "masks" / (st + ".png"));
     some_differ |= a.v != b.v;
     for (size_t p = 0; p < a.v.size(); ++p)
       ASSERT_EQ(b.v[p] ? truth[st][std::to_string(b.v[p])]["object"].get<int>() : 0, a.v[p]) << st;
@@ -165,7 +168,8 @@ TEST(MasksCli, LangSplatFixtureImportsTrainsAndEvaluates) {
     test::write_f32(ls / (st + "_s.npy"), {4, size_t(gt.height), size_t(gt.width)}, seg);
     test::write_f32(ls / (st + "_f.npy"), {4 * n, D}, feat);
   }
-  auto r = test::run_hgs("masks import " + s.string() + " --from langsplat " + ls.string() + " --level l --feature-stride 4 --force --quiet");
+  auto r = test::run_hgs("masks import " + s.string() + " --from langsplat " + ls.string() +
+                         " --level l --feature-stride 4 --force --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   Scene sc = load_scene(s);
   ASSERT_TRUE(sc.load_mask(0));
@@ -177,8 +181,8 @@ TEST(MasksCli, LangSplatFixtureImportsTrainsAndEvaluates) {
   EXPECT_EQ(gh, 12);
   r = test::run_hgs("train " + s.string() + " --out " + (t / "m").string() + " --iters 40 --quiet --threads 2");
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  r = test::run_hgs("eval " + s.string() + " " + (t / "m").string() + " --protocol lerf-ovs --out " + (t / "r" / "report.json").string() +
-                    " --no-png --quiet --threads 2");
+  r = test::run_hgs("eval " + s.string() + " " + (t / "m").string() + " --protocol lerf-ovs --out " +
+                    (t / "r" / "report.json").string() + " --no-png --quiet --threads 2");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_TRUE(fs::exists(t / "r" / "report.json"));
 }

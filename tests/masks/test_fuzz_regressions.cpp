@@ -53,6 +53,7 @@ TEST(FuzzRegressions, LangSplatShapeDimensionTooLarge) {
   EXPECT_FILE_ERROR(masks::read_npy_integers(f, shape), f, "too large");
   atomic_write_text(f, npy("4294967296, 4294967296, 4"));  // the element count overflows 64 bits
   EXPECT_FILE_ERROR(masks::read_npy_integers(f, shape), f, "too large");
-  atomic_write_text(f, npy("4,\xe0\xcd" "6, 3"));  // not digits
+  atomic_write_text(f, npy("4,\xe0\xcd"
+                           "6, 3"));  // not digits
   EXPECT_FILE_ERROR(masks::read_npy_integers(f, shape), f, "malformed NPY shape");
 }

@@ -35,8 +35,13 @@ std::vector<uint8_t> box(int x0, int y0, int x1, int y1) {  // inclusive
 json sam_entry(const std::vector<uint8_t>& b, double iou, double stab, bool string_counts) {
   Rle r = rle_encode(b, W, H);
   json counts = string_counts ? json(rle_counts_to_string(r.counts)) : json(r.counts);
-  return {{"segmentation", {{"size", {H, W}}, {"counts", counts}}}, {"area", rle_area(r)}, {"bbox", {0, 0, 1, 1}},
-          {"predicted_iou", iou}, {"stability_score", stab}, {"point_coords", {{0, 0}}}, {"crop_box", {0, 0, W, H}}};
+  return {{"segmentation", {{"size", {H, W}}, {"counts", counts}}},
+          {"area", rle_area(r)},
+          {"bbox", {0, 0, 1, 1}},
+          {"predicted_iou", iou},
+          {"stability_score", stab},
+          {"point_coords", {{0, 0}}},
+          {"crop_box", {0, 0, W, H}}};
 }
 
 // Three views; the expected flattened label map of view a for the masks below.
@@ -101,7 +106,7 @@ TEST(Import, SamJsonRoundTripThroughTheSceneLoader) {
   EXPECT_EQ(m->v, f.expected_a().v);
   auto conf = sc.load_confidence(0);
   ASSERT_TRUE(conf);
-  EXPECT_FLOAT_EQ((*conf)[0], float(0.8 * 0.99));         // (0,0): mask 2
+  EXPECT_FLOAT_EQ((*conf)[0], float(0.8 * 0.99));          // (0,0): mask 2
   EXPECT_FLOAT_EQ((*conf)[1 * W + 4], float(0.9 * 0.97));  // (4,1): mask 3
   EXPECT_FLOAT_EQ((*conf)[0 * W + 3], float(0.95 * 0.9));  // (3,0): mask 1
   EXPECT_FLOAT_EQ((*conf)[0 * W + 5], 1.f);                // (5,0): none
@@ -118,7 +123,9 @@ TEST(Import, SamJsonRoundTripThroughTheSceneLoader) {
 TEST(Import, SamPngFolderGivesTheSameAsSamJson) {
   Fixture f;
   const fs::path dir = f.t / "amg" / "a";
-  std::string csv = "id,area,bbox_x0,bbox_y0,bbox_w,bbox_h,point_input_x,point_input_y,predicted_iou,stability_score,crop_box_x0,crop_box_y0,crop_box_w,crop_box_h\n";
+  std::string csv =
+      "id,area,bbox_x0,bbox_y0,bbox_w,bbox_h,point_input_x,point_input_y,predicted_iou,stability_score,crop_box_x0,"
+      "crop_box_y0,crop_box_w,crop_box_h\n";
   const double iou[3] = {0.95, 0.8, 0.9}, stab[3] = {0.9, 0.99, 0.97};
   for (int i = 0; i < 3; ++i) {
     Image im(W, H, 1);

@@ -35,20 +35,21 @@ TEST(CorePixels, MatchBruteForce) {
 
 TEST(PartRoots, PartsFoldIntoAWholeTheyTileOnly) {
   std::map<int, MaskInfo> info;
-  info[1] = {100, 10, 0};   // a whole its parts cover: kept 10 of 100 pixels
-  info[2] = {45, 10, 1};    // its parts; 2 is itself covered by its own parts (kept 10 of 45)
+  info[1] = {100, 10, 0};  // a whole its parts cover: kept 10 of 100 pixels
+  info[2] = {45, 10, 1};   // its parts; 2 is itself covered by its own parts (kept 10 of 45)
   info[3] = {40, 40, 1};
-  info[4] = {5, 5, 2};      // a part of a tiled part: folds to the top
-  info[12] = {5, 5, 3};     // a small part of 3, which its parts do not tile: stays apart
-  info[5] = {100, 90, 0};   // a whole that kept most of its pixels...
-  info[6] = {60, 60, 5};    // ...but whose parts add up to 60% of it: tiled
-  info[7] = {1000, 900, 0}; // a table holding a small thing: not tiled
+  info[4] = {5, 5, 2};       // a part of a tiled part: folds to the top
+  info[12] = {5, 5, 3};      // a small part of 3, which its parts do not tile: stays apart
+  info[5] = {100, 90, 0};    // a whole that kept most of its pixels...
+  info[6] = {60, 60, 5};     // ...but whose parts add up to 60% of it: tiled
+  info[7] = {1000, 900, 0};  // a table holding a small thing: not tiled
   info[8] = {30, 30, 7};
-  info[9] = {5000, 100, 0}; // a whole over max_area (0.8 of 6000 px): keeps its parts apart
+  info[9] = {5000, 100, 0};  // a whole over max_area (0.8 of 6000 px): keeps its parts apart
   info[10] = {2000, 2000, 9};
   info[11] = {50, 50, 99};  // part of an id not in the list: stays itself
   const std::map<int, int> r = part_roots(info, 6000, 0.8);
-  const std::map<int, int> want = {{1, 1}, {2, 1}, {3, 1}, {4, 1}, {5, 5}, {6, 5}, {7, 7}, {8, 8}, {9, 9}, {10, 10}, {11, 11}, {12, 12}};
+  const std::map<int, int> want = {{1, 1}, {2, 1}, {3, 1}, {4, 1},   {5, 5},   {6, 5},
+                                   {7, 7}, {8, 8}, {9, 9}, {10, 10}, {11, 11}, {12, 12}};
   EXPECT_EQ(r, want);
   // A cycle (corrupt input) ends.
   std::map<int, MaskInfo> cyc;
@@ -116,7 +117,8 @@ TEST(ClipPartsToWholes, PartsKeepOnlyTheirPixelsInsideTheirWhole) {
   const Flattened u = flatten_masks(masks, W, H);
   int outside = 0;
   for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) outside += (u.labels.at(x, y) == 3 || u.labels.at(x, y) == 4) && !(x >= 2 && x < 8 && y >= 1 && y < 6);
+    for (int x = 0; x < W; ++x)
+      outside += (u.labels.at(x, y) == 3 || u.labels.at(x, y) == 4) && !(x >= 2 && x < 8 && y >= 1 && y < 6);
   EXPECT_GT(outside, 5);
   // Nothing folded: nothing to do.
   Flattened untouched;

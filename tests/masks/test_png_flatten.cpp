@@ -64,7 +64,8 @@ std::vector<uint8_t> filtered_png(const std::vector<uint8_t>& px, int w, int h, 
     const int f = y % 5;
     raw.push_back(uint8_t(f));
     for (int x = 0; x < w; ++x) {
-      const int cur = px[size_t(y) * w + x], a = x ? px[size_t(y) * w + x - 1] : 0, b = prev[x], c = x ? prev[x - 1] : 0;
+      const int cur = px[size_t(y) * w + x], a = x ? px[size_t(y) * w + x - 1] : 0, b = prev[x],
+                c = x ? prev[x - 1] : 0;
       int pred = 0;
       if (f == 1) pred = a;
       if (f == 2) pred = b;
@@ -139,7 +140,8 @@ TEST(IndexPng, SubByteDepths) {
       for (auto& v : px) v = uint8_t(rng() % (1 << depth));
       auto png = packed_png(px, w, h, ctype, depth);
       LabelMap d = decode_index_png(png.data(), png.size(), "d.png");
-      for (size_t i = 0; i < px.size(); ++i) ASSERT_EQ(d.v[i], px[i]) << "depth " << depth << " type " << ctype << " pixel " << i;
+      for (size_t i = 0; i < px.size(); ++i)
+        ASSERT_EQ(d.v[i], px[i]) << "depth " << depth << " type " << ctype << " pixel " << i;
     }
 }
 
@@ -174,21 +176,20 @@ TEST(Flatten, SmallestMaskWinsTiesGoToTheFirstListed) {
     s.stability_score = stab;
     return s;
   };
-  std::vector<SourceMask> ms = {make({{0, 0}, {1, 0}, {2, 0}, {0, 1}, {1, 1}, {2, 1}, {0, 2}, {1, 2}, {2, 2}}, 0.9, 0.8),
+  std::vector<SourceMask> ms = {make({{0, 0}, {1, 0}, {2, 0}, {0, 1}, {1, 1}, {2, 1}, {0, 2}, {1, 2}, {2, 2}}, 0.9,
+                                     0.8),
                                 make({{0, 0}, {0, 1}, {0, 2}}, 1.2, 0.5),  // iou above 1 is clamped
                                 make({{1, 0}, {2, 0}, {3, 0}}, 0.7, -1),   // no stability: iou alone
                                 make({{1, 0}, {2, 0}, {3, 0}}, 0.1, 0.1)};
   Flattened f = flatten_masks(ms, W, H);
-  const std::vector<uint16_t> want = {2, 3, 3, 3,
-                                      2, 1, 1, 0,
-                                      2, 1, 1, 0};
+  const std::vector<uint16_t> want = {2, 3, 3, 3, 2, 1, 1, 0, 2, 1, 1, 0};
   EXPECT_EQ(f.labels.v, want);
   EXPECT_EQ(f.visible, (std::vector<uint64_t>{4, 3, 3, 0}));
   ASSERT_EQ(f.confidence.size(), 12u);
-  EXPECT_FLOAT_EQ(f.confidence[0], 0.5f);       // mask 1: clamp(1.2) * 0.5
-  EXPECT_FLOAT_EQ(f.confidence[1], 0.7f);       // mask 2
+  EXPECT_FLOAT_EQ(f.confidence[0], 0.5f);  // mask 1: clamp(1.2) * 0.5
+  EXPECT_FLOAT_EQ(f.confidence[1], 0.7f);  // mask 2
   EXPECT_FLOAT_EQ(f.confidence[5], float(0.9 * 0.8));
-  EXPECT_FLOAT_EQ(f.confidence[7], 1.f);        // no mask
+  EXPECT_FLOAT_EQ(f.confidence[7], 1.f);  // no mask
   // Mask 1 lies inside mask 0; mask 2 has 2 of its 3 pixels in mask 0 (below 90%); mask 3 equals mask 2 in
   // area, and a part must be strictly smaller than its whole.
   EXPECT_EQ(part_of(ms), (std::vector<int>{-1, 0, -1, -1}));

@@ -43,7 +43,8 @@ TEST(Knn, MatchesBruteForce) {
     auto got = knn_mean_sq_dist(p, k);
     auto ref = brute_mean_sq(p, k);
     ASSERT_EQ(got.size(), ref.size());
-    for (size_t i = 0; i < p.size(); ++i) EXPECT_NEAR(got[i], ref[i], 1e-6f * std::max(1.f, ref[i])) << "k " << k << " i " << i;
+    for (size_t i = 0; i < p.size(); ++i)
+      EXPECT_NEAR(got[i], ref[i], 1e-6f * std::max(1.f, ref[i])) << "k " << k << " i " << i;
   }
   auto idx = knn_indices(p, 3);
   for (size_t i = 0; i < p.size(); i += 37) {

@@ -79,7 +79,7 @@ TEST(Model, HalfPrecisionExtraGroup) {
   EXPECT_TRUE(f.data.empty());
   ASSERT_EQ(f.half.size(), 60u);
   for (size_t k = 0; k < 60; ++k) f.half[k] = float_to_half(float(k) * 0.5f - 7.f);  // exact in half
-  EXPECT_EQ(m.fields().size(), 5u);  // the base fields only
+  EXPECT_EQ(m.fields().size(), 5u);                                                  // the base fields only
   m.validate("test");
   std::vector<float> row(10);
   m.find_extra("lang")->row(4, row.data());
@@ -119,8 +119,7 @@ TEST(Ply, StandardLayoutIsChannelMajor) {
   m.mean = {1, 2, 3};
   write_model_ply(dir / "m.ply", m);
   std::string h = read_header(dir / "m.ply");
-  const char* expect_prefix =
-      "ply\nformat binary_little_endian 1.0\n";
+  const char* expect_prefix = "ply\nformat binary_little_endian 1.0\n";
   EXPECT_EQ(h.rfind(expect_prefix, 0), 0u);
   size_t props = 0;
   for (size_t p = h.find("property float"); p != std::string::npos; p = h.find("property float", p + 1)) ++props;
@@ -135,12 +134,12 @@ TEST(Ply, StandardLayoutIsChannelMajor) {
   std::vector<float> row(62);
   std::memcpy(row.data(), bytes.data() + body, 62 * 4);
   EXPECT_EQ(row[0], 1.f);
-  EXPECT_EQ(row[6], 0.f);    // f_dc_0 = R of coefficient 0
-  EXPECT_EQ(row[8], 200.f);  // f_dc_2 = B of coefficient 0
-  EXPECT_EQ(row[9], 1.f);    // f_rest_0 = R of coefficient 1
-  EXPECT_EQ(row[9 + 14], 15.f);        // f_rest_14 = R of coefficient 15
-  EXPECT_EQ(row[9 + 15], 101.f);       // f_rest_15 = G of coefficient 1
-  EXPECT_EQ(row[9 + 44], 215.f);       // f_rest_44 = B of coefficient 15
+  EXPECT_EQ(row[6], 0.f);         // f_dc_0 = R of coefficient 0
+  EXPECT_EQ(row[8], 200.f);       // f_dc_2 = B of coefficient 0
+  EXPECT_EQ(row[9], 1.f);         // f_rest_0 = R of coefficient 1
+  EXPECT_EQ(row[9 + 14], 15.f);   // f_rest_14 = R of coefficient 15
+  EXPECT_EQ(row[9 + 15], 101.f);  // f_rest_15 = G of coefficient 1
+  EXPECT_EQ(row[9 + 44], 215.f);  // f_rest_44 = B of coefficient 15
 }
 
 // Writes a PLY by hand with the given header properties (all float) and `n` rows of the given values.
@@ -154,8 +153,8 @@ void write_raw(const std::filesystem::path& p, const std::vector<std::string>& n
   f.write(reinterpret_cast<const char*>(body.data()), body.size() * 4);
 }
 
-const std::vector<std::string> kMinimal = {"x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
-                                           "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"};
+const std::vector<std::string> kMinimal = {"x",       "y",       "z",       "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
+                                           "scale_0", "scale_1", "scale_2", "rot_0",  "rot_1",  "rot_2",  "rot_3"};
 
 TEST(Ply, AnyOrderAndDegreeZero) {
   test::TempDir dir;
@@ -171,7 +170,7 @@ TEST(Ply, AnyOrderAndDegreeZero) {
   EXPECT_EQ(m.mean[0], 13.f);
   EXPECT_EQ(m.mean[3], 23.f);
   EXPECT_EQ(m.quat[3], 0.f);
-  EXPECT_EQ(m.quat[4 + 0], 13.f);  // rot_0 is at index 3 -> 10 + 3
+  EXPECT_EQ(m.quat[4 + 0], 13.f);       // rot_0 is at index 3 -> 10 + 3
   EXPECT_EQ(m.opacity_logit[1], 17.f);  // opacity is at reversed index 7
 }
 
@@ -205,7 +204,8 @@ TEST(Ply, WrongRestCountAndGaps) {
   names.push_back("f_obj_0");
   names.push_back("f_obj_2");
   write_raw(dir / "c.ply", names, 1, std::vector<float>(names.size(), 0.f));
-  EXPECT_NE(error_of(dir / "c.ply").find("'obj' has 2 channels but no index 1"), std::string::npos) << error_of(dir / "c.ply");
+  EXPECT_NE(error_of(dir / "c.ply").find("'obj' has 2 channels but no index 1"), std::string::npos)
+      << error_of(dir / "c.ply");
 }
 
 TEST(Ply, MalformedHeaderAsciiTruncated) {
@@ -220,7 +220,8 @@ TEST(Ply, MalformedHeaderAsciiTruncated) {
   EXPECT_NE(error_of(dir / "n.ply").find("not terminated by end_header"), std::string::npos);
   atomic_write_text(dir / "x.ply", "PK\x03\x04");
   EXPECT_NE(error_of(dir / "x.ply").find("not a PLY file"), std::string::npos);
-  atomic_write_text(dir / "ty.ply", "ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty half x\nend_header\n");
+  atomic_write_text(dir / "ty.ply",
+                    "ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty half x\nend_header\n");
   EXPECT_NE(error_of(dir / "ty.ply").find("unknown property type 'half'"), std::string::npos);
   EXPECT_NE(error_of(dir / "absent.ply").find("absent.ply"), std::string::npos);
 }

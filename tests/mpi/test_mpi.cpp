@@ -102,8 +102,8 @@ TEST_F(MpiTrain, DeadRankEndsTheJobAndTheLastCheckpointResumes) {
   test::TempDir out;
   const std::string common = "train " + scene() + " --method rgb --iters 200 --threads 1 --seed 6 --quiet";
   // Rank 1 dies (SIGKILL) after 150 images; rank 0 waits in the next gradient exchange until mpirun ends it.
-  auto r = run("timeout 300 " + mpirun(2, common + " --save-every 50 --out " + (out / "m").string(),
-                                      "-x HGS_TEST_KILL=1:150"));
+  auto r = run("timeout 300 " +
+               mpirun(2, common + " --save-every 50 --out " + (out / "m").string(), "-x HGS_TEST_KILL=1:150"));
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.exit_code, 124) << "the job hung instead of ending";
   EXPECT_NE(r.err.find("signal 9"), std::string::npos) << r.err;
@@ -112,7 +112,8 @@ TEST_F(MpiTrain, DeadRankEndsTheJobAndTheLastCheckpointResumes) {
   for (const auto& e : fs::directory_iterator(out / "m" / "checkpoints"))
     EXPECT_EQ(e.path().extension(), ".ckpt") << e.path();
   // The newest checkpoint resumes (on one process, the same global batch).
-  fs::path newest = out / "m" / "checkpoints" / (fs::exists(out / "m" / "checkpoints" / "iter_150.ckpt") ? "iter_150.ckpt" : "iter_100.ckpt");
+  fs::path newest = out / "m" / "checkpoints" /
+                    (fs::exists(out / "m" / "checkpoints" / "iter_150.ckpt") ? "iter_150.ckpt" : "iter_100.ckpt");
   auto res = test::run_hgs(common + " --batch 2 --out " + (out / "m").string() + " --resume " + newest.string());
   ASSERT_EQ(res.exit_code, 0) << res.err;
   EXPECT_TRUE(fs::exists(out / "m" / "point_cloud.ply"));
@@ -120,9 +121,11 @@ TEST_F(MpiTrain, DeadRankEndsTheJobAndTheLastCheckpointResumes) {
 
 TEST(BatchCli, StepSizesThatDoNotDivideAreOneLineErrors) {
   test::TempDir d;
-  auto s = test::run_hgs("synth --out " + (d / "s").string() + " --views 6 --width 32 --height 24 --points 300 --feature-dim 4 --quiet");
+  auto s = test::run_hgs("synth --out " + (d / "s").string() +
+                         " --views 6 --width 32 --height 24 --points 300 --feature-dim 4 --quiet");
   ASSERT_EQ(s.exit_code, 0) << s.err;
-  auto r = test::run_hgs("train " + (d / "s").string() + " --method rgb --iters 101 --batch 2 --out " + (d / "m").string());
+  auto r =
+      test::run_hgs("train " + (d / "s").string() + " --method rgb --iters 101 --batch 2 --out " + (d / "m").string());
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("not a multiple of the 2 views of a step"), std::string::npos) << r.err;
   r = test::run_hgs("train " + (d / "s").string() + " --method rgb --iters 100 --batch 64 --out " + (d / "m").string());

@@ -15,11 +15,13 @@ namespace fs = std::filesystem;
 TEST(AblateCli, RowsSeedsProtocolsModesAndResume) {
   test::TempDir tmp;
   const std::string s = (tmp / "s").string(), out = (tmp / "a").string();
-  auto r = test::run_hgs("synth --out " + s + " --views 16 --width 96 --height 72 --objects 3 --points 2000 "
+  auto r = test::run_hgs("synth --out " + s +
+                         " --views 16 --width 96 --height 72 --objects 3 --points 2000 "
                          "--noise medium --feature-dim 16 --supersample 1 --seed 4 --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  const std::string cmd = "ablate " + s + " --out " + out +
-                          " --iters 30 --rows ends --eq15-row --seeds 2 --protocol instances,3d-ovs --mode both --quiet";
+  const std::string cmd =
+      "ablate " + s + " --out " + out +
+      " --iters 30 --rows ends --eq15-row --seeds 2 --protocol instances,3d-ovs --mode both --quiet";
   r = test::run_hgs(cmd);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto j = nlohmann::json::parse(read_file_text(tmp / "a" / "ablation.json"));

@@ -14,7 +14,8 @@ namespace fs = std::filesystem;
 TEST(QueryEndToEnd, TrainQueryExportEval) {
   test::TempDir tmp;
   const std::string s = (tmp / "s").string(), m = (tmp / "m").string();
-  auto r = test::run_hgs("synth --out " + s + " --views 16 --width 128 --height 96 --objects 4 --points 3000 --noise low "
+  auto r = test::run_hgs("synth --out " + s +
+                         " --views 16 --width 128 --height 96 --objects 4 --points 3000 --noise low "
                          "--feature-dim 32 --supersample 1 --seed 5 --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   r = test::run_hgs("train " + s + " --out " + m + " --iters 800 --sh-degree 1 --quiet");
@@ -40,7 +41,8 @@ TEST(QueryEndToEnd, TrainQueryExportEval) {
   r = test::run_hgs("export " + m + " --object 1 --remove --out " + (tmp / "no1.ply").string());
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(read_model_ply(tmp / "no1.ply").n + one.n, full.n);
-  r = test::run_hgs("eval " + s + " " + m + " --protocol instances --out " + (tmp / "e" / "report.json").string() + " --quiet");
+  r = test::run_hgs("eval " + s + " " + m + " --protocol instances --out " + (tmp / "e" / "report.json").string() +
+                    " --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   auto rep = nlohmann::json::parse(read_file_text(tmp / "e" / "report.json"));
   const double miou = rep["reports"][0]["summary"]["mIoU"].get<double>();
@@ -52,8 +54,8 @@ TEST(QueryEndToEnd, TrainQueryExportEval) {
   EXPECT_EQ(rep["reports"][1]["mode"], "pixel");
   EXPECT_EQ(rep["reports"][1]["extra"]["relevancy"], "lerf");
   EXPECT_FALSE(rep["reports"][0]["extra"].contains("relevancy"));
-  r = test::run_hgs("eval " + s + " " + m + " --relevancy foreground --no-png --out " + (tmp / "e2" / "report.json").string() +
-                    " --quiet");
+  r = test::run_hgs("eval " + s + " " + m + " --relevancy foreground --no-png --out " +
+                    (tmp / "e2" / "report.json").string() + " --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   rep = nlohmann::json::parse(read_file_text(tmp / "e2" / "report.json"));
   EXPECT_EQ(rep["reports"][1]["extra"]["relevancy"], "foreground");

@@ -68,7 +68,8 @@ TEST(Relevancy, ForegroundBlobKeepsItsRelevancy) {
   TwoBlobs s(0.f);
   render::GaussianRenderer r;
   const float text_right[TwoBlobs::D] = {0, 1, 0, 0};
-  const std::vector<float> rel = query::render_relevancy(r, s.m, s.cam, text_right, canonical(), query::Relevancy::Foreground);
+  const std::vector<float> rel =
+      query::render_relevancy(r, s.m, s.cam, text_right, canonical(), query::Relevancy::Foreground);
   EXPECT_GT(rel[s.right()], 0.9f);  // LERF relevancy of a feature equal to the text (cosine 1 against 0)
   EXPECT_LT(rel[s.left()], 0.6f);   // ... and of an orthogonal one (about 0.5)
 }

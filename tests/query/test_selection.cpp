@@ -31,8 +31,7 @@ GaussianModel three(bool f16 = false) {
   ExtraGroup& g = m.add_extra("lang", 2, 0.f, f16);
   if (f16)
     for (size_t k = 0; k < f.size(); ++k) g.half[k] = float_to_half(f[k]);
-  else
-    g.data = f;
+  else g.data = f;
   return m;
 }
 

@@ -84,10 +84,10 @@ inline Camera test_camera(int w, int h, std::mt19937& rng) {
   c.cx = 0.5f * w + 0.7f;
   c.cy = 0.5f * h - 0.4f;
   std::uniform_real_distribution<double> u(-0.15, 0.15);
-  Eigen::Matrix3d R = (Eigen::AngleAxisd(u(rng), Eigen::Vector3d::UnitX()) *
-                       Eigen::AngleAxisd(u(rng), Eigen::Vector3d::UnitY()) *
-                       Eigen::AngleAxisd(u(rng), Eigen::Vector3d::UnitZ()))
-                          .toRotationMatrix();
+  Eigen::Matrix3d R =
+      (Eigen::AngleAxisd(u(rng), Eigen::Vector3d::UnitX()) * Eigen::AngleAxisd(u(rng), Eigen::Vector3d::UnitY()) *
+       Eigen::AngleAxisd(u(rng), Eigen::Vector3d::UnitZ()))
+          .toRotationMatrix();
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) c.R[3 * i + j] = float(R(i, j));
   c.t[0] = float(u(rng));
@@ -226,8 +226,10 @@ inline std::vector<RefProjected> ref_project(const Scene& s) {
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(cov);
     const int r = int(std::ceil(3 * std::sqrt(es.eigenvalues().maxCoeff())));
     const double u = fx * c.x() / c.z() + s.cam.cx, v = fy * c.y() / c.z() + s.cam.cy;
-    const int px0 = std::max(0, int(std::ceil(u - r - 0.5))), px1 = std::min(s.cam.width - 1, int(std::floor(u + r - 0.5)));
-    const int py0 = std::max(0, int(std::ceil(v - r - 0.5))), py1 = std::min(s.cam.height - 1, int(std::floor(v + r - 0.5)));
+    const int px0 = std::max(0, int(std::ceil(u - r - 0.5))),
+              px1 = std::min(s.cam.width - 1, int(std::floor(u + r - 0.5)));
+    const int py0 = std::max(0, int(std::ceil(v - r - 0.5))),
+              py1 = std::min(s.cam.height - 1, int(std::floor(v + r - 0.5)));
     if (px0 > px1 || py0 > py1) continue;
     p.visible = true;
     p.u = u;
@@ -241,7 +243,8 @@ inline std::vector<RefProjected> ref_project(const Scene& s) {
     p.opacity = 1 / (1 + std::exp(-s.opacity_logit[i]));
     const Eigen::Vector3d dir = (m - campos).normalized();
     for (int ch = 0; ch < 3; ++ch) {
-      double col = s.use_colors ? s.colors[3 * i + ch] : ref_sh(s.sh_degree, &s.sh[size_t(i) * s.sh_stride * 3], dir, ch);
+      double col =
+          s.use_colors ? s.colors[3 * i + ch] : ref_sh(s.sh_degree, &s.sh[size_t(i) * s.sh_stride * 3], dir, ch);
       if (col < 0) {
         p.sh_clamped |= 1 << ch;
         col = 0;
@@ -312,6 +315,8 @@ inline RefImage ref_composite(const Scene& s, const std::vector<RefProjected>& P
   return img;
 }
 
-inline RefImage ref_render(const Scene& s, bool want_depth = true) { return ref_composite(s, ref_project(s), want_depth); }
+inline RefImage ref_render(const Scene& s, bool want_depth = true) {
+  return ref_composite(s, ref_project(s), want_depth);
+}
 
 }  // namespace hgs::render::test

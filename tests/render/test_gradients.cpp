@@ -49,8 +49,8 @@ TEST(RenderGrad, ProjectionFiniteDifferences) {
       Eval e;
       const bool vis = project_one(cam, &p[0], &p[3], &p[6], t);
       e.signature = {vis, t.inx, t.iny};
-      e.loss = w[0] * t.mean2d[0] + w[1] * t.mean2d[1] + wc[0] * t.conic[0] + wc[1] * t.conic[1] +
-               wc[2] * t.conic[2] + w[5] * t.tc[2];
+      e.loss = w[0] * t.mean2d[0] + w[1] * t.mean2d[1] + wc[0] * t.conic[0] + wc[1] * t.conic[1] + wc[2] * t.conic[2] +
+               w[5] * t.tc[2];
       return e;
     };
     std::vector<double> an(10);

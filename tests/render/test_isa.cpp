@@ -55,9 +55,7 @@ void compare_isas(const Scene& s) {
   EXPECT_GT(sum, 0);  // the scene has gradients to compare
 }
 
-bool have_avx512() {
-  return raster_isa_supported(RasterIsa::kAvx512);
-}
+bool have_avx512() { return raster_isa_supported(RasterIsa::kAvx512); }
 
 TEST(RasterIsa, Avx512AndAvx2GiveBitwiseEqualFloatResults) {
   if (!have_avx512()) GTEST_SKIP() << "this CPU has no AVX-512: only the AVX2 compilation can run here";

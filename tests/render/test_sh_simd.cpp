@@ -89,8 +89,8 @@ TEST(ShSimd, DriversBitwiseEqualScalar) {
     for (int n : {1, 7, 8, 9, 1003})
       for (bool with_active : {false, true}) {
         const ShCase c = make_case(n, degree, stride, with_active, uint32_t(1000 * degree + 10 * n + stride));
-        const std::string what = "degree " + std::to_string(degree) + " stride " + std::to_string(stride) +
-                                 " n " + std::to_string(n) + (with_active ? " active" : " all");
+        const std::string what = "degree " + std::to_string(degree) + " stride " + std::to_string(stride) + " n " +
+                                 std::to_string(n) + (with_active ? " active" : " all");
         // forward
         std::vector<float> col = garbage(3 * n, 1), col_ref = col;
         sh_forward(n, degree, stride, c.sh.data(), c.mean.data(), c.campos.data(), c.act(), col.data());

@@ -150,9 +150,8 @@ TEST(RenderTwoPhase, ChannelsFromProjectedColoursFiniteDifferences) {
   ColourChannels<double> cc;
   for (int i = 0; i < s.n; ++i) cc.scale.push_back(U(rng));
   const size_t P = size_t(s.cam.width) * s.cam.height;
-  const std::vector<double> wr = random_weights(3 * P, rng), wa = random_weights(P, rng),
-                            wd = random_weights(P, rng), we = random_weights(4 * P, rng),
-                            ww = random_weights(size_t(s.n) * 2, rng);
+  const std::vector<double> wr = random_weights(3 * P, rng), wa = random_weights(P, rng), wd = random_weights(P, rng),
+                            we = random_weights(4 * P, rng), ww = random_weights(size_t(s.n) * 2, rng);
   RendererT<double> r;
   RenderOutputsT<double> out;
   std::vector<std::vector<double>> store;
@@ -161,8 +160,7 @@ TEST(RenderTwoPhase, ChannelsFromProjectedColoursFiniteDifferences) {
     cc.build(r.projected());
     r.composite(cc.channels(), s.settings, out);
     Eval e;
-    e.loss = dot(wr, out.rgb) + dot(wa, out.alpha) + dot(wd, out.depth) + dot(we, out.extra) +
-             dot(ww, out.weight_sums);
+    e.loss = dot(wr, out.rgb) + dot(wa, out.alpha) + dot(wd, out.depth) + dot(we, out.extra) + dot(ww, out.weight_sums);
     e.signature = ref_render(s).signature;
     return e;
   };

@@ -20,7 +20,9 @@
 
 namespace hgs::test {
 
-inline std::filesystem::path sam_data(const std::string& rel) { return std::filesystem::path(HGS_TEST_DATA) / "sam" / rel; }
+inline std::filesystem::path sam_data(const std::string& rel) {
+  return std::filesystem::path(HGS_TEST_DATA) / "sam" / rel;
+}
 
 inline std::vector<float> sam_ref(const std::string& rel, std::vector<size_t>* shape = nullptr) {
   NpyArray a = read_npy(sam_data(rel));
@@ -63,7 +65,8 @@ inline RefPrompts read_prompts() {
         q.labels.push_back(p["labels"][i].get<int>());
       }
     if (p.contains("boxes"))
-      for (const auto& b : p["boxes"]) q.boxes.push_back({b[0].get<float>(), b[1].get<float>(), b[2].get<float>(), b[3].get<float>()});
+      for (const auto& b : p["boxes"])
+        q.boxes.push_back({b[0].get<float>(), b[1].get<float>(), b[2].get<float>(), b[3].get<float>()});
     r.prompts.push_back(q);
   }
   return r;
@@ -73,7 +76,8 @@ inline RefPrompts read_prompts() {
 inline double max_rel_err(const std::vector<float>& a, const std::vector<float>& b) {
   EXPECT_EQ(a.size(), b.size());
   double m = 0;
-  for (size_t i = 0; i < std::min(a.size(), b.size()); ++i) m = std::max(m, std::fabs(double(a[i]) - b[i]) / (1 + std::fabs(b[i])));
+  for (size_t i = 0; i < std::min(a.size(), b.size()); ++i)
+    m = std::max(m, std::fabs(double(a[i]) - b[i]) / (1 + std::fabs(b[i])));
   return m;
 }
 
@@ -100,12 +104,15 @@ inline void rewrite(const std::filesystem::path& dst, const std::function<std::s
   clip::write_safetensors(dst, out, clip::StDType::F32);
 }
 
-inline std::string sub(std::string s, const std::string& re, const std::string& by) { return std::regex_replace(s, std::regex(re), by); }
+inline std::string sub(std::string s, const std::string& re, const std::string& by) {
+  return std::regex_replace(s, std::regex(re), by);
+}
 
 // segment-anything's state-dict names for the tiny model's tensors (written independently of src/sam/load.cpp).
 inline std::string to_segment_anything(const std::string& n) {
   std::string s = n;
-  s = sub(s, R"(^shared_image_embedding\.positional_embedding$)", "prompt_encoder.pe_layer.positional_encoding_gaussian_matrix");
+  s = sub(s, R"(^shared_image_embedding\.positional_embedding$)",
+          "prompt_encoder.pe_layer.positional_encoding_gaussian_matrix");
   s = sub(s, R"(^vision_encoder\.patch_embed\.projection)", "image_encoder.patch_embed.proj");
   s = sub(s, R"(^vision_encoder\.layers\.(\d+)\.layer_norm(\d))", "image_encoder.blocks.$1.norm$2");
   s = sub(s, R"(^vision_encoder\.layers\.)", "image_encoder.blocks.");

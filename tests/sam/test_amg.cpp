@@ -129,20 +129,8 @@ std::vector<uint8_t> grid(const std::vector<std::string>& rows) {
 
 TEST(SamAmg, SmallHolesAreFilled) {
   // A 3-pixel hole and a 1-pixel hole inside, a large background outside (also a 0-region: kept).
-  auto m = grid({"..........",
-                 ".########.",
-                 ".#...####.",
-                 ".########.",
-                 ".####.###.",
-                 ".########.",
-                 ".........."});
-  auto want = grid({"..........",
-                    ".########.",
-                    ".########.",
-                    ".########.",
-                    ".########.",
-                    ".########.",
-                    ".........."});
+  auto m = grid({"..........", ".########.", ".#...####.", ".########.", ".####.###.", ".########.", ".........."});
+  auto want = grid({"..........", ".########.", ".########.", ".########.", ".########.", ".########.", ".........."});
   EXPECT_TRUE(sam::remove_small_regions(m, 10, 7, 4, true));
   EXPECT_EQ(m, want);
   EXPECT_FALSE(sam::remove_small_regions(m, 10, 7, 4, true));  // nothing small left
@@ -154,13 +142,7 @@ TEST(SamAmg, SmallHolesAreFilled) {
 }
 
 TEST(SamAmg, SmallIslandsAreDroppedDiagonalsConnect) {
-  auto m = grid({"##......#.",
-                 "##.......#",
-                 "..........",
-                 "....###...",
-                 "....###...",
-                 "....###...",
-                 "#........."});
+  auto m = grid({"##......#.", "##.......#", "..........", "....###...", "....###...", "....###...", "#........."});
   // Islands: the 2x2 block (4 px), the diagonal pair (2 px, 8-connected), the corner pixel (1), the 3x3 (9).
   EXPECT_TRUE(sam::remove_small_regions(m, 10, 7, 4, false));
   auto want = grid({"##........", "##........", "..........", "....###...", "....###...", "....###...", ".........."});
@@ -186,14 +168,16 @@ TEST(SamAmg, MinRegionAreaChangesTheTinyModelsMasks) {
   size_t changed = 0;
   for (const sam::AmgMask& c : clean) {
     std::vector<uint8_t> m = c.mask;  // a cleaned mask has nothing left to remove
-    EXPECT_FALSE(sam::remove_small_regions(m, e.orig_w, e.orig_h, 20, true) && sam::remove_small_regions(m, e.orig_w, e.orig_h, 20, false));
+    EXPECT_FALSE(sam::remove_small_regions(m, e.orig_w, e.orig_h, 20, true) &&
+                 sam::remove_small_regions(m, e.orig_w, e.orig_h, 20, false));
     int area = 0;
     for (uint8_t v : c.mask) area += v;
     EXPECT_EQ(area, c.area);
   }
   for (const sam::AmgMask& r : raw) {
     std::vector<uint8_t> m = r.mask;
-    changed += sam::remove_small_regions(m, e.orig_w, e.orig_h, 20, true) | sam::remove_small_regions(m, e.orig_w, e.orig_h, 20, false);
+    changed += sam::remove_small_regions(m, e.orig_w, e.orig_h, 20, true) |
+               sam::remove_small_regions(m, e.orig_w, e.orig_h, 20, false);
   }
   EXPECT_GT(changed, 0u);  // the speckled random masks do have small regions
 }

@@ -62,8 +62,8 @@ TEST(SamBf16, EncoderWithinBoundOfFloat32) {
   const double e_patch = max_rel_err(stages[0], sam_ref("patch.npy"));
   const std::vector<float> ref = sam_ref("embedding.npy");
   const double e_emb = max_rel_err(emb, ref), r_emb = rms_rel_err(emb, ref);
-  std::printf("bf16 encoder: patch embedding %.2e, embedding %.2e (max relative error), %.2e (relative RMS)\n",
-              e_patch, e_emb, r_emb);
+  std::printf("bf16 encoder: patch embedding %.2e, embedding %.2e (max relative error), %.2e (relative RMS)\n", e_patch,
+              e_emb, r_emb);
   EXPECT_LT(e_patch, 2e-2);
   EXPECT_LT(e_emb, 0.2);  // one element of ~2000 after the neck's LayerNorm; the RMS below is the typical error
   EXPECT_LT(r_emb, 3e-2);
@@ -76,10 +76,13 @@ TEST(SamBf16, DecoderWithinBoundOfFloat32) {
   for (size_t k = 0; k < r.prompts.size(); ++k) {
     sam::Prediction p = tiny_bf16().predict(e, r.prompts[k]);
     const std::vector<float> ref = sam_ref("lowres" + std::to_string(k) + ".npy");
-    const double e_low = max_rel_err(p.lowres, ref), e_iou = max_rel_err(p.iou, sam_ref("iou" + std::to_string(k) + ".npy"));
+    const double e_low = max_rel_err(p.lowres, ref),
+                 e_iou = max_rel_err(p.iou, sam_ref("iou" + std::to_string(k) + ".npy"));
     const double dis = mask_disagreement(p.lowres, ref, 0.1f), r_low = rms_rel_err(p.lowres, ref);
-    std::printf("bf16 decoder, prompt %zu: logits %.2e (RMS %.2e), IoU %.2e, mask pixels flipped (|logit| > 0.1) "
-                "%.4f\n", k, e_low, r_low, e_iou, dis);
+    std::printf(
+        "bf16 decoder, prompt %zu: logits %.2e (RMS %.2e), IoU %.2e, mask pixels flipped (|logit| > 0.1) "
+        "%.4f\n",
+        k, e_low, r_low, e_iou, dis);
     EXPECT_LT(e_low, 6e-2) << "prompt " << k;
     EXPECT_LT(r_low, 3e-2) << "prompt " << k;
     EXPECT_LT(e_iou, 3e-2) << "prompt " << k;

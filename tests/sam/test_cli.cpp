@@ -17,12 +17,14 @@ namespace {
 namespace fs = std::filesystem;
 
 // Thresholds for random weights (their masks are speckled, their IoU predictions low).
-const std::string kAmgArgs = " --points-per-side 4 --points-per-batch 5 --pred-iou-thresh 0 --stability-thresh 0"
-                             " --stability-offset 0.05 --box-nms-thresh 0.9";
+const std::string kAmgArgs =
+    " --points-per-side 4 --points-per-batch 5 --pred-iou-thresh 0 --stability-thresh 0"
+    " --stability-offset 0.05 --box-nms-thresh 0.9";
 
 fs::path make_scene(const TempDir& t) {
   const fs::path s = t / "scene";
-  auto r = run_hgs("synth --out " + s.string() + " --views 3 --width 56 --height 40 --points 400 --feature-dim 4 --quiet");
+  auto r =
+      run_hgs("synth --out " + s.string() + " --views 3 --width 56 --height 40 --points 400 --feature-dim 4 --quiet");
   EXPECT_EQ(r.exit_code, 0) << r.err;
   return s;
 }
@@ -115,7 +117,8 @@ TEST(SamCli, ClickWritesTheBestMultimaskOutput) {
   TempDir t;
   const fs::path s = make_scene(t);
   const std::string w = sam_data("tiny_sam.safetensors").string();
-  auto r = run_hgs("masks click " + s.string() + " --sam " + w + " --view 2 --point 30,20 --out " + (t / "m.png").string());
+  auto r =
+      run_hgs("masks click " + s.string() + " --sam " + w + " --view 2 --point 30,20 --out " + (t / "m.png").string());
   ASSERT_EQ(r.exit_code, 0) << r.err;
   Scene sc = load_scene(s);
   Image img = sc.load_image(2);

@@ -23,7 +23,9 @@ std::vector<float> randn(size_t n, float s, std::mt19937& rng) {
   for (auto& x : v) x = d(rng);
   return v;
 }
-Linear lin(int out, int in, std::mt19937& rng) { return {in, out, randn(size_t(out) * in, 1.f / std::sqrt(float(in)), rng), randn(out, 0.2f, rng)}; }
+Linear lin(int out, int in, std::mt19937& rng) {
+  return {in, out, randn(size_t(out) * in, 1.f / std::sqrt(float(in)), rng), randn(out, 0.2f, rng)};
+}
 
 using Mat = std::vector<double>;  // row-major
 
@@ -51,7 +53,8 @@ Mat apply(const Linear& l, const Mat& x, int n) {
 
 // Attention of the tokens (y, x) of an s x s grid given by `pos` (grid cells, -1 = padding with zero input),
 // straight from the formulas: scores q.k * scale + q.Rh[dy] + q.Rw[dx], softmax, values, proj.
-void attend_window(const sam::VitLayer& l, int heads, int C, int s, const Mat& h, const std::vector<int>& cells, Mat& out) {
+void attend_window(const sam::VitLayer& l, int heads, int C, int s, const Mat& h, const std::vector<int>& cells,
+                   Mat& out) {
   const int n = s * s, hd = C / heads;
   Mat in(size_t(n) * C, 0.0);
   for (int t = 0; t < n; ++t)
@@ -78,7 +81,8 @@ void attend_window(const sam::VitLayer& l, int heads, int C, int s, const Mat& h
       double sum = 0;
       for (auto& v : sc) sum += (v = std::exp(v - mx));
       for (int j = 0; j < n; ++j)
-        for (int c = 0; c < hd; ++c) o[size_t(i) * C + hh * hd + c] += sc[j] / sum * qkv[size_t(j) * 3 * C + 2 * C + hh * hd + c];
+        for (int c = 0; c < hd; ++c)
+          o[size_t(i) * C + hh * hd + c] += sc[j] / sum * qkv[size_t(j) * 3 * C + 2 * C + hh * hd + c];
     }
   Mat p = apply(l.proj, o, n);
   for (int t = 0; t < n; ++t)
@@ -126,7 +130,8 @@ TEST(SamKernels, VitLayersMatchBruteForce) {
         for (int c = 0; c < 3; ++c)
           for (int ky = 0; ky < P; ++ky)
             for (int kx = 0; kx < P; ++kx)
-              s += double(v.patch_embed.w[size_t(o) * 3 * P * P + (c * P + ky) * P + kx]) * img[((size_t(py) * P + ky) * S + px * P + kx) * 3 + c];
+              s += double(v.patch_embed.w[size_t(o) * 3 * P * P + (c * P + ky) * P + kx]) *
+                   img[((size_t(py) * P + ky) * S + px * P + kx) * 3 + c];
         x[(size_t(py) * g + px) * C + o] = s;
       }
   EXPECT_LT(max_rel_err(stages[0], std::vector<float>(x.begin(), x.end())), 2e-6);
@@ -194,7 +199,8 @@ TEST(SamKernels, ReassociatedDecoderAttentionMatchesPlainAttention) {
   std::mt19937 rng(5);
   const int C = 32, I = 16, heads = 4, few = 5, many = 300;
   sam::Attention a{lin(I, C, rng), lin(I, C, rng), lin(I, C, rng), lin(C, I, rng)};
-  for (auto* l : {&a.q, &a.k}) for (auto& x : l->w) x *= 3.f;  // peaked softmax
+  for (auto* l : {&a.q, &a.k})
+    for (auto& x : l->w) x *= 3.f;  // peaked softmax
   std::vector<float> tok = randn(size_t(few) * C, 1.f, rng), img = randn(size_t(many) * C, 1.f, rng),
                      img2 = randn(size_t(many) * C, 1.f, rng), tok2 = randn(size_t(few) * C, 1.f, rng);
   sam::AttnWork w;

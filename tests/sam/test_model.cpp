@@ -11,7 +11,9 @@ namespace {
 using sam::Prompt;
 
 // The reference geometry without running the encoder (embedding from the fixture).
-sam::ImageEmbedding ref_embedding(const RefPrompts& r) { return embedding_from(tiny_sam(), sam_ref("embedding.npy"), r); }
+sam::ImageEmbedding ref_embedding(const RefPrompts& r) {
+  return embedding_from(tiny_sam(), sam_ref("embedding.npy"), r);
+}
 
 TEST(SamModel, SizesReadFromTensors) {
   const sam::SamModel& m = tiny_sam();
@@ -48,7 +50,8 @@ TEST(SamModel, EncoderStagesMatchTorch) {
   std::vector<float> emb = tiny_sam().encode(px.data(), &stages);
   ASSERT_EQ(stages.size(), 4u);
   EXPECT_LT(max_rel_err(stages[0], sam_ref("patch.npy")), 2e-6);
-  for (int i = 0; i < 3; ++i) EXPECT_LT(max_rel_err(stages[i + 1], sam_ref("layer" + std::to_string(i) + ".npy")), 1e-5) << "layer " << i;
+  for (int i = 0; i < 3; ++i)
+    EXPECT_LT(max_rel_err(stages[i + 1], sam_ref("layer" + std::to_string(i) + ".npy")), 1e-5) << "layer " << i;
   EXPECT_LT(max_rel_err(emb, sam_ref("embedding.npy")), 1e-5);
 }
 

@@ -98,7 +98,9 @@ TEST(SamPruned, PromptsAndDensePeMatchTorch) {
   sam::ImageEmbedding e = ref_embedding(pruned_sam(), r);
   for (size_t k = 0; k < r.prompts.size(); ++k)
     for (const sam::SamModel* m : {&pruned_sam(), &pruned_sam_sa()})
-      EXPECT_LT(max_rel_err(m->encode_prompt(m->to_input(e, r.prompts[k])), pref("sparse" + std::to_string(k) + ".npy")), 2e-6)
+      EXPECT_LT(max_rel_err(m->encode_prompt(m->to_input(e, r.prompts[k])),
+                            pref("sparse" + std::to_string(k) + ".npy")),
+                2e-6)
           << "prompt " << k;
 }
 
@@ -168,7 +170,8 @@ void expect_error(const std::string& tensor, const std::vector<int64_t>& shape, 
 TEST(SamPruned, MisShapedLayerTensorsAreNamed) {
   // Attention output projection of layer 1: [32, 20] stored as [20, 32].
   expect_error("vision_encoder.layers.1.attn.proj.weight", {20, 32}, {"has shape [20, 32] but [32, 20] was expected"});
-  expect_error("vision_encoder.layers.1.attn.proj.weight", {20, 32}, {"has shape [20, 32] but [32, 20] was expected"}, true);
+  expect_error("vision_encoder.layers.1.attn.proj.weight", {20, 32}, {"has shape [20, 32] but [32, 20] was expected"},
+               true);
   // MLP of layer 2 (width 72): lin2 [32, 72] stored as [72, 32]; lin1's bias against lin1's rows.
   expect_error("vision_encoder.layers.2.mlp.lin2.weight", {72, 32}, {"has shape [72, 32] but [32, 72] was expected"});
   expect_error("vision_encoder.layers.0.mlp.lin1.bias", {2, 20}, {"has shape [2, 20] but [40] was expected"});
@@ -185,7 +188,8 @@ TEST(SamPruned, GivenHeadCountIsChecked) {
   opt.vit_heads = 2;  // layer 0 has 2 heads, layer 1 has 4 (head dim 5 of width 20)
   std::string err = load_error(pruned_file(), opt);
   EXPECT_NE(err.find("tensor 'vision_encoder.layers.1.attn.rel_pos_h' has shape [15, 5] but [15, 10] was expected"),
-            std::string::npos) << err;
+            std::string::npos)
+      << err;
   EXPECT_EQ(err.find('\n'), std::string::npos) << err;
 }
 
@@ -194,13 +198,15 @@ TEST(SamPruned, GivenHeadCountIsChecked) {
 TEST(SamPruned, LayerWithoutRelativePositionsUsesTheConfig) {
   TempDir t;
   const auto is_rel1 = [](const std::string& n) { return n.rfind("vision_encoder.layers.1.attn.rel_pos_", 0) == 0; };
-  rewrite(t / "zero.safetensors", [](const std::string& n) { return n; }, "", {}, pruned_file(),
-          [&](const std::string& n, std::vector<float>& v) {
-            if (is_rel1(n)) std::fill(v.begin(), v.end(), 0.f);
-          });
+  rewrite(
+      t / "zero.safetensors", [](const std::string& n) { return n; }, "", {}, pruned_file(),
+      [&](const std::string& n, std::vector<float>& v) {
+        if (is_rel1(n)) std::fill(v.begin(), v.end(), 0.f);
+      });
   std::filesystem::create_directories(t / "norel");
-  rewrite(t / "norel" / "m.safetensors", [&](const std::string& n) { return is_rel1(n) ? std::string() : n; }, "", {},
-          pruned_file());
+  rewrite(
+      t / "norel" / "m.safetensors", [&](const std::string& n) { return is_rel1(n) ? std::string() : n; }, "", {},
+      pruned_file());
   // No config: a one-line error naming the missing table.
   std::string err = load_error(t / "norel" / "m.safetensors");
   EXPECT_NE(err.find("vision_encoder.layers.1.attn.rel_pos_h"), std::string::npos) << err;
@@ -292,7 +298,9 @@ TEST(SamPruned, SeparateQkvLinearsLoad) {
   write_split_qkv(t / "bad.safetensors", "image_encoder.blocks.2.attn.k.weight", {32, 16});
   std::string err = load_error(t / "bad.safetensors");
   EXPECT_NE(err.find("bad.safetensors: tensor 'image_encoder.blocks.2.attn.k.weight' has shape [32, 16] but [16, 32] "
-                     "was expected"), std::string::npos) << err;
+                     "was expected"),
+            std::string::npos)
+      << err;
   EXPECT_EQ(err.find('\n'), std::string::npos) << err;
 }
 

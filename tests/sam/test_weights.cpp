@@ -71,7 +71,8 @@ TEST(SamWeights, BadRelativePositionsAreNamed) {
 
 TEST(SamWeights, NotASamFile) {
   TempDir t;
-  rewrite(t / "m.safetensors", [](const std::string& n) { return n.rfind("mask_decoder.", 0) == 0 ? n : std::string(); });
+  rewrite(t / "m.safetensors",
+          [](const std::string& n) { return n.rfind("mask_decoder.", 0) == 0 ? n : std::string(); });
   std::string err = load_error(t / "m.safetensors");
   EXPECT_NE(err.find("not a SAM model"), std::string::npos) << err;
   EXPECT_NE(load_error(t / "absent.safetensors").find("absent.safetensors"), std::string::npos);

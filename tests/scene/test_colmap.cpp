@@ -37,7 +37,9 @@ ColmapModel sample_model() {
   ColmapPoint p;
   p.id = 1;
   p.xyz = {0.1, -0.2, 3.3};
-  p.rgb[0] = 10; p.rgb[1] = 200; p.rgb[2] = 255;
+  p.rgb[0] = 10;
+  p.rgb[1] = 200;
+  p.rgb[2] = 255;
   p.error = 0.75;
   p.track = {{10, 0}, {11, 0}};
   m.points.push_back(p);
@@ -138,7 +140,7 @@ TEST(Scene, SplitNamesAndSubfolders) {
   EXPECT_EQ(s.views[2].stem, "sub/dir/b");
   EXPECT_TRUE(s.views[0].is_test);  // every 8th view, starting with the first
   EXPECT_FALSE(s.views[1].is_test);
-  EXPECT_EQ(s.views[1].fx, 33.0);   // SIMPLE_PINHOLE
+  EXPECT_EQ(s.views[1].fx, 33.0);  // SIMPLE_PINHOLE
   atomic_write_text(tmp / "test.txt", "c.png\nsub/dir/b.png\n");
   Scene t = load_scene(tmp.path);
   EXPECT_EQ(t.test_indices(), (std::vector<int>{1, 2}));

@@ -115,7 +115,8 @@ TEST(Synth, FeaturesPointAtTheRightObject) {
         for (int y = py * 16; y < std::min(240, py * 16 + 16); ++y)
           for (int x = px * 16; x < px * 16 + 16; ++x) cnt[gt.at(x, y)]++;
         int k = 0;
-        for (auto [id, c] : cnt) if (id && c > 128) k = id;
+        for (auto [id, c] : cnt)
+          if (id && c > 128) k = id;
         if (!k) continue;
         int best = -1;
         double bs = -2;
@@ -123,7 +124,10 @@ TEST(Synth, FeaturesPointAtTheRightObject) {
           const auto& t = s.text_embeddings.at(name);
           double d = 0;
           for (int c = 0; c < dim; ++c) d += t[c] * feat[(size_t(py) * gw + px) * dim + c];
-          if (d > bs) { bs = d; best = id; }
+          if (d > bs) {
+            bs = d;
+            best = id;
+          }
         }
         total++;
         correct += best == k;
@@ -146,7 +150,9 @@ double mask_iou(const fs::path& root, int views, int min_pixels) {
       long inter = 0, uni = 0, g = 0;
       for (size_t p = 0; p < gt.v.size(); ++p) {
         bool a = gt.v[p] == k, b = m.v[p] == k;
-        inter += a && b; uni += a || b; g += a;
+        inter += a && b;
+        uni += a || b;
+        g += a;
       }
       if (g < min_pixels) continue;
       sum += double(inter) / uni;
@@ -207,10 +213,12 @@ TEST(Synth, PolygonsRasteriseBackToTheParts) {
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
       if ((x - 10) * (x - 10) + (y - 12) * (y - 12) < 40) set(x, y);  // disc
-      if (x >= 25 && x < 39 && y >= 0 && y < 6) set(x, y);              // box on the border
+      if (x >= 25 && x < 39 && y >= 0 && y < 6) set(x, y);            // box on the border
     }
-  set(30, 10); set(31, 11); set(32, 12);  // diagonal chain (one 8-connected part)
-  set(2, 28);                             // one pixel
+  set(30, 10);
+  set(31, 11);
+  set(32, 12);                                                   // diagonal chain (one 8-connected part)
+  set(2, 28);                                                    // one pixel
   for (int k = 0; k < 6; ++k) set(20 + k, 25), set(20, 20 + k);  // L, one pixel wide
   auto polys = synth::trace_polygons(in, W, H);
   ASSERT_EQ(polys.size(), 5u);

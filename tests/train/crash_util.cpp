@@ -83,7 +83,8 @@ bool checkpoint_complete(const fs::path& file, std::string* why) {
     uint64_t values = 0;
     for (auto& a : h.at("arrays")) values += a.at("count").get<uint64_t>();
     if (16 + len + 4 * values != b.size())
-      return no("arrays hold " + std::to_string(4 * values) + " bytes, the file has " + std::to_string(b.size() - 16 - len));
+      return no("arrays hold " + std::to_string(4 * values) + " bytes, the file has " +
+                std::to_string(b.size() - 16 - len));
   } catch (const std::exception& e) {
     return no(std::string("header: ") + e.what());
   }

@@ -15,9 +15,9 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cstdlib>
 #include <random>
-#include <cstdio>
 #include <regex>
 
 #include <nlohmann/json.hpp>
@@ -45,8 +45,13 @@ class CrashSafety : public ::testing::Test {
   static void TearDownTestSuite() { delete dir_; }
   static std::string scene() { return (dir_->path / "scene").string(); }
   static std::vector<std::string> train_args(const fs::path& out, int iters = kIters) {
-    return {"train", scene(), "--out", out.string(), "--iters", std::to_string(iters), "--save-every",
-            std::to_string(kSaveEvery), "--threads", "2", "--seed", "5", "--quiet"};
+    return {"train",        scene(),
+            "--out",        out.string(),
+            "--iters",      std::to_string(iters),
+            "--save-every", std::to_string(kSaveEvery),
+            "--threads",    "2",
+            "--seed",       "5",
+            "--quiet"};
   }
   // Runs to the end; returns the exit status (stderr in *err).
   static int run(const std::vector<std::string>& args, const fs::path& logs, std::string* err = nullptr,
@@ -118,7 +123,8 @@ TEST_F(CrashSafety, KilledTrainingLeavesCompleteFilesAndResumesBitExact) {
   for (int k = kSaveEvery; k < kIters; k += kSaveEvery)
     if (fs::exists(out / "checkpoints" / fmt::format("iter_{}.ckpt", k))) last = k;
   std::vector<std::string> args = train_args(out);
-  if (last > 0) args.insert(args.end(), {"--resume", (out / "checkpoints" / fmt::format("iter_{}.ckpt", last)).string()});
+  if (last > 0)
+    args.insert(args.end(), {"--resume", (out / "checkpoints" / fmt::format("iter_{}.ckpt", last)).string()});
   ASSERT_EQ(run(args, t / "final_logs", &err), 0) << err;
   std::printf("%d of 8 runs killed, final run resumed from iteration %d\n", killed, last);
   const std::vector<uint8_t> got = read_file_bytes(out / "point_cloud.ply");
@@ -133,8 +139,16 @@ TEST_F(CrashSafety, KilledEvalLeavesCompleteFiles) {
   test::TempDir t;
   std::string err;
   ASSERT_EQ(run(train_args(t / "model", 20), t / "train_logs", &err), 0) << err;
-  const std::vector<std::string> args = {"eval", scene(), (t / "model").string(), "--protocol", "instances", "--out",
-                                         (t / "ev" / "report.json").string(), "--threads", "2", "--quiet"};
+  const std::vector<std::string> args = {"eval",
+                                         scene(),
+                                         (t / "model").string(),
+                                         "--protocol",
+                                         "instances",
+                                         "--out",
+                                         (t / "ev" / "report.json").string(),
+                                         "--threads",
+                                         "2",
+                                         "--quiet"};
   const auto t0 = std::chrono::steady_clock::now();
   ASSERT_EQ(run(args, t / "ref_logs", &err), 0) << err;
   const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -215,8 +229,8 @@ TEST_F(CrashSafety, ReadOnlyOutputGivesOneLineErrorAndNoFile) {
   EXPECT_TRUE(fs::is_empty(t / "ro"));
 
   ASSERT_EQ(run(train_args(t / "model", 8), t / "train_logs", &err), 0) << err;
-  st = run({"eval", scene(), (t / "model").string(), "--protocol", "instances", "--out", (t / "ro" / "report.json").string(),
-            "--threads", "2", "--quiet"},
+  st = run({"eval", scene(), (t / "model").string(), "--protocol", "instances", "--out",
+            (t / "ro" / "report.json").string(), "--threads", "2", "--quiet"},
            t / "eval_logs", &err, no_override);
   EXPECT_EQ(st, 1) << err;
   EXPECT_EQ(std::count(err.begin(), err.end(), '\n'), 1) << err;
@@ -237,7 +251,8 @@ TEST_F(CrashSafety, InjectedNanStopsTrainingAndKeepsTheLastCheckpoint) {
     const std::vector<uint8_t> before = read_file_bytes(ckpt), ply = read_file_bytes(out / "point_cloud.ply");
     std::vector<std::string> args = train_args(out, 30);
     args.insert(args.end(), {"--resume", ckpt.string()});
-    const int st = run(args, t / (group + "_logs1"), &err, [group] { ::setenv("HGS_INJECT_NAN", ("21:" + group).c_str(), 1); });
+    const int st =
+        run(args, t / (group + "_logs1"), &err, [group] { ::setenv("HGS_INJECT_NAN", ("21:" + group).c_str(), 1); });
     EXPECT_EQ(st, 1) << err;
     EXPECT_EQ(std::count(err.begin(), err.end(), '\n'), 1) << err;
     EXPECT_NE(err.find("iteration 21"), std::string::npos) << err;

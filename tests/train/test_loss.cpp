@@ -38,7 +38,11 @@ double brute_ssim(const std::vector<double>& x, const std::vector<double>& y, in
             int py = yy + i - 5, px = xx + j - 5;
             if (py < 0 || py >= H || px < 0 || px >= W) continue;
             double a = x[(size_t(py) * W + px) * C + c], b = y[(size_t(py) * W + px) * C + c], k = w[i] * w[j];
-            m1 += k * a; m2 += k * b; e11 += k * a * a; e22 += k * b * b; e12 += k * a * b;
+            m1 += k * a;
+            m2 += k * b;
+            e11 += k * a * a;
+            e22 += k * b * b;
+            e12 += k * a * b;
           }
         double s11 = e11 - m1 * m1, s22 = e22 - m2 * m2, s12 = e12 - m1 * m2;
         total += (2 * m1 * m2 + C1) * (2 * s12 + C2) / ((m1 * m1 + m2 * m2 + C1) * (s11 + s22 + C2));
@@ -77,8 +81,8 @@ TEST(Ssim, GradientMatchesFiniteDifferences) {
     ssim(x.data(), y.data(), H, W, C, g.data(), ws);
     const int h = H, w = W;
     auto f = [&] { return ssim(x.data(), y.data(), h, w, C, (double*)nullptr, ws); };
-    const test::FdStats st = test::fd_check("ssim", x, test::all_indices(x.size(), x.size() > 200 ? 2 : 1), g, f,
-                                            kSsimFd);
+    const test::FdStats st =
+        test::fd_check("ssim", x, test::all_indices(x.size(), x.size() > 200 ? 2 : 1), g, f, kSsimFd);
     EXPECT_GT(st.max_analytic, 1e-4);
   }
 }
@@ -148,8 +152,7 @@ TEST(L1, ValueAndGradient) {
   std::vector<int> idx = test::all_indices(a.size());
   idx.erase(idx.begin() + 4);
   auto f = [&] { return 2.0 * l1_loss(a.data(), b.data(), a.size(), (double*)nullptr); };
-  test::fd_check("l1", a, idx, g, f,
-                 {.h = 1e-7, .rtol = 1e-7, .rtol_of_fd = true, .scale_atol = 0, .noise_atol = 0});
+  test::fd_check("l1", a, idx, g, f, {.h = 1e-7, .rtol = 1e-7, .rtol_of_fd = true, .scale_atol = 0, .noise_atol = 0});
 }
 
 TEST(PhotometricLoss, CombinesL1AndSsimGradients) {

@@ -157,7 +157,8 @@ TEST(TrainerNonFinite, StopsNamingTheIterationAndTheGroup) {
   std::string e = step_error(Poison::kArrayGradient, 7, &it);
   EXPECT_EQ(it, 7);
   EXPECT_NE(e.find("iteration 7: non-finite gradient (NaN/Inf) in parameter group 'poison_logits' (1 values);"),
-            std::string::npos) << e;
+            std::string::npos)
+      << e;
   e = step_error(Poison::kLossTerm, 4, &it);
   EXPECT_EQ(it, 4);
   EXPECT_NE(e.find("iteration 4: the 'extra' loss is nan"), std::string::npos) << e;

@@ -51,7 +51,8 @@ TEST_F(TrainCli, RgbConvergesAndWritesOutputs) {
   }
   EXPECT_GT(curve[3]["test_psnr"].get<double>(), curve[0]["test_psnr"].get<double>() + 1.0);  // it learns
   EXPECT_LT(stats["test_seconds"].get<double>(), stats["wall_time_s"].get<double>());
-  for (auto key : {"iterations", "median_ms_per_iter", "peak_rss_mb", "num_gaussians", "wall_time_s", "mean_ms_per_part"})
+  for (auto key :
+       {"iterations", "median_ms_per_iter", "peak_rss_mb", "num_gaussians", "wall_time_s", "mean_ms_per_part"})
     EXPECT_TRUE(stats.contains(key)) << key;
   EXPECT_EQ(stats["iterations"], 1000);
   auto cfg = read_json(out / "m" / "config.json");
@@ -91,7 +92,8 @@ TEST_F(TrainCli, NoDensifyKeepsCountAndResumeContinues) {
   EXPECT_TRUE(std::filesystem::exists(out / "m" / "checkpoints" / "iter_100.ckpt"));
   ASSERT_TRUE(std::filesystem::exists(out / "m" / "checkpoints" / "iter_200.ckpt"));
   r = test::run_hgs("train " + scene() + " --method rgb --no-densify --iters 300 --resume " +
-                    (out / "m" / "checkpoints" / "iter_200.ckpt").string() + " --out " + (out / "m2").string() + " --quiet");
+                    (out / "m" / "checkpoints" / "iter_200.ckpt").string() + " --out " + (out / "m2").string() +
+                    " --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   auto stats = read_json(out / "m2" / "train_stats.json");
   EXPECT_EQ(stats["iterations"], 300);

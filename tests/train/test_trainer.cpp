@@ -27,7 +27,7 @@ TEST(TrainConfig, ScaledSchedule) {
   EXPECT_EQ(s.iters, 7000);
   EXPECT_EQ(s.densify_from, 500);  // floor min(500, 700)
   EXPECT_EQ(s.densify_until, 3500);
-  EXPECT_EQ(s.densify_every, 100);  // 23 raised to the floor
+  EXPECT_EQ(s.densify_every, 100);         // 23 raised to the floor
   EXPECT_EQ(s.opacity_reset_every, 1000);  // 700 raised to 10 intervals
   s = c.scaled_to(60000);
   EXPECT_EQ(s.densify_from, 1000);
@@ -202,7 +202,9 @@ struct Probe : Method {
     model = &m;
     ExtraGroup& g = m.add_extra("probe", 1, 0.f);
     for (int i = 0; i < m.n; ++i) g.data[i] = float(i);
-    optim.add("probe", 1, m.n, 0.1f).values = [this] { return ParamValues{&model->find_extra("probe")->data, nullptr}; };
+    optim.add("probe", 1, m.n, 0.1f).values = [this] {
+      return ParamValues{&model->find_extra("probe")->data, nullptr};
+    };
     optim.add_array("bias", 1, 2, 0.1f).values = [this] { return ParamValues{&bias, nullptr}; };
   }
   float rgb_weight() const override { return 0.5f; }
@@ -269,7 +271,7 @@ TEST(Method, RegisteredParametersFollowDensificationAndCheckpoints) {
   const AdamParam& probe = *a->adam().find("probe");
   const AdamParam& bias = *a->adam().find("bias");
   EXPECT_EQ(probe.m.size(), size_t(a->model().n));  // per-Gaussian moments follow the Gaussians
-  EXPECT_EQ(bias.m.size(), 2u);                      // the array parameter is left alone
+  EXPECT_EQ(bias.m.size(), 2u);                     // the array parameter is left alone
   EXPECT_EQ(a->model().find_extra("probe")->data.size(), size_t(a->model().n));
   a->save_checkpoint(dir / "p.ckpt");
   for (int i = 0; i < 20; ++i) a->step();

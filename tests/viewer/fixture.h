@@ -17,9 +17,9 @@
 namespace hgs::test {
 
 struct ViewerFixture {
-  std::filesystem::path scene, model;     // scene folder, model PLY
-  std::map<int, std::string> names;       // object id -> name (masks/objects.json)
-  std::map<int, int> counts;              // object id -> Gaussians with that hard id
+  std::filesystem::path scene, model;  // scene folder, model PLY
+  std::map<int, std::string> names;    // object id -> name (masks/objects.json)
+  std::map<int, int> counts;           // object id -> Gaussians with that hard id
 };
 
 // Writes the scene (via `hgs synth`) and the model into `dir`.

@@ -146,7 +146,8 @@ TEST_F(ViewerLoad, ConcurrentClientsGetSequentialAnswersAndMemoryStaysFlat) {
           ++failed;
           std::lock_guard l(mu);
           if (first_problem.empty())
-            first_problem = reqs[i].path + ": " + (r ? std::to_string(r->status) + " " + r->body : httplib::to_string(r.error()));
+            first_problem =
+                reqs[i].path + ": " + (r ? std::to_string(r->status) + " " + r->body : httplib::to_string(r.error()));
         } else if (canonical(r->body, r->get_header_value("Content-Type")) != expect[i]) {
           ++differ;
           std::lock_guard l(mu);
@@ -161,10 +162,11 @@ TEST_F(ViewerLoad, ConcurrentClientsGetSequentialAnswersAndMemoryStaysFlat) {
   const double rss_end = rss_mb();
   std::sort(lat.begin(), lat.end());
   auto pct = [&](double p) { return lat.empty() ? 0.0 : lat[std::min(lat.size() - 1, size_t(p * lat.size()))]; };
-  std::printf("viewer load: %d clients x %d requests = %ld in %.1f s (%.0f req/s), latency p50 %.1f ms, p99 %.1f ms, "
-              "max %.1f ms; RSS %.1f MB at start, %.1f MB after %ld requests, %.1f MB at the end\n",
-              C, R, total, secs, double(total) / secs, pct(0.5), pct(0.99), lat.empty() ? 0.0 : lat.back(), rss_start,
-              rss_warm.load(), total / 4, rss_end);
+  std::printf(
+      "viewer load: %d clients x %d requests = %ld in %.1f s (%.0f req/s), latency p50 %.1f ms, p99 %.1f ms, "
+      "max %.1f ms; RSS %.1f MB at start, %.1f MB after %ld requests, %.1f MB at the end\n",
+      C, R, total, secs, double(total) / secs, pct(0.5), pct(0.99), lat.empty() ? 0.0 : lat.back(), rss_start,
+      rss_warm.load(), total / 4, rss_end);
   EXPECT_EQ(failed.load(), 0) << first_problem;
   EXPECT_EQ(differ.load(), 0) << first_problem;
   EXPECT_EQ(long(lat.size()), total);
@@ -252,20 +254,25 @@ TEST_F(ViewerLoad, OversizeAndMalformedRequestsAreRefused) {
       EXPECT_FALSE(json::parse(resp.substr(h + 4), nullptr, false).is_discarded()) << what << ": " << resp;
     }
   };
-  expect_4xx("request line of 20 kB", "GET /api/query?text=" + std::string(20000, 'a') + " HTTP/1.1\r\nHost: x\r\n\r\n");
-  expect_4xx("header of 20 kB", "GET /api/objects HTTP/1.1\r\nHost: x\r\nX-Big: " + std::string(20000, 'b') + "\r\n\r\n");
+  expect_4xx("request line of 20 kB",
+             "GET /api/query?text=" + std::string(20000, 'a') + " HTTP/1.1\r\nHost: x\r\n\r\n");
+  expect_4xx("header of 20 kB",
+             "GET /api/objects HTTP/1.1\r\nHost: x\r\nX-Big: " + std::string(20000, 'b') + "\r\n\r\n");
   std::string many = "GET /api/objects HTTP/1.1\r\nHost: x\r\n";
   for (int i = 0; i < 2000; ++i) many += fmt::format("X-H{}: {}\r\n", i, std::string(40, 'c'));
   expect_4xx("2000 headers", many + "\r\n");
-  expect_4xx("body over the limit", "POST /api/query HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
-                                    "Content-Length: 10000000\r\n\r\n{\"text\": \"");
-  std::string chunked = "POST /api/query HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nTransfer-Encoding: chunked\r\n\r\n";
+  expect_4xx("body over the limit",
+             "POST /api/query HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+             "Content-Length: 10000000\r\n\r\n{\"text\": \"");
+  std::string chunked =
+      "POST /api/query HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nTransfer-Encoding: chunked\r\n\r\n";
   for (int i = 0; i < 40; ++i) chunked += fmt::format("{:x}\r\n{}\r\n", 4096, std::string(4096, 'd'));
   expect_4xx("chunked body over the limit", chunked + "0\r\n\r\n");
   // Malformed JSON and UTF-8.
   auto post = [&](const std::string& body) {
     return raw(port, fmt::format("POST /api/query HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
-                                  "Content-Length: {}\r\nConnection: close\r\n\r\n{}", body.size(), body));
+                                 "Content-Length: {}\r\nConnection: close\r\n\r\n{}",
+                                 body.size(), body));
   };
   for (const std::string& body : {std::string("{\"text\": \"red mug"), std::string("{\"text\": \"\xff\xfe\"}"),
                                   std::string("{\"text\": \"red \xc0\xaf mug\"}"), std::string("\xef\xbb\xbf{]"),
@@ -277,13 +284,15 @@ TEST_F(ViewerLoad, OversizeAndMalformedRequestsAreRefused) {
     EXPECT_FALSE(json::parse(resp.substr(h + 4), nullptr, false).is_discarded()) << resp;
   }
   for (const std::string q : {"%FF%FE", "red%C0%AFmug", "%ED%A0%80", "%F4%90%80%80"}) {
-    const std::string resp = raw(port, "GET /api/query?text=" + q + " HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
+    const std::string resp =
+        raw(port, "GET /api/query?text=" + q + " HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
     EXPECT_EQ(status_of(resp), 400) << q << ": " << resp;
     EXPECT_NE(resp.find("UTF-8"), std::string::npos) << q << ": " << resp;
   }
   // Valid multi-byte UTF-8 passes the check (then fails as a phrase the scene has no embedding for).
   for (const std::string q : {"caf%C3%A9", "%F0%9F%98%80", "%EF%BF%BD", "%F4%8F%BF%BF"}) {
-    const std::string resp = raw(port, "GET /api/query?text=" + q + " HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
+    const std::string resp =
+        raw(port, "GET /api/query?text=" + q + " HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
     EXPECT_EQ(status_of(resp), 400) << q << ": " << resp;
     EXPECT_EQ(resp.find("UTF-8"), std::string::npos) << q << ": " << resp;
     const size_t h = resp.find("\r\n\r\n");
@@ -292,10 +301,10 @@ TEST_F(ViewerLoad, OversizeAndMalformedRequestsAreRefused) {
   }
   // Path traversal beyond the basic cases of test_server.cpp: double encoding, raw backslashes, a symlinked
   // folder inside the static folder, invalid UTF-8 in the path.
-  for (const std::string p : {"/%252e%252e/secret.txt", "/%252e%252e%252fsecret.txt", "/..\\secret.txt",
-                              "/%5c..%5csecret.txt", "/linkdir/inner.txt", "/linkdir/../secret.txt",
-                              "/%2e%2e%2f%2e%2e%2fsecret.txt", "/.%2e/secret.txt", "/%c0%ae%c0%ae/secret.txt",
-                              "/%ff/../secret.txt"})
+  for (const std::string p :
+       {"/%252e%252e/secret.txt", "/%252e%252e%252fsecret.txt", "/..\\secret.txt", "/%5c..%5csecret.txt",
+        "/linkdir/inner.txt", "/linkdir/../secret.txt", "/%2e%2e%2f%2e%2e%2fsecret.txt", "/.%2e/secret.txt",
+        "/%c0%ae%c0%ae/secret.txt", "/%ff/../secret.txt"})
     expect_4xx(p, "GET " + p + " HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
   // Still serving.
   auto r = httplib::Client("127.0.0.1", port).Get("/api/query?text=red%20mug");

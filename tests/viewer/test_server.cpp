@@ -282,10 +282,14 @@ TEST_F(ViewerApi, BadRequestsGet4xxWithMessage) {
     ASSERT_TRUE(j.is_object() && j.contains("error")) << c.path << ": " << r->body;
     EXPECT_NE(j["error"].get<std::string>().find(c.contains), std::string::npos) << c.path << ": " << r->body;
   }
-  const std::vector<std::pair<std::string, std::string>> posts = {
-      {"{not json", "JSON"}, {"[1,2]", "text"}, {"{\"text\": 5}", "text"}, {"{}", "text"},
-      {"{\"text\": \"red mug\", \"min_relevancy\": \"x\"}", "min_relevancy"},
-      {"{\"text\": \"red mug\", \"min_relevancy\": 7}", "min_relevancy"}};
+  const std::vector<std::pair<std::string, std::string>> posts = {{"{not json", "JSON"},
+                                                                  {"[1,2]", "text"},
+                                                                  {"{\"text\": 5}", "text"},
+                                                                  {"{}", "text"},
+                                                                  {"{\"text\": \"red mug\", \"min_relevancy\": \"x\"}",
+                                                                   "min_relevancy"},
+                                                                  {"{\"text\": \"red mug\", \"min_relevancy\": 7}",
+                                                                   "min_relevancy"}};
   for (auto& [body, contains] : posts) {
     auto r = client().Post("/api/query", body, "application/json");
     ASSERT_TRUE(r) << body;
@@ -313,10 +317,19 @@ TEST_F(ViewerApi, StaticFilesOnlyFromTheViewerFolder) {
   ASSERT_TRUE(r);
   EXPECT_EQ(r->status, 200);
   EXPECT_EQ(r->get_header_value("Content-Type"), "text/javascript; charset=utf-8");
-  const std::vector<std::string> attacks = {
-      "/../secret.txt", "/%2e%2e/secret.txt", "/assets/../../secret.txt", "/assets/%2e%2e/%2e%2e/secret.txt",
-      "/..%2fsecret.txt", "/..%5csecret.txt", "/%2e%2e%2fsecret.txt", "//secret.txt", "/link.txt",
-      "/assets/..", "/" + (dir_->path / "secret.txt").string(), "/secret.txt%00.html", "/./index.html/../../secret.txt"};
+  const std::vector<std::string> attacks = {"/../secret.txt",
+                                            "/%2e%2e/secret.txt",
+                                            "/assets/../../secret.txt",
+                                            "/assets/%2e%2e/%2e%2e/secret.txt",
+                                            "/..%2fsecret.txt",
+                                            "/..%5csecret.txt",
+                                            "/%2e%2e%2fsecret.txt",
+                                            "//secret.txt",
+                                            "/link.txt",
+                                            "/assets/..",
+                                            "/" + (dir_->path / "secret.txt").string(),
+                                            "/secret.txt%00.html",
+                                            "/./index.html/../../secret.txt"};
   for (const std::string& a : attacks) {
     const std::string resp = raw(port_, "GET " + a + " HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
     const int st = status_of(resp);

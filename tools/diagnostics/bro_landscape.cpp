@@ -8,8 +8,8 @@
 // confidence filter; exact / exactconf: the synthetic ground truth gt/instances (then filtered).
 #include <cmath>
 #include <cstdio>
-#include <stdexcept>
 #include <cstring>
+#include <stdexcept>
 #include "eval/instances.h"
 #include "hybrid/bro.h"
 #include "hybrid/data.h"
@@ -60,11 +60,13 @@ int main(int argc, char** argv) try {
     float campos[3];
     for (int c = 0; c < 3; ++c) campos[c] = -(cam.R[c] * cam.t[0] + cam.R[3 + c] * cam.t[1] + cam.R[6 + c] * cam.t[2]);
     std::vector<float> col(size_t(n) * 3);
-    render::sh_forward(n, m.sh_degree, m.sh_stride(), m.sh.data(), m.mean.data(), campos, (const int*)nullptr, col.data());
+    render::sh_forward(n, m.sh_degree, m.sh_stride(), m.sh.data(), m.mean.data(), campos, (const int*)nullptr,
+                       col.data());
     std::vector<int> present;
     std::vector<int> area(L, 0);
     for (auto l : lab.v) area[l]++;
-    for (int k = 1; k < L; ++k) if (area[k] > 0) present.push_back(k);
+    for (int k = 1; k < L; ++k)
+      if (area[k] > 0) present.push_back(k);
     int J = present.size(), C = 4 * J;
     std::vector<float> extra(size_t(n) * C);
     for (int i = 0; i < n; ++i)
@@ -75,11 +77,14 @@ int main(int argc, char** argv) try {
       }
     auto in = render_inputs(m);
     in.colors = col.data();
-    in.extra = extra.data(); in.num_extra = C;
-    render::RenderSettings rs; rs.want_depth = false;
+    in.extra = extra.data();
+    in.num_extra = C;
+    render::RenderSettings rs;
+    rs.want_depth = false;
     render::RenderOutputs out;
     r.forward(cam, in, rs, out);
-    int W = v.width, H = v.height; size_t HW = size_t(W) * H;
+    int W = v.width, H = v.height;
+    size_t HW = size_t(W) * H;
     std::vector<float> pred(HW * 3), gtk(HW * 3), A(HW), M(HW), B(HW), tmp;
     for (int j = 0; j < J; ++j) {
       int k = present[j];

@@ -9,9 +9,9 @@
 #include <cstdio>
 #include <stdexcept>
 #include <string>
-#include "hybrid/data.h"
 #include "eval/instances.h"
 #include "hybrid/association.h"
+#include "hybrid/data.h"
 #include "hybrid/fusion.h"
 #include "model/ply.h"
 #include "object_stats.h"
@@ -19,7 +19,8 @@
 using namespace hgs;
 int main(int argc, char** argv) try {
   if (argc < 4) {
-    std::fprintf(stderr, "usage: diag_fused_evidence SCENE MODEL_DIR K [TAU1] [background|unobserved|exact][+visible]\n");
+    std::fprintf(stderr,
+                 "usage: diag_fused_evidence SCENE MODEL_DIR K [TAU1] [background|unobserved|exact][+visible]\n");
     return 2;
   }
   Scene sc = load_scene(argv[1]);
@@ -34,7 +35,8 @@ int main(int argc, char** argv) try {
     k = atoi(argv[3]);
   }
   float tau1 = argc > 4 ? atof(argv[4]) : 0.5f;
-  hybrid::HybridConfig hc; hc.tau1 = tau1;
+  hybrid::HybridConfig hc;
+  hc.tau1 = tau1;
   auto idx = sc.train_indices();
   std::string mode = argc > 5 ? argv[5] : "background";
   bool visible = false;
@@ -53,7 +55,10 @@ int main(int argc, char** argv) try {
   int L = data.num_labels, U = tab.num_views;
   const ExtraGroup* z = m.find_extra("obj_id");
   if (!z) throw std::runtime_error(std::string(argv[2]) + ": not a hybrid model (no obj_id)");
-  std::vector<double> s(L, 0); int cnt = 0; std::vector<int> win(L, 0), hard(L, 0); double nv = 0;
+  std::vector<double> s(L, 0);
+  int cnt = 0;
+  std::vector<int> win(L, 0), hard(L, 0);
+  double nv = 0;
   for (int i = 0; i < m.n; ++i) {
     if (sel[3] > 0) {
       const float* c = &m.mean[size_t(i) * 3];
@@ -62,13 +67,24 @@ int main(int argc, char** argv) try {
     } else if (int(z->data[i]) != k) {
       continue;
     }
-    std::vector<double> si(L, 0); double den = 0;
-    for (int u = 0; u < U; ++u) { auto l = tab.label[size_t(i) * U + u]; if (l == hybrid::kNoObservation) continue; den++; si[l]++; }
+    std::vector<double> si(L, 0);
+    double den = 0;
+    for (int u = 0; u < U; ++u) {
+      auto l = tab.label[size_t(i) * U + u];
+      if (l == hybrid::kNoObservation) continue;
+      den++;
+      si[l]++;
+    }
     const int zi = int(z->data[i]);
     if (zi >= 0 && zi < L) hard[zi]++;
     if (den == 0) continue;
-    cnt++; nv += den;
-    int best = 0; for (int l = 0; l < L; ++l) { s[l] += si[l] / den; if (si[l] > si[best]) best = l; }
+    cnt++;
+    nv += den;
+    int best = 0;
+    for (int l = 0; l < L; ++l) {
+      s[l] += si[l] / den;
+      if (si[l] > si[best]) best = l;
+    }
     win[best]++;
   }
   if (cnt == 0) {

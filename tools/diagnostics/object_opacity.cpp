@@ -33,11 +33,15 @@ int main(int argc, char** argv) try {
   for (int i = 0; i < m.n; ++i) {
     const int k = int(z->data[i]);
     if (k < 0 || k >= L) continue;
-    cnt[k]++; qk[k] += q->data[size_t(i) * L + k]; op[k] += 1 / (1 + std::exp(-m.opacity_logit[i]));
+    cnt[k]++;
+    qk[k] += q->data[size_t(i) * L + k];
+    op[k] += 1 / (1 + std::exp(-m.opacity_logit[i]));
   }
   printf("%-24s %8s %8s %8s %6s %8s %6s %6s\n", "object", "A_in", "px_in", "A_out", "IoU", "gauss", "q_k", "sig(o)");
   for (int k = 1; k < L; ++k)
-    printf("%-24s %8.3f %8.0f %8.0f %6.1f %8.0f %6.3f %6.3f\n", names.count(k) ? names[k].c_str() : "?", st.a_in(k), st.in_count[k], st.out_sum[k], 100 * st.iou(k), cnt[k], cnt[k] ? qk[k] / cnt[k] : 0, cnt[k] ? op[k] / cnt[k] : 0);
+    printf("%-24s %8.3f %8.0f %8.0f %6.1f %8.0f %6.3f %6.3f\n", names.count(k) ? names[k].c_str() : "?", st.a_in(k),
+           st.in_count[k], st.out_sum[k], 100 * st.iou(k), cnt[k], cnt[k] ? qk[k] / cnt[k] : 0,
+           cnt[k] ? op[k] / cnt[k] : 0);
   printf("background gauss %.0f q0 %.3f\n", cnt[0], cnt[0] ? qk[0] / cnt[0] : 0);
   return 0;
 } catch (const std::exception& e) {

@@ -8,9 +8,9 @@
 #include "core/image.h"
 #include "eval/instances.h"
 #include "query/query.h"
+#include "render/camera_from_view.h"
 #include "render/renderer.h"
 #include "scene/scene.h"
-#include "render/camera_from_view.h"
 
 namespace hgs::diag {
 

@@ -11,10 +11,10 @@
 #include <string>
 #include "hybrid/config.h"
 #include "hybrid/register.h"
-#include "train/registry.h"
 #include "object_stats.h"
 #include "query/query.h"
 #include "scene/scene.h"
+#include "train/registry.h"
 using namespace hgs;
 int main(int argc, char** argv) try {
   if (argc < 4) {
@@ -60,7 +60,11 @@ int main(int argc, char** argv) try {
     const train::MethodStats ms = tr->method().stats();
     const std::vector<float>& w = ms.array("view_weights");
     double wmax = 0, wmin = 1, ent = 0;
-    for (float x : w) { wmax = std::max<double>(wmax, x); wmin = std::min<double>(wmin, x); ent -= x > 0 ? x * std::log(x) : 0; }
+    for (float x : w) {
+      wmax = std::max<double>(wmax, x);
+      wmin = std::min<double>(wmin, x);
+      ent -= x > 0 ? x * std::log(x) : 0;
+    }
     printf("it %5d N %6d app %.4f bro %.4f sem %.3f | w %.4f..%.4f H/Hmax %.3f | A_in:", it, m.n, ms.value("app"),
            ms.value("bro"), ms.value("sem"), wmin, wmax, ent / std::log(double(w.size())));
     double miou = 0;
