@@ -4,6 +4,7 @@
 #include "model/ply.h"
 
 #include <cstring>
+#include <functional>
 #include <map>
 #include <sstream>
 
@@ -145,10 +146,17 @@ void write_model_ply(const std::filesystem::path& path, const GaussianModel& m) 
   });
 }
 
-GaussianModel read_model_ply(const std::filesystem::path& path) {
-  const std::string where = path.string();
-  std::vector<uint8_t> bytes = read_file_bytes(path);
-  // Header.
+namespace {
+
+// The vertex element of a PLY header: its properties, vertex count and row size, and where the body starts.
+struct PlyHeader {
+  std::vector<Prop> props;
+  long count = -1;
+  size_t row = 0;   // bytes per vertex
+  size_t body = 0;  // offset of the body in the file
+};
+
+PlyHeader read_header(const std::vector<uint8_t>& bytes, const std::string& where) {
   size_t pos = 0;
   auto next_line = [&](std::string& line) {
     size_t e = pos;
@@ -158,15 +166,16 @@ GaussianModel read_model_ply(const std::filesystem::path& path) {
     if (!line.empty() && line.back() == '\r') line.pop_back();
     pos = e + 1;
   };
+  PlyHeader h;
+  std::vector<Prop>& props = h.props;
+  long& count = h.count;
+  size_t& row = h.row;
   std::string line;
   if (bytes.size() < 4 || std::memcmp(bytes.data(), "ply", 3) != 0 || (bytes[3] != '\n' && bytes[3] != '\r'))
     fail("{}: not a PLY file (first line is not 'ply')", where);
   next_line(line);
   if (line != "ply") fail("{}: not a PLY file (first line is not 'ply')", where);
-  std::vector<Prop> props;
-  long count = -1;
-  bool in_vertex = false, seen_format = false, vertex_done = false;
-  size_t row = 0;
+  bool in_vertex = false, seen_format = false;
   int lineno = 1;
   while (true) {
     next_line(line);
@@ -191,7 +200,6 @@ GaussianModel read_model_ply(const std::filesystem::path& path) {
       // A count like "0.2" reads as 0 and leaves ".2", which `extra` catches.
       if (ls.fail() || c < 0 || (ls >> extra))
         fail("{}: header line {}: malformed element line '{}'", where, lineno, line);
-      if (in_vertex) vertex_done = true;
       in_vertex = name == "vertex";
       if (in_vertex) {
         if (count >= 0) fail("{}: more than one vertex element", where);
@@ -219,36 +227,36 @@ GaussianModel read_model_ply(const std::filesystem::path& path) {
       fail("{}: header line {}: unexpected '{}'", where, lineno, line);
     }
   }
-  (void)vertex_done;
   if (!seen_format) fail("{}: PLY header has no format line", where);
   if (count < 0) fail("{}: PLY has no vertex element", where);
   const size_t body = bytes.size() - pos;
   if (body < size_t(count) * row)
     fail("{}: truncated body: {} vertices of {} bytes need {} bytes, file has {}", where, count, row,
          size_t(count) * row, body);
+  h.body = pos;
+  return h;
+}
 
-  // Map properties to model slots.
-  std::map<std::string, const Prop*> by_name;
-  for (auto& p : props) by_name[p.name] = &p;
-  auto need = [&](const std::string& nm) {
-    auto it = by_name.find(nm);
-    if (it == by_name.end()) fail("{}: missing property '{}'", where, nm);
-    return it->second;
-  };
-  const char* required[] = {"x",       "y",       "z",       "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
-                            "scale_0", "scale_1", "scale_2", "rot_0",  "rot_1",  "rot_2",  "rot_3"};
-  for (auto r : required) need(r);
+const char* const kRequired[] = {"x",       "y",       "z",       "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
+                                 "scale_0", "scale_1", "scale_2", "rot_0",  "rot_1",  "rot_2",  "rot_3"};
+
+// The properties beyond the 3DGS ones: the SH rest count and the extra channel groups f_<name>_<i> (in file order).
+struct ExtraProps {
   int n_rest = 0;
-  std::map<std::string, std::map<int, const Prop*>> groups;  // f_<name>_<i>
+  std::map<std::string, std::map<int, const Prop*>> groups;
   std::vector<std::string> group_order;
+};
+
+ExtraProps classify_props(const std::vector<Prop>& props, const std::string& where) {
+  ExtraProps x;
   for (auto& p : props) {
     int idx;
     if ((idx = suffix_index(p.name, "f_rest_")) >= 0) {
-      n_rest = std::max(n_rest, idx + 1);
+      x.n_rest = std::max(x.n_rest, idx + 1);
       continue;
     }
     bool standard = false;
-    for (auto r : required) standard |= p.name == r;
+    for (auto r : kRequired) standard |= p.name == r;
     if (standard || p.name == "nx" || p.name == "ny" || p.name == "nz") continue;
     std::string gname = p.name;
     idx = 0;
@@ -259,27 +267,25 @@ GaussianModel read_model_ply(const std::filesystem::path& path) {
       gname = p.name.substr(2, us - 2);
       if (gname == "dc" || gname == "rest") fail("{}: unexpected property '{}'", where, p.name);
     }
-    if (!groups.count(gname)) group_order.push_back(gname);
-    auto& g = groups[gname];
+    if (!x.groups.count(gname)) x.group_order.push_back(gname);
+    auto& g = x.groups[gname];
     if (g.count(idx)) fail("{}: extra channel '{}' is given twice", where, p.name);
     g[idx] = &p;
   }
-  int degree = -1;
-  for (int d = 0; d <= 3; ++d)
-    if (n_rest == 3 * ((d + 1) * (d + 1) - 1)) degree = d;
-  if (degree < 0) fail("{}: {} f_rest properties; expected 0, 9, 24 or 45 (SH degree 0..3)", where, n_rest);
-  for (int i = 0; i < n_rest; ++i) need(fmt::format("f_rest_{}", i));
+  return x;
+}
 
-  GaussianModel m;
-  m.sh_degree = degree;
-  m.resize(int(count));
-  // Destination of one property: element i goes to (*v)[i * stride + offset]. (Offsets, not pointers: with
-  // zero Gaussians the arrays are empty and `data() + c` would offset a null pointer, which UBSan reports.)
-  struct Slot {
-    const Prop* p;
-    std::vector<float>* v;
-    size_t offset, stride;
-  };
+// Destination of one property: element i goes to (*v)[i * stride + offset]. (Offsets, not pointers: with zero
+// Gaussians the arrays are empty and `data() + c` would offset a null pointer, which UBSan reports.)
+struct Slot {
+  const Prop* p;
+  std::vector<float>* v;
+  size_t offset, stride;
+};
+
+// The slots of every property read into `m` (sized, SH degree set); adds m's extra groups.
+std::vector<Slot> model_slots(GaussianModel& m, ExtraProps& x,
+                              const std::function<const Prop*(const std::string&)>& need, const std::string& where) {
   std::vector<Slot> slots;
   const int S = m.sh_stride();
   for (int c = 0; c < 3; ++c) slots.push_back({need(std::string(1, "xyz"[c])), &m.mean, size_t(c), 3});
@@ -290,8 +296,8 @@ GaussianModel read_model_ply(const std::filesystem::path& path) {
   slots.push_back({need("opacity"), &m.opacity_logit, 0, 1});
   for (int c = 0; c < 3; ++c) slots.push_back({need(fmt::format("scale_{}", c)), &m.log_scale, size_t(c), 3});
   for (int c = 0; c < 4; ++c) slots.push_back({need(fmt::format("rot_{}", c)), &m.quat, size_t(c), 4});
-  for (auto& gname : group_order) {
-    auto& g = groups[gname];
+  for (auto& gname : x.group_order) {
+    auto& g = x.groups[gname];
     int dim = int(g.size());
     for (int i = 0; i < dim; ++i)
       if (!g.count(i)) fail("{}: extra channel group '{}' has {} channels but no index {}", where, gname, dim, i);
@@ -299,18 +305,46 @@ GaussianModel read_model_ply(const std::filesystem::path& path) {
     for (int i = 0; i < dim; ++i) slots.push_back({g[i], nullptr, size_t(i), size_t(dim)});
   }
   // Resolve extra destinations once every group is added (add_extra may reallocate `extras`).
-  {
-    size_t s = slots.size();
-    for (int gi = int(m.extras.size()) - 1; gi >= 0; --gi) {
-      auto& e = m.extras[gi];
-      s -= e.dim;
-      for (int i = 0; i < e.dim; ++i) slots[s + i].v = &e.data;
-    }
+  size_t s = slots.size();
+  for (int gi = int(m.extras.size()) - 1; gi >= 0; --gi) {
+    auto& e = m.extras[gi];
+    s -= e.dim;
+    for (int i = 0; i < e.dim; ++i) slots[s + i].v = &e.data;
   }
-  const uint8_t* base = bytes.data() + pos;
+  return slots;
+}
+
+}  // namespace
+
+GaussianModel read_model_ply(const std::filesystem::path& path) {
+  const std::string where = path.string();
+  std::vector<uint8_t> bytes = read_file_bytes(path);
+  const PlyHeader h = read_header(bytes, where);
+  // Map properties to model slots.
+  std::map<std::string, const Prop*> by_name;
+  for (auto& p : h.props) by_name[p.name] = &p;
+  auto need = [&](const std::string& nm) {
+    auto it = by_name.find(nm);
+    if (it == by_name.end()) fail("{}: missing property '{}'", where, nm);
+    return it->second;
+  };
+  for (auto r : kRequired) need(r);
+  ExtraProps x = classify_props(h.props, where);
+  int degree = -1;
+  for (int d = 0; d <= 3; ++d)
+    if (x.n_rest == 3 * ((d + 1) * (d + 1) - 1)) degree = d;
+  if (degree < 0) fail("{}: {} f_rest properties; expected 0, 9, 24 or 45 (SH degree 0..3)", where, x.n_rest);
+  for (int i = 0; i < x.n_rest; ++i) need(fmt::format("f_rest_{}", i));
+
+  GaussianModel m;
+  m.sh_degree = degree;
+  m.resize(int(h.count));
+  const std::vector<Slot> slots = model_slots(m, x, need, where);
+  const uint8_t* base = bytes.data() + h.body;
+  const size_t row = h.row;
   bool nonfinite = false;
 #pragma omp parallel for reduction(|| : nonfinite)
-  for (long i = 0; i < count; ++i) {
+  for (long i = 0; i < h.count; ++i) {
     const uint8_t* r = base + size_t(i) * row;
     for (auto& s : slots) {
       float v = decode(r + s.p->offset, s.p->type);
