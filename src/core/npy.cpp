@@ -171,11 +171,15 @@ std::vector<uint8_t> encode_npy(const NpyArray& a) {
       0x93, 'N', 'U', 'M', 'P', 'Y', 1, 0, static_cast<uint8_t>(h.size() & 0xff), static_cast<uint8_t>(h.size() >> 8)};
   // GCC 12 false positive: -Warray-bounds / -Wstringop-overread take the vector's first 10 bytes for the whole
   // buffer of the insert.
+#ifndef __clang__  // warnings clang does not have
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Warray-bounds"
 #pragma GCC diagnostic ignored "-Wstringop-overread"
+#endif
   out.insert(out.end(), h.begin(), h.end());
+#ifndef __clang__
 #pragma GCC diagnostic pop
+#endif
   out.insert(out.end(), a.data.begin(), a.data.end());
   return out;
 }

@@ -135,10 +135,14 @@ std::vector<uint8_t> pack_views(const std::vector<V>& views) {
   auto put = [&](const void* p, size_t bytes) {
     const auto* c = static_cast<const uint8_t*>(p);
     // GCC 12 false positive: -Wstringop-overflow takes the insert into the empty vector as a write to 0 bytes.
+#ifndef __clang__  // warnings clang does not have
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wstringop-overflow"
+#endif
     b.insert(b.end(), c, c + bytes);
+#ifndef __clang__
 #pragma GCC diagnostic pop
+#endif
   };
   const int32_t count = int32_t(views.size());
   put(&count, 4);

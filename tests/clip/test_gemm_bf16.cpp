@@ -24,12 +24,6 @@ std::vector<float> randn(size_t n, std::mt19937& rng, float scale = 1.f) {
   return v;
 }
 
-uint32_t bits(float f) {
-  uint32_t u;
-  std::memcpy(&u, &f, 4);
-  return u;
-}
-
 float from_bits(uint32_t u) {
   float f;
   std::memcpy(&f, &u, 4);

@@ -61,11 +61,15 @@ TEST(Npy, ParsesNumpyStyleHeaders) {
   std::vector<uint8_t> f = {0x93, 'N', 'U', 'M', 'P', 'Y', 1, 0, uint8_t(h.size()), 0};
   // GCC 12 false positive: -Warray-bounds / -Wstringop-overread take the vector's first 10 bytes for the whole
   // buffer of the insert.
+#ifndef __clang__  // warnings clang does not have
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Warray-bounds"
 #pragma GCC diagnostic ignored "-Wstringop-overread"
+#endif
   f.insert(f.end(), h.begin(), h.end());
+#ifndef __clang__
 #pragma GCC diagnostic pop
+#endif
   f.resize(f.size() + 24, 0);
   NpyArray a = parse_npy(f.data(), f.size(), "x.npy");
   EXPECT_EQ(a.shape, (std::vector<size_t>{2, 3}));
@@ -81,11 +85,15 @@ std::vector<uint8_t> with_header(const std::string& dict, size_t body) {
   std::vector<uint8_t> f = {0x93, 'N', 'U', 'M', 'P', 'Y', 1, 0, uint8_t(h.size()), 0};
   // GCC 12 false positive: -Warray-bounds / -Wstringop-overread take the vector's first 10 bytes for the whole
   // buffer of the insert.
+#ifndef __clang__  // warnings clang does not have
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Warray-bounds"
 #pragma GCC diagnostic ignored "-Wstringop-overread"
+#endif
   f.insert(f.end(), h.begin(), h.end());
+#ifndef __clang__
 #pragma GCC diagnostic pop
+#endif
   f.resize(f.size() + body, 0);
   return f;
 }

@@ -3,6 +3,7 @@
 // (label maps and SAM-style overlapping masks) against the truth synth records.
 #include <gtest/gtest.h>
 
+#include <fmt/format.h>
 #include <map>
 #include <nlohmann/json.hpp>
 
@@ -48,7 +49,7 @@ void make_scene(const fs::path& root, bool with_points = true) {
     LabelMap l(kW, kH);
     for (int y = 0; y < kH; ++y)
       for (int x = 0; x < kW; ++x) l.at(x, y) = uint16_t(in_a(x, y) ? ids[v][0] : in_b(x, y) ? ids[v][1] : ids[v][2]);
-    save_label_png(root / "masks" / ("v" + std::to_string(v) + ".png"), l);
+    save_label_png(root / "masks" / fmt::format("v{}.png", v), l);
   }
   std::vector<float> conf(size_t(kW) * kH, 0.75f);
   write_npy(root / "masks" / "v0.conf.npy", make_npy_f32({size_t(kH), size_t(kW)}, conf.data()));
@@ -103,7 +104,7 @@ TEST(MasksAssociate, HandMadeSceneGetsOneIdPerObject) {
   // A (3 views) is object 1, B (2 views) object 2; the background mask of v2 is dropped.
   const int want[3][3] = {{1, 2, 0}, {1, 2, 0}, {1, 0, 0}};
   for (int v = 0; v < 3; ++v) {
-    LabelMap l = load_label_png(s / "masks" / ("v" + std::to_string(v) + ".png"));
+    LabelMap l = load_label_png(s / "masks" / fmt::format("v{}.png", v));
     for (int y = 0; y < kH; ++y)
       for (int x = 0; x < kW; ++x)
         ASSERT_EQ(l.at(x, y), in_a(x, y)   ? want[v][0]

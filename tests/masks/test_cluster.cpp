@@ -7,6 +7,8 @@
 #include <random>
 #include <set>
 
+#include <fmt/format.h>
+
 #include "masks/cluster.h"
 
 using namespace hgs::masks;
@@ -48,8 +50,8 @@ World two_objects(bool a_in_view2 = true) {
   World w;
   w.views = 4;
   for (int v = 0; v < 4; ++v) {
-    if (v != 2 || a_in_view2) w.node("A" + std::to_string(v), v);
-    w.node("B" + std::to_string(v), v);
+    if (v != 2 || a_in_view2) w.node(fmt::format("A{}", v), v);
+    w.node(fmt::format("B{}", v), v);
   }
   return w;
 }
@@ -125,7 +127,7 @@ TEST(ClusterMasks, MissedViewLeavesTheObjectWhole) {
 TEST(ClusterMasks, SplitObjectKeepsItsLargerPartAndNeverTwoMasksOfOneView) {
   World w;
   w.views = 4;
-  for (int v : {0, 1, 3}) w.node("A" + std::to_string(v), v);
+  for (int v : {0, 1, 3}) w.node(fmt::format("A{}", v), v);
   w.node("a2_big", 2);
   w.node("a2_small", 2);
   w.points(24, {{0, "A0"}, {1, "A1"}, {2, "a2_big"}, {3, "A3"}});
@@ -143,7 +145,7 @@ TEST(ClusterMasks, SplitObjectKeepsItsLargerPartAndNeverTwoMasksOfOneView) {
 TEST(ClusterMasks, MergedPairJoinsTheObjectItMostlyHolds) {
   World w;
   w.views = 4;
-  for (int v : {0, 1, 3}) w.node("A" + std::to_string(v), v), w.node("B" + std::to_string(v), v);
+  for (int v : {0, 1, 3}) w.node(fmt::format("A{}", v), v), w.node(fmt::format("B{}", v), v);
   w.node("AB2", 2);  // SAM merged the touching A and B in view 2
   w.points(36, {{0, "A0"}, {1, "A1"}, {2, "AB2"}, {3, "A3"}});
   w.points(24, {{0, "B0"}, {1, "B1"}, {2, "AB2"}, {3, "B3"}});
@@ -156,7 +158,7 @@ TEST(ClusterMasks, MergedPairJoinsTheObjectItMostlyHolds) {
 TEST(ClusterMasks, BackgroundMaskHoldingAnObjectStaysOut) {
   World w;
   w.views = 4;
-  for (int v : {0, 2, 3}) w.node("A" + std::to_string(v), v);
+  for (int v : {0, 2, 3}) w.node(fmt::format("A{}", v), v);
   w.node("G1", 1);  // a large mask in view 1 (A missed there) over A and the table around it
   w.points(20, {{0, "A0"}, {1, "G1"}, {2, "A2"}, {3, "A3"}});
   w.points(300, {{0, ""}, {1, "G1"}, {2, ""}, {3, ""}});
@@ -222,7 +224,7 @@ TEST(ClusterMasks, PartsKeptApartInSomeViewsJoinTheObjectWhoseWholesHoldThem) {
   w.views = 4;
   w.node("W0", 0);
   w.node("W1", 1);
-  for (int v : {2, 3}) w.node("L" + std::to_string(v), v), w.node("R" + std::to_string(v), v);
+  for (int v : {2, 3}) w.node(fmt::format("L{}", v), v), w.node(fmt::format("R{}", v), v);
   w.node("B0", 0);  // a neighbour, never inside A's wholes
   w.node("B2", 2);
   w.points(20, {{0, "W0"}, {1, "W1"}, {2, "L2"}, {3, "L3"}});
