@@ -344,7 +344,9 @@ TEST(Synth, GtObjectsJsonNamesTheInstanceIdsInEveryMaskMode) {
     for (int i = 0; i < o.views; ++i) {
       const LabelMap gt = load_label_png(dir / "gt" / "instances" / fmt::format("frame_{:05d}.png", i + 1));
       for (uint16_t l : gt.v)
-        if (l) ASSERT_TRUE(names.contains(std::to_string(l))) << mode << ": id " << l << " of gt/instances unnamed";
+        if (l) {
+          ASSERT_TRUE(names.contains(std::to_string(l))) << mode << ": id " << l << " of gt/instances unnamed";
+        }
     }
   }
 }

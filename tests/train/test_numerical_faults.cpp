@@ -47,7 +47,7 @@ TEST(AdamNonFinite, RowUpdatesCountBadGradients) {
     a.add("first", 1, 10, 0.01f);
     AdamParam& p = a.add("f", 40, 100, 0.01f, bf16);  // 40 columns: the AVX2 bfloat16 path and its scalar tail
     std::vector<float> x(4000, 0.f);
-    a.update_rows(p, x.data(), 100, [&](long /*i*/, float* g) {
+    a.update_rows(p, x.data(), 100, [&](long i, float* g) {
       for (int c = 0; c < 40; ++c) g[c] = 0.01f * float(c - 20);
       if (i == 7) g[3] = kNan;    // in a 16-wide block
       if (i == 60) g[39] = kInf;  // in the tail

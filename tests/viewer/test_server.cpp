@@ -327,11 +327,11 @@ TEST_F(ViewerApi, StaticFilesOnlyFromTheViewerFolder) {
                                             "//secret.txt",
                                             "/link.txt",
                                             "/assets/..",
-                                            "/" + (dir_->path / "secret.txt").string(),
+                                            fmt::format("/{}", (dir_->path / "secret.txt").string()),
                                             "/secret.txt%00.html",
                                             "/./index.html/../../secret.txt"};
   for (const std::string& a : attacks) {
-    const std::string resp = raw(port_, "GET " + a + " HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
+    const std::string resp = raw(port_, fmt::format("GET {} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n", a));
     const int st = status_of(resp);
     EXPECT_GE(st, 400) << a;
     EXPECT_LT(st, 500) << a;
