@@ -1,7 +1,7 @@
 // `hgs eval SCENE MODEL --protocol lerf-ovs|3d-ovs|instances --out report.json`: evaluates a trained hybrid
 // model with a benchmark protocol (src/eval/run.h) and writes report.json, report.md and overlay PNGs.
 // lerf-ovs reports both the pixel-level (LangSplat protocol) and the object-level mode on the same frames;
-// 3d-ovs the pixel-level argmax over classes and the object-level one; instances (synthetic scenes) the
+// 3d-ovs the pixel-level argmax over classes and the object-level one; instances (gt/instances maps) the
 // object-level mode and the pixel-level mode (LERF post-processing). --mode picks one (cli/evaluate.h).
 #include <fmt/format.h>
 
@@ -59,7 +59,8 @@ void run_eval(const EvalArgs& a) {
 }
 
 CommandRegistration reg(
-    {"eval", "Evaluate a trained hybrid model: LERF-OVS, 3D-OVS or synthetic instance protocol", 50, [](CLI::App& sub) {
+    {"eval", "Evaluate a trained hybrid model: LERF-OVS, 3D-OVS or instance protocol (gt/instances)", 50,
+     [](CLI::App& sub) {
        auto a = std::make_shared<EvalArgs>();
        sub.add_option("SCENE", a->scene, "Scene folder (with label/, segmentations/ or gt/instances/)")->required();
        sub.add_option("MODEL", a->model, "Model folder (point_cloud.ply) or PLY file")->required();

@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include "cli/masks_command.h"
+#include "cli/sam_options.h"
 #include "clip/model.h"
 #include "core/error.h"
 #include "core/fs.h"
@@ -16,8 +17,8 @@ namespace fs = std::filesystem;
 struct ClickArgs {
   std::string scene, sam, view, out;
   std::vector<std::string> points, negatives, boxes;
-  int downscale = 1, threads = 0, decoder_heads = 0, vit_heads = 0;
-  std::string precision = "f32";
+  int downscale = 1, threads = 0;
+  SamModelOptions model;  // --vit-heads, --precision, --decoder-heads
   bool single = false;
 };
 
@@ -71,8 +72,7 @@ void run_click(const ClickArgs& a) {
     p.boxes.push_back({v[0], v[1], v[2], v[3]});
   }
   if (p.points.empty() && p.boxes.empty()) fail("masks click: give at least one --point, --negative or --box");
-  sam::SamModel m =
-      sam::SamModel::load(a.sam, {a.decoder_heads, a.vit_heads, clip::parse_precision(a.precision, "--precision")});
+  sam::SamModel m = a.model.load(a.sam);
   Image img = s.load_image(vi);
   sam::ImageEmbedding e = m.embed(img);
   sam::Prediction r = m.predict(e, p);
@@ -115,19 +115,7 @@ MasksSubcommandRegistration reg(
        sub.add_option("--downscale", a->downscale, "Integer image downscale factor")
            ->capture_default_str()
            ->check(CLI::Range(1, 64));
-       sub.add_option("--vit-heads", a->vit_heads,
-                      "Image encoder heads per layer (0 = from the relative-position tables, else config.json; given, "
-                      "it must agree with the tables and serves layers without them)")
-           ->check(CLI::Range(0, 4096))
-           ->capture_default_str();
-       sub.add_option("--precision", a->precision,
-                      "f32 (exact) or bf16: the large matrix products in bfloat16 with float32 sums, 2-4x faster with "
-                      "AMX / AVX512-BF16 (an approximation: docs/sam.md)")
-           ->check(CLI::IsMember({"f32", "bf16"}))
-           ->capture_default_str();
-       sub.add_option("--decoder-heads", a->decoder_heads,
-                      "Mask decoder heads (0 = config.json beside the weights, else 8)")
-           ->capture_default_str();
+       a->model.add_to(sub);
        sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();
        return [a] { run_click(*a); };
      }});

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli/masks_command.h"
+#include "cli/sam_options.h"
 #include "clip/model.h"
 #include "core/error.h"
 #include "core/fs.h"
@@ -21,8 +22,8 @@ namespace fs = std::filesystem;
 struct GenerateArgs {
   std::string scene, sam, out;
   sam::AmgOptions amg;
-  int downscale = 1, threads = 0, decoder_heads = 0, vit_heads = 0;
-  std::string precision = "f32";
+  int downscale = 1, threads = 0;
+  SamModelOptions model;  // --vit-heads, --precision, --decoder-heads
   bool force = false, quiet = false;
 };
 
@@ -44,8 +45,7 @@ nlohmann::json to_json(const std::vector<sam::AmgMask>& ms, int w, int h) {
 void run_generate(const GenerateArgs& a) {
   clip::set_num_threads(a.threads);
   Scene s = load_scene(a.scene, {a.downscale, false});
-  sam::SamModel m =
-      sam::SamModel::load(a.sam, {a.decoder_heads, a.vit_heads, clip::parse_precision(a.precision, "--precision")});
+  sam::SamModel m = a.model.load(a.sam);
   if (!a.quiet) fmt::print(stderr, "model: {}\n", m.describe());
   const fs::path out_dir = a.out.empty() ? s.root / "sam" : fs::path(a.out);
   const int n = a.amg.points_per_side * a.amg.points_per_side;
@@ -115,19 +115,7 @@ MasksSubcommandRegistration reg(
        sub.add_option("--downscale", a->downscale, "Integer image downscale factor before SAM")
            ->capture_default_str()
            ->check(CLI::Range(1, 64));
-       sub.add_option("--vit-heads", a->vit_heads,
-                      "Image encoder heads per layer (0 = from the relative-position tables, else config.json; given, "
-                      "it must agree with the tables and serves layers without them)")
-           ->check(CLI::Range(0, 4096))
-           ->capture_default_str();
-       sub.add_option("--precision", a->precision,
-                      "f32 (exact) or bf16: the large matrix products in bfloat16 with float32 sums, 2-4x faster with "
-                      "AMX / AVX512-BF16 (an approximation: docs/sam.md)")
-           ->check(CLI::IsMember({"f32", "bf16"}))
-           ->capture_default_str();
-       sub.add_option("--decoder-heads", a->decoder_heads,
-                      "Mask decoder heads (0 = config.json beside the weights, else 8)")
-           ->capture_default_str();
+       a->model.add_to(sub);
        sub.add_flag("--force", a->force, "Recompute views whose file exists");
        sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();
        sub.add_flag("--quiet", a->quiet, "No progress bar");
