@@ -42,8 +42,7 @@ class ObjectAssociation {
   void reduce(train::Reducer& r);
   void update(train::Adam& optim, float scale);
 
-  const std::vector<float>& weights() const;                    // [U] softmax of the current logits
-  const std::vector<float>& logits() const { return logits_; }  // [U]
+  const std::vector<float>& weights() const;  // [U] softmax of the current logits
   const ObservationTable& table() const { return table_; }
   // Restores a saved table (checked by the caller).
   void restore_table(int n, std::vector<uint16_t> labels);

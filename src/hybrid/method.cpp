@@ -95,10 +95,9 @@ void HybridMethod::prepare(const train::ViewStep& v, const train::PrepareIO& io)
   io.channels.extra = channels_.data();
   io.channels.num_extra = C;
   // Pixel weights M_k of the SCL anchors: the rasterizer returns a_{n,k} = sum_p M_k(p) alpha_n T_n.
-  pixel_weights_ = static_cast<int>(anchors.size());
   if (!anchors.empty()) {
     io.settings.pixel_weights = semantic_.pixel_weights(u);
-    io.settings.num_pixel_weights = pixel_weights_;
+    io.settings.num_pixel_weights = static_cast<int>(anchors.size());
   }
 }
 
@@ -116,7 +115,7 @@ void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
   io.objective.add("bro", cfg_.use_bro ? cfg_.lambda_bro : 0.f, ov.bro);
   const auto t1 = std::chrono::steady_clock::now();
   SemanticValues sv;
-  const int Jf = pixel_weights_;
+  const int Jf = static_cast<int>(semantic_.anchors_of(u).size());  // SCL anchors with pixel weights
   if (cfg_.lambda_sem > 0) {
     if (cfg_.use_scl) {
       float* da = nullptr;

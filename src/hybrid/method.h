@@ -67,7 +67,6 @@ class HybridMethod final : public train::Method {
   SemanticPass semantic_;
   ObjectLayout layout_;
   std::vector<int> objects_;       // labels scored in this view: present in its mask (all, or a sample)
-  int pixel_weights_ = 0;          // Jf: SCL anchors with pixel weights in this view
   std::vector<float> channels_;    // [N, C] object channels (+ f for the no-SCL ablation)
   std::vector<float> d_channels_;  // [H, W, C] dL/d the rendered channels
   std::vector<float> dq_;          // [N, L]

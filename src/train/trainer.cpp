@@ -93,8 +93,8 @@ void Trainer::check_finite(int it) const {
   fail("train: iteration {}: non-finite gradient (NaN/Inf) in parameter group {}; training stopped", it, groups);
 }
 
-int Trainer::active_sh_degree() const {
-  int d = cfg_.sh_increase_every > 0 ? it_ / cfg_.sh_increase_every : cfg_.sh_degree;
+int Trainer::sh_degree_at(int iteration) const {
+  const int d = cfg_.sh_increase_every > 0 ? iteration / cfg_.sh_increase_every : cfg_.sh_degree;
   return std::min(d, cfg_.sh_degree);
 }
 
@@ -225,9 +225,7 @@ StepInfo Trainer::step() {
   it_ += plan.step_views;
   adam_.get("mean").set_lr(cfg_.position_lr(plan.iteration, extent_));
   render::GaussianInputs in = render_inputs(model_);
-  // 3DGS raises the degree at iterations 1000, 2000, ... before rendering.
-  in.sh_degree =
-      std::min(cfg_.sh_degree, cfg_.sh_increase_every > 0 ? plan.iteration / cfg_.sh_increase_every : cfg_.sh_degree);
+  in.sh_degree = sh_degree_at(plan.iteration);
   if (!plan.gather_stats && step_stats_.n > 0) step_stats_ = StepStats{};
   ViewSums sums;
   for (int b = 0; b < plan.local_views; ++b) train_view(plan, b, in, sums, clock, info.times);

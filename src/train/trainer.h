@@ -84,7 +84,9 @@ class Trainer {
   StepInfo step();
   int iteration() const { return it_; }  // training images seen (= steps x views per step)
   int step_views() const;                // G: views of one step over all ranks
-  int active_sh_degree() const;
+  // The SH degree rendered at 1-based iteration `iteration`: one more every sh_increase_every images (3DGS raises
+  // it at 1000, 2000, ...), up to the configured maximum.
+  int sh_degree_at(int iteration) const;
   const GaussianModel& model() const { return model_; }
   GaussianModel& model() { return model_; }
   const TrainConfig& config() const { return cfg_; }
