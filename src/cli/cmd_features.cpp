@@ -5,8 +5,7 @@
 #include "cli/command.h"
 #include "clip/model.h"
 #include "core/error.h"
-#include "core/npy.h"
-#include "core/progress.h"
+#include "prepare/view_outputs.h"
 #include "scene/scene.h"
 
 namespace hgs::cli {
@@ -36,21 +35,8 @@ void run_features(const FeaturesArgs& a) {
   if (d.input_size < m.vision.patch)
     fail("--input-size {} is smaller than the patch size {}", d.input_size, m.vision.patch);
   const fs::path out_dir = s.root / "features";
-  Progress bar("features", long(s.views.size()), !a.quiet);
-  int done = 0, skipped = 0, h = 0, w = 0;
-  for (const View& v : s.views) {
-    fs::path out = out_dir / (v.stem + ".npy");
-    if (a.skip_existing && fs::exists(out)) {
-      ++skipped;
-    } else {
-      Image img = s.load_image(v.index);
-      clip::DenseFeatures f = m.dense_features(img, d);
-      write_npy(out, make_npy_f16({size_t(f.h), size_t(f.w), size_t(f.dim)}, f.data.data()));
-      h = f.h, w = f.w;
-    }
-    bar.update(++done, h ? fmt::format("{}x{} grid", w, h) : "");
-  }
-  bar.finish();
+  prepare::ViewFilesSummary r = prepare::write_clip_features(s, m, d, !a.skip_existing, !a.quiet);
+  const int done = r.written + r.skipped, skipped = r.skipped, h = r.grid_h, w = r.grid_w;
   fmt::print("wrote {} feature maps to {} ({} skipped; D = {}{})\n", done - skipped, out_dir.string(), skipped,
              m.embed_dim, h ? fmt::format(", last grid {}x{}", w, h) : "");
 }

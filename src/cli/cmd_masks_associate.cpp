@@ -7,10 +7,7 @@
 #include "core/error.h"
 #include "core/npy.h"
 #include "masks/associate.h"
-#include "model/ply.h"
-#include "model/render_inputs.h"
-#include "render/camera_from_view.h"
-#include "render/renderer.h"
+#include "prepare/view_outputs.h"
 
 namespace hgs::cli {
 namespace {
@@ -26,25 +23,6 @@ std::function<std::vector<float>(const View&)> depth_from_folder(const fs::path&
     if (a.shape.size() != 2 || a.shape[0] != size_t(v.height) || a.shape[1] != size_t(v.width))
       fail("{}: depth must be [H, W] = [{}, {}] for view {}", f.string(), v.height, v.width, v.name);
     return a.to_float();
-  };
-}
-
-// --depth-model MODEL: the model's expected depth sum_n z_n alpha_n T_n / alpha where its opacity alpha >= 0.5
-// (elsewhere none): a few hundred iterations of `hgs train --method rgb` are enough to place the surfaces.
-std::function<std::vector<float>(const View&)> depth_from_model(const fs::path& model_arg) {
-  const fs::path ply = fs::is_directory(model_arg) ? model_arg / "point_cloud.ply" : model_arg;
-  auto model = std::make_shared<GaussianModel>(read_model_ply(ply));
-  auto renderer = std::make_shared<render::GaussianRenderer>();
-  return [model, renderer](const View& v) {
-    render::GaussianInputs in = render_inputs(*model);
-    render::RenderSettings rs;
-    rs.want_depth = true;
-    render::RenderOutputs out;
-    renderer->forward(render::camera_from_view(v), in, rs, out);
-    std::vector<float> d(out.alpha.size(), 0.f);
-    for (size_t p = 0; p < d.size(); ++p)
-      if (out.alpha[p] >= 0.5f) d[p] = out.depth[p] / out.alpha[p];
-    return d;
   };
 }
 
@@ -151,7 +129,7 @@ MasksSubcommandRegistration reg(
          o->out_masks = *out;
          o->names = *names;
          if (!depth_dir->empty()) o->depth = depth_from_folder(*depth_dir);
-         if (!depth_model->empty()) o->depth = depth_from_model(*depth_model);
+         if (!depth_model->empty()) o->depth = prepare::depth_from_model(*depth_model);
          masks::AssociateSummary s = masks::associate_masks(*o);
          fmt::print("associated {} masks in {} of {} views", s.masks, s.views_with_masks, s.views);
          if (s.joined_parts) fmt::print(" ({} parts folded into their whole)", s.joined_parts);

@@ -3,15 +3,11 @@
 // A view whose file exists is skipped (resume-safe; --force recomputes); each file is written atomically.
 #include <fmt/format.h>
 
-#include <nlohmann/json.hpp>
-
 #include "cli/masks_command.h"
 #include "cli/sam_options.h"
 #include "clip/model.h"
 #include "core/error.h"
-#include "core/fs.h"
-#include "core/progress.h"
-#include "masks/rle.h"
+#include "prepare/view_outputs.h"
 #include "sam/amg.h"
 #include "scene/scene.h"
 
@@ -27,50 +23,15 @@ struct GenerateArgs {
   bool force = false, quiet = false;
 };
 
-nlohmann::json to_json(const std::vector<sam::AmgMask>& ms, int w, int h) {
-  nlohmann::json list = nlohmann::json::array();
-  for (const sam::AmgMask& m : ms) {
-    masks::Rle r = masks::rle_encode(m.mask, w, h);
-    list.push_back({{"segmentation", {{"size", {h, w}}, {"counts", masks::rle_counts_to_string(r.counts)}}},
-                    {"area", m.area},
-                    {"bbox", {m.bbox[0], m.bbox[1], m.bbox[2], m.bbox[3]}},
-                    {"predicted_iou", m.predicted_iou},
-                    {"point_coords", {{m.point[0], m.point[1]}}},
-                    {"stability_score", m.stability_score},
-                    {"crop_box", {0, 0, w, h}}});
-  }
-  return list;
-}
-
 void run_generate(const GenerateArgs& a) {
   clip::set_num_threads(a.threads);
   Scene s = load_scene(a.scene, {a.downscale, false});
   sam::SamModel m = a.model.load(a.sam);
   if (!a.quiet) fmt::print(stderr, "model: {}\n", m.describe());
   const fs::path out_dir = a.out.empty() ? s.root / "sam" : fs::path(a.out);
-  const int n = a.amg.points_per_side * a.amg.points_per_side;
-  const int batches = (n + a.amg.points_per_batch - 1) / a.amg.points_per_batch;
-  Progress bar("sam masks", long(s.views.size()) * batches, !a.quiet);
-  int done = 0, skipped = 0;
-  size_t total = 0;
-  for (const View& v : s.views) {
-    const fs::path out = out_dir / (v.stem + ".json");
-    if (!a.force && fs::exists(out)) {
-      ++skipped;
-    } else {
-      Image img = s.load_image(v.index);
-      sam::ImageEmbedding e = m.embed(img);
-      std::vector<sam::AmgMask> ms = sam::generate_masks(m, e, a.amg, [&](int d, int) {
-        bar.update(long(done) * batches + (d + a.amg.points_per_batch - 1) / a.amg.points_per_batch, v.stem);
-      });
-      ensure_dir(out.parent_path());
-      atomic_write_text(out, to_json(ms, img.width, img.height).dump());
-      total += ms.size();
-    }
-    ++done;
-    bar.update(long(done) * batches, fmt::format("{} masks", total));
-  }
-  bar.finish();
+  prepare::ViewFilesSummary r = prepare::write_sam_files(s, m, a.amg, out_dir, a.force, !a.quiet);
+  const int done = r.written + r.skipped, skipped = r.skipped;
+  const size_t total = r.items;
   fmt::print("wrote {} SAM mask files to {} ({} skipped as already done): {} masks\n", done - skipped, out_dir.string(),
              skipped, total);
   fmt::print("  next: hgs masks import {} --from sam-json {}\n", a.scene, out_dir.string());

@@ -32,19 +32,19 @@ struct InputOptions {
 };
 
 struct InputImage {
-  std::string source;  // the file it came from (a photo), or "<video>#<frame index>"
-  std::string name;    // file name in out_dir
+  std::string source;         // the file it came from (a photo), or "<video>#<frame index>"
+  std::string name;           // file name in out_dir
   int width = 0, height = 0;  // as written
   int orientation = 1;        // EXIF orientation applied (1 = none)
   bool resized = false;
 };
 
 struct InputReport {
-  std::vector<InputImage> images;                // sorted by name
-  std::vector<std::string> not_images;           // files skipped as not images
-  std::vector<std::string> bad;                  // "<file>: <reason>" skipped with skip_bad
-  std::vector<std::string> blurred;              // video frames dropped as blurred
-  int reused = 0;                                // outputs kept from an earlier run
+  std::vector<InputImage> images;       // sorted by name
+  std::vector<std::string> not_images;  // files skipped as not images
+  std::vector<std::string> bad;         // "<file>: <reason>" skipped with skip_bad
+  std::vector<std::string> blurred;     // video frames dropped as blurred
+  int reused = 0;                       // outputs kept from an earlier run
 };
 
 // True when `path` is a video file ffmpeg should read (a regular file that is not a JPEG / PNG image).

@@ -48,9 +48,10 @@ fs::path require_tool(const Tool& tool, const std::string& option) {
   if (auto p = find_program(tool.program)) return *p;
   if (tool.program.find('/') != std::string::npos)
     fail("{}: not an executable file (given with {})", tool.program, option);
-  fail("{} not found in PATH: install Debian's {} package (`apt-get install {}`, or scripts/setup), or give its path "
-       "with {}",
-       tool.program, tool.package, tool.package, option);
+  fail(
+      "{} not found in PATH: install Debian's {} package (`apt-get install {}`, or scripts/setup), or give its path "
+      "with {}",
+      tool.program, tool.package, tool.package, option);
 }
 
 std::string ToolRun::how_it_ended() const {
@@ -104,10 +105,8 @@ ToolRun run_tool(const fs::path& exe, const std::vector<std::string>& args, cons
     if (n < 0 && errno == EINTR) continue;
     if (n <= 0) break;
     for (ssize_t i = 0; i < n; ++i) {
-      if (buf[i] == '\n' || buf[i] == '\r')
-        emit();
-      else
-        line.push_back(buf[i]);
+      if (buf[i] == '\n' || buf[i] == '\r') emit();
+      else line.push_back(buf[i]);
     }
   }
   emit();

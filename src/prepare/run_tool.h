@@ -24,8 +24,8 @@ std::optional<std::filesystem::path> find_program(const std::string& program);
 std::filesystem::path require_tool(const Tool& tool, const std::string& option);
 
 struct ToolRun {
-  int exit_code = 0;  // when it exited
-  int signal = 0;     // when a signal ended it (exit_code is then -1)
+  int exit_code = 0;       // when it exited
+  int signal = 0;          // when a signal ended it (exit_code is then -1)
   std::string last_lines;  // the last few non-empty lines of its output (for error messages)
   bool ok() const { return signal == 0 && exit_code == 0; }
   std::string how_it_ended() const;  // "exit status 1", "killed by signal 25 (File size limit exceeded)"

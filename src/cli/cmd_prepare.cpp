@@ -1,0 +1,162 @@
+// `hgs prepare INPUT --out SCENE [--sam W] [--clip W]`: photos or a video -> a scene `hgs train` reads
+// (src/prepare/prepare.h): COLMAP poses, and with weights SAM masks associated across views and CLIP features.
+#include <fmt/format.h>
+
+#include "cli/command.h"
+#include "cli/sam_options.h"
+#include "clip/model.h"
+#include "core/error.h"
+#include "core/fs.h"
+#include "prepare/prepare.h"
+#include "prepare/stages.h"
+
+namespace hgs::cli {
+namespace {
+namespace fs = std::filesystem;
+
+struct PrepareArgs {
+  prepare::PrepareOptions o;
+  std::string input, out, sam, clip, phrases_file;
+  std::vector<std::string> texts;
+  SamModelOptions sam_model;
+  int threads = 0;
+  bool quiet = false;
+};
+
+std::vector<std::string> read_phrases(const std::string& file) {
+  std::vector<std::string> out;
+  std::string body = read_file_text(file), line;
+  for (size_t pos = 0; pos <= body.size();) {
+    size_t e = body.find('\n', pos);
+    if (e == std::string::npos) e = body.size();
+    line = body.substr(pos, e - pos);
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (!line.empty()) out.push_back(line);
+    pos = e + 1;
+  }
+  return out;
+}
+
+void run_prepare_command(PrepareArgs& a) {
+  clip::set_num_threads(a.threads);
+  set_threads(a.threads);
+  prepare::PrepareOptions& o = a.o;
+  o.input = a.input, o.scene = a.out;
+  o.in.progress = o.pose.progress = o.progress = !a.quiet;
+  if (!fs::exists(o.input)) fail("{}: no such folder or video file", a.input);
+  if (!a.sam.empty()) {
+    o.load_sam = [a] { return a.sam_model.load(a.sam); };
+    o.sam_key = fmt::format("{} {} {} {}", prepare::hash_file_identity(a.sam), a.sam_model.precision,
+                            a.sam_model.vit_heads, a.sam_model.decoder_heads);
+  }
+  if (!a.clip.empty()) {
+    const std::string precision = a.sam_model.precision;
+    o.load_clip = [a, precision] {
+      clip::ClipModel m = clip::ClipModel::load(a.clip, {});
+      if (!m.has_vision) fail("{}: the CLIP model has no vision tower", a.clip);
+      m.set_precision(clip::parse_precision(precision, "--precision"));
+      return m;
+    };
+    o.clip_key = fmt::format("{} {}", prepare::hash_file_identity(a.clip), precision);
+  }
+  o.phrases = a.texts;
+  if (!a.phrases_file.empty())
+    for (const std::string& p : read_phrases(a.phrases_file)) o.phrases.push_back(p);
+  prepare::PrepareReport r = prepare::run_prepare(o);
+  fmt::print("{}", r.text());
+  fmt::print("  report     {}\n", (o.scene / "prepare.json").string());
+  if (!o.until.empty()) return;
+  if (a.sam.empty())
+    fmt::print("  next: hgs train {} --method rgb   (object masks need --sam W: rerun prepare with it, the poses are kept)\n",
+               a.out);
+  else if (a.clip.empty())
+    fmt::print("  next: rerun with --clip W for language features (the poses and masks are kept)\n");
+  else
+    fmt::print("  next: hgs train {} --out MODEL && hgs view MODEL\n", a.out);
+}
+
+const char* kStages =
+    "Stages (each skipped when an earlier run completed it with the same inputs and options; --until STAGE|GROUP\n"
+    "stops after it). Costs are for ~80 photos at 1000 px on 2 cores (docs/capture.md):\n"
+    "  input      photos (JPEG/PNG, EXIF orientation applied, --max-size) or video frames (ffmpeg, --fps,\n"
+    "             blurred frames dropped) -> SCENE/prepare/input/                       seconds\n"
+    "  poses      COLMAP (Debian's colmap): features (SIFT), matching (--matcher), mapping (largest model\n"
+    "             kept), undistort (PINHOLE) -> SCENE/images/, SCENE/sparse/0/         minutes (matching most)\n"
+    "  masks      needs --sam: sam (automatic masks of every view), import, depth (--depth-iters RGB steps),\n"
+    "             associate (one id per object in every view) -> SCENE/masks/           ~10 s per view + training\n"
+    "  language   needs --clip: clip (dense features) -> SCENE/features/, text (--text / --phrases + LERF's\n"
+    "             canonical phrases) -> SCENE/text_embeddings.json                       ~2 s per view\n"
+    "Every run writes SCENE/prepare.json (images found / registered / dropped, cameras, reprojection error, track\n"
+    "length, masks per view, objects, seconds per stage). Work files and logs: SCENE/prepare/.\n"
+    "Example: hgs prepare photos/ --out scene --sam sam-vit-b.safetensors --clip clip-vit-b16.safetensors "
+    "--text \"red mug\"";
+
+void add_input_options(CLI::App& sub, PrepareArgs& a) {
+  sub.add_option("INPUT", a.input, "Folder of photos, or a video file")->required();
+  sub.add_option("--out", a.out, "Scene folder to write (new, empty, or made by an earlier hgs prepare)")->required();
+  sub.add_option("--max-size", a.o.in.max_size, "Longest image side in pixels; larger photos are downscaled (0 = keep)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 1 << 16));
+  sub.add_flag("--skip-bad-images", a.o.in.skip_bad, "Skip unreadable or truncated image files (listed in the report)");
+  sub.add_option("--fps", a.o.in.fps, "Video: frames per second to extract")->capture_default_str()->check(CLI::Range(0.01, 240.0));
+  sub.add_option("--blur-keep", a.o.in.blur_keep,
+                 "Video: drop frames sharper than less than this fraction of their neighbours' median")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0));
+  sub.add_option("--ffmpeg", a.o.in.ffmpeg, "ffmpeg program (video input)")->capture_default_str();
+}
+
+void add_pose_options(CLI::App& sub, PrepareArgs& a) {
+  sub.add_option("--matcher", a.o.pose.matcher,
+                 "auto (sequential for video, exhaustive up to 300 photos, else sequential), exhaustive, "
+                 "sequential, vocab-tree")
+      ->check(CLI::IsMember({"auto", "exhaustive", "sequential", "vocab-tree"}))
+      ->capture_default_str();
+  sub.add_option("--vocab-tree", a.o.pose.vocab_tree, "COLMAP vocabulary tree file (vocab-tree matcher)")
+      ->check(CLI::ExistingFile);
+  sub.add_option("--camera-model", a.o.pose.camera_model, "COLMAP camera model before undistortion")
+      ->check(CLI::IsMember({"SIMPLE_PINHOLE", "PINHOLE", "SIMPLE_RADIAL", "RADIAL", "OPENCV"}))
+      ->capture_default_str();
+  sub.add_option("--max-features", a.o.pose.max_features, "SIFT features per image (matching cost grows with its square)")
+      ->capture_default_str()
+      ->check(CLI::Range(256, 65536));
+  sub.add_flag("--allow-partial", a.o.allow_partial, "Keep going when COLMAP registers fewer than half the images");
+  sub.add_option("--colmap", a.o.pose.colmap, "colmap program")->capture_default_str();
+}
+
+void add_model_options(CLI::App& sub, PrepareArgs& a) {
+  sub.add_option("--sam", a.sam, "SAM weights (.safetensors): masks stage")->check(CLI::ExistingFile);
+  sub.add_option("--points-per-side", a.o.amg.points_per_side, "SAM: grid of n x n prompt points per view")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 256));
+  sub.add_option("--depth-iters", a.o.depth_iters,
+                 "RGB training steps of the depth model masks are associated through (0 = COLMAP points only)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 1 << 20));
+  a.sam_model.add_to(sub);
+  sub.add_option("--clip", a.clip, "CLIP weights (.safetensors): language stage")->check(CLI::ExistingFile);
+  sub.add_option("--input-size", a.o.dense.input_size, "CLIP: shorter image side fed to the ViT")
+      ->capture_default_str()
+      ->check(CLI::Range(8, 4096));
+  sub.add_option("--text", a.texts, "A phrase to embed into text_embeddings.json (repeatable)");
+  sub.add_option("--phrases", a.phrases_file, "File with one phrase per line to embed")->check(CLI::ExistingFile);
+}
+
+CommandRegistration reg(
+    {"prepare", "Photos or a video -> a scene to train: COLMAP poses, SAM masks, CLIP features (resumable)", 3,
+     [](CLI::App& sub) {
+       auto a = std::make_shared<PrepareArgs>();
+       sub.footer(kStages);
+       add_input_options(sub, *a);
+       add_pose_options(sub, *a);
+       add_model_options(sub, *a);
+       std::vector<std::string> until{"input", "poses", "masks", "language"};
+       for (auto& [s, g] : prepare::stage_groups()) until.push_back(s);
+       sub.add_option("--until", a->o.until, "Stop after this stage or group")->check(CLI::IsMember(until));
+       sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();
+       sub.add_flag("--quiet", a->quiet, "No progress bars");
+       return [a] { run_prepare_command(*a); };
+     }});
+
+}  // namespace
+}  // namespace hgs::cli

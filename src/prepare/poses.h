@@ -1,0 +1,60 @@
+// The pose stages of `hgs prepare`, on Debian's COLMAP 3.8 (`colmap`, CPU SIFT):
+//   features   feature_extractor into WORK/database.db; one camera per image size (images of one size share a
+//              camera: one run per size with single_camera and an image list, so mixed captures keep one
+//              intrinsic calibration per device and image names stay flat);
+//   matching   exhaustive_matcher, sequential_matcher (ordered frames: overlap 10 + quadratic overlap) or
+//              vocab_tree_matcher (needs a vocabulary tree file: COLMAP's are downloads, not in Debian);
+//              "auto" = sequential for video frames, exhaustive up to 300 photos, sequential above (a vocabulary
+//              tree when one is given);
+//   mapping    mapper into WORK/sparse/N, then the model with the most registered images is kept;
+//   undistort  image_undistorter to PINHOLE: SCENE/images/ and SCENE/sparse/0/, what `hgs train` reads.
+// Each runs colmap with a progress bar parsed from its log (WORK/logs/<stage>.log).
+#pragma once
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace hgs::prepare {
+
+struct PoseOptions {
+  std::string colmap = "colmap";           // program name or path
+  std::string matcher = "auto";            // auto | exhaustive | sequential | vocab-tree
+  std::string vocab_tree;                  // vocabulary tree file (vocab-tree matcher)
+  std::string camera_model = "SIMPLE_RADIAL";
+  int max_features = 4096;                 // SIFT features per image
+  bool ordered = false;                    // input images are video frames in order
+  bool progress = true;
+};
+
+// What a reconstruction holds, for the report.
+struct PoseSummary {
+  int images = 0;      // input images
+  int registered = 0;  // in the kept model
+  std::vector<std::string> dropped;  // input images not registered, sorted
+  int models = 0;      // models the mapper made
+  int cameras = 0;
+  int points = 0;
+  double mean_reprojection_error = 0;  // px, mean over points of COLMAP's per-point error
+  double mean_track_length = 0;        // observations per point
+  std::string matcher;                 // the matcher that ran
+};
+
+// The matcher "auto" resolves to for `n` images.
+std::string choose_matcher(const PoseOptions& opt, int n);
+
+void extract_features(const std::filesystem::path& colmap, const std::filesystem::path& input_dir,
+                      const std::filesystem::path& work, const PoseOptions& opt);
+void match_features(const std::filesystem::path& colmap, const std::filesystem::path& work, const std::string& matcher,
+                    int n_images, const PoseOptions& opt);
+// Runs the mapper; returns the folder of the largest model (WORK/sparse/N). Fails when no model was made.
+std::filesystem::path map_poses(const std::filesystem::path& colmap, const std::filesystem::path& input_dir,
+                                const std::filesystem::path& work, int n_images, const PoseOptions& opt);
+// Undistorts `model` into SCENE/images and SCENE/sparse/0 (replacing earlier ones only once complete).
+void undistort(const std::filesystem::path& colmap, const std::filesystem::path& input_dir,
+               const std::filesystem::path& model, const std::filesystem::path& work,
+               const std::filesystem::path& scene, const PoseOptions& opt);
+
+// Statistics of a COLMAP model folder against the input image names.
+PoseSummary summarize_model(const std::filesystem::path& model, const std::vector<std::string>& input_names);
+
+}  // namespace hgs::prepare

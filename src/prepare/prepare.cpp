@@ -1,0 +1,334 @@
+// The `hgs prepare` driver: runs the stages of prepare.h in order, skipping complete ones (stages.h).
+#include "prepare/prepare.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <set>
+
+#include "core/error.h"
+#include "core/fs.h"
+#include "masks/import.h"
+#include "prepare/run_tool.h"
+#include "prepare/stages.h"
+#include "prepare/view_outputs.h"
+#include "scene/scene.h"
+
+namespace hgs::prepare {
+namespace fs = std::filesystem;
+
+const std::vector<std::pair<std::string, std::string>>& stage_groups() {
+  static const std::vector<std::pair<std::string, std::string>> g = {
+      {"input", "input"},   {"features", "poses"}, {"matching", "poses"}, {"mapping", "poses"},
+      {"undistort", "poses"}, {"sam", "masks"},    {"import", "masks"},   {"depth", "masks"},
+      {"associate", "masks"}, {"clip", "language"}, {"text", "language"}};
+  return g;
+}
+
+namespace {
+
+const char* kCanonical[] = {"object", "things", "stuff", "texture"};  // LERF's canonical phrases
+
+// Runs stages in order with their keys, timing them and skipping those the log records complete.
+class Pipeline {
+ public:
+  Pipeline(const PrepareOptions& opt) : opt_(opt), log_(opt.scene / "prepare" / "state.json") {}
+
+  // Runs `fn` as stage `name` unless complete with `key` (chained to the previous stage's key). Returns false
+  // when --until stopped the run before this stage.
+  // `before`: seconds of work done for this stage before the call (the input stage computes its key so).
+  bool stage(const std::string& name, const std::string& key_text, const std::function<nlohmann::json()>& fn,
+             double before = 0) {
+    if (stopped_) return false;
+    key_ = hash_key(key_ + "|" + name + "|" + key_text);
+    StageRun r{name, 0, log_.done(name, key_)};
+    if (r.reused) {
+      r.seconds = log_.seconds(name);
+    } else {
+      log_.start(name, key_);
+      const auto t0 = std::chrono::steady_clock::now();
+      nlohmann::json info = fn();
+      r.seconds = before + std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      log_.finish(name, key_, r.seconds, info);
+    }
+    runs_.push_back(r);
+    if (!opt_.until.empty() && (opt_.until == name || (opt_.until == group(name) && last_of_group(name))))
+      stopped_ = true;
+    return true;
+  }
+  bool started_before(const std::string& name) const { return log_.started(name, key_); }
+  const nlohmann::json& info(const std::string& name) const { return log_.info(name); }
+  const std::vector<StageRun>& runs() const { return runs_; }
+  bool stopped() const { return stopped_; }
+  // The key the next stage chains to (the last stage's).
+  const std::string& key() const { return key_; }
+
+ private:
+  static std::string group(const std::string& name) {
+    for (auto& [s, g] : stage_groups())
+      if (s == name) return g;
+    return "";
+  }
+  static bool last_of_group(const std::string& name) {
+    const auto& g = stage_groups();
+    for (size_t i = 0; i < g.size(); ++i)
+      if (g[i].first == name) return i + 1 == g.size() || g[i + 1].second != g[i].second;
+    return false;
+  }
+  const PrepareOptions& opt_;
+  StageLog log_;
+  std::string key_;
+  std::vector<StageRun> runs_;
+  bool stopped_ = false;
+};
+
+// SCENE may be new, empty, or one hgs prepare made; anything else is left alone.
+void check_scene_folder(const fs::path& scene, const fs::path& input) {
+  std::error_code ec;
+  if (fs::exists(scene) && !fs::is_directory(scene)) fail("{}: --out exists and is not a folder", scene.string());
+  if (fs::exists(scene) && !fs::is_empty(scene) && !fs::exists(scene / "prepare" / "state.json"))
+    fail("{}: --out is a folder hgs prepare did not make (no prepare/state.json): give a new or empty folder",
+         scene.string());
+  if (fs::equivalent(scene, input, ec)) fail("{}: --out must not be the input folder", scene.string());
+}
+
+nlohmann::json input_info(const InputReport& r, const fs::path& input, bool video) {
+  int resized = 0, rotated = 0;
+  nlohmann::json list = nlohmann::json::array();
+  for (const InputImage& im : r.images) {
+    resized += im.resized;
+    rotated += im.orientation != 1;
+    list.push_back({im.name, im.width, im.height, im.orientation, im.source});
+  }
+  return {{"path", input.string()}, {"kind", video ? "video" : "photos"}, {"images", r.images.size()},
+          {"not_images", r.not_images}, {"bad", r.bad},  {"blurred", r.blurred},
+          {"resized", resized},         {"rotated", rotated}, {"list", list}};
+}
+
+std::vector<std::string> input_names(const nlohmann::json& info) {
+  std::vector<std::string> names;
+  for (const auto& e : info.at("list")) names.push_back(e.at(0).get<std::string>());
+  return names;
+}
+
+nlohmann::json pose_info(const PoseSummary& s) {
+  return {{"images", s.images},
+          {"registered", s.registered},
+          {"dropped", s.dropped},
+          {"models", s.models},
+          {"cameras", s.cameras},
+          {"points", s.points},
+          {"mean_reprojection_error_px", s.mean_reprojection_error},
+          {"mean_track_length", s.mean_track_length},
+          {"matcher", s.matcher}};
+}
+
+// Fewer than half the images registered: a capture problem the user should see before training on it.
+void check_registration(const PoseSummary& s, bool allow_partial) {
+  if (allow_partial || 2 * s.registered >= s.images) return;
+  fail("COLMAP registered only {} of {} images ({:.0f} %; dropped {}{}): the photos overlap too little or lack "
+       "texture; take more overlapping photos, try --matcher exhaustive, or keep going with the registered ones "
+       "with --allow-partial",
+       s.registered, s.images, 100.0 * s.registered / std::max(1, s.images),
+       fmt::join(s.dropped.begin(), s.dropped.begin() + std::min<size_t>(s.dropped.size(), 5), ", "),
+       s.dropped.size() > 5 ? ", ..." : "");
+}
+
+}  // namespace
+
+// ---- stages -------------------------------------------------------------------------------------------------
+
+namespace {
+
+void input_stage(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
+  // The input stage always runs (it keeps outputs whose source is unchanged): its key is what it produced.
+  const auto t0 = std::chrono::steady_clock::now();
+  const bool video = is_video_input(opt.input);
+  if (!video && !fs::is_directory(opt.input))
+    fail("{}: not a folder of photos or a video file", opt.input.string());
+  InputReport r = video ? import_video(opt.input, work / "input", opt.in) : import_photos(opt.input, work / "input", opt.in);
+  nlohmann::json info = input_info(r, opt.input, video);
+  if (r.images.size() < 3)
+    fail("{}: {} image{} found{}: COLMAP needs at least 3 overlapping views (20-200 photos around the subject work "
+         "best)",
+         opt.input.string(), r.images.size(), r.images.size() == 1 ? "" : "s",
+         r.not_images.empty() ? "" : fmt::format(" ({} other files skipped)", r.not_images.size()));
+  p.stage("input", info.dump(), [&] { return info; },
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+}
+
+void pose_stages(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
+  fs::path exe;  // found when a stage needs it: a scene whose poses are complete does not need colmap
+  auto colmap = [&] {
+    if (exe.empty()) exe = require_tool({opt.pose.colmap, "colmap"}, "--colmap");
+    return exe;
+  };
+  const nlohmann::json in = p.info("input");
+  const std::vector<std::string> names = input_names(in);
+  const int n = int(names.size());
+  PoseOptions po = opt.pose;
+  po.ordered = in.value("kind", "") == "video";
+  const std::string matcher = choose_matcher(po, n);
+  p.stage("features", fmt::format("{} {}", po.camera_model, po.max_features), [&] {
+    fs::remove(work / "database.db");
+    extract_features(colmap(), work / "input", work, po);
+    return nlohmann::json::object();
+  });
+  p.stage("matching", matcher + " " + po.vocab_tree, [&] {
+    match_features(colmap(), work, matcher, n, po);
+    return nlohmann::json{{"matcher", matcher}};
+  });
+  p.stage("mapping", "", [&] {
+    const fs::path best = map_poses(colmap(), work / "input", work, n, po);
+    PoseSummary s = summarize_model(best, names);
+    s.matcher = matcher;
+    int models = 0;
+    for (const auto& e : fs::directory_iterator(work / "sparse")) models += e.is_directory();
+    s.models = models;
+    nlohmann::json info = pose_info(s);
+    info["model"] = best.string();
+    return info;
+  });
+  if (p.stopped()) return;
+  const nlohmann::json m = p.info("mapping");
+  PoseSummary s;
+  s.images = m.at("images"), s.registered = m.at("registered"), s.dropped = m.at("dropped");
+  check_registration(s, opt.allow_partial);
+  p.stage("undistort", "", [&] {
+    undistort(colmap(), work / "input", m.at("model").get<std::string>(), work, opt.scene, po);
+    return nlohmann::json::object();
+  });
+}
+
+void mask_stages(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
+  const fs::path sam_dir = work / "sam";
+  const std::string amg_key = fmt::format("{} {} {} {} {} {} {}", opt.sam_key, opt.amg.points_per_side,
+                                          opt.amg.pred_iou_thresh, opt.amg.stability_score_thresh,
+                                          opt.amg.stability_score_offset, opt.amg.box_nms_thresh,
+                                          opt.amg.min_mask_region_area);
+  p.stage("sam", amg_key, [&] {
+    // A run started with the same key keeps the views it wrote; another key starts over.
+    if (!p.started_before("sam")) fs::remove_all(sam_dir);
+    Scene s = load_scene(opt.scene);
+    sam::SamModel m = opt.load_sam();
+    ViewFilesSummary r = write_sam_files(s, m, opt.amg, sam_dir, false, opt.progress);
+    return nlohmann::json{{"views", s.views.size()}, {"written", r.written}};
+  });
+  p.stage("import", "", [&] {
+    fs::remove_all(opt.scene / "masks");
+    masks::ImportOptions io;
+    io.scene = opt.scene, io.from = "sam-json", io.dir = sam_dir, io.force = true, io.progress = opt.progress;
+    masks::ImportSummary r = masks::import_masks(io);
+    return nlohmann::json{{"views", r.imported}, {"masks", r.masks}, {"hidden", r.hidden}};
+  });
+  const fs::path depth_ply = work / "depth_model" / "point_cloud.ply";
+  p.stage("depth", std::to_string(opt.depth_iters), [&] {
+    if (opt.depth_iters > 0) train_depth_model(load_scene(opt.scene), opt.depth_iters, depth_ply, opt.progress);
+    return nlohmann::json{{"iters", opt.depth_iters}};
+  });
+  p.stage("associate", "", [&] {
+    masks::AssociateOptions a = opt.associate;
+    a.scene = opt.scene, a.force = true, a.progress = opt.progress;
+    if (opt.depth_iters > 0) a.depth = depth_from_model(depth_ply);
+    masks::AssociateSummary r = masks::associate_masks(a);
+    return nlohmann::json{{"objects", r.objects.size()}, {"masks", r.masks}, {"views_with_masks", r.views_with_masks}};
+  });
+}
+
+void language_stages(Pipeline& p, const PrepareOptions& opt) {
+  const std::string dense_key =
+      fmt::format("{} {} {} {}", opt.clip_key, opt.dense.input_size, opt.dense.tile_size, opt.dense.max_tokens);
+  p.stage("clip", dense_key, [&] {
+    if (!p.started_before("clip")) fs::remove_all(opt.scene / "features");
+    Scene s = load_scene(opt.scene);
+    clip::ClipModel m = opt.load_clip();
+    ViewFilesSummary r = write_clip_features(s, m, opt.dense, false, opt.progress);
+    return nlohmann::json{{"views", s.views.size()}, {"grid", {r.grid_w, r.grid_h}}, {"dim", m.embed_dim}};
+  });
+  std::vector<std::string> phrases = opt.phrases;
+  for (const char* c : kCanonical)
+    if (std::find(phrases.begin(), phrases.end(), c) == phrases.end()) phrases.push_back(c);
+  p.stage("text", nlohmann::json(phrases).dump(), [&] {
+    clip::ClipModel m = opt.load_clip();
+    if (!m.has_text) fail("{}: the CLIP model has no text tower (text_embeddings.json needs one)", opt.clip_key);
+    std::vector<float> e = m.embed_text(phrases);
+    nlohmann::json out = nlohmann::json::object();
+    for (size_t i = 0; i < phrases.size(); ++i)
+      out[phrases[i]] = std::vector<float>(e.begin() + i * m.embed_dim, e.begin() + (i + 1) * m.embed_dim);
+    atomic_write_text(opt.scene / "text_embeddings.json", out.dump() + "\n");
+    return nlohmann::json{{"phrases", phrases}};
+  });
+}
+
+// Masks per view from the SAM files (mean, min, max), or an empty object.
+nlohmann::json masks_per_view(const fs::path& sam_dir) {
+  std::vector<size_t> n;
+  if (fs::is_directory(sam_dir))
+    for (const auto& e : fs::directory_iterator(sam_dir))
+      if (e.path().extension() == ".json") {
+        try {
+          n.push_back(nlohmann::json::parse(read_file_text(e.path())).size());
+        } catch (const nlohmann::json::exception&) {
+        }
+      }
+  if (n.empty()) return nlohmann::json::object();
+  size_t sum = 0;
+  for (size_t k : n) sum += k;
+  return {{"views", n.size()},
+          {"mean", double(sum) / double(n.size())},
+          {"min", *std::min_element(n.begin(), n.end())},
+          {"max", *std::max_element(n.begin(), n.end())}};
+}
+
+nlohmann::json prepare_json(const Pipeline& p, const PrepareOptions& opt) {
+  nlohmann::json j;
+  j["scene"] = opt.scene.string();
+  nlohmann::json in = p.info("input");
+  in.erase("list");
+  j["input"] = in;
+  j["poses"] = p.info("mapping");
+  j["poses"].erase("model");
+  j["masks"] = nlohmann::json::object();
+  if (opt.load_sam && !p.info("associate").empty()) {
+    nlohmann::json m = p.info("associate");
+    m["masks_per_view"] = masks_per_view(opt.scene / "prepare" / "sam");
+    m["depth_iters"] = p.info("depth").value("iters", 0);
+    j["masks"] = m;
+  }
+  j["language"] = nlohmann::json::object();
+  if (opt.load_clip && !p.info("clip").empty()) {
+    j["language"] = p.info("clip");
+    j["language"]["phrases"] = p.info("text").value("phrases", nlohmann::json::array());
+  }
+  nlohmann::json st = nlohmann::json::array();
+  double total = 0;
+  for (const StageRun& r : p.runs()) {
+    st.push_back({{"stage", r.name}, {"seconds", r.seconds}, {"reused", r.reused}});
+    total += r.seconds;
+  }
+  j["stages"] = st;
+  j["total_seconds"] = total;
+  if (!opt.until.empty()) j["until"] = opt.until;
+  return j;
+}
+
+}  // namespace
+
+PrepareReport run_prepare(const PrepareOptions& opt) {
+  check_scene_folder(opt.scene, opt.input);
+  const fs::path work = opt.scene / "prepare";
+  ensure_dir(work);
+  Pipeline p(opt);
+  input_stage(p, opt, work);
+  if (!p.stopped()) pose_stages(p, opt, work);
+  if (!p.stopped() && opt.load_sam) mask_stages(p, opt, work);
+  if (!p.stopped() && opt.load_clip) language_stages(p, opt);
+  PrepareReport r;
+  r.stages = p.runs();
+  r.json = prepare_json(p, opt);
+  atomic_write_text(opt.scene / "prepare.json", r.json.dump(2) + "\n");
+  return r;
+}
+
+}  // namespace hgs::prepare
