@@ -67,12 +67,12 @@ void run_prepare_command(PrepareArgs& a) {
   fmt::print("  report     {}\n", (o.scene / "prepare.json").string());
   if (!o.until.empty()) return;
   if (a.sam.empty())
-    fmt::print("  next: hgs train {} --method rgb   (object masks need --sam W: rerun prepare with it, the poses are kept)\n",
-               a.out);
+    fmt::print(
+        "  next: hgs train {} --method rgb   (object masks need --sam W: rerun prepare with it, the poses are kept)\n",
+        a.out);
   else if (a.clip.empty())
     fmt::print("  next: rerun with --clip W for language features (the poses and masks are kept)\n");
-  else
-    fmt::print("  next: hgs train {} --out MODEL && hgs view MODEL\n", a.out);
+  else fmt::print("  next: hgs train {} --out MODEL && hgs view MODEL\n", a.out);
 }
 
 const char* kStages =
@@ -98,7 +98,9 @@ void add_input_options(CLI::App& sub, PrepareArgs& a) {
       ->capture_default_str()
       ->check(CLI::Range(0, 1 << 16));
   sub.add_flag("--skip-bad-images", a.o.in.skip_bad, "Skip unreadable or truncated image files (listed in the report)");
-  sub.add_option("--fps", a.o.in.fps, "Video: frames per second to extract")->capture_default_str()->check(CLI::Range(0.01, 240.0));
+  sub.add_option("--fps", a.o.in.fps, "Video: frames per second to extract")
+      ->capture_default_str()
+      ->check(CLI::Range(0.01, 240.0));
   sub.add_option("--blur-keep", a.o.in.blur_keep,
                  "Video: drop frames sharper than less than this fraction of their neighbours' median")
       ->capture_default_str()
@@ -107,9 +109,12 @@ void add_input_options(CLI::App& sub, PrepareArgs& a) {
 }
 
 void add_pose_options(CLI::App& sub, PrepareArgs& a) {
-  sub.add_option("--matcher", a.o.pose.matcher,
-                 "auto (sequential for video, exhaustive up to 300 photos, else sequential), exhaustive, "
-                 "sequential, vocab-tree")
+  sub.add_option(
+         "--matcher", a.o.pose.matcher,
+         fmt::format(
+             "auto (sequential for video, exhaustive up to {} photos, else sequential by file name), exhaustive, "
+             "sequential, vocab-tree",
+             prepare::kExhaustiveUpTo))
       ->check(CLI::IsMember({"auto", "exhaustive", "sequential", "vocab-tree"}))
       ->capture_default_str();
   sub.add_option("--vocab-tree", a.o.pose.vocab_tree, "COLMAP vocabulary tree file (vocab-tree matcher)")
@@ -117,7 +122,8 @@ void add_pose_options(CLI::App& sub, PrepareArgs& a) {
   sub.add_option("--camera-model", a.o.pose.camera_model, "COLMAP camera model before undistortion")
       ->check(CLI::IsMember({"SIMPLE_PINHOLE", "PINHOLE", "SIMPLE_RADIAL", "RADIAL", "OPENCV"}))
       ->capture_default_str();
-  sub.add_option("--max-features", a.o.pose.max_features, "SIFT features per image (matching cost grows with its square)")
+  sub.add_option("--max-features", a.o.pose.max_features,
+                 "SIFT features per image (matching cost grows with its square)")
       ->capture_default_str()
       ->check(CLI::Range(256, 65536));
   sub.add_flag("--allow-partial", a.o.allow_partial, "Keep going when COLMAP registers fewer than half the images");
@@ -129,6 +135,22 @@ void add_model_options(CLI::App& sub, PrepareArgs& a) {
   sub.add_option("--points-per-side", a.o.amg.points_per_side, "SAM: grid of n x n prompt points per view")
       ->capture_default_str()
       ->check(CLI::Range(1, 256));
+  sub.add_option("--points-per-batch", a.o.amg.points_per_batch, "SAM: points decoded together")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 4096));
+  sub.add_option("--pred-iou-thresh", a.o.amg.pred_iou_thresh, "SAM: keep masks whose predicted IoU is above this")
+      ->capture_default_str();
+  sub.add_option("--stability-thresh", a.o.amg.stability_score_thresh, "SAM: keep masks whose stability is above this")
+      ->capture_default_str();
+  sub.add_option("--stability-offset", a.o.amg.stability_score_offset, "SAM: logit offset of the stability score")
+      ->capture_default_str();
+  sub.add_option("--box-nms-thresh", a.o.amg.box_nms_thresh,
+                 "SAM: box IoU above which the lower-scored mask is dropped")
+      ->capture_default_str();
+  sub.add_option("--min-views", a.o.associate.min_views, "Association: objects seen in fewer views are dropped")
+      ->capture_default_str();
+  sub.add_flag("--drop-surfaces", a.o.associate.drop_surfaces,
+               "Association: drop objects whose 3D points spread like a surface (table, floor, walls)");
   sub.add_option("--depth-iters", a.o.depth_iters,
                  "RGB training steps of the depth model masks are associated through (0 = COLMAP points only)")
       ->capture_default_str()

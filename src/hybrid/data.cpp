@@ -22,7 +22,11 @@ HybridData load_hybrid_data(const Scene& scene, const std::vector<int>& idx, con
   HybridData d;
   const int K = scene.num_objects();
   if (K == 0)
-    fail("{}: the hybrid method needs object masks (masks/<stem>.png) but none were found", scene.root.string());
+    fail(
+        "{}: the hybrid method needs object masks (masks/<stem>.png) but none were found: add them with `hgs prepare "
+        "PHOTOS --out SCENE --sam SAM.safetensors` (a rerun keeps the poses) or `hgs masks generate`, or train "
+        "without objects with --method rgb",
+        scene.root.string());
   d.num_labels = K + 1;
   d.masks.resize(idx.size());
   d.views.resize(idx.size());
@@ -30,8 +34,10 @@ HybridData load_hybrid_data(const Scene& scene, const std::vector<int>& idx, con
     const View& v = scene.views[i];
     if (!v.mask_path) fail("{}: view '{}' has no mask (masks/{}.png)", scene.root.string(), v.name, v.stem);
     if (!v.feature_path)
-      fail("{}: view '{}' has no language features (features/{}.npy); run `hgs features` first", scene.root.string(),
-           v.name, v.stem);
+      fail(
+          "{}: view '{}' has no language features (features/{}.npy); run `hgs features` or `hgs prepare` with --clip "
+          "first, or train with --method rgb",
+          scene.root.string(), v.name, v.stem);
   }
   d.dim = static_cast<int>(read_npy_header(*scene.views[idx[0]].feature_path).shape.back());
   parallel_for_progress("load masks+features", long(idx.size()), progress, [&](long j) {

@@ -47,12 +47,11 @@ std::string log_path(const fs::path& work, const std::string& stage) {
 std::string choose_matcher(const PoseOptions& opt, int n) {
   if (opt.matcher != "auto") return opt.matcher;
   if (opt.ordered) return "sequential";
-  if (n <= 300) return "exhaustive";
+  if (n <= kExhaustiveUpTo) return "exhaustive";
   return opt.vocab_tree.empty() ? "sequential" : "vocab-tree";
 }
 
-void extract_features(const fs::path& colmap, const fs::path& input_dir, const fs::path& work,
-                      const PoseOptions& opt) {
+void extract_features(const fs::path& colmap, const fs::path& input_dir, const fs::path& work, const PoseOptions& opt) {
   // One camera per image size: one run per size, each with its image list.
   std::map<std::pair<int, int>, std::vector<std::string>> by_size;
   for (const std::string& n : image_names(input_dir)) {
@@ -70,14 +69,14 @@ void extract_features(const fs::path& colmap, const fs::path& input_dir, const f
     ensure_dir(list.parent_path());
     atomic_write_text(list, text);
     const long base = done;
-    run_tool_or_fail(
-        "colmap feature_extractor", colmap,
-        {"feature_extractor", "--database_path", (work / "database.db").string(), "--image_path", input_dir.string(),
-         "--image_list_path", list.string(), "--ImageReader.single_camera", "1",
-         "--ImageReader.camera_model", opt.camera_model, "--SiftExtraction.use_gpu", "0",
-         "--SiftExtraction.max_num_features", std::to_string(opt.max_features)},
-        log_path(work, "features"),
-        counter("Processed file", [&](long i, long) { bar.update(base + i, fmt::format("{}x{}", size.first, size.second)); }));
+    run_tool_or_fail("colmap feature_extractor", colmap,
+                     {"feature_extractor", "--database_path", (work / "database.db").string(), "--image_path",
+                      input_dir.string(), "--image_list_path", list.string(), "--ImageReader.single_camera", "1",
+                      "--ImageReader.camera_model", opt.camera_model, "--SiftExtraction.use_gpu", "0",
+                      "--SiftExtraction.max_num_features", std::to_string(opt.max_features)},
+                     log_path(work, "features"), counter("Processed file", [&](long i, long) {
+                       bar.update(base + i, fmt::format("{}x{}", size.first, size.second));
+                     }));
     done += long(names.size());
   }
   bar.finish(fmt::format("{} images, {} camera{}", total, by_size.size(), by_size.size() > 1 ? "s" : ""));
@@ -94,12 +93,13 @@ void match_features(const fs::path& colmap, const fs::path& work, const std::str
     prog = "sequential_matcher";
     args.insert(args.end(), {"--SequentialMatching.overlap", "10", "--SequentialMatching.quadratic_overlap", "1"});
     if (!opt.vocab_tree.empty())
-      args.insert(args.end(), {"--SequentialMatching.loop_detection", "1", "--SequentialMatching.vocab_tree_path",
-                               opt.vocab_tree});
+      args.insert(args.end(),
+                  {"--SequentialMatching.loop_detection", "1", "--SequentialMatching.vocab_tree_path", opt.vocab_tree});
   } else if (matcher == "vocab-tree") {
     if (opt.vocab_tree.empty())
-      fail("--matcher vocab-tree needs --vocab-tree FILE (COLMAP's vocabulary trees are downloads from "
-           "colmap.github.io, not part of Debian's package); or use --matcher exhaustive or sequential");
+      fail(
+          "--matcher vocab-tree needs --vocab-tree FILE (COLMAP's vocabulary trees are downloads from "
+          "colmap.github.io, not part of Debian's package); or use --matcher exhaustive or sequential");
     prog = "vocab_tree_matcher";
     args.insert(args.end(), {"--VocabTreeMatching.vocab_tree_path", opt.vocab_tree});
   } else {
@@ -114,8 +114,7 @@ void match_features(const fs::path& colmap, const fs::path& work, const std::str
   auto per_image = counter(prefix, [&](long i, long) { bar.update(i, matcher); });
   auto on_line = [&](const std::string& line) {
     std::smatch m;
-    if (matcher != "exhaustive")
-      per_image(line);
+    if (matcher != "exhaustive") per_image(line);
     else if (std::regex_search(line, m, block_re))
       bar.update((std::stol(m[1]) - 1) * B + std::stol(m[2]) - 1, "exhaustive");
   };
@@ -155,11 +154,12 @@ fs::path map_poses(const fs::path& colmap, const fs::path& input_dir, const fs::
     if (n > best_n) best_n = n, best = e.path();
   }
   if (best.empty())
-    fail("colmap mapper made no model from {} images: too few matches between the images (more overlap between "
-         "photos, more texture, or --matcher exhaustive); log: {}",
-         n_images, log.string());
-  bar.finish(fmt::format("{} of {} registered in the largest of {} model{}", best_n, n_images, models,
-                         models > 1 ? "s" : ""));
+    fail(
+        "colmap mapper made no model from {} images: too few matches between the images (more overlap between "
+        "photos, more texture, or --matcher exhaustive); log: {}",
+        n_images, log.string());
+  bar.finish(
+      fmt::format("{} of {} registered in the largest of {} model{}", best_n, n_images, models, models > 1 ? "s" : ""));
   return best;
 }
 

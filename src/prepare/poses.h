@@ -4,8 +4,10 @@
 //              intrinsic calibration per device and image names stay flat);
 //   matching   exhaustive_matcher, sequential_matcher (ordered frames: overlap 10 + quadratic overlap) or
 //              vocab_tree_matcher (needs a vocabulary tree file: COLMAP's are downloads, not in Debian);
-//              "auto" = sequential for video frames, exhaustive up to 300 photos, sequential above (a vocabulary
-//              tree when one is given);
+//              "auto" = sequential for video frames, exhaustive up to kExhaustiveUpTo photos, above it
+//              sequential by file name (cameras name photos in shooting order) or a vocabulary tree when one is
+//              given. COLMAP's CPU matcher costs ~0.5 s per pair at 2048 features on one core (docs/capture.md):
+//              exhaustive over 80 photos is 3240 pairs, sequential about 10 per photo;
 //   mapping    mapper into WORK/sparse/N, then the model with the most registered images is kept;
 //   undistort  image_undistorter to PINHOLE: SCENE/images/ and SCENE/sparse/0/, what `hgs train` reads.
 // Each runs colmap with a progress bar parsed from its log (WORK/logs/<stage>.log).
@@ -16,22 +18,24 @@
 
 namespace hgs::prepare {
 
+inline constexpr int kExhaustiveUpTo = 40;
+
 struct PoseOptions {
-  std::string colmap = "colmap";           // program name or path
-  std::string matcher = "auto";            // auto | exhaustive | sequential | vocab-tree
-  std::string vocab_tree;                  // vocabulary tree file (vocab-tree matcher)
+  std::string colmap = "colmap";  // program name or path
+  std::string matcher = "auto";   // auto | exhaustive | sequential | vocab-tree
+  std::string vocab_tree;         // vocabulary tree file (vocab-tree matcher)
   std::string camera_model = "SIMPLE_RADIAL";
-  int max_features = 4096;                 // SIFT features per image
-  bool ordered = false;                    // input images are video frames in order
+  int max_features = 4096;  // SIFT features per image
+  bool ordered = false;     // input images are video frames in order
   bool progress = true;
 };
 
 // What a reconstruction holds, for the report.
 struct PoseSummary {
-  int images = 0;      // input images
-  int registered = 0;  // in the kept model
+  int images = 0;                    // input images
+  int registered = 0;                // in the kept model
   std::vector<std::string> dropped;  // input images not registered, sorted
-  int models = 0;      // models the mapper made
+  int models = 0;                    // models the mapper made
   int cameras = 0;
   int points = 0;
   double mean_reprojection_error = 0;  // px, mean over points of COLMAP's per-point error

@@ -19,10 +19,12 @@ namespace hgs::prepare {
 namespace fs = std::filesystem;
 
 const std::vector<std::pair<std::string, std::string>>& stage_groups() {
-  static const std::vector<std::pair<std::string, std::string>> g = {
-      {"input", "input"},   {"features", "poses"}, {"matching", "poses"}, {"mapping", "poses"},
-      {"undistort", "poses"}, {"sam", "masks"},    {"import", "masks"},   {"depth", "masks"},
-      {"associate", "masks"}, {"clip", "language"}, {"text", "language"}};
+  static const std::vector<std::pair<std::string, std::string>> g = {{"input", "input"},     {"features", "poses"},
+                                                                     {"matching", "poses"},  {"mapping", "poses"},
+                                                                     {"undistort", "poses"}, {"sam", "masks"},
+                                                                     {"import", "masks"},    {"depth", "masks"},
+                                                                     {"associate", "masks"}, {"clip", "language"},
+                                                                     {"text", "language"}};
   return g;
 }
 
@@ -101,9 +103,15 @@ nlohmann::json input_info(const InputReport& r, const fs::path& input, bool vide
     rotated += im.orientation != 1;
     list.push_back({im.name, im.width, im.height, im.orientation, im.source});
   }
-  return {{"path", input.string()}, {"kind", video ? "video" : "photos"}, {"images", r.images.size()},
-          {"not_images", r.not_images}, {"bad", r.bad},  {"blurred", r.blurred},
-          {"resized", resized},         {"rotated", rotated}, {"list", list}};
+  return {{"path", input.string()},
+          {"kind", video ? "video" : "photos"},
+          {"images", r.images.size()},
+          {"not_images", r.not_images},
+          {"bad", r.bad},
+          {"blurred", r.blurred},
+          {"resized", resized},
+          {"rotated", rotated},
+          {"list", list}};
 }
 
 std::vector<std::string> input_names(const nlohmann::json& info) {
@@ -127,12 +135,13 @@ nlohmann::json pose_info(const PoseSummary& s) {
 // Fewer than half the images registered: a capture problem the user should see before training on it.
 void check_registration(const PoseSummary& s, bool allow_partial) {
   if (allow_partial || 2 * s.registered >= s.images) return;
-  fail("COLMAP registered only {} of {} images ({:.0f} %; dropped {}{}): the photos overlap too little or lack "
-       "texture; take more overlapping photos, try --matcher exhaustive, or keep going with the registered ones "
-       "with --allow-partial",
-       s.registered, s.images, 100.0 * s.registered / std::max(1, s.images),
-       fmt::join(s.dropped.begin(), s.dropped.begin() + std::min<size_t>(s.dropped.size(), 5), ", "),
-       s.dropped.size() > 5 ? ", ..." : "");
+  fail(
+      "COLMAP registered only {} of {} images ({:.0f} %; dropped {}{}): the photos overlap too little or lack "
+      "texture; take more overlapping photos, try --matcher exhaustive, or keep going with the registered ones "
+      "with --allow-partial",
+      s.registered, s.images, 100.0 * s.registered / std::max(1, s.images),
+      fmt::join(s.dropped.begin(), s.dropped.begin() + std::min<size_t>(s.dropped.size(), 5), ", "),
+      s.dropped.size() > 5 ? ", ..." : "");
 }
 
 }  // namespace
@@ -145,17 +154,19 @@ void input_stage(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
   // The input stage always runs (it keeps outputs whose source is unchanged): its key is what it produced.
   const auto t0 = std::chrono::steady_clock::now();
   const bool video = is_video_input(opt.input);
-  if (!video && !fs::is_directory(opt.input))
-    fail("{}: not a folder of photos or a video file", opt.input.string());
-  InputReport r = video ? import_video(opt.input, work / "input", opt.in) : import_photos(opt.input, work / "input", opt.in);
+  if (!video && !fs::is_directory(opt.input)) fail("{}: not a folder of photos or a video file", opt.input.string());
+  InputReport r =
+      video ? import_video(opt.input, work / "input", opt.in) : import_photos(opt.input, work / "input", opt.in);
   nlohmann::json info = input_info(r, opt.input, video);
   if (r.images.size() < 3)
-    fail("{}: {} image{} found{}: COLMAP needs at least 3 overlapping views (20-200 photos around the subject work "
-         "best)",
-         opt.input.string(), r.images.size(), r.images.size() == 1 ? "" : "s",
-         r.not_images.empty() ? "" : fmt::format(" ({} other files skipped)", r.not_images.size()));
-  p.stage("input", info.dump(), [&] { return info; },
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    fail(
+        "{}: {} image{} found{}: COLMAP needs at least 3 overlapping views (20-200 photos around the subject work "
+        "best)",
+        opt.input.string(), r.images.size(), r.images.size() == 1 ? "" : "s",
+        r.not_images.empty() ? "" : fmt::format(" ({} other files skipped)", r.not_images.size()));
+  p.stage(
+      "input", info.dump(), [&] { return info; },
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
 }
 
 void pose_stages(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
@@ -203,10 +214,10 @@ void pose_stages(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
 
 void mask_stages(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
   const fs::path sam_dir = work / "sam";
-  const std::string amg_key = fmt::format("{} {} {} {} {} {} {}", opt.sam_key, opt.amg.points_per_side,
-                                          opt.amg.pred_iou_thresh, opt.amg.stability_score_thresh,
-                                          opt.amg.stability_score_offset, opt.amg.box_nms_thresh,
-                                          opt.amg.min_mask_region_area);
+  const std::string amg_key =
+      fmt::format("{} {} {} {} {} {} {}", opt.sam_key, opt.amg.points_per_side, opt.amg.pred_iou_thresh,
+                  opt.amg.stability_score_thresh, opt.amg.stability_score_offset, opt.amg.box_nms_thresh,
+                  opt.amg.min_mask_region_area);
   p.stage("sam", amg_key, [&] {
     // A run started with the same key keeps the views it wrote; another key starts over.
     if (!p.started_before("sam")) fs::remove_all(sam_dir);
@@ -227,7 +238,10 @@ void mask_stages(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
     if (opt.depth_iters > 0) train_depth_model(load_scene(opt.scene), opt.depth_iters, depth_ply, opt.progress);
     return nlohmann::json{{"iters", opt.depth_iters}};
   });
-  p.stage("associate", "", [&] {
+  const masks::AssociateOptions& ao = opt.associate;
+  const std::string assoc_key =
+      fmt::format("{} {} {} {} {}", ao.min_views, ao.min_points, ao.min_affinity, ao.max_area, ao.drop_surfaces);
+  p.stage("associate", assoc_key, [&] {
     masks::AssociateOptions a = opt.associate;
     a.scene = opt.scene, a.force = true, a.progress = opt.progress;
     if (opt.depth_iters > 0) a.depth = depth_from_model(depth_ply);

@@ -21,8 +21,8 @@ std::string PrepareReport::text() const {
   const nlohmann::json& j = json;
   std::string t = fmt::format("prepared {}\n", j.value("scene", ""));
   if (const auto& in = j.at("input"); !in.empty()) {
-    t += fmt::format("  input      {} {} from {}", in.value("images", 0), in.value("kind", "") == "video" ? "frames" : "images",
-                     in.value("path", ""));
+    t += fmt::format("  input      {} {} from {}", in.value("images", 0),
+                     in.value("kind", "") == "video" ? "frames" : "images", in.value("path", ""));
     if (in.value("rotated", 0)) t += fmt::format(", {} rotated upright (EXIF)", in.value("rotated", 0));
     if (in.value("resized", 0)) t += fmt::format(", {} downscaled", in.value("resized", 0));
     t += "\n";
@@ -48,7 +48,7 @@ std::string PrepareReport::text() const {
     t += fmt::format("  masks      {:.1f} SAM masks per view ({}-{}), {} objects after association{}\n",
                      mv.value("mean", 0.0), mv.value("min", 0), mv.value("max", 0), m.value("objects", 0),
                      m.value("depth_iters", 0) ? fmt::format(" (depth from {} RGB steps)", m.value("depth_iters", 0))
-                                                : " (COLMAP points only)");
+                                               : " (COLMAP points only)");
   }
   if (const auto& l = j.at("language"); l.contains("dim"))
     t += fmt::format("  language   {} feature maps (D = {}, grid {}x{}), {} phrases embedded\n", l.value("views", 0),

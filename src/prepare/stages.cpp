@@ -22,7 +22,10 @@ std::string hash_file_identity(const std::string& path) {
 }
 
 StageLog::StageLog(fs::path file) : file_(std::move(file)) {
-  if (!fs::exists(file_)) return;
+  if (!fs::exists(file_)) {
+    save();  // marks the folder as one hgs prepare made, before anything else is written there
+    return;
+  }
   try {
     j_ = nlohmann::json::parse(read_file_text(file_));
   } catch (const std::exception&) {

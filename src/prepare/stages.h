@@ -19,7 +19,8 @@ std::string hash_file_identity(const std::string& path);
 
 class StageLog {
  public:
-  explicit StageLog(std::filesystem::path file);  // reads it when it exists (a damaged file counts as empty)
+  // Reads `file` when it exists (a damaged file counts as empty), else writes an empty one.
+  explicit StageLog(std::filesystem::path file);
   bool done(const std::string& stage, const std::string& key) const;
   bool started(const std::string& stage, const std::string& key) const;  // started or done with this key
   void start(const std::string& stage, const std::string& key);

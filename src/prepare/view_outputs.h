@@ -15,9 +15,9 @@ namespace hgs::prepare {
 
 struct ViewFilesSummary {
   int written = 0, skipped = 0;
-  size_t items = 0;             // masks written (SAM); 0 for features
-  std::vector<int> per_view;    // [views written] masks per view (SAM)
-  int grid_w = 0, grid_h = 0;   // last feature grid (CLIP)
+  size_t items = 0;            // masks written (SAM); 0 for features
+  std::vector<int> per_view;   // [views written] masks per view (SAM)
+  int grid_w = 0, grid_h = 0;  // last feature grid (CLIP)
 };
 
 // SAM's automatic masks of every view -> out_dir/<stem>.json (SAM JSON: COCO RLE, what `hgs masks import
