@@ -11,7 +11,8 @@
 namespace hgs::prepare {
 
 inline constexpr const char* kInputsJson = "inputs.json";
-inline constexpr int kInputsFormat = 1;  // bump when the outputs for the same options change
+inline constexpr const char* kFramesTmp = ".frames.tmp";  // video frames before the blur filter
+inline constexpr int kInputsFormat = 1;                   // bump when the outputs for the same options change
 
 struct FileStamp {
   uint64_t size = 0;

@@ -199,6 +199,8 @@ InputReport import_photos(const fs::path& dir_in, const fs::path& out_dir, const
   std::set<std::string> keep;
   for (const InputImage& im : report.images) keep.insert(im.name);
   remove_other_files(out_dir, keep);
+  std::error_code ec;
+  fs::remove_all(out_dir / kFramesTmp, ec);  // left by a killed video import into the same folder
   return report;
 }
 

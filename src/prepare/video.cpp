@@ -30,7 +30,6 @@ bool is_video_input(const fs::path& path) {
 }
 
 namespace {
-constexpr const char* kFramesTmp = ".frames.tmp";
 
 std::string frame_filter(const InputOptions& opt) {
   std::string f = fmt::format("fps={}", opt.fps);
@@ -125,7 +124,9 @@ void place_frames(const fs::path& video, const std::vector<fs::path>& frames, co
       continue;
     }
     const std::string name = fmt::format("frame_{:05d}.jpg", report.images.size() + 1);
-    fs::rename(frames[i], out_dir / name);
+    std::error_code ec;
+    fs::rename(frames[i], out_dir / name, ec);
+    if (ec) fail("{}: cannot move the frame into place ({})", (out_dir / name).string(), ec.message());
     report.images.push_back({source, name, wh[i * 2], wh[i * 2 + 1], 1, false});
   }
 }

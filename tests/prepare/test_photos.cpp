@@ -7,6 +7,7 @@
 
 #include <array>
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 
 #include "core/error.h"
@@ -138,6 +139,60 @@ TEST(Photos, ExifOrientationIsReadInBothByteOrders) {
     }
   const auto plain = encode_jpeg(quadrants(8, 8), 90);
   EXPECT_EQ(exif_orientation(plain.data(), plain.size()), 1);
+}
+
+// Adds a one-component SHORT or LONG entry (libexif frees entry data with free()).
+void add_number(ExifData* ed, ExifIfd ifd, ExifTag tag, ExifFormat format, uint32_t value) {
+  ExifEntry* e = exif_entry_new();
+  e->tag = tag;
+  e->format = format;
+  e->components = 1;
+  e->size = format == EXIF_FORMAT_SHORT ? 2 : 4;
+  e->data = static_cast<unsigned char*>(std::malloc(e->size));
+  if (format == EXIF_FORMAT_SHORT) exif_set_short(e->data, exif_data_get_byte_order(ed), ExifShort(value));
+  else exif_set_long(e->data, exif_data_get_byte_order(ed), value);
+  exif_content_add_entry(ed->ifd[ifd], e);
+  exif_entry_unref(e);
+}
+
+uint32_t number(ExifData* ed, ExifIfd ifd, ExifTag tag) {
+  ExifEntry* e = exif_content_get_entry(ed->ifd[ifd], tag);
+  if (!e) return 0;
+  const ExifByteOrder o = exif_data_get_byte_order(ed);
+  return e->format == EXIF_FORMAT_SHORT ? exif_get_short(e->data, o) : exif_get_long(e->data, o);
+}
+
+TEST(Photos, ARewrittenJpegKeepsItsExifUpright) {
+  ExifData* ed = exif_data_new();
+  add_number(ed, EXIF_IFD_0, EXIF_TAG_ORIENTATION, EXIF_FORMAT_SHORT, 6);
+  add_number(ed, EXIF_IFD_EXIF, EXIF_TAG_FOCAL_LENGTH_IN_35MM_FILM, EXIF_FORMAT_SHORT, 28);
+  add_number(ed, EXIF_IFD_EXIF, EXIF_TAG_PIXEL_X_DIMENSION, EXIF_FORMAT_LONG, 300);
+  add_number(ed, EXIF_IFD_EXIF, EXIF_TAG_PIXEL_Y_DIMENSION, EXIF_FORMAT_LONG, 200);
+  const auto thumb = encode_jpeg(quadrants(30, 20), 80);
+  ed->data = static_cast<unsigned char*>(std::malloc(thumb.size()));
+  std::copy(thumb.begin(), thumb.end(), ed->data);
+  ed->size = unsigned(thumb.size());
+  unsigned char* buf = nullptr;
+  unsigned size = 0;
+  exif_data_save_data(ed, &buf, &size);
+  exif_data_unref(ed);
+  ASSERT_NE(buf, nullptr);
+  TempDir t;
+  fs::create_directories(t / "in");
+  write(t / "in" / "cam.jpg", encode_jpeg(quadrants(300, 200), 95, std::vector<uint8_t>(buf, buf + size)));
+  std::free(buf);
+  const InputReport r = import_photos(t / "in", t / "out", quiet(100));
+  ASSERT_EQ(r.images.size(), 1u);
+  EXPECT_EQ(r.images[0].orientation, 6);
+  const auto out = read_file_bytes(t / "out" / "cam.jpg");
+  ExifData* got = exif_data_new_from_data(out.data(), unsigned(out.size()));
+  ASSERT_NE(got, nullptr);
+  EXPECT_EQ(number(got, EXIF_IFD_0, EXIF_TAG_ORIENTATION), 1u);
+  EXPECT_EQ(number(got, EXIF_IFD_EXIF, EXIF_TAG_FOCAL_LENGTH_IN_35MM_FILM), 28u);
+  EXPECT_EQ(number(got, EXIF_IFD_EXIF, EXIF_TAG_PIXEL_X_DIMENSION), 67u);
+  EXPECT_EQ(number(got, EXIF_IFD_EXIF, EXIF_TAG_PIXEL_Y_DIMENSION), 100u);
+  EXPECT_EQ(got->size, 0u) << "the thumbnail (still turned) is dropped";
+  exif_data_unref(got);
 }
 
 TEST(Photos, AreaResizeMatchesTheAreaIntegral) {
