@@ -97,7 +97,14 @@ bool reuse(const json& old, const Source& s, const fs::path& out_dir, Outcome& o
 
 // Checks, decodes, orients, resizes and writes one image; a bad file sets o.bad instead of throwing.
 void convert(const Source& s, const fs::path& out_dir, const InputOptions& opt, Outcome& o) {
-  const std::vector<uint8_t> bytes = read_file_bytes(s.path);
+  std::vector<uint8_t> bytes;
+  try {
+    bytes = read_file_bytes(s.path);
+  } catch (const Error& e) {  // "<file>: <why>" -> why
+    const std::string m = e.what(), prefix = s.path.string() + ": ";
+    o.bad = m.rfind(prefix, 0) == 0 ? m.substr(prefix.size()) : m;
+    return;
+  }
   Pixels px;
   o.bad = incomplete_reason(bytes, s.kind);
   if (o.bad.empty()) o.bad = decode_rgb(bytes, px);
@@ -132,7 +139,8 @@ json record(const std::vector<Source>& sources, const std::vector<Outcome>& outc
 }  // namespace
 
 namespace {
-// Sources (images by signature) and the files that are not images, in name order.
+// Sources (images by signature, and files that cannot be read: bad files) and the files that are not images, in
+// name order.
 std::vector<Source> find_sources(const fs::path& dir, InputReport& report) {
   std::vector<Source> sources;
   for (const fs::path& p : list_files(dir)) {
@@ -147,11 +155,10 @@ std::vector<Source> find_sources(const fs::path& dir, InputReport& report) {
   return sources;
 }
 
-void check_folders(const fs::path& dir, const fs::path& out_dir) {
+void check_out_dir(const fs::path& dir, const fs::path& out_dir) {
   std::error_code ec;
   if (fs::exists(out_dir, ec) && fs::equivalent(dir, out_dir, ec))
     fail("{}: the output folder of the input images may not be the photo folder itself", out_dir.string());
-  ensure_dir(out_dir);
 }
 
 // The report's lists from the outcomes; throws the first bad file (in name order) unless skip_bad.
@@ -172,9 +179,10 @@ void finish_report(const std::vector<Source>& sources, const std::vector<Outcome
 
 InputReport import_photos(const fs::path& dir_in, const fs::path& out_dir, const InputOptions& opt) {
   const fs::path dir = fs::absolute(dir_in).lexically_normal();
-  check_folders(dir, out_dir);
+  check_out_dir(dir, out_dir);
   InputReport report;
   const std::vector<Source> sources = find_sources(dir, report);
+  ensure_dir(out_dir);
   json old = read_inputs_record(out_dir);
   if (!old.is_object() || old.value("kind", "") != "photos" || old.value("max_size", -1) != opt.max_size) old = nullptr;
   std::vector<Outcome> outcomes(sources.size());
@@ -184,7 +192,7 @@ InputReport import_photos(const fs::path& dir_in, const fs::path& out_dir, const
     else todo.push_back(long(i));
   std::mutex mu;
   auto last_save = std::chrono::steady_clock::now();
-  parallel_for_progress("input images", long(todo.size()), opt.progress, [&](long k) {
+  parallel_for_progress("input images", long(todo.size()), opt.progress && !todo.empty(), [&](long k) {
     Outcome o;
     convert(sources[todo[k]], out_dir, opt, o);
     std::lock_guard<std::mutex> lock(mu);

@@ -25,6 +25,7 @@ ImageKind sniff_image(const uint8_t* d, size_t n) {
 
 ImageKind sniff_image(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
+  if (!in) return ImageKind::unreadable;
   uint8_t head[8] = {};
   in.read(reinterpret_cast<char*>(head), sizeof head);
   return sniff_image(head, static_cast<size_t>(in.gcount()));

@@ -14,9 +14,10 @@ struct Pixels {
   std::vector<uint8_t> v;  // [H, W, 3], row-major RGB
 };
 
-enum class ImageKind { none, jpeg, png };
+enum class ImageKind { none, jpeg, png, unreadable };
 
-// The kind of image a file holds by its first bytes (JPEG FF D8 FF, PNG 89 'PNG'); none for anything else.
+// The kind of image a file holds by its first bytes (JPEG FF D8 FF, PNG 89 'PNG'); none for anything else;
+// unreadable when the file cannot be opened.
 ImageKind sniff_image(const std::filesystem::path& path);
 ImageKind sniff_image(const uint8_t* data, size_t n);
 

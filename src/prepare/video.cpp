@@ -26,7 +26,9 @@ using nlohmann::json;
 
 bool is_video_input(const fs::path& path) {
   std::error_code ec;
-  return fs::is_regular_file(path, ec) && sniff_image(path) == ImageKind::none;
+  if (!fs::is_regular_file(path, ec)) return false;
+  const ImageKind kind = sniff_image(path);  // (unreadable: ffmpeg will say why)
+  return kind == ImageKind::none || kind == ImageKind::unreadable;
 }
 
 namespace {

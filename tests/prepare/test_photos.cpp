@@ -311,6 +311,7 @@ TEST(Photos, TruncatedAndUndecodableFilesFailNamingTheFileOrAreSkipped) {
   opt.skip_bad = true;
   const InputReport r = import_photos(t / "in", t / "out", opt);
   ASSERT_EQ(r.images.size(), 3u);
+  EXPECT_EQ(r.reused, 3) << "the good images a failing run converted are kept";
   EXPECT_EQ(r.images[2].name, "c_trailer.jpg");
   ASSERT_EQ(r.bad.size(), 2u);
   EXPECT_NE(r.bad[0].find("d_cut.jpg: truncated JPEG"), std::string::npos) << r.bad[0];
@@ -338,12 +339,14 @@ TEST(Photos, ResumeKeepsDoneOutputsRedoesChangedOnesAndDropsRemovedOnes) {
   write(t / "in" / "p1.jpg", jpeg_bytes(quadrants(60, 40)));  // changed: now small enough to copy
   fs::remove(t / "in" / "p2.jpg");
   fs::remove(t / "out" / "p3.jpg");  // output lost
+  atomic_write_text(t / "out" / "stray.txt", "not an output");
   r = import_photos(t / "in", t / "out", opt);
   EXPECT_EQ(r.reused, 1);
   ASSERT_EQ(r.images.size(), 3u);
   EXPECT_EQ(r.images[1].width, 60);
   EXPECT_EQ(read_file_bytes(t / "out" / "p1.jpg"), read_file_bytes(t / "in" / "p1.jpg"));
   EXPECT_FALSE(fs::exists(t / "out" / "p2.jpg")) << "the folder must equal the input";
+  EXPECT_FALSE(fs::exists(t / "out" / "stray.txt"));
   EXPECT_TRUE(fs::exists(t / "out" / "p3.jpg"));
 
   r = import_photos(t / "in", t / "out", quiet(50));  // other options: nothing reused
@@ -360,6 +363,7 @@ TEST(Photos, NamesThatDifferOnlyInCaseAndBadFoldersFailClearly) {
   EXPECT_FILE_ERROR(import_photos(t / "missing", t / "out", quiet()), t / "missing", "not a folder");
   EXPECT_FILE_ERROR(import_photos(t / "in" / "a.jpg", t / "out", quiet()), t / "in" / "a.jpg", "not a folder");
   EXPECT_FILE_ERROR(import_photos(t / "in", t / "in", quiet()), t / "in", "may not be the photo folder");
+  EXPECT_FALSE(fs::exists(t / "out")) << "nothing is written before the input is known to be usable";
 }
 
 }  // namespace
