@@ -4,12 +4,22 @@
 //     (JPEG / PNG signature), not its extension; other files are skipped and listed. A JPEG's EXIF orientation
 //     (libexif) is applied; images larger than `max_size` on their longest side are area-downscaled. An image
 //     that needs neither is copied byte for byte; others are written as JPEG (quality 95) or PNG (PNG input).
-//   - Video: frames through ffmpeg at `fps`; a frame whose sharpness (variance of the Laplacian of its grey
-//     image) is below `blur_keep` x the median of its neighbours' is dropped as blurred.
-//   - Unreadable or truncated files (decoder error, JPEG without its end marker, PNG without IEND) fail with a
-//     one-line error naming the file, unless `skip_bad`, when they are skipped and listed.
-// Resumable: an output that exists and whose record in out_dir/inputs.json matches its source (size, mtime,
-// options) is kept; every output is written atomically.
+//     When a JPEG is rewritten its EXIF (camera, focal length: COLMAP's first intrinsics) is carried over with the
+//     orientation reset to 1, the new pixel size, and no thumbnail or maker note.
+//   - Video: frames through ffmpeg at `fps`, scaled so the longest side is at most `max_size`, as quality-2 JPEGs
+//     frame_00001.jpg ... (kept frames renumbered in order); ffmpeg turns frames upright by the stream's display
+//     matrix (EXIF plays no part); its log is out_dir/../logs/ffmpeg.log. A frame is dropped as blurred when its
+//     sharpness (variance of the 3x3 Laplacian of its grey image) is below `blur_keep` x the median sharpness of
+//     the frames within +-5 of it (itself included), so runs of up to 5 blurred frames in a row are dropped while
+//     a video that is soft throughout keeps its frames.
+//   - Unreadable or truncated files (decoder error, JPEG whose markers end before EOI -- data after EOI, such as
+//     zero padding or a motion photo's video, is fine --, PNG without IEND) fail with a one-line error naming the
+//     file, unless `skip_bad`, when they are skipped and listed.
+// out_dir belongs to this stage: it always ends holding exactly the outputs of the input (other files there are
+// removed) and out_dir/inputs.json, the record of each output (source path, size and mtime; the options; the
+// output's size, mtime, width, height and orientation). Resumable: an output whose record matches its source,
+// the options and the output file is kept (`reused`), others are redone; a kill at any moment leaves whole files
+// only (atomic writes; the record is saved every few seconds). Images are converted on the OpenMP threads.
 #pragma once
 #include <filesystem>
 #include <string>
