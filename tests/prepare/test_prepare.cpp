@@ -114,9 +114,10 @@ TEST_F(PrepareGoldcape, RegistersTheSubsetAndAgreesWithTheSharedModel) {
     rot.push_back(std::acos(std::clamp((d.trace() - 1) / 2, -1.0, 1.0)) * 180 / M_PI);
   }
   const double med_pos = median(pos), med_rot = median(rot);
-  std::printf("goldcape subset: %d of %d registered, reprojection %.3f px, median centre error %.4f of the scene "
-              "size (%.3f), median rotation error %.3f deg\n",
-              registered, images, p["mean_reprojection_error_px"].get<double>(), med_pos, size, med_rot);
+  std::printf(
+      "goldcape subset: %d of %d registered, reprojection %.3f px, median centre error %.4f of the scene "
+      "size (%.3f), median rotation error %.3f deg\n",
+      registered, images, p["mean_reprojection_error_px"].get<double>(), med_pos, size, med_rot);
   EXPECT_LT(med_pos, 0.02);
   EXPECT_LT(med_rot, 1.0);
 }

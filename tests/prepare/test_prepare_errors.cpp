@@ -108,8 +108,7 @@ TEST(PrepareErrors, FullDiskFailsCleanlyAndARerunCompletes) {
   TempDir t;
   const fs::path in = photos(t, 3, 160, 120), out = t / "scene";  // ~57 KB each
   const std::string cmd = std::string("bash -c \"trap '' XFSZ; ulimit -f 40; exec ") + HGS_BINARY + " prepare " +
-                          in.string() + " --out " + out.string() + " --until input --quiet\" 2>" +
-                          (t / "err").string();
+                          in.string() + " --out " + out.string() + " --until input --quiet\" 2>" + (t / "err").string();
   const int st = std::system(cmd.c_str());
   EXPECT_NE(st, 0);
   std::ifstream ef(t / "err");
