@@ -72,7 +72,7 @@ void run_prepare_command(PrepareArgs& a) {
         a.out);
   else if (a.clip.empty())
     fmt::print("  next: rerun with --clip W for language features (the poses and masks are kept)\n");
-  else fmt::print("  next: hgs train {} --out MODEL && hgs view MODEL\n", a.out);
+  else fmt::print("  next: hgs train {} --out MODEL && hgs view {} MODEL\n", a.out, a.out);
 }
 
 const char* kStages =

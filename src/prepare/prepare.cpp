@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <map>
 #include <set>
 
 #include "core/error.h"
@@ -37,34 +38,37 @@ class Pipeline {
  public:
   Pipeline(const PrepareOptions& opt) : opt_(opt), log_(opt.scene / "prepare" / "state.json") {}
 
-  // Runs `fn` as stage `name` unless complete with `key` (chained to the previous stage's key). Returns false
-  // when --until stopped the run before this stage.
-  // `before`: seconds of work done for this stage before the call (the input stage computes its key so).
-  bool stage(const std::string& name, const std::string& key_text, const std::function<nlohmann::json()>& fn,
-             double before = 0) {
+  // Runs `fn` as stage `name` unless complete with the same key: a hash of `key_text` and the keys of the
+  // stages it reads (`deps`), so that a change reruns exactly the stages downstream of it. Returns false when
+  // --until stopped the run before this stage. `before`: seconds of work done for it before the call (the input
+  // stage computes its key so).
+  bool stage(const std::string& name, const std::vector<std::string>& deps, const std::string& key_text,
+             const std::function<nlohmann::json()>& fn, double before = 0) {
     if (stopped_) return false;
-    key_ = hash_key(key_ + "|" + name + "|" + key_text);
-    StageRun r{name, 0, log_.done(name, key_)};
+    std::string text = name + "|" + key_text;
+    for (const std::string& d : deps) text += "|" + keys_.at(d);
+    const std::string key = keys_[name] = hash_key(text);
+    StageRun r{name, 0, log_.done(name, key)};
     if (r.reused) {
       r.seconds = log_.seconds(name);
     } else {
-      log_.start(name, key_);
+      resuming_ = log_.started(name, key);
+      log_.start(name, key);
       const auto t0 = std::chrono::steady_clock::now();
       nlohmann::json info = fn();
       r.seconds = before + std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      log_.finish(name, key_, r.seconds, info);
+      log_.finish(name, key, r.seconds, info);
     }
     runs_.push_back(r);
     if (!opt_.until.empty() && (opt_.until == name || (opt_.until == group(name) && last_of_group(name))))
       stopped_ = true;
     return true;
   }
-  bool started_before(const std::string& name) const { return log_.started(name, key_); }
+  // Inside a stage: an earlier run started it with the same key (its per-view outputs may be kept).
+  bool resuming() const { return resuming_; }
   const nlohmann::json& info(const std::string& name) const { return log_.info(name); }
   const std::vector<StageRun>& runs() const { return runs_; }
   bool stopped() const { return stopped_; }
-  // The key the next stage chains to (the last stage's).
-  const std::string& key() const { return key_; }
 
  private:
   static std::string group(const std::string& name) {
@@ -80,9 +84,9 @@ class Pipeline {
   }
   const PrepareOptions& opt_;
   StageLog log_;
-  std::string key_;
+  std::map<std::string, std::string> keys_;  // stage -> key, of the stages run or skipped so far
   std::vector<StageRun> runs_;
-  bool stopped_ = false;
+  bool stopped_ = false, resuming_ = false;
 };
 
 // SCENE may be new, empty, or one hgs prepare made; anything else is left alone.
@@ -165,7 +169,7 @@ void input_stage(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
         opt.input.string(), r.images.size(), r.images.size() == 1 ? "" : "s",
         r.not_images.empty() ? "" : fmt::format(" ({} other files skipped)", r.not_images.size()));
   p.stage(
-      "input", info.dump(), [&] { return info; },
+      "input", {}, info.dump(), [&] { return info; },
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
 }
 
@@ -181,16 +185,16 @@ void pose_stages(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
   PoseOptions po = opt.pose;
   po.ordered = in.value("kind", "") == "video";
   const std::string matcher = choose_matcher(po, n);
-  p.stage("features", fmt::format("{} {}", po.camera_model, po.max_features), [&] {
+  p.stage("features", {"input"}, fmt::format("{} {}", po.camera_model, po.max_features), [&] {
     fs::remove(work / "database.db");
     extract_features(colmap(), work / "input", work, po);
     return nlohmann::json::object();
   });
-  p.stage("matching", matcher + " " + po.vocab_tree, [&] {
+  p.stage("matching", {"features"}, matcher + " " + po.vocab_tree, [&] {
     match_features(colmap(), work, matcher, n, po);
     return nlohmann::json{{"matcher", matcher}};
   });
-  p.stage("mapping", "", [&] {
+  p.stage("mapping", {"matching"}, "", [&] {
     const fs::path best = map_poses(colmap(), work / "input", work, n, po);
     PoseSummary s = summarize_model(best, names);
     s.matcher = matcher;
@@ -206,7 +210,7 @@ void pose_stages(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
   PoseSummary s;
   s.images = m.at("images"), s.registered = m.at("registered"), s.dropped = m.at("dropped");
   check_registration(s, opt.allow_partial);
-  p.stage("undistort", "", [&] {
+  p.stage("undistort", {"mapping"}, "", [&] {
     undistort(colmap(), work / "input", m.at("model").get<std::string>(), work, opt.scene, po);
     return nlohmann::json::object();
   });
@@ -218,15 +222,15 @@ void mask_stages(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
       fmt::format("{} {} {} {} {} {} {}", opt.sam_key, opt.amg.points_per_side, opt.amg.pred_iou_thresh,
                   opt.amg.stability_score_thresh, opt.amg.stability_score_offset, opt.amg.box_nms_thresh,
                   opt.amg.min_mask_region_area);
-  p.stage("sam", amg_key, [&] {
+  p.stage("sam", {"undistort"}, amg_key, [&] {
     // A run started with the same key keeps the views it wrote; another key starts over.
-    if (!p.started_before("sam")) fs::remove_all(sam_dir);
+    if (!p.resuming()) fs::remove_all(sam_dir);
     Scene s = load_scene(opt.scene);
     sam::SamModel m = opt.load_sam();
     ViewFilesSummary r = write_sam_files(s, m, opt.amg, sam_dir, false, opt.progress);
     return nlohmann::json{{"views", s.views.size()}, {"written", r.written}};
   });
-  p.stage("import", "", [&] {
+  p.stage("import", {"sam"}, "", [&] {
     fs::remove_all(opt.scene / "masks");
     masks::ImportOptions io;
     io.scene = opt.scene, io.from = "sam-json", io.dir = sam_dir, io.force = true, io.progress = opt.progress;
@@ -234,14 +238,14 @@ void mask_stages(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
     return nlohmann::json{{"views", r.imported}, {"masks", r.masks}, {"hidden", r.hidden}};
   });
   const fs::path depth_ply = work / "depth_model" / "point_cloud.ply";
-  p.stage("depth", std::to_string(opt.depth_iters), [&] {
+  p.stage("depth", {"undistort"}, std::to_string(opt.depth_iters), [&] {
     if (opt.depth_iters > 0) train_depth_model(load_scene(opt.scene), opt.depth_iters, depth_ply, opt.progress);
     return nlohmann::json{{"iters", opt.depth_iters}};
   });
   const masks::AssociateOptions& ao = opt.associate;
   const std::string assoc_key =
       fmt::format("{} {} {} {} {}", ao.min_views, ao.min_points, ao.min_affinity, ao.max_area, ao.drop_surfaces);
-  p.stage("associate", assoc_key, [&] {
+  p.stage("associate", {"import", "depth"}, assoc_key, [&] {
     masks::AssociateOptions a = opt.associate;
     a.scene = opt.scene, a.force = true, a.progress = opt.progress;
     if (opt.depth_iters > 0) a.depth = depth_from_model(depth_ply);
@@ -253,8 +257,8 @@ void mask_stages(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
 void language_stages(Pipeline& p, const PrepareOptions& opt) {
   const std::string dense_key =
       fmt::format("{} {} {} {}", opt.clip_key, opt.dense.input_size, opt.dense.tile_size, opt.dense.max_tokens);
-  p.stage("clip", dense_key, [&] {
-    if (!p.started_before("clip")) fs::remove_all(opt.scene / "features");
+  p.stage("clip", {"undistort"}, dense_key, [&] {
+    if (!p.resuming()) fs::remove_all(opt.scene / "features");
     Scene s = load_scene(opt.scene);
     clip::ClipModel m = opt.load_clip();
     ViewFilesSummary r = write_clip_features(s, m, opt.dense, false, opt.progress);
@@ -263,7 +267,7 @@ void language_stages(Pipeline& p, const PrepareOptions& opt) {
   std::vector<std::string> phrases = opt.phrases;
   for (const char* c : kCanonical)
     if (std::find(phrases.begin(), phrases.end(), c) == phrases.end()) phrases.push_back(c);
-  p.stage("text", nlohmann::json(phrases).dump(), [&] {
+  p.stage("text", {}, opt.clip_key + nlohmann::json(phrases).dump(), [&] {
     clip::ClipModel m = opt.load_clip();
     if (!m.has_text) fail("{}: the CLIP model has no text tower (text_embeddings.json needs one)", opt.clip_key);
     std::vector<float> e = m.embed_text(phrases);
@@ -319,7 +323,7 @@ nlohmann::json prepare_json(const Pipeline& p, const PrepareOptions& opt) {
   double total = 0;
   for (const StageRun& r : p.runs()) {
     st.push_back({{"stage", r.name}, {"seconds", r.seconds}, {"reused", r.reused}});
-    total += r.seconds;
+    if (!r.reused) total += r.seconds;
   }
   j["stages"] = st;
   j["total_seconds"] = total;

@@ -57,7 +57,7 @@ std::string PrepareReport::text() const {
   t += "  seconds   ";
   for (const StageRun& r : stages)
     t += fmt::format(" {} {}{}", r.name, format_duration(r.seconds), r.reused ? " (kept)" : "");
-  t += fmt::format("\n  total      {}\n", format_duration(j.value("total_seconds", 0.0)));
+  t += fmt::format("\n  this run   {}\n", format_duration(j.value("total_seconds", 0.0)));
   return t;
 }
 

@@ -1,8 +1,8 @@
 // Which stages of `hgs prepare` are complete, kept in SCENE/prepare/state.json so that a rerun skips them. Each
-// stage has a key: a hash of its options and of the previous stage's key, so a change anywhere upstream (other
-// photos, another matcher, other weights) makes every later stage run again. A stage is marked started (with its
-// key) before it writes anything and done only once its outputs are complete; a per-view stage started with the
-// same key keeps the views already written, one started with another key starts over.
+// stage has a key: a hash of its options and of the keys of the stages it reads, so a change upstream (other
+// photos, another matcher, other weights) makes every stage downstream of it run again, and no other. A stage is marked
+// started (with its key) before it writes anything and done only once its outputs are complete; a per-view stage
+// started with the same key keeps the views already written, one started with another key starts over.
 #pragma once
 #include <filesystem>
 #include <string>

@@ -98,17 +98,17 @@ TEST_F(PrepareGoldcape, RegistersTheSubsetAndAgreesWithTheSharedModel) {
   for (auto& [n, c] : est.centre)
     if (ref.centre.count(n)) names.push_back(n);
   ASSERT_GE(names.size(), 14u);
-  Eigen::Matrix3Xd src(3, names.size()), dst(3, names.size());
+  Eigen::MatrixXd src(3, names.size()), dst(3, names.size());  // dynamic: GCC 12 warns inside umeyama on 3xN
   for (size_t i = 0; i < names.size(); ++i) src.col(i) = est.centre[names[i]], dst.col(i) = ref.centre[names[i]];
-  const Eigen::Matrix4d T = Eigen::umeyama(src, dst, true);
-  const Eigen::Matrix3d sR = T.topLeftCorner<3, 3>();
+  const Eigen::MatrixXd T = Eigen::umeyama(src, dst, true);
+  const Eigen::Matrix3d sR = T.topLeftCorner(3, 3);
   const Eigen::Matrix3d R = sR / std::cbrt(sR.determinant());
   double size = 0;  // scene size: the largest distance between two reference centres of these views
   for (size_t i = 0; i < names.size(); ++i)
     for (size_t k = i + 1; k < names.size(); ++k) size = std::max(size, (dst.col(i) - dst.col(k)).norm());
   std::vector<double> pos, rot;
   for (size_t i = 0; i < names.size(); ++i) {
-    const Eigen::Vector3d c = sR * src.col(i) + T.topRightCorner<3, 1>();
+    const Eigen::Vector3d c = sR * src.col(i) + T.topRightCorner(3, 1);
     pos.push_back((c - dst.col(i)).norm() / size);
     const Eigen::Matrix3d d = ref.c2w[names[i]].transpose() * R * est.c2w[names[i]];
     rot.push_back(std::acos(std::clamp((d.trace() - 1) / 2, -1.0, 1.0)) * 180 / M_PI);
@@ -118,8 +118,8 @@ TEST_F(PrepareGoldcape, RegistersTheSubsetAndAgreesWithTheSharedModel) {
       "goldcape subset: %d of %d registered, reprojection %.3f px, median centre error %.4f of the scene "
       "size (%.3f), median rotation error %.3f deg\n",
       registered, images, p["mean_reprojection_error_px"].get<double>(), med_pos, size, med_rot);
-  EXPECT_LT(med_pos, 0.02);
-  EXPECT_LT(med_rot, 1.0);
+  EXPECT_LT(med_pos, 0.01);  // measured 0.0010 (tests/prepare, 2026-11-26)
+  EXPECT_LT(med_rot, 1.0);   // measured 0.245 deg
 }
 
 TEST_F(PrepareGoldcape, TrainWithoutMasksSaysHowToGetThem) {
@@ -144,7 +144,9 @@ TEST_F(PrepareGoldcape, ChainWithTinyWeightsEndsInTrainAndQuery) {
   for (const auto& st : j["stages"]) {
     const std::string name = st["stage"];
     const bool pose = name == "features" || name == "matching" || name == "mapping" || name == "undistort";
-    if (pose) EXPECT_TRUE(st["reused"].get<bool>()) << name << " ran again";
+    if (pose) {
+      EXPECT_TRUE(st["reused"].get<bool>()) << name << " ran again";
+    }
   }
   EXPECT_GT(j["masks"]["masks_per_view"]["mean"].get<double>(), 0.0) << j.dump();
   EXPECT_GT(j["masks"]["objects"].get<int>(), 0) << j.dump();
@@ -158,10 +160,11 @@ TEST_F(PrepareGoldcape, ChainWithTinyWeightsEndsInTrainAndQuery) {
     EXPECT_TRUE(fs::exists(scene_ / "features" / (stem + ".npy"))) << stem;
   }
   const fs::path model = *tmp_ / "model";
-  r = run_hgs("train " + scene_.string() + " --iters 20 --out " + model.string() + " --quiet");
+  // 200 steps: the object table is first fused at step 100 (hybrid --fusion-every).
+  r = run_hgs("train " + scene_.string() + " --iters 200 --downscale 2 --out " + model.string() + " --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  r = run_hgs("query " + scene_.string() + " " + model.string() + " --text 'gold cape' --split all --quiet --out " +
-              (*tmp_ / "q").string());
+  r = run_hgs("query " + scene_.string() + " " + model.string() +
+              " --downscale 2 --text 'gold cape' --split all --quiet --out " + (*tmp_ / "q").string());
   EXPECT_EQ(r.exit_code, 0) << r.err;
 }
 
