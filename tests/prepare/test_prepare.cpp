@@ -136,7 +136,7 @@ TEST_F(PrepareGoldcape, ChainWithTinyWeightsEndsInTrainAndQuery) {
   const std::string clip = (fs::path(HGS_TEST_DATA) / "clip" / "hf_f32" / "model.safetensors").string();
   RunResult r = run_hgs("prepare " + (*tmp_ / "photos").string() + " --out " + scene_.string() +
                         " --max-size 512 --max-features 2048 --sam " + sam + " --clip " + clip +
-                        " --points-per-side 4 --pred-iou-thresh 0 --stability-thresh 0 --stability-offset 0.05"
+                        " --points-per-side 8 --pred-iou-thresh 0 --stability-thresh 0 --stability-offset 0.05"
                         " --box-nms-thresh 0.9 --depth-iters 30 --min-views 2 --input-size 64 --text 'gold cape'"
                         " --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
