@@ -29,7 +29,8 @@ void goldcape_photos(const fs::path& gc, const fs::path& dir, int n, int skip = 
   std::vector<fs::path> all;
   for (const auto& e : fs::directory_iterator(gc / "images")) all.push_back(e.path());
   std::sort(all.begin(), all.end());
-  for (int i = skip; i < skip + n && i < int(all.size()); ++i) fs::create_symlink(all[i], dir / all[i].filename());
+  for (int i = skip; i < skip + n && i < int(all.size()); ++i)
+    if (!fs::exists(dir / all[i].filename())) fs::create_symlink(all[i], dir / all[i].filename());
 }
 
 // Camera centres and camera-to-world rotations by image name.
@@ -52,31 +53,25 @@ double median(std::vector<double> v) {
   return v.empty() ? 0.0 : v[v.size() / 2];
 }
 
-// The prepared goldcape subset, made once for the suite: 16 photos, --max-size 512 for CI time.
-class PrepareGoldcape : public ::testing::Test {
- protected:
-  static void SetUpTestSuite() {
-    gc_ = shared_data("goldcape");
-    if (gc_.empty() || !prepare::find_program("colmap")) return;
-    tmp_ = new TempDir;
-    goldcape_photos(gc_, *tmp_ / "photos", 16);
-    scene_ = *tmp_ / "scene";
-    first_ = run_hgs("prepare " + (*tmp_ / "photos").string() + " --out " + scene_.string() +
-                     " --max-size 512 --max-features 2048 --quiet");
-  }
-  static void TearDownTestSuite() { delete tmp_; }
-  void SetUp() override {
-    if (gc_.empty()) GTEST_SKIP() << "../shared/data/goldcape is absent: skipping real-data test";
-    if (!prepare::find_program("colmap")) GTEST_SKIP() << kColmapSkip;
-    ASSERT_EQ(first_.exit_code, 0) << first_.err;
-  }
-  static inline fs::path gc_, scene_;
-  static inline TempDir* tmp_ = nullptr;
-  static inline RunResult first_;
-};
+// The goldcape subset posed by `hgs prepare`: 16 photos, --max-size 512 and 2048 features for CI time. Each test
+// makes its own (ctest runs every test case in its own process).
+RunResult prepare_subset(const fs::path& gc, const TempDir& t, const std::string& extra = "") {
+  goldcape_photos(gc, t / "photos", 16);
+  return run_hgs("prepare " + (t / "photos").string() + " --out " + (t / "scene").string() +
+                 " --max-size 512 --max-features 2048 --quiet" + extra);
+}
 
-TEST_F(PrepareGoldcape, RegistersTheSubsetAndAgreesWithTheSharedModel) {
-  const nlohmann::json j = read_json(scene_ / "prepare.json");
+#define REQUIRE_COLMAP() \
+  if (!prepare::find_program("colmap")) GTEST_SKIP() << kColmapSkip
+
+TEST(PrepareGoldcape, PosesAgreeWithTheSharedModelAndTrainingAsksForMasks) {
+  HGS_REQUIRE_SHARED(gc, "goldcape");
+  REQUIRE_COLMAP();
+  TempDir tmp;
+  const fs::path scene = tmp / "scene";
+  RunResult first = prepare_subset(gc, tmp);
+  ASSERT_EQ(first.exit_code, 0) << first.err;
+  const nlohmann::json j = read_json(scene / "prepare.json");
   const nlohmann::json& p = j["poses"];
   const int images = p["images"], registered = p["registered"];
   EXPECT_EQ(images, 16);
@@ -86,14 +81,14 @@ TEST_F(PrepareGoldcape, RegistersTheSubsetAndAgreesWithTheSharedModel) {
   EXPECT_EQ(j["input"]["resized"], 16);  // 912 px -> 512 px
 
   // The scene `hgs train` reads: PINHOLE cameras, images of the model's size.
-  ColmapModel m = read_colmap(scene_ / "sparse" / "0");
+  ColmapModel m = read_colmap(scene / "sparse" / "0");
   for (auto& [id, cam] : m.cameras) EXPECT_EQ(cam.model, "PINHOLE");
   int w = 0, h = 0;
-  image_size(scene_ / "images" / m.images[0].name, w, h);
+  image_size(scene / "images" / m.images[0].name, w, h);
   EXPECT_EQ(uint64_t(w), m.cameras.begin()->second.width);
 
   // Camera centres against the shared model (same photos) after a similarity alignment (Umeyama).
-  Poses est = poses_of(scene_ / "sparse" / "0"), ref = poses_of(gc_ / "sparse" / "0");
+  Poses est = poses_of(scene / "sparse" / "0"), ref = poses_of(gc / "sparse" / "0");
   std::vector<std::string> names;
   for (auto& [n, c] : est.centre)
     if (ref.centre.count(n)) names.push_back(n);
@@ -120,27 +115,32 @@ TEST_F(PrepareGoldcape, RegistersTheSubsetAndAgreesWithTheSharedModel) {
       registered, images, p["mean_reprojection_error_px"].get<double>(), med_pos, size, med_rot);
   EXPECT_LT(med_pos, 0.01);  // measured 0.0010 (tests/prepare, 2026-11-26)
   EXPECT_LT(med_rot, 1.0);   // measured 0.245 deg
-}
 
-TEST_F(PrepareGoldcape, TrainWithoutMasksSaysHowToGetThem) {
-  RunResult r = run_hgs("train " + scene_.string() + " --iters 2 --out " + (*tmp_ / "nomask").string() + " --quiet");
+  // Training the prepared scene (no --sam) as hybrid says how to get masks.
+  RunResult r = run_hgs("train " + scene.string() + " --iters 2 --out " + (tmp / "nomask").string() + " --quiet");
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.err.find("--sam"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("--method rgb"), std::string::npos) << r.err;
 }
 
-// The whole chain on the prepared poses (kept: the rerun only adds the mask and language stages) with the tiny
-// weights of tests/data, then training and a query. Plumbing, not accuracy.
-TEST_F(PrepareGoldcape, ChainWithTinyWeightsEndsInTrainAndQuery) {
+// The whole chain with the tiny weights of tests/data, then training and a query (plumbing, not accuracy): poses
+// first, then a rerun that adds --sam and --clip keeps them and runs only the mask and language stages.
+TEST(PrepareGoldcape, ChainWithTinyWeightsEndsInTrainAndQuery) {
+  HGS_REQUIRE_SHARED(gc, "goldcape");
+  REQUIRE_COLMAP();
+  TempDir tmp;
+  const fs::path scene = tmp / "scene";
+  RunResult first = prepare_subset(gc, tmp, " --until poses");
+  ASSERT_EQ(first.exit_code, 0) << first.err;
   const std::string sam = (fs::path(HGS_TEST_DATA) / "sam" / "tiny_sam.safetensors").string();
   const std::string clip = (fs::path(HGS_TEST_DATA) / "clip" / "hf_f32" / "model.safetensors").string();
-  RunResult r = run_hgs("prepare " + (*tmp_ / "photos").string() + " --out " + scene_.string() +
-                        " --max-size 512 --max-features 2048 --sam " + sam + " --clip " + clip +
-                        " --points-per-side 8 --pred-iou-thresh 0 --stability-thresh 0 --stability-offset 0.05"
-                        " --box-nms-thresh 0.9 --depth-iters 30 --min-views 2 --input-size 64 --text 'gold cape'"
-                        " --quiet");
+  RunResult r =
+      prepare_subset(gc, tmp,
+                     " --sam " + sam + " --clip " + clip +
+                         " --points-per-side 8 --pred-iou-thresh 0 --stability-thresh 0 --stability-offset 0.05"
+                         " --box-nms-thresh 0.9 --depth-iters 30 --min-views 2 --input-size 64 --text 'gold cape'");
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  const nlohmann::json j = read_json(scene_ / "prepare.json");
+  const nlohmann::json j = read_json(scene / "prepare.json");
   for (const auto& st : j["stages"]) {
     const std::string name = st["stage"];
     const bool pose = name == "features" || name == "matching" || name == "mapping" || name == "undistort";
@@ -150,21 +150,21 @@ TEST_F(PrepareGoldcape, ChainWithTinyWeightsEndsInTrainAndQuery) {
   }
   EXPECT_GT(j["masks"]["masks_per_view"]["mean"].get<double>(), 0.0) << j.dump();
   EXPECT_GT(j["masks"]["objects"].get<int>(), 0) << j.dump();
-  const nlohmann::json te = read_json(scene_ / "text_embeddings.json");
+  const nlohmann::json te = read_json(scene / "text_embeddings.json");
   EXPECT_TRUE(te.contains("gold cape"));
   EXPECT_TRUE(te.contains("object"));
-  ColmapModel m = read_colmap(scene_ / "sparse" / "0");
+  ColmapModel m = read_colmap(scene / "sparse" / "0");
   for (const ColmapImage& im : m.images) {
     const std::string stem = fs::path(im.name).replace_extension().string();
-    EXPECT_TRUE(fs::exists(scene_ / "masks" / (stem + ".png"))) << stem;
-    EXPECT_TRUE(fs::exists(scene_ / "features" / (stem + ".npy"))) << stem;
+    EXPECT_TRUE(fs::exists(scene / "masks" / (stem + ".png"))) << stem;
+    EXPECT_TRUE(fs::exists(scene / "features" / (stem + ".npy"))) << stem;
   }
-  const fs::path model = *tmp_ / "model";
+  const fs::path model = tmp / "model";
   // 200 steps: the object table is first fused at step 100 (hybrid --fusion-every).
-  r = run_hgs("train " + scene_.string() + " --iters 200 --downscale 2 --out " + model.string() + " --quiet");
+  r = run_hgs("train " + scene.string() + " --iters 200 --downscale 2 --out " + model.string() + " --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  r = run_hgs("query " + scene_.string() + " " + model.string() +
-              " --downscale 2 --text 'gold cape' --split all --quiet --out " + (*tmp_ / "q").string());
+  r = run_hgs("query " + scene.string() + " " + model.string() +
+              " --downscale 2 --text 'gold cape' --split all --quiet --out " + (tmp / "q").string());
   EXPECT_EQ(r.exit_code, 0) << r.err;
 }
 
