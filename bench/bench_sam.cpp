@@ -3,14 +3,21 @@
 // here, no file needed): the image embedding at 1024x1024, the mask decoder on a batch of 64 single-point
 // prompts, a whole automatic-mask image (32 x 32 grid, segment-anything's defaults, embedding included), and
 // a plain sgemm of the ViT MLP's shape for the attainable FLOP rate. Counters: FLOPS (from the model's
-// multiply-adds, to compare with the sgemm's), peak RSS of the process (MB).
+// multiply-adds, to compare with the sgemm's), peak RSS of the process (MB). Every benchmark runs at each thread
+// count of HGS_BENCH_THREADS (default "1,2"; OpenMP, the blocking pool and OpenBLAS all set to it), so one run
+// shows how each part scales (bench/run_multicore.sh runs it at 1-16 threads).
 //   ./build/bench_sam --benchmark_min_time=1
+//   HGS_BENCH_THREADS=1,2,4,8,16 ./build/bench_sam --benchmark_filter='f32'
 #include <benchmark/benchmark.h>
 #include <cblas.h>
+#include <omp.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <random>
+#include <sstream>
 
+#include "clip/model.h"
 #include "core/process.h"
 #include "sam/amg.h"
 #include "sam/model.h"
@@ -111,6 +118,43 @@ const SamModel& vit_b(int bf16 = 0) {
 // Benchmark argument 0 = float32, 1 = bfloat16 products; the label names the precision (and oneDNN's kernel).
 void label(benchmark::State& state, int bf16) { state.SetLabel(bf16 ? "bf16 " + clip::bf16_kernel_name() : "f32"); }
 
+// The thread counts to run at: HGS_BENCH_THREADS ("1,2,4"), default 1 and 2.
+std::vector<int> thread_counts() {
+  std::vector<int> t;
+  const char* env = std::getenv("HGS_BENCH_THREADS");
+  std::stringstream ss(env && *env ? env : "1,2");
+  for (std::string item; std::getline(ss, item, ',');)
+    if (const int n = std::atoi(item.c_str()); n > 0) t.push_back(n);
+  if (t.empty()) t = {1, 2};
+  return t;
+}
+
+// Argument 1: the thread count of OpenMP, the element-wise pool and OpenBLAS (clip::set_num_threads, what
+// --threads sets) for the benchmark's lifetime.
+class Threads {
+ public:
+  explicit Threads(const benchmark::State& st) : prev_(omp_get_max_threads()) {
+    clip::set_num_threads(int(st.range(1)));
+  }
+  ~Threads() { clip::set_num_threads(prev_); }
+  Threads(const Threads&) = delete;
+  Threads& operator=(const Threads&) = delete;
+
+ private:
+  int prev_;
+};
+
+// precision x threads, named.
+void precision_and_threads(benchmark::internal::Benchmark* b) {
+  b->ArgNames({"bf16", "threads"});
+  for (int p : {0, 1})
+    for (int t : thread_counts()) b->Args({p, t});
+}
+void threads_only(benchmark::internal::Benchmark* b) {
+  b->ArgNames({"n", "threads"});
+  for (int t : thread_counts()) b->Args({4096, t});
+}
+
 // Multiply-add FLOPs (2 per MAC) of the image encoder.
 double encoder_flops() {
   const double C = kHidden, N = double(kGrid) * kGrid;
@@ -146,6 +190,7 @@ double decoder_flops(int B) {
 }
 
 void BM_ImageEmbedding1024(benchmark::State& state) {
+  Threads threads(state);
   const SamModel& m = vit_b(int(state.range(0)));
   label(state, int(state.range(0)));
   std::mt19937 rng(2);
@@ -154,9 +199,14 @@ void BM_ImageEmbedding1024(benchmark::State& state) {
   state.counters["FLOPS"] = benchmark::Counter(encoder_flops(), benchmark::Counter::kIsIterationInvariantRate);
   state.counters["peak_RSS_MB"] = peak_rss_mb();
 }
-BENCHMARK(BM_ImageEmbedding1024)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(2);
+BENCHMARK(BM_ImageEmbedding1024)
+    ->Apply(precision_and_threads)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(2);
 
 void BM_Decoder64Prompts(benchmark::State& state) {
+  Threads threads(state);
   const SamModel& m = vit_b(int(state.range(0)));
   label(state, int(state.range(0)));
   std::mt19937 rng(3);
@@ -176,10 +226,15 @@ void BM_Decoder64Prompts(benchmark::State& state) {
   state.counters["FLOPS"] = benchmark::Counter(decoder_flops(64), benchmark::Counter::kIsIterationInvariantRate);
   state.counters["peak_RSS_MB"] = peak_rss_mb();
 }
-BENCHMARK(BM_Decoder64Prompts)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(2);
+BENCHMARK(BM_Decoder64Prompts)
+    ->Apply(precision_and_threads)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(2);
 
 // A whole automatic-mask image: embedding + 32 x 32 points in batches of 64, segment-anything's thresholds.
 void BM_AutomaticMasksImage(benchmark::State& state) {
+  Threads threads(state);
   const SamModel& m = vit_b(int(state.range(0)));
   label(state, int(state.range(0)));
   Image img(1024, 768, 3);
@@ -196,10 +251,15 @@ void BM_AutomaticMasksImage(benchmark::State& state) {
       benchmark::Counter(encoder_flops() + 16 * decoder_flops(64), benchmark::Counter::kIsIterationInvariantRate);
   state.counters["peak_RSS_MB"] = peak_rss_mb();
 }
-BENCHMARK(BM_AutomaticMasksImage)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1);
+BENCHMARK(BM_AutomaticMasksImage)
+    ->Apply(precision_and_threads)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(1);
 
 // The reference rate: one sgemm with the shape of the ViT-B MLP up-projection, [n, 768] x [768, 3072].
 void BM_SgemmReference(benchmark::State& state) {
+  Threads threads(state);
   const int n = int(state.range(0)), k = 768, o = 3072;
   std::mt19937 rng(5);
   auto a = randn(size_t(n) * k, 1.f, rng), b = randn(size_t(o) * k, 1.f, rng);
@@ -210,10 +270,11 @@ void BM_SgemmReference(benchmark::State& state) {
   }
   state.counters["FLOPS"] = benchmark::Counter(2.0 * n * k * o, benchmark::Counter::kIsIterationInvariantRate);
 }
-BENCHMARK(BM_SgemmReference)->Arg(4096)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_SgemmReference)->Apply(threads_only)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // The same product in bfloat16 (clip/gemm_bf16.h: the operands rounded beforehand, float32 accumulation).
 void BM_Bf16GemmReference(benchmark::State& state) {
+  Threads threads(state);
   const int n = int(state.range(0)), k = 768, o = 3072;
   std::mt19937 rng(5);
   auto a = clip::to_bf16(randn(size_t(n) * k, 1.f, rng)), b = clip::to_bf16(randn(size_t(o) * k, 1.f, rng));
@@ -225,7 +286,7 @@ void BM_Bf16GemmReference(benchmark::State& state) {
   state.SetLabel(clip::bf16_kernel_name());
   state.counters["FLOPS"] = benchmark::Counter(2.0 * n * k * o, benchmark::Counter::kIsIterationInvariantRate);
 }
-BENCHMARK(BM_Bf16GemmReference)->Arg(4096)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Bf16GemmReference)->Apply(threads_only)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 }  // namespace
 
