@@ -18,12 +18,15 @@
 #include <sstream>
 
 #include "clip/model.h"
+#include "clip/openblas_env.h"
 #include "core/process.h"
 #include "sam/amg.h"
 #include "sam/model.h"
 
 using namespace hgs;
 using namespace hgs::sam;
+
+HGS_OPENBLAS_PREINIT();
 
 namespace {
 

@@ -1,11 +1,17 @@
 // hgs — command-line entry point. Errors from hgs::Error print one line and exit with status 1.
+#include <cblas.h>
 #include <omp.h>
 
 #include <algorithm>
 #include <cstdio>
+#include <cstdlib>
 
 #include "cli/command.h"
+#include "clip/openblas_env.h"
 #include "core/error.h"
+#include "core/process.h"
+
+HGS_OPENBLAS_PREINIT();
 
 namespace hgs::cli {
 
@@ -15,13 +21,27 @@ std::vector<CommandSpec>& registry() {
 }
 
 void set_threads(int threads) {
-  if (threads > 0) omp_set_num_threads(threads);
+  if (threads <= 0) return;
+  omp_set_num_threads(threads);
+  openblas_set_num_threads(threads);
 }
+
+namespace {
+
+// The default thread count of OpenMP, the element-wise pools and OpenBLAS: the CPUs this process may use (a
+// container's CPU quota included, core/process.h), unless OMP_NUM_THREADS / OPENBLAS_NUM_THREADS say otherwise.
+void default_threads() {
+  if (!std::getenv("OMP_NUM_THREADS")) omp_set_num_threads(std::min(omp_get_max_threads(), hgs::available_cpus()));
+  if (!std::getenv("OPENBLAS_NUM_THREADS")) openblas_set_num_threads(omp_get_max_threads());
+}
+
+}  // namespace
 
 }  // namespace hgs::cli
 
 int main(int argc, char** argv) {
   using namespace hgs::cli;
+  default_threads();
   CLI::App app{"hgs " HGS_VERSION
                " — Hybrid Gaussians: open-vocabulary 3D segmentation with Gaussian splatting, on the CPU"};
   app.set_version_flag("--version", std::string("hgs ") + HGS_VERSION);

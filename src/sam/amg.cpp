@@ -3,8 +3,11 @@
 #include "sam/amg.h"
 
 #include <algorithm>
+#include <functional>
 #include <numeric>
+#include <optional>
 
+#include "clip/thread_pool.h"
 #include "core/error.h"
 
 namespace hgs::sam {
@@ -114,6 +117,17 @@ void set_box_area(AmgMask& a, int W, int H) {
   a.bbox = {x0, y0, x1 - x0, y1 - y0};
 }
 
+// fn(u) for u in [0, n) on the pool's threads, thread p taking u = p, p + T, p + 2T, ... (T threads): the
+// costly items (masks that pass the thresholds) tend to be neighbours, so contiguous chunks would balance badly.
+// fn must not throw.
+void each_of(int n, const std::function<void(int)>& fn) {
+  const int T = std::min(clip::pool_threads(), std::max(n, 1));
+  clip::parallel_for(T, 2, [&](long p0, long p1) {
+    for (long p = p0; p < p1; ++p)
+      for (long u = p; u < n; u += T) fn(int(u));
+  });
+}
+
 std::array<float, 4> xyxy(const AmgMask& a) {
   return {float(a.bbox[0]), float(a.bbox[1]), float(a.bbox[0] + a.bbox[2]), float(a.bbox[1] + a.bbox[3])};
 }
@@ -143,25 +157,33 @@ std::vector<AmgMask> generate_masks(const SamModel& m, const ImageEmbedding& e, 
     }
     const int T = int(sparse.size()) / (B * C);
     std::vector<Prediction> pred = m.decode(e.data.data(), sparse.data(), B, T);
-    for (int i = 0; i < B; ++i) {
+    // The multimask outputs (prompt i, token t >= 1): each that passes the predicted IoU costs two full-size
+    // resamplings, so they are spread over the threads (each thread every T-th output, as the passing ones
+    // cluster) and collected in order.
+    const int tokens = pred.empty() ? 0 : pred[0].tokens, outs = B * std::max(tokens - 1, 0);
+    std::vector<std::optional<AmgMask>> kept(outs);
+    each_of(outs, [&](int u) {
+      const int i = u / (tokens - 1), t = 1 + u % (tokens - 1);
       const Prediction& p = pred[i];
+      if (!(p.iou[t] > o.pred_iou_thresh)) return;
       const size_t plane = size_t(p.size) * p.size;
-      for (int t = 1; t < p.tokens; ++t) {  // the multimask outputs
-        if (!(p.iou[t] > o.pred_iou_thresh)) continue;
-        std::vector<float> full = m.upscale_masks(e, p.lowres.data() + t * plane, 1);
-        const float stab = stability_score(full.data(), full.size(), 0.f, o.stability_score_offset);
-        if (!(stab > o.stability_score_thresh)) continue;
-        AmgMask a;
-        a.mask.resize(full.size());
-        for (size_t k = 0; k < full.size(); ++k) a.mask[k] = full[k] > 0.f;
-        set_box_area(a, W, H);
-        a.predicted_iou = p.iou[t];
-        a.stability_score = stab;
-        a.point = pts[i];
-        boxes.push_back(xyxy(a));
-        scores.push_back(a.predicted_iou);
-        cand.push_back(std::move(a));
-      }
+      std::vector<float> full = m.upscale_masks(e, p.lowres.data() + t * plane, 1);
+      const float stab = stability_score(full.data(), full.size(), 0.f, o.stability_score_offset);
+      if (!(stab > o.stability_score_thresh)) return;
+      AmgMask a;
+      a.mask.resize(full.size());
+      for (size_t k = 0; k < full.size(); ++k) a.mask[k] = full[k] > 0.f;
+      set_box_area(a, W, H);
+      a.predicted_iou = p.iou[t];
+      a.stability_score = stab;
+      a.point = pts[i];
+      kept[u] = std::move(a);
+    });
+    for (auto& a : kept) {
+      if (!a) continue;
+      boxes.push_back(xyxy(*a));
+      scores.push_back(a->predicted_iou);
+      cand.push_back(std::move(*a));
     }
     if (progress) progress(b0 + B, n);
   }
@@ -171,14 +193,15 @@ std::vector<AmgMask> generate_masks(const SamModel& m, const ImageEmbedding& e, 
   // Small holes and islands, then NMS again preferring the masks that did not change.
   std::vector<AmgMask> fixed = out;
   std::vector<std::array<float, 4>> b2;
-  std::vector<float> unchanged;
-  for (AmgMask& a : fixed) {
+  std::vector<float> unchanged(fixed.size());
+  each_of(int(fixed.size()), [&](int k) {
+    AmgMask& a = fixed[k];
     const bool c1 = remove_small_regions(a.mask, W, H, o.min_mask_region_area, true);
     const bool c2 = remove_small_regions(a.mask, W, H, o.min_mask_region_area, false);
     set_box_area(a, W, H);
-    b2.push_back(xyxy(a));
-    unchanged.push_back(c1 || c2 ? 0.f : 1.f);
-  }
+    unchanged[k] = c1 || c2 ? 0.f : 1.f;
+  });
+  for (const AmgMask& a : fixed) b2.push_back(xyxy(a));
   std::vector<AmgMask> res;
   for (int k : box_nms(b2, unchanged, o.box_nms_thresh)) res.push_back(std::move(fixed[k]));
   return res;

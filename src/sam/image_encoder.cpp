@@ -64,34 +64,54 @@ void vit_attention(const VitLayer& l, int g, int C, int heads, bool bf16, const 
   const int s = l.window > 0 ? l.window : g;          // side of one attention grid
   const int nw = l.window > 0 ? (g + s - 1) / s : 1;  // windows per side
   const int n = s * s, M = nw * nw * n;               // tokens per window, all (padded) tokens
-  // Gather windows: token (wy, wx, i, j) <- grid (wy * s + i, wx * s + j), zero outside the grid.
-  w.win.assign(size_t(M) * C, 0.f);
-  for (int wy = 0; wy < nw; ++wy)
-    for (int wx = 0; wx < nw; ++wx)
-      for (int i = 0; i < s; ++i)
+  // Gather windows: token (wy, wx, i, j) <- grid (wy * s + i, wx * s + j), zero outside the grid; rows of
+  // windows in parallel (every copy and scatter of this file runs on the pool: a serial pass over the 3 M
+  // values of the token grid is a few percent of a layer at one thread, and so caps the scaling).
+  w.win.resize(size_t(M) * C);
+  clip::parallel_for(long(nw) * s, 2, [&](long r0, long r1) {
+    for (long r = r0; r < r1; ++r) {
+      const int wy = int(r / s), i = int(r % s), y = wy * s + i;
+      for (int wx = 0; wx < nw; ++wx)
         for (int j = 0; j < s; ++j) {
-          const int y = wy * s + i, xx = wx * s + j;
-          if (y >= g || xx >= g) continue;
-          std::copy_n(h + (size_t(y) * g + xx) * C, C, w.win.data() + ((size_t(wy * nw + wx) * n) + i * s + j) * C);
+          const int xx = wx * s + j;
+          float* d = w.win.data() + ((size_t(wy * nw + wx) * n) + i * s + j) * C;
+          if (y >= g || xx >= g) std::fill_n(d, C, 0.f);
+          else std::copy_n(h + (size_t(y) * g + xx) * C, C, d);
         }
+    }
+  });
   w.qkv.resize(size_t(M) * 3 * I);
   clip::linear(l.qkv, w.win.data(), M, w.qkv.data());
   w.attn.resize(size_t(M) * I);
   if (bf16) {  // keys and values rounded once for every query block, each window's heads contiguous
     w.k16.resize(size_t(M) * I);
     w.v16.resize(size_t(M) * I);
-    for (int wi = 0; wi < nw * nw; ++wi) {
-      const float* base = w.qkv.data() + size_t(wi) * n * 3 * I;
-      clip::split_heads_bf16(base + I, n, 3 * I, heads, hd, w.k16.data() + size_t(wi) * n * I);
-      clip::split_heads_bf16(base + 2 * I, n, 3 * I, heads, hd, w.v16.data() + size_t(wi) * n * I);
+    if (nw == 1) {  // one global window: split_heads_bf16 runs its rows on the pool
+      clip::split_heads_bf16(w.qkv.data() + I, n, 3 * I, heads, hd, w.k16.data());
+      clip::split_heads_bf16(w.qkv.data() + 2 * I, n, 3 * I, heads, hd, w.v16.data());
+    } else {
+      clip::parallel_for(nw * nw, 2, [&](long w0, long w1) {
+        for (long wi = w0; wi < w1; ++wi) {
+          const float* base = w.qkv.data() + size_t(wi) * n * 3 * I;
+          clip::split_heads_bf16(base + I, n, 3 * I, heads, hd, w.k16.data() + size_t(wi) * n * I);
+          clip::split_heads_bf16(base + 2 * I, n, 3 * I, heads, hd, w.v16.data() + size_t(wi) * n * I);
+        }
+      });
     }
   }
   // Query blocks keep the score matrix [rows, n] within ~2 MB (cache) for the global layers. The (window,
   // block) units are independent: one per thread with single-threaded OpenBLAS (one hand-off per layer instead
   // of several per head).
-  const int rows = std::min(n, std::max(16, (1 << 19) / n));
-  const int blocks = (n + rows - 1) / rows, units = nw * nw * blocks;
-  const bool split = units > 1 && clip::pool_threads() > 1;
+  // The units are equal in cost, so with T threads they are cut until T divides their count or there are at
+  // least 8 per thread (windowed layers: 25 windows at ViT-B, 13 + 12 on two threads lost ~4 % of the attention).
+  const int T = clip::pool_threads();
+  int rows = std::min(n, std::max(16, (1 << 19) / n));
+  int blocks = (n + rows - 1) / rows;
+  for (int b = blocks + 1; T > 1 && (nw * nw * blocks) % T != 0 && nw * nw * blocks < 8 * T && (n + b - 1) / b >= 16;
+       ++b)
+    rows = (n + b - 1) / b, blocks = (n + rows - 1) / rows;
+  const int units = nw * nw * blocks;
+  const bool split = units > 1 && T > 1;
   const int blas_threads = openblas_get_num_threads();
   if (split) openblas_set_num_threads(1);
   auto run = [&](long u0, long u1) {
@@ -124,31 +144,36 @@ void vit_attention(const VitLayer& l, int g, int C, int heads, bool bf16, const 
   if (split) openblas_set_num_threads(blas_threads);
   w.out.resize(size_t(M) * C);
   clip::linear(l.proj, w.attn.data(), M, w.out.data());
-  for (int wy = 0; wy < nw; ++wy)
-    for (int wx = 0; wx < nw; ++wx)
-      for (int i = 0; i < s; ++i)
-        for (int j = 0; j < s; ++j) {
-          const int y = wy * s + i, xx = wx * s + j;
-          if (y >= g || xx >= g) continue;
-          const float* o = w.out.data() + ((size_t(wy * nw + wx) * n) + i * s + j) * C;
-          float* d = x + (size_t(y) * g + xx) * C;
-          for (int c = 0; c < C; ++c) d[c] += o[c];
-        }
+  // Scatter back, grid rows in parallel (each grid token is in exactly one window).
+  clip::parallel_for(g, 2, [&](long y0, long y1) {
+    for (long y = y0; y < y1; ++y) {
+      const int wy = int(y) / s, i = int(y) % s;
+      for (int xx = 0; xx < g; ++xx) {
+        const int wx = xx / s, j = xx % s;
+        const float* o = w.out.data() + ((size_t(wy * nw + wx) * n) + i * s + j) * C;
+        float* d = x + (size_t(y) * g + xx) * C;
+        for (int c = 0; c < C; ++c) d[c] += o[c];
+      }
+    }
+  });
 }
 
 // im2col of a 3x3 convolution with zero padding 1 on x [g, g, C]: cols [g * g, 9 * C] ordered (ky, kx, c).
 void im2col3x3(const float* x, int g, int C, std::vector<float>& cols) {
-  cols.assign(size_t(g) * g * 9 * C, 0.f);
-  for (int y = 0; y < g; ++y)
-    for (int xx = 0; xx < g; ++xx) {
-      float* o = cols.data() + (size_t(y) * g + xx) * 9 * C;
-      for (int ky = 0; ky < 3; ++ky)
-        for (int kx = 0; kx < 3; ++kx) {
-          const int sy = y + ky - 1, sx = xx + kx - 1;
-          if (sy < 0 || sy >= g || sx < 0 || sx >= g) continue;
-          std::copy_n(x + (size_t(sy) * g + sx) * C, C, o + (ky * 3 + kx) * C);
-        }
-    }
+  cols.resize(size_t(g) * g * 9 * C);
+  clip::parallel_for(g, 2, [&](long y0, long y1) {
+    for (long y = y0; y < y1; ++y)
+      for (int xx = 0; xx < g; ++xx) {
+        float* o = cols.data() + (size_t(y) * g + xx) * 9 * C;
+        for (int ky = 0; ky < 3; ++ky)
+          for (int kx = 0; kx < 3; ++kx) {
+            const int sy = int(y) + ky - 1, sx = xx + kx - 1;
+            float* d = o + (ky * 3 + kx) * C;
+            if (sy < 0 || sy >= g || sx < 0 || sx >= g) std::fill_n(d, C, 0.f);
+            else std::copy_n(x + (size_t(sy) * g + sx) * C, C, d);
+          }
+      }
+  });
 }
 
 }  // namespace
@@ -158,17 +183,21 @@ std::vector<float> SamModel::encode(const float* x, std::vector<std::vector<floa
   const int g = v.grid, P = v.patch, C = v.hidden, N = g * g, S = image_size(), K = 3 * P * P;
   // Patch embedding: cols [N, 3 * P * P] ordered (c, ky, kx) like the conv weight.
   std::vector<float> cols(size_t(N) * K);
-  for (int py = 0; py < g; ++py)
-    for (int px = 0; px < g; ++px) {
-      float* o = cols.data() + (size_t(py) * g + px) * K;
-      for (int c = 0; c < 3; ++c)
-        for (int ky = 0; ky < P; ++ky)
-          for (int kx = 0; kx < P; ++kx)
-            o[(c * P + ky) * P + kx] = x[((size_t(py) * P + ky) * S + px * P + kx) * 3 + c];
-    }
+  clip::parallel_for(g, 2, [&](long p0, long p1) {
+    for (long py = p0; py < p1; ++py)
+      for (int px = 0; px < g; ++px) {
+        float* o = cols.data() + (size_t(py) * g + px) * K;
+        for (int c = 0; c < 3; ++c)
+          for (int ky = 0; ky < P; ++ky)
+            for (int kx = 0; kx < P; ++kx)
+              o[(c * P + ky) * P + kx] = x[((size_t(py) * P + ky) * S + px * P + kx) * 3 + c];
+      }
+  });
   std::vector<float> tok(size_t(N) * C);
   clip::linear(v.patch_embed, cols.data(), N, tok.data());
-  for (size_t i = 0; i < tok.size(); ++i) tok[i] += v.pos[i];
+  clip::parallel_for(N, 64, [&](long t0, long t1) {
+    for (size_t i = size_t(t0) * C; i < size_t(t1) * C; ++i) tok[i] += v.pos[i];
+  });
   if (stages) {
     stages->clear();
     stages->push_back(tok);

@@ -116,9 +116,13 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
   const int Tt = 1 + d.tokens + T;  // iou token, mask tokens, prompt tokens
   if (d.layers.empty()) fail("SAM mask decoder has no layers");
   const std::vector<float> pe = dense_pe();  // [N, C]
-  std::vector<float> src0(size_t(N) * C), kpe;
-  for (size_t i = 0; i < src0.size(); ++i) src0[i] = emb[i] + prompt.no_mask[i % C];
-  add(src0.data(), pe.data(), src0.size(), kpe);
+  std::vector<float> src0(size_t(N) * C), kpe(size_t(N) * C);
+  clip::parallel_for(N, 64, [&](long t0, long t1) {  // image tokens on the pool (serial, they capped the scaling)
+    for (size_t i = size_t(t0) * C; i < size_t(t1) * C; ++i) {
+      src0[i] = emb[i] + prompt.no_mask[i % C];
+      kpe[i] = src0[i] + pe[i];
+    }
+  });
   // The first block's token-to-image keys / values: the same for every prompt.
   Proj kv0;
   const Attention& a0 = d.layers[0].token_to_image;
