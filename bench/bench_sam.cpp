@@ -1,7 +1,8 @@
 // SAM speed on this machine at ViT-B shapes (sam-vit-base: hidden 768 x 12 layers, 12 heads, window 14, global
 // layers 2, 5, 8, 11, 1024 px, patch 16; neck / decoder 256, 2 decoder layers, 8 heads; random weights built
 // here, no file needed): the image embedding at 1024x1024, the mask decoder on a batch of 64 single-point
-// prompts, a whole automatic-mask image (32 x 32 grid, segment-anything's defaults, embedding included), and
+// prompts, a whole automatic-mask image (32 x 32 grid, segment-anything's defaults, embedding included), the
+// mask post-processing with every mask kept, and
 // a plain sgemm of the ViT MLP's shape for the attainable FLOP rate. Counters: FLOPS (from the model's
 // multiply-adds, to compare with the sgemm's), peak RSS of the process (MB). Every benchmark runs at each thread
 // count of HGS_BENCH_THREADS (default "1,2"; OpenMP, the blocking pool and OpenBLAS all set to it), so one run
@@ -240,15 +241,21 @@ BENCHMARK(BM_Decoder64Prompts)
     ->UseRealTime()
     ->Iterations(2);
 
+// A 1024 x 768 image of uniform noise.
+Image random_image(unsigned seed) {
+  Image img(1024, 768, 3);
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> U(0.f, 1.f);
+  for (auto& v : img.px) v = U(rng);
+  return img;
+}
+
 // A whole automatic-mask image: embedding + 32 x 32 points in batches of 64, segment-anything's thresholds.
 void BM_AutomaticMasksImage(benchmark::State& state) {
   Threads threads(state);
   const SamModel& m = vit_b(int(state.range(0)));
   label(state, int(state.range(0)));
-  Image img(1024, 768, 3);
-  std::mt19937 rng(4);
-  std::uniform_real_distribution<float> U(0.f, 1.f);
-  for (auto& v : img.px) v = U(rng);
+  const Image img = random_image(4);
   size_t masks = 0;
   for (auto _ : state) {
     ImageEmbedding e = m.embed(img);
@@ -264,6 +271,31 @@ BENCHMARK(BM_AutomaticMasksImage)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->Iterations(1);
+
+// The automatic mask generator's post-processing, which random weights otherwise never reach: every output of an
+// 8 x 8 grid kept (thresholds off), so each of the 192 masks is resampled to full size, scored and boxed, then
+// NMS, holes and islands under 100 pixels, NMS again; the embedding is made once outside the timing.
+void BM_AutomaticMasksAllKept(benchmark::State& state) {
+  Threads threads(state);
+  const SamModel& m = vit_b(int(state.range(0)));
+  label(state, int(state.range(0)));
+  const Image img = random_image(6);
+  const ImageEmbedding e = m.embed(img);
+  AmgOptions o;
+  o.points_per_side = 8;
+  o.pred_iou_thresh = -1e30f;
+  o.stability_score_thresh = -1e30f;
+  o.box_nms_thresh = 1.1f;       // keeps every mask, so the count does not depend on the scores
+  o.min_mask_region_area = 100;  // and the small-region clean-up of each
+  size_t masks = 0;
+  for (auto _ : state) masks = generate_masks(m, e, o).size();
+  state.counters["masks"] = double(masks);
+}
+BENCHMARK(BM_AutomaticMasksAllKept)
+    ->Apply(precision_and_threads)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(2);
 
 // The reference rate: one sgemm with the shape of the ViT-B MLP up-projection, [n, 768] x [768, 3072].
 void BM_SgemmReference(benchmark::State& state) {

@@ -77,13 +77,13 @@ void run_prepare_command(PrepareArgs& a) {
 
 const char* kStages =
     "Stages (each skipped when an earlier run completed it with the same inputs and options; --until STAGE|GROUP\n"
-    "stops after it). Costs are for ~80 photos at 1000 px on 2 cores (docs/capture.md):\n"
+    "stops after it). Costs: 82 photos at 912 px on 2 cores (docs/capture.md \"Cost\"):\n"
     "  input      photos (JPEG/PNG, EXIF orientation applied, --max-size) or video frames (ffmpeg, --fps,\n"
-    "             blurred frames dropped) -> SCENE/prepare/input/                       seconds\n"
+    "             blurred frames dropped) -> SCENE/prepare/input/                       ~1 s\n"
     "  poses      COLMAP (Debian's colmap): features (SIFT), matching (--matcher), mapping (largest model\n"
-    "             kept), undistort (PINHOLE) -> SCENE/images/, SCENE/sparse/0/         minutes (matching most)\n"
+    "             kept), undistort (PINHOLE) -> SCENE/images/, SCENE/sparse/0/         ~5 min (matching 3.5)\n"
     "  masks      needs --sam: sam (automatic masks of every view), import, depth (--depth-iters RGB steps),\n"
-    "             associate (one id per object in every view) -> SCENE/masks/           ~10 s per view + training\n"
+    "             associate (one id per object in every view) -> SCENE/masks/           ~15 s per view + 2 min\n"
     "  language   needs --clip: clip (dense features) -> SCENE/features/, text (--text / --phrases + LERF's\n"
     "             canonical phrases) -> SCENE/text_embeddings.json                       ~2 s per view\n"
     "Every run writes SCENE/prepare.json (images found / registered / dropped, cameras, reprojection error, track\n"

@@ -6,6 +6,7 @@
 #include <functional>
 #include <numeric>
 #include <optional>
+#include <utility>
 
 #include "clip/thread_pool.h"
 #include "core/error.h"
@@ -191,7 +192,7 @@ std::vector<AmgMask> generate_masks(const SamModel& m, const ImageEmbedding& e, 
   for (int k : box_nms(boxes, scores, o.box_nms_thresh)) out.push_back(std::move(cand[k]));
   if (o.min_mask_region_area <= 0 || out.empty()) return out;
   // Small holes and islands, then NMS again preferring the masks that did not change.
-  std::vector<AmgMask> fixed = out;
+  std::vector<AmgMask> fixed = std::move(out);  // out is not read again
   std::vector<std::array<float, 4>> b2;
   std::vector<float> unchanged(fixed.size());
   each_of(int(fixed.size()), [&](int k) {

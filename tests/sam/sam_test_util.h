@@ -44,6 +44,19 @@ inline const sam::SamModel& tiny_sam() {
   return m;
 }
 
+// The automatic mask generator's options of a reference file (amg.json: "options").
+inline sam::AmgOptions reference_amg_options(const nlohmann::json& j) {
+  const auto& jo = j["options"];
+  sam::AmgOptions o;
+  o.points_per_side = jo["points_per_side"];
+  o.points_per_batch = jo["points_per_batch"];
+  o.pred_iou_thresh = jo["pred_iou_thresh"];
+  o.stability_score_thresh = jo["stability_thresh"];
+  o.stability_score_offset = jo["offset"];
+  o.box_nms_thresh = jo["box_nms_thresh"];
+  return o;
+}
+
 // The prompt sets of the reference (prompts.json): image and input sizes, prompts in original pixels.
 struct RefPrompts {
   int H = 0, W = 0, in_h = 0, in_w = 0;

@@ -73,14 +73,7 @@ TEST(SamAmg, BoxNmsIsGreedyByScore) {
 
 TEST(SamAmg, MatchesTorchOnTheTinyModel) {
   nlohmann::json j = nlohmann::json::parse(std::ifstream(sam_data("amg.json")));
-  const auto& jo = j["options"];
-  sam::AmgOptions o;
-  o.points_per_side = jo["points_per_side"];
-  o.points_per_batch = jo["points_per_batch"];
-  o.pred_iou_thresh = jo["pred_iou_thresh"];
-  o.stability_score_thresh = jo["stability_thresh"];
-  o.stability_score_offset = jo["offset"];
-  o.box_nms_thresh = jo["box_nms_thresh"];
+  const sam::AmgOptions o = reference_amg_options(j);
   sam::ImageEmbedding e = tiny_sam().embed(sam_image());
   int batches = 0;
   std::vector<sam::AmgMask> got = sam::generate_masks(tiny_sam(), e, o, [&](int /*done*/, int total) {

@@ -144,14 +144,7 @@ TEST(SamBf16, MasksAgreeWithFloat32EndToEnd) {
     }
   }
   nlohmann::json j = nlohmann::json::parse(std::ifstream(sam_data("amg.json")));
-  const auto& jo = j["options"];
-  sam::AmgOptions o;
-  o.points_per_side = jo["points_per_side"];
-  o.points_per_batch = jo["points_per_batch"];
-  o.pred_iou_thresh = jo["pred_iou_thresh"];
-  o.stability_score_thresh = jo["stability_thresh"];
-  o.stability_score_offset = jo["offset"];
-  o.box_nms_thresh = jo["box_nms_thresh"];
+  const sam::AmgOptions o = reference_amg_options(j);
   const std::vector<sam::AmgMask> mf = sam::generate_masks(f, ef, o), mb = sam::generate_masks(b, eb, o);
   double sum = 0, amg_worst = 1;
   for (const sam::AmgMask& a : mf) {

@@ -135,14 +135,7 @@ TEST(SamPruned, PostProcessingAndEndToEndMatchTorch) {
 
 TEST(SamPruned, AutomaticMasksMatchTorch) {
   nlohmann::json j = nlohmann::json::parse(std::ifstream(sam_data("pruned/amg.json")));
-  const auto& jo = j["options"];
-  sam::AmgOptions o;
-  o.points_per_side = jo["points_per_side"];
-  o.points_per_batch = jo["points_per_batch"];
-  o.pred_iou_thresh = jo["pred_iou_thresh"];
-  o.stability_score_thresh = jo["stability_thresh"];
-  o.stability_score_offset = jo["offset"];
-  o.box_nms_thresh = jo["box_nms_thresh"];
+  const sam::AmgOptions o = reference_amg_options(j);
   sam::ImageEmbedding e = pruned_sam().embed(sam_image());
   std::vector<sam::AmgMask> got = sam::generate_masks(pruned_sam(), e, o);
   std::vector<float> ref_masks = pref("amg_masks.npy");
