@@ -4,7 +4,7 @@
 // 320x240 (30k Gaussians, SH degree 3, K = 8 objects + background present in each view, D = 512).
 // Densification off; the observation table is rebuilt every R = 100 steps as in training. The hybrid step runs
 // exact (objects_per_step 0) and with the objects-per-step approximation (4 and 2 of the 9 present objects;
-// hybrid/config.h). Every timing runs at 1 and 2 OpenMP threads (bench_threads.h).
+// hybrid/config.h). Every timing runs at each thread count of HGS_BENCH_THREADS (bench_threads.h; default 1, 2).
 // Both steps report the mean time of each part of the step as counters (ms_forward, ms_method_loss, ...; the
 // hybrid step also ms_method_loss_objects / _semantic). Also times the parts of a hybrid step separately
 // (fusion, object channels, SCL pooling) for profiling, and measures the peak memory of a 300k-Gaussian hybrid
@@ -226,22 +226,22 @@ void BM_ObjectSsim(benchmark::State& st) {
 
 BENCHMARK(BM_RenderObjects)
     ->ArgNames({"objects", "threads"})
-    ->ArgsProduct({{0, 1}, {1, 2}})
+    ->ArgsProduct({{0, 1}, bench::thread_counts()})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 BENCHMARK(BM_ObjectSsim)
     ->ArgNames({"one_image", "threads"})
-    ->ArgsProduct({{0, 1}, {1, 2}})
+    ->ArgsProduct({{0, 1}, bench::thread_counts()})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
-BENCHMARK(BM_RgbStep)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_RgbStep)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_HybridStep)
     ->ArgNames({"objects_per_step", "threads"})
-    ->ArgsProduct({{0, 4, 2}, {1, 2}})
+    ->ArgsProduct({{0, 4, 2}, bench::thread_counts()})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 BENCHMARK(BM_HybridStepMemory300k)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
-BENCHMARK(BM_Fuse)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_ObjectChannels)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_PooledPrediction)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Fuse)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ObjectChannels)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_PooledPrediction)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_MAIN();

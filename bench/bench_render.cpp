@@ -221,13 +221,13 @@ void BM_RenderForwardBackward(benchmark::State& state) {
 
 }  // namespace
 
-BENCHMARK(BM_Project)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_ShForward)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_ShBackward)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_Binning)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_RasterizeForward)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_RasterizeBackward)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_RenderForward)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_RenderForwardBackward)->Apply(bench::at_1_and_2_threads)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Project)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ShForward)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ShBackward)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Binning)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_RasterizeForward)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_RasterizeBackward)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_RenderForward)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_RenderForwardBackward)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 BENCHMARK_MAIN();

@@ -18,6 +18,7 @@
 #include <random>
 #include <sstream>
 
+#include "bench_threads.h"
 #include "clip/model.h"
 #include "clip/openblas_env.h"
 #include "core/process.h"
@@ -124,17 +125,6 @@ const SamModel& vit_b(int bf16 = 0) {
 // Benchmark argument 0 = float32, 1 = bfloat16 products; the label names the precision (and oneDNN's kernel).
 void label(benchmark::State& state, int bf16) { state.SetLabel(bf16 ? "bf16 " + clip::bf16_kernel_name() : "f32"); }
 
-// The thread counts to run at: HGS_BENCH_THREADS ("1,2,4"), default 1 and 2.
-std::vector<int> thread_counts() {
-  std::vector<int> t;
-  const char* env = std::getenv("HGS_BENCH_THREADS");
-  std::stringstream ss(env && *env ? env : "1,2");
-  for (std::string item; std::getline(ss, item, ',');)
-    if (const int n = std::atoi(item.c_str()); n > 0) t.push_back(n);
-  if (t.empty()) t = {1, 2};
-  return t;
-}
-
 // Argument 1: the thread count of OpenMP, the element-wise pool and OpenBLAS (clip::set_num_threads, what
 // --threads sets) for the benchmark's lifetime.
 class Threads {
@@ -154,11 +144,11 @@ class Threads {
 void precision_and_threads(benchmark::internal::Benchmark* b) {
   b->ArgNames({"bf16", "threads"});
   for (int p : {0, 1})
-    for (int t : thread_counts()) b->Args({p, t});
+    for (int64_t t : bench::thread_counts()) b->Args({p, t});
 }
 void threads_only(benchmark::internal::Benchmark* b) {
   b->ArgNames({"n", "threads"});
-  for (int t : thread_counts()) b->Args({4096, t});
+  for (int64_t t : bench::thread_counts()) b->Args({4096, t});
 }
 
 // Multiply-add FLOPs (2 per MAC) of the image encoder.

@@ -1,12 +1,17 @@
-// OpenMP thread count as a benchmark argument: every timing benchmark of bench_render, bench_train and bench_hybrid
-// runs at 1 and at 2 threads (the last argument, "threads"), so one run shows how each part scales from one core
-// to two (docs/performance.md).
+// OpenMP thread count as a benchmark argument: every timing benchmark of bench_render, bench_train, bench_hybrid
+// and bench_sam runs at each thread count of HGS_BENCH_THREADS (the last argument, "threads"; default "1,2"), so
+// one run shows how each part scales from one core to two, or to 16 where a machine has them:
+//   HGS_BENCH_THREADS=1,2,4,8,16 build/bench_hybrid     (docs/performance.md)
 #pragma once
 #include <benchmark/benchmark.h>
 #include <omp.h>
 
+#include <cstdint>
+#include <cstdlib>
 #include <exception>
+#include <sstream>
 #include <string>
+#include <vector>
 
 #include "render/raster_isa.h"
 
@@ -36,7 +41,21 @@ inline std::string raster_isa_context() {
 }
 inline const bool kRasterIsaContext = (benchmark::AddCustomContext("raster_isa", raster_isa_context()), true);
 
-// A benchmark without other arguments at 1 and 2 threads.
-inline void at_1_and_2_threads(benchmark::internal::Benchmark* b) { b->ArgName("threads")->Arg(1)->Arg(2); }
+// The thread counts to run at: HGS_BENCH_THREADS ("1,2,4,8,16"), default 1 and 2.
+inline std::vector<int64_t> thread_counts() {
+  std::vector<int64_t> t;
+  const char* env = std::getenv("HGS_BENCH_THREADS");
+  std::stringstream ss(env && *env ? env : "1,2");
+  for (std::string item; std::getline(ss, item, ',');)
+    if (const int n = std::atoi(item.c_str()); n > 0) t.push_back(n);
+  if (t.empty()) t = {1, 2};
+  return t;
+}
+
+// A benchmark without other arguments at each thread count.
+inline void at_each_thread_count(benchmark::internal::Benchmark* b) {
+  b->ArgName("threads");
+  for (int64_t t : thread_counts()) b->Arg(t);
+}
 
 }  // namespace hgs::bench
