@@ -1,5 +1,7 @@
-// Tile binning: per-Gaussian boxes (parallel), LSD radix sort of depth keys (stable), parallel scatter into
-// per-tile lists by chunks of tile rows (each chunk scans the depth-sorted Gaussians once). See binning.h.
+// Tile binning: per-Gaussian boxes, pair numbering (prefix sum by chunks), LSD radix sort of depth keys (stable,
+// per-thread digit counts), scatter into per-tile lists by chunks of tile rows (each chunk scans the
+// depth-sorted Gaussians' tile rects once): every step on the OpenMP threads, results independent of their
+// count. See binning.h.
 #include "render/binning.h"
 
 #include <omp.h>
@@ -26,26 +28,51 @@ inline uint64_t depth_key(double d) {
   return (u & 0x8000000000000000ull) ? ~u : (u | 0x8000000000000000ull);
 }
 
-// Stable LSD radix sort of (key, value) pairs, 8-bit digits, skipping digits that are equal everywhere.
+// Stable LSD radix sort of (key, value) pairs, 8-bit digits, skipping digits that are equal everywhere. Each
+// pass runs on the OpenMP threads: thread t counts the digits of its contiguous chunk, the scatter offsets are
+// laid out digit-major then thread-major, so every thread writes its chunk's entries in their order and the
+// result is the serial stable sort's, whatever the thread count.
 void radix_sort(std::vector<uint64_t>& keys, std::vector<int>& vals, std::vector<uint64_t>& ktmp,
                 std::vector<int>& vtmp, int key_bytes) {
   const size_t m = keys.size();
   ktmp.resize(m);
   vtmp.resize(m);
+  const int T = m < 8192 ? 1 : std::max(1, omp_get_max_threads());
+  std::vector<size_t> hist(size_t(T) * 256);
   for (int pass = 0; pass < key_bytes; ++pass) {
     const int shift = 8 * pass;
-    size_t cnt[257] = {0};
-    for (size_t i = 0; i < m; ++i) ++cnt[((keys[i] >> shift) & 255) + 1];
+    std::fill(hist.begin(), hist.end(), 0);
     bool trivial = false;
-    for (int d = 0; d < 256; ++d)
-      if (cnt[d + 1] == m) trivial = true;
-    if (trivial) continue;
-    for (int d = 0; d < 256; ++d) cnt[d + 1] += cnt[d];
-    for (size_t i = 0; i < m; ++i) {
-      const size_t pos = cnt[(keys[i] >> shift) & 255]++;
-      ktmp[pos] = keys[i];
-      vtmp[pos] = vals[i];
+#pragma omp parallel num_threads(T)
+    {
+      const int t = omp_get_thread_num(), nt = omp_get_num_threads();
+      const size_t c0 = m * size_t(t) / size_t(nt), c1 = m * size_t(t + 1) / size_t(nt);
+      size_t* h = hist.data() + size_t(t) * 256;
+      for (size_t i = c0; i < c1; ++i) ++h[(keys[i] >> shift) & 255];
+#pragma omp barrier
+#pragma omp single
+      {
+        // Exclusive offsets, digit-major then thread-major (hist becomes the write cursors).
+        size_t run = 0;
+        for (int d = 0; d < 256; ++d) {
+          size_t total = 0;
+          for (int u = 0; u < nt; ++u) total += hist[size_t(u) * 256 + d];
+          if (total == m) trivial = true;
+          for (int u = 0; u < nt; ++u) {
+            const size_t c = hist[size_t(u) * 256 + d];
+            hist[size_t(u) * 256 + d] = run;
+            run += c;
+          }
+        }
+      }  // implicit barrier
+      if (!trivial)
+        for (size_t i = c0; i < c1; ++i) {
+          const size_t pos = h[(keys[i] >> shift) & 255]++;
+          ktmp[pos] = keys[i];
+          vtmp[pos] = vals[i];
+        }
     }
+    if (trivial) continue;
     keys.swap(ktmp);
     vals.swap(vtmp);
   }
@@ -121,16 +148,40 @@ void bin_gaussians(int width, int height, int n, const T* mean2d, const T* conic
     b.counts[i] = (tr[1] - tr[0] + 1) * (tr[3] - tr[2] + 1);
   }
 
-  // 2. Gaussian-major pair numbering and the depth order of binned Gaussians
-  b.keys.clear();
-  b.order.clear();
-  int total = 0;
-  for (int i = 0; i < n; ++i) {
-    b.pair_offset[i] = total;
-    total += b.counts[i];
-    if (b.counts[i] > 0) {
-      b.keys.push_back(depth_key(depth[i]));
-      b.order.push_back(i);
+  // 2. Gaussian-major pair numbering and the depth order of binned Gaussians: a two-pass prefix sum over
+  // contiguous chunks of Gaussians (sums per chunk, then each chunk numbers its pairs and places its binned
+  // Gaussians from its offsets), so the result is the serial loop's.
+  const int T2 = n < 8192 ? 1 : std::max(1, omp_get_max_threads());
+  std::vector<int64_t> chunk_pairs(size_t(T2) + 1, 0), chunk_binned(size_t(T2) + 1, 0);
+  int total = 0, binned = 0;
+#pragma omp parallel num_threads(T2)
+  {
+    const int t = omp_get_thread_num(), nt = omp_get_num_threads();
+    const int i0 = int(int64_t(n) * t / nt), i1 = int(int64_t(n) * (t + 1) / nt);
+    int64_t p = 0, q = 0;
+    for (int i = i0; i < i1; ++i) p += b.counts[i], q += b.counts[i] > 0;
+    chunk_pairs[size_t(t) + 1] = p;
+    chunk_binned[size_t(t) + 1] = q;
+#pragma omp barrier
+#pragma omp single
+    {
+      for (int u = 0; u < nt; ++u) {
+        chunk_pairs[size_t(u) + 1] += chunk_pairs[u];
+        chunk_binned[size_t(u) + 1] += chunk_binned[u];
+      }
+      total = int(chunk_pairs[size_t(nt)]);
+      binned = int(chunk_binned[size_t(nt)]);
+      b.keys.resize(size_t(binned));
+      b.order.resize(size_t(binned));
+    }  // implicit barrier
+    int run = int(chunk_pairs[t]), k = int(chunk_binned[t]);
+    for (int i = i0; i < i1; ++i) {
+      b.pair_offset[i] = run;
+      run += b.counts[i];
+      if (b.counts[i] > 0) {
+        b.keys[k] = depth_key(depth[i]);
+        b.order[k++] = i;
+      }
     }
   }
   b.pair_offset[n] = total;
@@ -144,13 +195,18 @@ void bin_gaussians(int width, int height, int n, const T* mean2d, const T* conic
   b.tile_pair.resize(size_t(total));
   const int m = int(b.order.size());
   const int nthreads = std::max(1, std::min(omp_get_max_threads(), b.tiles_y));
+  // The tile rects in depth order, so that both scans below read them in sequence.
+  b.sorted_rect.resize(size_t(m) * 4);
+#pragma omp parallel for schedule(static) num_threads(nthreads)
+  for (int k = 0; k < m; ++k)
+    std::memcpy(&b.sorted_rect[4 * size_t(k)], &b.trect[4 * size_t(b.order[k])], 4 * sizeof(int));
 #pragma omp parallel num_threads(nthreads)
   {
     const int tid = omp_get_thread_num(), nt = omp_get_num_threads();
     const int r0 = int(int64_t(b.tiles_y) * tid / nt), r1 = int(int64_t(b.tiles_y) * (tid + 1) / nt);
     int* start = b.tile_start.data();
     for (int k = 0; k < m; ++k) {
-      const int* tr = &b.trect[4 * size_t(b.order[k])];
+      const int* tr = &b.sorted_rect[4 * size_t(k)];
       const int ty0 = std::max(tr[2], r0), ty1 = std::min(tr[3], r1 - 1);
       for (int ty = ty0; ty <= ty1; ++ty)
         for (int tx = tr[0]; tx <= tr[1]; ++tx) ++start[ty * b.tiles_x + tx + 1];
@@ -165,9 +221,10 @@ void bin_gaussians(int width, int height, int n, const T* mean2d, const T* conic
     for (int ty = r0; ty < r1; ++ty)
       for (int tx = 0; tx < b.tiles_x; ++tx) cursor[size_t(ty - r0) * b.tiles_x + tx] = start[ty * b.tiles_x + tx];
     for (int k = 0; k < m; ++k) {
-      const int g = b.order[k];
-      const int* tr = &b.trect[4 * size_t(g)];
+      const int* tr = &b.sorted_rect[4 * size_t(k)];
       const int ty0 = std::max(tr[2], r0), ty1 = std::min(tr[3], r1 - 1);
+      if (ty0 > ty1) continue;
+      const int g = b.order[k];
       const int w = tr[1] - tr[0] + 1;
       for (int ty = ty0; ty <= ty1; ++ty)
         for (int tx = tr[0]; tx <= tr[1]; ++tx) {

@@ -30,6 +30,7 @@ struct Binning {
   // scratch kept between calls
   std::vector<uint64_t> keys, keys_tmp;
   std::vector<int> order, order_tmp, counts, cursor;
+  std::vector<int> sorted_rect;  // [M, 4] trect of the binned Gaussians in depth order (read in sequence)
 };
 
 // Bins N projected Gaussians (radius[i] == 0 means culled) for an image of width x height.
