@@ -32,8 +32,8 @@ Projected random_projected(int n, int W, int H, unsigned seed) {
     const float sx = 0.5f + 12 * U(rng), sy = 0.5f + 12 * U(rng), rho = 0.8f * (U(rng) - 0.5f);
     const float cxx = sx * sx, cyy = sy * sy, cxy = rho * sx * sy, det = cxx * cyy - cxy * cxy;
     p.conic.insert(p.conic.end(), {cyy / det, -cxy / det, cxx / det});
-    p.opacity.push_back(U(rng) < 0.05f ? 0.001f : 0.01f + 0.99f * U(rng));  // some below 1/255: not binned
-    p.depth.push_back(U(rng) < 0.1f ? 2.f : 0.2f + 10 * U(rng));          // ties keep index order
+    p.opacity.push_back(U(rng) < 0.05f ? 0.001f : 0.01f + 0.99f * U(rng));   // some below 1/255: not binned
+    p.depth.push_back(U(rng) < 0.1f ? 2.f : 0.2f + 10 * U(rng));             // ties keep index order
     p.radius.push_back(U(rng) < 0.05f ? 0 : int(3 * std::max(sx, sy)) + 1);  // some culled
   }
   return p;
