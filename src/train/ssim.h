@@ -10,6 +10,7 @@ template <typename T>
 struct SsimWorkspace {
   std::vector<std::vector<T>> band;  // per row band: line buffers (96 rows of W*C); reused between calls
   std::vector<double> row_sum;       // [H] SSIM-map sum of each row
+  std::vector<T> coeff;              // [H, 3, W*C] horizontally filtered backward coefficients (with a gradient)
 };
 
 // Mean SSIM of images x and y, both [H, W, C] (channel-interleaved). When `grad_x` is not null it receives
