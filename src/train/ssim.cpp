@@ -99,6 +99,18 @@ void conv_col(Ring&& ring, int y, int H, int L, T* o) {
   }
 }
 
+// The SSIM terms of pixel j from the five moment rows (mu_x, mu_y, E[xx], E[yy], E[xy]); map = A1 A2 / (B1 B2).
+template <typename T>
+struct Terms {
+  T A1, A2, B1, B2;
+};
+template <typename T>
+inline Terms<T> ssim_terms(T* const* mom, int j, T C1, T C2) {
+  const T mu1 = mom[0][j], mu2 = mom[1][j];
+  const T s11 = mom[2][j] - mu1 * mu1, s22 = mom[3][j] - mu2 * mu2, s12 = mom[4][j] - mu1 * mu2;
+  return {2 * mu1 * mu2 + C1, 2 * s12 + C2, mu1 * mu1 + mu2 * mu2 + C1, s11 + s22 + C2};
+}
+
 // SSIM of output rows [y0, y1) as a line-buffer pipeline, so every intermediate row stays in cache:
 //   product rows (x, y, xx, yy, xy) -> horizontal pass -> ring P (11 rows)
 //   moment row m (vertical pass over P rows m-5..m+5) -> map (summed into row_sum[m]) and, when `coeff` is
@@ -142,10 +154,8 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, T* c
       double total = 0;
 #pragma omp simd reduction(+ : total)
       for (int j = 0; j < L; ++j) {
-        const T mu1 = mom[0][j], mu2 = mom[1][j];
-        const T s11 = mom[2][j] - mu1 * mu1, s22 = mom[3][j] - mu2 * mu2, s12 = mom[4][j] - mu1 * mu2;
-        const T A1 = 2 * mu1 * mu2 + C1, A2 = 2 * s12 + C2, B1 = mu1 * mu1 + mu2 * mu2 + C1, B2 = s11 + s22 + C2;
-        total += A1 * A2 * (T(1) / (B1 * B2));
+        const Terms<T> t = ssim_terms(mom, j, C1, C2);
+        total += t.A1 * t.A2 * (T(1) / (t.B1 * t.B2));
       }
       row_sum[m] = total;
       continue;
@@ -156,9 +166,8 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, T* c
     double total = 0;
 #pragma omp simd reduction(+ : total)
     for (int j = 0; j < L; ++j) {
-      const T mu1 = mom[0][j], mu2 = mom[1][j];
-      const T s11 = mom[2][j] - mu1 * mu1, s22 = mom[3][j] - mu2 * mu2, s12 = mom[4][j] - mu1 * mu2;
-      const T A1 = 2 * mu1 * mu2 + C1, A2 = 2 * s12 + C2, B1 = mu1 * mu1 + mu2 * mu2 + C1, B2 = s11 + s22 + C2;
+      const Terms<T> t = ssim_terms(mom, j, C1, C2);
+      const T mu1 = mom[0][j], mu2 = mom[1][j], A1 = t.A1, A2 = t.A2, B1 = t.B1, B2 = t.B2;
       const T inv = T(1) / (B1 * B2);
       const T map = A1 * A2 * inv;
       total += map;
