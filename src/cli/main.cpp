@@ -7,6 +7,7 @@
 #include <cstdlib>
 
 #include "cli/command.h"
+#include "clip/model.h"
 #include "clip/openblas_env.h"
 #include "core/error.h"
 #include "core/process.h"
@@ -20,11 +21,7 @@ std::vector<CommandSpec>& registry() {
   return r;
 }
 
-void set_threads(int threads) {
-  if (threads <= 0) return;
-  omp_set_num_threads(threads);
-  openblas_set_num_threads(threads);
-}
+void set_threads(int threads) { hgs::clip::set_num_threads(threads); }  // OpenMP, the pool and OpenBLAS
 
 namespace {
 

@@ -1,11 +1,13 @@
 // Blocking thread pool: see thread_pool.h. One job at a time (calls from several threads serialise on a mutex);
-// workers are started lazily and live for the process.
+// workers are started lazily and live for the process. An exception thrown by a chunk is caught where it was
+// thrown (it must not leave a worker thread) and the first one is rethrown to the caller once every chunk ended.
 #include "clip/thread_pool.h"
 
 #include <omp.h>
 
 #include <algorithm>
 #include <condition_variable>
+#include <exception>
 #include <mutex>
 #include <thread>
 #include <vector>
@@ -40,15 +42,27 @@ class Pool {
     }
     cv_.notify_all();
     chunk(0, fn);
-    std::unique_lock<std::mutex> l(m_);
-    done_cv_.wait(l, [&] { return pending_ == 0; });
-    fn_ = nullptr;
+    std::exception_ptr err;
+    {
+      std::unique_lock<std::mutex> l(m_);
+      done_cv_.wait(l, [&] { return pending_ == 0; });
+      fn_ = nullptr;
+      err = error_;
+      error_ = nullptr;
+    }
+    if (err) std::rethrow_exception(err);
   }
 
  private:
   void chunk(int part, const std::function<void(long, long)>& fn) {
     long b = n_ * part / parts_, e = n_ * (part + 1) / parts_;
-    if (b < e) fn(b, e);
+    if (b >= e) return;
+    try {
+      fn(b, e);
+    } catch (...) {
+      std::lock_guard<std::mutex> l(m_);
+      if (!error_) error_ = std::current_exception();
+    }
   }
   void loop(int id) {
     long seen = 0;
@@ -71,6 +85,7 @@ class Pool {
   std::condition_variable cv_, done_cv_;
   std::vector<std::thread> workers_;
   const std::function<void(long, long)>* fn_ = nullptr;
+  std::exception_ptr error_;  // the first exception of the running job's chunks
   long n_ = 0, generation_ = 0;
   int parts_ = 1, pending_ = 0;
   bool stop_ = false;

@@ -7,7 +7,8 @@
 namespace hgs::clip {
 
 // Calls fn(begin, end) on disjoint chunks covering [0, n), in parallel on up to `threads()` threads (the
-// calling thread takes the first chunk). Runs inline when n < min_parallel or one thread is configured.
+// calling thread takes the first chunk). Runs inline when n < min_parallel or one thread is configured. If a
+// chunk throws, the other chunks still run to their end and the first exception is rethrown here.
 void parallel_for(long n, long min_parallel, const std::function<void(long, long)>& fn);
 
 // Worker count: omp_get_max_threads() (so --threads applies), at most 64.

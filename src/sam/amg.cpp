@@ -120,7 +120,7 @@ void set_box_area(AmgMask& a, int W, int H) {
 
 // fn(u) for u in [0, n) on the pool's threads, thread p taking u = p, p + T, p + 2T, ... (T threads): the
 // costly items (masks that pass the thresholds) tend to be neighbours, so contiguous chunks would balance badly.
-// fn must not throw.
+// An exception of fn reaches the caller (clip::parallel_for).
 void each_of(int n, const std::function<void(int)>& fn) {
   const int T = std::min(clip::pool_threads(), std::max(n, 1));
   clip::parallel_for(T, 2, [&](long p0, long p1) {

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cmath>
 #include <random>
+#include <stdexcept>
 
 #include "clip/thread_pool.h"
 #include "clip/transformer.h"
@@ -120,6 +121,23 @@ TEST(ClipKernels, NestedParallelForRunsInline) {
     for (long i = b; i < e; ++i) parallel_for(1000, 1, [&](long b2, long e2) { total += e2 - b2; });
   });
   EXPECT_EQ(total.load(), 8000);
+}
+
+TEST(ClipKernels, ParallelForRethrowsAWorkersExceptionAndStaysUsable) {
+  omp_set_num_threads(3);
+  // The last chunk runs on a worker thread (the caller takes the first): its exception reaches the caller.
+  std::atomic<long> done{0};
+  EXPECT_THROW(parallel_for(300, 1,
+                            [&](long b, long e) {
+                              if (e == 300) throw std::runtime_error("chunk failed");
+                              done += e - b;
+                            }),
+               std::runtime_error);
+  EXPECT_EQ(done.load(), 200);  // the other chunks ran to their end
+  std::atomic<long> total{0};
+  parallel_for(300, 1, [&](long b, long e) { total += e - b; });  // the pool took the next job
+  EXPECT_EQ(total.load(), 300);
+  omp_set_num_threads(2);
 }
 
 TEST(ClipKernels, BlockMatchesBruteForce) {
