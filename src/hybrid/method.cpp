@@ -83,7 +83,7 @@ void HybridMethod::prepare(const train::ViewStep& v, const train::PrepareIO& io)
   const std::vector<int>& anchors = semantic_.anchors_of(u);
   const int J = static_cast<int>(objects_.size());
   const int sem = (!cfg_.use_scl && cfg_.lambda_sem > 0) ? data_.dim : 0;
-  layout_ = ObjectLayout{J, sem};
+  layout_ = ObjectLayout{J, sem, true};  // the base render lets the object losses score far pixels once
   const int C = layout_.total();
   channels_.resize(size_t(n) * C);
   object_channels(n, L, layout_, objects_.data(), fields.q->data.data(), io.projected.colors, channels_.data());
