@@ -44,6 +44,9 @@ class ObjectAssociation {
 
   const std::vector<float>& weights() const;  // [U] softmax of the current logits
   const ObservationTable& table() const { return table_; }
+  // The last fuse()'s s [N, L] and valid [N] (null before the first, and without OF).
+  const float* fused_s() const { return s_.empty() ? nullptr : s_.data(); }
+  const uint8_t* fused_valid() const { return valid_.empty() ? nullptr : valid_.data(); }
   // Restores a saved table (checked by the caller).
   void restore_table(int n, std::vector<uint16_t> labels);
 

@@ -10,7 +10,8 @@ namespace hgs::hybrid {
   X(use_of) X(use_scl) X(use_bro) X(lambda_rgb) X(lambda_app) X(lambda_sem) X(lambda_bro) X(lambda_dssim) \
   X(tau1) X(unconfident_unobserved) X(occlusion_test) X(background_vote) X(temperature) X(fusion_eps) X(tau2) \
   X(scl_background) X(fusion_every) X(bro_kernel) X(bro_scale_invariant) X(bro_image_norm) X(sem_geometry) \
-  X(bro_eps) X(min_mask_pixels) X(lr_lang) X(lang_half) X(lr_view) X(lang_init_std) X(objects_per_step)
+  X(bro_eps) X(min_mask_pixels) X(lr_lang) X(lang_half) X(lr_view) X(lang_init_std) X(objects_per_step) \
+  X(sparse_objects)
 // clang-format on
 
 nlohmann::json HybridConfig::to_json() const {

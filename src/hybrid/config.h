@@ -76,6 +76,10 @@ struct HybridConfig {
   // more; the test ObjectSampling.* checks the expectation over all subsets). The object channels of the render
   // shrink from 4J to 4M. See docs/performance.md for the speed and the accuracy measured.
   int objects_per_step = 0;
+  // How the object channels are composited; both exact (the same function up to float rounding). true: a base
+  // render plus per-object sparse groups (object_groups.h), the cost of one or two objects per Gaussian visit;
+  // false: 4 dense channels per object (object_channels.h).
+  bool sparse_objects = true;
 
   nlohmann::json to_json() const;
   static HybridConfig from_json(const nlohmann::json& j);

@@ -7,6 +7,7 @@
 #include "core/error.h"
 #include "core/half.h"
 #include "core/parallel.h"
+#include "hybrid/object_groups.h"
 
 namespace hgs::hybrid {
 
@@ -84,13 +85,28 @@ void HybridMethod::prepare(const train::ViewStep& v, const train::PrepareIO& io)
   const int J = static_cast<int>(objects_.size());
   const int sem = (!cfg_.use_scl && cfg_.lambda_sem > 0) ? data_.dim : 0;
   layout_ = ObjectLayout{J, sem, true};  // the base render lets the object losses score far pixels once
-  const int C = layout_.total();
+  // The channels rendered: the object layout itself (dense), or the base channels + groups (sparse).
+  const int C = cfg_.sparse_objects ? SparseLayout{sem}.total() : layout_.total();
+  const int other = cfg_.sparse_objects ? SparseLayout::other() : layout_.other();
   channels_.resize(size_t(n) * C);
-  object_channels(n, L, layout_, objects_.data(), fields.q->data.data(), io.projected.colors, channels_.data());
+  const float* q = fields.q->data.data();
+  if (cfg_.sparse_objects) {
+    const bool fused = cfg_.use_of;  // the fusion backward reads dq: labels with s != 0 keep their own entry
+    build_object_groups(n, L, J, SparseLayout{sem}, objects_.data(), q, io.projected.colors, io.projected.radii,
+                        fused ? assoc_.fused_s() : nullptr, fused ? assoc_.fused_valid() : nullptr, channels_.data(),
+                        groups_);
+    io.channels.num_groups = J;
+    io.channels.group_width = ObjectGroups::kWidth;
+    io.channels.group_ptr = groups_.ptr.data();
+    io.channels.group_id = groups_.id.data();
+    io.channels.group_val = groups_.val.data();
+  } else {
+    object_channels(n, L, layout_, objects_.data(), q, io.projected.colors, channels_.data());
+  }
   if (sem) {
     const ExtraGroup& f = *fields.f;
 #pragma omp parallel for schedule(static)
-    for (int i = 0; i < n; ++i) f.row(i, &channels_[size_t(i) * C + layout_.other()]);
+    for (int i = 0; i < n; ++i) f.row(i, &channels_[size_t(i) * C + other]);
   }
   io.channels.extra = channels_.data();
   io.channels.num_extra = C;
@@ -104,11 +120,18 @@ void HybridMethod::prepare(const train::ViewStep& v, const train::PrepareIO& io)
 void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
   HybridFields fields = HybridFields::bind(v.model, "hybrid");
   const int W = v.view.cam.width, H = v.view.cam.height, C = layout_.total(), u = v.view_index, n = v.model.n;
-  d_channels_.resize(size_t(W) * H * C);
+  const long HW = long(W) * H;
+  d_channels_.resize(size_t(HW) * C);
   parallel_fill(d_channels_, 0.f);
+  const float* rendered = io.out.extra.data();  // [H, W, C] in the object layout
+  if (cfg_.sparse_objects) {
+    render_.resize(size_t(HW) * C);
+    assemble_object_render(HW, layout_, io.out.extra.data(), io.out.groups.data(), render_.data());
+    rendered = render_.data();
+  }
   const auto t0 = std::chrono::steady_clock::now();
   const ObjectLossValues ov =
-      object_losses_(v.view.image, data_.masks[u].labels, io.out.extra.data(), layout_, objects_, d_channels_.data());
+      object_losses_(v.view.image, data_.masks[u].labels, rendered, layout_, objects_, d_channels_.data());
   last_.app = float(ov.app);
   last_.bro = float(ov.bro);
   io.objective.add("app", cfg_.lambda_app, ov.app);
@@ -127,7 +150,7 @@ void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
                                  v.slot == 0);
       if (da && sv.anchors > 0) io.dout.weight_sums = da;
     } else {
-      sv = semantic_.cosine(u, W, H, io.out.extra.data(), C, layout_.other(), d_channels_.data());
+      sv = semantic_.cosine(u, W, H, rendered, C, layout_.other(), d_channels_.data());
     }
   }
   last_.sem = float(sv.loss);
@@ -136,8 +159,20 @@ void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
   const auto t2 = std::chrono::steady_clock::now();
   last_.ms_app = std::chrono::duration<double, std::milli>(t1 - t0).count();
   last_.ms_sem = std::chrono::duration<double, std::milli>(t2 - t1).count();
-  io.dout.extra = d_channels_.data();
-  io.dout.extra_grad_channels = layout_.grad_channels();  // the opacity channels only shape BRO's constant band
+  if (cfg_.sparse_objects) {  // base colour: the sum of the objects' gradients; each group: its object's
+    const SparseLayout sl{layout_.S};
+    d_dense_.resize(size_t(HW) * sl.total());
+    dense_object_grad(HW, layout_, d_channels_.data(), d_dense_.data());
+    io.dout.extra = d_dense_.data();
+    io.dout.extra_grad_channels = sl.grad_channels();
+    io.dout.groups = d_channels_.data() + layout_.color(0);
+    io.dout.group_row = C;
+    io.dout.group_stride = 3;
+    io.dout.group_grad_channels = ObjectGroups::kGradWidth;
+  } else {
+    io.dout.extra = d_channels_.data();
+    io.dout.extra_grad_channels = layout_.grad_channels();  // the opacity channels only shape BRO's constant band
+  }
 }
 
 void HybridMethod::backward(const train::ViewStep& v, const train::BackwardIO& io) {
@@ -145,11 +180,20 @@ void HybridMethod::backward(const train::ViewStep& v, const train::BackwardIO& i
   const int n = v.model.n;
   // Object channels -> dq and dc, added to the RGB path's colour gradient before the renderer's
   // preprocess_backward takes it through SH.
-  object_channels_backward(n, data_.num_labels, layout_, objects_.data(), fields.q->data.data(), io.projected.colors,
-                           io.grads.extra.data(), dq_.data(), io.grads.colors.data());
+  const int L = data_.num_labels;
+  const float* q = fields.q->data.data();
+  if (cfg_.sparse_objects)
+    object_groups_backward(n, L, layout_.J, SparseLayout{layout_.S}, objects_.data(), q, io.projected.colors, groups_,
+                           io.grads.extra.data(), io.grads.group_val.data(), dq_.data(), io.grads.colors.data());
+  else
+    object_channels_backward(n, L, layout_, objects_.data(), q, io.projected.colors, io.grads.extra.data(), dq_.data(),
+                             io.grads.colors.data());
   assoc_.backward(n, fields, dq_.data(), v.slot == 0);
-  if (!cfg_.use_scl && cfg_.lambda_sem > 0)
-    semantic_.add_channel_grads(n, io.grads.extra.data(), layout_.total(), layout_.other(), v.slot == 0);
+  if (!cfg_.use_scl && cfg_.lambda_sem > 0) {
+    const int C = cfg_.sparse_objects ? SparseLayout{layout_.S}.total() : layout_.total();
+    const int o = cfg_.sparse_objects ? SparseLayout::other() : layout_.other();
+    semantic_.add_channel_grads(n, io.grads.extra.data(), C, o, v.slot == 0);
+  }
 }
 
 void HybridMethod::reduce(train::Reducer& reducer) {
@@ -174,7 +218,8 @@ void HybridMethod::after_step(const train::StepEnd& end) {
 void HybridMethod::release() {
   object_losses_.release();
   semantic_.release();
-  for (auto* v : {&dq_, &channels_, &d_channels_, &d_wsum_}) std::vector<float>().swap(*v);
+  for (auto* v : {&dq_, &channels_, &d_channels_, &d_wsum_, &render_, &d_dense_}) std::vector<float>().swap(*v);
+  groups_ = ObjectGroups{};
 }
 
 train::MethodStats HybridMethod::stats() const {

@@ -3,8 +3,9 @@
 //  prepare   Observation Fusion: q = softmax(s(w)/T) (association.h; recomputed from the view logits once per
 //            step, so the gradient reaches them exactly). From the renderer's SH colours c_n of the visible
 //            Gaussians (its preprocess phase), 4 channels per object present in u's mask (or a sample of them,
-//            --objects-per-step), (q_k c, q_k) (object_channels.h), composited in the same
-//            rasterization as the RGB image; for SCL the rasterizer also accumulates a_{n,k} = sum_p M_k alpha T
+//            --objects-per-step), (q_k c, q_k), composited in the same rasterization as the RGB image: as a base
+//            render plus sparse per-object groups (object_groups.h; the default) or 4 dense channels per object
+//            (object_channels.h); for SCL the rasterizer also accumulates a_{n,k} = sum_p M_k alpha T
 //            for every anchor object.
 //  losses    terms "app" (eq. 6) and "bro" (eq. 14) per object (object_losses.h), "sem" (SCL, eqs. 9-10, or the
 //            no-SCL cosine; semantic.h). The trainer adds "rgb" (3DGS photometric loss, weight lambda_rgb).
@@ -24,6 +25,7 @@
 #include "hybrid/association.h"
 #include "hybrid/config.h"
 #include "hybrid/data.h"
+#include "hybrid/object_groups.h"
 #include "hybrid/object_losses.h"
 #include "hybrid/semantic.h"
 #include "train/method.h"
@@ -67,8 +69,11 @@ class HybridMethod final : public train::Method {
   SemanticPass semantic_;
   ObjectLayout layout_;
   std::vector<int> objects_;       // labels scored in this view: present in its mask (all, or a sample)
-  std::vector<float> channels_;    // [N, C] object channels (+ f for the no-SCL ablation)
-  std::vector<float> d_channels_;  // [H, W, C] dL/d the rendered channels
+  std::vector<float> channels_;    // [N, C] object channels, or the base channels (+ f for the no-SCL ablation)
+  ObjectGroups groups_;            // the sparse object groups (sparse_objects)
+  std::vector<float> render_;      // [H, W, C] the object layout assembled from the sparse render
+  std::vector<float> d_channels_;  // [H, W, C] dL/d the object layout's channels
+  std::vector<float> d_dense_;     // [H, W, 4 + S] dL/d the base channels (sparse_objects)
   std::vector<float> dq_;          // [N, L]
   std::vector<float> d_wsum_;      // [N, Jf]
   LastLosses last_;

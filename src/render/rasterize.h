@@ -17,6 +17,9 @@
 // / (1 - alpha_i) for any number of channels. Optional pixel-weight maps M_j give per-Gaussian sums
 // a_{n,j} = sum_p M_j(p) alpha_n(p) T_n(p) (the blending weight a Gaussian receives inside mask j); their
 // gradient enters S and <value, g> as the per-pixel value sum_j dL/da_{n,j} M_j(p).
+// Sparse channel groups (e.g. the hybrid method's object channels, where a Gaussian belongs to one or two of K
+// objects): a Gaussian adds its value rows to its own groups only; composited and differentiated from the same
+// visit lists as the extra channels, at a cost per visit of its entries instead of all G * GW channels.
 // Extra channels (C of them, e.g. the hybrid method's 4 per object) are kept out of the walks, which would
 // read-modify-write C packs of batch state per visit: forward records each batch's visits (Gaussian, weight
 // pack) and then sums w * extra per batch, 12 channels at a time in registers; backward computes every visit's
@@ -57,6 +60,14 @@ struct RasterInputs {
   T background[3] = {0, 0, 0};
   const float* pixel_weights = nullptr;  // [H, W, J] optional per-pixel weight maps M_j
   int num_weights = 0;                   // J
+  // Sparse channel groups: Gaussian i adds group_val[e] (GW values) to group group_id[e] for e in
+  // [group_ptr[i], group_ptr[i + 1]); the other groups get nothing from it. Output [H, W, G * GW].
+  int num_groups = 0;              // G
+  int group_width = 0;             // GW
+  int group_grad_width = 0;        // backward: the first GWg <= GW channels of a group carry gradient
+  const int* group_ptr = nullptr;  // [N + 1]
+  const int* group_id = nullptr;   // [E] in [0, G)
+  const T* group_val = nullptr;    // [E, GW]
 };
 
 template <class T>
@@ -68,6 +79,7 @@ struct RasterOutputs {
   T* final_T = nullptr;      // [H, W] saved for backward
   int32_t* last = nullptr;   // [H, W] saved for backward: tile-local index + 1 of the last accumulated Gaussian
   T* weight_sums = nullptr;  // [N, J] sum_p M_j(p) alpha_n(p) T_n(p) (when num_weights > 0)
+  T* groups = nullptr;       // [H, W, G * GW] (when num_groups > 0)
 };
 
 // Upstream gradients (null = zero) and per-Gaussian results (overwritten).
@@ -78,12 +90,16 @@ struct RasterGrads {
   const T* d_depth = nullptr;        // [H, W]
   const T* d_extra = nullptr;        // [H, W, C]
   const T* d_weight_sums = nullptr;  // [N, J]
-  T* mean2d = nullptr;               // [N, 2] out
-  T* conic = nullptr;                // [N, 3] out (b counted once)
-  T* opacity = nullptr;              // [N] out (w.r.t. opacity after the sigmoid)
-  T* color = nullptr;                // [N, 3] out
-  T* depth = nullptr;                // [N] out (may be null)
-  T* extra = nullptr;                // [N, C] out (may be null)
+  // d groups: channel i < GWg of group g at pixel p is d_groups[p * d_group_row + g * d_group_stride + i]
+  const T* d_groups = nullptr;
+  int d_group_row = 0, d_group_stride = 0;
+  T* mean2d = nullptr;     // [N, 2] out
+  T* conic = nullptr;      // [N, 3] out (b counted once)
+  T* opacity = nullptr;    // [N] out (w.r.t. opacity after the sigmoid)
+  T* color = nullptr;      // [N, 3] out
+  T* depth = nullptr;      // [N] out (may be null)
+  T* extra = nullptr;      // [N, C] out (may be null)
+  T* group_val = nullptr;  // [E, GW] out (channels [GWg, GW) zero; may be null)
 };
 
 // Grow-only, 128-byte-aligned scratch memory viewed as an array of U. The two kernel compilations
@@ -118,11 +134,13 @@ struct RasterWorkspace {
     RasterScratch blast;   // per-batch active / last-contributor masks [2, batches]
   };
   std::vector<PerThread> threads;
-  std::vector<T> records;       // [N, 16] per-Gaussian records built by forward, reused by backward
-  std::vector<T> tile_records;  // [P, 16] records in tile order (forward gathers, backward reuses)
-  std::vector<uint32_t> masks;  // [P] per (tile, Gaussian) entry: bit b = listed in batch b
-  std::vector<T> pair_grad;     // [P, F]
-  std::vector<T> pair_w;        // [P, J] forward weight sums per pair
+  std::vector<T> records;         // [N, 16] per-Gaussian records built by forward, reused by backward
+  std::vector<T> tile_records;    // [P, 16] records in tile order (forward gathers, backward reuses)
+  std::vector<uint32_t> masks;    // [P] per (tile, Gaussian) entry: bit b = listed in batch b
+  std::vector<T> pair_grad;       // [P, F]
+  std::vector<T> pair_w;          // [P, J] forward weight sums per pair
+  std::vector<size_t> group_off;  // [N + 1] backward: start of each Gaussian's group-gradient pair slots
+  std::vector<T> pair_group;      // [sum_i pairs_i * entries_i * GWg] group gradients per pair
 };
 
 template <class T>

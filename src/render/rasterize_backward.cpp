@@ -61,18 +61,55 @@ void extra_grads(const int* vb, const simd::Pack<T>* vw, int cnt, const simd::Pa
   });
 }
 
+// Sparse groups of one batch, backward: dot[v] += sum_e <val_e[0, GWg), g[id_e]> over the entries of the visit's
+// Gaussian, g [G * GWg] the batch's group gradient packs.
+template <class T>
+void group_dots(const int* vk, int cnt, const RasterInputs<T>& in, const simd::Pack<T>* g, simd::Pack<T>* dot) {
+  using P = simd::Pack<T>;
+  const int GW = in.group_width, GWg = in.group_grad_width;
+  for (int v = 0; v < cnt; ++v) {
+    const int gi = vk[v];
+    P d = P{};
+    for (int e = in.group_ptr[gi]; e < in.group_ptr[gi + 1]; ++e) {
+      const P* gs = g + size_t(in.group_id[e]) * GWg;
+      const T* x = in.group_val + size_t(e) * GW;
+      for (int i = 0; i < GWg; ++i) d += x[i] * gs[i];
+    }
+    dot[v] += d;
+  }
+}
+
+// Group gradients of one (tile, Gaussian) pair: o[e', i] = sum over its visits v of hsum(w_v * g_{b_v}[id_e, i])
+// for the Gaussian's entries e = ptr[gi] + e', i < GWg; g_b the group gradient packs of batch b (stride BS from
+// base).
+template <class T>
+void group_grads(const int* vb, const simd::Pack<T>* vw, int cnt, const simd::Pack<T>* base, int BS,
+                 const RasterInputs<T>& in, int gi, T* o) {
+  using P = simd::Pack<T>;
+  const int GWg = in.group_grad_width;
+  for (int e = in.group_ptr[gi]; e < in.group_ptr[gi + 1]; ++e, o += GWg) {
+    const size_t off = size_t(in.group_id[e]) * GWg;
+    for (int i = 0; i < GWg; ++i) {
+      P acc = P{};
+      for (int v = 0; v < cnt; ++v) acc += vw[v] * base[size_t(vb[v]) * BS + off + i];
+      o[i] = simd::hsum<T>(acc);
+    }
+  }
+}
+
 // Backward of one tile, Gaussian-major: the tile's Gaussians are walked back to front (k = n-1 .. 0); each visits
 // the batches its mask names, whose per-pixel state (T, S) lives in per-thread scratch, while its gradient
 // sums stay in registers and are stored once per (tile, Gaussian) pair.
 template <class T, bool kDepth, bool kExtra>
 void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typename RasterWorkspace<T>::PerThread& w,
                    const T* final_T, const int32_t* last, const RasterGrads<T>& g, const T* records, T* tile_records,
-                   const uint32_t* ws_masks, T* pair_grad) {
+                   const uint32_t* ws_masks, T* pair_grad, const size_t* group_off, T* pair_group) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
   using I = typename std::remove_reference<decltype(M{}[0])>::type;
   const int W = bins.width, H = bins.height, C = in.num_extra, XS = in.extra_stride > 0 ? in.extra_stride : C;
   const int F = kNumGrads + C;
+  const int GWg = g.d_groups ? in.group_grad_width : 0, GT = in.num_groups * GWg;  // group gradient channels
   const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
   TileData<T> td;
   if (!load_records(bins, records, tile_records, false, tile, td)) return;
@@ -85,9 +122,9 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
     for (int k = 0; k < n; ++k)
       for (int jj = 0; jj < J; ++jj) DW[size_t(k) * J + jj] = g.d_weight_sums[size_t(bins.tile_gauss[s0 + k]) * J + jj];
   }
-  // per-batch state: [Tc, S, gr, gg, gb, gd, Tbg, GE[C], MW[J]]
+  // per-batch state: [Tc, S, gr, gg, gb, gd, Tbg, GE[C], MW[J], GG[G * GWg]]
   enum { bT, bS, bR, bG, bB, bD, bBg, kBatchFixed };
-  const int BS = kBatchFixed + C + J;
+  const int BS = kBatchFixed + C + J + GT, GO = kBatchFixed + C + J;
   P* bst = w.bstate.template get<P>(size_t(kBatches) * BS);
   M* blast = w.blast.template get<M>(kBatches);
   int kmax[kBatches];
@@ -103,7 +140,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
     P* st = bst + size_t(bt) * BS;
     P Tf = simd::splat(T(1)), gr = P{}, gg = P{}, gb = P{}, ga = P{}, gd = P{};
     M lastp = M{};
-    for (int c = 0; c < C + J; ++c) st[kBatchFixed + c] = P{};
+    for (int c = 0; c < C + J + GT; ++c) st[kBatchFixed + c] = P{};
     for (int l = 0; l < nvalid; ++l) {
       const size_t p = size_t(py) * W + px0 + l;
       Tf[l] = final_T[p];
@@ -118,6 +155,11 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
       if (kDepth && g.d_depth) gd[l] = g.d_depth[p];
       if (kExtra && g.d_extra)
         for (int c = 0; c < C; ++c) st[kBatchFixed + c][l] = g.d_extra[p * XS + c];
+      if (kExtra && GT > 0) {
+        const T* dg = g.d_groups + p * size_t(g.d_group_row);
+        for (int gr = 0; gr < in.num_groups; ++gr)
+          for (int i = 0; i < GWg; ++i) st[GO + gr * GWg + i][l] = dg[size_t(gr) * g.d_group_stride + i];
+      }
       for (int jj = 0; jj < J; ++jj) {
         st[kBatchFixed + C + jj][l] = T(in.pixel_weights[p * J + jj]);
         jmask[bt] |= map_bit(jj, st[kBatchFixed + C + jj][l] != T(0));
@@ -150,8 +192,9 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
       }
     for (int bt = 0; bt < kBatches; ++bt) {
       vcur[bt] = vcnt[bt];
-      if (vcnt[bt] > 0)
-        extra_dots<T>(vk + voff[bt], vcnt[bt], in.extra, C, XS, bst + size_t(bt) * BS + kBatchFixed, vdot + voff[bt]);
+      if (vcnt[bt] == 0) continue;
+      extra_dots<T>(vk + voff[bt], vcnt[bt], in.extra, C, XS, bst + size_t(bt) * BS + kBatchFixed, vdot + voff[bt]);
+      if (GT > 0) group_dots<T>(vk + voff[bt], vcnt[bt], in, bst + size_t(bt) * BS + GO, vdot + voff[bt]);
     }
   }
   int kvb[kBatches];  // this Gaussian's visits with a contribution: batch, masked weight
@@ -234,6 +277,12 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
     if (kExtra) extra_grads<T>(kvb, kvw, nkv, bst + kBatchFixed, BS, C, o + kNumGrads);
     else
       for (int ch = 0; ch < C; ++ch) o[kNumGrads + ch] = T(0);
+    if (GT > 0) {
+      const int gi = bins.tile_gauss[s + k], pr = bins.tile_pair[s + k];
+      const int ne = in.group_ptr[gi + 1] - in.group_ptr[gi];
+      T* og = pair_group + group_off[gi] + size_t(pr - bins.pair_offset[gi]) * ne * GWg;
+      group_grads<T>(kvb, kvw, nkv, bst + GO, BS, in, gi, og);
+    }
   }
 }
 
@@ -245,8 +294,20 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
   ensure_threads(ws);
   const int C = in.num_extra, F = kNumGrads + C, XS = in.extra_stride > 0 ? in.extra_stride : C;
   const bool dep = in.depth != nullptr && g.d_depth != nullptr;
-  const bool ext = C > 0 && g.d_extra != nullptr;
+  const int GWg = g.d_groups ? in.group_grad_width : 0, GW = in.group_width;
+  const bool groups = in.num_groups > 0 && GWg > 0;
+  const bool ext = (C > 0 && g.d_extra != nullptr) || groups;
   if (ws.pair_grad.size() < size_t(bins.num_pairs) * F) ws.pair_grad.resize(size_t(bins.num_pairs) * F);
+  if (groups) {  // each Gaussian's group gradients: one slot of entries x GWg per pair, Gaussian-major
+    ws.group_off.resize(size_t(in.n) + 1);
+    ws.group_off[0] = 0;
+    for (int i = 0; i < in.n; ++i)
+      ws.group_off[i + 1] = ws.group_off[i] + size_t(bins.pair_offset[i + 1] - bins.pair_offset[i]) *
+                                                  size_t(in.group_ptr[i + 1] - in.group_ptr[i]) * GWg;
+    if (ws.pair_group.size() < ws.group_off[in.n]) ws.pair_group.resize(ws.group_off[in.n]);
+  }
+  const size_t* GOF = groups ? ws.group_off.data() : nullptr;
+  T* PGR = groups ? ws.pair_group.data() : nullptr;
   T* pg = ws.pair_grad.data();
   const uint32_t* MK = ws.masks.data();
   const T* R = ws.records.data();
@@ -256,10 +317,10 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
     auto& w = ws.threads[omp_get_thread_num()];
 #pragma omp for schedule(dynamic, 1)
     for (int t = 0; t < bins.num_tiles; ++t) {
-      if (dep && ext) backward_tile<T, true, true>(in, bins, t, w, final_T, last, g, R, TR, MK, pg);
-      else if (dep) backward_tile<T, true, false>(in, bins, t, w, final_T, last, g, R, TR, MK, pg);
-      else if (ext) backward_tile<T, false, true>(in, bins, t, w, final_T, last, g, R, TR, MK, pg);
-      else backward_tile<T, false, false>(in, bins, t, w, final_T, last, g, R, TR, MK, pg);
+      if (dep && ext) backward_tile<T, true, true>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GOF, PGR);
+      else if (dep) backward_tile<T, true, false>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GOF, PGR);
+      else if (ext) backward_tile<T, false, true>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GOF, PGR);
+      else backward_tile<T, false, false>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GOF, PGR);
     }
     // reduce pair slots per Gaussian in a fixed order
 #pragma omp for schedule(static)
@@ -284,6 +345,17 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
       g.color[3 * i + 1] = s[gG];
       g.color[3 * i + 2] = s[gBl];
       if (g.depth) g.depth[i] = s[gZ];
+      if (g.group_val && in.num_groups > 0) {  // entries x GW; pair slots are entries x GWg
+        const int e0 = in.group_ptr[i], ne = in.group_ptr[i + 1] - e0;
+        T* gv = g.group_val + size_t(e0) * GW;
+        for (int c = 0; c < ne * GW; ++c) gv[c] = 0;
+        if (groups)
+          for (int p = bins.pair_offset[i]; p < bins.pair_offset[i + 1]; ++p) {
+            const T* o = PGR + GOF[i] + size_t(p - bins.pair_offset[i]) * ne * GWg;
+            for (int e = 0; e < ne; ++e)
+              for (int c = 0; c < GWg; ++c) gv[size_t(e) * GW + c] += o[e * GWg + c];
+          }
+      }
     }
   }
 }

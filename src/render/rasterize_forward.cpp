@@ -3,9 +3,10 @@
 // alpha >= 1/255 ellipse reaches (build_masks, exact per-row x-intervals). Each tile walks its Gaussians front to
 // back (Gaussian-major) over the batches of their masks that still have a live pixel: alpha = min(kAlphaMax,
 // opacity exp(power)), skipped below kAlphaMin, the pixel stops (without accumulating) when T (1 - alpha) <
-// kTransmittanceMin, else w = alpha T is accumulated into colour / depth / pixel-weight sums. Extra channels are
-// summed afterwards from each batch's recorded visits (composite_extras). Saves final T and the last contributor
-// per pixel for backward; per-pair weight sums are reduced per Gaussian in a fixed order.
+// kTransmittanceMin, else w = alpha T is accumulated into colour / depth / pixel-weight sums. Extra channels and
+// sparse groups are summed afterwards from each batch's recorded visits (composite_extras, composite_groups). Saves
+// final T and the last contributor per pixel for backward; per-pair weight sums are reduced per Gaussian in a fixed
+// order.
 #include "render/raster_isa.h"
 
 #include <omp.h>
@@ -73,6 +74,23 @@ void composite_extras(const int* vk, const simd::Pack<T>* vw, int cnt, const T* 
   });
 }
 
+// Sparse groups of one batch, forward: dst[id_e * GW + i] += w_v val_e[i] for every entry e of every visit's
+// Gaussian, visits in walk order (each group channel sums its contributions in the order of the walk). ptr [N+1],
+// id [E], val [E, GW]; dst [G * GW] packs.
+template <class T>
+void composite_groups(const int* vk, const simd::Pack<T>* vw, int cnt, const RasterInputs<T>& in, simd::Pack<T>* dst) {
+  const int GW = in.group_width;
+  for (int v = 0; v < cnt; ++v) {
+    const int g = vk[v];
+    const simd::Pack<T> wv = vw[v];
+    for (int e = in.group_ptr[g]; e < in.group_ptr[g + 1]; ++e) {
+      simd::Pack<T>* d = dst + size_t(in.group_id[e]) * GW;
+      const T* x = in.group_val + size_t(e) * GW;
+      for (int i = 0; i < GW; ++i) d[i] += wv * x[i];
+    }
+  }
+}
+
 // Batch masks of a tile, masks [n]: bit (row * 2 + half) is set when the Gaussian can reach the 8-pixel batch
 // (half a row) with alpha >= 1/255. For each of the 16 pixel rows the exact x-interval where d^T conic d <= m
 // (the alpha >= 1/255 region, with margin; binning.h) is computed in double, 4 rows per vector.
@@ -133,6 +151,7 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   using M = simd::Mask<T>;
   using I = typename std::remove_reference<decltype(M{}[0])>::type;
   const int W = bins.width, H = bins.height, C = in.num_extra, J = in.num_weights;
+  const int GT = in.num_groups * in.group_width;  // group channels, after the pixel-weight maps in the state
   const int XS = in.extra_stride > 0 ? in.extra_stride : C;
   const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
   TileData<T> td;
@@ -140,9 +159,9 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   const int n = any_g ? td.n : 0;
   uint32_t* masks = ws_masks + bins.tile_start[tile];
   if (any_g) build_masks(bins, tile, td, masks);
-  // per-batch state: [T, R, G, B, D, E[C], MW[J]] + active / last masks
+  // per-batch state: [T, R, G, B, D, E[C], MW[J], GR[G * GW]] + active / last masks
   enum { bT, bR, bG, bB, bD, kBatchFixed };
-  const int BS = kBatchFixed + C + J;
+  const int BS = kBatchFixed + C + J + GT, GO = kBatchFixed + C + J;
   P* bst = w.bstate.template get<P>(size_t(kBatches) * BS);
   M* bact = w.blast.template get<M>(size_t(2) * kBatches);
   M* blast = bact + kBatches;
@@ -230,8 +249,10 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
     const int py = ty0 + bt / kBatchesPerRow, px0 = tx0 + (bt % kBatchesPerRow) * kLanes;
     const int nvalid = std::min(kLanes, W - px0);
     P* st = bst + size_t(bt) * BS;
-    if (kExtra && vcnt[bt] > 0)
-      composite_extras<T>(vk + voff[bt], vw + voff[bt], vcnt[bt], in.extra, C, XS, st + kBatchFixed);
+    if (kExtra && vcnt[bt] > 0) {
+      if (C > 0) composite_extras<T>(vk + voff[bt], vw + voff[bt], vcnt[bt], in.extra, C, XS, st + kBatchFixed);
+      if (GT > 0) composite_groups<T>(vk + voff[bt], vw + voff[bt], vcnt[bt], in, st + GO);
+    }
     for (int l = 0; l < nvalid; ++l) {
       const size_t p = size_t(py) * W + px0 + l;
       const T Tr = st[bT][l];
@@ -244,6 +265,8 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
       if (kDepth) out.depth[p] = st[bD][l];
       if (kExtra)
         for (int c = 0; c < C; ++c) out.extra[p * C + c] = st[kBatchFixed + c][l];
+      if (kExtra)
+        for (int c = 0; c < GT; ++c) out.groups[p * GT + c] = st[GO + c][l];
     }
   }
   if (J > 0 && any_g) {
@@ -264,7 +287,7 @@ template <class T>
 void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws,
                        const RasterOutputs<T>& out) {
   ensure_threads(ws);
-  const bool dep = in.depth != nullptr, ext = in.num_extra > 0;
+  const bool dep = in.depth != nullptr, ext = in.num_extra > 0 || in.num_groups * in.group_width > 0;
   if (ws.masks.size() < size_t(bins.num_pairs)) ws.masks.resize(size_t(bins.num_pairs));
   uint32_t* MK = ws.masks.data();
   if (ws.records.size() < size_t(in.n) * kRecord) ws.records.resize(size_t(in.n) * kRecord);

@@ -99,6 +99,14 @@ template <class T>
 struct ChannelsT {
   const T* extra = nullptr;  // [N, num_extra]
   int num_extra = 0;         // C
+  // Sparse channel groups (rasterize.h): Gaussian i adds group_val[e] to group group_id[e] for e in
+  // [group_ptr[i], group_ptr[i + 1]) and nothing to the other groups; composited into RenderOutputs::groups
+  // [H, W, G * GW] at a cost per Gaussian visit of its own entries.
+  int num_groups = 0;              // G
+  int group_width = 0;             // GW
+  const int* group_ptr = nullptr;  // [N + 1]
+  const int* group_id = nullptr;   // [E] in [0, G)
+  const T* group_val = nullptr;    // [E, GW]
 };
 using Channels = ChannelsT<float>;
 
@@ -119,6 +127,7 @@ struct RenderOutputsT {
   std::vector<T> depth;        // [H, W] (empty when !want_depth)
   std::vector<T> extra;        // [H, W, C] (empty when C = 0)
   std::vector<T> weight_sums;  // [N, J] when pixel weights were given (else empty)
+  std::vector<T> groups;       // [H, W, G * GW] when channel groups were given (else empty)
   int num_visible = 0;         // Gaussians that passed culling
 };
 using RenderOutputs = RenderOutputsT<float>;
@@ -134,6 +143,10 @@ struct OutputGradsT {
   // Only channels [0, extra_grad_channels) of `extra` carry gradient; the others are forward-only (e.g. an
   // opacity render used as a constant) and backward skips them (their input gradient is 0). -1 = all.
   int extra_grad_channels = -1;
+  // Channel groups: the first group_grad_channels of each group carry gradient, read from
+  // groups[p * group_row + g * group_stride + i] (so they may live inside another layout).
+  const T* groups = nullptr;
+  int group_row = 0, group_stride = 0, group_grad_channels = 0;
 };
 using OutputGrads = OutputGradsT<float>;
 
@@ -142,12 +155,13 @@ using OutputGrads = OutputGradsT<float>;
 // them in between (e.g. to `colors` the colour gradient of extra channels it built from projected().colors).
 template <class T>
 struct ProjectedGradsT {
-  std::vector<T> mean2d;   // [N, 2] dL/d(projected centre) in pixels (densification statistic)
-  std::vector<T> conic;    // [N, 3] (b counted once)
-  std::vector<T> depth;    // [N] camera-space depth (zeros when the depth channel was off)
-  std::vector<T> opacity;  // [N] w.r.t. the opacity after the sigmoid
-  std::vector<T> colors;   // [N, 3] w.r.t. projected().colors
-  std::vector<T> extra;    // [N, C] w.r.t. the composited channels (0 for forward-only ones)
+  std::vector<T> mean2d;     // [N, 2] dL/d(projected centre) in pixels (densification statistic)
+  std::vector<T> conic;      // [N, 3] (b counted once)
+  std::vector<T> depth;      // [N] camera-space depth (zeros when the depth channel was off)
+  std::vector<T> opacity;    // [N] w.r.t. the opacity after the sigmoid
+  std::vector<T> colors;     // [N, 3] w.r.t. projected().colors
+  std::vector<T> extra;      // [N, C] w.r.t. the composited channels (0 for forward-only ones)
+  std::vector<T> group_val;  // [E, GW] w.r.t. the channel groups' values (0 for forward-only channels)
 };
 using ProjectedGrads = ProjectedGradsT<float>;
 

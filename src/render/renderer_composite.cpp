@@ -5,6 +5,20 @@
 
 namespace hgs::render {
 
+namespace {
+
+template <class T>
+void set_groups(const ChannelsT<T>& ch, RasterInputs<T>& ri) {
+  if (ch.num_groups <= 0 || ch.group_width <= 0) return;
+  ri.num_groups = ch.num_groups;
+  ri.group_width = ch.group_width;
+  ri.group_ptr = ch.group_ptr;
+  ri.group_id = ch.group_id;
+  ri.group_val = ch.group_val;
+}
+
+}  // namespace
+
 template <class T>
 void RendererT<T>::composite(const ChannelsT<T>& ch, const RenderSettings& s, RenderOutputsT<T>& out) {
   State& st = *st_;
@@ -14,6 +28,10 @@ void RendererT<T>::composite(const ChannelsT<T>& ch, const RenderSettings& s, Re
   if (J < 0 || (J > 0 && !s.pixel_weights))
     fail("render: num_pixel_weights is {} but no pixel_weights array was given", J);
   if (C < 0 || (C > 0 && n > 0 && !ch.extra)) fail("render: num_extra is {} but no extra array was given", C);
+  const int GT = ch.num_groups * ch.group_width;
+  if (ch.num_groups < 0 || ch.group_width < 0 ||
+      (GT > 0 && (!ch.group_ptr || (ch.group_ptr[n] > 0 && (!ch.group_id || !ch.group_val)))))
+    fail("render: {} channel groups of width {} without their entry arrays", ch.num_groups, ch.group_width);
   st.ch = ch;
   st.s = s;
 
@@ -26,6 +44,8 @@ void RendererT<T>::composite(const ChannelsT<T>& ch, const RenderSettings& s, Re
   else out.extra.clear();
   if (J > 0) out.weight_sums.resize(size_t(n) * J);
   else out.weight_sums.clear();
+  if (GT > 0) out.groups.resize(P * GT);
+  else out.groups.clear();
   st.final_T.resize(P);
   st.last.resize(P);
   RasterInputs<T> ri;
@@ -42,7 +62,9 @@ void RendererT<T>::composite(const ChannelsT<T>& ch, const RenderSettings& s, Re
   for (int k = 0; k < 3; ++k) ri.background[k] = s.background[k];
   ri.pixel_weights = J > 0 ? s.pixel_weights : nullptr;
   ri.num_weights = J;
+  set_groups(ch, ri);
   RasterOutputs<T> ro;
+  ro.groups = GT > 0 ? out.groups.data() : nullptr;
   ro.weight_sums = J > 0 ? out.weight_sums.data() : nullptr;
   ro.rgb = out.rgb.data();
   ro.alpha = out.alpha.data();
@@ -70,6 +92,12 @@ void RendererT<T>::composite_backward(const OutputGradsT<T>& dout, ProjectedGrad
   pg.colors.resize(size_t(n) * 3);
   if (C > 0) pg.extra.resize(size_t(n) * C);
   else pg.extra.clear();
+  const int G = st.ch.num_groups, GW = st.ch.group_width;
+  const bool groups = G > 0 && GW > 0;
+  if (groups && (dout.group_grad_channels < 0 || dout.group_grad_channels > GW))
+    fail("render: {} channels of a group carry gradient but groups have {}", dout.group_grad_channels, GW);
+  if (groups) pg.group_val.resize(size_t(st.ch.group_ptr[n]) * GW);
+  else pg.group_val.clear();
 
   RasterInputs<T> ri;
   ri.width = st.W;
@@ -86,7 +114,15 @@ void RendererT<T>::composite_backward(const OutputGradsT<T>& dout, ProjectedGrad
   for (int k = 0; k < 3; ++k) ri.background[k] = st.s.background[k];
   ri.pixel_weights = st.s.num_pixel_weights > 0 ? st.s.pixel_weights : nullptr;
   ri.num_weights = st.s.num_pixel_weights;
+  set_groups(st.ch, ri);
   RasterGrads<T> rg;
+  if (groups && dout.groups && dout.group_grad_channels > 0) {
+    ri.group_grad_width = dout.group_grad_channels;
+    rg.d_groups = dout.groups;
+    rg.d_group_row = dout.group_row;
+    rg.d_group_stride = dout.group_stride;
+  }
+  rg.group_val = groups ? pg.group_val.data() : nullptr;
   rg.d_weight_sums = st.s.num_pixel_weights > 0 ? dout.weight_sums : nullptr;
   rg.d_rgb = dout.rgb;
   rg.d_alpha = dout.alpha;

@@ -1,0 +1,157 @@
+// Object channels as base + sparse groups (object_groups.h has the derivation): building the entries, assembling
+// the renders into the object layout, and the backward to dq and dc.
+#include "hybrid/object_groups.h"
+
+#include <omp.h>
+
+namespace hgs::hybrid {
+
+namespace {
+
+// Does Gaussian i get an entry for object j (label k)?
+inline bool has_entry(const float* qi, float b, const float* si, bool fused, int k) {
+  return qi[k] != b || (fused && si[k] != 0.f);
+}
+
+}  // namespace
+
+void build_object_groups(int n, int L, int J, const SparseLayout& sl, const int* objs, const float* q,
+                         const float* color, const int* radii, const float* s, const uint8_t* valid, float* dense,
+                         ObjectGroups& g) {
+  const int C = sl.total();
+  g.count.resize(n);
+  g.ptr.resize(size_t(n) + 1);
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i) {
+    const float* qi = q + size_t(i) * L;
+    const float* ci = color + size_t(i) * 3;
+    const float b = base_association(qi, L);
+    float* d = dense + size_t(i) * C;
+    d[0] = b * ci[0];
+    d[1] = b * ci[1];
+    d[2] = b * ci[2];
+    d[sl.base_opacity()] = b;
+    int cnt = 0;
+    if (radii[i] > 0) {
+      const bool fused = s && valid[i];
+      const float* si = fused ? s + size_t(i) * L : nullptr;
+      for (int j = 0; j < J; ++j) cnt += has_entry(qi, b, si, fused, objs[j]);
+    }
+    g.count[i] = cnt;
+  }
+  g.ptr[0] = 0;
+  for (int i = 0; i < n; ++i) g.ptr[i + 1] = g.ptr[i] + g.count[i];
+  const size_t E = size_t(g.ptr[n]);
+  g.id.resize(E);
+  g.val.resize(E * ObjectGroups::kWidth);
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i) {
+    if (g.count[i] == 0) continue;
+    const float* qi = q + size_t(i) * L;
+    const float* ci = color + size_t(i) * 3;
+    const float b = base_association(qi, L);
+    const bool fused = s && valid[i];
+    const float* si = fused ? s + size_t(i) * L : nullptr;
+    int e = g.ptr[i];
+    for (int j = 0; j < J; ++j) {
+      const int k = objs[j];
+      if (!has_entry(qi, b, si, fused, k)) continue;
+      const float dl = qi[k] - b;
+      g.id[e] = j;
+      float* v = &g.val[size_t(e) * ObjectGroups::kWidth];
+      v[0] = dl * ci[0];
+      v[1] = dl * ci[1];
+      v[2] = dl * ci[2];
+      v[3] = dl;
+      ++e;
+    }
+  }
+}
+
+void assemble_object_render(long hw, const ObjectLayout& lay, const float* dense, const float* groups, float* out) {
+  const int C = lay.total(), J = lay.J, S = lay.S;
+  const SparseLayout sl{S};
+  const int CD = sl.total();
+#pragma omp parallel for schedule(static)
+  for (long p = 0; p < hw; ++p) {
+    const float* d = dense + size_t(p) * CD;
+    const float* gr = groups + size_t(p) * 4 * J;
+    float* o = out + size_t(p) * C;
+    const float bop = d[sl.base_opacity()];
+    for (int j = 0; j < J; ++j) {
+      for (int c = 0; c < 3; ++c) o[lay.color(j) + c] = d[c] + gr[4 * j + c];
+      o[lay.opacity(j)] = bop + gr[4 * j + 3];
+    }
+    for (int c = 0; c < S; ++c) o[lay.other() + c] = d[sl.other() + c];
+    for (int c = 0; c < 3; ++c) o[lay.base_color() + c] = d[c];
+    o[lay.base_opacity()] = bop;
+  }
+}
+
+void dense_object_grad(long hw, const ObjectLayout& lay, const float* d_out, float* d_dense) {
+  const int C = lay.total(), J = lay.J, S = lay.S;
+  const SparseLayout sl{S};
+  const int CD = sl.total();
+#pragma omp parallel for schedule(static)
+  for (long p = 0; p < hw; ++p) {
+    const float* g = d_out + size_t(p) * C;
+    float* d = d_dense + size_t(p) * CD;
+    float s0 = 0, s1 = 0, s2 = 0;
+    for (int j = 0; j < J; ++j) {
+      s0 += g[lay.color(j)];
+      s1 += g[lay.color(j) + 1];
+      s2 += g[lay.color(j) + 2];
+    }
+    d[0] = s0;
+    d[1] = s1;
+    d[2] = s2;
+    for (int c = 0; c < S; ++c) d[sl.other() + c] = g[lay.other() + c];
+    d[sl.base_opacity()] = 0.f;
+  }
+}
+
+void object_groups_backward(int n, int L, int J, const SparseLayout& sl, const int* objs, const float* q,
+                            const float* color, const ObjectGroups& g, const float* grad_dense,
+                            const float* grad_groups, float* dq, float* dcolor) {
+  const int C = sl.total();
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i) {
+    const float* qi = q + size_t(i) * L;
+    const float* ci = color + size_t(i) * 3;
+    const float* gb = grad_dense + size_t(i) * C;
+    const float b = base_association(qi, L);
+    float* dc = dcolor + size_t(i) * 3;
+    float* dqi = dq + size_t(i) * L;
+    dc[0] += b * gb[0];
+    dc[1] += b * gb[1];
+    dc[2] += b * gb[2];
+    float rest = ci[0] * gb[0] + ci[1] * gb[1] + ci[2] * gb[2];  // sum_k dL/dq_k over the present labels
+    uint64_t entry = 0;                                          // objects with an entry (bit j, j < 64)
+    bool many = false;
+    for (int e = g.ptr[i]; e < g.ptr[i + 1]; ++e) {
+      const int j = g.id[e];
+      const float* ge = grad_groups + size_t(e) * ObjectGroups::kWidth;
+      const float dl = qi[objs[j]] - b;
+      dc[0] += dl * ge[0];
+      dc[1] += dl * ge[1];
+      dc[2] += dl * ge[2];
+      const float dqe = ci[0] * ge[0] + ci[1] * ge[1] + ci[2] * ge[2];
+      dqi[objs[j]] += dqe;
+      rest -= dqe;
+      if (j < 64) entry |= uint64_t(1) << j;
+      else many = true;
+    }
+    // The labels without an entry (all at q = b_n): their summed gradient goes to the first of them.
+    for (int j = 0; j < J; ++j) {
+      bool has = j < 64 ? ((entry >> j) & 1) != 0 : false;
+      if (many && j >= 64)
+        for (int e = g.ptr[i]; e < g.ptr[i + 1] && !has; ++e) has = g.id[e] == j;
+      if (!has) {
+        dqi[objs[j]] += rest;
+        break;
+      }
+    }
+  }
+}
+
+}  // namespace hgs::hybrid

@@ -1,0 +1,191 @@
+// Sparse channel groups (ChannelsT::num_groups, rasterize.h): a Gaussian adds its value rows to its own groups
+// only. Checked against the dense extra channels they stand for (the dense path has its own brute-force and
+// finite-difference tests): a scene whose Gaussians have 0 to 3 entries in G groups renders the same groups as the
+// dense [N, G * GW] channels with zeros elsewhere, and its backward gives the same group-value gradients (the
+// gradient-free tail of each group zero) and the same gradients of the Gaussians, in double and float, with the
+// upstream group gradients read through a row and group stride. Finite differences of the whole chain in double
+// through the group values and the Gaussians' parameters.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+
+#include "fd_check.h"
+#include "render/renderer.h"
+#include "render_ref.h"
+
+namespace hgs::render::test {
+namespace {
+
+using namespace hgs::test;
+
+constexpr int kG = 5, kGW = 4, kGWg = 3;  // groups, channels per group, channels with gradient
+
+// Entries of every Gaussian: 0..3 distinct groups in ascending order, values N(0, 1).
+struct Groups {
+  std::vector<int> ptr{0}, id;
+  std::vector<double> val;
+  explicit Groups(int n, uint32_t seed) {
+    std::mt19937 rng(seed);
+    std::uniform_int_distribution<int> cnt(0, 3);
+    std::normal_distribution<double> N01(0, 1);
+    for (int i = 0; i < n; ++i) {
+      std::vector<int> g(kG);
+      for (int k = 0; k < kG; ++k) g[k] = k;
+      std::shuffle(g.begin(), g.end(), rng);
+      g.resize(cnt(rng));
+      std::sort(g.begin(), g.end());
+      for (int k : g) {
+        id.push_back(k);
+        for (int c = 0; c < kGW; ++c) val.push_back(N01(rng));
+      }
+      ptr.push_back(int(id.size()));
+    }
+  }
+  std::vector<double> dense(int n) const {  // [N, G * GW]
+    std::vector<double> d(size_t(n) * kG * kGW, 0.0);
+    for (int i = 0; i < n; ++i)
+      for (int e = ptr[i]; e < ptr[i + 1]; ++e)
+        for (int c = 0; c < kGW; ++c) d[(size_t(i) * kG + id[e]) * kGW + c] = val[size_t(e) * kGW + c];
+    return d;
+  }
+};
+
+template <class T>
+std::vector<T> conv(const std::vector<double>& v) {
+  return std::vector<T>(v.begin(), v.end());
+}
+
+template <class T>
+double max_abs_diff(const std::vector<T>& a, const std::vector<T>& b) {
+  EXPECT_EQ(a.size(), b.size());
+  double m = 0;
+  for (size_t i = 0; i < std::min(a.size(), b.size()); ++i) m = std::max(m, std::abs(double(a[i]) - double(b[i])));
+  return m;
+}
+
+template <class T>
+double max_abs(const std::vector<T>& a) {
+  double m = 0;
+  for (T v : a) m = std::max(m, std::abs(double(v)));
+  return m;
+}
+
+// Renders the scene once with the groups and once with the equivalent dense channels, backward with the same
+// upstream gradients (the groups' read from a strided layout), and compares.
+template <class T>
+void check_against_dense(double tol) {
+  Scene s = random_scene(400, 64, 48, 91, 0.9, 0);
+  const Groups gr(s.n, 17);
+  const std::vector<T> val = conv<T>(gr.val), dense = conv<T>(gr.dense(s.n));
+  const size_t P = size_t(s.cam.width) * s.cam.height;
+  std::mt19937 rng(3);
+  const std::vector<T> wr = conv<T>(random_weights(3 * P, rng)), wa = conv<T>(random_weights(P, rng));
+  // Upstream group gradients: group g, channel i at [p * 23 + g * 4 + i + 1] (a wider layout); the dense
+  // equivalent has them at [p, g * 4 + i] and 0 in the gradient-free channel.
+  const int row = 23, gstride = 4;
+  const std::vector<T> wide = conv<T>(random_weights(P * row, rng));
+  std::vector<T> wd(P * kG * kGW, T(0));
+  for (size_t p = 0; p < P; ++p)
+    for (int g = 0; g < kG; ++g)
+      for (int i = 0; i < kGWg; ++i) wd[(p * kG + g) * kGW + i] = wide[p * row + g * gstride + i + 1];
+
+  std::vector<std::vector<T>> store;
+  RendererT<T> rs, rd;
+  RenderOutputsT<T> os, od;
+  ProjectedGradsT<T> ps, pd;
+  rs.preprocess(s.cam, s.inputs<T>(store));
+  rd.preprocess(s.cam, s.inputs<T>(store));
+  ChannelsT<T> cs;
+  cs.num_groups = kG;
+  cs.group_width = kGW;
+  cs.group_ptr = gr.ptr.data();
+  cs.group_id = gr.id.data();
+  cs.group_val = val.data();
+  rs.composite(cs, s.settings, os);
+  rd.composite(ChannelsT<T>{dense.data(), kG * kGW}, s.settings, od);
+  EXPECT_LE(max_abs_diff(os.groups, od.extra), tol * max_abs(od.extra));
+  EXPECT_GT(max_abs(os.groups), 0.1);  // the groups were rendered
+  EXPECT_EQ(os.rgb, od.rgb);
+  EXPECT_EQ(os.alpha, od.alpha);
+
+  OutputGradsT<T> ds, dd;
+  ds.rgb = dd.rgb = wr.data();
+  ds.alpha = dd.alpha = wa.data();
+  ds.groups = wide.data() + 1;
+  ds.group_row = row;
+  ds.group_stride = gstride;
+  ds.group_grad_channels = kGWg;
+  dd.extra = wd.data();
+  rs.composite_backward(ds, ps);
+  rd.composite_backward(dd, pd);
+  // Group-value gradients against the dense channels' at the entries; the gradient-free channel is 0.
+  ASSERT_EQ(ps.group_val.size(), val.size());
+  double worst = 0, scale = max_abs(pd.extra);
+  for (int i = 0; i < s.n; ++i)
+    for (int e = gr.ptr[i]; e < gr.ptr[i + 1]; ++e)
+      for (int c = 0; c < kGW; ++c) {
+        const double a = ps.group_val[size_t(e) * kGW + c];
+        if (c >= kGWg) EXPECT_EQ(a, 0.0);
+        else worst = std::max(worst, std::abs(a - double(pd.extra[(size_t(i) * kG + gr.id[e]) * kGW + c])));
+      }
+  EXPECT_LE(worst, tol * scale);
+  EXPECT_GT(scale, 0.1);
+  for (auto [a, b] : {std::pair{&ps.mean2d, &pd.mean2d},
+                      {&ps.conic, &pd.conic},
+                      {&ps.opacity, &pd.opacity},
+                      {&ps.colors, &pd.colors},
+                      {&ps.depth, &pd.depth}})
+    EXPECT_LE(max_abs_diff(*a, *b), tol * (max_abs(*b) + 1e-30));
+}
+
+TEST(RenderGroups, MatchDenseChannelsDouble) { check_against_dense<double>(1e-12); }
+TEST(RenderGroups, MatchDenseChannelsFloat) { check_against_dense<float>(2e-5); }
+
+// Finite differences (double) of L = <w_rgb, rgb> + <w_groups, groups> with respect to the group values, the
+// means and the opacity logits, through preprocess, composite and both backward phases.
+TEST(RenderGroups, FiniteDifferences) {
+  SingleThread one_thread;
+  Scene s = random_scene(60, 40, 36, 57, 0.9, 0);
+  Groups gr(s.n, 5);
+  const size_t P = size_t(s.cam.width) * s.cam.height;
+  std::mt19937 rng(11);
+  const std::vector<double> wr = random_weights(3 * P, rng), wg = random_weights(P * kG * kGW, rng);
+  RendererT<double> r;
+  RenderOutputsT<double> out;
+  std::vector<std::vector<double>> store;
+  auto run = [&]() {
+    r.preprocess(s.cam, s.inputs<double>(store));
+    ChannelsT<double> ch;
+    ch.num_groups = kG;
+    ch.group_width = kGW;
+    ch.group_ptr = gr.ptr.data();
+    ch.group_id = gr.id.data();
+    ch.group_val = gr.val.data();
+    r.composite(ch, s.settings, out);
+    Eval e;
+    e.loss = dot(wr, out.rgb) + dot(wg, out.groups);
+    e.signature = ref_render(s).signature;
+    return e;
+  };
+  run();
+  OutputGradsT<double> d;
+  d.rgb = wr.data();
+  d.groups = wg.data();
+  d.group_row = kG * kGW;
+  d.group_stride = kGW;
+  d.group_grad_channels = kGW;  // every channel differentiated here
+  ProjectedGradsT<double> pg;
+  r.composite_backward(d, pg);
+  GaussianGradsT<double> g;
+  r.preprocess_backward(pg, g);
+  const std::vector<double> dval = pg.group_val;
+  const FdStats sv = fd_check("group values", gr.val, all_indices(gr.val.size()), dval, run);
+  EXPECT_GT(sv.nonzero, 20);
+  fd_check("group mean", s.mean, all_indices(s.mean.size()), g.mean, run);
+  fd_check("group opacity_logit", s.opacity_logit, all_indices(s.opacity_logit.size()), g.opacity_logit, run);
+}
+
+}  // namespace
+}  // namespace hgs::render::test
