@@ -7,8 +7,9 @@
 // hybrid/config.h). Every timing runs at each thread count of HGS_BENCH_THREADS (bench_threads.h; default 1, 2).
 // Both steps report the mean time of each part of the step as counters (ms_forward, ms_method_loss, ...; the
 // hybrid step also ms_method_loss_objects / _semantic). Also times the parts of a hybrid step separately
-// (fusion, object channels, SCL pooling) for profiling, and measures the peak memory of a 300k-Gaussian hybrid
-// step (BM_HybridStepMemory300k, run alone; bench_scale has the full-resolution cases).
+// (fusion, object channels, SCL pooling, the object losses with and without boxes) for profiling, and measures
+// the peak memory of a 300k-Gaussian hybrid step (BM_HybridStepMemory300k, run alone; bench_scale has the
+// full-resolution cases).
 //   build/bench_hybrid --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
 #include <benchmark/benchmark.h>
 
@@ -22,6 +23,7 @@
 #include "hybrid/fusion.h"
 #include "hybrid/method.h"
 #include "hybrid/object_channels.h"
+#include "hybrid/object_losses.h"
 #include "hybrid/scl.h"
 #include "model/gaussian_model.h"
 #include "model/render_inputs.h"
@@ -222,8 +224,51 @@ void BM_ObjectSsim(benchmark::State& st) {
   }
 }
 
+// Eqs. 6 and 14 for the 9 objects of view 0 (hybrid/object_losses.h) on a real composite of the object channels
+// with the base channels (q fused from the bench masks, the renderer's SH colours), with boxes (arg 1) or every
+// object over the whole image (arg 0); both give the same values and gradients.
+void BM_ObjectLosses(benchmark::State& st) {
+  const bench::OmpThreads threads(st, 1);
+  auto& s = setup();
+  const int L = kK + 1;
+  hybrid::ObservationTable tab;
+  hybrid::observe(s.model.mean.data(), kN, s.data.masks, tab);
+  std::vector<float> w(kViews, 1.f / kViews), q(size_t(kN) * L), sbuf(q.size());
+  std::vector<uint8_t> valid(kN);
+  hybrid::fuse(tab, w.data(), hybrid::FusionParams{L, 0.1, 1e-6}, q.data(), sbuf.data(), valid.data());
+  const hybrid::ObjectLayout lay{L, 0, true};
+  std::vector<int> objs(L);
+  for (int l = 0; l < L; ++l) objs[l] = l;
+  render::GaussianRenderer r;
+  const render::GaussianInputs in = render_inputs(s.model);
+  r.preprocess(s.views[0].cam, in);
+  std::vector<float> ch(size_t(kN) * lay.total());
+  hybrid::object_channels(kN, L, lay, objs.data(), q.data(), r.projected().colors, ch.data());
+  render::RenderSettings rs;
+  rs.want_depth = false;
+  render::RenderOutputs out;
+  render::Channels channels;
+  channels.extra = ch.data();
+  channels.num_extra = lay.total();
+  r.composite(channels, rs, out);
+  hybrid::ObjectLosses losses(hybrid::HybridConfig{}, {.boxes = st.range(0) != 0});
+  std::vector<float> d(out.extra.size());
+  for (auto _ : st) {
+    st.PauseTiming();
+    std::fill(d.begin(), d.end(), 0.f);
+    st.ResumeTiming();
+    benchmark::DoNotOptimize(
+        losses(s.views[0].image, s.data.masks[0].labels, out.extra.data(), lay, objs, d.data()).app);
+  }
+}
+
 }  // namespace
 
+BENCHMARK(BM_ObjectLosses)
+    ->ArgNames({"boxes", "threads"})
+    ->ArgsProduct({{0, 1}, bench::thread_counts()})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 BENCHMARK(BM_RenderObjects)
     ->ArgNames({"objects", "threads"})
     ->ArgsProduct({{0, 1}, bench::thread_counts()})

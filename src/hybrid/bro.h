@@ -53,6 +53,14 @@ template <class T>
 T bro_loss(const T* pred, const T* gt, int cstride, int C, const float* B, int H, int W, T eps, T* grad, T scale,
            double band_total = -1);
 
+// Eq. 14 pixel by pixel, for scoring parts of an image (object_losses.cpp), on contiguous C-channel images.
+// Each difference is charged to its first pixel p (the x pair (p, p + 1), the y pair (p, p + W)):
+// wsum [H, W] receives W^x(p) + W^y(p) and num [H, W] sum_c W^x(p) |r^x_c| + W^y(p) |r^y_c| (both overwritten), so
+// L = sum num / (C sum wsum + eps); unit [H, W, C] (overwritten) receives d(sum num)/dpred, so that eq. 14's
+// gradient is unit / (C sum wsum + eps). pred, gt: [H, W, C]; B: [H, W].
+template <class T>
+void bro_parts(const T* pred, const T* gt, int C, const float* B, int H, int W, double* wsum, double* num, T* unit);
+
 // sum_d ||W^d||_1 of eq. 14 for the band B [H, W] (at most about 2 H W).
 double band_weight_total(const float* B, int H, int W);
 

@@ -1,12 +1,46 @@
+// Eqs. 6 and 14 for the J objects of one view. Without boxes (or without the base render): every object over the
+// whole image, one object per task. With boxes (the exactness argument is in object_losses.h):
+//   1. one pass over the interleaved render finds each object's box D_k of pixels that differ from the base
+//      render (or carry its label) and copies the base render to planar images;
+//   2. tasks, largest first: the base pair's eq. 6 and eq. 14 over the image, each small object's terms on its
+//      crop Q_k (kept inside R_k), each large object over the whole image;
+//   3. per object, the global scalars (means, eq. 14's band total and scale, the projection coefficient) from
+//      the base pair's sums outside R_k plus the object's inside it, and its gradient inside R_k completed;
+//   4. the gradients back to the interleaved layout: own inside R_k, the base pair's combination outside.
 #include "hybrid/object_losses.h"
 
 #include <omp.h>
 
 #include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstdint>
 
 #include "hybrid/bro.h"
+#include "train/ssim.h"
 
 namespace hgs::hybrid {
+namespace {
+
+constexpr int kSsimRadius = 5;  // the SSIM window is 11 x 11
+
+// dep of object_losses.h: the SSIM gradient reads radius 10, eq. 14's differences its band's radius plus one.
+int dependency_radius(const HybridConfig& cfg) { return std::max(2 * kSsimRadius, cfg.bro_kernel / 2 + 1); }
+
+inline uint32_t bits(float v) { return std::bit_cast<uint32_t>(v); }
+
+// Eq. 6's gradient of one value: the L1 sign term (a = (1 - lambda) / n, 0 at a tie) plus b = -lambda times
+// SSIM's gradient, as train::PhotometricLoss, then times s_app.
+inline float app_grad(float d, float a, float b, float gs, float s_app) {
+  return ((d > 0 ? a : (d < 0 ? -a : 0.f)) + b * gs) * s_app;
+}
+
+}  // namespace
+
+PixelBox PixelBox::grown(int r, int W, int H) const {
+  if (empty()) return {};
+  return {std::max(0, x0 - r), std::max(0, y0 - r), std::min(W, x1 + r), std::min(H, y1 + r)};
+}
 
 std::vector<int> sample_objects(const std::vector<int>& present, int m, std::mt19937_64& rng) {
   const int J = static_cast<int>(present.size());
@@ -25,14 +59,61 @@ std::vector<int> sample_objects(const std::vector<int>& present, int m, std::mt1
 }
 
 void ObjectLosses::release() {
-  for (auto* v : {&pred_, &grad_, &opac_}) std::vector<float>().swap(*v);
+  for (auto* v : {&pred_, &grad_, &opac_, &base_pred_, &base_app_, &base_unit_, &base_opac_, &zeros_})
+    std::vector<float>().swap(*v);
+  std::vector<double>().swap(base_terms_);
+  std::vector<Object>().swap(obj_);
+  grads_ = ObjectGradients{};
 }
 
 ObjectLossValues ObjectLosses::operator()(const Image& image, const LabelMap& lab, const float* extra,
                                           const ObjectLayout& lay, const std::vector<int>& objs, float* d_extra) {
+  const size_t threads = size_t(std::max(1, omp_get_max_threads()));
+  if (scratch_.size() < threads) scratch_.resize(threads, Scratch(cfg_.lambda_dssim));
+  if (lay.base && opt_.boxes && !objs.empty()) return box_path(image, lab, extra, lay, objs, d_extra);
+  return full_path(image, lab, extra, lay, objs, d_extra);
+}
+
+// Object k over the whole image. pred [H, W, 3], opac [H, W] -> grad [H, W, 3] (overwritten) = d(lambda_app app
+// + lambda_bro bro) / J; app and bro its eq. 6 and eq. 14 (the latter as optimised, times the scale rule).
+void ObjectLosses::score_full(Scratch& w, const Image& image, const LabelMap& lab, int k, int J, const float* pred,
+                              const float* opac, float* grad, double& app, double& bro) {
+  const int W = image.width, H = image.height;
+  const size_t HW = size_t(W) * H;
+  w.gt.resize(HW * 3);
+  w.mask.resize(HW);
+  w.band.resize(HW);
+  for (size_t p = 0; p < HW; ++p) {
+    const float m = lab.v[p] == k ? 1.f : 0.f;
+    w.mask[p] = m;
+    for (int c = 0; c < 3; ++c) w.gt[p * 3 + c] = image.px[p * 3 + c] * m;
+  }
+  train::LossValues lv = w.loss(pred, w.gt.data(), H, W, grad);
+  app = lv.total;
+  bro = 0;
+  const float s_app = cfg_.lambda_app / J;
+  for (size_t i = 0; i < HW * 3; ++i) grad[i] *= s_app;
+  if (!(cfg_.use_bro && cfg_.lambda_bro > 0)) return;
+  // B is built from the rendered opacity but treated as a constant: no gradient through the morphology.
+  boundary_band(opac, w.mask.data(), H, W, cfg_.bro_kernel, w.band.data(), w.morph);
+  const double band_total = band_weight_total(w.band.data(), H, W);
+  const float f = cfg_.bro_image_norm ? float(band_total / (2.0 * HW)) : 1.f;
+  const float s_bro = f * cfg_.lambda_bro / J;
+  if (!cfg_.bro_scale_invariant) {  // eq. 14's own gradient
+    bro = bro_loss(pred, w.gt.data(), 3, 3, w.band.data(), H, W, cfg_.bro_eps, grad, s_bro, band_total);
+  } else {  // the same value; its gradient without the component that scales the whole render (bro.h)
+    w.bgrad.assign(HW * 3, 0.f);
+    bro = bro_loss(pred, w.gt.data(), 3, 3, w.band.data(), H, W, cfg_.bro_eps, w.bgrad.data(), s_bro, band_total);
+    remove_scale_component(pred, HW * 3, w.bgrad.data());
+    for (size_t i = 0; i < HW * 3; ++i) grad[i] += w.bgrad[i];
+  }
+  bro *= f;  // the term as optimised
+}
+
+ObjectLossValues ObjectLosses::full_path(const Image& image, const LabelMap& lab, const float* extra,
+                                         const ObjectLayout& lay, const std::vector<int>& objs, float* d_extra) {
   const int W = image.width, H = image.height, J = static_cast<int>(objs.size()), C = lay.total();
   const size_t HW = size_t(W) * H;
-  const bool bro_on = cfg_.use_bro && cfg_.lambda_bro > 0;
   app_.assign(J, 0.0);
   bro_.assign(J, 0.0);
   // Object images to planar [J][H, W, 3] (+ opacities [J][H, W]) in one pass over the interleaved render.
@@ -47,57 +128,396 @@ ObjectLossValues ObjectLosses::operator()(const Image& image, const LabelMap& la
       opac_[size_t(j) * HW + p] = e[lay.opacity(j)];
     }
   }
-  const size_t threads = size_t(std::max(1, omp_get_max_threads()));
-  if (scratch_.size() < threads) scratch_.resize(threads, Scratch(cfg_.lambda_dssim));
 #pragma omp parallel for schedule(dynamic, 1)
-  for (int j = 0; j < J; ++j) {
-    Scratch& w = scratch_[omp_get_thread_num()];
-    w.gt.resize(HW * 3);
-    w.mask.resize(HW);
-    w.band.resize(HW);
-    const float* pred = &pred_[size_t(j) * HW * 3];
-    float* grad = &grad_[size_t(j) * HW * 3];
-    const int k = objs[j];
-    for (size_t p = 0; p < HW; ++p) {
-      const float m = lab.v[p] == k ? 1.f : 0.f;
-      w.mask[p] = m;
-      for (int c = 0; c < 3; ++c) w.gt[p * 3 + c] = image.px[p * 3 + c] * m;
-    }
-    train::LossValues lv = w.loss(pred, w.gt.data(), H, W, grad);
-    app_[j] = lv.total;
-    const float s_app = cfg_.lambda_app / J;
-    for (size_t i = 0; i < HW * 3; ++i) grad[i] *= s_app;
-    if (bro_on) {
-      // B is built from the rendered opacity but treated as a constant: no gradient through the morphology.
-      boundary_band(&opac_[size_t(j) * HW], w.mask.data(), H, W, cfg_.bro_kernel, w.band.data(), w.morph);
-      const double band_total = band_weight_total(w.band.data(), H, W);
-      const float f = cfg_.bro_image_norm ? float(band_total / (2.0 * HW)) : 1.f;
-      const float s_bro = f * cfg_.lambda_bro / J;
-      if (!cfg_.bro_scale_invariant) {  // eq. 14's own gradient
-        bro_[j] = bro_loss(pred, w.gt.data(), 3, 3, w.band.data(), H, W, cfg_.bro_eps, grad, s_bro, band_total);
-      } else {  // the same value; its gradient without the component that scales the whole render (bro.h)
-        w.bgrad.assign(HW * 3, 0.f);
-        bro_[j] =
-            bro_loss(pred, w.gt.data(), 3, 3, w.band.data(), H, W, cfg_.bro_eps, w.bgrad.data(), s_bro, band_total);
-        remove_scale_component(pred, HW * 3, w.bgrad.data());
-        for (size_t i = 0; i < HW * 3; ++i) grad[i] += w.bgrad[i];
-      }
-      bro_[j] *= f;  // the term as optimised
-    }
-  }
+  for (int j = 0; j < J; ++j)
+    score_full(scratch_[omp_get_thread_num()], image, lab, objs[j], J, &pred_[size_t(j) * HW * 3],
+               &opac_[size_t(j) * HW], &grad_[size_t(j) * HW * 3], app_[j], bro_[j]);
   // Gradients back to the interleaved layout (the colour channels of a pixel are contiguous).
+  if (d_extra) {
 #pragma omp parallel for schedule(static)
-  for (long p = 0; p < long(HW); ++p) {
-    float* d = &d_extra[size_t(p) * C];
-    for (int j = 0; j < J; ++j)
-      for (int c = 0; c < 3; ++c) d[lay.color(j) + c] += grad_[(size_t(j) * HW + p) * 3 + c];
+    for (long p = 0; p < long(HW); ++p) {
+      float* d = &d_extra[size_t(p) * C];
+      for (int j = 0; j < J; ++j)
+        for (int c = 0; c < 3; ++c) d[lay.color(j) + c] += grad_[(size_t(j) * HW + p) * 3 + c];
+    }
   }
+  grads_ = ObjectGradients{};
+  grads_.app_scale = J ? cfg_.lambda_app / J : 0.f;
+  for (int j = 0; j < J; ++j) {
+    grads_.box.push_back({0, 0, W, H});
+    grads_.own.push_back(&grad_[size_t(j) * HW * 3]);
+  }
+  grads_.bro_scale.assign(J, 0.f);
+  grads_.proj.assign(J, 0.f);
   ObjectLossValues v;
   for (int j = 0; j < J; ++j) {
     v.app += app_[j];
     v.bro += bro_[j];
   }
   if (J) v.app /= J, v.bro /= J;
+  return v;
+}
+
+// Step 1: each object's box D_k (rows of differing columns, then their hull), R_k and Q_k; the base render to
+// base_pred_ [H, W, 3] and base_opac_ [H, W].
+void ObjectLosses::find_boxes(const LabelMap& lab, const float* extra, const ObjectLayout& lay,
+                              const std::vector<int>& objs) {
+  const int W = lab.width, H = lab.height, J = static_cast<int>(objs.size()), C = lay.total();
+  const size_t HW = size_t(W) * H;
+  std::vector<int> of_label(*std::max_element(objs.begin(), objs.end()) + 1, -1);  // label -> j
+  for (int j = 0; j < J; ++j) of_label[objs[j]] = j;
+  row_lo_.assign(size_t(J) * H, W);
+  row_hi_.assign(size_t(J) * H, -1);
+  base_pred_.resize(HW * 3);
+  base_opac_.resize(HW);
+#pragma omp parallel for schedule(static)
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const size_t p = size_t(y) * W + x;
+      const float* e = extra + p * C;
+      const float* b = e + lay.base_color();
+      for (int c = 0; c < 3; ++c) base_pred_[p * 3 + c] = b[c];
+      base_opac_[p] = e[lay.base_opacity()];
+      const uint32_t b0 = bits(b[0]), b1 = bits(b[1]), b2 = bits(b[2]), b3 = bits(e[lay.base_opacity()]);
+      const int l = lab.v[p];
+      const int jl = l < int(of_label.size()) ? of_label[l] : -1;
+      for (int j = 0; j < J; ++j) {
+        const float* o = e + lay.color(j);
+        const uint32_t diff =
+            (bits(o[0]) ^ b0) | (bits(o[1]) ^ b1) | (bits(o[2]) ^ b2) | (bits(e[lay.opacity(j)]) ^ b3);
+        if (diff || j == jl) {
+          int& lo = row_lo_[size_t(j) * H + y];
+          lo = std::min(lo, x);
+          row_hi_[size_t(j) * H + y] = x;
+        }
+      }
+    }
+  }
+  const int dep = opt_.dilation >= 0 ? opt_.dilation : dependency_radius(cfg_);
+  obj_.resize(J);
+  for (int j = 0; j < J; ++j) {
+    PixelBox D{W, H, 0, 0};
+    for (int y = 0; y < H; ++y) {
+      if (row_hi_[size_t(j) * H + y] < 0) continue;
+      D.x0 = std::min(D.x0, row_lo_[size_t(j) * H + y]);
+      D.x1 = std::max(D.x1, row_hi_[size_t(j) * H + y] + 1);
+      D.y0 = std::min(D.y0, y);
+      D.y1 = y + 1;
+    }
+    Object& o = obj_[j];
+    o.R = D.grown(dep, W, H);
+    o.Q = o.R.grown(dep, W, H);
+    o.full = double(o.Q.area()) > opt_.max_box_fraction * double(HW);
+    if (o.full) o.R = o.Q = PixelBox{0, 0, W, H};
+  }
+}
+
+// The base pair's eq. 6 over the image: base_app_ [H, W, 3] its gradient (without s_app), the L1 and SSIM-map
+// terms per pixel and their totals.
+void ObjectLosses::score_base_app(Scratch& w, int H, int W) {
+  const size_t HW = size_t(W) * H, n = HW * 3;
+  w.sgrad.resize(n);
+  w.smap.resize(n);
+  train::ssim_map(base_pred_.data(), static_cast<const float*>(nullptr), H, W, 3, w.sgrad.data(), w.smap.data(),
+                  double(n), w.ssim);  // against zeros
+  base_app_.resize(n);
+  const float lam = cfg_.lambda_dssim, a = (1 - lam) / float(n), b = -lam;
+  double l1_total = 0, ssim_total = 0;
+  for (size_t p = 0; p < HW; ++p) {
+    double l1 = 0, ss = 0;
+    for (size_t i = p * 3; i < p * 3 + 3; ++i) {
+      const float d = base_pred_[i] - 0.f;
+      l1 += std::abs(d);
+      ss += w.smap[i];
+      base_app_[i] = app_grad(d, a, b, w.sgrad[i], 1.f);
+    }
+    base_terms_[p * kTerms + kL1] = l1;
+    base_terms_[p * kTerms + kSsim] = ss;
+    l1_total += l1;
+    ssim_total += ss;
+  }
+  base_total_[kL1] = l1_total;
+  base_total_[kSsim] = ssim_total;
+}
+
+// The base pair's eq. 14 over the image (band from the base opacity, mask 0): base_unit_ [H, W, 3], the band
+// weight, numerator and dot-product terms per pixel and their totals.
+void ObjectLosses::score_base_bro(Scratch& w, int H, int W) {
+  const size_t HW = size_t(W) * H;
+  w.band.resize(HW);
+  w.wsum.resize(HW);
+  w.num.resize(HW);
+  base_unit_.resize(HW * 3);
+  boundary_band(base_opac_.data(), zeros_.data(), H, W, cfg_.bro_kernel, w.band.data(), w.morph);
+  bro_parts(base_pred_.data(), zeros_.data(), 3, w.band.data(), H, W, w.wsum.data(), w.num.data(), base_unit_.data());
+  double tot[kTerms] = {};
+  for (size_t p = 0; p < HW; ++p) {
+    double gp = 0, pp = 0;
+    for (size_t i = p * 3; i < p * 3 + 3; ++i) {
+      gp += double(base_unit_[i]) * double(base_pred_[i]);
+      pp += double(base_pred_[i]) * double(base_pred_[i]);
+    }
+    double* t = &base_terms_[p * kTerms];
+    t[kWsum] = w.wsum[p];
+    t[kNum] = w.num[p];
+    t[kGp] = gp;
+    t[kPp] = pp;
+    for (int k : {kWsum, kNum, kGp, kPp}) tot[k] += t[k];
+  }
+  for (int k : {kWsum, kNum, kGp, kPp}) base_total_[k] = tot[k];
+}
+
+// Step 2 for a small object: its crop Q_k, eq. 6 and eq. 14's parts there, kept inside R_k: own = eq. 6's
+// gradient, unit = eq. 14's unscaled gradient, in[] the per-pixel terms summed over R_k.
+void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& lab, const float* extra,
+                              const ObjectLayout& lay, int j, int k) {
+  Object& o = obj_[j];
+  const int W = image.width, H = image.height, C = lay.total(), J = static_cast<int>(obj_.size());
+  const size_t n = size_t(W) * H * 3;
+  const PixelBox &Q = o.Q, &R = o.R;
+  const int qw = Q.width(), qh = Q.height(), rw = R.width(), rh = R.height();
+  const int rx = R.x0 - Q.x0, ry = R.y0 - Q.y0;  // R inside the crop
+  const size_t qn = size_t(qw) * qh;
+  const bool bro_on = cfg_.use_bro && cfg_.lambda_bro > 0;
+  std::fill(o.in, o.in + kTerms, 0.0);
+  o.own.resize(size_t(rw) * rh * 3);
+  o.unit.resize(bro_on ? o.own.size() : 0);
+  o.pred.resize(bro_on && cfg_.bro_scale_invariant ? o.own.size() : 0);
+  if (qn == 0) return;
+  // The crop: pred, gt = I * M_k [qh, qw, 3]; mask, opac [qh, qw].
+  w.pred.resize(qn * 3);
+  w.gt.resize(qn * 3);
+  w.mask.resize(qn);
+  w.opac.resize(qn);
+  for (int yy = 0; yy < qh; ++yy)
+    for (int xx = 0; xx < qw; ++xx) {
+      const size_t p = size_t(yy + Q.y0) * W + (xx + Q.x0), q = size_t(yy) * qw + xx;
+      const float* e = extra + p * C;
+      const float m = lab.v[p] == k ? 1.f : 0.f;
+      w.mask[q] = m;
+      w.opac[q] = e[lay.opacity(j)];
+      for (int c = 0; c < 3; ++c) {
+        w.pred[q * 3 + c] = e[lay.color(j) + c];
+        w.gt[q * 3 + c] = image.px[p * 3 + c] * m;
+      }
+    }
+  // Eq. 6: SSIM on the crop with the image's normaliser; L1 and the map summed over R.
+  w.sgrad.resize(qn * 3);
+  w.smap.resize(qn * 3);
+  train::ssim_map(w.pred.data(), w.gt.data(), qh, qw, 3, w.sgrad.data(), w.smap.data(), double(n), w.ssim);
+  const float lam = cfg_.lambda_dssim, a = (1 - lam) / float(n), b = -lam, s_app = cfg_.lambda_app / J;
+  double l1 = 0, ss = 0;
+  for (int yy = 0; yy < rh; ++yy) {
+    const size_t q0 = (size_t(yy + ry) * qw + rx) * 3;
+    const float *pr = &w.pred[q0], *gt = &w.gt[q0], *sg = &w.sgrad[q0], *sm = &w.smap[q0];
+    float* own = &o.own[size_t(yy) * rw * 3];
+#pragma omp simd reduction(+ : l1, ss)
+    for (int i = 0; i < rw * 3; ++i) {
+      const float d = pr[i] - gt[i];
+      l1 += std::abs(d);
+      ss += sm[i];
+      own[i] = app_grad(d, a, b, sg[i], s_app);
+    }
+  }
+  o.in[kL1] = l1;
+  o.in[kSsim] = ss;
+  if (!bro_on) return;
+  // Eq. 14's parts on the crop (the band from the object's opacity and mask), kept inside R.
+  w.band.resize(qn);
+  w.wsum.resize(qn);
+  w.num.resize(qn);
+  w.bgrad.resize(qn * 3);
+  boundary_band(w.opac.data(), w.mask.data(), qh, qw, cfg_.bro_kernel, w.band.data(), w.morph);
+  bro_parts(w.pred.data(), w.gt.data(), 3, w.band.data(), qh, qw, w.wsum.data(), w.num.data(), w.bgrad.data());
+  double ws = 0, num = 0, gp = 0, pp = 0;
+  for (int yy = 0; yy < rh; ++yy) {
+    const size_t q0 = size_t(yy + ry) * qw + rx, o0 = size_t(yy) * rw * 3;
+    for (int xx = 0; xx < rw; ++xx) {
+      ws += w.wsum[q0 + xx];
+      num += w.num[q0 + xx];
+    }
+    const float *u = &w.bgrad[q0 * 3], *pr = &w.pred[q0 * 3];
+#pragma omp simd reduction(+ : gp, pp)
+    for (int i = 0; i < rw * 3; ++i) {
+      gp += double(u[i]) * double(pr[i]);
+      pp += double(pr[i]) * double(pr[i]);
+    }
+    std::copy_n(u, rw * 3, &o.unit[o0]);
+    if (!o.pred.empty()) std::copy_n(pr, rw * 3, &o.pred[o0]);
+  }
+  o.in[kWsum] = ws;
+  o.in[kNum] = num;
+  o.in[kGp] = gp;
+  o.in[kPp] = pp;
+}
+
+// The base pair's per-pixel terms summed over r. out [kTerms]
+void ObjectLosses::base_sums(const PixelBox& r, int W, double* out) const {
+  std::fill(out, out + kTerms, 0.0);
+  for (int y = r.y0; y < r.y1 && !r.empty(); ++y)
+    for (int x = r.x0; x < r.x1; ++x) {
+      const double* t = &base_terms_[(size_t(y) * W + x) * kTerms];
+      for (int k = 0; k < kTerms; ++k) out[k] += t[k];
+    }
+}
+
+// Step 3 for a small object: its values (into app_[j], bro_[j]) and scalars from the base pair's sums outside R
+// plus its own inside, and its gradient inside R completed with eq. 14's.
+void ObjectLosses::finish_box(int W, int H, int j) {
+  Object& o = obj_[j];
+  const size_t HW = size_t(W) * H;
+  const double n = double(HW) * 3;
+  const int J = static_cast<int>(obj_.size());
+  double base_in[kTerms];
+  base_sums(o.R, W, base_in);
+  auto whole = [&](int t) { return base_total_[t] - base_in[t] + o.in[t]; };  // the object's sum over the image
+  const float lam = cfg_.lambda_dssim;
+  const float l1 = float(whole(kL1) / n), ss = float(whole(kSsim) / n);
+  app_[j] = (1 - lam) * l1 + lam * (1 - ss);
+  bro_[j] = 0;
+  o.bro_scale = o.proj = 0;
+  if (!(cfg_.use_bro && cfg_.lambda_bro > 0)) return;
+  const double band_total = whole(kWsum);
+  const float f = cfg_.bro_image_norm ? float(band_total / (2.0 * HW)) : 1.f;
+  const float s_bro = f * cfg_.lambda_bro / J;
+  const float den = float(3 * band_total) + cfg_.bro_eps;
+  const float gs = s_bro / den;
+  bro_[j] = double(float(whole(kNum)) / den) * f;
+  o.bro_scale = gs;
+  if (cfg_.bro_scale_invariant) {
+    // remove_scale_component's dot products <g, p>, <p, p> over the image. A non-finite ratio can only come from
+    // cancellation where p is 0 everywhere, when the projection removes nothing.
+    const double pp = whole(kPp);
+    const float proj = pp > 0 ? float(double(gs) * whole(kGp) / pp) : 0.f;
+    o.proj = std::isfinite(proj) ? proj : 0.f;
+  }
+  const float gsf = o.bro_scale, a = o.proj;
+  if (o.pred.empty()) {
+    for (size_t i = 0; i < o.own.size(); ++i) o.own[i] += gsf * o.unit[i];
+  } else {
+    for (size_t i = 0; i < o.own.size(); ++i) o.own[i] += gsf * o.unit[i] - a * o.pred[i];
+  }
+}
+
+// Step 4: d_extra [H, W, C] += each object's gradient: own inside R, the base pair's combination outside. Pixel
+// by pixel: the base pair's values are loaded once for the J colour triples of the pixel.
+void ObjectLosses::scatter(int H, int W, const ObjectLayout& lay, bool bro_grad, float* d_extra) const {
+  const int C = lay.total(), J = static_cast<int>(obj_.size());
+  const float s_app = grads_.app_scale;
+  const bool has_base = !base_app_.empty();  // else every object is scored over the whole image
+#pragma omp parallel
+  {
+    std::vector<int> xa(J), xb(J);
+    std::vector<const float*> own(J);
+#pragma omp for schedule(static)
+    for (int y = 0; y < H; ++y) {
+      for (int j = 0; j < J; ++j) {  // object j's own columns [xa, xb) in this row; own[j] at column xa
+        const PixelBox& R = obj_[j].R;
+        const bool in_rows = y >= R.y0 && y < R.y1;
+        xa[j] = in_rows ? R.x0 : W;
+        xb[j] = in_rows ? R.x1 : W;
+        own[j] = in_rows ? obj_[j].own.data() + size_t(y - R.y0) * R.width() * 3 : nullptr;
+      }
+      for (int x = 0; x < W; ++x) {
+        float* const px = d_extra + (size_t(y) * W + x) * C;
+        const size_t i = (size_t(y) * W + x) * 3;
+        float g[3] = {}, u[3] = {}, p[3] = {};
+        if (has_base)
+          for (int c = 0; c < 3; ++c) {
+            g[c] = s_app * base_app_[i + c];
+            u[c] = bro_grad ? base_unit_[i + c] : 0.f;
+            p[c] = base_pred_[i + c];
+          }
+        for (int j = 0; j < J; ++j) {
+          float* d = px + lay.color(j);
+          if (x >= xa[j] && x < xb[j]) {
+            const float* o = own[j] + size_t(x - xa[j]) * 3;
+            for (int c = 0; c < 3; ++c) d[c] += o[c];
+          } else if (bro_grad) {
+            const float gs = obj_[j].bro_scale, a = obj_[j].proj;
+            for (int c = 0; c < 3; ++c) d[c] += g[c] + (gs * u[c] - a * p[c]);
+          } else {
+            for (int c = 0; c < 3; ++c) d[c] += g[c];
+          }
+        }
+      }
+    }
+  }
+}
+
+ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab, const float* extra,
+                                        const ObjectLayout& lay, const std::vector<int>& objs, float* d_extra) {
+  const int W = image.width, H = image.height, J = static_cast<int>(objs.size()), C = lay.total();
+  const size_t HW = size_t(W) * H;
+  const bool bro_on = cfg_.use_bro && cfg_.lambda_bro > 0;
+  app_.assign(J, 0.0);
+  bro_.assign(J, 0.0);
+  find_boxes(lab, extra, lay, objs);
+  bool any_box = false;
+  for (const Object& o : obj_) any_box |= !o.full;
+  if (any_box) {
+    if (zeros_.size() != HW * 3) zeros_.assign(HW * 3, 0.f);
+    base_terms_.resize(HW * kTerms);
+  }
+  // Step 2: tasks largest first (-1: the base pair's eq. 6, -2: its eq. 14, j: object j).
+  struct Task {
+    double cost;
+    int id;
+  };
+  const double bro_cost = bro_on ? 0.5 : 0.0;
+  std::vector<Task> tasks;
+  if (any_box) tasks.push_back({double(HW), -1});
+  if (any_box && bro_on) tasks.push_back({bro_cost * double(HW), -2});
+  for (int j = 0; j < J; ++j) tasks.push_back({(1 + bro_cost) * double(obj_[j].Q.area()), j});
+  std::stable_sort(tasks.begin(), tasks.end(), [](const Task& a, const Task& b) { return a.cost > b.cost; });
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int t = 0; t < int(tasks.size()); ++t) {
+    Scratch& w = scratch_[omp_get_thread_num()];
+    const int id = tasks[t].id;
+    if (id == -1) {
+      score_base_app(w, H, W);
+    } else if (id == -2) {
+      score_base_bro(w, H, W);
+    } else if (!obj_[id].full) {
+      score_crop(w, image, lab, extra, lay, id, objs[id]);
+    } else {  // over the whole image, as without boxes
+      Object& o = obj_[id];
+      w.pred.resize(HW * 3);
+      w.opac.resize(HW);
+      for (size_t p = 0; p < HW; ++p) {
+        const float* e = extra + p * C;
+        for (int c = 0; c < 3; ++c) w.pred[p * 3 + c] = e[lay.color(id) + c];
+        w.opac[p] = e[lay.opacity(id)];
+      }
+      o.own.resize(HW * 3);
+      score_full(w, image, lab, objs[id], J, w.pred.data(), w.opac.data(), o.own.data(), app_[id], bro_[id]);
+      o.bro_scale = o.proj = 0;
+    }
+  }
+  // Step 3.
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int j = 0; j < J; ++j)
+    if (!obj_[j].full) finish_box(W, H, j);
+  grads_ = ObjectGradients{};
+  grads_.app_scale = cfg_.lambda_app / J;
+  for (const Object& o : obj_) {
+    grads_.box.push_back(o.R);
+    grads_.own.push_back(o.own.data());
+    grads_.bro_scale.push_back(o.bro_scale);
+    grads_.proj.push_back(o.proj);
+  }
+  if (any_box) {
+    grads_.base_app = base_app_.data();
+    grads_.base_pred = base_pred_.data();
+    if (bro_on) grads_.base_unit = base_unit_.data();
+  }
+  if (d_extra) scatter(H, W, lay, any_box && bro_on, d_extra);
+  ObjectLossValues v;
+  for (int j = 0; j < J; ++j) {
+    v.app += app_[j];
+    v.bro += bro_[j];
+  }
+  v.app /= J, v.bro /= J;
   return v;
 }
 

@@ -1,10 +1,31 @@
 // The object-conditioned losses of one view: eq. 6 (appearance, (1 - lambda) L1 + lambda (1 - SSIM) of each
 // object render I_k against I * M_k) and eq. 14 (BRO on the band of eq. 13, with the scale rule and the
 // scale-invariant gradient of bro.h), for the J objects present in the view's mask. The object renders come
-// interleaved in the extra channels of one rasterization (object_channels.h); they are copied to planar
-// images, each object's losses run single-threaded in one thread's scratch (no parallel-region overhead per
-// convolution, each object's images stay in one core's cache), and the gradients go back interleaved.
-// Loss values are summed in object order (deterministic).
+// interleaved in the extra channels of one rasterization (object_channels.h). Each object's losses run
+// single-threaded in one thread's scratch (no parallel-region overhead per convolution, each object's images
+// stay in one core's cache), and the gradients go back interleaved. Loss values are summed in object order
+// (deterministic, independent of the thread count).
+//
+// Boxes (ObjectLossOptions::boxes, with the layout's base render). Every term of both losses is a sum over
+// pixels p (L1 and the SSIM map over pixels, eq. 14's numerator and band weights over the forward differences,
+// charged to their first pixel) divided by a global normaliser (3 H W, or eq. 14's band total), and every
+// gradient at p is a sum of local terms times global scalars. Object k's inputs (colour, opacity, mask, I * M_k)
+// equal those of the "base pair" (the base render against an all-zero target, mask 0) outside the box D_k of
+// the pixels where its colour or opacity channels differ bitwise from the base channels or its label is k. The
+// terms at p read the inputs within a radius: the SSIM map 5, its gradient 10, eq. 14's band s/2 and its
+// differences one more. So with R_k = D_k grown by dep = max(10, s/2 + 1), every per-pixel term and local
+// gradient of object k outside R_k is the base pair's, bitwise. Hence, exactly (up to reassociation):
+//   sum_k = sum_base - sum_base over R_k + sum_k over R_k     (for L1, the SSIM map, eq. 14's numerator and band
+//                                                               weight, and BRO's dot products <g, p>, <p, p>)
+// and object k's gradient is its own inside R_k and, outside, s_app G_base + gs_k U_base - a_k P_base, where
+// G_base is eq. 6's gradient of the base pair, U_base eq. 14's unscaled gradient (bro_parts), P_base the base
+// render, gs_k eq. 14's global scale (from the band total) and a_k the projection coefficient of
+// remove_scale_component (from the two dot products). Object k's terms inside R_k come from a crop Q_k = R_k
+// grown by dep again: every term inside R_k reads only pixels of Q_k, and where Q_k's edge is not the image's,
+// the crop's own border handling (zero padding, clipped windows) affects only pixels outside R_k. The base pair
+// is scored once per view over the whole image (two tasks: eq. 6, eq. 14). Objects whose crop covers more than
+// max_box_fraction of the image (typically the background) are scored over the whole image as without boxes.
+// Tasks (the base pair's and the objects') run largest first on a dynamic schedule.
 #pragma once
 #include <random>
 #include <vector>
@@ -26,29 +47,97 @@ struct ObjectLossValues {
 // or m >= J.
 std::vector<int> sample_objects(const std::vector<int>& present, int m, std::mt19937_64& rng);
 
+// A pixel rectangle [x0, x1) x [y0, y1).
+struct PixelBox {
+  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  bool empty() const { return x0 >= x1 || y0 >= y1; }
+  int width() const { return empty() ? 0 : x1 - x0; }
+  int height() const { return empty() ? 0 : y1 - y0; }
+  size_t area() const { return size_t(width()) * height(); }
+  PixelBox grown(int r, int W, int H) const;  // by r on every side, clipped to the W x H image (empty stays empty)
+};
+
+struct ObjectLossOptions {
+  bool boxes = true;              // score objects inside their boxes when the layout has the base render
+  double max_box_fraction = 0.8;  // an object whose crop covers more of the image is scored over the whole image
+  int dilation = -1;              // the radius dep of the header (< 0: the exact one; tests shrink it)
+};
+
+// The colour gradient of the last call in sparse form: object j's gradient is own[j] [box h, box w, 3] inside
+// box[j] and app_scale * base_app + bro_scale[j] * base_unit - proj[j] * base_pred outside it (base_* [H, W, 3];
+// base_unit only when some bro_scale is non-zero). box[j] is the whole image for objects scored over it.
+struct ObjectGradients {
+  std::vector<PixelBox> box;           // [J]
+  std::vector<const float*> own;       // [J]
+  float app_scale = 0;                 // lambda_app / J
+  std::vector<float> bro_scale, proj;  // [J]
+  const float *base_app = nullptr, *base_unit = nullptr, *base_pred = nullptr;
+};
+
 class ObjectLosses {
  public:
-  explicit ObjectLosses(const HybridConfig& cfg) : cfg_(cfg) {}
+  explicit ObjectLosses(const HybridConfig& cfg, const ObjectLossOptions& opt = {}) : cfg_(cfg), opt_(opt) {}
   // image [H, W, 3]; labels [H, W] (confidence-filtered mask); extra [H, W, C] the render of the layout's
   // channels; objs [J] the objects of the layout. Adds lambda_app * d(app) + lambda_bro * d(bro) to the colour
-  // channels of d_extra [H, W, C].
+  // channels of d_extra [H, W, C] (may be null: gradients() then has them).
   ObjectLossValues operator()(const Image& image, const LabelMap& labels, const float* extra, const ObjectLayout& lay,
                               const std::vector<int>& objs, float* d_extra);
+  // The last call's gradient, sparse (valid until the next call or release()).
+  const ObjectGradients& gradients() const { return grads_; }
   void release();
 
  private:
   struct Scratch {  // per-thread buffers of the losses of one object
     explicit Scratch(float lambda_dssim) : loss(lambda_dssim) {}
     train::PhotometricLoss loss;
-    std::vector<float> gt;                 // [H, W, 3]
-    std::vector<float> mask, band, morph;  // [H, W]
-    std::vector<float> bgrad;              // [H, W, 3] BRO's gradient before its scale component is removed
+    train::SsimWorkspace<float> ssim;
+    std::vector<float> gt, pred;                 // [H, W, 3] (of the crop in the box path)
+    std::vector<float> mask, band, morph, opac;  // [H, W]
+    std::vector<float> bgrad;                    // [H, W, 3] BRO's gradient before its scale component is removed
+    std::vector<float> sgrad, smap;              // [H, W, 3] SSIM's gradient and map
+    std::vector<double> wsum, num;               // [H, W] eq. 14 per pixel (bro_parts)
   };
+  // The per-pixel terms of the box path: L1, SSIM map, eq. 14's band weight and numerator, <g, p>, <p, p>.
+  enum Term { kL1, kSsim, kWsum, kNum, kGp, kPp, kTerms };
+  struct Object {             // one object of the box path
+    PixelBox R, Q;            // scored box and crop (image coordinates)
+    bool full = false;        // scored over the whole image (R = Q = the image)
+    std::vector<float> own;   // [R h, R w, 3] its gradient inside R
+    std::vector<float> unit;  // [R h, R w, 3] eq. 14's unscaled gradient inside R (bro_parts)
+    std::vector<float> pred;  // [R h, R w, 3] the object's render inside R (for the projection)
+    double in[kTerms] = {};   // its per-pixel terms summed over R
+    float bro_scale = 0, proj = 0;
+  };
+
+  ObjectLossValues full_path(const Image& image, const LabelMap& labels, const float* extra, const ObjectLayout& lay,
+                             const std::vector<int>& objs, float* d_extra);
+  ObjectLossValues box_path(const Image& image, const LabelMap& labels, const float* extra, const ObjectLayout& lay,
+                            const std::vector<int>& objs, float* d_extra);
+  void score_full(Scratch& w, const Image& image, const LabelMap& labels, int k, int J, const float* pred,
+                  const float* opac, float* grad, double& app, double& bro);
+  void find_boxes(const LabelMap& labels, const float* extra, const ObjectLayout& lay, const std::vector<int>& objs);
+  void score_base_app(Scratch& w, int H, int W);
+  void score_base_bro(Scratch& w, int H, int W);
+  void score_crop(Scratch& w, const Image& image, const LabelMap& labels, const float* extra, const ObjectLayout& lay,
+                  int j, int k);
+  void finish_box(int W, int H, int j);
+  void base_sums(const PixelBox& r, int W, double* out) const;
+  void scatter(int H, int W, const ObjectLayout& lay, bool bro_grad, float* d_extra) const;
+
   HybridConfig cfg_;
+  ObjectLossOptions opt_;
   std::vector<Scratch> scratch_;    // [threads]
-  std::vector<float> pred_, grad_;  // [J, H, W, 3] planar object renders / gradients
+  std::vector<float> pred_, grad_;  // [J, H, W, 3] planar object renders / gradients (path without boxes)
   std::vector<float> opac_;         // [J, H, W]
   std::vector<double> app_, bro_;   // [J]
+  // Box path.
+  std::vector<Object> obj_;                              // [J]
+  std::vector<int> row_lo_, row_hi_;                     // [J, H] each row's differing columns
+  std::vector<float> base_pred_, base_app_, base_unit_;  // [H, W, 3]
+  std::vector<float> base_opac_, zeros_;                 // [H, W], [H, W, 3]
+  std::vector<double> base_terms_;                       // [H, W, kTerms]
+  double base_total_[kTerms] = {};                       // their sums over the image
+  ObjectGradients grads_;
 };
 
 }  // namespace hgs::hybrid

@@ -7,6 +7,8 @@
 //   d/dE[xy] = 2 A1 / (B1 B2);
 // the window is symmetric so the adjoint of the convolution is the same convolution, giving
 //   dL/dx = w*(g d_mu) + 2 x w*(g d_exx) + y w*(g d_exy).
+// ssim_map also stores the map and takes g = 1/count from the caller (a crop scored as part of a larger image);
+// with y null (an all-zero y) the passes of mu_y, E[yy], E[xy] and of d_exy are skipped (their values are 0).
 #include "train/ssim.h"
 
 #include <omp.h>
@@ -117,18 +119,29 @@ inline Terms<T> ssim_terms(T* const* mom, int j, T C1, T C2) {
 //   given, the three backward coefficients -> horizontal pass -> coeff rows m ([H, 3, L], shared by the bands).
 // Product rows are computed for [y0 - 5, y1 + 5) (clipped), so a band needs nothing from its neighbours; every
 // value is computed with the same arithmetic whatever the banding.
-template <typename T>
-void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, T* coeff, double* row_sum,
+// kMap: the map's values are also stored in `map` [H, L]. `g` is the gradient's normaliser 1 / count.
+template <typename T, bool kMap>
+void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, T* coeff, double* row_sum, T g, T* map,
                std::vector<T>& buf) {
   const int L = W * C;
   const T C1 = T(0.01 * 0.01), C2 = T(0.03 * 0.03);
-  const T g = T(1) / T(size_t(H) * L);
   buf.resize(size_t(kWin) * 5 * L + size_t(8) * L);
   T* P = buf.data();                  // [11][5][L]
   T* tmp = P + size_t(kWin) * 5 * L;  // [8][L]: products, moments
   auto prow = [&](int row, int map) { return P + (size_t(row % kWin) * 5 + map) * L; };
   int next_p = std::max(0, y0 - kHalf);  // next product row to compute
+  // y null: an all-zero image, whose moments mu_y, E[yy], E[xy] are 0 (their rows stay zero, no passes).
+  if (!y)
+    for (int k : {1, 3, 4}) std::fill(tmp + size_t(3 + k) * L, tmp + size_t(4 + k) * L, T(0));
   for (int m = y0; m < y1; ++m) {
+    for (; next_p <= std::min(H - 1, m + kHalf) && !y; ++next_p) {
+      const T* xr = x + size_t(next_p) * L;
+      T* pxx = tmp;
+#pragma omp simd
+      for (int j = 0; j < L; ++j) pxx[j] = xr[j] * xr[j];
+      conv_row(xr, prow(next_p, 0), W, C);
+      conv_row(pxx, prow(next_p, 2), W, C);
+    }
     for (; next_p <= std::min(H - 1, m + kHalf); ++next_p) {
       const T* xr = x + size_t(next_p) * L;
       const T* yr = y + size_t(next_p) * L;
@@ -148,14 +161,18 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, T* c
     T* mom[5];
     for (int k = 0; k < 5; ++k) {
       mom[k] = tmp + size_t(3 + k) * L;
+      if (!y && (k == 1 || k == 3 || k == 4)) continue;
       conv_col<T>([&](int r) { return prow(r, k); }, m, H, L, mom[k]);
     }
+    T* mrow = kMap ? map + size_t(m) * L : nullptr;
     if (!coeff) {
       double total = 0;
 #pragma omp simd reduction(+ : total)
       for (int j = 0; j < L; ++j) {
         const Terms<T> t = ssim_terms(mom, j, C1, C2);
-        total += t.A1 * t.A2 * (T(1) / (t.B1 * t.B2));
+        const T v = t.A1 * t.A2 * (T(1) / (t.B1 * t.B2));
+        total += v;
+        if constexpr (kMap) mrow[j] = v;
       }
       row_sum[m] = total;
       continue;
@@ -171,6 +188,7 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, T* c
       const T inv = T(1) / (B1 * B2);
       const T map = A1 * A2 * inv;
       total += map;
+      if constexpr (kMap) mrow[j] = map;
       // g d/dmu_x, g d/dE[xx], g d/dE[xy] (see the top of the file)
       dmu[j] = g * (2 * mu2 * (A2 - A1) * inv - map * (2 * mu1 / B1 - 2 * mu1 / B2));
       dxx[j] = -g * map / B2;
@@ -179,6 +197,7 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, T* c
     row_sum[m] = total;
     // Horizontal pass of the coefficients, in place through a scratch row.
     for (T* q : {dmu, dxx, dxy}) {
+      if (!y && q == dxy) continue;  // multiplies y
       std::copy(q, q + L, tmp);
       conv_row(tmp, q, W, C);
     }
@@ -193,10 +212,16 @@ void ssim_grad_band(const T* x, const T* y, int H, int L, int y0, int y1, const 
   buf.resize(std::max(buf.size(), size_t(3) * L));
   T* v[3] = {buf.data(), buf.data() + L, buf.data() + 2 * size_t(L)};
   for (int yy = y0; yy < y1; ++yy) {
-    for (int k = 0; k < 3; ++k) conv_col<T>([&](int r) { return coeff + (size_t(r) * 3 + k) * L; }, yy, H, L, v[k]);
+    for (int k = 0; k < (y ? 3 : 2); ++k)
+      conv_col<T>([&](int r) { return coeff + (size_t(r) * 3 + k) * L; }, yy, H, L, v[k]);
     const T* xr = x + size_t(yy) * L;
-    const T* yr = y + size_t(yy) * L;
     T* gr = grad_x + size_t(yy) * L;
+    if (!y) {  // an all-zero y
+#pragma omp simd
+      for (int j = 0; j < L; ++j) gr[j] = v[0][j] + 2 * xr[j] * v[1][j];
+      continue;
+    }
+    const T* yr = y + size_t(yy) * L;
 #pragma omp simd
     for (int j = 0; j < L; ++j) gr[j] = v[0][j] + 2 * xr[j] * v[1][j] + yr[j] * v[2][j];
   }
@@ -212,6 +237,11 @@ const T* ssim_window() {
 
 template <typename T>
 T ssim(const T* x, const T* y, int H, int W, int C, T* grad_x, SsimWorkspace<T>& ws) {
+  return ssim_map(x, y, H, W, C, grad_x, static_cast<T*>(nullptr), double(size_t(H) * W * C), ws);
+}
+
+template <typename T>
+T ssim_map(const T* x, const T* y, int H, int W, int C, T* grad_x, T* map, double count, SsimWorkspace<T>& ws) {
   // Bands of rows, one per thread (one band when called inside a parallel region); per-row sums added in row
   // order, so the value and the gradient are bitwise independent of the thread count.
   // With a gradient: two phases, all bands' coefficient rows first, then the gradient rows, which read their
@@ -223,12 +253,15 @@ T ssim(const T* x, const T* y, int H, int W, int C, T* grad_x, SsimWorkspace<T>&
   const int L = W * C;
   if (grad_x) ws.coeff.resize(size_t(H) * 3 * L);
   T* coeff = grad_x ? ws.coeff.data() : nullptr;
+  const T g = T(1) / T(count);
 #pragma omp parallel num_threads(bands) if (bands > 1)
   {
 #pragma omp for schedule(static, 1)
-    for (int b = 0; b < bands; ++b)
-      ssim_band(x, y, H, W, C, int(long(H) * b / bands), int(long(H) * (b + 1) / bands), coeff, ws.row_sum.data(),
-                ws.band[b]);
+    for (int b = 0; b < bands; ++b) {
+      const int y0 = int(long(H) * b / bands), y1 = int(long(H) * (b + 1) / bands);
+      if (map) ssim_band<T, true>(x, y, H, W, C, y0, y1, coeff, ws.row_sum.data(), g, map, ws.band[b]);
+      else ssim_band<T, false>(x, y, H, W, C, y0, y1, coeff, ws.row_sum.data(), g, map, ws.band[b]);
+    }
     if (grad_x) {
 #pragma omp for schedule(static, 1)
       for (int b = 0; b < bands; ++b)
@@ -241,6 +274,10 @@ T ssim(const T* x, const T* y, int H, int W, int C, T* grad_x, SsimWorkspace<T>&
 }
 
 template float ssim<float>(const float*, const float*, int, int, int, float*, SsimWorkspace<float>&);
+template float ssim_map<float>(const float*, const float*, int, int, int, float*, float*, double,
+                               SsimWorkspace<float>&);
+template double ssim_map<double>(const double*, const double*, int, int, int, double*, double*, double,
+                                 SsimWorkspace<double>&);
 template double ssim<double>(const double*, const double*, int, int, int, double*, SsimWorkspace<double>&);
 template const float* ssim_window<float>();
 template const double* ssim_window<double>();

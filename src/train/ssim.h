@@ -19,6 +19,13 @@ struct SsimWorkspace {
 template <typename T>
 T ssim(const T* x, const T* y, int H, int W, int C, T* grad_x, SsimWorkspace<T>& ws);
 
+// ssim() with extras for scoring part of an image (hybrid/object_losses.cpp scores crops): `map` (may be null)
+// receives the SSIM map [H, W, C], and `grad_x` receives d(sum of the map / count)/dx (count = H W C is ssim()'s
+// mean; a crop of a larger image passes the larger image's count). y may be null for an all-zero image (the same
+// values as zeros, with the passes of its three zero moments skipped). Returns the mean over H W C.
+template <typename T>
+T ssim_map(const T* x, const T* y, int H, int W, int C, T* grad_x, T* map, double count, SsimWorkspace<T>& ws);
+
 // The normalised 1D window (11 taps) shared by the forward and the tests.
 template <typename T>
 const T* ssim_window();

@@ -1,0 +1,418 @@
+// ObjectLosses with boxes (object_losses.h): scoring each object inside the box where it differs from the base
+// render, plus the base pair once per view, gives the values and the full colour gradient of scoring every
+// object over the whole image (ObjectLossOptions::boxes = false), up to float rounding. Checked on synthetic
+// renders (base + a delta in a few regions: objects inside the image, touching its border, covering all of it,
+// absent from the render with or without mask pixels) and on a real composite of object_channels() by the
+// renderer, for BRO on / off, scale-invariant or not, with and without the scale rule, three lambda_dssim and
+// three band kernels; the sparse gradient description against the dense one; and a dilation one pixel short of
+// the dependency radius is caught. Also the two helpers the box path adds, train::ssim_map and bro_parts.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "hybrid/bro.h"
+#include "hybrid/object_channels.h"
+#include "hybrid/object_losses.h"
+#include "render/renderer.h"
+#include "train/ssim.h"
+
+using namespace hgs;
+using namespace hgs::hybrid;
+
+namespace {
+
+// One view's inputs to ObjectLosses.
+struct Case {
+  int W = 0, H = 0;
+  ObjectLayout lay;
+  std::vector<int> objs;     // [J]
+  Image image;               // [H, W, 3]
+  LabelMap lab;              // [H, W]
+  std::vector<float> extra;  // [H, W, lay.total()]
+};
+
+struct Result {
+  ObjectLossValues v;
+  std::vector<float> d;  // [H, W, C]
+  std::vector<PixelBox> boxes;
+};
+
+Result run(const Case& c, const HybridConfig& cfg, const ObjectLossOptions& opt) {
+  ObjectLosses losses(cfg, opt);
+  Result r;
+  r.d.assign(c.extra.size(), 0.f);
+  r.v = losses(c.image, c.lab, c.extra.data(), c.lay, c.objs, r.d.data());
+  r.boxes = losses.gradients().box;
+  return r;
+}
+
+// Largest |a - b| over the gradient, and the largest |ref|.
+void grad_error(const Result& ref, const Result& got, double& err, double& scale) {
+  err = scale = 0;
+  for (size_t i = 0; i < ref.d.size(); ++i) {
+    err = std::max(err, double(std::abs(ref.d[i] - got.d[i])));
+    scale = std::max(scale, double(std::abs(ref.d[i])));
+  }
+}
+
+void expect_same(const Result& ref, const Result& got, const std::string& what) {
+  EXPECT_NEAR(got.v.app, ref.v.app, 1e-5 * std::abs(ref.v.app) + 1e-12) << what;
+  EXPECT_NEAR(got.v.bro, ref.v.bro, 1e-5 * std::abs(ref.v.bro) + 1e-12) << what;
+  double err, scale;
+  grad_error(ref, got, err, scale);
+  ASSERT_GT(scale, 0) << what;
+  EXPECT_LE(err, 1e-5 * scale) << what;
+}
+
+// A smooth random field in [0, 1]: a few Gaussian bumps. [H, W]
+std::vector<float> bumps(int W, int H, int count, std::mt19937& rng) {
+  std::uniform_real_distribution<float> U(0, 1);
+  std::vector<float> f(size_t(W) * H, 0.f);
+  for (int b = 0; b < count; ++b) {
+    const float cx = U(rng) * W, cy = U(rng) * H, s = 3 + 8 * U(rng), a = U(rng);
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x)
+        f[size_t(y) * W + x] += a * std::exp(-((x - cx) * (x - cx) + (y - cy) * (y - cy)) / (2 * s * s));
+  }
+  for (auto& v : f) v = std::min(v, 1.f);
+  return f;
+}
+
+// A rectangle [x0, x1) x [y0, y1) with a disc cut into it (a blob with straight and round edges).
+struct Region {
+  int x0, y0, x1, y1;
+  bool inside(int x, int y) const {
+    if (x < x0 || x >= x1 || y < y0 || y >= y1) return false;
+    const float cx = 0.5f * (x0 + x1), cy = 0.5f * (y0 + y1), r = 0.3f * std::min(x1 - x0, y1 - y0);
+    return (x - cx) * (x - cx) + (y - cy) * (y - cy) > r * r || (x + y) % 3 == 0;
+  }
+};
+
+// Synthetic view, 80 x 60, objects {0, 2, 3, 5, 6, 7} and one further channel with gradient:
+//   0  background: label everywhere else, render deltas in regions at opposite corners (box = the image);
+//   2  label rectangle and a render delta beside it, inside the image;
+//   3  label and delta touching the top-left corner;
+//   5  absent: neither label pixels nor a delta (its channels equal the base);
+//   6  label pixels but no delta (absent from the render);
+//   7  a delta touching the right border, no label pixels.
+Case synthetic(unsigned seed) {
+  Case c;
+  c.W = 80;
+  c.H = 60;
+  c.objs = {0, 2, 3, 5, 6, 7};
+  const int J = 6, W = c.W, H = c.H;
+  c.lay = ObjectLayout{J, 1, true};
+  const int C = c.lay.total();
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> U(0, 1);
+  c.image = Image(W, H, 3);
+  for (auto& v : c.image.px) v = U(rng);
+  const Region labels[J] = {{0, 0, 0, 0}, {12, 10, 28, 24}, {0, 0, 14, 11},
+                            {0, 0, 0, 0}, {50, 38, 62, 50}, {0, 0, 0, 0}};
+  c.lab = LabelMap(W, H, 0);
+  for (int j = 1; j < J; ++j)
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x)
+        if (labels[j].inside(x, y)) c.lab.at(x, y) = uint16_t(c.objs[j]);
+  const std::vector<std::vector<Region>> deltas = {{{0, 0, 9, 7}, {70, 52, 80, 60}, {30, 25, 45, 40}},
+                                                   {{20, 14, 36, 30}},
+                                                   {{0, 0, 10, 6}},
+                                                   {},
+                                                   {},
+                                                   {{72, 20, 80, 33}}};
+  const std::vector<float> br = bumps(W, H, 6, rng), bg = bumps(W, H, 6, rng), bb = bumps(W, H, 6, rng),
+                           bo = bumps(W, H, 5, rng);
+  c.extra.assign(size_t(W) * H * C, 0.f);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const size_t p = size_t(y) * W + x;
+      float* e = &c.extra[p * C];
+      const float base[4] = {0.5f * br[p], 0.5f * bg[p], 0.5f * bb[p], bo[p] > 0.3f ? 0.5f * bo[p] : 0.f};
+      for (int i = 0; i < 4; ++i) e[c.lay.base_color() + i] = base[i];
+      e[c.lay.other()] = U(rng);
+      for (int j = 0; j < J; ++j) {
+        bool in = false;
+        for (const Region& r : deltas[j]) in |= r.inside(x, y);
+        const float dq = in ? 0.5f * U(rng) : 0.f;  // q_k - b_n >= 0: the object is the base plus something
+        for (int i = 0; i < 3; ++i) e[c.lay.color(j) + i] = in ? base[i] + dq * (0.3f + U(rng)) : base[i];
+        e[c.lay.opacity(j)] = in ? base[3] + dq : base[3];
+      }
+    }
+  return c;
+}
+
+// The configurations compared: BRO on / off, scale-invariant or not, scale rule on / off, lambda_dssim and the
+// band kernel varied.
+std::vector<std::pair<std::string, HybridConfig>> configs() {
+  std::vector<std::pair<std::string, HybridConfig>> out;
+  HybridConfig d;
+  out.push_back({"default", d});
+  HybridConfig c = d;
+  c.bro_scale_invariant = false;
+  out.push_back({"bro_plain_gradient", c});
+  c = d;
+  c.use_bro = false;
+  out.push_back({"no_bro", c});
+  c = d;
+  c.lambda_bro = 0;
+  c.lambda_dssim = 0;
+  out.push_back({"no_bro_l1_only", c});
+  c = d;
+  c.lambda_dssim = 1;
+  c.bro_image_norm = false;
+  out.push_back({"ssim_only_no_scale_rule", c});
+  c = d;
+  c.bro_kernel = 3;
+  c.lambda_app = 0.5f;
+  c.lambda_bro = 2;
+  out.push_back({"kernel3", c});
+  c = d;
+  c.bro_kernel = 21;  // a band radius above the SSIM gradient's: the dependency radius is 11
+  c.bro_scale_invariant = false;
+  out.push_back({"kernel21_plain", c});
+  return out;
+}
+
+PixelBox whole(const Case& c) { return {0, 0, c.W, c.H}; }
+
+}  // namespace
+
+TEST(ObjectLossesBoxes, SyntheticMatchesTheWholeImageScoring) {
+  const Case c = synthetic(7);
+  for (const auto& [name, cfg] : configs()) {
+    const Result ref = run(c, cfg, {.boxes = false});
+    ASSERT_GT(ref.v.app, 0) << name;
+    if (cfg.use_bro && cfg.lambda_bro > 0) {
+      ASSERT_GT(ref.v.bro, 0) << name;
+    }
+    const Result def = run(c, cfg, {});
+    expect_same(ref, def, name + " default boxes");
+    // Every object on its box, the background's crop being the whole image.
+    const Result all = run(c, cfg, {.max_box_fraction = 1.0});
+    expect_same(ref, all, name + " all boxes");
+    // The boxes as described: the background over the image, 5 absent, the others strictly smaller.
+    ASSERT_EQ(def.boxes.size(), 6u);
+    EXPECT_EQ(def.boxes[0].area(), whole(c).area()) << name;
+    EXPECT_TRUE(def.boxes[3].empty()) << name;
+    for (int j : {1, 2, 4, 5}) {
+      EXPECT_FALSE(def.boxes[j].empty()) << name << " object " << j;
+      EXPECT_LT(def.boxes[j].area(), whole(c).area() / 2) << name << " object " << j;
+    }
+    EXPECT_EQ(def.boxes[2].x0, 0) << name;  // object 3 touches the top-left corner
+    EXPECT_EQ(def.boxes[2].y0, 0) << name;
+    EXPECT_EQ(def.boxes[5].x1, c.W) << name;  // object 7 the right border
+  }
+}
+
+TEST(ObjectLossesBoxes, WithoutTheBaseRenderTheOptionChangesNothing) {
+  Case c = synthetic(8);
+  // The same channels without the 4 base channels: boxes need them, so both run the whole-image path.
+  ObjectLayout lay{c.lay.J, c.lay.S, false};
+  std::vector<float> ex(size_t(c.W) * c.H * lay.total());
+  for (size_t p = 0; p < size_t(c.W) * c.H; ++p)
+    std::copy_n(&c.extra[p * c.lay.total()], lay.total(), &ex[p * lay.total()]);
+  const Result with_base = run(c, HybridConfig{}, {.boxes = false});
+  c.extra = ex;
+  c.lay = lay;
+  const Result a = run(c, HybridConfig{}, {}), b = run(c, HybridConfig{}, {.boxes = false});
+  EXPECT_EQ(a.v.app, b.v.app);
+  EXPECT_EQ(a.v.bro, b.v.bro);
+  EXPECT_EQ(a.v.app, with_base.v.app);  // the base channels themselves change nothing
+  for (size_t p = 0; p < size_t(c.W) * c.H; ++p)
+    for (int i = 0; i < lay.total(); ++i) ASSERT_EQ(a.d[p * lay.total() + i], b.d[p * lay.total() + i]);
+}
+
+TEST(ObjectLossesBoxes, GradientsAddToDExtraAndLeaveOtherChannels) {
+  const Case c = synthetic(9);
+  const HybridConfig cfg;
+  const Result ref = run(c, cfg, {});
+  ObjectLosses losses(cfg);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> U(-1, 1);
+  std::vector<float> init(c.extra.size()), d;
+  for (auto& v : init) v = U(rng);
+  d = init;
+  losses(c.image, c.lab, c.extra.data(), c.lay, c.objs, d.data());
+  const int C = c.lay.total();
+  double err = 0, scale = 0;
+  for (size_t i = 0; i < d.size(); ++i) {
+    const int ch = int(i % C);
+    if (ch >= 3 * c.lay.J) {
+      ASSERT_EQ(d[i], init[i]) << "channel " << ch;  // the other channel, opacities and base: untouched
+    } else {
+      err = std::max(err, double(std::abs((d[i] - init[i]) - ref.d[i])));
+      scale = std::max(scale, double(std::abs(ref.d[i])));
+    }
+  }
+  EXPECT_LE(err, 1e-6 * 2 + 1e-5 * scale);  // |init| <= 1 rounds the sum
+}
+
+TEST(ObjectLossesBoxes, SparseGradientsDescribeTheDenseOnes) {
+  const Case c = synthetic(10);
+  for (const auto& [name, cfg] : configs()) {
+    const Result dense = run(c, cfg, {});
+    ObjectLosses losses(cfg);
+    const ObjectLossValues v = losses(c.image, c.lab, c.extra.data(), c.lay, c.objs, nullptr);
+    EXPECT_EQ(v.app, dense.v.app) << name;
+    EXPECT_EQ(v.bro, dense.v.bro) << name;
+    const ObjectGradients& g = losses.gradients();
+    const int C = c.lay.total(), J = c.lay.J;
+    ASSERT_TRUE(g.base_app && g.base_pred) << name;
+    double err = 0;
+    for (int y = 0; y < c.H; ++y)
+      for (int x = 0; x < c.W; ++x)
+        for (int j = 0; j < J; ++j)
+          for (int ch = 0; ch < 3; ++ch) {
+            const PixelBox& b = g.box[j];
+            const size_t p = size_t(y) * c.W + x, i = p * 3 + ch;
+            float want;
+            if (x >= b.x0 && x < b.x1 && y >= b.y0 && y < b.y1) {
+              want = g.own[j][(size_t(y - b.y0) * b.width() + (x - b.x0)) * 3 + ch];
+            } else {
+              want = g.app_scale * g.base_app[i];
+              if (g.base_unit) want += g.bro_scale[j] * g.base_unit[i] - g.proj[j] * g.base_pred[i];
+            }
+            err = std::max(err, double(std::abs(want - dense.d[p * C + c.lay.color(j) + ch])));
+          }
+    EXPECT_LE(err, 1e-9) << name;
+  }
+}
+
+// A box one pixel short of the dependency radius misses gradient terms (SSIM's tail at radius 10; with a 21-pixel
+// band kernel eq. 14's differences at radius 11): the comparison must catch it, by more than 10x its tolerance.
+TEST(ObjectLossesBoxes, ADilationOnePixelShortIsCaught) {
+  const Case c = synthetic(11);
+  HybridConfig wide;
+  wide.bro_kernel = 21;
+  for (const auto& [cfg, dep] : {std::pair{HybridConfig{}, 10}, std::pair{wide, 11}}) {
+    const Result ref = run(c, cfg, {.boxes = false});
+    const Result ok = run(c, cfg, {.max_box_fraction = 1.0, .dilation = dep});
+    expect_same(ref, ok, "the dependency radius");
+    const Result shrunk = run(c, cfg, {.max_box_fraction = 1.0, .dilation = dep - 1});
+    double err, scale;
+    grad_error(ref, shrunk, err, scale);
+    EXPECT_GT(err, 1e-4 * scale) << "kernel " << cfg.bro_kernel;
+  }
+}
+
+// The real path: object_channels() with the base channels, softmax-like q rows (one dominant label, the others
+// at the row minimum; some rows all equal), composited by the renderer; far objects equal the base bitwise, so
+// most objects get small boxes.
+TEST(ObjectLossesBoxes, RenderedObjectChannelsMatchTheWholeImageScoring) {
+  const int W = 128, H = 96, L = 6, per = 60, N = L * per + 40;
+  std::mt19937 rng(21);
+  std::uniform_real_distribution<float> U(0, 1);
+  render::Camera cam;
+  cam.width = W;
+  cam.height = H;
+  cam.fx = cam.fy = 90;
+  cam.cx = W / 2.f;
+  cam.cy = H / 2.f;
+  // Object l's Gaussians cluster around a centre (the background, label 0, spreads over the image); the last 40
+  // rows are unobserved (q uniform: every label at the row minimum).
+  const float centres[L][2] = {{0, 0}, {-0.9f, -0.6f}, {0.8f, -0.5f}, {-0.2f, 0.5f}, {1.2f, 0.75f}, {-1.3f, 0.8f}};
+  std::vector<float> mean, log_scale, quat, opacity, colors, q(size_t(N) * L);
+  for (int i = 0; i < N; ++i) {
+    const int l = i < L * per ? i / per : -1;
+    const float spread = l <= 0 ? 1.5f : 0.15f;
+    const float cx = l > 0 ? centres[l][0] : 0.f, cy = l > 0 ? centres[l][1] : 0.f;
+    mean.insert(mean.end(), {cx + spread * (2 * U(rng) - 1), cy + spread * 0.7f * (2 * U(rng) - 1), 2.5f + U(rng)});
+    const float s = std::log(0.03f + 0.05f * U(rng));
+    log_scale.insert(log_scale.end(), {s, s + 0.2f * (U(rng) - 0.5f), s});
+    quat.insert(quat.end(), {1, 0.2f * (U(rng) - 0.5f), 0.2f * (U(rng) - 0.5f), 0.1f});
+    opacity.push_back(3 * U(rng) - 1);
+    colors.insert(colors.end(), {U(rng), U(rng), U(rng)});
+    const float top = l >= 0 ? 0.6f + 0.3f * U(rng) : 1.f / L, rest = (1 - top) / (L - 1);
+    for (int k = 0; k < L; ++k) q[size_t(i) * L + k] = l < 0 ? 1.f / L : (k == l ? top : rest);
+  }
+  Case c;
+  c.W = W;
+  c.H = H;
+  c.objs = {0, 1, 2, 3, 4, 5};
+  c.lay = ObjectLayout{L, 0, true};
+  const int C = c.lay.total();
+  std::vector<float> ch(size_t(N) * C);
+  object_channels(N, L, c.lay, c.objs.data(), q.data(), colors.data(), ch.data());
+  render::GaussianRenderer r;
+  render::GaussianInputs in;
+  in.n = N;
+  in.mean = mean.data();
+  in.log_scale = log_scale.data();
+  in.quat = quat.data();
+  in.opacity_logit = opacity.data();
+  in.colors = colors.data();
+  in.extra = ch.data();
+  in.num_extra = C;
+  render::RenderSettings rs;
+  rs.want_depth = false;
+  render::RenderOutputs out;
+  r.forward(cam, in, rs, out);
+  c.extra = out.extra;
+  // Labels: each object's pixels where it dominates the render's opacity, the rest background.
+  c.image = Image(W, H, 3);
+  for (auto& v : c.image.px) v = U(rng);
+  c.lab = LabelMap(W, H, 0);
+  for (size_t p = 0; p < size_t(W) * H; ++p)
+    for (int j = 1; j < L; ++j)
+      if (c.extra[p * C + c.lay.opacity(j)] > 0.4f) c.lab.v[p] = uint16_t(j);
+  for (const auto& [name, cfg] : configs()) {
+    const Result ref = run(c, cfg, {.boxes = false});
+    const Result def = run(c, cfg, {});
+    expect_same(ref, def, name + " rendered");
+    expect_same(ref, run(c, cfg, {.max_box_fraction = 1.0}), name + " rendered, all boxes");
+    int small = 0;
+    for (const PixelBox& b : def.boxes) small += b.area() < size_t(W) * H / 2;
+    EXPECT_GE(small, 3) << name << ": the clustered objects should get small boxes";
+    EXPECT_EQ(def.boxes[0].area(), size_t(W) * H) << name;  // the background spreads over the image
+  }
+}
+
+// The two helpers the box path adds: train::ssim_map (map, count, a null all-zero y) against train::ssim, and
+// bro_parts against bro_loss.
+TEST(ObjectLossesBoxes, SsimMapAndBroPartsAgreeWithSsimAndBroLoss) {
+  const int W = 37, H = 29, C = 3, n = W * H * C;
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> U(0, 1);
+  std::vector<float> x(n), y(n), zero(n, 0.f), g(n), gm(n), map(n), B(size_t(W) * H);
+  for (auto& v : x) v = U(rng);
+  for (auto& v : y) v = U(rng);
+  for (auto& v : B) v = U(rng) < 0.3f ? 0.f : U(rng);
+  train::SsimWorkspace<float> ws;
+  for (const float* yy : {y.data(), zero.data()}) {
+    const float s = train::ssim(x.data(), yy, H, W, C, g.data(), ws);
+    // count = 4 n: the gradient of sum(map) / (4 n), a quarter of ssim()'s.
+    const float sm = train::ssim_map(x.data(), yy, H, W, C, gm.data(), map.data(), 4.0 * n, ws);
+    EXPECT_EQ(sm, s);
+    double sum = 0;
+    for (float v : map) sum += v;
+    EXPECT_NEAR(sum / n, s, 1e-6);
+    for (int i = 0; i < n; ++i) ASSERT_NEAR(gm[i], g[i] / 4, 1e-6f * std::abs(g[i]) + 1e-12f) << i;
+  }
+  // A null y is an all-zero one.
+  const float s0 = train::ssim(x.data(), zero.data(), H, W, C, g.data(), ws);
+  EXPECT_EQ(train::ssim_map(x.data(), static_cast<const float*>(nullptr), H, W, C, gm.data(), map.data(), double(n),
+                            ws),
+            s0);
+  for (int i = 0; i < n; ++i) ASSERT_NEAR(gm[i], g[i], 1e-6f * std::abs(g[i]) + 1e-12f) << i;
+  // bro_parts: sum num / (C sum wsum + eps) is eq. 14 and unit * scale / (C sum wsum + eps) its gradient.
+  std::vector<double> wsum(size_t(W) * H), num(size_t(W) * H);
+  std::vector<float> unit(n), gb(n, 0.f);
+  bro_parts(x.data(), y.data(), C, B.data(), H, W, wsum.data(), num.data(), unit.data());
+  const float eps = 1e-6f, scale = 0.7f;
+  const float L = bro_loss(x.data(), y.data(), C, C, B.data(), H, W, eps, gb.data(), scale);
+  double ws_total = 0, num_total = 0;
+  for (size_t p = 0; p < wsum.size(); ++p) ws_total += wsum[p], num_total += num[p];
+  EXPECT_NEAR(ws_total, band_weight_total(B.data(), H, W), 1e-9 * ws_total);
+  const double den = C * ws_total + eps;
+  EXPECT_NEAR(num_total / den, L, 1e-6 * L);
+  double err = 0, mx = 0;
+  for (int i = 0; i < n; ++i) {
+    err = std::max(err, std::abs(unit[i] * scale / den - gb[i]));
+    mx = std::max(mx, double(std::abs(gb[i])));
+  }
+  ASSERT_GT(mx, 0);
+  EXPECT_LE(err, 1e-6 * mx);
+}
