@@ -77,6 +77,18 @@ namespace {
 // Contiguous channels (cs == C): the pairs of both directions are differences of whole shifted rows, computed
 // branch-free with the per-pixel weight spread over the channels (same sums as the generic loop below, which
 // serves strided layouts).
+// Row y's pair weights, each repeated over the C channels: wx[x, c] = max(B(x, y), B(x + 1, y)) and wy[x, c] =
+// max(B(x, y), B(x, y + 1)) (0 past the last column / row). B [H, W]; wx, wy [W * C].
+template <class T>
+void pair_weights(const float* B, int y, int H, int W, int C, T* wx, T* wy) {
+  const float* b = B + size_t(y) * W;
+  for (int x = 0; x < W; ++x)
+    for (int c = 0; c < C; ++c) {
+      wx[size_t(x) * C + c] = x + 1 < W ? T(std::max(b[x], b[x + 1])) : T(0);
+      wy[size_t(x) * C + c] = y + 1 < H ? T(std::max(b[x], b[x + W])) : T(0);
+    }
+}
+
 template <class T>
 T bro_loss_contiguous(const T* pred, const T* gt, int C, const float* B, int H, int W, T eps, T* grad, T scale,
                       double band_total) {
@@ -86,12 +98,7 @@ T bro_loss_contiguous(const T* pred, const T* gt, int C, const float* B, int H, 
   const T gs = scale / den;
   double num = 0;
   for (int y = 0; y < H; ++y) {
-    const float* b = B + size_t(y) * W;
-    for (int x = 0; x < W; ++x)
-      for (int c = 0; c < C; ++c) {
-        wx[size_t(x) * C + c] = x + 1 < W ? T(std::max(b[x], b[x + 1])) : T(0);
-        wy[size_t(x) * C + c] = y + 1 < H ? T(std::max(b[x], b[x + W])) : T(0);
-      }
+    pair_weights(B, y, H, W, C, wx.data(), wy.data());
     const T* p = pred + size_t(y) * L;
     const T* q = gt + size_t(y) * L;
     // x direction: element i pairs with i + C in the same row.
@@ -172,12 +179,7 @@ void bro_parts(const T* pred, const T* gt, int C, const float* B, int H, int W, 
   std::fill(unit, unit + size_t(H) * L, T(0));
   std::vector<T> wx(L), wy(L), ax(L, T(0)), ay(L, T(0)), g(L);
   for (int y = 0; y < H; ++y) {
-    const float* b = B + size_t(y) * W;
-    for (int x = 0; x < W; ++x)
-      for (int c = 0; c < C; ++c) {
-        wx[size_t(x) * C + c] = x + 1 < W ? T(std::max(b[x], b[x + 1])) : T(0);
-        wy[size_t(x) * C + c] = y + 1 < H ? T(std::max(b[x], b[x + W])) : T(0);
-      }
+    pair_weights(B, y, H, W, C, wx.data(), wy.data());
     const T* p = pred + size_t(y) * L;
     const T* q = gt + size_t(y) * L;
     T* u = unit + size_t(y) * L;

@@ -126,8 +126,6 @@ void object_groups_backward(int n, int L, int J, const SparseLayout& sl, const i
     dc[1] += b * gb[1];
     dc[2] += b * gb[2];
     float rest = ci[0] * gb[0] + ci[1] * gb[1] + ci[2] * gb[2];  // sum_k dL/dq_k over the present labels
-    uint64_t entry = 0;                                          // objects with an entry (bit j, j < 64)
-    bool many = false;
     for (int e = g.ptr[i]; e < g.ptr[i + 1]; ++e) {
       const int j = g.id[e];
       const float* ge = grad_groups + size_t(e) * ObjectGroups::kWidth;
@@ -138,18 +136,17 @@ void object_groups_backward(int n, int L, int J, const SparseLayout& sl, const i
       const float dqe = ci[0] * ge[0] + ci[1] * ge[1] + ci[2] * ge[2];
       dqi[objs[j]] += dqe;
       rest -= dqe;
-      if (j < 64) entry |= uint64_t(1) << j;
-      else many = true;
     }
-    // The labels without an entry (all at q = b_n): their summed gradient goes to the first of them.
+    // The labels without an entry (all at q = b_n): their summed gradient goes to the first of them. Entries are
+    // in ascending object order (build_object_groups), so one walk beside them finds it.
+    int e = g.ptr[i];
     for (int j = 0; j < J; ++j) {
-      bool has = j < 64 ? ((entry >> j) & 1) != 0 : false;
-      if (many && j >= 64)
-        for (int e = g.ptr[i]; e < g.ptr[i + 1] && !has; ++e) has = g.id[e] == j;
-      if (!has) {
-        dqi[objs[j]] += rest;
-        break;
+      if (e < g.ptr[i + 1] && g.id[e] == j) {
+        ++e;
+        continue;
       }
+      dqi[objs[j]] += rest;
+      break;
     }
   }
 }

@@ -43,6 +43,16 @@ struct Groups {
       ptr.push_back(int(id.size()));
     }
   }
+  template <class T>
+  ChannelsT<T> channels(const T* values) const {  // values [E, GW]
+    ChannelsT<T> ch;
+    ch.num_groups = kG;
+    ch.group_width = kGW;
+    ch.group_ptr = ptr.data();
+    ch.group_id = id.data();
+    ch.group_val = values;
+    return ch;
+  }
   std::vector<double> dense(int n) const {  // [N, G * GW]
     std::vector<double> d(size_t(n) * kG * kGW, 0.0);
     for (int i = 0; i < n; ++i)
@@ -97,13 +107,7 @@ void check_against_dense(double tol) {
   ProjectedGradsT<T> ps, pd;
   rs.preprocess(s.cam, s.inputs<T>(store));
   rd.preprocess(s.cam, s.inputs<T>(store));
-  ChannelsT<T> cs;
-  cs.num_groups = kG;
-  cs.group_width = kGW;
-  cs.group_ptr = gr.ptr.data();
-  cs.group_id = gr.id.data();
-  cs.group_val = val.data();
-  rs.composite(cs, s.settings, os);
+  rs.composite(gr.channels(val.data()), s.settings, os);
   rd.composite(ChannelsT<T>{dense.data(), kG * kGW}, s.settings, od);
   EXPECT_LE(max_abs_diff(os.groups, od.extra), tol * max_abs(od.extra));
   EXPECT_GT(max_abs(os.groups), 0.1);  // the groups were rendered
@@ -157,13 +161,7 @@ TEST(RenderGroups, FiniteDifferences) {
   std::vector<std::vector<double>> store;
   auto run = [&]() {
     r.preprocess(s.cam, s.inputs<double>(store));
-    ChannelsT<double> ch;
-    ch.num_groups = kG;
-    ch.group_width = kGW;
-    ch.group_ptr = gr.ptr.data();
-    ch.group_id = gr.id.data();
-    ch.group_val = gr.val.data();
-    r.composite(ch, s.settings, out);
+    r.composite(gr.channels(gr.val.data()), s.settings, out);
     Eval e;
     e.loss = dot(wr, out.rgb) + dot(wg, out.groups);
     e.signature = ref_render(s).signature;
