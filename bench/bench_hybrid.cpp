@@ -87,12 +87,14 @@ void BM_RgbStep(benchmark::State& st) {
   parts.report(st);
 }
 
-// Arg: HybridConfig::objects_per_step (0 = every present object, the exact eqs. 6 and 14).
+// Args: HybridConfig::objects_per_step (0 = every present object, the exact eqs. 6 and 14) and
+// HybridConfig::sparse_objects (0 = dense object channels, 1 = base render + sparse channel groups; both exact).
 void BM_HybridStep(benchmark::State& st) {
-  const bench::OmpThreads threads(st, 1);
+  const bench::OmpThreads threads(st, 2);
   auto& s = setup();
   hybrid::HybridConfig hc;
   hc.objects_per_step = static_cast<int>(st.range(0));
+  hc.sparse_objects = st.range(1) != 0;
   train::Trainer trainer(bench_config(), s.model, s.views, 5.f,
                          std::make_unique<hybrid::HybridMethod>(hc, s.data, bench_config().seed));
   for (int i = 0; i < 3; ++i) trainer.step();
@@ -281,8 +283,8 @@ BENCHMARK(BM_ObjectSsim)
     ->UseRealTime();
 BENCHMARK(BM_RgbStep)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_HybridStep)
-    ->ArgNames({"objects_per_step", "threads"})
-    ->ArgsProduct({{0, 4, 2}, bench::thread_counts()})
+    ->ArgNames({"objects_per_step", "sparse", "threads"})
+    ->ArgsProduct({{0, 4, 2}, {0, 1}, bench::thread_counts()})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 BENCHMARK(BM_HybridStepMemory300k)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);

@@ -79,7 +79,7 @@ struct HybridConfig {
   // How the object channels are composited; both exact (the same function up to float rounding). true: a base
   // render plus per-object sparse groups (object_groups.h), the cost of one or two objects per Gaussian visit;
   // false: 4 dense channels per object (object_channels.h).
-  bool sparse_objects = false;  // off until measured: it moves BoundaryLossDoesNotFade... across its 0.01 margin
+  bool sparse_objects = true;
 
   nlohmann::json to_json() const;
   static HybridConfig from_json(const nlohmann::json& j);
