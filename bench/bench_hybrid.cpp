@@ -176,19 +176,35 @@ void BM_PooledPrediction(benchmark::State& st) {
 void BM_RenderObjects(benchmark::State& st) {
   const bench::OmpThreads threads(st, 1);
   auto& s = setup();
-  const bool objects = st.range(0) != 0;
-  const int L = kK + 1, C = objects ? 4 * L : 0, J = objects ? kK : 0;
+  // 0: RGB only; 1: 4 dense channels per label + the SCL pixel weights; 2: the sparse layout (4 base channels,
+  // one group of 4 per Gaussian, object_groups.h) + the pixel weights; 3: the pixel weights alone; 4: the 4 base
+  // channels alone; 5: the groups alone.
+  const int mode = static_cast<int>(st.range(0));
+  const int L = kK + 1, C = mode == 1 ? 4 * L : (mode == 2 || mode == 4) ? 4 : 0;
+  const int J = (mode >= 1 && mode <= 3) ? kK : 0, G = (mode == 2 || mode == 5) ? L : 0;
   render::GaussianRenderer r;
   render::RenderOutputs out;
   render::GaussianGrads g;
   render::GaussianInputs in = render_inputs(s.model);
   std::vector<float> extra(size_t(kN) * C, 0.1f), pw(size_t(kW) * kH * J), d_rgb(size_t(kW) * kH * 3, 1e-3f),
-      d_extra(size_t(kW) * kH * C, 1e-3f), d_ws(size_t(kN) * J, 1e-3f);
+      d_extra(size_t(kW) * kH * C, 1e-3f), d_ws(size_t(kN) * J, 1e-3f), gval(size_t(kN) * 4, 0.2f),
+      d_groups(size_t(kW) * kH * 3 * G, 1e-3f);
+  std::vector<int> gptr(size_t(kN) + 1), gid(kN);
+  for (int i = 0; i <= kN; ++i) gptr[i] = i;
+  for (int i = 0; i < kN; ++i) gid[i] = i % L;
   const LabelMap& lab = s.data.masks[0].labels;
   for (size_t p = 0; p < lab.v.size(); ++p)
     for (int j = 0; j < J; ++j) pw[p * J + j] = lab.v[p] == j + 1;
-  in.extra = extra.data();
-  in.num_extra = C;
+  render::Channels ch;
+  ch.extra = extra.data();
+  ch.num_extra = C;
+  if (G) {
+    ch.num_groups = G;
+    ch.group_width = 4;
+    ch.group_ptr = gptr.data();
+    ch.group_id = gid.data();
+    ch.group_val = gval.data();
+  }
   render::RenderSettings rs;
   rs.want_depth = false;
   rs.pixel_weights = J ? pw.data() : nullptr;
@@ -196,11 +212,20 @@ void BM_RenderObjects(benchmark::State& st) {
   render::OutputGrads dout;
   dout.rgb = d_rgb.data();
   dout.extra = C ? d_extra.data() : nullptr;
-  dout.extra_grad_channels = objects ? 3 * L : -1;  // the opacities are forward-only, as in training
+  dout.extra_grad_channels = mode == 1 ? 3 * L : C == 4 ? 3 : -1;  // the opacities are forward-only
   dout.weight_sums = J ? d_ws.data() : nullptr;
+  if (G) {
+    dout.groups = d_groups.data();
+    dout.group_row = 3 * G;
+    dout.group_stride = 3;
+    dout.group_grad_channels = 3;
+  }
+  render::ProjectedGrads pg;
   for (auto _ : st) {
-    r.forward(s.views[0].cam, in, rs, out);
-    r.backward(dout, g);
+    r.preprocess(s.views[0].cam, in);
+    r.composite(ch, rs, out);
+    r.composite_backward(dout, pg);
+    r.preprocess_backward(pg, g);
   }
 }
 
@@ -273,7 +298,7 @@ BENCHMARK(BM_ObjectLosses)
     ->UseRealTime();
 BENCHMARK(BM_RenderObjects)
     ->ArgNames({"objects", "threads"})
-    ->ArgsProduct({{0, 1}, bench::thread_counts()})
+    ->ArgsProduct({{0, 1, 2, 3, 4, 5}, bench::thread_counts()})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 BENCHMARK(BM_ObjectSsim)

@@ -3,9 +3,9 @@
 //  prepare   Observation Fusion: q = softmax(s(w)/T) (association.h; recomputed from the view logits once per
 //            step, so the gradient reaches them exactly). From the renderer's SH colours c_n of the visible
 //            Gaussians (its preprocess phase), 4 channels per object present in u's mask (or a sample of them,
-//            --objects-per-step), (q_k c, q_k), composited in the same rasterization as the RGB image: as 4
-//            dense channels per object (object_channels.h; the default) or as a base render plus sparse
-//            per-object groups (object_groups.h; sparse_objects); for SCL the rasterizer also accumulates
+//            --objects-per-step), (q_k c, q_k), composited in the same rasterization as the RGB image: as a
+//            base render plus sparse per-object groups (object_groups.h; sparse_objects, the default) or as 4
+//            dense channels per object (object_channels.h); for SCL the rasterizer also accumulates
 //            a_{n,k} = sum_p M_k alpha T for every anchor object.
 //  losses    terms "app" (eq. 6) and "bro" (eq. 14) per object (object_losses.h), "sem" (SCL, eqs. 9-10, or the
 //            no-SCL cosine; semantic.h). The trainer adds "rgb" (3DGS photometric loss, weight lambda_rgb).
