@@ -188,9 +188,11 @@ std::string save_snapshot(const fs::path& out, const train::Trainer& trainer, bo
 
 // What one run measured, for train_stats.json and the closing lines.
 struct RunTimes {
-  std::vector<float> ms;   // wall ms of each step of this run
-  train::StepTimes parts;  // summed over the steps
-  double wall = 0;         // seconds, test scoring included
+  std::vector<float> ms;          // wall ms of each step of this run
+  std::vector<int> iter;          // the iteration (images seen) each step ended at
+  std::vector<float> densify_ms;  // ... and its densification / opacity reset / after_step part
+  train::StepTimes parts;         // summed over the steps
+  double wall = 0;                // seconds, test scoring included
 };
 
 nlohmann::json train_stats(const train::Trainer& trainer, int start, const RunTimes& rt, const LossEma& ema,
@@ -216,6 +218,16 @@ nlohmann::json train_stats(const train::Trainer& trainer, int start, const RunTi
                           // this rank's share of the gradient exchange (rank 0; every rank sends about as much)
                           {"comm_bytes_per_step", ms.empty() ? 0.0 : trainer.reducer().stats.bytes_sent / ms.size()},
                           {"comm_ms_per_step", ms.empty() ? 0.0 : trainer.reducer().stats.ms / ms.size()}};
+  // The slowest steps (where the mean departs from the median: densification, observation-table rebuilds).
+  std::vector<size_t> order(ms.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+  const size_t top = std::min<size_t>(5, order.size());
+  std::partial_sort(order.begin(), order.begin() + top, order.end(), [&](size_t x, size_t y) { return ms[x] > ms[y]; });
+  nlohmann::json slowest = nlohmann::json::array();
+  for (size_t i = 0; i < top; ++i)
+    slowest.push_back(
+        {{"iteration", rt.iter[order[i]]}, {"ms", ms[order[i]]}, {"densify_ms", rt.densify_ms[order[i]]}});
+  stats["slowest_steps"] = slowest;
   nlohmann::json part_ms = nlohmann::json::object();
   train::StepTimes::each([&](const char* name, double train::StepTimes::*m) {
     part_ms[name] = ms.empty() ? 0.0 : rt.parts.*m / ms.size();
@@ -257,6 +269,8 @@ void train_loop(const TrainArgs& a, const Scene& scene, train::Trainer& trainer,
       fail("{} (the last checkpoint {} is intact: --resume from it)", e.what(), last_ckpt);
     }
     rt.ms.push_back(float(s.ms));
+    rt.iter.push_back(trainer.iteration());
+    rt.densify_ms.push_back(float(s.times.densify));
     train::StepTimes::each([&](const char*, double train::StepTimes::*m) { rt.parts.*m += s.times.*m; });
     ema.add(s, rt.ms.size() == 1);
     const int it = trainer.iteration();

@@ -55,6 +55,18 @@ TEST_F(TrainCli, RgbConvergesAndWritesOutputs) {
        {"iterations", "median_ms_per_iter", "peak_rss_mb", "num_gaussians", "wall_time_s", "mean_ms_per_part"})
     EXPECT_TRUE(stats.contains(key)) << key;
   EXPECT_EQ(stats["iterations"], 1000);
+  // The five slowest steps, slowest first, each with its densification part.
+  const auto& slow = stats["slowest_steps"];
+  ASSERT_EQ(slow.size(), 5u) << slow.dump();
+  for (size_t k = 0; k < slow.size(); ++k) {
+    if (k > 0) {
+      EXPECT_GE(slow[k - 1]["ms"].get<double>(), slow[k]["ms"].get<double>());
+    }
+    EXPECT_LE(slow[k]["densify_ms"].get<double>(), slow[k]["ms"].get<double>());
+    const int it = slow[k]["iteration"].get<int>();
+    EXPECT_TRUE(it >= 1 && it <= 1000) << it;
+  }
+  EXPECT_GE(slow[0]["ms"].get<double>(), stats["median_ms_per_iter"].get<double>());
   auto cfg = read_json(out / "m" / "config.json");
   EXPECT_EQ(cfg["method"], "rgb");
   EXPECT_EQ(cfg["iters"], 1000);
