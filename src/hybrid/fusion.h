@@ -35,6 +35,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
 #include <vector>
 
 #include "core/image.h"
@@ -98,37 +99,82 @@ struct FusionParams {
   double background_vote = 1.0;  // weight of a background observation in eq. 4's numerator (1 = the paper)
 };
 
+// Eq. 5 for one Gaussian from its unnormalised sums acc [L] (strided by `stride`) and den: s_n [L], q_n [L],
+// valid. lg [L] scratch.
+template <class T>
+void fuse_finish(const T* acc, int stride, T den, const FusionParams& p, T* sn, T* qn, uint8_t& valid, T* lg) {
+  const int L = p.num_labels;
+  for (int k = 0; k < L; ++k) sn[k] = acc[size_t(k) * stride];
+  valid = den > 0;
+  if (!valid) return;
+  const T inv = T(1) / (den + T(p.eps));
+  for (int k = 0; k < L; ++k) {
+    sn[k] *= inv;
+    lg[k] = sn[k] / T(p.temperature);
+  }
+  softmax(lg, L, qn);
+}
+
 // w [U] (already softmax-normalised), q [N, K+1] in/out (kept where no view is valid), s [N, K+1] out,
 // valid [N] out (1 if some view observed the Gaussian).
+// Up to kFuseBlockLabels labels, the sums of eq. 4 run over blocks of 8 Gaussians, one per lane, each label's sum
+// in registers: every view adds its weight (or 0) to every label's sum. A Gaussian's sums then run in view
+// order with zeros in between, so they are those of the per-Gaussian loop bitwise, without its unpredictable
+// branches and its read-modify-writes of one label's sum view after view (a chain of store-to-load latencies).
+constexpr int kFuseBlockLabels = 96;
 template <class T>
 void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, T* s, uint8_t* valid) {
-  const int L = p.num_labels, U = tab.num_views;
-#pragma omp parallel for schedule(static)
-  for (int n = 0; n < tab.n; ++n) {
-    const uint16_t* lab = &tab.label[size_t(n) * U];
-    T* sn = s + size_t(n) * L;
-    std::fill(sn, sn + L, T(0));
-    T den = 0;
-    for (int u = 0; u < U; ++u) {
-      if (lab[u] == kNoObservation) continue;
-      den += w[u];
-      if (lab[u] < L) sn[lab[u]] += lab[u] == 0 ? T(p.background_vote) * w[u] : w[u];
+  const int L = p.num_labels, U = tab.num_views, N = tab.n;
+  const T bv = T(p.background_vote);
+  if (L <= kFuseBlockLabels) {
+    constexpr int B = 8;
+    using I = std::conditional_t<sizeof(T) == 4, int32_t, int64_t>;
+    typedef T V __attribute__((vector_size(sizeof(T) * B)));   // 8 Gaussians' sums of one label
+    typedef I VI __attribute__((vector_size(sizeof(T) * B)));  // their labels in one view
+    const int blocks = (N + B - 1) / B;
+#pragma omp parallel
+    {
+      V acc[kFuseBlockLabels];  // (a vector type loses its attribute as a template argument: no std::vector)
+      std::vector<T> lg(L), col(size_t(L) * B);
+#pragma omp for schedule(static)
+      for (int blk = 0; blk < blocks; ++blk) {
+        const int n0 = blk * B, nb = std::min(B, N - n0);
+        for (int k = 0; k < L; ++k) acc[k] = V{};
+        V den{};
+        const uint16_t* rows = &tab.label[size_t(n0) * U];
+        for (int u = 0; u < U; ++u) {
+          VI lb;
+          for (int b = 0; b < B; ++b) lb[b] = b < nb ? I(rows[size_t(b) * U + u]) : I(kNoObservation);
+          const V wu = V{} + w[u], w0 = V{} + bv * w[u];
+          den += lb != I(kNoObservation) ? wu : V{};
+          acc[0] += lb == I(0) ? w0 : V{};
+          for (int k = 1; k < L; ++k) acc[k] += lb == I(k) ? wu : V{};
+        }
+        for (int k = 0; k < L; ++k)
+          for (int b = 0; b < B; ++b) col[size_t(k) * B + b] = acc[k][b];
+        for (int b = 0; b < nb; ++b) {
+          const size_t n = size_t(n0 + b);
+          fuse_finish(&col[b], B, den[b], p, s + n * L, q + n * L, valid[n], lg.data());
+        }
+      }
     }
-    valid[n] = den > 0;
-    if (!valid[n]) continue;
-    const T inv = T(1) / (den + T(p.eps));
-    T logits[256];
-    T* lg = L <= 256 ? logits : nullptr;
-    std::vector<T> big;
-    if (!lg) {
-      big.resize(L);
-      lg = big.data();
+    return;
+  }
+#pragma omp parallel
+  {
+    std::vector<T> acc(L), lg(L);
+#pragma omp for schedule(static)
+    for (int n = 0; n < N; ++n) {
+      const uint16_t* lab = &tab.label[size_t(n) * U];
+      std::fill(acc.begin(), acc.end(), T(0));
+      T den = 0;
+      for (int u = 0; u < U; ++u) {
+        if (lab[u] == kNoObservation) continue;
+        den += w[u];
+        if (lab[u] < L) acc[lab[u]] += lab[u] == 0 ? bv * w[u] : w[u];
+      }
+      fuse_finish(acc.data(), 1, den, p, s + size_t(n) * L, q + size_t(n) * L, valid[n], lg.data());
     }
-    for (int k = 0; k < L; ++k) {
-      sn[k] *= inv;
-      lg[k] = sn[k] / T(p.temperature);
-    }
-    softmax(lg, L, q + size_t(n) * L);
   }
 }
 
@@ -136,7 +182,12 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
 template <class T>
 void fuse_backward(const ObservationTable& tab, const T* w, const FusionParams& p, const T* s, const T* q,
                    const uint8_t* valid, const T* dq, T* dw) {
-  const int L = p.num_labels, U = tab.num_views;
+  const int L = p.num_labels, U = tab.num_views, N = tab.n;
+  constexpr int B = 8;  // Gaussians per block: their normalisers as in fuse(), then their views
+  using I = std::conditional_t<sizeof(T) == 4, int32_t, int64_t>;
+  typedef T V __attribute__((vector_size(sizeof(T) * B)));
+  typedef I VI __attribute__((vector_size(sizeof(T) * B)));
+  const int blocks = (N + B - 1) / B;
   std::fill(dw, dw + U, T(0));
   // Per-thread partial sums, added in thread order (deterministic for a given thread count).
   std::vector<std::vector<T>> partial(size_t(std::max(1, omp_get_max_threads())));
@@ -144,29 +195,56 @@ void fuse_backward(const ObservationTable& tab, const T* w, const FusionParams& 
   {
     std::vector<T>& dw_local = partial[omp_get_thread_num()];
     dw_local.assign(U, T(0));
-    std::vector<T> ds(L);
+    // gv [B, L + 2]: the gradient of a view that observes the Gaussian with label l, before the factor 1 / (den +
+    // eps) (background weighted; a label outside [0, L) gets only the normalisation's part, slot L), slot L + 1 = 0
+    // for no observation.
+    std::vector<T> ds(L), gv(size_t(B) * (L + 2));
 #pragma omp for schedule(static)
-    for (int n = 0; n < tab.n; ++n) {
-      if (!valid[n]) continue;
-      const T* qn = q + size_t(n) * L;
-      const T* sn = s + size_t(n) * L;
-      softmax_backward(qn, dq + size_t(n) * L, L, ds.data());
-      T den = 0;
-      const uint16_t* lab = &tab.label[size_t(n) * U];
-      for (int u = 0; u < U; ++u)
-        if (lab[u] != kNoObservation) den += w[u];
-      const T inv = T(1) / (den + T(p.eps));
-      // ds/ds_logit scale 1/T; d s_k / d w_u = V_u ([label_u = k] - s_k) / (den + eps)
-      T sum_ds_s = 0;
-      for (int k = 0; k < L; ++k) {
-        ds[k] /= T(p.temperature);
-        sum_ds_s += ds[k] * sn[k];
-      }
+    for (int blk = 0; blk < blocks; ++blk) {
+      const int n0 = blk * B, nb = std::min(B, N - n0);
+      const uint16_t* rows = &tab.label[size_t(n0) * U];
+      V den{};  // in view order, as fuse() sums it
       for (int u = 0; u < U; ++u) {
-        if (lab[u] == kNoObservation) continue;
-        T g = -sum_ds_s;
-        if (lab[u] < L) g += lab[u] == 0 ? T(p.background_vote) * ds[0] : ds[lab[u]];
-        dw_local[u] += g * inv;
+        VI lb;
+        for (int b = 0; b < B; ++b) lb[b] = b < nb ? I(rows[size_t(b) * U + u]) : I(kNoObservation);
+        den += lb != I(kNoObservation) ? V{} + w[u] : V{};
+      }
+      bool any = false;
+      T inv_b[B] = {};
+      for (int b = 0; b < nb; ++b) {
+        const size_t n = size_t(n0 + b);
+        T* g = &gv[size_t(b) * (L + 2)];
+        std::fill(g, g + L + 2, T(0));
+        if (!valid[n]) continue;  // q is a constant there: no gradient
+        any = true;
+        softmax_backward(q + n * L, dq + n * L, L, ds.data());
+        const T inv = T(1) / (den[b] + T(p.eps));
+        // ds/ds_logit scale 1/T; d s_k / d w_u = V_u ([label_u = k] - s_k) / (den + eps)
+        T sum_ds_s = 0;
+        const T* sn = s + n * L;
+        for (int k = 0; k < L; ++k) {
+          ds[k] /= T(p.temperature);
+          sum_ds_s += ds[k] * sn[k];
+        }
+        // (written as the per-view formula -sum + b_k ds_k, then times inv where it is added, so that the values
+        // are those of a loop over the views, ObservationFusion.BlockedFusionIsThePerGaussianLoopBitwise)
+        g[0] = -sum_ds_s + T(p.background_vote) * ds[0];
+        for (int k = 1; k < L; ++k) g[k] = -sum_ds_s + ds[k];
+        g[L] = -sum_ds_s;
+        inv_b[b] = inv;
+      }
+      if (!any) continue;
+      // Gaussian by Gaussian (the order of the per-Gaussian loop), its views independent of each other.
+      for (int b = 0; b < nb; ++b) {
+        if (!valid[n0 + b]) continue;
+        const T* g = &gv[size_t(b) * (L + 2)];
+        const T inv = inv_b[b];
+        const uint16_t* lab = rows + size_t(b) * U;
+        T* d = dw_local.data();
+        for (int u = 0; u < U; ++u) {
+          const int l = lab[u];
+          d[u] += g[l == kNoObservation ? L + 1 : l < L ? l : L] * inv;
+        }
       }
     }
   }

@@ -1,0 +1,97 @@
+#!/usr/bin/env python3
+"""Per-phase scaling of a training step and its Amdahl projection to more threads (docs/performance.md).
+
+Reads the JSON of a bench_hybrid run at 1 and 2 threads (the step benchmarks report the mean ms of each part of
+the step as counters ms_<part>) and prints, per part, the 1- and 2-thread times, the speed-up, the parallel
+fraction p that speed-up implies under Amdahl's law (S_2 = 1 / ((1 - p) + p / 2), so p = 2 (1 - 1 / S_2)), and
+the part's projected time at each target thread count; then the step's projected totals. Medians over the
+repetitions when the run has them.
+
+  HGS_BENCH_THREADS=1,2 build/bench_hybrid --benchmark_filter='BM_RgbStep|BM_HybridStep/objects_per_step:0/sparse:1' \\
+      --benchmark_repetitions=5 --benchmark_enable_random_interleaving=true --benchmark_out=steps.json
+  bench/amdahl.py steps.json --threads 16
+
+The projection is an upper bound of what the 2-thread figures allow: it assumes a part's serial share stays
+serial and its parallel share divides perfectly, and ignores memory bandwidth and the barriers of more threads.
+"""
+import argparse
+import json
+import re
+import statistics
+import sys
+from collections import defaultdict
+
+
+def parse(path):
+    """{(benchmark family, threads): {counter: [values]}} from Google Benchmark's JSON (iteration rows only)."""
+    with open(path) as f:
+        data = json.load(f)
+    rows = defaultdict(lambda: defaultdict(list))
+    for b in data.get("benchmarks", []):
+        if b.get("run_type") == "aggregate":
+            continue
+        name = b["name"]
+        m = re.search(r"/threads:(\d+)", name)
+        if not m:
+            continue
+        family = re.sub(r"/threads:\d+", "", name).replace("/real_time", "")
+        key = (family, int(m.group(1)))
+        unit = {"ns": 1e-6, "us": 1e-3, "ms": 1.0, "s": 1e3}[b.get("time_unit", "ns")]
+        rows[key]["step"].append(b["real_time"] * unit)
+        for k, v in b.items():
+            if k.startswith("ms_") and isinstance(v, (int, float)):
+                rows[key][k[3:]].append(float(v))
+    return rows
+
+
+def project(t1, t2, n):
+    """Amdahl: time at n threads from the 1- and 2-thread times (p clamped to [0, 1])."""
+    if t1 <= 0:
+        return 0.0, 0.0
+    s2 = t1 / t2 if t2 > 0 else 2.0
+    p = min(1.0, max(0.0, 2.0 * (1.0 - 1.0 / s2)))
+    return p, t1 * ((1.0 - p) + p / n)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("json", help="Google Benchmark JSON (--benchmark_out) of a run at 1 and 2 threads")
+    ap.add_argument("--threads", type=int, nargs="+", default=[16], help="thread counts to project to")
+    ap.add_argument("--min-share", type=float, default=0.0,
+                    help="list only the parts above this share of the 1-thread step (e.g. 0.05)")
+    a = ap.parse_args()
+    rows = parse(a.json)
+    families = sorted({f for f, _ in rows})
+    if not families:
+        sys.exit(f"{a.json}: no benchmark with a threads argument")
+    for fam in families:
+        if (fam, 1) not in rows or (fam, 2) not in rows:
+            print(f"{fam}: needs both 1 and 2 threads, skipped")
+            continue
+        r1, r2 = rows[(fam, 1)], rows[(fam, 2)]
+        med = lambda r, k: statistics.median(r[k]) if r.get(k) else 0.0
+        step1, step2 = med(r1, "step"), med(r2, "step")
+        parts = [k for k in r1 if k != "step" and k in r2 and not k.startswith("method_loss_")]
+        print(f"\n{fam}: step {step1:.2f} ms at 1 thread, {step2:.2f} ms at 2 ({step1 / step2:.2f}x)")
+        head = "| part | 1 thr ms | 2 thr ms | speed-up | parallel p |" + "".join(
+            f" {n} thr ms |" for n in a.threads)
+        print(head)
+        print("|---" * (5 + len(a.threads)) + "|")
+        totals = defaultdict(float)
+        other1 = step1 - sum(med(r1, k) for k in parts)
+        other2 = step2 - sum(med(r2, k) for k in parts)
+        for k, t1, t2 in [(k, med(r1, k), med(r2, k)) for k in parts] + [("(rest of the step)", other1, other2)]:
+            p, _ = project(t1, t2, 2)
+            proj = [project(t1, t2, n)[1] for n in a.threads]
+            for n, t in zip(a.threads, proj):
+                totals[n] += t
+            if t1 < a.min_share * step1:
+                continue
+            sp = f"{t1 / t2:.2f}x" if t2 > 0 else "-"
+            print(f"| {k} | {t1:.2f} | {t2:.2f} | {sp} | {p:.3f} |" + "".join(f" {t:.2f} |" for t in proj))
+        for n in a.threads:
+            print(f"projected step at {n} threads: {totals[n]:.2f} ms ({step1 / totals[n]:.1f}x the 1-thread step)")
+
+
+if __name__ == "__main__":
+    main()
