@@ -1,7 +1,7 @@
 // `hgs ablate SCENE... --out DIR`: the paper's Table 3. Trains the rows (Observation Fusion, Semantic Contrastive
 // Learning and Boundary Reconstruction Optimization each on or off; optionally the full method with eq. 15 alone,
 // --lambda-rgb 0) on every scene and seed, evaluates each model on the held-out views with the chosen protocols
-// and modes (cli/evaluate.h), and writes mean and standard deviation per row over the (scene, seed) runs.
+// and modes (query/evaluate.h), and writes mean and standard deviation per row over the (scene, seed) runs.
 //
 // Layout: DIR/<scene folder name>/seed<S>/<row>/{point_cloud.ply, report.json, report.md, run.json}, then
 // DIR/ablation.json (every run and the per-row summaries) and DIR/ablation.md (one table per protocol and mode),
@@ -16,7 +16,6 @@
 #include <set>
 
 #include "cli/command.h"
-#include "cli/evaluate.h"
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/progress.h"
@@ -24,6 +23,7 @@
 #include "hybrid/config.h"
 #include "hybrid/register.h"
 #include "model/ply.h"
+#include "query/evaluate.h"
 #include "query/session.h"
 #include "train/registry.h"
 
@@ -65,7 +65,7 @@ std::vector<Row> make_rows(const AblateArgs& a) {
 std::vector<std::string> protocols_for(const std::string& spec, const std::vector<Scene>& scenes) {
   std::vector<std::string> out;
   if (spec == "auto") {
-    out.push_back(has_protocol_labels(scenes[0], "instances") ? "instances" : "lerf-ovs");
+    out.push_back(query::has_protocol_labels(scenes[0], "instances") ? "instances" : "lerf-ovs");
   } else {
     size_t b = 0;
     while (b <= spec.size()) {
@@ -80,7 +80,7 @@ std::vector<std::string> protocols_for(const std::string& spec, const std::vecto
   }
   for (const Scene& s : scenes)
     for (const auto& p : out)
-      if (!has_protocol_labels(s, p)) fail("{}: no labels for the {} protocol", s.root.string(), p);
+      if (!query::has_protocol_labels(s, p)) fail("{}: no labels for the {} protocol", s.root.string(), p);
   return out;
 }
 
@@ -133,13 +133,13 @@ json train_and_evaluate(const AblateArgs& a, const Scene& scene, const std::stri
   query::Session s(scene_path, dir / "point_cloud.ply", a.downscale, "");
   std::vector<eval::EvalReport> reports;
   for (const auto& p : protocols) {
-    EvaluateOptions eo;
+    query::EvaluateOptions eo;
     eo.protocol = p;
     eo.object = a.mode != "pixel";
     eo.pixel = a.mode != "object";
     eo.relevancy = a.relevancy == "lerf" ? query::Relevancy::Lerf : query::Relevancy::Foreground;
     eo.progress = false;
-    for (auto& r : evaluate_model(s, eo)) reports.push_back(std::move(r));
+    for (auto& r : query::evaluate_model(s, eo)) reports.push_back(std::move(r));
   }
   eval::write_reports(dir / "report.json", dir / "report.md", reports);
   json run = {{"train_seconds", train_s},
@@ -296,7 +296,7 @@ CommandRegistration reg(
                       "instances, 3d-ovs, lerf-ovs, or a comma-separated list of them; auto = instances when "
                       "gt/instances/ exists, else lerf-ovs")
            ->capture_default_str();
-       sub.add_option("--mode", a->mode, "object, pixel or both (cli/evaluate.h)")
+       sub.add_option("--mode", a->mode, "object, pixel or both (query/evaluate.h)")
            ->check(CLI::IsMember({"object", "pixel", "both"}))
            ->capture_default_str();
        sub.add_option("--relevancy", a->relevancy, "Pixel mode: lerf (the published protocol) or foreground (ours)")

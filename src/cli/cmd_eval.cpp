@@ -2,14 +2,14 @@
 // model with a benchmark protocol (src/eval/run.h) and writes report.json, report.md and overlay PNGs.
 // lerf-ovs reports both the pixel-level (LangSplat protocol) and the object-level mode on the same frames;
 // 3d-ovs the pixel-level argmax over classes and the object-level one; instances (gt/instances maps) the
-// object-level mode and the pixel-level mode (LERF post-processing). --mode picks one (cli/evaluate.h).
+// object-level mode and the pixel-level mode (LERF post-processing). --mode picks one (query/evaluate.h).
 #include <fmt/format.h>
 
 #include "cli/command.h"
-#include "cli/evaluate.h"
 #include "core/error.h"
 #include "eval/report.h"
 #include "eval/run.h"
+#include "query/evaluate.h"
 #include "query/session.h"
 
 namespace hgs::cli {
@@ -40,7 +40,7 @@ void run_eval(const EvalArgs& a) {
   query::Session s(a.scene, ply, a.downscale, a.clip);
   const fs::path out = a.out;
   const fs::path dir = out.parent_path().empty() ? fs::path(".") : out.parent_path();
-  EvaluateOptions opt;
+  query::EvaluateOptions opt;
   opt.protocol = a.protocol;
   opt.object = a.mode != "pixel";
   opt.pixel = a.mode != "object";
@@ -48,7 +48,7 @@ void run_eval(const EvalArgs& a) {
   opt.mask_threshold = a.mask_threshold;
   if (!a.no_png) opt.overlay_dir = dir / "overlays";
   opt.progress = !a.quiet;
-  std::vector<eval::EvalReport> reports = evaluate_model(s, opt);
+  std::vector<eval::EvalReport> reports = query::evaluate_model(s, opt);
   for (auto& r : reports) r.extra["model"] = ply.string();
   fs::path md = out;
   md.replace_extension(".md");
@@ -70,7 +70,7 @@ CommandRegistration reg(
        sub.add_option("--out", a->out, "report.json path (report.md and overlays/ go beside it)")->required();
        sub.add_option("--mode", a->mode,
                       "object (each query's best object; on 3d-ovs background pixels take the language field's "
-                      "class, see cli/evaluate.h), pixel (relevancy of the rendered language map) or both")
+                      "class, see query/evaluate.h), pixel (relevancy of the rendered language map) or both")
            ->check(CLI::IsMember({"object", "pixel", "both"}))
            ->capture_default_str();
        sub.add_option("--relevancy", a->relevancy,

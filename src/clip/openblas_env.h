@@ -4,7 +4,8 @@
 // after that. So the preinit below re-executes the program once (its path from /proc/self/exe, same arguments) with the
 // variables added, marked HGS_OPENBLAS_ENV=1; values the user set are kept, and HGS_OPENBLAS_ENV=0 turns this
 // off. Put HGS_OPENBLAS_PREINIT() in one source file of each executable that runs SAM or CLIP products (hgs,
-// bench_sam, test_clip).
+// bench_sam, test_clip). A Python process cannot re-execute itself: the package `hgs` sets the same two variables
+// from openblas_core_for_this_cpu() and kOpenblasThreadTimeout before it loads the library (python/hgs/__init__.py).
 //
 // OPENBLAS_CORETYPE: Debian's OpenBLAS picks its kernels by the CPU model number, and on a virtual machine
 // whose CPUID names no model it knows (seen: a 16-core Sapphire Rapids guest reporting "Intel Xeon Processor")
@@ -22,6 +23,9 @@
 #include <unistd.h>
 
 namespace hgs::clip {
+
+// The value of OPENBLAS_THREAD_TIMEOUT set here (see above).
+inline constexpr char kOpenblasThreadTimeout[] = "4";
 
 inline const char* openblas_core_for_this_cpu() {
   __builtin_cpu_init();  // needed before the program's constructors have run
@@ -58,13 +62,14 @@ inline void set_openblas_env(int, char** argv, char** envp) {
   if (!add_core && !add_timeout) return;
   constexpr int kMax = 4096;
   static char* env[kMax + 4];
-  static char core_var[64], timeout_var[] = "OPENBLAS_THREAD_TIMEOUT=4", mark[] = "HGS_OPENBLAS_ENV=1";
+  static char core_var[64], timeout_var[64], mark[] = "HGS_OPENBLAS_ENV=1";
   int n = 0;
   for (char** e = envp; e && *e; ++e)
     if (n < kMax) env[n++] = *e;
     else return;  // an environment this large: leave it as it is
   if (add_core) detail::append(core_var, "OPENBLAS_CORETYPE=", core), env[n++] = core_var;
-  if (add_timeout) env[n++] = timeout_var;
+  if (add_timeout)
+    detail::append(timeout_var, "OPENBLAS_THREAD_TIMEOUT=", kOpenblasThreadTimeout), env[n++] = timeout_var;
   env[n++] = mark;
   env[n] = nullptr;
   // The program's own path rather than /proc/self/exe, which would rename the process "exe" in ps and top.

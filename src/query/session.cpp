@@ -8,18 +8,28 @@ namespace hgs::query {
 
 Session::Session(const std::filesystem::path& scene, const std::filesystem::path& model_ply, int downscale,
                  const std::filesystem::path& clip_path)
-    : scene_(load_scene(scene, {downscale, false})),
-      model_(read_model_ply(model_ply)),
-      text_(scene_, clip_path),
-      oe_(object_embeddings(model_)) {
+    : scene_(std::make_shared<const Scene>(load_scene(scene, {downscale, false}))),
+      model_(std::make_shared<const GaussianModel>(read_model_ply(model_ply))),
+      text_(*scene_, clip_path),
+      oe_(object_embeddings(*model_)) {
+  check_dims(model_ply.string());
+}
+
+Session::Session(std::shared_ptr<const Scene> scene, std::shared_ptr<const GaussianModel> model,
+                 const std::filesystem::path& clip_path, const std::string& where)
+    : scene_(std::move(scene)), model_(std::move(model)), text_(*scene_, clip_path), oe_(object_embeddings(*model_)) {
+  check_dims(where);
+}
+
+void Session::check_dims(const std::string& where) const {
   if (oe_.dim != text_.dim())
-    fail("{}: the model's language embeddings have D = {} but the text embeddings have D = {}", model_ply.string(),
-         oe_.dim, text_.dim());
+    fail("{}: the model's language embeddings have D = {} but the text embeddings have D = {}", where, oe_.dim,
+         text_.dim());
 }
 
 std::string Session::object_name(int id) const {
-  auto it = scene_.object_names.find(id);
-  return it != scene_.object_names.end() ? it->second : fmt::format("object {}", id);
+  auto it = scene_->object_names.find(id);
+  return it != scene_->object_names.end() ? it->second : fmt::format("object {}", id);
 }
 
 ObjectAnswer Session::ask(const std::string& text, const QueryOptions& opt) {
@@ -32,8 +42,8 @@ ObjectAnswer Session::ask(const std::string& text, const QueryOptions& opt) {
 }
 
 std::vector<float> Session::object_opacity(int view, const std::vector<int>& objects) {
-  const View& v = scene_.views.at(view);
-  std::vector<float> A = render_object_opacity(renderer_, model_, render::camera_from_view(v), objects);
+  const View& v = scene_->views.at(view);
+  std::vector<float> A = render_object_opacity(renderer_, *model_, render::camera_from_view(v), objects);
   const size_t HW = size_t(v.width) * v.height, J = objects.size();
   std::vector<float> sum(HW, 0.f);
   for (size_t p = 0; p < HW; ++p)
@@ -56,7 +66,7 @@ eval::Mask Session::answer_mask(int view, const std::string& text, float thresho
 
 std::vector<float> Session::pixel_relevancy(int view, const std::string& text, Relevancy variant) {
   const auto& e = text_.embed(text);
-  return render_relevancy(renderer_, model_, render::camera_from_view(scene_.views.at(view)), e.data(),
+  return render_relevancy(renderer_, *model_, render::camera_from_view(scene_->views.at(view)), e.data(),
                           text_.canonical(), variant);
 }
 
@@ -64,7 +74,7 @@ std::vector<std::vector<float>> Session::pixel_relevancies(int view, const std::
                                                            Relevancy variant) {
   std::vector<const float*> e;
   for (const auto& t : texts) e.push_back(text_.embed(t).data());  // embed() keeps each embedding (cache)
-  return render_relevancies(renderer_, model_, render::camera_from_view(scene_.views.at(view)), e, text_.canonical(),
+  return render_relevancies(renderer_, *model_, render::camera_from_view(scene_->views.at(view)), e, text_.canonical(),
                             variant);
 }
 

@@ -3,6 +3,7 @@
 // their rendered opacity above a threshold. Pixel-level answers render the language map's relevancy.
 #pragma once
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -30,9 +31,13 @@ class Session {
  public:
   Session(const std::filesystem::path& scene, const std::filesystem::path& model_ply, int downscale,
           const std::filesystem::path& clip_path);
+  // On a scene and a model already in memory, shared, not copied (the Python binding); `where` names the model
+  // in errors. The model must not change while the session lives (its object embeddings are computed here).
+  Session(std::shared_ptr<const Scene> scene, std::shared_ptr<const GaussianModel> model,
+          const std::filesystem::path& clip_path, const std::string& where);
 
-  const Scene& scene() const { return scene_; }
-  const GaussianModel& model() const { return model_; }
+  const Scene& scene() const { return *scene_; }
+  const GaussianModel& model() const { return *model_; }
   TextEmbedder& text() { return text_; }
   const ObjectEmbeddings& objects() const { return oe_; }
   std::string object_name(int id) const;  // masks/objects.json name, or "object <id>"
@@ -52,11 +57,13 @@ class Session {
                                                     Relevancy variant = Relevancy::Lerf);
 
  private:
-  Scene scene_;
-  GaussianModel model_;
+  std::shared_ptr<const Scene> scene_;
+  std::shared_ptr<const GaussianModel> model_;
   TextEmbedder text_;
   ObjectEmbeddings oe_;
   render::GaussianRenderer renderer_;
+
+  void check_dims(const std::string& where) const;  // the model's D against the text embeddings'
 };
 
 }  // namespace hgs::query

@@ -1,5 +1,5 @@
 // A trained hybrid model through one benchmark protocol, in object mode, pixel mode or both: the evaluation
-// shared by `hgs eval` and `hgs ablate`.
+// shared by `hgs eval`, `hgs ablate` and the Python binding (hgs.evaluate).
 //
 // Object mode answers each query with its best object (Session::ask) and masks that object's rendered
 // opacity. On 3D-OVS, whose classes include background surfaces (walls, floors, tables) that no object mask
@@ -19,7 +19,7 @@
 #include "eval/run.h"
 #include "query/session.h"
 
-namespace hgs::cli {
+namespace hgs::query {
 
 struct EvaluateOptions {
   std::string protocol = "instances";                   // lerf-ovs | 3d-ovs | instances
@@ -37,4 +37,4 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
 // Whether the scene has the labels a protocol needs (gt/instances/, segmentations/, label/).
 bool has_protocol_labels(const Scene& scene, const std::string& protocol);
 
-}  // namespace hgs::cli
+}  // namespace hgs::query

@@ -1,11 +1,11 @@
-#include "cli/evaluate.h"
+#include "query/evaluate.h"
 
 #include <algorithm>
 
 #include "core/error.h"
 #include "render/camera_from_view.h"
 
-namespace hgs::cli {
+namespace hgs::query {
 namespace fs = std::filesystem;
 
 namespace {
@@ -110,4 +110,4 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
   return reports;
 }
 
-}  // namespace hgs::cli
+}  // namespace hgs::query

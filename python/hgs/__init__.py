@@ -1,0 +1,341 @@
+"""hgs: Hybrid Gaussians for open-vocabulary 3D segmentation, from Python (docs/python.md).
+
+The C++ library does the work (module ``hgs._hgs``); this package adds the training loop with its callback,
+progress bar and Ctrl-C handling, and the query / evaluate helpers. Arrays are numpy; the model's arrays are
+views on its own storage.
+
+    import hgs
+    scene = hgs.Scene.load("scene")
+    model = hgs.train(scene, iters=3000)
+    answer = hgs.query(model, scene, "red mug")
+    mask = answer.mask(0)                   # bool [H, W]
+"""
+
+import json
+import math
+import os
+import sys
+import time
+
+from . import _openblas_env
+
+
+def _set_openblas_env():
+    # OpenBLAS reads these once, when the library is loaded (by _hgs below, or by numpy before it): the same
+    # choice as the hgs executables make (src/clip/openblas_env.h). Values the user set are kept, and
+    # HGS_OPENBLAS_ENV=0 leaves everything to OpenBLAS.
+    if os.environ.get("HGS_OPENBLAS_ENV") == "0":
+        return
+    core = _openblas_env.core_for_this_cpu()
+    if core and "OPENBLAS_CORETYPE" not in os.environ:
+        os.environ["OPENBLAS_CORETYPE"] = core
+    os.environ.setdefault("OPENBLAS_THREAD_TIMEOUT", _openblas_env.thread_timeout)
+
+
+_set_openblas_env()
+
+from ._hgs import (  # noqa: E402  (after the environment above)
+    Error,
+    Model,
+    QuerySession,
+    Scene,
+    StepInfo,
+    Trainer,
+    View,
+    __version__,
+    clip,
+    method_names,
+    render,
+    sam,
+    set_threads,
+    synth,
+)
+
+# hgs.clip and hgs.sam are submodules of _hgs: make `import hgs.clip` find them too.
+sys.modules[__name__ + ".clip"] = clip
+sys.modules[__name__ + ".sam"] = sam
+
+__all__ = [
+    "Error", "Model", "QueryResult", "QuerySession", "Scene", "StepInfo", "Trainer", "View", "clip", "evaluate",
+    "method_names", "query", "render", "sam", "set_threads", "synth", "train",
+]
+
+
+# ---- progress bar -------------------------------------------------------------------------------------------
+
+class _Progress:
+    """A progress bar with rate and ETA on sys.stderr: redrawn in place (carriage return) in a terminal and in
+    Jupyter, whose output areas honour it; elsewhere (logs, CI) a plain line every 10 % or 30 s."""
+
+    def __init__(self, label, total, stream=None):
+        self.label, self.total = label, max(1, total)
+        self.stream = stream if stream is not None else sys.stderr
+        isatty = getattr(self.stream, "isatty", lambda: False)
+        self.live = bool(isatty()) or "ipykernel" in sys.modules
+        self.t0 = time.perf_counter()
+        self.last_print, self.last_done, self.width = 0.0, -1, 0
+
+    def _line(self, done, status):
+        el = time.perf_counter() - self.t0
+        frac = min(1.0, done / self.total)
+        eta = el / done * (self.total - done) if done > 0 else float("nan")
+        rate = done / el if el > 0 else 0.0
+        bar = "#" * int(frac * 20)
+        eta_s = "?" if math.isnan(eta) else _duration(eta)
+        return (f"{self.label} [{bar:<20}] {done}/{self.total} {100 * frac:5.1f}% {rate:.1f}/s "
+                f"ETA {eta_s}" + (f"  {status}" if status else ""))
+
+    def update(self, done, status=""):
+        now = time.perf_counter()
+        if self.live:
+            if now - self.last_print < 0.1 and done < self.total:
+                return
+            line = self._line(done, status)
+            self.stream.write("\r" + line + " " * max(0, self.width - len(line)))
+            self.width = len(line)
+        else:
+            step = max(1, self.total // 10)
+            if done // step == self.last_done // step and now - self.last_print < 30 and done < self.total:
+                return
+            self.stream.write(self._line(done, status) + "\n")
+        self.stream.flush()
+        self.last_print, self.last_done = now, done
+
+    def finish(self, done, status=""):
+        if self.live:  # the bar as it ends, then a new line
+            self.last_print = 0.0
+            self.update(done, status)
+            self.stream.write("\n")
+        else:  # one closing line
+            el = time.perf_counter() - self.t0
+            line = f"{self.label}: {done}/{self.total} in {_duration(el)}"
+            self.stream.write(line + (f"  {status}" if status else "") + "\n")
+        self.stream.flush()
+
+
+def _duration(s):
+    if s >= 3600:
+        return f"{int(s // 3600)}h{int(s % 3600 // 60):02d}m"
+    if s >= 60:
+        return f"{int(s // 60)}m{int(s % 60):02d}s"
+    return f"{s:.1f}s"
+
+
+# ---- training -----------------------------------------------------------------------------------------------
+
+def _atomic_write_text(path, text):
+    tmp = f"{path}.tmp{os.getpid()}"
+    with open(tmp, "w") as f:
+        f.write(text)
+    os.replace(tmp, path)
+
+
+def _as_scene(scene, downscale=1):
+    if isinstance(scene, Scene):
+        return scene
+    return Scene.load(os.fspath(scene), downscale)
+
+
+def _as_model(model):
+    if isinstance(model, Model):
+        return model
+    return Model.load(os.fspath(model))
+
+
+def _snapshot(trainer, out, with_ply):
+    # out/checkpoints/iter_<i>.ckpt and, during training, out/point_cloud_iter_<i>.ply (as `hgs train`).
+    it = trainer.iteration
+    os.makedirs(os.path.join(out, "checkpoints"), exist_ok=True)
+    trainer.save_checkpoint(os.path.join(out, "checkpoints", f"iter_{it}.ckpt"))
+    if with_ply:
+        trainer.model.save(os.path.join(out, f"point_cloud_iter_{it}.ply"))
+
+
+def train(scene, out=None, method="hybrid", iters=30000, callback=None, callback_every=100, progress=True,
+          threads=None, resume=None, **options):
+    """Trains Hybrid Gaussians (method="hybrid", the default) or plain 3DGS (method="rgb") on a scene and returns
+    the trained hgs.Model.
+
+    scene: an hgs.Scene or a scene folder. out: a model folder to write (point_cloud.ply, config.json,
+    train_stats.json), or None. iters: training images to see; the 30k schedule (densification) is scaled to it,
+    as `hgs train --iters` does. callback(info) is called every `callback_every` images and at the end, with a
+    dict: iteration, loss, terms (weighted loss terms), psnr, num_gaussians, ms_per_iter (mean since the last
+    call), elapsed_s; when it returns False training stops and the model so far is returned. Ctrl-C
+    (KeyboardInterrupt) stops training the same way at the end of the running step. progress: a progress bar on
+    stderr (terminal or Jupyter). threads: worker threads (hgs.set_threads). options: the training configuration
+    by name (seed, sh_degree, densify, white_bg, batch, batch_lr, learning rates, ...) and, for the hybrid method,
+    its options (use_of, use_scl, use_bro, lambda_app, lambda_sem, lambda_bro, objects_per_step, ...); see
+    docs/python.md. An unknown name raises hgs.Error. With save_every=N (a multiple of the views per step) and
+    `out`, a checkpoint out/checkpoints/iter_<i>.ckpt and a PLY are written every N images (and a checkpoint at
+    the end), as `hgs train --save-every` does; resume=CHECKPOINT continues such a run bit for bit.
+    """
+    if "downscale" in options:
+        if isinstance(scene, Scene):
+            raise ValueError("downscale: the scene is loaded already (hgs.Scene.load(path, downscale))")
+        scene = _as_scene(scene, int(options.pop("downscale")))
+    scene = _as_scene(scene)
+    if threads is not None:
+        set_threads(int(threads))
+    if int(callback_every) < 1:
+        raise ValueError(f"callback_every must be >= 1, got {callback_every}")
+    if callback is not None and not callable(callback):
+        raise TypeError("callback must be callable (or None)")
+    save_every = int(options.get("save_every", 0))
+    if save_every and out is None:
+        raise ValueError("save_every: checkpoints need an output folder (out=...)")
+    if out is not None:  # before training: a folder that cannot be made fails now, not after the run
+        out = os.fspath(out)
+        os.makedirs(out, exist_ok=True)
+    trainer = Trainer(scene, method, int(iters), dict(options), False)
+    G = trainer.step_views
+    if save_every % G:
+        raise ValueError(f"save_every {save_every} is not a multiple of the {G} views of a step")
+    if resume is not None:
+        trainer.load_checkpoint(os.fspath(resume))
+        if trainer.iteration >= iters:
+            raise Error(f"{os.fspath(resume)}: checkpoint is at iteration {trainer.iteration}, nothing to do for "
+                        f"iters {iters}")
+    start = trainer.iteration
+    bar = _Progress("train", iters - start) if progress else None
+    ms, ema, stopped = [], None, None
+    window_ms, window_steps = 0.0, 0
+    t0 = time.perf_counter()
+    try:
+        while trainer.iteration < iters:
+            s = trainer.step()
+            it = trainer.iteration
+            ms.append(s.ms)
+            window_ms += s.ms
+            window_steps += 1
+            ema = s.loss if ema is None else 0.4 * s.loss + 0.6 * ema
+            if save_every and it % save_every == 0 and it < iters:
+                _snapshot(trainer, out, with_ply=True)
+            if bar is not None:
+                bar.update(it - start, f"loss {ema:.4f} psnr {s.psnr:.2f} N {s.num_gaussians} {s.ms:.1f} ms/it")
+            if callback is not None and (it // callback_every > (it - G) // callback_every or it >= iters):
+                info = {"iteration": it, "loss": s.loss, "terms": s.terms, "psnr": s.psnr,
+                        "num_gaussians": s.num_gaussians, "ms_per_iter": window_ms / window_steps / G,
+                        "elapsed_s": time.perf_counter() - t0}
+                window_ms, window_steps = 0.0, 0
+                if callback(info) is False:
+                    stopped = "callback"
+                    break
+    except KeyboardInterrupt:
+        stopped = "interrupted"
+    wall = time.perf_counter() - t0
+    it = trainer.iteration
+    config = json.loads(trainer.config_json)
+    if resume is not None:
+        config["resumed_from"] = os.fspath(resume)
+    if save_every:
+        _snapshot(trainer, out, with_ply=False)
+    model = trainer.finish()
+    if bar is not None:
+        note = {"callback": " (stopped by the callback)", "interrupted": " (interrupted)"}.get(stopped, "")
+        bar.finish(it - start, f"N {model.n}{note}")
+    srt = sorted(ms)
+    model.train_stats = {
+        "iterations": it, "iterations_this_run": it - start,
+        "median_ms_per_iter": srt[len(srt) // 2] if srt else 0.0,
+        "mean_ms_per_iter": wall * 1000.0 / len(ms) if ms else 0.0,  # the loop's wall time per step
+        "mean_step_ms": sum(ms) / len(ms) if ms else 0.0,  # the library's own time per step (StepInfo.ms)
+        "num_gaussians": model.n, "wall_time_s": wall, "final_train_loss_ema": ema, "stopped": stopped,
+        "threads": None if threads is None else int(threads),
+    }
+    if out is not None:
+        model.save(out)
+        _atomic_write_text(os.path.join(out, "config.json"), json.dumps(config, indent=2) + "\n")
+        _atomic_write_text(os.path.join(out, "train_stats.json"), json.dumps(model.train_stats, indent=2) + "\n")
+    if stopped == "interrupted":
+        print(f"hgs.train: interrupted at iteration {it}; returning the model so far", file=sys.stderr)
+    return model
+
+
+# ---- queries and evaluation ---------------------------------------------------------------------------------
+
+class QueryResult:
+    """The answer to a text query: every object ranked (best first), the chosen ones, and on demand their
+    rendered opacity and masks per view, the pixel relevancy map, and the chosen objects' Gaussians."""
+
+    def __init__(self, session, model, scene, text, objects, views, mask_threshold):
+        self.session, self.model, self.scene, self.text = session, model, scene, text
+        self.objects = objects  # [{id, name, relevancy, cosine, chosen}], best first
+        self.chosen = [o["id"] for o in objects if o["chosen"]]
+        self.views = views  # view indices of `masks`
+        self.mask_threshold = mask_threshold
+        self._opacity = {}
+
+    @property
+    def best(self):
+        """The best object: {id, name, relevancy, cosine, chosen}."""
+        return self.objects[0]
+
+    def opacity(self, view):
+        """Rendered opacity of the chosen objects in a view (index or name), summed: float32 [H, W]."""
+        i = self.scene.index(view)
+        if i not in self._opacity:
+            self._opacity[i] = self.session.object_opacity(i, self.chosen)
+        return self._opacity[i]
+
+    def mask(self, view, threshold=None):
+        """Mask of the chosen objects in a view: opacity > threshold (default mask_threshold), bool [H, W]."""
+        return self.opacity(view) > (self.mask_threshold if threshold is None else threshold)
+
+    @property
+    def masks(self):
+        """{view name: bool [H, W]} over the views asked for (hgs.query's `views`)."""
+        return {self.scene.view(i).name: self.mask(i) for i in self.views}
+
+    def relevancy(self, view, relevancy="lerf"):
+        """Pixel-level relevancy of the rendered language map for the text, float32 [H, W] (lerf or foreground)."""
+        return self.session.pixel_relevancy(self.scene.index(view), self.text, relevancy)
+
+    def select(self, remove=False):
+        """The chosen objects' Gaussians as a new hgs.Model (or the scene without them, remove=True)."""
+        return self.model.select(self.chosen, remove)
+
+    def export(self, path, remove=False):
+        """Writes select(remove) as a 3DGS PLY (with the hybrid channels); returns the file written."""
+        return self.select(remove).save(os.fspath(path))
+
+    def __repr__(self):
+        b = self.best
+        return f"<hgs.QueryResult '{self.text}': object {b['id']} ({b['name']}), relevancy {b['relevancy']:.3f}>"
+
+
+def _view_list(scene, views):
+    if views is None or views == "all":
+        return list(range(len(scene)))
+    if views == "test":
+        return list(scene.test_indices)
+    if views == "train":
+        return list(scene.train_indices)
+    if isinstance(views, (int, str)):
+        views = [views]
+    return [scene.index(v) for v in views]
+
+
+def query(model, scene, text, views=None, min_relevancy=0.0, mask_threshold=0.5, clip=None, session=None):
+    """Answers a text query on a trained hybrid model: returns a QueryResult (objects ranked by their embedding's
+    cosine with the text, with LERF relevancy; the best one chosen, plus every other with relevancy >=
+    min_relevancy when that is > 0). views: the views of result.masks ("all" = None, "test", "train", or a list of
+    indices / names); masks are rendered when first asked for. Texts are embedded from the scene's
+    text_embeddings.json, or by OpenCLIP weights `clip`. A QuerySession given as `session` is reused (several
+    queries on one model)."""
+    scene, model = _as_scene(scene), _as_model(model)
+    if session is None:
+        session = QuerySession(scene, model, "" if clip is None else os.fspath(clip))
+    objects = session.ask(text, float(min_relevancy))
+    return QueryResult(session, model, scene, text, objects, _view_list(scene, views), float(mask_threshold))
+
+
+def evaluate(model, scene, protocol="instances", mode="both", relevancy="lerf", mask_threshold=0.5, clip=None,
+             overlays=None, progress=False):
+    """Evaluates a trained hybrid model with a benchmark protocol (lerf-ovs, 3d-ovs or instances) in object mode,
+    pixel mode or both, as `hgs eval` does; returns the report as a dict {"reports": [...]} (report.json's
+    layout: per mode the records, the means, mAcc / mIoU / mBIoU). overlays: a folder for overlay PNGs."""
+    scene, model = _as_scene(scene), _as_model(model)
+    session = QuerySession(scene, model, "" if clip is None else os.fspath(clip))
+    text = session.evaluate(protocol, mode, relevancy, float(mask_threshold),
+                            "" if overlays is None else os.fspath(overlays), bool(progress))
+    return json.loads(text)

@@ -1,0 +1,115 @@
+// hgs.QuerySession: query::Session on a scene and a model shared with Python (not copied): text -> ranked objects
+// (cosine and LERF relevancy), per-view object opacity and masks, pixel relevancy maps, the protocols of
+// query/evaluate.h as report dicts. hgs.query / hgs.evaluate (python/hgs/__init__.py) build one per call.
+#include <nlohmann/json.hpp>
+
+#include "common.h"
+#include "core/error.h"
+#include "eval/report.h"
+#include "query/evaluate.h"
+#include "query/session.h"
+
+namespace hgs::py {
+namespace {
+
+using SessionPtr = std::shared_ptr<query::Session>;
+
+query::Relevancy relevancy_variant(const std::string& r) {
+  if (r == "lerf") return query::Relevancy::Lerf;
+  if (r == "foreground") return query::Relevancy::Foreground;
+  fail("relevancy must be lerf or foreground, got '{}'", r);
+}
+
+pb::list ask(query::Session& s, const std::string& text, float min_relevancy) {
+  query::ObjectAnswer a;
+  {
+    pb::gil_scoped_release nogil;
+    a = s.ask(text, {min_relevancy, 0.5f});
+  }
+  pb::list out;
+  for (const auto& sc : a.scores) {
+    pb::dict d;
+    d["id"] = sc.object;
+    d["name"] = s.object_name(sc.object);
+    d["relevancy"] = sc.relevancy;
+    d["cosine"] = sc.cosine;
+    d["chosen"] = std::find(a.chosen.begin(), a.chosen.end(), sc.object) != a.chosen.end();
+    out.append(d);
+  }
+  return out;
+}
+
+pb::array object_opacity(query::Session& s, pb::handle view, const std::vector<int>& objects) {
+  const int vi = view_index(s.scene(), view);
+  const View& v = s.scene().views[vi];
+  std::vector<float> a;
+  {
+    pb::gil_scoped_release nogil;
+    a = s.object_opacity(vi, objects);
+  }
+  return take_vector(std::move(a), {v.height, v.width});
+}
+
+pb::array pixel_relevancy(query::Session& s, pb::handle view, const std::string& text, const std::string& variant) {
+  const int vi = view_index(s.scene(), view);
+  const View& v = s.scene().views[vi];
+  const query::Relevancy r = relevancy_variant(variant);
+  std::vector<float> a;
+  {
+    pb::gil_scoped_release nogil;
+    a = s.pixel_relevancy(vi, text, r);
+  }
+  return take_vector(std::move(a), {v.height, v.width});
+}
+
+std::string evaluate(query::Session& s, const std::string& protocol, const std::string& mode,
+                     const std::string& relevancy, float mask_threshold, const std::string& overlay_dir,
+                     bool progress) {
+  if (protocol != "lerf-ovs" && protocol != "3d-ovs" && protocol != "instances")
+    fail("protocol must be lerf-ovs, 3d-ovs or instances, got '{}'", protocol);
+  if (mode != "object" && mode != "pixel" && mode != "both") fail("mode must be object, pixel or both, got '{}'", mode);
+  if (!query::has_protocol_labels(s.scene(), protocol))
+    fail("{}: no labels for the {} protocol", s.scene().root.string(), protocol);
+  query::EvaluateOptions o;
+  o.protocol = protocol;
+  o.object = mode != "pixel";
+  o.pixel = mode != "object";
+  o.relevancy = relevancy_variant(relevancy);
+  o.mask_threshold = mask_threshold;
+  o.overlay_dir = overlay_dir;
+  o.progress = progress;
+  nlohmann::json reports = nlohmann::json::array();
+  {
+    pb::gil_scoped_release nogil;
+    for (const auto& r : query::evaluate_model(s, o)) reports.push_back(eval::report_json(r));
+  }
+  return nlohmann::json{{"reports", reports}}.dump();
+}
+
+}  // namespace
+
+void bind_query(pb::module_& m) {
+  pb::class_<query::Session, SessionPtr>(
+      m, "QuerySession",
+      "A scene and a trained hybrid model ready for text queries (the model must not change while it is used)")
+      .def(pb::init([](std::shared_ptr<Scene> scene, std::shared_ptr<GaussianModel> model, const std::string& clip) {
+             pb::gil_scoped_release nogil;
+             return std::make_shared<query::Session>(scene, model, clip, "hgs.query");
+           }),
+           pb::arg("scene"), pb::arg("model"), pb::arg("clip") = "",
+           "Object embeddings of the model; texts are embedded from the scene's text_embeddings.json, or by the "
+           "OpenCLIP weights `clip` (.safetensors) when given")
+      .def("ask", &ask, pb::arg("text"), pb::arg("min_relevancy") = 0.f,
+           "Every object ranked for `text`, best first: dicts with id, name, relevancy, cosine, chosen (the best "
+           "one, plus every other with relevancy >= min_relevancy when it is > 0)")
+      .def("object_opacity", &object_opacity, pb::arg("view"), pb::arg("objects"),
+           "Rendered opacity of the objects in a view, summed: float32 [H, W]")
+      .def("pixel_relevancy", &pixel_relevancy, pb::arg("view"), pb::arg("text"), pb::arg("relevancy") = "lerf",
+           "Relevancy of the rendered language map: float32 [H, W] (relevancy lerf or foreground)")
+      .def("object_name", &query::Session::object_name, pb::arg("id"))
+      .def("evaluate", &evaluate, pb::arg("protocol"), pb::arg("mode") = "both", pb::arg("relevancy") = "lerf",
+           pb::arg("mask_threshold") = 0.5f, pb::arg("overlay_dir") = "", pb::arg("progress") = false,
+           "Runs a benchmark protocol (lerf-ovs, 3d-ovs, instances) and returns {\"reports\": [...]} as JSON text");
+}
+
+}  // namespace hgs::py

@@ -1,0 +1,186 @@
+// hgs.Trainer: the library's train::Trainer (make_trainer: training views, SfM initialisation, the method by name)
+// for Python. step() runs one training step with the GIL released and returns a StepInfo; the loop, the callback,
+// the progress bar and Ctrl-C are in hgs.train (python/hgs/__init__.py), one step at a time, so a KeyboardInterrupt
+// lands between two steps. Options: the keys of TrainConfig::to_json and, for method "hybrid", of
+// HybridConfig::to_json (docs/python.md); unknown keys and wrong types are hgs.Error.
+#include <set>
+
+#include <nlohmann/json.hpp>
+
+#include "clip/model.h"
+#include "common.h"
+#include "core/error.h"
+#include "core/process.h"
+#include "hybrid/config.h"
+#include "hybrid/register.h"
+#include "train/registry.h"
+#include "train/trainer.h"
+
+namespace hgs::py {
+namespace {
+
+using json = nlohmann::json;
+
+// A Python scalar option as JSON (bool before int: bool is an int in Python).
+json option_json(const std::string& key, pb::handle v) {
+  if (pb::isinstance<pb::bool_>(v)) return v.cast<bool>();
+  if (pb::isinstance<pb::int_>(v)) return v.cast<long long>();
+  if (pb::isinstance<pb::float_>(v)) return v.cast<double>();
+  if (pb::isinstance<pb::str>(v)) return v.cast<std::string>();
+  fail("hgs.train: option '{}' must be a bool, int, float or str, got {}", key,
+       std::string(pb::str(v.get_type().attr("__name__"))));
+}
+
+// The option names of both configurations, sorted, for the message of an unknown one.
+std::string key_list(const json& a, const json& b) {
+  std::set<std::string> keys;
+  for (const json* j : {&a, &b})
+    for (auto it = j->begin(); it != j->end(); ++it)
+      if (it.key() != "method" && it.key() != "iters") keys.insert(it.key());
+  std::string t;
+  for (const auto& k : keys) t += (t.empty() ? "" : ", ") + k;
+  return t;
+}
+
+class PyTrainer {
+ public:
+  PyTrainer(std::shared_ptr<Scene> scene, const std::string& method, int iters, const pb::dict& options, bool progress)
+      : scene_(std::move(scene)) {
+    if (iters < 1) fail("hgs.train: iters must be >= 1, got {}", iters);
+    train::TrainConfig base;
+    json tj = base.scaled_to(iters).to_json();
+    json hj = hybrid::HybridConfig().to_json();
+    for (auto [k, v] : options) {
+      const std::string key = k.cast<std::string>();
+      const bool in_train = tj.contains(key) && key != "method" && key != "iters";
+      const bool in_hybrid = method == "hybrid" && hj.contains(key);
+      if (!in_train && !in_hybrid)
+        fail("hgs.train: unknown option '{}' for method '{}' (options: {})", key, method,
+             key_list(tj, method == "hybrid" ? hj : json::object()));
+      if (in_train) tj[key] = option_json(key, v);
+      if (in_hybrid) hj[key] = option_json(key, v);
+    }
+    tj["method"] = method;
+    train::TrainConfig cfg = train::TrainConfig::from_json(tj, "hgs.train options");
+    json method_options;  // null for methods without options (rgb)
+    if (method == "hybrid") {
+      try {
+        method_options = hybrid::HybridConfig::from_json(hj).to_json();
+      } catch (const json::exception& e) {
+        fail("hgs.train options: a hybrid option has the wrong type ({})", e.what());
+      }
+    }
+    const std::vector<int> idx = scene_->train_indices();
+    if (idx.empty()) fail("{}: the scene has no training views", scene_->root.string());
+    if (cfg.batch > int(idx.size()))
+      fail("{}: a step of {} views is more than the {} training views", scene_->root.string(), cfg.batch, idx.size());
+    {
+      pb::gil_scoped_release nogil;
+      trainer_ = train::make_trainer(*scene_, idx, cfg, method, method_options, progress);
+    }
+    config_ = trainer_->config().to_json();
+    config_["scene"] = std::filesystem::absolute(scene_->root).lexically_normal().string();
+    config_["downscale"] = scene_->downscale;
+    config_["extent"] = trainer_->extent();
+    config_["train_views"] = idx.size();
+    config_["init_points"] = trainer_->model().n;
+    config_["split"] = scene_->split_source;
+    if (!method_options.is_null()) config_["hybrid"] = method_options;
+    config_["ranks"] = 1;
+  }
+
+  train::StepInfo step() {
+    live();
+    pb::gil_scoped_release nogil;
+    return trainer_->step();
+  }
+  int iteration() const { return live().iteration(); }
+  int step_views() const { return live().step_views(); }
+  int iters() const { return live().config().iters; }
+  std::shared_ptr<GaussianModel> model_copy() const {
+    live();
+    return std::make_shared<GaussianModel>(trainer_->model());
+  }
+  // Ends training: the model moves out (no copy) and the trainer is released.
+  std::shared_ptr<GaussianModel> finish() {
+    live();
+    auto m = std::make_shared<GaussianModel>(std::move(trainer_->model()));
+    pb::gil_scoped_release nogil;
+    trainer_.reset();
+    return m;
+  }
+  std::string config_text() const { return config_.dump(); }
+  void save_checkpoint(const std::filesystem::path& p) const {
+    live();
+    pb::gil_scoped_release nogil;
+    trainer_->save_checkpoint(p);
+  }
+  void load_checkpoint(const std::filesystem::path& p) {
+    live();
+    pb::gil_scoped_release nogil;
+    trainer_->load_checkpoint(p);
+  }
+
+ private:
+  std::shared_ptr<Scene> scene_;  // the trainer's views and method data came from it
+  std::unique_ptr<train::Trainer> trainer_;
+  json config_;
+  // The trainer, or hgs.Error once finish() has taken the model.
+  train::Trainer& live() const {
+    if (!trainer_) fail("hgs.Trainer: training has finished (finish() took the model)");
+    return *trainer_;
+  }
+};
+
+}  // namespace
+
+void bind_train(pb::module_& m) {
+  hybrid::register_method();
+  // The default thread count, as the hgs command sets it (cli/main.cpp): the CPUs this process may use.
+  if (!std::getenv("OMP_NUM_THREADS")) clip::set_num_threads(available_cpus());
+  m.def("set_threads", &clip::set_num_threads, pb::arg("n"),
+        "Worker threads of OpenMP and OpenBLAS (n > 0; the default is every CPU this process may use)");
+  m.def("method_names", &train::method_names, "Registered training methods ('rgb', 'hybrid')");
+
+  pb::class_<train::StepInfo>(m, "StepInfo", "What one training step reports")
+      .def_readonly("loss", &train::StepInfo::total, "The optimised objective: the sum of the weighted terms")
+      .def_property_readonly(
+          "terms",
+          [](const train::StepInfo& s) {
+            pb::dict d;
+            for (const auto& t : s.terms) d[pb::str(t.name)] = t.weighted();
+            return d;
+          },
+          "Weighted loss terms by name (rgb, app, bro, sem); they sum to loss")
+      .def_readonly("psnr", &train::StepInfo::psnr, "PSNR of the step's training views")
+      .def_readonly("num_gaussians", &train::StepInfo::num_gaussians)
+      .def_readonly("ms", &train::StepInfo::ms, "Wall time of the step in ms")
+      .def_readonly("densified", &train::StepInfo::densified)
+      .def_property_readonly(
+          "times",
+          [](const train::StepInfo& s) {
+            pb::dict d;
+            train::StepTimes::each([&](const char* name, double train::StepTimes::*p) { d[name] = s.times.*p; });
+            return d;
+          },
+          "Wall time of the step's parts in ms (prepare, forward, loss, ...)");
+
+  pb::class_<PyTrainer>(m, "Trainer",
+                        "A training run, one step at a time (hgs.train drives it: callback, progress, Ctrl-C)")
+      .def(pb::init<std::shared_ptr<Scene>, const std::string&, int, const pb::dict&, bool>(), pb::arg("scene"),
+           pb::arg("method") = "hybrid", pb::arg("iters") = 30000, pb::arg("options") = pb::dict(),
+           pb::arg("progress") = false,
+           "Loads the training views, initialises Gaussians from the SfM points and builds the method; "
+           "`iters` scales the 30k schedule (densification) as `hgs train --iters` does")
+      .def("step", &PyTrainer::step, "One training step (G views; the GIL is released while it runs)")
+      .def_property_readonly("iteration", &PyTrainer::iteration, "Training images seen so far")
+      .def_property_readonly("step_views", &PyTrainer::step_views, "Views per step (batch)")
+      .def_property_readonly("iters", &PyTrainer::iters, "Images to see in the whole run")
+      .def_property_readonly("model", &PyTrainer::model_copy, "A copy of the model as it is now")
+      .def("finish", &PyTrainer::finish, "Ends training and returns the model (moved out, not copied)")
+      .def_property_readonly("config_json", &PyTrainer::config_text, "The run's configuration as JSON text")
+      .def("save_checkpoint", &PyTrainer::save_checkpoint, pb::arg("path"))
+      .def("load_checkpoint", &PyTrainer::load_checkpoint, pb::arg("path"));
+}
+
+}  // namespace hgs::py
