@@ -115,6 +115,21 @@ void fuse_finish(const T* acc, int stride, T den, const FusionParams& p, T* sn, 
   softmax(lg, L, qn);
 }
 
+// Blocks of 8 Gaussians, one per vector lane, for fuse() and fuse_backward(): V holds one value of each, VI their
+// labels in one view.
+template <class T>
+struct FuseBlock {
+  static constexpr int B = 8;
+  using I = std::conditional_t<sizeof(T) == 4, int32_t, int64_t>;
+  typedef T V __attribute__((vector_size(sizeof(T) * B)));
+  typedef I VI __attribute__((vector_size(sizeof(T) * B)));
+  // View u's labels of the block's nb Gaussians (rows [nb, U] of the table) into lb; lanes past nb: no observation.
+  // (An out-parameter: a 64-byte vector returned by value would change the ABI between ISA levels.)
+  static void labels(const uint16_t* rows, int U, int u, int nb, VI& lb) {
+    for (int b = 0; b < B; ++b) lb[b] = b < nb ? I(rows[size_t(b) * U + u]) : I(kNoObservation);
+  }
+};
+
 // w [U] (already softmax-normalised), q [N, K+1] in/out (kept where no view is valid), s [N, K+1] out,
 // valid [N] out (1 if some view observed the Gaussian).
 // Up to kFuseBlockLabels labels, the sums of eq. 4 run over blocks of 8 Gaussians, one per lane, each label's sum
@@ -127,10 +142,10 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
   const int L = p.num_labels, U = tab.num_views, N = tab.n;
   const T bv = T(p.background_vote);
   if (L <= kFuseBlockLabels) {
-    constexpr int B = 8;
-    using I = std::conditional_t<sizeof(T) == 4, int32_t, int64_t>;
-    typedef T V __attribute__((vector_size(sizeof(T) * B)));   // 8 Gaussians' sums of one label
-    typedef I VI __attribute__((vector_size(sizeof(T) * B)));  // their labels in one view
+    using FB = FuseBlock<T>;
+    using I = typename FB::I;
+    using V = typename FB::V;  // 8 Gaussians' sums of one label
+    constexpr int B = FB::B;
     const int blocks = (N + B - 1) / B;
 #pragma omp parallel
     {
@@ -143,8 +158,8 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
         V den{};
         const uint16_t* rows = &tab.label[size_t(n0) * U];
         for (int u = 0; u < U; ++u) {
-          VI lb;
-          for (int b = 0; b < B; ++b) lb[b] = b < nb ? I(rows[size_t(b) * U + u]) : I(kNoObservation);
+          typename FB::VI lb;
+          FB::labels(rows, U, u, nb, lb);
           const V wu = V{} + w[u], w0 = V{} + bv * w[u];
           den += lb != I(kNoObservation) ? wu : V{};
           acc[0] += lb == I(0) ? w0 : V{};
@@ -183,10 +198,10 @@ template <class T>
 void fuse_backward(const ObservationTable& tab, const T* w, const FusionParams& p, const T* s, const T* q,
                    const uint8_t* valid, const T* dq, T* dw) {
   const int L = p.num_labels, U = tab.num_views, N = tab.n;
-  constexpr int B = 8;  // Gaussians per block: their normalisers as in fuse(), then their views
-  using I = std::conditional_t<sizeof(T) == 4, int32_t, int64_t>;
-  typedef T V __attribute__((vector_size(sizeof(T) * B)));
-  typedef I VI __attribute__((vector_size(sizeof(T) * B)));
+  using FB = FuseBlock<T>;  // blocks of Gaussians: their normalisers as in fuse(), then their views
+  using I = typename FB::I;
+  using V = typename FB::V;
+  constexpr int B = FB::B;
   const int blocks = (N + B - 1) / B;
   std::fill(dw, dw + U, T(0));
   // Per-thread partial sums, added in thread order (deterministic for a given thread count).
@@ -205,8 +220,8 @@ void fuse_backward(const ObservationTable& tab, const T* w, const FusionParams& 
       const uint16_t* rows = &tab.label[size_t(n0) * U];
       V den{};  // in view order, as fuse() sums it
       for (int u = 0; u < U; ++u) {
-        VI lb;
-        for (int b = 0; b < B; ++b) lb[b] = b < nb ? I(rows[size_t(b) * U + u]) : I(kNoObservation);
+        typename FB::VI lb;
+        FB::labels(rows, U, u, nb, lb);
         den += lb != I(kNoObservation) ? V{} + w[u] : V{};
       }
       bool any = false;
