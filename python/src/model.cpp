@@ -28,6 +28,16 @@ pb::array group_view(ExtraGroup& g, int n, pb::handle self) {
   return view_array(g.data.data(), shape, self);
 }
 
+// The getter of a property that views one of the model's per-Gaussian float arrays: [N, cols] ([N] for cols 0).
+auto field_view(std::vector<float> GaussianModel::*field, int cols) {
+  return [field, cols](pb::object self) {
+    auto& g = self.cast<GaussianModel&>();
+    std::vector<pb::ssize_t> shape = {g.n};
+    if (cols > 0) shape.push_back(cols);
+    return view_array((g.*field).data(), shape, self);
+  };
+}
+
 ExtraGroup& group(GaussianModel& m, const char* name) {
   ExtraGroup* g = m.find_extra(name);
   if (!g) fail("the model has no '{}' group (not a hybrid model: train it with method=\"hybrid\")", name);
@@ -104,20 +114,9 @@ void bind_model(pb::module_& m) {
                              [](const GaussianModel& g) {
                                return hybrid::ConstHybridFields::present(g) ? "hybrid" : "rgb";
                              })
-      .def_property_readonly(
-          "means",
-          [](pb::object self) {
-            auto& g = self.cast<GaussianModel&>();
-            return view_array(g.mean.data(), {g.n, 3}, self);
-          },
-          "Centres float32 [N, 3] (view)")
-      .def_property_readonly(
-          "log_scales",
-          [](pb::object self) {
-            auto& g = self.cast<GaussianModel&>();
-            return view_array(g.log_scale.data(), {g.n, 3}, self);
-          },
-          "Log of the scales float32 [N, 3] (view)")
+      .def_property_readonly("means", field_view(&GaussianModel::mean, 3), "Centres float32 [N, 3] (view)")
+      .def_property_readonly("log_scales", field_view(&GaussianModel::log_scale, 3),
+                             "Log of the scales float32 [N, 3] (view)")
       .def_property_readonly(
           "scales",
           [](const GaussianModel& g) {
@@ -126,20 +125,10 @@ void bind_model(pb::module_& m) {
             return take_vector(std::move(s), {g.n, 3});
           },
           "Scales float32 [N, 3] (exp of log_scales; a copy)")
-      .def_property_readonly(
-          "rotations",
-          [](pb::object self) {
-            auto& g = self.cast<GaussianModel&>();
-            return view_array(g.quat.data(), {g.n, 4}, self);
-          },
-          "Rotations as quaternions (w, x, y, z) float32 [N, 4] (view)")
-      .def_property_readonly(
-          "opacity_logits",
-          [](pb::object self) {
-            auto& g = self.cast<GaussianModel&>();
-            return view_array(g.opacity_logit.data(), {g.n}, self);
-          },
-          "Opacity logits float32 [N] (view)")
+      .def_property_readonly("rotations", field_view(&GaussianModel::quat, 4),
+                             "Rotations as quaternions (w, x, y, z) float32 [N, 4] (view)")
+      .def_property_readonly("opacity_logits", field_view(&GaussianModel::opacity_logit, 0),
+                             "Opacity logits float32 [N] (view)")
       .def_property_readonly(
           "opacities",
           [](const GaussianModel& g) {
