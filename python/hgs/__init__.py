@@ -34,6 +34,13 @@ def _set_openblas_env():
 
 _set_openblas_env()
 
+try:  # after the OpenBLAS settings above: numpy loads the same OpenBLAS
+    import numpy as _numpy  # noqa: F401  (every array hgs hands out is numpy's)
+except ImportError as e:
+    raise ImportError(
+        f"hgs needs numpy in this interpreter ({sys.executable}): Debian's python3-numpy (scripts/setup) is for "
+        "/usr/bin/python3, the interpreter hgs is built for (docs/python.md)") from e
+
 from ._hgs import (  # noqa: E402  (after the environment above)
     Error,
     Model,
