@@ -1,7 +1,9 @@
 // SmallSynth: the synth::SynthOptions of a small test scene, with chained setters for what a test changes.
 // It starts at 16 views of 96x72 pixels, 4 objects, 3000 SfM points, 32-dimensional features, one sample per
-// pixel and no progress output; every other field keeps SynthOptions' default (seed 1, medium noise, consistent
-// label masks). Used by the tests and by the fuzz harnesses' tiny scene.
+// pixel and no progress output, in the objects-only world (masks of the objects alone, no small-object misses, no
+// parts: the world the tests' margins were measured on; sam_like() gives `hgs synth`'s default world); every other
+// field keeps SynthOptions' default (seed 1, medium noise, consistent label masks). Used by the tests and by the
+// fuzz harnesses' tiny scene.
 #pragma once
 #include <cstdint>
 #include <string>
@@ -41,6 +43,13 @@ class SmallSynth {
     o_.noise = v;
     return *this;
   }
+  SmallSynth& sam_like() {  // the default world of `hgs synth`: surfaces, small-object misses, parts
+    const synth::SynthOptions d;
+    o_.surface_masks = d.surface_masks;
+    o_.small_miss_rate = d.small_miss_rate;
+    o_.split_rate = d.split_rate;
+    return *this;
+  }
   operator synth::SynthOptions() const { return o_; }
 
  private:
@@ -51,6 +60,9 @@ class SmallSynth {
                          .points = 3000,
                          .feature_dim = 32,
                          .supersample = 1,
+                         .surface_masks = false,
+                         .small_miss_rate = 0,
+                         .split_rate = 0,
                          .progress = false};
 };
 

@@ -77,3 +77,16 @@ def test_downscale(scene_dir):
     s2 = hgs.Scene.load(scene_dir, downscale=2)
     assert s2.downscale == 2 and s2.views[0].size == (SYNTH["width"] // 2, SYNTH["height"] // 2)
     assert s2.image(0).shape == (SYNTH["height"] // 2, SYNTH["width"] // 2, 3)
+
+
+def test_synth_default_world_has_surfaces_and_parts(tmp_path):
+    # hgs.synth's defaults are `hgs synth`'s: the background surfaces are mask objects after the objects, and a
+    # split object's part follows them; objects_only=True gives the masks of the objects alone.
+    opts = dict(SYNTH, objects_only=False, split_rate=1.0)
+    out = hgs.synth(str(tmp_path / "sam_like"), **opts)
+    with open(os.path.join(out, "masks", "objects.json")) as f:
+        names = json.load(f)
+    assert names["4"] == "wooden table" and names["5"] == "floor"
+    assert sorted(names[k] for k in names if int(k) > 5) == sorted(names[str(k)] + " (part)" for k in (1, 2, 3))
+    m = hgs.Scene.load(out).mask(0)
+    assert m.max() > 5  # a part is in view 0

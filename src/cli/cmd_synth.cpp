@@ -42,10 +42,25 @@ CommandRegistration reg(
               "as SAM JSON with COCO RLE in sam/<stem>.json; masks/ holds them flattened as `hgs masks import` does)")
            ->check(CLI::IsMember({"label", "sam"}))
            ->capture_default_str();
-       sub.add_flag(
-           "--surface-masks", o->surface_masks,
-           "Label-style masks also hold the background surfaces (table, floor, walls) as objects K+1.., named "
-           "in objects.json, as SAM2 propagation of everything SAM segmented gives (the object masks stay the same)");
+       auto* surfaces =
+           sub.add_flag("--surface-masks", o->surface_masks,
+                        "(The default) Label-style masks also hold the background surfaces (table, floor, walls) as "
+                        "objects K+1.., named in objects.json, as SAM2 propagation of everything SAM segmented gives");
+       sub.add_flag("--objects-only", o->objects_only,
+                    "The world of earlier versions: masks of the objects only (no surfaces), no small-object misses, "
+                    "no parts; for comparisons")
+           ->excludes(surfaces);
+       auto rate = [&](const char* name, double& v, const char* what) {
+         sub.add_option(name, v, std::string(what) + " (default: the noise level's rate, docs/synth.md)")
+             ->check(CLI::Range(0.0, 1.0));
+       };
+       rate("--miss-rate", o->miss_rate, "Probability that an object is missed in a view");
+       rate("--small-miss-rate", o->small_miss_rate,
+            "Added to --miss-rate for an object under 0.5 % of the view's pixels (SAM misses small objects)");
+       rate("--merge-rate", o->merge_rate, "Probability that two touching objects share one mask in a view");
+       rate("--split-rate", o->split_rate,
+            "Probability that an object's part (its upper half) is a mask of its own, in every view (label "
+            "style; SAM cuts parts off wholes and SAM2 tracks them)");
        sub.add_flag(
            "--depth", o->write_depth,
            "Also write the exact depth of every view, gt/depth/<stem>.npy (camera z [H, W], float32; 0 = nothing)");

@@ -82,6 +82,11 @@ void validate(const SynthOptions& o) {
   if (o.feature_dim < 1 || o.feature_dim > 4096)
     fail("--feature-dim: must be between 1 and 4096, got {}", o.feature_dim);
   noise_level(o.noise);
+  for (auto [name, r] : {std::pair<const char*, double>{"--miss-rate", o.miss_rate},
+                         {"--small-miss-rate", o.small_miss_rate},
+                         {"--merge-rate", o.merge_rate},
+                         {"--split-rate", o.split_rate}})
+    if (r > 1) fail("{}: a rate between 0 and 1, got {}", name, r);
 }
 
 // The surfaces' concepts: index 0 is the sky / empty background, then every distinct surface concept.
@@ -123,6 +128,7 @@ struct Generation {
   const int K;  // objects
   const bool sam_style, per_view;
   std::vector<char> split;         // [K] --mask-style sam: objects that SAM also cuts into two halves
+  std::vector<int> part_id;        // [K] label style: the mask id of object k's part, 0 = the object is not split
   json mask_ids = json::object();  // per view: id in masks/<stem>.png -> what it truly is
   std::set<int> surface_used;      // --mask-style sam: concepts of the surfaces some view has a mask of
 };
@@ -216,11 +222,28 @@ void write_label_view(Generation& g, int i, const RenderedView& rv) {
     for (size_t p = 0; p < mask.v.size(); ++p)
       if (mask.v[p] == 0 && rv.instances.v[p] == 0 && g.concepts.surface_of[rv.concept_id[p]])
         mask.v[p] = static_cast<uint16_t>(K + g.concepts.surface_of[rv.concept_id[p]]);
+  // Parts: where the mask still shows the object itself, its upper half (world z >= the object's centre: a lid, a
+  // cap, a head, seen from every view above the table) takes the part's id.
+  std::map<int, int> object_of_part;
+  for (int k = 1; k <= K; ++k) {
+    const int part = g.part_id[k - 1];
+    if (!part) continue;
+    object_of_part[part] = k;
+    const double split_z = g.world.objects[k - 1].position.z();
+    for (int y = 0; y < mask.height; ++y)
+      for (int x = 0; x < mask.width; ++x) {
+        const size_t p = size_t(y) * mask.width + x;
+        if (mask.v[p] == k && rv.instances.v[p] == k && pixel_world_point(rv, g.cam, x, y).z() >= split_z)
+          mask.v[p] = static_cast<uint16_t>(part);
+      }
+  }
   if (g.per_view) {
     g.mask_ids[stem] = shuffle_ids(mask, mix(opt.seed, 5, i));
-    for (auto& [id, truth] : g.mask_ids[stem].items())  // a surface's id K + j is no object
-      if (truth["object"].get<int>() > K)
-        truth = {{"object", 0}, {"surface", g.concepts.names[g.concepts.surfaces[truth["object"].get<int>() - K - 1]]}};
+    for (auto& [id, truth] : g.mask_ids[stem].items()) {  // a surface's id K + j is no object; a part's is
+      const int e = truth["object"].get<int>();
+      if (object_of_part.count(e)) truth = {{"object", object_of_part[e]}, {"part", 1}};
+      else if (e > K) truth = {{"object", 0}, {"surface", g.concepts.names[g.concepts.surfaces[e - K - 1]]}};
+    }
   }
   save_label_png(g.tmp / "masks" / (stem + ".png"), mask);
   if (!conf.empty())
@@ -256,6 +279,8 @@ void write_mask_names(const Generation& g) {
   for (auto& o : g.world.objects) names[std::to_string(o.id)] = o.name;
   if (g.opt.surface_masks && !g.sam_style)
     for (size_t j = 0; j < cc.surfaces.size(); ++j) names[std::to_string(K + 1 + int(j))] = cc.names[cc.surfaces[j]];
+  for (auto& o : g.world.objects)
+    if (g.part_id[o.id - 1]) names[std::to_string(g.part_id[o.id - 1])] = fmt::format("{} (part)", o.name);
   if (g.sam_style) {
     for (auto& o : g.world.objects)
       if (g.split[o.id - 1])
@@ -456,7 +481,9 @@ void write_record(const Generation& g) {
                  {"merge", nl.merge},
                  {"swap", nl.swap},
                  {"confidence_noise", nl.conf_noise},
-                 {"feature_noise", nl.feature}}},
+                 {"feature_noise", nl.feature},
+                 {"small_object_miss", nl.small_miss},
+                 {"split", nl.split}}},
                {"feature_dim", opt.feature_dim},
                {"feature_patch", 16},
                {"objects", objs},
@@ -465,15 +492,22 @@ void write_record(const Generation& g) {
                {"background_concepts", std::vector<std::string>(g.concepts.names.begin() + 1, g.concepts.names.end())}};
   if (g.per_view) meta["mask_ids"] = opt.mask_ids;  // only when not the default, so default scenes keep their bytes
   if (g.sam_style) meta["mask_style"] = opt.mask_style;
-  if (opt.surface_masks) meta["surface_masks"] = true;
+  meta["surface_masks"] = opt.surface_masks;
+  if (opt.objects_only) meta["objects_only"] = true;
+  json parts = json::object();  // mask id of each split object's part
+  for (int k = 0; k < g.K; ++k)
+    if (g.part_id[k]) parts[std::to_string(g.part_id[k])] = k + 1;
+  if (!parts.empty()) meta["parts"] = parts;
   if (opt.write_depth) meta["depth"] = "gt/depth";
   atomic_write_text(g.tmp / "synth.json", meta.dump(2) + "\n");
 }
 
 }  // namespace
 
-void generate(const fs::path& out, const SynthOptions& opt) {
-  validate(opt);
+void generate(const fs::path& out, const SynthOptions& options) {
+  validate(options);
+  SynthOptions opt = options;
+  if (opt.objects_only) opt.surface_masks = false;
   if (fs::exists(out) && (!fs::is_directory(out) || !fs::is_empty(out)))
     fail("{}: output folder exists and is not empty (choose a new folder)", out.string());
   const World world = make_world(opt.preset, opt.objects, opt.seed);
@@ -486,15 +520,20 @@ void generate(const fs::path& out, const SynthOptions& opt) {
                tmp,
                world,
                concepts,
-               noise_level(opt.noise),
+               noise_of(opt),
                make_intrinsics(opt.width, opt.height),
                opt.objects,
                opt.mask_style == "sam",
                opt.mask_ids == "per-view",
                std::vector<char>(opt.objects, 0),
+               std::vector<int>(opt.objects, 0),
                json::object(),
                {}};
   for (int k = 0; k < g.K; ++k) g.split[k] = mix(opt.seed, 7, k) & 1;
+  // Label style: the objects whose part SAM cut off (and SAM2 tracked as an object), ids after the surfaces.
+  int next_id = g.K + (opt.surface_masks ? int(concepts.surfaces.size()) : 0) + 1;
+  for (int k = 0; k < g.K && !g.sam_style; ++k)
+    if (double(mix(opt.seed, 8, k) >> 11) * 0x1.0p-53 < g.nl.split) g.part_id[k] = next_id++;
   try {
     ensure_dir(tmp);
     const std::vector<RenderedView> views = render_views(g);

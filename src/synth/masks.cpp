@@ -15,11 +15,28 @@
 namespace hgs::synth {
 
 NoiseLevel noise_level(const std::string& name) {
-  if (name == "none") return {0, 0, 0, 0, 0, 0};
-  if (name == "low") return {0.02, 1, 0.05, 0.02, 0.04, 0.3};
-  if (name == "medium") return {0.04, 2, 0.05, 0.04, 0.07, 0.5};
-  if (name == "high") return {0.10, 3, 0.15, 0.10, 0.10, 0.8};
+  // miss, jitter, merge, swap, confidence noise, feature noise, small-object miss, split
+  if (name == "none") return {0, 0, 0, 0, 0, 0, 0, 0};
+  if (name == "low") return {0.02, 1, 0.05, 0.02, 0.04, 0.3, 0.10, 0.10};
+  if (name == "medium") return {0.04, 2, 0.05, 0.04, 0.07, 0.5, 0.20, 0.25};
+  if (name == "high") return {0.10, 3, 0.15, 0.10, 0.10, 0.8, 0.35, 0.40};
   fail("--noise: unknown level '{}' (none, low, medium or high)", name);
+}
+
+NoiseLevel noise_of(const SynthOptions& opt) {
+  NoiseLevel nl = noise_level(opt.noise);
+  if (opt.miss_rate >= 0) nl.miss = opt.miss_rate;
+  if (opt.small_miss_rate >= 0) nl.small_miss = opt.small_miss_rate;
+  if (opt.merge_rate >= 0) nl.merge = opt.merge_rate;
+  if (opt.split_rate >= 0) nl.split = opt.split_rate;
+  if (opt.objects_only) nl.small_miss = nl.split = 0;
+  return nl;
+}
+
+Eigen::Vector3d pixel_world_point(const RenderedView& v, const Intrinsics& K, int x, int y) {
+  const double z = v.depth[size_t(y) * v.rgb.width + x];
+  const Vec3 pc((x + 0.5 - K.cx) / K.fx * z, (y + 0.5 - K.cy) / K.fy * z, z);
+  return v.R.transpose() * (pc - v.t);
 }
 
 using masks::chessboard_distance;  // masks/per_view.h
@@ -66,10 +83,7 @@ std::vector<SamMask> simulate_sam_masks(const RenderedView& v, const Intrinsics&
         inside[p] = 1;
         ++a;
         if (!split[k - 1]) continue;
-        const double z = v.depth[p];
-        const Vec3 pc((x + 0.5 - K.cx) / K.fx * z, (y + 0.5 - K.cy) / K.fy * z, z);
-        const Vec3 X = v.R.transpose() * (pc - v.t);
-        if (X.x() < split_x) half1[p] = 1, ++a1;
+        if (pixel_world_point(v, K, x, y).x() < split_x) half1[p] = 1, ++a1;
         else half2[p] = 1, ++a2;
       }
     if (!a) continue;
@@ -99,13 +113,11 @@ void simulate_masks(const LabelMap& gt, const NoiseLevel& nl, int num_objects, u
   mask = gt;
   Rng rng(seed);
   std::vector<int> present;
-  {
-    std::vector<int> count(num_objects + 1, 0);
-    for (uint16_t l : gt.v)
-      if (l && l <= num_objects) count[l]++;
-    for (int k = 1; k <= num_objects; ++k)
-      if (count[k] > 0) present.push_back(k);
-  }
+  std::vector<int> count(num_objects + 1, 0);  // [K + 1] pixels of each object in the view
+  for (uint16_t l : gt.v)
+    if (l && l <= num_objects) count[l]++;
+  for (int k = 1; k <= num_objects; ++k)
+    if (count[k] > 0) present.push_back(k);
   // 1. id swap (a propagation failure exchanges two identities in this view)
   if (present.size() >= 2 && rng.chance(nl.swap)) {
     int a = present[rng.integer(0, int(present.size()) - 1)], b;
@@ -114,9 +126,10 @@ void simulate_masks(const LabelMap& gt, const NoiseLevel& nl, int num_objects, u
     } while (b == a);
     for (auto& l : mask.v) l = l == a ? b : l == b ? a : l;
   }
-  // 2-3. missed detections and boundary jitter
+  // 2-3. missed detections (more often for small objects) and boundary jitter
+  const double small = kSmallObjectFraction * double(n);
   for (int k : present) {
-    if (rng.chance(nl.miss)) {
+    if (rng.chance(nl.miss + (count[k] < small ? nl.small_miss : 0.0))) {
       for (auto& l : mask.v)
         if (l == k) l = 0;
       continue;

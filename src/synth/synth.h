@@ -27,9 +27,16 @@ struct SynthOptions {
   std::string mask_style = "label";     // label (SAM2-like label maps) | sam (overlapping SAM masks, sam/<stem>.json)
   // Label style: the background surfaces (table, floor, walls, shelf) get mask ids K + 1 ... K + S too, as SAM2
   // tracks whatever SAM segmented; objects.json names them. The object masks are the same as without it (the
-  // surfaces fill the mask's background pixels that show a surface; they carry no noise of their own).
-  bool surface_masks = false;
-  bool write_depth = false;  // gt/depth/<stem>.npy: exact camera z at pixel centres [H, W] float32 (0 = sky)
+  // surfaces fill the mask's background pixels that show a surface; they carry no noise of their own). On by
+  // default; `--objects-only` turns it off together with the SAM-like errors below (the world of earlier versions).
+  bool surface_masks = true;
+  // SAM's typical errors, each a rate (docs/synth.md); negative = the noise level's rate (NoiseLevel):
+  double miss_rate = -1;        // an object missed in a view
+  double small_miss_rate = -1;  // added to miss_rate for an object under 0.5 % of the view's pixels
+  double merge_rate = -1;       // two touching objects under one mask in a view
+  double split_rate = -1;       // an object whose part (its upper half) is a mask of its own
+  bool objects_only = false;    // no surfaces, no small-object misses, no parts: the objects-only world
+  bool write_depth = false;     // gt/depth/<stem>.npy: exact camera z at pixel centres [H, W] float32 (0 = sky)
   bool progress = true;
 };
 
@@ -41,8 +48,13 @@ struct NoiseLevel {
   double swap = 0;        // probability of an id swap between two objects in a view
   double conf_noise = 0;  // std of per-pixel confidence noise; 0 with `none` (no confidence files written)
   double feature = 0;     // relative norm of the per-patch feature noise
+  double small_miss = 0;  // added to miss for an object under kSmallObjectFraction of the view's pixels
+  double split = 0;       // probability an object's part is a mask of its own (label style; per object, per scene)
 };
+constexpr double kSmallObjectFraction = 0.005;
 NoiseLevel noise_level(const std::string& name);
+// The noise level of `opt.noise` with the options' rate overrides and `objects_only` applied.
+NoiseLevel noise_of(const SynthOptions& opt);
 
 // One rendered view: RGB, ground-truth instance ids and camera-space depth at pixel centres.
 struct RenderedView {
@@ -65,6 +77,9 @@ std::vector<std::pair<Eigen::Matrix3d, Eigen::Vector3d>> make_poses(const World&
 Intrinsics make_intrinsics(int width, int height);
 RenderedView render_view(const World& w, const Intrinsics& K, const Eigen::Matrix3d& R, const Eigen::Vector3d& t,
                          int supersample, const std::vector<std::string>& concept_names);
+
+// The world point seen at the centre of pixel (x, y) of a rendered view (its depth must be > 0).
+Eigen::Vector3d pixel_world_point(const RenderedView& v, const Intrinsics& K, int x, int y);
 
 // Simulated SAM2 label map for one view and its per-pixel confidence (empty when noise is none).
 void simulate_masks(const LabelMap& gt, const NoiseLevel& nl, int num_objects, uint64_t seed, LabelMap& mask,

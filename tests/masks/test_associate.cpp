@@ -213,8 +213,10 @@ TEST(MasksAssociate, BadInputNamesTheFileAndChangesNothing) {
 
 namespace {
 
+// The objects-only world: these tests follow the objects' ids (the surfaces' and parts' are tested below).
 const std::string kScene =
-    "--views 16 --width 96 --height 72 --points 6000 --objects 5 --feature-dim 8 --supersample 1 --quiet --threads 2";
+    "--views 16 --width 96 --height 72 --points 6000 --objects 5 --feature-dim 8 --supersample 1 --quiet --threads 2 "
+    "--objects-only";
 
 std::vector<std::string> stems(const fs::path& scene) {
   std::vector<std::string> s;

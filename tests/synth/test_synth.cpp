@@ -350,3 +350,118 @@ TEST(Synth, GtObjectsJsonNamesTheInstanceIdsInEveryMaskMode) {
     }
   }
 }
+
+TEST(Synth, TheDefaultWorldIsSamLikeAndObjectsOnlyIsTheEarlierOne) {
+  // `hgs synth`'s defaults: surfaces in the masks and the SAM-like rates of the noise level; --objects-only: the
+  // objects' masks alone, without small-object misses or parts.
+  const synth::SynthOptions d;
+  EXPECT_TRUE(d.surface_masks);
+  const synth::NoiseLevel med = synth::noise_of(d);
+  EXPECT_DOUBLE_EQ(med.small_miss, synth::noise_level("medium").small_miss);
+  EXPECT_GT(med.small_miss, 0);
+  EXPECT_GT(med.split, 0);
+  synth::SynthOptions only = d;
+  only.objects_only = true;
+  EXPECT_EQ(synth::noise_of(only).small_miss, 0);
+  EXPECT_EQ(synth::noise_of(only).split, 0);
+  EXPECT_EQ(synth::noise_of(only).miss, med.miss);  // the object noise itself is the level's
+  synth::SynthOptions over = d;
+  over.merge_rate = 0.5;
+  over.miss_rate = 0;
+  EXPECT_EQ(synth::noise_of(over).merge, 0.5);
+  EXPECT_EQ(synth::noise_of(over).miss, 0);
+
+  test::TempDir tmp;
+  synth::SynthOptions o = test::SmallSynth().objects(5).points(300).views(6).sam_like();
+  synth::generate(tmp / "sam", o);
+  o.objects_only = true;
+  synth::generate(tmp / "only", o);
+  const auto names = nlohmann::json::parse(read_file_text(tmp / "sam" / "masks" / "objects.json"));
+  EXPECT_EQ(names[std::to_string(o.objects + 1)], "wooden table");
+  const auto only_names = nlohmann::json::parse(read_file_text(tmp / "only" / "masks" / "objects.json"));
+  EXPECT_EQ(only_names.size(), size_t(o.objects));
+  for (int i = 0; i < o.views; ++i) {
+    const LabelMap m = load_label_png(tmp / "only" / "masks" / fmt::format("frame_{:05d}.png", i + 1));
+    for (uint16_t l : m.v) ASSERT_LE(l, o.objects) << "an id beyond the objects in the objects-only world";
+  }
+  const auto meta = nlohmann::json::parse(read_file_text(tmp / "only" / "synth.json"));
+  EXPECT_FALSE(meta["surface_masks"].get<bool>());
+  EXPECT_EQ(meta["noise_params"]["split"].get<double>(), 0.0);
+}
+
+TEST(Synth, SplitObjectsHaveTheirUpperPartAsAMaskOfItsOwnInEveryView) {
+  // --split-rate 1, no other noise: every object's mask is its exact pixels, the upper half under the part's id
+  // (after the surfaces'), the same id in every view; the ground truth is still the whole object.
+  test::TempDir tmp;
+  synth::SynthOptions o = test::SmallSynth().objects(5).points(300).views(6).noise("none").image_size(160, 120);
+  o.surface_masks = true;
+  o.split_rate = 1;
+  synth::generate(tmp / "s", o);
+  const auto meta = nlohmann::json::parse(read_file_text(tmp / "s" / "synth.json"));
+  const auto names = nlohmann::json::parse(read_file_text(tmp / "s" / "masks" / "objects.json"));
+  ASSERT_EQ(meta["parts"].size(), size_t(o.objects));
+  std::map<int, int> object_of;  // part id -> object
+  for (auto& [id, k] : meta["parts"].items()) {
+    object_of[std::stoi(id)] = k.get<int>();
+    EXPECT_GT(std::stoi(id), o.objects + 2) << "a part id among the objects' or the surfaces'";
+    const std::string whole = names[std::to_string(k.get<int>())];
+    EXPECT_EQ(names[id].get<std::string>(), whole + " (part)");
+  }
+  const synth::World world = synth::make_world(o.preset, o.objects, o.seed);
+  const synth::Intrinsics K = synth::make_intrinsics(o.width, o.height);
+  const auto poses = synth::make_poses(world, o.views, o.seed);
+  std::map<int, size_t> part_pixels, whole_pixels;
+  for (int i = 0; i < o.views; ++i) {
+    const std::string stem = fmt::format("frame_{:05d}", i + 1);
+    const LabelMap m = load_label_png(tmp / "s" / "masks" / (stem + ".png"));
+    const LabelMap gt = load_label_png(tmp / "s" / "gt" / "instances" / (stem + ".png"));
+    const synth::RenderedView rv =
+        synth::render_view(world, K, poses[i].first, poses[i].second, 1, std::vector<std::string>{"sky"});
+    for (int y = 0; y < m.height; ++y)
+      for (int x = 0; x < m.width; ++x) {
+        const size_t p = size_t(y) * m.width + x;
+        const int k = gt.v[p];
+        if (!k) continue;
+        const bool upper = synth::pixel_world_point(rv, K, x, y).z() >= world.objects[k - 1].position.z();
+        const int want = upper ? [&] { for (auto [id, obj] : object_of) if (obj == k) return id; return -1; }() : k;
+        ASSERT_EQ(m.v[p], want) << stem << " pixel (" << x << ", " << y << ") of object " << k;
+        (upper ? part_pixels : whole_pixels)[k]++;
+      }
+  }
+  for (int k = 1; k <= o.objects; ++k) {
+    EXPECT_GT(part_pixels[k], 50u) << "object " << k << ": its part is (nearly) never seen";
+    EXPECT_GT(whole_pixels[k], 50u) << "object " << k << ": nothing of it is left under its own id";
+  }
+}
+
+TEST(Synth, SmallObjectsAreMissedAtTheSmallObjectRate) {
+  // --small-miss-rate 1 with no other noise: an object under 0.5 % of a view's pixels is never in that view's
+  // mask, a larger one always is, exactly.
+  test::TempDir tmp;
+  synth::SynthOptions o = test::SmallSynth().objects(6).points(300).views(10).noise("none").image_size(160, 120);
+  o.small_miss_rate = 1;
+  synth::generate(tmp / "s", o);
+  int small = 0, large = 0;
+  for (int i = 0; i < o.views; ++i) {
+    const std::string stem = fmt::format("frame_{:05d}", i + 1);
+    const LabelMap m = load_label_png(tmp / "s" / "masks" / (stem + ".png"));
+    const LabelMap gt = load_label_png(tmp / "s" / "gt" / "instances" / (stem + ".png"));
+    std::vector<size_t> area(o.objects + 1, 0), kept(o.objects + 1, 0);
+    for (size_t p = 0; p < gt.v.size(); ++p) {
+      area[gt.v[p]]++;
+      if (gt.v[p] && m.v[p] == gt.v[p]) kept[gt.v[p]]++;
+    }
+    for (int k = 1; k <= o.objects; ++k) {
+      if (!area[k]) continue;
+      if (double(area[k]) < synth::kSmallObjectFraction * double(gt.v.size())) {
+        EXPECT_EQ(kept[k], 0u) << stem << ": small object " << k << " (" << area[k] << " px) kept";
+        ++small;
+      } else {
+        EXPECT_EQ(kept[k], area[k]) << stem << ": object " << k << " changed";
+        ++large;
+      }
+    }
+  }
+  EXPECT_GT(small, 0) << "no small object in any view: the test scene proves nothing";
+  EXPECT_GT(large, 0);
+}
