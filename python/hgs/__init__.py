@@ -293,7 +293,7 @@ class QueryResult:
         """{view name: bool [H, W]} over the views asked for (hgs.query's `views`)."""
         return {self.scene.view(i).name: self.mask(i) for i in self.views}
 
-    def relevancy(self, view, relevancy="lerf"):
+    def relevancy(self, view, relevancy="objects"):
         """Pixel-level relevancy of the rendered language map for the text, float32 [H, W] (lerf or foreground)."""
         return self.session.pixel_relevancy(self.scene.index(view), self.text, relevancy)
 
@@ -336,7 +336,7 @@ def query(model, scene, text, views=None, min_relevancy=0.0, mask_threshold=0.5,
     return QueryResult(session, model, scene, text, objects, _view_list(scene, views), float(mask_threshold))
 
 
-def evaluate(model, scene, protocol="instances", mode="both", relevancy="lerf", mask_threshold=0.5, clip=None,
+def evaluate(model, scene, protocol="instances", mode="both", relevancy="objects", mask_threshold=0.5, clip=None,
              overlays=None, progress=False):
     """Evaluates a trained hybrid model with a benchmark protocol (lerf-ovs, 3d-ovs or instances) in object mode,
     pixel mode or both, as `hgs eval` does; returns the report as a dict {"reports": [...]} (report.json's

@@ -14,11 +14,7 @@ namespace {
 
 using SessionPtr = std::shared_ptr<query::Session>;
 
-query::Relevancy relevancy_variant(const std::string& r) {
-  if (r == "lerf") return query::Relevancy::Lerf;
-  if (r == "foreground") return query::Relevancy::Foreground;
-  fail("relevancy must be lerf or foreground, got '{}'", r);
-}
+query::Relevancy relevancy_variant(const std::string& r) { return query::parse_relevancy(r); }
 
 pb::list ask(query::Session& s, const std::string& text, float min_relevancy) {
   query::ObjectAnswer a;
@@ -104,10 +100,11 @@ void bind_query(pb::module_& m) {
            "one, plus every other with relevancy >= min_relevancy when it is > 0)")
       .def("object_opacity", &object_opacity, pb::arg("view"), pb::arg("objects"),
            "Rendered opacity of the objects in a view, summed: float32 [H, W]")
-      .def("pixel_relevancy", &pixel_relevancy, pb::arg("view"), pb::arg("text"), pb::arg("relevancy") = "lerf",
-           "Relevancy of the rendered language map: float32 [H, W] (relevancy lerf or foreground)")
+      .def("pixel_relevancy", &pixel_relevancy, pb::arg("view"), pb::arg("text"), pb::arg("relevancy") = "objects",
+           "Relevancy of the rendered language map: float32 [H, W] (relevancy objects, lerf or foreground: "
+           "query/query.h)")
       .def("object_name", &query::Session::object_name, pb::arg("id"))
-      .def("evaluate", &evaluate, pb::arg("protocol"), pb::arg("mode") = "both", pb::arg("relevancy") = "lerf",
+      .def("evaluate", &evaluate, pb::arg("protocol"), pb::arg("mode") = "both", pb::arg("relevancy") = "objects",
            pb::arg("mask_threshold") = 0.5f, pb::arg("overlay_dir") = "", pb::arg("progress") = false,
            "Runs a benchmark protocol (lerf-ovs, 3d-ovs, instances) and returns {\"reports\": [...]} as JSON text");
 }

@@ -34,7 +34,7 @@ using nlohmann::json;
 
 struct AblateArgs {
   std::vector<std::string> scenes;
-  std::string out, rows = "all", protocol = "auto", mode = "object", relevancy = "lerf", scl_background = "auto";
+  std::string out, rows = "all", protocol = "auto", mode = "object", relevancy = "objects", scl_background = "auto";
   int iters = 3000, downscale = 1, threads = 0, seeds = 1, objects_per_step = 0;
   uint64_t seed = 0;
   bool eq15_row = false, quiet = false;
@@ -137,7 +137,7 @@ json train_and_evaluate(const AblateArgs& a, const Scene& scene, const std::stri
     eo.protocol = p;
     eo.object = a.mode != "pixel";
     eo.pixel = a.mode != "object";
-    eo.relevancy = a.relevancy == "lerf" ? query::Relevancy::Lerf : query::Relevancy::Foreground;
+    eo.relevancy = query::parse_relevancy(a.relevancy);
     eo.progress = false;
     for (auto& r : query::evaluate_model(s, eo)) reports.push_back(std::move(r));
   }
@@ -299,8 +299,9 @@ CommandRegistration reg(
        sub.add_option("--mode", a->mode, "object, pixel or both (query/evaluate.h)")
            ->check(CLI::IsMember({"object", "pixel", "both"}))
            ->capture_default_str();
-       sub.add_option("--relevancy", a->relevancy, "Pixel mode: lerf (the published protocol) or foreground (ours)")
-           ->check(CLI::IsMember({"lerf", "foreground"}))
+       sub.add_option("--relevancy", a->relevancy,
+                      "Pixel mode: objects, lerf or foreground (as `hgs eval --relevancy`)")
+           ->check(CLI::IsMember({"objects", "lerf", "foreground"}))
            ->capture_default_str();
        sub.add_option("--scl-background", a->scl_background, "As `hgs train --scl-background` (every row)")
            ->check(CLI::IsMember({"auto", "on", "off"}))

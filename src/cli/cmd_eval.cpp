@@ -17,7 +17,7 @@ namespace {
 namespace fs = std::filesystem;
 
 struct EvalArgs {
-  std::string scene, model, protocol = "instances", out, clip, relevancy = "lerf", mode = "both";
+  std::string scene, model, protocol = "instances", out, clip, relevancy = "objects", mode = "both";
   int downscale = 1, threads = 0;
   float mask_threshold = 0.5f;
   bool no_png = false, quiet = false;
@@ -44,7 +44,7 @@ void run_eval(const EvalArgs& a) {
   opt.protocol = a.protocol;
   opt.object = a.mode != "pixel";
   opt.pixel = a.mode != "object";
-  opt.relevancy = a.relevancy == "lerf" ? query::Relevancy::Lerf : query::Relevancy::Foreground;
+  opt.relevancy = query::parse_relevancy(a.relevancy);
   opt.mask_threshold = a.mask_threshold;
   if (!a.no_png) opt.overlay_dir = dir / "overlays";
   opt.progress = !a.quiet;
@@ -70,13 +70,17 @@ CommandRegistration reg(
        sub.add_option("--out", a->out, "report.json path (report.md and overlays/ go beside it)")->required();
        sub.add_option("--mode", a->mode,
                       "object (each query's best object; on 3d-ovs background pixels take the language field's "
-                      "class, see query/evaluate.h), pixel (relevancy of the rendered language map) or both")
+                      "class, see query/evaluate.h), pixel (LERF's relevancy of a rendered language map, LangSplat's "
+                      "protocol) or "
+                      "both")
            ->check(CLI::IsMember({"object", "pixel", "both"}))
            ->capture_default_str();
-       sub.add_option("--relevancy", a->relevancy,
-                      "Pixel mode: lerf (LERF's relevancy of the rendered language map, as LangSplat's evaluation) or "
-                      "foreground (ours: times the rendered foreground opacity; see query/query.h)")
-           ->check(CLI::IsMember({"lerf", "foreground"}))
+       sub.add_option(
+              "--relevancy", a->relevancy,
+              "Pixel mode, the map scored: objects (the object-conditioned map sum_k A_k e_k of eqs. 8-9), lerf "
+              "(the raw map sum_n f_n alpha T, as LangSplat's evaluation scores its field) or foreground (the "
+              "raw map's relevancy times the rendered foreground opacity); see query/query.h")
+           ->check(CLI::IsMember({"objects", "lerf", "foreground"}))
            ->capture_default_str();
        sub.add_option("--mask-threshold", a->mask_threshold, "Object mode: mask = rendered object opacity > this")
            ->capture_default_str();

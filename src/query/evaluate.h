@@ -9,7 +9,8 @@
 // r_obj(c) its object relevancy and r_c(p) the LERF relevancy of the rendered language map: object pixels take
 // the class of their object's answer, background pixels the class the language field gives them (both terms
 // are LERF relevancies, on one scale). The argmax over classes is the prediction (eval/protocols.h).
-// Pixel mode is the protocol's relevancy of the rendered language map (query.h Relevancy variants).
+// Pixel mode is the protocol's relevancy of a rendered language map (query.h Relevancy: by default the
+// object-conditioned map of eqs. 8-9, `lerf` the raw map as LangSplat scores its field).
 #pragma once
 #include <filesystem>
 #include <string>
@@ -22,11 +23,11 @@
 namespace hgs::query {
 
 struct EvaluateOptions {
-  std::string protocol = "instances";                   // lerf-ovs | 3d-ovs | instances
-  bool object = true, pixel = true;                     // modes
-  query::Relevancy relevancy = query::Relevancy::Lerf;  // pixel mode
-  float mask_threshold = 0.5f;                          // object mode
-  std::filesystem::path overlay_dir;                    // PNGs under <overlay_dir>/<mode>/ (empty: none)
+  std::string protocol = "instances";                      // lerf-ovs | 3d-ovs | instances
+  bool object = true, pixel = true;                        // modes
+  query::Relevancy relevancy = query::Relevancy::Objects;  // pixel mode
+  float mask_threshold = 0.5f;                             // object mode
+  std::filesystem::path overlay_dir;                       // PNGs under <overlay_dir>/<mode>/ (empty: none)
   bool progress = true;
 };
 

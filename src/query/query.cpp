@@ -79,16 +79,97 @@ std::vector<float> render_object_opacity(render::GaussianRenderer& r, const Gaus
   return out.extra;
 }
 
-const char* relevancy_name(Relevancy v) { return v == Relevancy::Lerf ? "lerf" : "foreground"; }
+const char* relevancy_name(Relevancy v) {
+  return v == Relevancy::Objects ? "objects" : v == Relevancy::Lerf ? "lerf" : "foreground";
+}
+
+Relevancy parse_relevancy(const std::string& name) {
+  if (name == "objects") return Relevancy::Objects;
+  if (name == "lerf") return Relevancy::Lerf;
+  if (name == "foreground") return Relevancy::Foreground;
+  fail("unknown relevancy '{}' (objects, lerf or foreground)", name);
+}
 
 std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
-                                    const float* text, const Canonical& canon, Relevancy variant) {
-  return std::move(render_relevancies(r, m, cam, {text}, canon, variant)[0]);
+                                    const float* text, const Canonical& canon, Relevancy variant,
+                                    const ObjectEmbeddings* oe) {
+  return std::move(render_relevancies(r, m, cam, {text}, canon, variant, oe)[0]);
 }
+
+namespace {
+
+// Relevancy::Objects. F(p) = sum_k A_k(p) e_k is never formed: its cosine with a unit direction u is
+// sum_k A_k(p) (e_k . u) / |F(p)|, and |F(p)|^2 = A(p)^T G A(p) with G = E E^T [L, L], so a pixel costs O(L^2 + L T)
+// instead of O(L D). A pixel where F = 0 gets the cosines 0 (relevancy 0.5), as lerf_relevancy_map.
+std::vector<std::vector<float>> object_map_relevancies(render::GaussianRenderer& r, const GaussianModel& m,
+                                                       const render::Camera& cam,
+                                                       const std::vector<const float*>& texts, const Canonical& canon,
+                                                       const ObjectEmbeddings& oe) {
+  const int L = oe.num_labels, D = oe.dim, T = static_cast<int>(texts.size()), M = static_cast<int>(canon.size());
+  if (M == 0) fail("eval: the LERF relevancy needs at least one canonical phrase embedding");
+  std::vector<int> labels(L);
+  for (int k = 0; k < L; ++k) labels[k] = k;
+  const std::vector<float> A = render_object_opacity(r, m, cam, labels);  // [H, W, L]
+  // Directions: the T texts, then the M canonical phrases, as unit vectors; u [L, T + M] = e_k . direction.
+  std::vector<const float*> dirs(texts);
+  for (const auto& c : canon) {
+    if (c.size() != size_t(D)) fail("eval: a canonical phrase embedding has dimension {}, expected {}", c.size(), D);
+    dirs.push_back(c.data());
+  }
+  const int U = T + M;
+  std::vector<double> u(size_t(L) * U), G(size_t(L) * L);
+  for (int j = 0; j < U; ++j) {
+    double n2 = 0;
+    for (int d = 0; d < D; ++d) n2 += double(dirs[j][d]) * dirs[j][d];
+    const double inv = n2 > 0 ? 1.0 / std::sqrt(n2) : 0.0;
+    for (int k = 0; k < L; ++k) {
+      double s = 0;
+      for (int d = 0; d < D; ++d) s += double(oe.e[size_t(k) * D + d]) * dirs[j][d];
+      u[size_t(k) * U + j] = s * inv;
+    }
+  }
+  for (int a = 0; a < L; ++a)
+    for (int b = 0; b < L; ++b) {
+      double s = 0;
+      for (int d = 0; d < D; ++d) s += double(oe.e[size_t(a) * D + d]) * oe.e[size_t(b) * D + d];
+      G[size_t(a) * L + b] = s;
+    }
+  const size_t HW = size_t(cam.width) * cam.height;
+  std::vector<std::vector<float>> maps(T, std::vector<float>(HW));
+#pragma omp parallel
+  {
+    std::vector<double> dots(U), sc(M);
+#pragma omp for schedule(static)
+    for (long p = 0; p < long(HW); ++p) {
+      const float* a = &A[size_t(p) * L];
+      double n2 = 0;
+      for (int i = 0; i < L; ++i) {
+        double gi = 0;
+        for (int j = 0; j < L; ++j) gi += G[size_t(i) * L + j] * a[j];
+        n2 += a[i] * gi;
+      }
+      std::fill(dots.begin(), dots.end(), 0.0);
+      for (int k = 0; k < L; ++k)
+        if (a[k] != 0.f)
+          for (int j = 0; j < U; ++j) dots[j] += a[k] * u[size_t(k) * U + j];
+      const double inv = n2 > 0 ? 1.0 / std::sqrt(n2) : 0.0;
+      for (int i = 0; i < M; ++i) sc[i] = dots[T + i] * inv;
+      for (int t = 0; t < T; ++t) maps[t][p] = lerf_relevancy_from_cosines(dots[t] * inv, sc.data(), M);
+    }
+  }
+  return maps;
+}
+
+}  // namespace
 
 std::vector<std::vector<float>> render_relevancies(render::GaussianRenderer& r, const GaussianModel& m,
                                                    const render::Camera& cam, const std::vector<const float*>& texts,
-                                                   const Canonical& canon, Relevancy variant) {
+                                                   const Canonical& canon, Relevancy variant,
+                                                   const ObjectEmbeddings* oe) {
+  if (variant == Relevancy::Objects) {
+    if (oe) return object_map_relevancies(r, m, cam, texts, canon, *oe);
+    return object_map_relevancies(r, m, cam, texts, canon, object_embeddings(m));
+  }
   const auto h = hybrid::ConstHybridFields::bind(m, "query");
   const ExtraGroup *f = h.f, *q = h.q;
   const int D = f->dim;

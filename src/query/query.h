@@ -8,8 +8,9 @@
 // contrastive loss (eq. 10) leaves that offset free, so ranking by relevancy picked the wrong object for 2 of 9
 // names on a trained model whose cosine ranking was right for all 9 (docs/results.md). Its mask in a view
 // is its rendered opacity A_k = sum_n q_{n,k} alpha T, thresholded (default 0.5).
-// Pixel level (LERF / LangSplat style): the foreground language map sum_n (1 - q_{n,0}) f_n alpha T is rendered
-// and scored per pixel (background Gaussians carry no language supervision: SCL anchors are foreground objects).
+// Pixel level: a language map is rendered and scored per pixel with LERF's relevancy (Relevancy below): by default
+// the object-conditioned map sum_k A_k(p) e_k (eqs. 8-9: each object's embedding, rendered with its soft object
+// opacity, so its boundaries are the Gaussians'), or the raw map sum_n f_n alpha T as LangSplat scores its field.
 // 3D selection: the Gaussians whose hard id z_n is one of the chosen objects (or all others, for removal).
 #pragma once
 #include <map>
@@ -51,24 +52,32 @@ std::vector<int> choose_objects(const std::vector<ObjectScore>& scores, float mi
 // Opacity render of objects `ks` (channel j = A_{ks[j]}). Returns [H, W, J].
 std::vector<float> render_object_opacity(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
                                          const std::vector<int>& ks);
-// How a pixel's relevancy is computed from the rendered language map F(p) = sum_n f_n alpha T:
-//  Lerf:       LERF's relevancy of F(p) as LangSplat's evaluation computes it (min over the canonical phrases of
-//              the pairwise softmax at temperature 10), nothing else; the published protocol.
-//  Foreground: ours: that relevancy times the rendered foreground opacity sum_n (1 - q_{n,0}) alpha T, and 0
-//              where nothing is rendered (alpha < 1e-4). Background Gaussians get no language supervision (SCL's
-//              anchors are the foreground objects), so their f_n stay near the random init; the weight silences
-//              them.
-enum class Relevancy { Lerf, Foreground };
-const char* relevancy_name(Relevancy v);  // "lerf" | "foreground"
+// Which language map a pixel's relevancy (LERF's: the min over the canonical phrases of the pairwise softmax at
+// temperature 10) is computed on:
+//  Objects:    the object-conditioned map F_obj(p) = sum_k A_k(p) e_k over every label k (the background's too),
+//              A_k = sum_n q_{n,k} alpha T the object's rendered opacity and e_k its embedding (object_embeddings):
+//              eq. 8's map with each Gaussian's f_n replaced by its objects' embeddings. SCL (eqs. 9-10) trains
+//              f only through the objects' pooled means; the part of each f_n that differs from its object's mean
+//              is never constrained and stays at its random initialisation, which the raw map renders as
+//              per-pixel noise (docs/ablation.md, "Pixel mode"). The default.
+//  Lerf:       the raw map F(p) = sum_n f_n alpha T, nothing else: LangSplat's evaluation of its own field.
+//  Foreground: the raw map's relevancy times the rendered foreground opacity sum_n (1 - q_{n,0}) alpha T, and 0
+//              where nothing is rendered (alpha < 1e-4).
+enum class Relevancy { Objects, Lerf, Foreground };
+const char* relevancy_name(Relevancy v);             // "objects" | "lerf" | "foreground"
+Relevancy parse_relevancy(const std::string& name);  // fails naming the accepted values
 
-// Per-pixel relevancy of the rendered language map for a query: [H, W].
+// Per-pixel relevancy of a rendered language map for a query: [H, W]. `oe`: the model's object embeddings for
+// Relevancy::Objects (computed here when null).
 std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
-                                    const float* text, const Canonical& canon, Relevancy variant = Relevancy::Lerf);
-// The same for several queries from one render of the language map: texts[t] is [D]; result [T][H, W], each equal
-// to render_relevancy(texts[t]).
+                                    const float* text, const Canonical& canon, Relevancy variant = Relevancy::Objects,
+                                    const ObjectEmbeddings* oe = nullptr);
+// The same for several queries from one render: texts[t] is [D]; result [T][H, W], each equal to
+// render_relevancy(texts[t]).
 std::vector<std::vector<float>> render_relevancies(render::GaussianRenderer& r, const GaussianModel& m,
                                                    const render::Camera& cam, const std::vector<const float*>& texts,
-                                                   const Canonical& canon, Relevancy variant = Relevancy::Lerf);
+                                                   const Canonical& canon, Relevancy variant = Relevancy::Objects,
+                                                   const ObjectEmbeddings* oe = nullptr);
 
 // Copy of the model keeping Gaussians whose hard id is in `objects` (or not in it when `remove`).
 GaussianModel select_objects(const GaussianModel& m, const std::vector<int>& objects, bool remove);

@@ -36,13 +36,13 @@ void check_canonical(const std::vector<std::vector<float>>& canonical, int dim) 
       fail("eval: canonical phrase embedding {} has dimension {}, expected {}", i, canonical[i].size(), dim);
 }
 
-float relevancy_from_cos(double sq, const double* sc, size_t m, float t) {
+}  // namespace
+
+float lerf_relevancy_from_cosines(double sq, const double* sc, size_t m, float t) {
   double r = 1.0;
   for (size_t i = 0; i < m; ++i) r = std::min(r, 1.0 / (1.0 + std::exp(double(t) * (sc[i] - sq))));
   return static_cast<float>(r);
 }
-
-}  // namespace
 
 float cosine(const float* a, const float* b, int dim) {
   const double na = dot(a, a, dim), nb = dot(b, b, dim);
@@ -56,7 +56,7 @@ float lerf_relevancy(const float* e, const float* query, const std::vector<std::
   const double sq = cosine(e, query, dim);
   std::vector<double> sc(canonical.size());
   for (size_t i = 0; i < canonical.size(); ++i) sc[i] = cosine(e, canonical[i].data(), dim);
-  return relevancy_from_cos(sq, sc.data(), sc.size(), temperature);
+  return lerf_relevancy_from_cosines(sq, sc.data(), sc.size(), temperature);
 }
 
 std::vector<float> lerf_relevancy_map(const float* features, size_t n, int dim, const float* query,
@@ -89,7 +89,7 @@ std::vector<float> lerf_relevancy_map(const float* features, size_t n, int dim, 
       const double ne = norms[r];
       const double sq = ne > 0 ? dots(r, 0) / ne : 0.0;
       for (int i = 0; i < m; ++i) sc[i] = ne > 0 ? dots(r, 1 + i) / ne : 0.0;
-      out[p0 + r] = relevancy_from_cos(sq, sc.data(), m, temperature);
+      out[p0 + r] = lerf_relevancy_from_cosines(sq, sc.data(), m, temperature);
     }
   }
   return out;

@@ -15,6 +15,9 @@ constexpr float kLerfTemperature = 10.f;
 // Cosine similarity of two D-vectors (0 if either is zero).
 float cosine(const float* a, const float* b, int dim);
 
+// The relevancy from the cosines: sq = cos(e, query), sc [m] = cos(e, canonical_i).
+float lerf_relevancy_from_cosines(double sq, const double* sc, size_t m, float temperature = kLerfTemperature);
+
 // Relevancy of one embedding `e` [D] for `query` [D] against `canonical` (each [D], at least one).
 float lerf_relevancy(const float* e, const float* query, const std::vector<std::vector<float>>& canonical, int dim,
                      float temperature = kLerfTemperature);

@@ -67,7 +67,7 @@ eval::Mask Session::answer_mask(int view, const std::string& text, float thresho
 std::vector<float> Session::pixel_relevancy(int view, const std::string& text, Relevancy variant) {
   const auto& e = text_.embed(text);
   return render_relevancy(renderer_, *model_, render::camera_from_view(scene_->views.at(view)), e.data(),
-                          text_.canonical(), variant);
+                          text_.canonical(), variant, &oe_);
 }
 
 std::vector<std::vector<float>> Session::pixel_relevancies(int view, const std::vector<std::string>& texts,
@@ -75,7 +75,7 @@ std::vector<std::vector<float>> Session::pixel_relevancies(int view, const std::
   std::vector<const float*> e;
   for (const auto& t : texts) e.push_back(text_.embed(t).data());  // embed() keeps each embedding (cache)
   return render_relevancies(renderer_, *model_, render::camera_from_view(scene_->views.at(view)), e, text_.canonical(),
-                            variant);
+                            variant, &oe_);
 }
 
 }  // namespace hgs::query

@@ -50,11 +50,11 @@ class Session {
                          std::vector<float>* opacity = nullptr);
   // Object-level answer in one view: the best object for `text`, its mask and (optionally) its opacity.
   eval::Mask answer_mask(int view, const std::string& text, float threshold, std::vector<float>* opacity = nullptr);
-  // Relevancy of the rendered language map (query.h, Relevancy): [H, W].
-  std::vector<float> pixel_relevancy(int view, const std::string& text, Relevancy variant = Relevancy::Lerf);
+  // Relevancy of a rendered language map (query.h, Relevancy): [H, W].
+  std::vector<float> pixel_relevancy(int view, const std::string& text, Relevancy variant = Relevancy::Objects);
   // The same for several texts from one render of the view's language map: [T][H, W].
   std::vector<std::vector<float>> pixel_relevancies(int view, const std::vector<std::string>& texts,
-                                                    Relevancy variant = Relevancy::Lerf);
+                                                    Relevancy variant = Relevancy::Objects);
 
  private:
   std::shared_ptr<const Scene> scene_;

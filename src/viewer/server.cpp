@@ -227,7 +227,7 @@ struct Server::Impl {
         if (!req.has_param("text")) throw HttpError(400, "mode=pixel needs text=<query>");
         const std::string t = checked_text(req.get_param_value("text"));
         std::lock_guard lock(mu);
-        out = eval::heatmap(s.pixel_relevancy(vi, t, query::Relevancy::Foreground), v.width, v.height);
+        out = eval::heatmap(s.pixel_relevancy(vi, t, query::Relevancy::Objects), v.width, v.height);
       } else if (mode == "object") {
         std::vector<int> ids = panel_objects(req);
         std::lock_guard lock(mu);

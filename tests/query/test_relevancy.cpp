@@ -1,10 +1,13 @@
-// Pixel-level relevancy of a hybrid model (query::render_relevancy): the rendered language map scored by LERF's
-// rule and weighted by the rendered foreground opacity sum_n (1 - q_{n,0}) alpha T, so background Gaussians,
-// whose f_n get no language supervision, cannot light up a query.
+// Pixel-level relevancy of a hybrid model (query::render_relevancy): a rendered language map scored by LERF's
+// rule: the object-conditioned map sum_k A_k e_k (the default), the raw map sum_n f_n alpha T, or the raw map
+// weighted by the rendered foreground opacity sum_n (1 - q_{n,0}) alpha T.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <random>
 
+#include "core/error.h"
 #include "model/render_inputs.h"
 #include "query/query.h"
 #include "query/relevancy.h"
@@ -81,7 +84,8 @@ TEST(Relevancy, LerfVariantIsTheRelevancyOfTheRenderedFeatureAlone) {
   TwoBlobs s;
   render::GaussianRenderer r;
   const float text_right[TwoBlobs::D] = {0, 1, 0, 0};
-  const std::vector<float> rel = query::render_relevancy(r, s.m, s.cam, text_right, canonical());  // default: Lerf
+  const std::vector<float> rel =
+      query::render_relevancy(r, s.m, s.cam, text_right, canonical(), query::Relevancy::Lerf);
   EXPECT_GT(rel[s.right()], 0.9f);
   EXPECT_FLOAT_EQ(rel[0], 0.5f);
   render::GaussianInputs in = render_inputs(s.m);
@@ -102,7 +106,7 @@ TEST(Relevancy, SeveralTextsFromOneRenderEqualOneRenderEach) {
   TwoBlobs s;
   render::GaussianRenderer r;
   const float t0[TwoBlobs::D] = {0, 1, 0, 0}, t1[TwoBlobs::D] = {1, 0, 0, 0}, t2[TwoBlobs::D] = {0.6f, 0, 0, 0.8f};
-  for (auto variant : {query::Relevancy::Lerf, query::Relevancy::Foreground}) {
+  for (auto variant : {query::Relevancy::Lerf, query::Relevancy::Foreground, query::Relevancy::Objects}) {
     const auto maps = query::render_relevancies(r, s.m, s.cam, {t0, t1, t2}, canonical(), variant);
     ASSERT_EQ(maps.size(), 3u);
     const float* texts[3] = {t0, t1, t2};
@@ -111,6 +115,96 @@ TEST(Relevancy, SeveralTextsFromOneRenderEqualOneRenderEach) {
       ASSERT_EQ(maps[t], one) << "text " << t << " variant " << query::relevancy_name(variant);
     }
     EXPECT_NE(maps[0], maps[1]);
+  }
+}
+
+// Eight overlapping Gaussians with soft associations over 3 labels and random embeddings (D = 5).
+struct SoftScene {
+  GaussianModel m;
+  render::Camera cam;
+  static constexpr int N = 8, L = 3, D = 5;
+  SoftScene() {
+    m.sh_degree = 0;
+    m.resize(N);
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<float> u(-1.f, 1.f);
+    for (int i = 0; i < N; ++i) {
+      m.mean[3 * i] = 0.6f * u(rng);
+      m.mean[3 * i + 1] = 0.3f * u(rng);
+      m.mean[3 * i + 2] = 3.f + 0.5f * u(rng);
+      for (int a = 0; a < 3; ++a) m.log_scale[3 * i + a] = std::log(0.2f + 0.05f * u(rng));
+      m.opacity_logit[i] = 1.5f * u(rng);
+    }
+    ExtraGroup& q = m.add_extra("obj", L);
+    ExtraGroup& f = m.add_extra("lang", D);
+    ExtraGroup& z = m.add_extra("obj_id", 1);
+    for (int i = 0; i < N; ++i) {
+      float w[L], sum = 0;
+      for (float& x : w) sum += (x = 0.05f + std::abs(u(rng)));
+      for (int k = 0; k < L; ++k) q.data[size_t(i) * L + k] = w[k] / sum;
+      for (int d = 0; d < D; ++d) f.data[size_t(i) * D + d] = u(rng);
+      z.data[i] = float(std::max_element(w, w + L) - w);
+    }
+    cam.width = 48;
+    cam.height = 24;
+    cam.fx = cam.fy = 40;
+    cam.cx = 24;
+    cam.cy = 12;
+  }
+};
+
+TEST(Relevancy, ObjectsVariantIsLerfOnTheObjectConditionedMapByBruteForce) {
+  // Every pixel equals LERF's relevancy of F(p) = sum_k A_k(p) e_k formed explicitly: A from render_object_opacity
+  // over all labels, e_k from object_embeddings. The fast path never forms F (its cosines come from A, E E^T and
+  // E t).
+  SoftScene s;
+  render::GaussianRenderer r;
+  const query::Canonical canon = {{0.3f, -0.2f, 0.5f, 0.1f, 0.7f}, {-0.6f, 0.1f, 0.2f, 0.4f, 0.1f}};
+  const float text[SoftScene::D] = {0.2f, 0.9f, -0.3f, 0.1f, 0.2f};
+  const std::vector<float> rel = query::render_relevancy(r, s.m, s.cam, text, canon);  // default: Objects
+  const query::ObjectEmbeddings oe = query::object_embeddings(s.m);
+  const std::vector<float> A = query::render_object_opacity(r, s.m, s.cam, {0, 1, 2});
+  const size_t HW = size_t(s.cam.width) * s.cam.height;
+  ASSERT_EQ(rel.size(), HW);
+  size_t covered = 0;
+  for (size_t p = 0; p < HW; ++p) {
+    float F[SoftScene::D] = {};
+    for (int k = 0; k < SoftScene::L; ++k)
+      for (int d = 0; d < SoftScene::D; ++d) F[d] += A[p * SoftScene::L + k] * oe.e[size_t(k) * SoftScene::D + d];
+    ASSERT_NEAR(rel[p], query::lerf_relevancy(F, text, canon, SoftScene::D), 2e-5) << "pixel " << p;
+    covered += A[p * SoftScene::L] + A[p * SoftScene::L + 1] + A[p * SoftScene::L + 2] > 0.1f;
+  }
+  EXPECT_GT(covered, HW / 4);     // the Gaussians cover much of the image: the comparison is not all ties
+  EXPECT_FLOAT_EQ(rel[0], 0.5f);  // nothing rendered in the corner: a zero map, a tie
+  // Given the embeddings, the same maps.
+  EXPECT_EQ(query::render_relevancy(r, s.m, s.cam, text, canon, query::Relevancy::Objects, &oe), rel);
+}
+
+TEST(Relevancy, ObjectsVariantGivesAnObjectOneEmbeddingWhateverItsGaussiansCarry) {
+  // Both blobs in object 1 with embeddings (1, 1, 0, 0) and (1, -1, 0, 0): their object's embedding is the first
+  // axis. The raw map answers the text (0, 1, 0, 0) on the left blob only; the object-conditioned map gives both
+  // blobs the object's relevancy, which is LERF's of the first axis.
+  TwoBlobs s(0.f);
+  ExtraGroup& f = *s.m.find_extra("lang");
+  f.data = {1, 1, 0, 0, 1, -1, 0, 0};
+  render::GaussianRenderer r;
+  const float text[TwoBlobs::D] = {0, 1, 0, 0}, axis[TwoBlobs::D] = {1, 0, 0, 0};
+  const auto raw = query::render_relevancy(r, s.m, s.cam, text, canonical(), query::Relevancy::Lerf);
+  const auto obj = query::render_relevancy(r, s.m, s.cam, text, canonical(), query::Relevancy::Objects);
+  EXPECT_GT(raw[s.left()] - raw[s.right()], 0.5f);
+  const float want = query::lerf_relevancy(axis, text, canonical(), TwoBlobs::D);
+  EXPECT_NEAR(obj[s.left()], want, 1e-5);
+  EXPECT_NEAR(obj[s.right()], want, 1e-5);
+}
+
+TEST(Relevancy, NamesParseBackAndAnUnknownNameFails) {
+  for (auto v : {query::Relevancy::Objects, query::Relevancy::Lerf, query::Relevancy::Foreground})
+    EXPECT_EQ(query::parse_relevancy(query::relevancy_name(v)), v);
+  try {
+    query::parse_relevancy("pixels");
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("objects, lerf or foreground"), std::string::npos) << e.what();
   }
 }
 
