@@ -33,6 +33,23 @@ void print_summary(const eval::EvalReport& r) {
              lerf ? fmt::format("  pixel acc {:>6}", pct(m.macc)) : std::string(), m.count);
 }
 
+// One line on what a mode measures, printed under its figures (so that a newcomer can read them).
+std::string what_the_mode_measures(const eval::EvalReport& r) {
+  if (r.mode == "object")
+    return r.protocol == "3d-ovs"
+               ? "every query answered by its best object; a pixel takes the class of the object it shows (the "
+                 "language map's class where it shows no object)"
+               : "every query answered by its best object: mask = that object's rendered opacity > threshold";
+  const auto it = r.extra.find("relevancy");
+  const std::string rel = it != r.extra.end() && it->is_string() ? it->get<std::string>() : "objects";
+  const std::string map = rel == "objects" ? "the object-conditioned language map (eqs. 8-9)"
+                          : rel == "lerf"  ? "the raw rendered language map"
+                                           : "the raw language map times the foreground opacity";
+  return r.protocol == "3d-ovs" ? "every pixel on its own: the class whose LERF relevancy on " + map + " is highest"
+                                : "every pixel on its own: LERF relevancy on " + map +
+                                      ", LangSplat's post-processing (30-px box, min-max, threshold, 7x7 majority)";
+}
+
 void run_eval(const EvalArgs& a) {
   set_threads(a.threads);
   fs::path ply = a.model;
@@ -53,7 +70,10 @@ void run_eval(const EvalArgs& a) {
   fs::path md = out;
   md.replace_extension(".md");
   eval::write_reports(out, md, reports);
-  for (auto& r : reports) print_summary(r);
+  for (auto& r : reports) {
+    print_summary(r);
+    fmt::print("  {} mode: {}\n", r.mode, what_the_mode_measures(r));
+  }
   fmt::print("wrote {} and {}{}\n", out.string(), md.string(),
              a.no_png ? "" : fmt::format(" (overlays in {})", (dir / "overlays").string()));
 }

@@ -49,7 +49,7 @@ TEST(AblateCli, RowsSeedsProtocolsModesAndResume) {
   EXPECT_NE(j["runs"][1]["run"]["results"]["instances/object"]["miou"],
             j["runs"][4]["run"]["results"]["instances/object"]["miou"]);
   const std::string md = read_file_text(tmp / "a" / "ablation.md");
-  EXPECT_NE(md.find("## 3d-ovs/pixel (relevancy lerf)"), std::string::npos) << md;
+  EXPECT_NE(md.find("## 3d-ovs/pixel (relevancy objects)"), std::string::npos) << md;
   EXPECT_NE(md.find(" ± "), std::string::npos);
   // Continuing: every run is on disk, so nothing is trained again and the summary is the same.
   r = test::run_hgs(cmd.substr(0, cmd.size() - 8));  // without --quiet: one line per run

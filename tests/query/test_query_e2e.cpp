@@ -49,16 +49,22 @@ TEST(QueryEndToEnd, TrainQueryExportEval) {
   std::printf("tiny scene, 800 iterations: object-mode mIoU %.3f\n", miou);
   EXPECT_GT(miou, 0.3);  // measured 0.44 (objects are only a few hundred pixels at 128x96)
   EXPECT_TRUE(fs::exists(tmp / "e" / "report.md"));
-  // The pixel-mode report names its relevancy: LangSplat's by default, ours on request.
+  // The pixel-mode report names its relevancy: the object-conditioned map by default, the others on request.
   ASSERT_EQ(rep["reports"].size(), 2u);
   EXPECT_EQ(rep["reports"][1]["mode"], "pixel");
-  EXPECT_EQ(rep["reports"][1]["extra"]["relevancy"], "lerf");
+  EXPECT_EQ(rep["reports"][1]["extra"]["relevancy"], "objects");
+  EXPECT_NE(r.out.find("pixel mode: every pixel on its own"), std::string::npos) << r.out;  // what it measures
   EXPECT_FALSE(rep["reports"][0]["extra"].contains("relevancy"));
   r = test::run_hgs("eval " + s + " " + m + " --relevancy foreground --no-png --out " +
                     (tmp / "e2" / "report.json").string() + " --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   rep = nlohmann::json::parse(read_file_text(tmp / "e2" / "report.json"));
   EXPECT_EQ(rep["reports"][1]["extra"]["relevancy"], "foreground");
+  r = test::run_hgs("eval " + s + " " + m + " --relevancy lerf --mode pixel --no-png --out " +
+                    (tmp / "e3" / "report.json").string() + " --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  rep = nlohmann::json::parse(read_file_text(tmp / "e3" / "report.json"));
+  EXPECT_EQ(rep["reports"][0]["extra"]["relevancy"], "lerf");
   // Bad input: a model without object data.
   r = test::run_hgs("train " + s + " --out " + (tmp / "rgb").string() + " --method rgb --iters 20 --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
