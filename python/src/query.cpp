@@ -101,8 +101,8 @@ void bind_query(pb::module_& m) {
       .def("object_opacity", &object_opacity, pb::arg("view"), pb::arg("objects"),
            "Rendered opacity of the objects in a view, summed: float32 [H, W]")
       .def("pixel_relevancy", &pixel_relevancy, pb::arg("view"), pb::arg("text"), pb::arg("relevancy") = "objects",
-           "Relevancy of the rendered language map: float32 [H, W] (relevancy objects, lerf or foreground: "
-           "query/query.h)")
+           "A pixel score map for the text: float32 [H, W] (relevancy: objects = cosine with the object-conditioned "
+           "map, objects-lerf, lerf or foreground = LERF relevancies; query/query.h)")
       .def("object_name", &query::Session::object_name, pb::arg("id"))
       .def("evaluate", &evaluate, pb::arg("protocol"), pb::arg("mode") = "both", pb::arg("relevancy") = "objects",
            pb::arg("mask_threshold") = 0.5f, pb::arg("overlay_dir") = "", pb::arg("progress") = false,

@@ -300,8 +300,8 @@ CommandRegistration reg(
            ->check(CLI::IsMember({"object", "pixel", "both"}))
            ->capture_default_str();
        sub.add_option("--relevancy", a->relevancy,
-                      "Pixel mode: objects, lerf or foreground (as `hgs eval --relevancy`)")
-           ->check(CLI::IsMember({"objects", "lerf", "foreground"}))
+                      "Pixel mode: objects, objects-lerf, lerf or foreground (as `hgs eval --relevancy`)")
+           ->check(CLI::IsMember({"objects", "objects-lerf", "lerf", "foreground"}))
            ->capture_default_str();
        sub.add_option("--scl-background", a->scl_background, "As `hgs train --scl-background` (every row)")
            ->check(CLI::IsMember({"auto", "on", "off"}))

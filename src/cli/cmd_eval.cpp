@@ -42,11 +42,12 @@ std::string what_the_mode_measures(const eval::EvalReport& r) {
                : "every query answered by its best object: mask = that object's rendered opacity > threshold";
   const auto it = r.extra.find("relevancy");
   const std::string rel = it != r.extra.end() && it->is_string() ? it->get<std::string>() : "objects";
-  const std::string map = rel == "objects" ? "the object-conditioned language map (eqs. 8-9)"
-                          : rel == "lerf"  ? "the raw rendered language map"
-                                           : "the raw language map times the foreground opacity";
-  return r.protocol == "3d-ovs" ? "every pixel on its own: the class whose LERF relevancy on " + map + " is highest"
-                                : "every pixel on its own: LERF relevancy on " + map +
+  const std::string score = rel == "objects"        ? "the text's cosine with the object-conditioned language map"
+                            : rel == "objects-lerf" ? "LERF relevancy of the object-conditioned language map"
+                            : rel == "lerf"         ? "LERF relevancy of the raw rendered language map"
+                                                    : "LERF relevancy of the raw language map times the foreground";
+  return r.protocol == "3d-ovs" ? "every pixel on its own: the class with the highest " + score
+                                : "every pixel on its own: " + score +
                                       ", LangSplat's post-processing (30-px box, min-max, threshold, 7x7 majority)";
 }
 
@@ -95,12 +96,12 @@ CommandRegistration reg(
                       "both")
            ->check(CLI::IsMember({"object", "pixel", "both"}))
            ->capture_default_str();
-       sub.add_option(
-              "--relevancy", a->relevancy,
-              "Pixel mode, the map scored: objects (the object-conditioned map sum_k A_k e_k of eqs. 8-9), lerf "
-              "(the raw map sum_n f_n alpha T, as LangSplat's evaluation scores its field) or foreground (the "
-              "raw map's relevancy times the rendered foreground opacity); see query/query.h")
-           ->check(CLI::IsMember({"objects", "lerf", "foreground"}))
+       sub.add_option("--relevancy", a->relevancy,
+                      "Pixel mode, a pixel's score: objects (the cosine of the object-conditioned map sum_k A_k e_k of "
+                      "eqs. 8-9 with the text), objects-lerf (LERF's relevancy of that map), lerf (LERF's relevancy "
+                      "of the raw map sum_n f_n alpha T, as LangSplat's evaluation scores its field) or foreground "
+                      "(that times the rendered foreground opacity); see query/query.h")
+           ->check(CLI::IsMember({"objects", "objects-lerf", "lerf", "foreground"}))
            ->capture_default_str();
        sub.add_option("--mask-threshold", a->mask_threshold, "Object mode: mask = rendered object opacity > this")
            ->capture_default_str();

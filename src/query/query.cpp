@@ -80,14 +80,19 @@ std::vector<float> render_object_opacity(render::GaussianRenderer& r, const Gaus
 }
 
 const char* relevancy_name(Relevancy v) {
-  return v == Relevancy::Objects ? "objects" : v == Relevancy::Lerf ? "lerf" : "foreground";
+  switch (v) {
+    case Relevancy::Objects: return "objects";
+    case Relevancy::ObjectsLerf: return "objects-lerf";
+    case Relevancy::Lerf: return "lerf";
+    case Relevancy::Foreground: return "foreground";
+  }
+  return "?";
 }
 
 Relevancy parse_relevancy(const std::string& name) {
-  if (name == "objects") return Relevancy::Objects;
-  if (name == "lerf") return Relevancy::Lerf;
-  if (name == "foreground") return Relevancy::Foreground;
-  fail("unknown relevancy '{}' (objects, lerf or foreground)", name);
+  for (auto v : {Relevancy::Objects, Relevancy::ObjectsLerf, Relevancy::Lerf, Relevancy::Foreground})
+    if (name == relevancy_name(v)) return v;
+  fail("unknown relevancy '{}' (objects, objects-lerf, lerf or foreground)", name);
 }
 
 std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
@@ -98,13 +103,14 @@ std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianM
 
 namespace {
 
-// Relevancy::Objects. F(p) = sum_k A_k(p) e_k is never formed: its cosine with a unit direction u is
-// sum_k A_k(p) (e_k . u) / |F(p)|, and |F(p)|^2 = A(p)^T G A(p) with G = E E^T [L, L], so a pixel costs O(L^2 + L T)
-// instead of O(L D). A pixel where F = 0 gets the cosines 0 (relevancy 0.5), as lerf_relevancy_map.
+// Relevancy::Objects (the cosines, `lerf` false) and ObjectsLerf. F(p) = sum_k A_k(p) e_k is never formed: its
+// cosine with a unit direction u is sum_k A_k(p) (e_k . u) / |F(p)|, and |F(p)|^2 = A(p)^T G A(p) with G = E E^T
+// [L, L], so a pixel costs O(L^2 + L T) instead of O(L D). A pixel where F = 0 gets the cosines 0 (relevancy 0.5),
+// as lerf_relevancy_map.
 std::vector<std::vector<float>> object_map_relevancies(render::GaussianRenderer& r, const GaussianModel& m,
                                                        const render::Camera& cam,
                                                        const std::vector<const float*>& texts, const Canonical& canon,
-                                                       const ObjectEmbeddings& oe) {
+                                                       const ObjectEmbeddings& oe, bool lerf) {
   const int L = oe.num_labels, D = oe.dim, T = static_cast<int>(texts.size()), M = static_cast<int>(canon.size());
   if (M == 0) fail("eval: the LERF relevancy needs at least one canonical phrase embedding");
   std::vector<int> labels(L);
@@ -154,7 +160,8 @@ std::vector<std::vector<float>> object_map_relevancies(render::GaussianRenderer&
           for (int j = 0; j < U; ++j) dots[j] += a[k] * u[size_t(k) * U + j];
       const double inv = n2 > 0 ? 1.0 / std::sqrt(n2) : 0.0;
       for (int i = 0; i < M; ++i) sc[i] = dots[T + i] * inv;
-      for (int t = 0; t < T; ++t) maps[t][p] = lerf_relevancy_from_cosines(dots[t] * inv, sc.data(), M);
+      for (int t = 0; t < T; ++t)
+        maps[t][p] = lerf ? lerf_relevancy_from_cosines(dots[t] * inv, sc.data(), M) : float(dots[t] * inv);
     }
   }
   return maps;
@@ -166,9 +173,10 @@ std::vector<std::vector<float>> render_relevancies(render::GaussianRenderer& r, 
                                                    const render::Camera& cam, const std::vector<const float*>& texts,
                                                    const Canonical& canon, Relevancy variant,
                                                    const ObjectEmbeddings* oe) {
-  if (variant == Relevancy::Objects) {
-    if (oe) return object_map_relevancies(r, m, cam, texts, canon, *oe);
-    return object_map_relevancies(r, m, cam, texts, canon, object_embeddings(m));
+  if (variant == Relevancy::Objects || variant == Relevancy::ObjectsLerf) {
+    const bool lerf = variant == Relevancy::ObjectsLerf;
+    if (oe) return object_map_relevancies(r, m, cam, texts, canon, *oe, lerf);
+    return object_map_relevancies(r, m, cam, texts, canon, object_embeddings(m), lerf);
   }
   const auto h = hybrid::ConstHybridFields::bind(m, "query");
   const ExtraGroup *f = h.f, *q = h.q;

@@ -52,23 +52,29 @@ std::vector<int> choose_objects(const std::vector<ObjectScore>& scores, float mi
 // Opacity render of objects `ks` (channel j = A_{ks[j]}). Returns [H, W, J].
 std::vector<float> render_object_opacity(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
                                          const std::vector<int>& ks);
-// Which language map a pixel's relevancy (LERF's: the min over the canonical phrases of the pairwise softmax at
-// temperature 10) is computed on:
-//  Objects:    the object-conditioned map F_obj(p) = sum_k A_k(p) e_k over every label k (the background's too),
-//              A_k = sum_n q_{n,k} alpha T the object's rendered opacity and e_k its embedding (object_embeddings):
-//              eq. 8's map with each Gaussian's f_n replaced by its objects' embeddings. SCL (eqs. 9-10) trains
-//              f only through the objects' pooled means; the part of each f_n that differs from its object's mean
-//              is never constrained and stays at its random initialisation, which the raw map renders as
-//              per-pixel noise (docs/ablation.md, "Pixel mode"). The default.
-//  Lerf:       the raw map F(p) = sum_n f_n alpha T, nothing else: LangSplat's evaluation of its own field.
-//  Foreground: the raw map's relevancy times the rendered foreground opacity sum_n (1 - q_{n,0}) alpha T, and 0
-//              where nothing is rendered (alpha < 1e-4).
-enum class Relevancy { Objects, Lerf, Foreground };
-const char* relevancy_name(Relevancy v);             // "objects" | "lerf" | "foreground"
+// A pixel's score for a text, from a rendered language map:
+//  Objects:     the cosine (eq. 10's sim) of the text with the object-conditioned map F_obj(p) = sum_k A_k(p) e_k
+//               over every label k (the background's too), A_k = sum_n q_{n,k} alpha T the object's rendered
+//               opacity and e_k its embedding (object_embeddings): eq. 8's map with each Gaussian's f_n replaced
+//               by its objects' embedding. SCL (eqs. 9-10) trains f only through the objects' pooled means, so the
+//               part of each f_n that differs from its object's mean stays at its random initialisation (per-pixel
+//               noise in the raw map), and only through cosines among the scene's references, so an embedding's
+//               offset from LERF's canonical phrases is free (the reason object ranking uses the cosine too). The
+//               default (docs/ablation.md, "Pixel mode against object mode").
+//  ObjectsLerf: LERF's relevancy (the min over the canonical phrases of the pairwise softmax at temperature 10) of
+//               the object-conditioned map.
+//  Lerf:        LERF's relevancy of the raw map F(p) = sum_n f_n alpha T, nothing else: LangSplat's evaluation of
+//               its own field.
+//  Foreground:  the raw map's relevancy times the rendered foreground opacity sum_n (1 - q_{n,0}) alpha T, and 0
+//               where nothing is rendered (alpha < 1e-4).
+// On 3D-OVS (the argmax over classes at each pixel) Objects and ObjectsLerf agree: for one pixel LERF's relevancy
+// grows with the cosine.
+enum class Relevancy { Objects, ObjectsLerf, Lerf, Foreground };
+const char* relevancy_name(Relevancy v);             // "objects" | "objects-lerf" | "lerf" | "foreground"
 Relevancy parse_relevancy(const std::string& name);  // fails naming the accepted values
 
 // Per-pixel relevancy of a rendered language map for a query: [H, W]. `oe`: the model's object embeddings for
-// Relevancy::Objects (computed here when null).
+// Relevancy::Objects and ObjectsLerf (computed here when null).
 std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
                                     const float* text, const Canonical& canon, Relevancy variant = Relevancy::Objects,
                                     const ObjectEmbeddings* oe = nullptr);

@@ -1,6 +1,6 @@
 // Pixel-level relevancy of a hybrid model (query::render_relevancy): a rendered language map scored by LERF's
-// rule: the object-conditioned map sum_k A_k e_k (the default), the raw map sum_n f_n alpha T, or the raw map
-// weighted by the rendered foreground opacity sum_n (1 - q_{n,0}) alpha T.
+// rule or its cosine with the text: the object-conditioned map sum_k A_k e_k (by its cosine, the default, or its
+// relevancy), the raw map sum_n f_n alpha T, or the raw map weighted by the rendered foreground opacity.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -106,7 +106,8 @@ TEST(Relevancy, SeveralTextsFromOneRenderEqualOneRenderEach) {
   TwoBlobs s;
   render::GaussianRenderer r;
   const float t0[TwoBlobs::D] = {0, 1, 0, 0}, t1[TwoBlobs::D] = {1, 0, 0, 0}, t2[TwoBlobs::D] = {0.6f, 0, 0, 0.8f};
-  for (auto variant : {query::Relevancy::Lerf, query::Relevancy::Foreground, query::Relevancy::Objects}) {
+  for (auto variant : {query::Relevancy::Lerf, query::Relevancy::Foreground, query::Relevancy::Objects,
+                       query::Relevancy::ObjectsLerf}) {
     const auto maps = query::render_relevancies(r, s.m, s.cam, {t0, t1, t2}, canonical(), variant);
     ASSERT_EQ(maps.size(), 3u);
     const float* texts[3] = {t0, t1, t2};
@@ -153,15 +154,16 @@ struct SoftScene {
   }
 };
 
-TEST(Relevancy, ObjectsVariantIsLerfOnTheObjectConditionedMapByBruteForce) {
-  // Every pixel equals LERF's relevancy of F(p) = sum_k A_k(p) e_k formed explicitly: A from render_object_opacity
-  // over all labels, e_k from object_embeddings. The fast path never forms F (its cosines come from A, E E^T and
-  // E t).
+TEST(Relevancy, ObjectsVariantsScoreTheObjectConditionedMapByBruteForce) {
+  // Every pixel equals the cosine of the text with F(p) = sum_k A_k(p) e_k formed explicitly (Objects) and LERF's
+  // relevancy of F(p) (ObjectsLerf): A from render_object_opacity over all labels, e_k from object_embeddings. The
+  // fast path never forms F (its cosines come from A, E E^T and E t).
   SoftScene s;
   render::GaussianRenderer r;
   const query::Canonical canon = {{0.3f, -0.2f, 0.5f, 0.1f, 0.7f}, {-0.6f, 0.1f, 0.2f, 0.4f, 0.1f}};
   const float text[SoftScene::D] = {0.2f, 0.9f, -0.3f, 0.1f, 0.2f};
-  const std::vector<float> rel = query::render_relevancy(r, s.m, s.cam, text, canon);  // default: Objects
+  const std::vector<float> cos = query::render_relevancy(r, s.m, s.cam, text, canon);  // default: Objects
+  const std::vector<float> rel = query::render_relevancy(r, s.m, s.cam, text, canon, query::Relevancy::ObjectsLerf);
   const query::ObjectEmbeddings oe = query::object_embeddings(s.m);
   const std::vector<float> A = query::render_object_opacity(r, s.m, s.cam, {0, 1, 2});
   const size_t HW = size_t(s.cam.width) * s.cam.height;
@@ -172,39 +174,46 @@ TEST(Relevancy, ObjectsVariantIsLerfOnTheObjectConditionedMapByBruteForce) {
     for (int k = 0; k < SoftScene::L; ++k)
       for (int d = 0; d < SoftScene::D; ++d) F[d] += A[p * SoftScene::L + k] * oe.e[size_t(k) * SoftScene::D + d];
     ASSERT_NEAR(rel[p], query::lerf_relevancy(F, text, canon, SoftScene::D), 2e-5) << "pixel " << p;
+    ASSERT_NEAR(cos[p], query::cosine(F, text, SoftScene::D), 2e-5) << "pixel " << p;
     covered += A[p * SoftScene::L] + A[p * SoftScene::L + 1] + A[p * SoftScene::L + 2] > 0.1f;
   }
   EXPECT_GT(covered, HW / 4);     // the Gaussians cover much of the image: the comparison is not all ties
   EXPECT_FLOAT_EQ(rel[0], 0.5f);  // nothing rendered in the corner: a zero map, a tie
+  EXPECT_EQ(cos[0], 0.f);
   // Given the embeddings, the same maps.
-  EXPECT_EQ(query::render_relevancy(r, s.m, s.cam, text, canon, query::Relevancy::Objects, &oe), rel);
+  EXPECT_EQ(query::render_relevancy(r, s.m, s.cam, text, canon, query::Relevancy::Objects, &oe), cos);
 }
 
 TEST(Relevancy, ObjectsVariantGivesAnObjectOneEmbeddingWhateverItsGaussiansCarry) {
   // Both blobs in object 1 with embeddings (1, 1, 0, 0) and (1, -1, 0, 0): their object's embedding is the first
   // axis. The raw map answers the text (0, 1, 0, 0) on the left blob only; the object-conditioned map gives both
-  // blobs the object's relevancy, which is LERF's of the first axis.
+  // blobs the object's score: LERF's relevancy of the first axis, or its cosine with the text (0).
   TwoBlobs s(0.f);
   ExtraGroup& f = *s.m.find_extra("lang");
   f.data = {1, 1, 0, 0, 1, -1, 0, 0};
   render::GaussianRenderer r;
   const float text[TwoBlobs::D] = {0, 1, 0, 0}, axis[TwoBlobs::D] = {1, 0, 0, 0};
   const auto raw = query::render_relevancy(r, s.m, s.cam, text, canonical(), query::Relevancy::Lerf);
-  const auto obj = query::render_relevancy(r, s.m, s.cam, text, canonical(), query::Relevancy::Objects);
+  const auto obj = query::render_relevancy(r, s.m, s.cam, text, canonical(), query::Relevancy::ObjectsLerf);
+  const auto cos = query::render_relevancy(r, s.m, s.cam, text, canonical(), query::Relevancy::Objects);
   EXPECT_GT(raw[s.left()] - raw[s.right()], 0.5f);
   const float want = query::lerf_relevancy(axis, text, canonical(), TwoBlobs::D);
   EXPECT_NEAR(obj[s.left()], want, 1e-5);
   EXPECT_NEAR(obj[s.right()], want, 1e-5);
+  EXPECT_NEAR(cos[s.left()], 0.f, 1e-6);
+  EXPECT_NEAR(cos[s.right()], 0.f, 1e-6);
+  EXPECT_GT(query::render_relevancy(r, s.m, s.cam, axis, canonical())[s.right()], 0.999f);  // the object's own axis
 }
 
 TEST(Relevancy, NamesParseBackAndAnUnknownNameFails) {
-  for (auto v : {query::Relevancy::Objects, query::Relevancy::Lerf, query::Relevancy::Foreground})
+  for (auto v :
+       {query::Relevancy::Objects, query::Relevancy::ObjectsLerf, query::Relevancy::Lerf, query::Relevancy::Foreground})
     EXPECT_EQ(query::parse_relevancy(query::relevancy_name(v)), v);
   try {
     query::parse_relevancy("pixels");
     FAIL() << "no error";
   } catch (const Error& e) {
-    EXPECT_NE(std::string(e.what()).find("objects, lerf or foreground"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("objects, objects-lerf, lerf or foreground"), std::string::npos) << e.what();
   }
 }
 
