@@ -1,7 +1,8 @@
 // `hgs ablate SCENE... --out DIR`: the paper's Table 3. Trains the rows (Observation Fusion, Semantic Contrastive
 // Learning and Boundary Reconstruction Optimization each on or off; optionally the full method with eq. 15 alone,
 // --lambda-rgb 0) on every scene and seed, evaluates each model on the held-out views with the chosen protocols
-// and modes (query/evaluate.h), and writes mean and standard deviation per row over the (scene, seed) runs.
+// and modes (query/evaluate.h), and writes mean and standard deviation per row over the (scene, seed) runs, and the
+// paired differences of mIoU (each row minus all-off, each component added to the other two) with 95 % intervals.
 //
 // Layout: DIR/<scene folder name>/seed<S>/<row>/{point_cloud.ply, report.json, report.md, run.json}, then
 // DIR/ablation.json (every run and the per-row summaries) and DIR/ablation.md (one table per protocol and mode),
@@ -96,6 +97,29 @@ std::pair<double, double> mean_std(const std::vector<double>& v) {
   for (double x : v)
     if (std::isfinite(x)) ss += (x - m) * (x - m);
   return {m, n > 1 ? std::sqrt(ss / (n - 1)) : NAN};
+}
+
+// Student's t quantile t_{0.975, dof} for a 95 % interval of a mean (dof 1..30, then the normal 1.96 as the limit):
+// a fixed table, the only values the intervals below need.
+double t975(int dof) {
+  static const double t[30] = {12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228,
+                               2.201,  2.179, 2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086,
+                               2.080,  2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042};
+  return dof < 1 ? NAN : dof <= 30 ? t[dof - 1] : 1.96;
+}
+
+// Paired differences d_i (the same scene and seed in both rows): mean, half-width of its 95 % interval, count.
+struct Paired {
+  double mean = NAN, half = NAN;
+  int n = 0;
+};
+Paired paired(const std::vector<double>& d) {
+  auto [m, sd] = mean_std(d);
+  Paired p;
+  for (double x : d) p.n += std::isfinite(x);
+  p.mean = m;
+  p.half = p.n > 1 ? t975(p.n - 1) * sd / std::sqrt(double(p.n)) : NAN;
+  return p;
 }
 
 std::string pct(double v) { return std::isfinite(v) ? fmt::format("{:.2f}", 100 * v) : "-"; }
@@ -198,6 +222,50 @@ void run_ablate(const AblateArgs& a) {
                         pct_pm(mean_std(v.at("miou"))), pct_pm(mean_std(v.at("mbiou"))), v.at("miou").size());
       }
     }
+    // Paired differences of mIoU over the (scene, seed) runs both rows have: every row minus all-off, and each
+    // component added to the other two (the full row minus the full row without it).
+    std::map<std::string, std::map<std::string, const json*>> by_run;  // "<scene>/<seed>" -> row -> results
+    for (const auto& run : runs)
+      by_run[run["scene"].get<std::string>() + "/" + std::to_string(run["seed"].get<uint64_t>())]
+            [run["row"].get<std::string>()] = &run["run"]["results"];
+    auto diffs = [&](const std::string& key, const std::string& a_row, const std::string& b_row) {
+      std::vector<double> d;
+      for (const auto& [id, rs] : by_run) {
+        auto ia = rs.find(a_row), ib = rs.find(b_row);
+        if (ia == rs.end() || ib == rs.end() || !ia->second->contains(key) || !ib->second->contains(key)) continue;
+        const json &va = (*ia->second)[key]["miou"], &vb = (*ib->second)[key]["miou"];
+        if (va.is_number() && vb.is_number()) d.push_back(va.get<double>() - vb.get<double>());
+      }
+      return paired(d);
+    };
+    json paired_json = json::object();
+    std::string pmd;
+    for (const auto& key : keys) {
+      std::vector<std::pair<std::string, Paired>> lines;
+      for (const Row& row : rows)
+        if (row.name != "of0_scl0_bro0")
+          lines.push_back({row.name + " - all off", diffs(key, row.name, "of0_scl0_bro0")});
+      for (const char* c : {"of", "scl", "bro"}) {
+        std::string without = "of1_scl1_bro1";
+        without.replace(without.find(c) + std::string(c).size(), 1, "0");
+        lines.push_back({fmt::format("{} added to the other two", c), diffs(key, "of1_scl1_bro1", without)});
+      }
+      std::string body;
+      for (const auto& [what, p] : lines) {
+        if (p.n == 0) continue;
+        paired_json[key][what] = {{"mean", std::isfinite(p.mean) ? json(p.mean) : json(nullptr)},
+                                  {"ci95_half", std::isfinite(p.half) ? json(p.half) : json(nullptr)},
+                                  {"runs", p.n}};
+        body += fmt::format("| {} | {} | {} | {} |\n", what, pct(p.mean),
+                            std::isfinite(p.half) ? fmt::format("± {:.2f}", 100 * p.half) : "-", p.n);
+      }
+      if (!body.empty())
+        pmd += fmt::format(
+            "\n### {} (mIoU, paired by scene and seed)\n\n| difference | mean | 95 % interval | runs |\n"
+            "|---|---|---|---|\n{}",
+            key, body);
+    }
+    if (!pmd.empty()) md += "\n## Paired differences\n" + pmd;
     for (size_t r = 0; r < rows.size(); ++r) {
       json res = json::object();
       for (const auto& [key, v] : acc[r]) {
@@ -228,6 +296,7 @@ void run_ablate(const AblateArgs& a) {
                     {"scl_background", a.scl_background},
                     {"objects_per_step", a.objects_per_step},
                     {"summary", summary},
+                    {"paired", paired_json},
                     {"runs", runs}};
     atomic_write_text(fs::path(a.out) / "ablation.json", j.dump(2) + "\n");
     atomic_write_text(fs::path(a.out) / "ablation.md", md);

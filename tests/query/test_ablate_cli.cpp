@@ -1,9 +1,10 @@
 // `hgs ablate` through the CLI on a tiny synthetic scene: rows x scenes x seeds with two protocols and both
-// modes, mean and sample standard deviation per row, the eq. 15 row, and an interrupted ablation continuing
-// from the runs already on disk.
+// modes, mean and sample standard deviation per row, paired differences, the eq. 15 row, and an interrupted
+// ablation continuing from the runs already on disk.
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <map>
 #include <nlohmann/json.hpp>
 
 #include "core/fs.h"
@@ -44,6 +45,23 @@ TEST(AblateCli, RowsSeedsProtocolsModesAndResume) {
       EXPECT_NEAR(k["miou_mean"].get<double>(), (v[0] + v[1]) / 2, 1e-12);
       EXPECT_NEAR(k["miou_std"].get<double>(), std::abs(v[0] - v[1]) / std::sqrt(2.0), 1e-12);
     }
+  }
+  // Paired differences: the full row minus all-off, per seed, averaged; their 95 % interval uses t(1) = 12.706.
+  for (const char* key : {"instances/object", "3d-ovs/pixel"}) {
+    std::map<uint64_t, double> full, off;
+    for (const auto& run : j["runs"]) {
+      const double v = run["run"]["results"][key]["miou"].get<double>();
+      if (run["row"] == "of1_scl1_bro1") full[run["seed"].get<uint64_t>()] = v;
+      if (run["row"] == "of0_scl0_bro0") off[run["seed"].get<uint64_t>()] = v;
+    }
+    ASSERT_EQ(full.size(), 2u);
+    std::vector<double> d;
+    for (auto [seed, v] : full) d.push_back(v - off.at(seed));
+    const auto& p = j["paired"][key]["of1_scl1_bro1 - all off"];
+    EXPECT_EQ(p["runs"], 2);
+    EXPECT_NEAR(p["mean"].get<double>(), (d[0] + d[1]) / 2, 1e-12) << key;
+    EXPECT_NEAR(p["ci95_half"].get<double>(), 12.706 * std::abs(d[0] - d[1]) / std::sqrt(2.0) / std::sqrt(2.0), 1e-9);
+    EXPECT_FALSE(j["paired"][key].contains("of added to the other two"));  // no middle rows were trained
   }
   // Different seeds train different models.
   EXPECT_NE(j["runs"][1]["run"]["results"]["instances/object"]["miou"],
