@@ -91,9 +91,8 @@ CommandRegistration reg(
        sub.add_option("--out", a->out, "report.json path (report.md and overlays/ go beside it)")->required();
        sub.add_option("--mode", a->mode,
                       "object (each query's best object; on 3d-ovs background pixels take the language field's "
-                      "class, see query/evaluate.h), pixel (LERF's relevancy of a rendered language map, LangSplat's "
-                      "protocol) or "
-                      "both")
+                      "class, see query/evaluate.h), pixel (every pixel scored on a rendered language map, LangSplat's "
+                      "protocol; --relevancy) or both")
            ->check(CLI::IsMember({"object", "pixel", "both"}))
            ->capture_default_str();
        sub.add_option("--relevancy", a->relevancy,

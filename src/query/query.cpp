@@ -112,16 +112,13 @@ std::vector<std::vector<float>> object_map_relevancies(render::GaussianRenderer&
                                                        const std::vector<const float*>& texts, const Canonical& canon,
                                                        const ObjectEmbeddings& oe, bool lerf) {
   const int L = oe.num_labels, D = oe.dim, T = static_cast<int>(texts.size()), M = static_cast<int>(canon.size());
-  if (M == 0) fail("eval: the LERF relevancy needs at least one canonical phrase embedding");
+  check_canonical(canon, D);
   std::vector<int> labels(L);
   for (int k = 0; k < L; ++k) labels[k] = k;
   const std::vector<float> A = render_object_opacity(r, m, cam, labels);  // [H, W, L]
   // Directions: the T texts, then the M canonical phrases, as unit vectors; u [L, T + M] = e_k . direction.
   std::vector<const float*> dirs(texts);
-  for (const auto& c : canon) {
-    if (c.size() != size_t(D)) fail("eval: a canonical phrase embedding has dimension {}, expected {}", c.size(), D);
-    dirs.push_back(c.data());
-  }
+  for (const auto& c : canon) dirs.push_back(c.data());
   const int U = T + M;
   std::vector<double> u(size_t(L) * U), G(size_t(L) * L);
   for (int j = 0; j < U; ++j) {

@@ -28,6 +28,8 @@ std::vector<float> unit(const float* v, int d) {
   return u;
 }
 
+}  // namespace
+
 void check_canonical(const std::vector<std::vector<float>>& canonical, int dim) {
   if (dim <= 0) fail("eval: relevancy needs a positive embedding dimension, got {}", dim);
   if (canonical.empty()) fail("eval: the LERF relevancy needs at least one canonical phrase embedding");
@@ -35,8 +37,6 @@ void check_canonical(const std::vector<std::vector<float>>& canonical, int dim) 
     if (canonical[i].size() != size_t(dim))
       fail("eval: canonical phrase embedding {} has dimension {}, expected {}", i, canonical[i].size(), dim);
 }
-
-}  // namespace
 
 float lerf_relevancy_from_cosines(double sq, const double* sc, size_t m, float t) {
   double r = 1.0;

@@ -15,6 +15,9 @@ constexpr float kLerfTemperature = 10.f;
 // Cosine similarity of two D-vectors (0 if either is zero).
 float cosine(const float* a, const float* b, int dim);
 
+// Fails with a one-line error unless there is at least one canonical phrase and each is [dim] (dim > 0).
+void check_canonical(const std::vector<std::vector<float>>& canonical, int dim);
+
 // The relevancy from the cosines: sq = cos(e, query), sc [m] = cos(e, canonical_i).
 float lerf_relevancy_from_cosines(double sq, const double* sc, size_t m, float temperature = kLerfTemperature);
 
