@@ -4,7 +4,8 @@
 // (scales / cbrt(n / 30k), so the box is covered alike), two views, K = 8 objects, D = 512, densification off.
 // Every case runs in a child process (this program re-runs itself with --case), so each peak RSS is that case's
 // own: the model, the optimiser, the renderer's buffers and the two training images. Prints a markdown table
-// (README "Benchmarks") and, with --json FILE, the figures as JSON.
+// (README "Benchmarks"), the parts of the base case's steps (train::StepTimes) and, with --json FILE, the
+// figures as JSON.
 //   build/bench_scale [--steps 4] [--threads 2] [--objects-per-step M] [--json FILE]
 #include <unistd.h>
 
@@ -56,23 +57,29 @@ int run_case(const std::string& method, double pixels, double gaussians, const A
   train::Trainer trainer(cfg, std::move(s.model), s.views, 5.f, std::move(m));
   trainer.step();
   std::vector<double> ms;
+  std::vector<train::StepTimes> parts;
   for (int i = 0; i < a.steps; ++i) {
     const auto t0 = std::chrono::steady_clock::now();
     const train::StepInfo info = trainer.step();
     ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    parts.push_back(info.times);
     if (!std::isfinite(info.total)) {
       std::fprintf(stderr, "bench_scale: the %s step's loss is not finite\n", method.c_str());
       return 1;
     }
   }
+  json part_ms = json::object();  // the median of each part over the timed steps
+  train::StepTimes::each([&](const char* name, double train::StepTimes::*m) {
+    std::vector<double> v;
+    for (const auto& t : parts) v.push_back(t.*m);
+    std::sort(v.begin(), v.end());
+    part_ms[name] = v[v.size() / 2];
+  });
   std::sort(ms.begin(), ms.end());
-  const json j = {{"method", method},
-                  {"width", W},
-                  {"height", H},
-                  {"gaussians", n},
-                  {"ms_median", ms[ms.size() / 2]},
-                  {"ms_min", ms.front()},
-                  {"peak_rss_mb", peak_rss_mb()}};
+  const json j = {{"parts_ms", part_ms},  {"method", method},
+                  {"width", W},           {"height", H},
+                  {"gaussians", n},       {"ms_median", ms[ms.size() / 2]},
+                  {"ms_min", ms.front()}, {"peak_rss_mb", peak_rss_mb()}};
   std::printf("%s\n", j.dump().c_str());
   return 0;
 }
@@ -169,6 +176,15 @@ int main(int argc, char** argv) {
                 ratio.c_str(), mb(r).c_str(), mb(h).c_str());
     std::fflush(stdout);
     all.push_back({{"pixels", c[0]}, {"gaussians", c[1]}, {"rgb", r}, {"hybrid", h}});
+  }
+  // Where the time of the base case goes (medians of each part; they need not add up to the step's median).
+  const json& base = all[0];
+  if (!base["rgb"].is_null() && !base["hybrid"].is_null()) {
+    std::printf(
+        "\nParts of the 1000x700 / 300k steps, ms (median over the steps):\n\n| part | RGB | hybrid "
+        "|\n|---|---|---|\n");
+    for (const auto& [name, v] : base["hybrid"]["parts_ms"].items())
+      std::printf("| %s | %.1f | %.1f |\n", name.c_str(), base["rgb"]["parts_ms"].value(name, 0.0), v.get<double>());
   }
   if (!a.json_out.empty()) {
     FILE* f = std::fopen(a.json_out.c_str(), "w");

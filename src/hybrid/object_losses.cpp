@@ -193,7 +193,7 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const float* extra, const Obj
       }
     }
   }
-  const int dep = opt_.dilation >= 0 ? opt_.dilation : dependency_radius(cfg_);
+  const int dep = dep_ = opt_.dilation >= 0 ? opt_.dilation : dependency_radius(cfg_);
   obj_.resize(J);
   for (int j = 0; j < J; ++j) {
     PixelBox D{W, H, 0, 0};
@@ -212,77 +212,96 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const float* extra, const Obj
   }
 }
 
-// The base pair's eq. 6 over the image: base_app_ [H, W, 3] its gradient (without s_app), the L1 and SSIM-map
-// terms per pixel and their totals.
-void ObjectLosses::score_base_app(Scratch& w, int H, int W) {
-  const size_t HW = size_t(W) * H, n = HW * 3;
-  w.sgrad.resize(n);
-  w.smap.resize(n);
-  train::ssim_map(base_pred_.data(), static_cast<const float*>(nullptr), H, W, 3, w.sgrad.data(), w.smap.data(),
-                  double(n), w.ssim);  // against zeros
-  base_app_.resize(n);
+// Rows [y0, y1) grown by dep_ above and below (the crop of a band of full rows).
+static void band_crop(int y0, int y1, int dep, int H, int& q0, int& q1) {
+  q0 = std::max(0, y0 - dep);
+  q1 = std::min(H, y1 + dep);
+}
+
+// The base pair's eq. 6 over image rows [y0, y1): base_app_ [H, W, 3] its gradient there (without s_app), the L1
+// and SSIM-map terms per pixel and their row sums.
+void ObjectLosses::score_base_app(Scratch& w, int H, int W, int y0, int y1) {
+  int q0, q1;
+  band_crop(y0, y1, dep_, H, q0, q1);
+  const size_t L = size_t(W) * 3, qn = size_t(q1 - q0) * L;
+  w.sgrad.resize(qn);
+  w.smap.resize(qn);
+  const double n = double(H) * L;
+  train::ssim_map(&base_pred_[q0 * L], static_cast<const float*>(nullptr), q1 - q0, W, 3, w.sgrad.data(), w.smap.data(),
+                  n, w.ssim);  // against zeros
   const float lam = cfg_.lambda_dssim, a = (1 - lam) / float(n), b = -lam;
-  double l1_total = 0, ssim_total = 0;
-  for (size_t p = 0; p < HW; ++p) {
-    double l1 = 0, ss = 0;
-    for (size_t i = p * 3; i < p * 3 + 3; ++i) {
-      const float d = base_pred_[i] - 0.f;
-      l1 += std::abs(d);
-      ss += w.smap[i];
-      base_app_[i] = app_grad(d, a, b, w.sgrad[i], 1.f);
+  for (int y = y0; y < y1; ++y) {
+    double l1_row = 0, ssim_row = 0;
+    for (int x = 0; x < W; ++x) {
+      const size_t p = size_t(y) * W + x, q = size_t(y - q0) * W + x;
+      double l1 = 0, ss = 0;
+      for (int c = 0; c < 3; ++c) {
+        const float d = base_pred_[p * 3 + c] - 0.f;
+        l1 += std::abs(d);
+        ss += w.smap[q * 3 + c];
+        base_app_[p * 3 + c] = app_grad(d, a, b, w.sgrad[q * 3 + c], 1.f);
+      }
+      base_terms_[p * kTerms + kL1] = l1;
+      base_terms_[p * kTerms + kSsim] = ss;
+      l1_row += l1;
+      ssim_row += ss;
     }
-    base_terms_[p * kTerms + kL1] = l1;
-    base_terms_[p * kTerms + kSsim] = ss;
-    l1_total += l1;
-    ssim_total += ss;
+    base_rows_[size_t(y) * kTerms + kL1] = l1_row;
+    base_rows_[size_t(y) * kTerms + kSsim] = ssim_row;
   }
-  base_total_[kL1] = l1_total;
-  base_total_[kSsim] = ssim_total;
 }
 
-// The base pair's eq. 14 over the image (band from the base opacity, mask 0): base_unit_ [H, W, 3], the band
-// weight, numerator and dot-product terms per pixel and their totals.
-void ObjectLosses::score_base_bro(Scratch& w, int H, int W) {
-  const size_t HW = size_t(W) * H;
-  w.band.resize(HW);
-  w.wsum.resize(HW);
-  w.num.resize(HW);
-  base_unit_.resize(HW * 3);
-  boundary_band(base_opac_.data(), zeros_.data(), H, W, cfg_.bro_kernel, w.band.data(), w.morph);
-  bro_parts(base_pred_.data(), zeros_.data(), 3, w.band.data(), H, W, w.wsum.data(), w.num.data(), base_unit_.data());
-  double tot[kTerms] = {};
-  for (size_t p = 0; p < HW; ++p) {
-    double gp = 0, pp = 0;
-    for (size_t i = p * 3; i < p * 3 + 3; ++i) {
-      gp += double(base_unit_[i]) * double(base_pred_[i]);
-      pp += double(base_pred_[i]) * double(base_pred_[i]);
+// The base pair's eq. 14 over image rows [y0, y1) (band from the base opacity, mask 0): base_unit_ [H, W, 3]
+// there, the band weight, numerator and dot-product terms per pixel and their row sums.
+void ObjectLosses::score_base_bro(Scratch& w, int H, int W, int y0, int y1) {
+  int q0, q1;
+  band_crop(y0, y1, dep_, H, q0, q1);
+  const int qh = q1 - q0;
+  const size_t qn = size_t(qh) * W;
+  w.band.resize(qn);
+  w.wsum.resize(qn);
+  w.num.resize(qn);
+  w.bgrad.resize(qn * 3);
+  boundary_band(&base_opac_[size_t(q0) * W], zeros_.data(), qh, W, cfg_.bro_kernel, w.band.data(), w.morph);
+  bro_parts(&base_pred_[size_t(q0) * W * 3], zeros_.data(), 3, w.band.data(), qh, W, w.wsum.data(), w.num.data(),
+            w.bgrad.data());
+  for (int y = y0; y < y1; ++y) {
+    double row[kTerms] = {};
+    for (int x = 0; x < W; ++x) {
+      const size_t p = size_t(y) * W + x, q = size_t(y - q0) * W + x;
+      double gp = 0, pp = 0;
+      for (int c = 0; c < 3; ++c) {
+        const float u = w.bgrad[q * 3 + c], pr = base_pred_[p * 3 + c];
+        base_unit_[p * 3 + c] = u;
+        gp += double(u) * double(pr);
+        pp += double(pr) * double(pr);
+      }
+      double* t = &base_terms_[p * kTerms];
+      t[kWsum] = w.wsum[q];
+      t[kNum] = w.num[q];
+      t[kGp] = gp;
+      t[kPp] = pp;
+      for (int k : {kWsum, kNum, kGp, kPp}) row[k] += t[k];
     }
-    double* t = &base_terms_[p * kTerms];
-    t[kWsum] = w.wsum[p];
-    t[kNum] = w.num[p];
-    t[kGp] = gp;
-    t[kPp] = pp;
-    for (int k : {kWsum, kNum, kGp, kPp}) tot[k] += t[k];
+    for (int k : {kWsum, kNum, kGp, kPp}) base_rows_[size_t(y) * kTerms + k] = row[k];
   }
-  for (int k : {kWsum, kNum, kGp, kPp}) base_total_[k] = tot[k];
 }
 
-// Step 2 for a small object: its crop Q_k, eq. 6 and eq. 14's parts there, kept inside R_k: own = eq. 6's
-// gradient, unit = eq. 14's unscaled gradient, in[] the per-pixel terms summed over R_k.
+// Step 2 for rows [y0, y1) of object j's box R (all of them for a small object, a band of the image for a large
+// one): its crop Q = those rows of R grown by dep_, eq. 6 and eq. 14's parts there, kept inside R: own = eq. 6's
+// gradient, unit = eq. 14's unscaled gradient, pred the render, rows[] the per-pixel terms summed over each row.
 void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& lab, const float* extra,
-                              const ObjectLayout& lay, int j, int k) {
+                              const ObjectLayout& lay, int j, int k, int y0, int y1) {
   Object& o = obj_[j];
   const int W = image.width, H = image.height, C = lay.total(), J = static_cast<int>(obj_.size());
   const size_t n = size_t(W) * H * 3;
-  const PixelBox &Q = o.Q, &R = o.R;
+  const PixelBox R{o.R.x0, y0, o.R.x1, y1};
+  const PixelBox Q = R.grown(dep_, W, H);
   const int qw = Q.width(), qh = Q.height(), rw = R.width(), rh = R.height();
   const int rx = R.x0 - Q.x0, ry = R.y0 - Q.y0;  // R inside the crop
   const size_t qn = size_t(qw) * qh;
   const bool bro_on = cfg_.use_bro && cfg_.lambda_bro > 0;
-  std::fill(o.in, o.in + kTerms, 0.0);
-  o.own.resize(size_t(rw) * rh * 3);
-  o.unit.resize(bro_on ? o.own.size() : 0);
-  o.pred.resize(bro_on && cfg_.bro_scale_invariant ? o.own.size() : 0);
+  const size_t out0 = size_t(y0 - o.R.y0) * rw;  // the band's first pixel in o's arrays
   if (qn == 0) return;
   // The crop: pred, gt = I * M_k [qh, qw, 3]; mask, opac [qh, qw].
   w.pred.resize(qn * 3);
@@ -301,16 +320,16 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
         w.gt[q * 3 + c] = image.px[p * 3 + c] * m;
       }
     }
-  // Eq. 6: SSIM on the crop with the image's normaliser; L1 and the map summed over R.
+  // Eq. 6: SSIM on the crop with the image's normaliser; L1 and the map summed over each row of R.
   w.sgrad.resize(qn * 3);
   w.smap.resize(qn * 3);
   train::ssim_map(w.pred.data(), w.gt.data(), qh, qw, 3, w.sgrad.data(), w.smap.data(), double(n), w.ssim);
   const float lam = cfg_.lambda_dssim, a = (1 - lam) / float(n), b = -lam, s_app = cfg_.lambda_app / J;
-  double l1 = 0, ss = 0;
   for (int yy = 0; yy < rh; ++yy) {
     const size_t q0 = (size_t(yy + ry) * qw + rx) * 3;
     const float *pr = &w.pred[q0], *gt = &w.gt[q0], *sg = &w.sgrad[q0], *sm = &w.smap[q0];
-    float* own = &o.own[size_t(yy) * rw * 3];
+    float* own = &o.own[(out0 + size_t(yy) * rw) * 3];
+    double l1 = 0, ss = 0;
 #pragma omp simd reduction(+ : l1, ss)
     for (int i = 0; i < rw * 3; ++i) {
       const float d = pr[i] - gt[i];
@@ -318,9 +337,10 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
       ss += sm[i];
       own[i] = app_grad(d, a, b, sg[i], s_app);
     }
+    double* row = &o.rows[(size_t(y0 - o.R.y0) + yy) * kTerms];
+    row[kL1] = l1;
+    row[kSsim] = ss;
   }
-  o.in[kL1] = l1;
-  o.in[kSsim] = ss;
   if (!bro_on) return;
   // Eq. 14's parts on the crop (the band from the object's opacity and mask), kept inside R.
   w.band.resize(qn);
@@ -329,9 +349,9 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
   w.bgrad.resize(qn * 3);
   boundary_band(w.opac.data(), w.mask.data(), qh, qw, cfg_.bro_kernel, w.band.data(), w.morph);
   bro_parts(w.pred.data(), w.gt.data(), 3, w.band.data(), qh, qw, w.wsum.data(), w.num.data(), w.bgrad.data());
-  double ws = 0, num = 0, gp = 0, pp = 0;
   for (int yy = 0; yy < rh; ++yy) {
-    const size_t q0 = size_t(yy + ry) * qw + rx, o0 = size_t(yy) * rw * 3;
+    const size_t q0 = size_t(yy + ry) * qw + rx, o0 = (out0 + size_t(yy) * rw) * 3;
+    double ws = 0, num = 0, gp = 0, pp = 0;
     for (int xx = 0; xx < rw; ++xx) {
       ws += w.wsum[q0 + xx];
       num += w.num[q0 + xx];
@@ -344,11 +364,12 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
     }
     std::copy_n(u, rw * 3, &o.unit[o0]);
     if (!o.pred.empty()) std::copy_n(pr, rw * 3, &o.pred[o0]);
+    double* row = &o.rows[(size_t(y0 - o.R.y0) + yy) * kTerms];
+    row[kWsum] = ws;
+    row[kNum] = num;
+    row[kGp] = gp;
+    row[kPp] = pp;
   }
-  o.in[kWsum] = ws;
-  o.in[kNum] = num;
-  o.in[kGp] = gp;
-  o.in[kPp] = pp;
 }
 
 // The base pair's per-pixel terms summed over r. out [kTerms]
@@ -361,16 +382,22 @@ void ObjectLosses::base_sums(const PixelBox& r, int W, double* out) const {
     }
 }
 
-// Step 3 for a small object: its values (into app_[j], bro_[j]) and scalars from the base pair's sums outside R
-// plus its own inside, and its gradient inside R completed with eq. 14's.
+// Step 3 for an object: its sums over R (its rows in order), its values (into app_[j], bro_[j]) and scalars
+// from the base pair's sums outside R plus its own inside (a full object: its own alone), and its gradient
+// inside R completed with eq. 14's.
 void ObjectLosses::finish_box(int W, int H, int j) {
   Object& o = obj_[j];
   const size_t HW = size_t(W) * H;
   const double n = double(HW) * 3;
   const int J = static_cast<int>(obj_.size());
-  double base_in[kTerms];
-  base_sums(o.R, W, base_in);
-  auto whole = [&](int t) { return base_total_[t] - base_in[t] + o.in[t]; };  // the object's sum over the image
+  std::fill(o.in, o.in + kTerms, 0.0);
+  for (size_t r = 0; r < o.rows.size(); r += kTerms)
+    for (int t = 0; t < kTerms; ++t) o.in[t] += o.rows[r + t];
+  double base_in[kTerms] = {};
+  if (!o.full) base_sums(o.R, W, base_in);
+  auto whole = [&](int t) {  // the object's sum over the image
+    return o.full ? o.in[t] : base_total_[t] - base_in[t] + o.in[t];
+  };
   const float lam = cfg_.lambda_dssim;
   const float l1 = float(whole(kL1) / n), ss = float(whole(kSsim) / n);
   app_[j] = (1 - lam) * l1 + lam * (1 - ss);
@@ -447,7 +474,7 @@ void ObjectLosses::scatter(int H, int W, const ObjectLayout& lay, bool bro_grad,
 
 ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab, const float* extra,
                                         const ObjectLayout& lay, const std::vector<int>& objs, float* d_extra) {
-  const int W = image.width, H = image.height, J = static_cast<int>(objs.size()), C = lay.total();
+  const int W = image.width, H = image.height, J = static_cast<int>(objs.size());
   const size_t HW = size_t(W) * H;
   const bool bro_on = cfg_.use_bro && cfg_.lambda_bro > 0;
   app_.assign(J, 0.0);
@@ -458,46 +485,65 @@ ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab,
   if (any_box) {
     if (zeros_.size() != HW * 3) zeros_.assign(HW * 3, 0.f);
     base_terms_.resize(HW * kTerms);
+    base_rows_.assign(size_t(H) * kTerms, 0.0);
+    base_app_.resize(HW * 3);
+    if (bro_on) base_unit_.resize(HW * 3);
   }
-  // Step 2: tasks largest first (-1: the base pair's eq. 6, -2: its eq. 14, j: object j).
-  struct Task {
+  for (Object& o : obj_) {  // the outputs the pieces fill, row by row
+    const size_t n = o.R.area() * 3;
+    o.own.resize(n);
+    o.unit.resize(bro_on ? n : 0);
+    o.pred.resize(bro_on && cfg_.bro_scale_invariant ? n : 0);
+    o.rows.assign(size_t(o.R.height()) * kTerms, 0.0);
+  }
+  // Step 2: tasks (-1: the base pair's eq. 6, -2: its eq. 14, j: object j) over rows [y0, y1), cut into bands.
+  struct Piece {
     double cost;
-    int id;
+    int id, y0, y1;
   };
   const double bro_cost = bro_on ? 0.5 : 0.0;
-  std::vector<Task> tasks;
-  if (any_box) tasks.push_back({double(HW), -1});
-  if (any_box && bro_on) tasks.push_back({bro_cost * double(HW), -2});
-  for (int j = 0; j < J; ++j) tasks.push_back({(1 + bro_cost) * double(obj_[j].Q.area()), j});
-  std::stable_sort(tasks.begin(), tasks.end(), [](const Task& a, const Task& b) { return a.cost > b.cost; });
-#pragma omp parallel for schedule(dynamic, 1)
-  for (int t = 0; t < int(tasks.size()); ++t) {
-    Scratch& w = scratch_[omp_get_thread_num()];
-    const int id = tasks[t].id;
-    if (id == -1) {
-      score_base_app(w, H, W);
-    } else if (id == -2) {
-      score_base_bro(w, H, W);
-    } else if (!obj_[id].full) {
-      score_crop(w, image, lab, extra, lay, id, objs[id]);
-    } else {  // over the whole image, as without boxes
-      Object& o = obj_[id];
-      w.pred.resize(HW * 3);
-      w.opac.resize(HW);
-      for (size_t p = 0; p < HW; ++p) {
-        const float* e = extra + p * C;
-        for (int c = 0; c < 3; ++c) w.pred[p * 3 + c] = e[lay.color(id) + c];
-        w.opac[p] = e[lay.opacity(id)];
-      }
-      o.own.resize(HW * 3);
-      score_full(w, image, lab, objs[id], J, w.pred.data(), w.opac.data(), o.own.data(), app_[id], bro_[id]);
-      o.bro_scale = o.proj = 0;
+  std::vector<Piece> tasks;
+  if (any_box) tasks.push_back({double(HW), -1, 0, H});
+  if (any_box && bro_on) tasks.push_back({bro_cost * double(HW), -2, 0, H});
+  for (int j = 0; j < J; ++j)
+    if (!obj_[j].R.empty()) tasks.push_back({(1 + bro_cost) * double(obj_[j].Q.area()), j, obj_[j].R.y0, obj_[j].R.y1});
+  const int threads = std::max(1, omp_get_max_threads());
+  double total = 0;
+  for (const Piece& t : tasks) total += t.cost;
+  // Bands: at most a quarter of a thread's share each, at least kMinBandRows rows (the crop adds 2 dep_ rows).
+  constexpr int kMinBandRows = 24;
+  std::vector<Piece> pieces;
+  for (const Piece& t : tasks) {
+    const int rows = t.y1 - t.y0;
+    int bands = 1;
+    if (opt_.band_rows > 0) bands = (rows + opt_.band_rows - 1) / opt_.band_rows;
+    else if (threads > 1)
+      bands = std::clamp(int(std::ceil(t.cost / (total / (4.0 * threads)))), 1, std::max(1, rows / kMinBandRows));
+    for (int b = 0; b < bands; ++b) {
+      const int y0 = t.y0 + int(long(rows) * b / bands), y1 = t.y0 + int(long(rows) * (b + 1) / bands);
+      pieces.push_back({t.cost * (y1 - y0 + 2 * dep_) / double(rows + 2 * dep_), t.id, y0, y1});
     }
   }
-  // Step 3.
+  std::stable_sort(pieces.begin(), pieces.end(), [](const Piece& a, const Piece& b) { return a.cost > b.cost; });
 #pragma omp parallel for schedule(dynamic, 1)
-  for (int j = 0; j < J; ++j)
-    if (!obj_[j].full) finish_box(W, H, j);
+  for (int t = 0; t < int(pieces.size()); ++t) {
+    Scratch& w = scratch_[omp_get_thread_num()];
+    const Piece& pc = pieces[t];
+    if (pc.id == -1) score_base_app(w, H, W, pc.y0, pc.y1);
+    else if (pc.id == -2) score_base_bro(w, H, W, pc.y0, pc.y1);
+    else score_crop(w, image, lab, extra, lay, pc.id, objs[pc.id], pc.y0, pc.y1);
+  }
+  if (any_box)  // the base pair's totals, its rows in order
+    for (int t = 0; t < kTerms; ++t) {
+      base_total_[t] = 0;
+      for (int y = 0; y < H; ++y) base_total_[t] += base_rows_[size_t(y) * kTerms + t];
+    }
+    // Step 3 (a full object's own gradient is then complete over the image: nothing of the base pair outside).
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int j = 0; j < J; ++j) {
+    finish_box(W, H, j);
+    if (obj_[j].full) obj_[j].bro_scale = obj_[j].proj = 0;
+  }
   grads_ = ObjectGradients{};
   grads_.app_scale = cfg_.lambda_app / J;
   for (const Object& o : obj_) {

@@ -23,9 +23,14 @@
 // remove_scale_component (from the two dot products). Object k's terms inside R_k come from a crop Q_k = R_k
 // grown by dep again: every term inside R_k reads only pixels of Q_k, and where Q_k's edge is not the image's,
 // the crop's own border handling (zero padding, clipped windows) affects only pixels outside R_k. The base pair
-// is scored once per view over the whole image (two tasks: eq. 6, eq. 14). Objects whose crop covers more than
-// max_box_fraction of the image (typically the background) are scored over the whole image as without boxes.
-// Tasks (the base pair's and the objects') run largest first on a dynamic schedule.
+// is scored once per view over the whole image (eq. 6, eq. 14). Objects whose crop covers more than
+// max_box_fraction of the image (typically the background) are scored over the whole image, like the others
+// through the sums and scalars above (with no base part).
+// Bands. The same argument splits any scored region by rows: a band of rows [y0, y1) of R_k, cropped with dep
+// rows above and below, gives R_k's terms in those rows bitwise. Each task (the base pair's two, every object)
+// is cut into bands so that no piece is a large part of the whole work (by the thread count, at least 24 rows
+// each; one band at one thread), the pieces run largest first on a dynamic schedule, and every sum is kept per
+// row and added in row order: values and gradients are bitwise the same for any banding, so at any thread count.
 #pragma once
 #include <random>
 #include <vector>
@@ -61,6 +66,7 @@ struct ObjectLossOptions {
   bool boxes = true;              // score objects inside their boxes when the layout has the base render
   double max_box_fraction = 0.8;  // an object whose crop covers more of the image is scored over the whole image
   int dilation = -1;              // the radius dep of the header (< 0: the exact one; tests shrink it)
+  int band_rows = 0;              // rows per band of the box path (0: by the thread count; tests set it)
 };
 
 // The colour gradient of the last call in sparse form: object j's gradient is own[j] [box h, box w, 3] inside
@@ -99,13 +105,14 @@ class ObjectLosses {
   };
   // The per-pixel terms of the box path: L1, SSIM map, eq. 14's band weight and numerator, <g, p>, <p, p>.
   enum Term { kL1, kSsim, kWsum, kNum, kGp, kPp, kTerms };
-  struct Object {             // one object of the box path
-    PixelBox R, Q;            // scored box and crop (image coordinates)
-    bool full = false;        // scored over the whole image (R = Q = the image)
-    std::vector<float> own;   // [R h, R w, 3] its gradient inside R
-    std::vector<float> unit;  // [R h, R w, 3] eq. 14's unscaled gradient inside R (bro_parts)
-    std::vector<float> pred;  // [R h, R w, 3] the object's render inside R (for the projection)
-    double in[kTerms] = {};   // its per-pixel terms summed over R
+  struct Object {              // one object of the box path
+    PixelBox R, Q;             // scored box and crop (image coordinates)
+    bool full = false;         // scored over the whole image (R = Q = the image)
+    std::vector<float> own;    // [R h, R w, 3] its gradient inside R
+    std::vector<float> unit;   // [R h, R w, 3] eq. 14's unscaled gradient inside R (bro_parts)
+    std::vector<float> pred;   // [R h, R w, 3] the object's render inside R (for the projection)
+    std::vector<double> rows;  // [R h, kTerms] its per-pixel terms summed over each row of R
+    double in[kTerms] = {};    // the same summed over R (the rows in order)
     float bro_scale = 0, proj = 0;
   };
 
@@ -116,10 +123,10 @@ class ObjectLosses {
   void score_full(Scratch& w, const Image& image, const LabelMap& labels, int k, int J, const float* pred,
                   const float* opac, float* grad, double& app, double& bro);
   void find_boxes(const LabelMap& labels, const float* extra, const ObjectLayout& lay, const std::vector<int>& objs);
-  void score_base_app(Scratch& w, int H, int W);
-  void score_base_bro(Scratch& w, int H, int W);
+  void score_base_app(Scratch& w, int H, int W, int y0, int y1);
+  void score_base_bro(Scratch& w, int H, int W, int y0, int y1);
   void score_crop(Scratch& w, const Image& image, const LabelMap& labels, const float* extra, const ObjectLayout& lay,
-                  int j, int k);
+                  int j, int k, int y0, int y1);
   void finish_box(int W, int H, int j);
   void base_sums(const PixelBox& r, int W, double* out) const;
   void scatter(int H, int W, const ObjectLayout& lay, bool bro_grad, float* d_extra) const;
@@ -136,7 +143,9 @@ class ObjectLosses {
   std::vector<float> base_pred_, base_app_, base_unit_;  // [H, W, 3]
   std::vector<float> base_opac_, zeros_;                 // [H, W], [H, W, 3]
   std::vector<double> base_terms_;                       // [H, W, kTerms]
-  double base_total_[kTerms] = {};                       // their sums over the image
+  std::vector<double> base_rows_;                        // [H, kTerms] their sums over each row
+  double base_total_[kTerms] = {};                       // their sums over the image (the rows in order)
+  int dep_ = 0;                                          // the dependency radius in use
   ObjectGradients grads_;
 };
 

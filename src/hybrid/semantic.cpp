@@ -1,5 +1,7 @@
 #include "hybrid/semantic.h"
 
+#include <omp.h>
+
 #include <algorithm>
 #include <cstring>
 
@@ -94,13 +96,32 @@ SemanticValues SemanticPass::contrastive(int u, int n, HybridFields& h, const fl
   FactoredView& fv = views_.emplace_back();
   fv.objs = classes_;
   fv.G = G_;
-  for (long i = 0; i < n; ++i) {
-    const float* ai = a + size_t(i) * Jf;
-    if (std::any_of(ai, ai + Jf, [](float x) { return x != 0.f; })) {
-      fv.rows.push_back(int(i));
-      fv.a.insert(fv.a.end(), ai, ai + Jf);
+  // The Gaussians the view's masks touched (a row of a not all 0), in index order: each thread collects its
+  // static chunk, the chunks joined in thread order (the same rows whatever the thread count).
+  std::vector<std::vector<int>> touched(size_t(std::max(1, omp_get_max_threads())));
+#pragma omp parallel
+  {
+    std::vector<int>& mine = touched[omp_get_thread_num()];
+    mine.clear();
+#pragma omp for schedule(static)
+    for (long i = 0; i < n; ++i) {
+      const float* ai = a + size_t(i) * Jf;
+      if (std::any_of(ai, ai + Jf, [](float x) { return x != 0.f; })) mine.push_back(int(i));
     }
   }
+  size_t rows = 0;
+  for (const auto& t : touched) rows += t.size();
+  fv.rows.resize(rows);
+  fv.a.resize(rows * Jf);
+  std::vector<size_t> start(touched.size() + 1, 0);
+  for (size_t t = 0; t < touched.size(); ++t) start[t + 1] = start[t] + touched[t].size();
+#pragma omp parallel for schedule(static, 1)
+  for (long t = 0; t < long(touched.size()); ++t)
+    for (size_t r = 0; r < touched[t].size(); ++r) {
+      const int i = touched[t][r];
+      fv.rows[start[t] + r] = i;
+      std::copy_n(a + size_t(i) * Jf, Jf, &fv.a[(start[t] + r) * Jf]);
+    }
   out.loss = loss / anchors.size();
   return out;
 }

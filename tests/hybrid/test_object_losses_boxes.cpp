@@ -7,6 +7,7 @@
 // three band kernels; the sparse gradient description against the dense one; and a dilation one pixel short of
 // the dependency radius is caught. Also the two helpers the box path adds, train::ssim_map and bro_parts.
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <algorithm>
 #include <cmath>
@@ -296,6 +297,47 @@ TEST(ObjectLossesBoxes, ADilationOnePixelShortIsCaught) {
     grad_error(ref, shrunk, err, scale);
     EXPECT_GT(err, 1e-4 * scale) << "kernel " << cfg.bro_kernel;
   }
+}
+
+void expect_bitwise(const Result& ref, const Result& got, const std::string& what) {
+  EXPECT_EQ(got.v.app, ref.v.app) << what;
+  EXPECT_EQ(got.v.bro, ref.v.bro) << what;
+  ASSERT_EQ(got.d.size(), ref.d.size());
+  size_t differ = 0;
+  for (size_t i = 0; i < ref.d.size(); ++i) differ += got.d[i] != ref.d[i];
+  EXPECT_EQ(differ, 0u) << what;
+}
+
+// Bands of rows (object_losses.h): any banding of the base pair's and the objects' scoring, at any thread count,
+// gives the values and gradients of scoring each in one piece, bitwise (bands of 1 row up to one band, crops of
+// the background and of small objects, bands that cut through objects' boxes).
+TEST(ObjectLossesBoxes, BandsOfRowsChangeNothingBitwise) {
+  const Case c = synthetic(12);
+  HybridConfig wide;
+  wide.bro_kernel = 21;
+  wide.bro_scale_invariant = false;
+  for (const auto& [name, cfg] :
+       {std::pair{std::string("default"), HybridConfig{}}, std::pair{std::string("wide"), wide}}) {
+    for (double frac : {0.8, 1.0}) {
+      omp_set_num_threads(1);
+      const Result one = run(c, cfg, {.max_box_fraction = frac, .band_rows = 1000});
+      const Result ref = run(c, cfg, {.boxes = false});
+      expect_same(ref, one, name + " one band");
+      for (int rows : {1, 4, 7, 25}) {
+        const std::string what = name + " bands of " + std::to_string(rows) + " rows";
+        expect_bitwise(one, run(c, cfg, {.max_box_fraction = frac, .band_rows = rows}), what);
+        omp_set_num_threads(3);
+        expect_bitwise(one, run(c, cfg, {.max_box_fraction = frac, .band_rows = rows}), what + ", 3 threads");
+        omp_set_num_threads(1);
+      }
+      for (int threads : {2, 3, 5, 16}) {  // the banding chosen by the thread count
+        omp_set_num_threads(threads);
+        expect_bitwise(one, run(c, cfg, {.max_box_fraction = frac}),
+                       name + " at " + std::to_string(threads) + " threads");
+      }
+    }
+  }
+  omp_set_num_threads(omp_get_num_procs());
 }
 
 // The real path: object_channels() with the base channels, softmax-like q rows (one dominant label, the others
