@@ -13,6 +13,8 @@ repetitions when the run has them.
 
 The projection is an upper bound of what the 2-thread figures allow: it assumes a part's serial share stays
 serial and its parallel share divides perfectly, and ignores memory bandwidth and the barriers of more threads.
+Where the run also measured a target thread count (HGS_BENCH_THREADS=1,2,4,8,16 on a machine with the cores),
+each projected column is followed by the measured one ("meas.").
 """
 import argparse
 import json
@@ -73,14 +75,16 @@ def main():
         step1, step2 = med(r1, "step"), med(r2, "step")
         parts = [k for k in r1 if k != "step" and k in r2 and not k.startswith("method_loss_")]
         print(f"\n{fam}: step {step1:.2f} ms at 1 thread, {step2:.2f} ms at 2 ({step1 / step2:.2f}x)")
+        measured = {n: rows[(fam, n)] for n in a.threads if (fam, n) in rows}
         head = "| part | 1 thr ms | 2 thr ms | speed-up | parallel p |" + "".join(
-            f" {n} thr ms |" for n in a.threads)
+            f" {n} thr ms |" + (f" {n} thr meas. |" if n in measured else "") for n in a.threads)
         print(head)
-        print("|---" * (5 + len(a.threads)) + "|")
+        print("|---" * (5 + len(a.threads) + len(measured)) + "|")
         totals = defaultdict(float)
-        other1 = step1 - sum(med(r1, k) for k in parts)
-        other2 = step2 - sum(med(r2, k) for k in parts)
-        for k, t1, t2 in [(k, med(r1, k), med(r2, k)) for k in parts] + [("(rest of the step)", other1, other2)]:
+        rest = lambda r: med(r, "step") - sum(med(r, k) for k in parts)
+        for k in parts + ["(rest of the step)"]:
+            part = (lambda r: rest(r)) if k == "(rest of the step)" else (lambda r, k=k: med(r, k))
+            t1, t2 = part(r1), part(r2)
             p, _ = project(t1, t2, 2)
             proj = [project(t1, t2, n)[1] for n in a.threads]
             for n, t in zip(a.threads, proj):
@@ -88,9 +92,15 @@ def main():
             if t1 < a.min_share * step1:
                 continue
             sp = f"{t1 / t2:.2f}x" if t2 > 0 else "-"
-            print(f"| {k} | {t1:.2f} | {t2:.2f} | {sp} | {p:.3f} |" + "".join(f" {t:.2f} |" for t in proj))
+            cols = "".join(f" {t:.2f} |" + (f" {part(measured[n]):.2f} |" if n in measured else "")
+                           for n, t in zip(a.threads, proj))
+            print(f"| {k} | {t1:.2f} | {t2:.2f} | {sp} | {p:.3f} |" + cols)
         for n in a.threads:
-            print(f"projected step at {n} threads: {totals[n]:.2f} ms ({step1 / totals[n]:.1f}x the 1-thread step)")
+            line = f"projected step at {n} threads: {totals[n]:.2f} ms ({step1 / totals[n]:.1f}x the 1-thread step)"
+            if n in measured:
+                t = med(measured[n], "step")
+                line += f"; measured {t:.2f} ms ({step1 / t:.1f}x)"
+            print(line)
 
 
 if __name__ == "__main__":

@@ -7,7 +7,8 @@
 // Layout: DIR/<scene folder name>/seed<S>/<row>/{point_cloud.ply, report.json, report.md, run.json}, then
 // DIR/ablation.json (every run and the per-row summaries) and DIR/ablation.md (one table per protocol and mode),
 // both rewritten after every run so a long ablation shows its progress. A run whose run.json exists (same
-// iterations, protocols and modes) is reused, so an interrupted ablation continues where it stopped.
+// iterations, protocols and modes) is reused, so an interrupted ablation continues where it stopped;
+// --reevaluate evaluates such runs' kept models again instead (after a change in the evaluation).
 #include <fmt/format.h>
 
 #include <chrono>
@@ -38,7 +39,7 @@ struct AblateArgs {
   std::string out, rows = "all", protocol = "auto", mode = "object", relevancy = "objects", scl_background = "auto";
   int iters = 3000, downscale = 1, threads = 0, seeds = 1, objects_per_step = 0;
   uint64_t seed = 0;
-  bool eq15_row = false, quiet = false;
+  bool eq15_row = false, reevaluate = false, quiet = false;
 };
 
 struct Row {
@@ -128,6 +129,34 @@ std::string pct_pm(const std::pair<double, double>& ms) {
   return std::isfinite(ms.second) ? fmt::format("{:.2f} ± {:.2f}", 100 * ms.first, 100 * ms.second) : pct(ms.first);
 }
 
+// Evaluates the model dir/point_cloud.ply with the protocols and modes asked, writes dir/report.json and .md,
+// sets run["results"] {"<protocol>/<mode>": {"acc", "miou", "mbiou", "records"}} and writes dir/run.json.
+void evaluate_run(const AblateArgs& a, const std::string& scene_path, const std::vector<std::string>& protocols,
+                  const fs::path& dir, json& run) {
+  query::Session s(scene_path, dir / "point_cloud.ply", a.downscale, "");
+  std::vector<eval::EvalReport> reports;
+  for (const auto& p : protocols) {
+    query::EvaluateOptions eo;
+    eo.protocol = p;
+    eo.object = a.mode != "pixel";
+    eo.pixel = a.mode != "object";
+    eo.relevancy = query::parse_relevancy(a.relevancy);
+    eo.progress = false;
+    for (auto& r : query::evaluate_model(s, eo)) reports.push_back(std::move(r));
+  }
+  eval::write_reports(dir / "report.json", dir / "report.md", reports);
+  run["results"] = json::object();
+  for (const auto& r : reports) {
+    const eval::MeanRow m = eval::scene_mean(r);
+    auto num = [](double v) { return std::isfinite(v) ? json(v) : json(nullptr); };
+    run["results"][r.protocol + "/" + r.mode] = {{"acc", num(eval::paper_accuracy(m, r.protocol))},
+                                                 {"miou", num(m.miou)},
+                                                 {"mbiou", num(m.mbiou)},
+                                                 {"records", m.count}};
+  }
+  atomic_write_text(dir / "run.json", run.dump(2) + "\n");
+}
+
 // One trained and evaluated row: {"<protocol>/<mode>": {"acc", "miou", "mbiou", "records"}, "train_seconds"}.
 json train_and_evaluate(const AblateArgs& a, const Scene& scene, const std::string& scene_path, const Row& row,
                         uint64_t seed, const std::vector<std::string>& protocols, const fs::path& dir,
@@ -154,32 +183,12 @@ json train_and_evaluate(const AblateArgs& a, const Scene& scene, const std::stri
   const double train_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   write_model_ply(dir / "point_cloud.ply", trainer->model());
   trainer.reset();
-  query::Session s(scene_path, dir / "point_cloud.ply", a.downscale, "");
-  std::vector<eval::EvalReport> reports;
-  for (const auto& p : protocols) {
-    query::EvaluateOptions eo;
-    eo.protocol = p;
-    eo.object = a.mode != "pixel";
-    eo.pixel = a.mode != "object";
-    eo.relevancy = query::parse_relevancy(a.relevancy);
-    eo.progress = false;
-    for (auto& r : query::evaluate_model(s, eo)) reports.push_back(std::move(r));
-  }
-  eval::write_reports(dir / "report.json", dir / "report.md", reports);
   json run = {{"train_seconds", train_s},
               {"iters", a.iters},
               {"seed", seed},
               {"objects_per_step", a.objects_per_step},
               {"results", json::object()}};
-  for (const auto& r : reports) {
-    const eval::MeanRow m = eval::scene_mean(r);
-    auto num = [](double v) { return std::isfinite(v) ? json(v) : json(nullptr); };
-    run["results"][r.protocol + "/" + r.mode] = {{"acc", num(eval::paper_accuracy(m, r.protocol))},
-                                                 {"miou", num(m.miou)},
-                                                 {"mbiou", num(m.mbiou)},
-                                                 {"records", m.count}};
-  }
-  atomic_write_text(dir / "run.json", run.dump(2) + "\n");
+  evaluate_run(a, scene_path, protocols, dir, run);
   return run;
 }
 
@@ -315,11 +324,19 @@ void run_ablate(const AblateArgs& a) {
         if (fs::exists(prev)) {  // an earlier, interrupted ablation: reuse when it ran what is asked now
           try {
             json p = json::parse(read_file_text(prev));
-            bool ok = p.at("iters").get<int>() == a.iters && p.value("objects_per_step", 0) == a.objects_per_step;
+            const bool same =
+                p.at("iters").get<int>() == a.iters && p.value("objects_per_step", 0) == a.objects_per_step;
+            bool ok = same;
             for (const auto& proto : protocols)
               for (const char* m : {"object", "pixel"})
                 if ((a.mode == "both" || a.mode == m) && !p.at("results").contains(proto + "/" + m)) ok = false;
+            if (same && a.reevaluate && fs::exists(dir / "point_cloud.ply")) {  // the kept model, evaluated again
+              evaluate_run(a, a.scenes[si], protocols, dir, p);
+              ok = true;
+            }
             if (ok) run = std::move(p), reused = true;
+          } catch (const Error&) {
+            throw;  // an evaluation that failed: its message, not a silent retraining
           } catch (const std::exception&) {
           }
         }
@@ -328,7 +345,8 @@ void run_ablate(const AblateArgs& a) {
           run = train_and_evaluate(a, scenes[si], a.scenes[si], rows[r], seed, protocols, dir,
                                    fmt::format("ablate {} {} seed {} ({}/{})", sname, rows[r].name, seed, done, total));
         }
-        std::string line = fmt::format("{} seed {} {}{}:", sname, seed, rows[r].name, reused ? " (reused)" : "");
+        std::string line = fmt::format("{} seed {} {}{}:", sname, seed, rows[r].name,
+                                       reused ? (a.reevaluate ? " (model reused, evaluated again)" : " (reused)") : "");
         for (auto& [key, v] : run.at("results").items()) {
           if (std::find(keys.begin(), keys.end(), key) == keys.end()) keys.push_back(key);
           for (const char* m : {"acc", "miou", "mbiou"})
@@ -358,6 +376,10 @@ CommandRegistration reg(
                       "rows asked, and --rows all on the same --out later reuses every run on disk")
            ->check(CLI::IsMember({"all", "ends", "middle", "full"}))
            ->capture_default_str();
+       sub.add_flag(
+           "--reevaluate", a->reevaluate,
+           "Runs already on disk (same iterations): evaluate their kept models again with the protocols, modes "
+           "and relevancy asked now instead of reusing their figures (after a change in the evaluation)");
        sub.add_flag("--eq15-row", a->eq15_row,
                     "Add the full method trained on eq. 15 alone (--lambda-rgb 0); the other rows keep the default "
                     "full-image photometric loss");

@@ -18,28 +18,13 @@ fs::path protocol_label_dir(const Scene& scene, const std::string& protocol) {
   fail("unknown protocol '{}' (lerf-ovs, 3d-ovs or instances)", protocol);
 }
 
-// 3D-OVS object mode (evaluate.h): score_c(p) = A_{k(c)}(p) r_obj(c) + A_0(p) r_c(p) for every class c.
+// 3D-OVS object mode (evaluate.h): every label classifies itself (query.h object_class_scores).
 std::vector<std::vector<float>> object_class_scores(query::Session& s, render::GaussianRenderer& r, int view,
                                                     const std::vector<std::string>& classes) {
-  std::vector<int> ids = {0}, chosen;
-  std::vector<float> rel_obj;
-  for (const auto& c : classes) {
-    const query::ObjectAnswer ans = s.ask(c);
-    chosen.push_back(ans.chosen[0]);
-    for (const auto& sc : ans.scores)
-      if (sc.object == chosen.back()) rel_obj.push_back(sc.relevancy);
-    if (std::find(ids.begin(), ids.end(), chosen.back()) == ids.end()) ids.push_back(chosen.back());
-  }
-  const View& v = s.scene().views.at(view);
-  const std::vector<float> A = query::render_object_opacity(r, s.model(), render::camera_from_view(v), ids);  // [HW, J]
-  const size_t HW = size_t(v.width) * v.height, J = ids.size();
-  std::vector<std::vector<float>> maps = s.pixel_relevancies(view, classes, query::Relevancy::Lerf);  // [C][H, W]
-  for (size_t c = 0; c < classes.size(); ++c) {
-    const size_t j = std::find(ids.begin(), ids.end(), chosen[c]) - ids.begin();
-    std::vector<float>& rc = maps[c];
-    for (size_t p = 0; p < HW; ++p) rc[p] = A[p * J + j] * rel_obj[c] + A[p * J] * rc[p];
-  }
-  return maps;
+  std::vector<const float*> texts;  // [C] each [D]
+  for (const auto& c : classes) texts.push_back(s.text().embed(c).data());
+  return query::object_class_scores(r, s.model(), render::camera_from_view(s.scene().views.at(view)), s.objects(),
+                                    texts, s.text().canonical());
 }
 
 }  // namespace

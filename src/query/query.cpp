@@ -216,6 +216,33 @@ std::vector<int> choose_objects(const std::vector<ObjectScore>& scores, float mi
   return chosen;
 }
 
+std::vector<std::vector<float>> object_class_scores(render::GaussianRenderer& r, const GaussianModel& m,
+                                                    const render::Camera& cam, const ObjectEmbeddings& oe,
+                                                    const std::vector<const float*>& texts, const Canonical& canon) {
+  std::vector<int> ids, cls;  // the labels with Gaussians and their classes
+  std::vector<float> rel;     // r_k(c(k))
+  for (int k = 0; k < oe.num_labels; ++k) {
+    if (oe.weight[k] <= 0) continue;
+    const float* e = &oe.e[size_t(k) * oe.dim];
+    int best = 0;
+    float best_cos = -2.f;
+    for (size_t c = 0; c < texts.size(); ++c) {
+      const float co = cosine(e, texts[c], oe.dim);
+      if (co > best_cos) best_cos = co, best = int(c);
+    }
+    ids.push_back(k);
+    cls.push_back(best);
+    rel.push_back(lerf_relevancy(e, texts[best], canon, oe.dim));
+  }
+  const size_t HW = size_t(cam.width) * cam.height, J = ids.size();
+  std::vector<std::vector<float>> maps(texts.size(), std::vector<float>(HW, 0.f));
+  if (J == 0 || texts.empty()) return maps;
+  const std::vector<float> A = render_object_opacity(r, m, cam, ids);  // [HW, J]
+  for (size_t p = 0; p < HW; ++p)
+    for (size_t j = 0; j < J; ++j) maps[cls[j]][p] += A[p * J + j] * rel[j];
+  return maps;
+}
+
 GaussianModel select_objects(const GaussianModel& m, const std::vector<int>& objects, bool remove) {
   const ExtraGroup* z = hybrid::ConstHybridFields::bind(m, "query").z;
   std::vector<int> keep;

@@ -85,6 +85,14 @@ std::vector<std::vector<float>> render_relevancies(render::GaussianRenderer& r, 
                                                    const Canonical& canon, Relevancy variant = Relevancy::Objects,
                                                    const ObjectEmbeddings* oe = nullptr);
 
+// Closed-set classification by objects (3D-OVS object mode, query/evaluate.h): every label k with Gaussians (the
+// background 0 too) takes the class c(k) whose text its embedding e_k is closest to (cosine), and the score of
+// class c at a pixel is sum_{k : c(k) = c} A_k(p) r_k(c), A_k the label's rendered opacity and r_k(c) the LERF
+// relevancy of e_k for text c. texts[c] is [D]; result [C][H, W].
+std::vector<std::vector<float>> object_class_scores(render::GaussianRenderer& r, const GaussianModel& m,
+                                                    const render::Camera& cam, const ObjectEmbeddings& oe,
+                                                    const std::vector<const float*>& texts, const Canonical& canon);
+
 // Copy of the model keeping Gaussians whose hard id is in `objects` (or not in it when `remove`).
 GaussianModel select_objects(const GaussianModel& m, const std::vector<int>& objects, bool remove);
 

@@ -76,6 +76,26 @@ TEST(AblateCli, RowsSeedsProtocolsModesAndResume) {
   for (size_t p = r.out.find("(reused)"); p != std::string::npos; p = r.out.find("(reused)", p + 1)) ++reused;
   EXPECT_EQ(reused, 6u) << r.out;
   EXPECT_EQ(nlohmann::json::parse(read_file_text(tmp / "a" / "ablation.json"))["summary"], j["summary"]);
+  // --reevaluate: the kept models evaluated again (here with another pixel relevancy), nothing trained: the object
+  // figures and training times stay, the pixel figures are the new relevancy's.
+  r = test::run_hgs(cmd.substr(0, cmd.size() - 8) + " --reevaluate --relevancy lerf");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  size_t again = 0;
+  for (size_t p = r.out.find("evaluated again"); p != std::string::npos; p = r.out.find("evaluated again", p + 1))
+    ++again;
+  EXPECT_EQ(again, 6u) << r.out;
+  const auto re = nlohmann::json::parse(read_file_text(tmp / "a" / "ablation.json"));
+  ASSERT_EQ(re["runs"].size(), 6u);
+  bool pixel_changed = false;
+  for (size_t i = 0; i < 6; ++i) {
+    const auto &a = j["runs"][i]["run"], &b = re["runs"][i]["run"];
+    EXPECT_EQ(a["train_seconds"], b["train_seconds"]);
+    EXPECT_EQ(a["results"]["instances/object"], b["results"]["instances/object"]);
+    EXPECT_EQ(a["results"]["3d-ovs/object"], b["results"]["3d-ovs/object"]);
+    pixel_changed |= a["results"]["instances/pixel"] != b["results"]["instances/pixel"];
+  }
+  EXPECT_TRUE(pixel_changed);
+  EXPECT_NE(read_file_text(tmp / "a" / "ablation.md").find("## 3d-ovs/pixel (relevancy lerf)"), std::string::npos);
   // A protocol without labels is a clear error before any training.
   fs::remove_all(tmp / "s" / "segmentations");
   r = test::run_hgs("ablate " + s + " --out " + (tmp / "b").string() + " --iters 5 --protocol 3d-ovs --quiet");

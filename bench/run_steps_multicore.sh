@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# The training steps' scaling with threads on a machine with more cores (docs/performance.md "Measured on 16
+# cores"): the machine's facts, then bench_hybrid's RGB and exact hybrid steps (with their per-part counters) at
+# each thread count of THREADS (default 1,2,4,8,16) for each build folder given, alternating (a second round in
+# the opposite order at the counts above 2), then bench_scale at the most threads for each. JSON and text under
+# OUT (default /tmp/steps_multicore); `bench/amdahl.py OUT/<tag>.json --threads 4 16` prints projection and
+# measurement side by side.
+#   bench/run_steps_multicore.sh NEW_BUILD_DIR [OLD_BUILD_DIR]
+set -uo pipefail
+[ $# -ge 1 ] || { echo "usage: bench/run_steps_multicore.sh NEW_BUILD_DIR [OLD_BUILD_DIR]" >&2; exit 2; }
+THREADS="${THREADS:-1,2,4,8,16}"
+O="${OUT:-/tmp/steps_multicore}"
+mkdir -p "$O"
+F='BM_RgbStep|BM_HybridStep/objects_per_step:0/sparse:1'
+echo "== machine"
+echo "nproc $(nproc), cgroup cpu.max: $(cat /sys/fs/cgroup/cpu.max 2>/dev/null || echo none)"
+lscpu | grep -E '^(Model name|Thread\(s\) per core|Core\(s\) per socket|Socket\(s\)|L3)' || true
+hb() {  # tag build threads
+  HGS_BENCH_THREADS="$3" "$2/bench_hybrid" --benchmark_filter="$F" --benchmark_repetitions=3 \
+    --benchmark_min_time=0.3 --benchmark_display_aggregates_only=true --benchmark_out="$O/$1.json" 2>&1 |
+    grep -E 'median|error' | sed "s/^/$1 /" | tee -a "$O/hybrid.txt"
+}
+tags=(new) dirs=("$1")
+[ $# -ge 2 ] && tags+=(old) dirs+=("$2")
+above2="${THREADS#1,2,}"
+for i in "${!dirs[@]}"; do hb "${tags[$i]}1" "${dirs[$i]}" "$THREADS"; done
+if [ $# -ge 2 ]; then
+  for i in 1 0; do hb "${tags[$i]}2" "${dirs[$i]}" "$above2"; done
+fi
+for i in "${!dirs[@]}"; do
+  "${dirs[$i]}/bench_scale" --steps 3 --threads "${THREADS##*,}" --json "$O/scale_${tags[$i]}.json" 2>&1 |
+    sed "s/^/${tags[$i]} /" | tee "$O/scale_${tags[$i]}.txt"
+done
