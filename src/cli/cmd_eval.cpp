@@ -31,14 +31,18 @@ void print_summary(const eval::EvalReport& r) {
   fmt::print("{:<10} {:<7} {} {:>6}  mIoU {:>6}  mBIoU {:>6}{}  ({} records)\n", r.protocol, r.mode,
              lerf ? "mAcc(loc)" : "mAcc", pct(eval::paper_accuracy(m, r.protocol)), pct(m.miou), pct(m.mbiou),
              lerf ? fmt::format("  pixel acc {:>6}", pct(m.macc)) : std::string(), m.count);
+  const auto c = r.extra.find("miou_ceiling");
+  if (c != r.extra.end() && c->is_number() && c->get<double>() < 1)
+    fmt::print("           no prediction can score above {} mIoU here (3D-OVS scores a class absent from a frame 0)\n",
+               pct(c->get<double>()));
 }
 
 // One line on what a mode measures, printed under its figures (so that a newcomer can read them).
 std::string what_the_mode_measures(const eval::EvalReport& r) {
   if (r.mode == "object")
     return r.protocol == "3d-ovs"
-               ? "every query answered by its best object; a pixel takes the class of the object it shows (the "
-                 "language map's class where it shows no object)"
+               ? "every object (the background too) takes the class its embedding is closest to; a pixel the class "
+                 "of the objects it shows"
                : "every query answered by its best object: mask = that object's rendered opacity > threshold";
   const auto it = r.extra.find("relevancy");
   const std::string rel = it != r.extra.end() && it->is_string() ? it->get<std::string>() : "objects";

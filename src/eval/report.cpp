@@ -218,6 +218,11 @@ std::string report_markdown(const std::vector<EvalReport>& reports) {
     md += fmt::format("\n## {} — {}{}\n", cell(r.protocol), cell(r.scene),
                       r.mode.empty() ? "" : " (" + cell(r.mode) + ")");
     const MeanRow s = scene_mean(r);
+    if (r.extra.contains("miou_ceiling") && r.extra["miou_ceiling"].is_number())
+      md += fmt::format(
+          "\nNo prediction can score above {} mIoU here (a class absent from a frame's ground truth "
+          "scores 0).\n",
+          pct(r.extra["miou_ceiling"].get<double>()));
     table("Per query", "query", query_means(r), s);
     table("Per frame", "frame", frame_means(r), s);
     md += "\n### Per (frame, query)\n\n| frame | query | acc | IoU | BIoU | loc |\n|---|---|---:|---:|---:|:---:|\n";

@@ -143,6 +143,51 @@ TEST(EvalRun, ThreeDOvsWithTwoDFeatures) {
   EXPECT_TRUE(fs::exists(opt.overlay_dir / "frame_00009" / "classes.png"));
 }
 
+TEST(EvalRun, ThreeDOvsCeilingIsWhatTheGroundTruthItselfScores) {
+  // A class absent from a frame's ground truth scores 0 in 3D-OVS whatever is predicted; the report's
+  // miou_ceiling is the share of (frame, class) pairs whose class is present, a bound no prediction passes: the
+  // ground truth itself, predicted, scores below it only through the unlabelled pixels (which take some class).
+  // One class is blanked in one view to make it absent there.
+  Fixture& F = fx();
+  hgs::test::TempDir tmp;
+  fs::copy(F.scene.root, tmp / "scene", fs::copy_options::recursive);
+  const OvsLabelSet labels = open_3dovs_labels(tmp / "scene");
+  ASSERT_GE(labels.views.size(), 2u);
+  {
+    const fs::path png = labels.views[0].dir / (labels.classes[0] + ".png");
+    Image img = load_image(png, 1);
+    std::fill(img.px.begin(), img.px.end(), 0.f);
+    save_png(png, img);
+  }
+  const Scene scene = load_scene(tmp / "scene", {1, false});
+  ClassRelevancyFn truth = [&](int view, const std::vector<std::string>& classes) {
+    for (size_t i = 0; i < labels.views.size(); ++i)
+      if (labels.views[i].index == view) {
+        const OvsViewLabels gt = load_3dovs_view(labels, i);
+        std::vector<std::vector<float>> out(classes.size());
+        for (size_t c = 0; c < classes.size(); ++c) out[c].assign(gt.masks[c].begin(), gt.masks[c].end());
+        return out;
+      }
+    throw Error("no labels for view " + std::to_string(view));
+  };
+  RunOptions opt;
+  opt.progress = false;
+  const EvalReport r = run_3dovs(scene, truth, opt);
+  const double pairs = double(labels.views.size() * labels.classes.size());
+  ASSERT_TRUE(r.extra.contains("miou_ceiling"));
+  EXPECT_NEAR(r.extra["miou_ceiling"].get<double>(), (pairs - 1) / pairs, 1e-12);
+  EXPECT_LE(scene_mean(r).miou, r.extra["miou_ceiling"].get<double>());
+  EXPECT_GT(scene_mean(r).miou, 0.75);
+  size_t perfect = 0;
+  for (const auto& q : r.records) {
+    if (q.frame == scene.views[labels.views[0].index].name && q.query == labels.classes[0]) {
+      EXPECT_EQ(q.iou, 0.0);
+    }
+    perfect += q.iou == 1.0;
+  }
+  EXPECT_GE(perfect, size_t(pairs) / 2);  // the classes the unlabelled pixels do not fall to
+}
+
 TEST(EvalRun, SafeFileNames) {
   EXPECT_EQ(safe_file_name("red mug"), "red_mug");
   EXPECT_EQ(safe_file_name("a/b\\c"), "a_b_c");
