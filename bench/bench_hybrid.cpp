@@ -13,6 +13,8 @@
 //   build/bench_hybrid --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
 #include <benchmark/benchmark.h>
 
+#include <map>
+
 #include <cmath>
 #include <random>
 
@@ -61,6 +63,7 @@ train::TrainConfig bench_config() {
 struct PartTimes {
   train::StepTimes sum;
   double app = 0, sem = 0;
+  std::map<std::string, double> phases;  // the object losses' phases and the buffers around them (method stats)
   long n = 0;
   void add(const train::StepInfo& info) {
     train::StepTimes::each([&](const char*, double train::StepTimes::*m) { sum.*m += info.times.*m; });
@@ -73,6 +76,7 @@ struct PartTimes {
     if (app > 0 || sem > 0) {
       st.counters["ms_method_loss_objects"] = app / n;
       st.counters["ms_method_loss_semantic"] = sem / n;
+      for (const auto& [k, v] : phases) st.counters["ms_method_loss_" + k.substr(3)] = v / n;
     }
   }
 };
@@ -107,6 +111,8 @@ void BM_HybridStep(benchmark::State& st) {
     const train::MethodStats ms = trainer.method().stats();
     parts.app += ms.value("ms_app");
     parts.sem += ms.value("ms_sem");
+    for (const char* k : {"ms_app_boxes", "ms_app_pieces", "ms_app_finish", "ms_app_scatter", "ms_buffers"})
+      parts.phases[k] += ms.value(k);
   }
   st.counters["loss"] = loss;
   if (!std::isfinite(loss)) st.SkipWithError("the hybrid step's loss is not finite");  // timing NaNs is no figure

@@ -121,6 +121,7 @@ void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
   HybridFields fields = HybridFields::bind(v.model, "hybrid");
   const int W = v.view.cam.width, H = v.view.cam.height, C = layout_.total(), u = v.view_index, n = v.model.n;
   const long HW = long(W) * H;
+  const auto tb0 = std::chrono::steady_clock::now();
   d_channels_.resize(size_t(HW) * C);
   parallel_fill(d_channels_, 0.f);
   const float* rendered = io.out.extra.data();  // [H, W, C] in the object layout
@@ -159,6 +160,7 @@ void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
   const auto t2 = std::chrono::steady_clock::now();
   last_.ms_app = std::chrono::duration<double, std::milli>(t1 - t0).count();
   last_.ms_sem = std::chrono::duration<double, std::milli>(t2 - t1).count();
+  last_.app_phases = object_losses_.phase_times();
   if (cfg_.sparse_objects) {  // base colour: the sum of the objects' gradients; each group: its object's
     const SparseLayout sl{layout_.S};
     d_dense_.resize(size_t(HW) * sl.total());
@@ -173,6 +175,8 @@ void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
     io.dout.extra = d_channels_.data();
     io.dout.extra_grad_channels = layout_.grad_channels();  // the opacity channels only shape BRO's constant band
   }
+  last_.ms_buffers =
+      std::chrono::duration<double, std::milli>(t0 - tb0 + (std::chrono::steady_clock::now() - t2)).count();
 }
 
 void HybridMethod::backward(const train::ViewStep& v, const train::BackwardIO& io) {
@@ -224,8 +228,17 @@ void HybridMethod::release() {
 
 train::MethodStats HybridMethod::stats() const {
   train::MethodStats s;
-  s.values = {{"app", last_.app},         {"bro", last_.bro},       {"sem", last_.sem},
-              {"anchors", last_.anchors}, {"ms_app", last_.ms_app}, {"ms_sem", last_.ms_sem}};
+  s.values = {{"app", last_.app},
+              {"bro", last_.bro},
+              {"sem", last_.sem},
+              {"anchors", last_.anchors},
+              {"ms_app", last_.ms_app},
+              {"ms_sem", last_.ms_sem},
+              {"ms_app_boxes", last_.app_phases.boxes},
+              {"ms_app_pieces", last_.app_phases.pieces},
+              {"ms_app_finish", last_.app_phases.finish},
+              {"ms_app_scatter", last_.app_phases.scatter},
+              {"ms_buffers", last_.ms_buffers}};
   s.arrays = {{"view_weights", assoc_.weights()}};
   return s;
 }

@@ -57,7 +57,8 @@ class HybridMethod final : public train::Method {
   struct LastLosses {
     float app = 0, sem = 0, bro = 0;
     int anchors = 0;
-    double ms_app = 0, ms_sem = 0;
+    double ms_app = 0, ms_sem = 0, ms_buffers = 0;  // ms_buffers: the channel buffers around the losses
+    ObjectLosses::PhaseTimes app_phases;
   };
   void init_language(GaussianModel& model) const;
 

@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 
@@ -112,6 +113,7 @@ void ObjectLosses::score_full(Scratch& w, const Image& image, const LabelMap& la
 
 ObjectLossValues ObjectLosses::full_path(const Image& image, const LabelMap& lab, const float* extra,
                                          const ObjectLayout& lay, const std::vector<int>& objs, float* d_extra) {
+  times_ = {};
   const int W = image.width, H = image.height, J = static_cast<int>(objs.size()), C = lay.total();
   const size_t HW = size_t(W) * H;
   app_.assign(J, 0.0);
@@ -477,9 +479,15 @@ ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab,
   const int W = image.width, H = image.height, J = static_cast<int>(objs.size());
   const size_t HW = size_t(W) * H;
   const bool bro_on = cfg_.use_bro && cfg_.lambda_bro > 0;
+  using Clock = std::chrono::steady_clock;
+  auto ms = [](Clock::time_point a, Clock::time_point b) {
+    return std::chrono::duration<double, std::milli>(b - a).count();
+  };
+  const auto t0 = Clock::now();
   app_.assign(J, 0.0);
   bro_.assign(J, 0.0);
   find_boxes(lab, extra, lay, objs);
+  const auto t1 = Clock::now();
   bool any_box = false;
   for (const Object& o : obj_) any_box |= !o.full;
   if (any_box) {
@@ -533,6 +541,7 @@ ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab,
     else if (pc.id == -2) score_base_bro(w, H, W, pc.y0, pc.y1);
     else score_crop(w, image, lab, extra, lay, pc.id, objs[pc.id], pc.y0, pc.y1);
   }
+  const auto t2 = Clock::now();
   if (any_box)  // the base pair's totals, its rows in order
     for (int t = 0; t < kTerms; ++t) {
       base_total_[t] = 0;
@@ -544,6 +553,7 @@ ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab,
     finish_box(W, H, j);
     if (obj_[j].full) obj_[j].bro_scale = obj_[j].proj = 0;
   }
+  const auto t3 = Clock::now();
   grads_ = ObjectGradients{};
   grads_.app_scale = cfg_.lambda_app / J;
   for (const Object& o : obj_) {
@@ -558,6 +568,7 @@ ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab,
     if (bro_on) grads_.base_unit = base_unit_.data();
   }
   if (d_extra) scatter(H, W, lay, any_box && bro_on, d_extra);
+  times_ = {ms(t0, t1), ms(t1, t2), ms(t2, t3), ms(t3, Clock::now())};
   ObjectLossValues v;
   for (int j = 0; j < J; ++j) {
     v.app += app_[j];

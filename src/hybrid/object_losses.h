@@ -90,6 +90,12 @@ class ObjectLosses {
                               const std::vector<int>& objs, float* d_extra);
   // The last call's gradient, sparse (valid until the next call or release()).
   const ObjectGradients& gradients() const { return grads_; }
+  // Wall time of the last call's phases of the box path, ms (0 on the path without boxes): finding the boxes,
+  // the scoring pieces, the per-object scalars, the scatter of the gradients (bench_hybrid's counters).
+  struct PhaseTimes {
+    double boxes = 0, pieces = 0, finish = 0, scatter = 0;
+  };
+  const PhaseTimes& phase_times() const { return times_; }
   void release();
 
  private:
@@ -147,6 +153,7 @@ class ObjectLosses {
   double base_total_[kTerms] = {};                       // their sums over the image (the rows in order)
   int dep_ = 0;                                          // the dependency radius in use
   ObjectGradients grads_;
+  PhaseTimes times_;
 };
 
 }  // namespace hgs::hybrid
