@@ -41,8 +41,8 @@ void print_summary(const eval::EvalReport& r) {
 std::string what_the_mode_measures(const eval::EvalReport& r) {
   if (r.mode == "object")
     return r.protocol == "3d-ovs"
-               ? "every object (the background too) takes the class its embedding is closest to; a pixel the class "
-                 "of the objects it shows"
+               ? "every class takes its best object, every other object (the background too) the class it is "
+                 "closest to; a pixel the class of the objects it shows"
                : "every query answered by its best object: mask = that object's rendered opacity > threshold";
   const auto it = r.extra.find("relevancy");
   const std::string rel = it != r.extra.end() && it->is_string() ? it->get<std::string>() : "objects";

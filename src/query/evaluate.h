@@ -3,15 +3,15 @@
 //
 // Object mode answers each query with its best object (Session::ask) and masks that object's rendered
 // opacity. On 3D-OVS (a closed list of classes per scene, background surfaces among them, the argmax over the
-// classes at each pixel) every label instead classifies itself: object k takes the class c(k) whose text its
-// embedding e_k is closest to (cosine), so that all the objects of a class count (also a part that SAM split off
-// its whole), and the background label 0 likewise through its own embedding. The class score of a pixel is
-//   score_c(p) = sum_{k : c(k) = c} A_k(p) r_k(c),
-// A_k the rendered opacity of label k (A_0: the background's, through q_{n,0}) and r_k(c) the LERF relevancy of
-// e_k for c; the argmax over classes is the prediction (eval/protocols.h). (Until 2026-11-27 each class chose its
-// best object and background pixels took the LERF relevancy of the raw language map: 91.4 / 85.6 mIoU on two
-// default-world scenes where this gives 94.7 / 86.2, 11-16 on objects-only scenes where this gives 66-69;
-// docs/ablation.md.)
+// classes at each pixel) the objects are classified: every class takes its best object k(c), and every label no
+// class took takes the class c(k) its embedding is closest to (cosine): the background label 0 through its own
+// embedding, a part that SAM split off its whole (the whole answers the class, the part joins it), a second
+// instance. The class score of a pixel is
+//   score_c(p) = sum over the labels k of class c of A_k(p) r_k(c)
+// (query::object_class_scores), A_k the rendered opacity of label k and r_k(c) the LERF relevancy of e_k for c;
+// the argmax over classes is the prediction (eval/protocols.h). Until 2026-11-27 background pixels took the LERF
+// relevancy of the raw language map instead (A_0(p) r_c(p)) and unchosen objects nothing; docs/ablation.md
+// compares the two on 16 models.
 // Pixel mode is the protocol's relevancy of a rendered language map (query.h Relevancy: by default the
 // object-conditioned map of eqs. 8-9, `lerf` the raw map as LangSplat scores its field).
 #pragma once

@@ -219,27 +219,51 @@ std::vector<int> choose_objects(const std::vector<ObjectScore>& scores, float mi
 std::vector<std::vector<float>> object_class_scores(render::GaussianRenderer& r, const GaussianModel& m,
                                                     const render::Camera& cam, const ObjectEmbeddings& oe,
                                                     const std::vector<const float*>& texts, const Canonical& canon) {
-  std::vector<int> ids, cls;  // the labels with Gaussians and their classes
-  std::vector<float> rel;     // r_k(c(k))
-  for (int k = 0; k < oe.num_labels; ++k) {
-    if (oe.weight[k] <= 0) continue;
-    const float* e = &oe.e[size_t(k) * oe.dim];
-    int best = 0;
-    float best_cos = -2.f;
-    for (size_t c = 0; c < texts.size(); ++c) {
-      const float co = cosine(e, texts[c], oe.dim);
-      if (co > best_cos) best_cos = co, best = int(c);
+  const int C = static_cast<int>(texts.size());
+  std::vector<int> labels;  // the labels with Gaussians
+  for (int k = 0; k < oe.num_labels; ++k)
+    if (oe.weight[k] > 0) labels.push_back(k);
+  auto e = [&](int k) { return &oe.e[size_t(k) * oe.dim]; };
+  // Each class's best foreground object (as Session::ask answers it).
+  std::vector<int> best_object(C, -1);
+  for (int c = 0; c < C; ++c) {
+    float best = -2.f;
+    for (int k : labels) {
+      if (k == 0) continue;
+      const float co = cosine(e(k), texts[c], oe.dim);
+      if (co > best) best = co, best_object[c] = k;
     }
-    ids.push_back(k);
-    cls.push_back(best);
-    rel.push_back(lerf_relevancy(e, texts[best], canon, oe.dim));
+  }
+  // The (label, class) pairs that score: every class with its best object, and every label no class chose (the
+  // background, a part split off its whole, a second instance) with the class it is closest to.
+  std::vector<int> ids, cls;
+  std::vector<float> rel;
+  for (int k : labels) {
+    bool chosen = false;
+    for (int c = 0; c < C; ++c)
+      if (best_object[c] == k) {
+        chosen = true;
+        ids.push_back(k), cls.push_back(c), rel.push_back(lerf_relevancy(e(k), texts[c], canon, oe.dim));
+      }
+    if (chosen || C == 0) continue;
+    int own = 0;
+    float best = -2.f;
+    for (int c = 0; c < C; ++c) {
+      const float co = cosine(e(k), texts[c], oe.dim);
+      if (co > best) best = co, own = c;
+    }
+    ids.push_back(k), cls.push_back(own), rel.push_back(lerf_relevancy(e(k), texts[own], canon, oe.dim));
   }
   const size_t HW = size_t(cam.width) * cam.height, J = ids.size();
-  std::vector<std::vector<float>> maps(texts.size(), std::vector<float>(HW, 0.f));
-  if (J == 0 || texts.empty()) return maps;
-  const std::vector<float> A = render_object_opacity(r, m, cam, ids);  // [HW, J]
+  std::vector<std::vector<float>> maps(C, std::vector<float>(HW, 0.f));
+  if (J == 0) return maps;
+  // One opacity channel per label; pair j reads its label's channel.
+  const std::vector<float> A = render_object_opacity(r, m, cam, labels);  // [HW, labels]
+  std::vector<size_t> ch(J);
+  for (size_t j = 0; j < J; ++j) ch[j] = std::find(labels.begin(), labels.end(), ids[j]) - labels.begin();
+  const size_t L = labels.size();
   for (size_t p = 0; p < HW; ++p)
-    for (size_t j = 0; j < J; ++j) maps[cls[j]][p] += A[p * J + j] * rel[j];
+    for (size_t j = 0; j < J; ++j) maps[cls[j]][p] += A[p * L + ch[j]] * rel[j];
   return maps;
 }
 

@@ -85,10 +85,11 @@ std::vector<std::vector<float>> render_relevancies(render::GaussianRenderer& r, 
                                                    const Canonical& canon, Relevancy variant = Relevancy::Objects,
                                                    const ObjectEmbeddings* oe = nullptr);
 
-// Closed-set classification by objects (3D-OVS object mode, query/evaluate.h): every label k with Gaussians (the
-// background 0 too) takes the class c(k) whose text its embedding e_k is closest to (cosine), and the score of
-// class c at a pixel is sum_{k : c(k) = c} A_k(p) r_k(c), A_k the label's rendered opacity and r_k(c) the LERF
-// relevancy of e_k for text c. texts[c] is [D]; result [C][H, W].
+// Closed-set classification by objects (3D-OVS object mode, query/evaluate.h): every class c takes its best
+// foreground object k(c) (the highest cosine, as Session::ask answers it), and every label no class took (the
+// background 0, a part SAM split off its whole, a second instance) takes the class c(k) its embedding is closest
+// to; the score of class c at a pixel is the sum over its labels of A_k(p) r_k(c), A_k the label's rendered
+// opacity and r_k(c) the LERF relevancy of e_k for text c. texts[c] is [D]; result [C][H, W].
 std::vector<std::vector<float>> object_class_scores(render::GaussianRenderer& r, const GaussianModel& m,
                                                     const render::Camera& cam, const ObjectEmbeddings& oe,
                                                     const std::vector<const float*>& texts, const Canonical& canon);

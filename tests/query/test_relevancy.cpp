@@ -206,56 +206,59 @@ TEST(Relevancy, ObjectsVariantGivesAnObjectOneEmbeddingWhateverItsGaussiansCarry
   EXPECT_GT(query::render_relevancy(r, s.m, s.cam, axis, canonical())[s.right()], 0.999f);  // the object's own axis
 }
 
-TEST(Relevancy, ObjectClassScoresLetEveryLabelClassifyItselfByBruteForce) {
-  // 3D-OVS object mode: every label (the background's too) takes the class its embedding is closest to, and a
-  // class's score at a pixel is the sum of A_k r_k over its labels. Brute force: the classes by explicit argmax
-  // of the cosines, the maps from render_object_opacity and lerf_relevancy; two labels put in one class both
-  // count (a part and its whole).
+TEST(Relevancy, ObjectClassScoresClassifyTheObjectsByBruteForce) {
+  // 3D-OVS object mode: every class takes its best foreground object, every label no class took (the background
+  // 0 too) the class its embedding is closest to, and a class's score at a pixel is the sum of A_k r_k(c) over
+  // its labels. Brute force: the choices by explicit argmax of the cosines, the maps from render_object_opacity
+  // and lerf_relevancy, for three texts and for one (where every label joins the only class: a part and its
+  // whole both count).
   SoftScene s;
   render::GaussianRenderer r;
   const query::Canonical canon = {{0.3f, -0.2f, 0.5f, 0.1f, 0.7f}, {-0.6f, 0.1f, 0.2f, 0.4f, 0.1f}};
   const query::ObjectEmbeddings oe = query::object_embeddings(s.m);
-  constexpr int D = SoftScene::D;
+  constexpr int D = SoftScene::D, L = SoftScene::L;
   auto e = [&](int k) { return &oe.e[size_t(k) * D]; };
-  // The closest pair of labels (a, b) and the third c. Class 0 towards a and b and away from c, class 2 its
-  // reverse, class 1 away from every label: a and b then pick class 0 (cos(e_a, t0) ~ 1 + c_ab - 2 c_ac > 0 > the
-  // reverse) and c picks class 2.
-  int a = 0, b = 1, c = 2;
-  for (auto [x, y, z] : {std::array{0, 2, 1}, std::array{1, 2, 0}})
-    if (query::cosine(e(x), e(y), D) > query::cosine(e(a), e(b), D)) a = x, b = y, c = z;
   float t0[D], t1[D], t2[D];
   for (int d = 0; d < D; ++d) {
-    t0[d] = e(a)[d] + e(b)[d] - 2 * e(c)[d];
-    t1[d] = -(e(a)[d] + e(b)[d] + e(c)[d]);
+    t0[d] = e(1)[d] + e(2)[d] - 2 * e(0)[d];
+    t1[d] = -(e(0)[d] + e(1)[d] + e(2)[d]);
     t2[d] = -t0[d];
   }
-  const std::vector<const float*> texts = {t0, t1, t2};
-  const auto maps = query::object_class_scores(r, s.m, s.cam, oe, texts, canon);
-  ASSERT_EQ(maps.size(), 3u);
-  const std::vector<float> A = query::render_object_opacity(r, s.m, s.cam, {0, 1, 2});
-  int cls[SoftScene::L];
-  for (int k = 0; k < SoftScene::L; ++k) {
-    float best = -2;
-    for (int c = 0; c < 3; ++c) {
-      const float co = query::cosine(&oe.e[size_t(k) * SoftScene::D], texts[c], SoftScene::D);
-      if (co > best) best = co, cls[k] = c;
+  const std::vector<float> A = query::render_object_opacity(r, s.m, s.cam, {0, 1, 2});  // [HW, L]
+  const size_t HW = size_t(s.cam.width) * s.cam.height;
+  for (const std::vector<const float*>& texts :
+       {std::vector<const float*>{t0, t1, t2}, std::vector<const float*>{t0}}) {
+    const int C = static_cast<int>(texts.size());
+    const auto maps = query::object_class_scores(r, s.m, s.cam, oe, texts, canon);
+    ASSERT_EQ(maps.size(), size_t(C));
+    std::vector<std::pair<int, int>> pairs;  // (label, class)
+    std::vector<bool> taken(L, false);
+    for (int c = 0; c < C; ++c) {
+      int best = 1;
+      for (int k = 2; k < L; ++k)
+        if (query::cosine(e(k), texts[c], D) > query::cosine(e(best), texts[c], D)) best = k;
+      pairs.push_back({best, c});
+      taken[best] = true;
+    }
+    for (int k = 0; k < L; ++k) {
+      if (taken[k]) continue;
+      int own = 0;
+      for (int c = 1; c < C; ++c)
+        if (query::cosine(e(k), texts[c], D) > query::cosine(e(k), texts[own], D)) own = c;
+      pairs.push_back({k, own});
+    }
+    size_t covered = 0;
+    for (size_t p = 0; p < HW; ++p) {
+      std::vector<float> want(C, 0.f);
+      for (auto [k, c] : pairs) want[c] += A[p * L + k] * query::lerf_relevancy(e(k), texts[c], canon, D);
+      for (int c = 0; c < C; ++c) ASSERT_NEAR(maps[c][p], want[c], 1e-5) << "pixel " << p << " class " << c;
+      covered += want[0] > 1e-3f;
+    }
+    EXPECT_GT(covered, HW / 10);  // the comparison is not all zeros
+    if (C == 1) {
+      EXPECT_EQ(pairs.size(), 3u);  // the answer, the other object and the background all in the one class
     }
   }
-  ASSERT_EQ(cls[a], 0);
-  ASSERT_EQ(cls[b], 0);
-  ASSERT_EQ(cls[c], 2);
-  const size_t HW = size_t(s.cam.width) * s.cam.height;
-  size_t covered = 0;
-  for (size_t p = 0; p < HW; ++p) {
-    float want[3] = {};
-    for (int k = 0; k < SoftScene::L; ++k)
-      want[cls[k]] += A[p * SoftScene::L + k] *
-                      query::lerf_relevancy(&oe.e[size_t(k) * SoftScene::D], texts[cls[k]], canon, SoftScene::D);
-    for (int c = 0; c < 3; ++c) ASSERT_NEAR(maps[c][p], want[c], 1e-5) << "pixel " << p << " class " << c;
-    EXPECT_EQ(maps[1][p], 0.f);  // no label is closest to class 1
-    covered += want[0] > 1e-3f && want[2] > 1e-3f;
-  }
-  EXPECT_GT(covered, HW / 10);  // labels of both classes overlap: the comparison is not all zeros
 }
 
 TEST(Relevancy, NamesParseBackAndAnUnknownNameFails) {
