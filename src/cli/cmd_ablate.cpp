@@ -322,7 +322,7 @@ void run_ablate(const AblateArgs& a) {
         const fs::path dir = fs::path(a.out) / sname / fmt::format("seed{}", seed) / rows[r].name;
         json run;
         const fs::path prev = dir / "run.json";
-        bool reused = false;
+        bool reused = false, again = false;
         if (fs::exists(prev)) {  // an earlier, interrupted ablation: reuse when it ran what is asked now
           try {
             json p = json::parse(read_file_text(prev));
@@ -334,7 +334,7 @@ void run_ablate(const AblateArgs& a) {
                 if ((a.mode == "both" || a.mode == m) && !p.at("results").contains(proto + "/" + m)) ok = false;
             if (same && a.reevaluate && fs::exists(dir / "point_cloud.ply")) {  // the kept model, evaluated again
               evaluate_run(a, a.scenes[si], protocols, dir, p);
-              ok = true;
+              ok = again = true;
             }
             if (ok) run = std::move(p), reused = true;
           } catch (const Error&) {
@@ -348,7 +348,9 @@ void run_ablate(const AblateArgs& a) {
                                    fmt::format("ablate {} {} seed {} ({}/{})", sname, rows[r].name, seed, done, total));
         }
         std::string line = fmt::format("{} seed {} {}{}:", sname, seed, rows[r].name,
-                                       reused ? (a.reevaluate ? " (model reused, evaluated again)" : " (reused)") : "");
+                                       again    ? " (model reused, evaluated again)"
+                                       : reused ? " (reused)"
+                                                : "");
         for (auto& [key, v] : run.at("results").items()) {
           if (std::find(keys.begin(), keys.end(), key) == keys.end()) keys.push_back(key);
           for (const char* m : {"acc", "miou", "mbiou"})
