@@ -229,8 +229,8 @@ void ObjectLosses::score_base_app(Scratch& w, int H, int W, int y0, int y1) {
   w.sgrad.resize(qn);
   w.smap.resize(qn);
   const double n = double(H) * L;
-  train::ssim_map(&base_pred_[q0 * L], static_cast<const float*>(nullptr), q1 - q0, W, 3, w.sgrad.data(), w.smap.data(),
-                  n, w.ssim);  // against zeros
+  train::ssim_map_rows(&base_pred_[q0 * L], static_cast<const float*>(nullptr), q1 - q0, W, 3, y0 - q0, y1 - q0,
+                       w.sgrad.data(), w.smap.data(), n, w.ssim);  // against zeros, the band's rows
   const float lam = cfg_.lambda_dssim, a = (1 - lam) / float(n), b = -lam;
   for (int y = y0; y < y1; ++y) {
     double l1_row = 0, ssim_row = 0;
@@ -325,7 +325,8 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
   // Eq. 6: SSIM on the crop with the image's normaliser; L1 and the map summed over each row of R.
   w.sgrad.resize(qn * 3);
   w.smap.resize(qn * 3);
-  train::ssim_map(w.pred.data(), w.gt.data(), qh, qw, 3, w.sgrad.data(), w.smap.data(), double(n), w.ssim);
+  train::ssim_map_rows(w.pred.data(), w.gt.data(), qh, qw, 3, ry, ry + rh, w.sgrad.data(), w.smap.data(), double(n),
+                       w.ssim);  // R's rows
   const float lam = cfg_.lambda_dssim, a = (1 - lam) / float(n), b = -lam, s_app = cfg_.lambda_app / J;
   for (int yy = 0; yy < rh; ++yy) {
     const size_t q0 = (size_t(yy + ry) * qw + rx) * 3;

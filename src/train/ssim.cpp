@@ -273,11 +273,30 @@ T ssim_map(const T* x, const T* y, int H, int W, int C, T* grad_x, T* map, doubl
   return T(total / (double(H) * W * C));
 }
 
+template <typename T>
+void ssim_map_rows(const T* x, const T* y, int H, int W, int C, int y0, int y1, T* grad_x, T* map, double count,
+                   SsimWorkspace<T>& ws) {
+  y0 = std::max(0, y0);
+  y1 = std::min(H, y1);
+  if (y0 >= y1) return;
+  const int L = W * C, m0 = std::max(0, y0 - kHalf), m1 = std::min(H, y1 + kHalf);
+  ws.row_sum.assign(size_t(H), 0.0);
+  if (ws.band.empty()) ws.band.resize(1);
+  ws.coeff.resize(size_t(H) * 3 * L);  // rows [m0, m1) written
+  const T g = T(1) / T(count);
+  ssim_band<T, true>(x, y, H, W, C, m0, m1, ws.coeff.data(), ws.row_sum.data(), g, map, ws.band[0]);
+  ssim_grad_band(x, y, H, L, y0, y1, ws.coeff.data(), grad_x, ws.band[0]);
+}
+
 template float ssim<float>(const float*, const float*, int, int, int, float*, SsimWorkspace<float>&);
 template float ssim_map<float>(const float*, const float*, int, int, int, float*, float*, double,
                                SsimWorkspace<float>&);
 template double ssim_map<double>(const double*, const double*, int, int, int, double*, double*, double,
                                  SsimWorkspace<double>&);
+template void ssim_map_rows<float>(const float*, const float*, int, int, int, int, int, float*, float*, double,
+                                   SsimWorkspace<float>&);
+template void ssim_map_rows<double>(const double*, const double*, int, int, int, int, int, double*, double*, double,
+                                    SsimWorkspace<double>&);
 template double ssim<double>(const double*, const double*, int, int, int, double*, SsimWorkspace<double>&);
 template const float* ssim_window<float>();
 template const double* ssim_window<double>();

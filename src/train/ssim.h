@@ -26,6 +26,13 @@ T ssim(const T* x, const T* y, int H, int W, int C, T* grad_x, SsimWorkspace<T>&
 template <typename T>
 T ssim_map(const T* x, const T* y, int H, int W, int C, T* grad_x, T* map, double count, SsimWorkspace<T>& ws);
 
+// ssim_map for output rows [y0, y1) only: map and grad_x there (other rows are not written), bitwise the values
+// ssim_map gives them; the moments are computed for rows [y0 - 5, y1 + 5) and the products for 5 more on each
+// side. One band, single-threaded (for scoring a band of a larger image inside a parallel region).
+template <typename T>
+void ssim_map_rows(const T* x, const T* y, int H, int W, int C, int y0, int y1, T* grad_x, T* map, double count,
+                   SsimWorkspace<T>& ws);
+
 // The normalised 1D window (11 taps) shared by the forward and the tests.
 template <typename T>
 const T* ssim_window();

@@ -412,8 +412,8 @@ TEST(ObjectLossesBoxes, RenderedObjectChannelsMatchTheWholeImageScoring) {
   }
 }
 
-// The two helpers the box path adds: train::ssim_map (map, count, a null all-zero y) against train::ssim, and
-// bro_parts against bro_loss.
+// The helpers the box path adds: train::ssim_map (map, count, a null all-zero y) against train::ssim,
+// train::ssim_map_rows against ssim_map, and bro_parts against bro_loss.
 TEST(ObjectLossesBoxes, SsimMapAndBroPartsAgreeWithSsimAndBroLoss) {
   const int W = 37, H = 29, C = 3, n = W * H * C;
   std::mt19937 rng(5);
@@ -439,6 +439,20 @@ TEST(ObjectLossesBoxes, SsimMapAndBroPartsAgreeWithSsimAndBroLoss) {
                             ws),
             s0);
   for (int i = 0; i < n; ++i) ASSERT_NEAR(gm[i], g[i], 1e-6f * std::abs(g[i]) + 1e-12f) << i;
+  // ssim_map_rows: rows [y0, y1) bitwise ssim_map's (bands at the edges, inside, one row, the whole image).
+  for (const float* yy : {static_cast<const float*>(y.data()), static_cast<const float*>(nullptr)}) {
+    train::ssim_map(x.data(), yy, H, W, C, gm.data(), map.data(), 3.0 * n, ws);
+    for (auto [y0, y1] : {std::pair{0, 4}, std::pair{7, 8}, std::pair{10, 21}, std::pair{22, H}, std::pair{0, H}}) {
+      std::vector<float> gr(n, -7.f), mr(n, -7.f);
+      train::SsimWorkspace<float> wr;
+      train::ssim_map_rows(x.data(), yy, H, W, C, y0, y1, gr.data(), mr.data(), 3.0 * n, wr);
+      for (int i = y0 * W * C; i < y1 * W * C; ++i) {
+        ASSERT_EQ(gr[i], gm[i]) << "rows " << y0 << "-" << y1 << " value " << i;
+        ASSERT_EQ(mr[i], map[i]) << "rows " << y0 << "-" << y1 << " value " << i;
+      }
+      for (int i = 0; i < y0 * W * C; ++i) ASSERT_EQ(gr[i], -7.f);  // rows above the band: not written
+    }
+  }
   // bro_parts: sum num / (C sum wsum + eps) is eq. 14 and unit * scale / (C sum wsum + eps) its gradient.
   std::vector<double> wsum(size_t(W) * H), num(size_t(W) * H);
   std::vector<float> unit(n), gb(n, 0.f);
