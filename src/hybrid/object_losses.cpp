@@ -2,10 +2,12 @@
 // whole image, one object per task. With boxes (the exactness argument is in object_losses.h):
 //   1. one pass over the interleaved render finds each object's box D_k of pixels that differ from the base
 //      render (or carry its label) and copies the base render to planar images;
-//   2. tasks, largest first: the base pair's eq. 6 and eq. 14 over the image, each small object's terms on its
-//      crop Q_k (kept inside R_k), each large object over the whole image;
-//   3. per object, the global scalars (means, eq. 14's band total and scale, the projection coefficient) from
-//      the base pair's sums outside R_k plus the object's inside it, and its gradient inside R_k completed;
+//   2. tasks: the base pair's eq. 6 and eq. 14 over the image, each small object's terms on its crop Q_k (kept
+//      inside R_k), each large object over the whole image; every task cut into bands of rows (each cropped with
+//      dep rows above and below) that run as pieces, largest first, each writing its rows' terms and row sums;
+//   3. per object, its sums (rows in order) and the global scalars (means, eq. 14's band total and scale, the
+//      projection coefficient) from the base pair's sums outside R_k plus the object's inside it, and its
+//      gradient inside R_k completed;
 //   4. the gradients back to the interleaved layout: own inside R_k, the base pair's combination outside.
 #include "hybrid/object_losses.h"
 
@@ -29,6 +31,12 @@ constexpr int kSsimRadius = 5;  // the SSIM window is 11 x 11
 int dependency_radius(const HybridConfig& cfg) { return std::max(2 * kSsimRadius, cfg.bro_kernel / 2 + 1); }
 
 inline uint32_t bits(float v) { return std::bit_cast<uint32_t>(v); }
+
+// Rows [y0, y1) grown by dep above and below, clipped to [0, H) (the crop of a band of full rows).
+void band_crop(int y0, int y1, int dep, int H, int& q0, int& q1) {
+  q0 = std::max(0, y0 - dep);
+  q1 = std::min(H, y1 + dep);
+}
 
 // Eq. 6's gradient of one value: the L1 sign term (a = (1 - lambda) / n, 0 at a tie) plus b = -lambda times
 // SSIM's gradient, as train::PhotometricLoss, then times s_app.
@@ -212,12 +220,6 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const float* extra, const Obj
     o.full = double(o.Q.area()) > opt_.max_box_fraction * double(HW);
     if (o.full) o.R = o.Q = PixelBox{0, 0, W, H};
   }
-}
-
-// Rows [y0, y1) grown by dep_ above and below (the crop of a band of full rows).
-static void band_crop(int y0, int y1, int dep, int H, int& q0, int& q1) {
-  q0 = std::max(0, y0 - dep);
-  q1 = std::min(H, y1 + dep);
 }
 
 // The base pair's eq. 6 over image rows [y0, y1): base_app_ [H, W, 3] its gradient there (without s_app), the L1
