@@ -499,6 +499,8 @@ ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab,
     base_rows_.assign(size_t(H) * kTerms, 0.0);
     base_app_.resize(HW * 3);
     if (bro_on) base_unit_.resize(HW * 3);
+  } else {
+    base_app_.clear();  // scatter reads the base pair only when it was scored for this view (any size)
   }
   for (Object& o : obj_) {  // the outputs the pieces fill, row by row
     const size_t n = o.R.area() * 3;
