@@ -220,50 +220,41 @@ std::vector<std::vector<float>> object_class_scores(render::GaussianRenderer& r,
                                                     const render::Camera& cam, const ObjectEmbeddings& oe,
                                                     const std::vector<const float*>& texts, const Canonical& canon) {
   const int C = static_cast<int>(texts.size());
-  std::vector<int> labels;  // the labels with Gaussians
+  std::vector<int> labels;  // the labels with Gaussians: the opacity channels rendered
   for (int k = 0; k < oe.num_labels; ++k)
     if (oe.weight[k] > 0) labels.push_back(k);
-  auto e = [&](int k) { return &oe.e[size_t(k) * oe.dim]; };
-  // Each class's best foreground object (as Session::ask answers it).
-  std::vector<int> best_object(C, -1);
+  // The (channel, class, relevancy) triples that score: every class with its best foreground object (score_objects'
+  // ranking, as Session::ask answers), then every label no class chose (the background, a part split off its
+  // whole, a second instance) with the class it is closest to.
+  struct Term {
+    size_t channel;
+    int cls;
+    float rel;
+  };
+  std::vector<Term> terms;
+  std::vector<bool> chosen(oe.num_labels, false);
   for (int c = 0; c < C; ++c) {
-    float best = -2.f;
-    for (int k : labels) {
-      if (k == 0) continue;
-      const float co = cosine(e(k), texts[c], oe.dim);
-      if (co > best) best = co, best_object[c] = k;
-    }
+    const std::vector<ObjectScore> sc = score_objects(oe, texts[c], canon);
+    if (sc.empty()) continue;
+    chosen[sc[0].object] = true;
+    const size_t ch = std::find(labels.begin(), labels.end(), sc[0].object) - labels.begin();
+    terms.push_back({ch, c, sc[0].relevancy});
   }
-  // The (label, class) pairs that score: every class with its best object, and every label no class chose (the
-  // background, a part split off its whole, a second instance) with the class it is closest to.
-  std::vector<int> ids, cls;
-  std::vector<float> rel;
-  for (int k : labels) {
-    bool chosen = false;
-    for (int c = 0; c < C; ++c)
-      if (best_object[c] == k) {
-        chosen = true;
-        ids.push_back(k), cls.push_back(c), rel.push_back(lerf_relevancy(e(k), texts[c], canon, oe.dim));
-      }
-    if (chosen || C == 0) continue;
+  for (size_t ch = 0; ch < labels.size() && C > 0; ++ch) {
+    const int k = labels[ch];
+    if (chosen[k]) continue;
+    const float* e = &oe.e[size_t(k) * oe.dim];
     int own = 0;
-    float best = -2.f;
-    for (int c = 0; c < C; ++c) {
-      const float co = cosine(e(k), texts[c], oe.dim);
-      if (co > best) best = co, own = c;
-    }
-    ids.push_back(k), cls.push_back(own), rel.push_back(lerf_relevancy(e(k), texts[own], canon, oe.dim));
+    for (int c = 1; c < C; ++c)
+      if (cosine(e, texts[c], oe.dim) > cosine(e, texts[own], oe.dim)) own = c;
+    terms.push_back({ch, own, lerf_relevancy(e, texts[own], canon, oe.dim)});
   }
-  const size_t HW = size_t(cam.width) * cam.height, J = ids.size();
+  const size_t HW = size_t(cam.width) * cam.height, L = labels.size();
   std::vector<std::vector<float>> maps(C, std::vector<float>(HW, 0.f));
-  if (J == 0) return maps;
-  // One opacity channel per label; pair j reads its label's channel.
-  const std::vector<float> A = render_object_opacity(r, m, cam, labels);  // [HW, labels]
-  std::vector<size_t> ch(J);
-  for (size_t j = 0; j < J; ++j) ch[j] = std::find(labels.begin(), labels.end(), ids[j]) - labels.begin();
-  const size_t L = labels.size();
+  if (terms.empty()) return maps;
+  const std::vector<float> A = render_object_opacity(r, m, cam, labels);  // [HW, L]
   for (size_t p = 0; p < HW; ++p)
-    for (size_t j = 0; j < J; ++j) maps[cls[j]][p] += A[p * L + ch[j]] * rel[j];
+    for (const Term& t : terms) maps[t.cls][p] += A[p * L + t.channel] * t.rel;
   return maps;
 }
 
