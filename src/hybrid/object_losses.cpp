@@ -32,12 +32,6 @@ int dependency_radius(const HybridConfig& cfg) { return std::max(2 * kSsimRadius
 
 inline uint32_t bits(float v) { return std::bit_cast<uint32_t>(v); }
 
-// Rows [y0, y1) grown by dep above and below, clipped to [0, H) (the crop of a band of full rows).
-void band_crop(int y0, int y1, int dep, int H, int& q0, int& q1) {
-  q0 = std::max(0, y0 - dep);
-  q1 = std::min(H, y1 + dep);
-}
-
 // Eq. 6's gradient of one value: the L1 sign term (a = (1 - lambda) / n, 0 at a tie) plus b = -lambda times
 // SSIM's gradient, as train::PhotometricLoss, then times s_app.
 inline float app_grad(float d, float a, float b, float gs, float s_app) {
@@ -225,8 +219,8 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const float* extra, const Obj
 // The base pair's eq. 6 over image rows [y0, y1): base_app_ [H, W, 3] its gradient there (without s_app), the L1
 // and SSIM-map terms per pixel and their row sums.
 void ObjectLosses::score_base_app(Scratch& w, int H, int W, int y0, int y1) {
-  int q0, q1;
-  band_crop(y0, y1, dep_, H, q0, q1);
+  const PixelBox Q = PixelBox{0, y0, W, y1}.grown(dep_, W, H);  // the band's crop: full rows
+  const int q0 = Q.y0, q1 = Q.y1;
   const size_t L = size_t(W) * 3, qn = size_t(q1 - q0) * L;
   w.sgrad.resize(qn);
   w.smap.resize(qn);
@@ -258,8 +252,8 @@ void ObjectLosses::score_base_app(Scratch& w, int H, int W, int y0, int y1) {
 // The base pair's eq. 14 over image rows [y0, y1) (band from the base opacity, mask 0): base_unit_ [H, W, 3]
 // there, the band weight, numerator and dot-product terms per pixel and their row sums.
 void ObjectLosses::score_base_bro(Scratch& w, int H, int W, int y0, int y1) {
-  int q0, q1;
-  band_crop(y0, y1, dep_, H, q0, q1);
+  const PixelBox Q = PixelBox{0, y0, W, y1}.grown(dep_, W, H);  // the band's crop: full rows
+  const int q0 = Q.y0, q1 = Q.y1;
   const int qh = q1 - q0;
   const size_t qn = size_t(qh) * W;
   w.band.resize(qn);
@@ -395,13 +389,13 @@ void ObjectLosses::finish_box(int W, int H, int j) {
   const size_t HW = size_t(W) * H;
   const double n = double(HW) * 3;
   const int J = static_cast<int>(obj_.size());
-  std::fill(o.in, o.in + kTerms, 0.0);
+  double in[kTerms] = {};  // its terms summed over R, the rows in order
   for (size_t r = 0; r < o.rows.size(); r += kTerms)
-    for (int t = 0; t < kTerms; ++t) o.in[t] += o.rows[r + t];
+    for (int t = 0; t < kTerms; ++t) in[t] += o.rows[r + t];
   double base_in[kTerms] = {};
   if (!o.full) base_sums(o.R, W, base_in);
   auto whole = [&](int t) {  // the object's sum over the image
-    return o.full ? o.in[t] : base_total_[t] - base_in[t] + o.in[t];
+    return o.full ? in[t] : base_total_[t] - base_in[t] + in[t];
   };
   const float lam = cfg_.lambda_dssim;
   const float l1 = float(whole(kL1) / n), ss = float(whole(kSsim) / n);

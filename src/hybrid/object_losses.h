@@ -118,7 +118,6 @@ class ObjectLosses {
     std::vector<float> unit;   // [R h, R w, 3] eq. 14's unscaled gradient inside R (bro_parts)
     std::vector<float> pred;   // [R h, R w, 3] the object's render inside R (for the projection)
     std::vector<double> rows;  // [R h, kTerms] its per-pixel terms summed over each row of R
-    double in[kTerms] = {};    // the same summed over R (the rows in order)
     float bro_scale = 0, proj = 0;
   };
 
