@@ -4,6 +4,7 @@
 
 #include <atomic>
 #include <cstdlib>
+#include <string>
 
 #include "core/error.h"
 
@@ -14,6 +15,21 @@ std::atomic<int>& current() {
   static std::atomic<int> c{int(raster_isa_from_env(std::getenv("HGS_RASTER_ISA")))};
   return c;
 }
+
+// The channel path of every call that leaves it to kAuto: HGS_RASTER_CHANNELS=lists|folded (read once) or
+// set_raster_channel_path().
+std::atomic<int>& channel_override_state() {
+  static std::atomic<int> p{[] {
+    const char* v = std::getenv("HGS_RASTER_CHANNELS");
+    if (!v || !*v) return int(ChannelPath::kAuto);
+    const std::string s = v;
+    if (s == "lists") return int(ChannelPath::kVisitLists);
+    if (s == "folded") return int(ChannelPath::kFolded);
+    fail("HGS_RASTER_CHANNELS={}: unknown channel path (lists or folded)", s);
+  }()};
+  return p;
+}
+ChannelPath channel_override() { return ChannelPath(channel_override_state().load(std::memory_order_relaxed)); }
 
 }  // namespace
 
@@ -30,6 +46,8 @@ void set_raster_isa(RasterIsa isa) {
   if (!raster_isa_supported(isa)) fail("rasterizer: this CPU does not support {}", raster_isa_name(isa));
   current().store(int(isa), std::memory_order_relaxed);
 }
+
+void set_raster_channel_path(ChannelPath path) { channel_override_state().store(int(path), std::memory_order_relaxed); }
 
 const char* raster_isa_name(RasterIsa isa) { return isa == RasterIsa::kAvx512 ? "avx512" : "avx2"; }
 
@@ -51,6 +69,11 @@ RasterIsa parse_raster_isa(const std::string& name) {
 template <class T>
 void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws,
                        const RasterOutputs<T>& out) {
+  if (in.channel_path == ChannelPath::kAuto && channel_override() != ChannelPath::kAuto) {
+    RasterInputs<T> forced = in;
+    forced.channel_path = channel_override();
+    return rasterize_forward(forced, bins, ws, out);
+  }
   if (raster_isa() == RasterIsa::kAvx512) avx512::rasterize_forward(in, bins, ws, out);
   else avx2::rasterize_forward(in, bins, ws, out);
 }
@@ -58,6 +81,11 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
 template <class T>
 void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws, const T* final_T,
                         const int32_t* last, const RasterGrads<T>& g) {
+  if (in.channel_path == ChannelPath::kAuto && channel_override() != ChannelPath::kAuto) {
+    RasterInputs<T> forced = in;
+    forced.channel_path = channel_override();
+    return rasterize_backward(forced, bins, ws, final_T, last, g);
+  }
   // Both compilations lay out the workspace alike, so either may differentiate the other's forward.
   if (raster_isa() == RasterIsa::kAvx512) avx512::rasterize_backward(in, bins, ws, final_T, last, g);
   else avx2::rasterize_backward(in, bins, ws, final_T, last, g);

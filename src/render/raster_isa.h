@@ -19,9 +19,12 @@ namespace hgs::render {
 
 enum class RasterIsa { kAvx2, kAvx512 };
 
-bool raster_isa_supported(RasterIsa isa);             // by this CPU
-RasterIsa raster_isa();                               // the one rasterize_forward uses now
-void set_raster_isa(RasterIsa isa);                   // fails when the CPU does not support it
+bool raster_isa_supported(RasterIsa isa);  // by this CPU
+RasterIsa raster_isa();                    // the one rasterize_forward uses now
+void set_raster_isa(RasterIsa isa);        // fails when the CPU does not support it
+// The channel path (rasterize.h) of every call whose inputs leave it to ChannelPath::kAuto; kAuto restores the
+// kernels' own choice. HGS_RASTER_CHANNELS=lists|folded in the environment sets it at start-up.
+void set_raster_channel_path(ChannelPath path);
 const char* raster_isa_name(RasterIsa isa);           // "avx2" / "avx512"
 RasterIsa parse_raster_isa(const std::string& name);  // "avx2" / "avx512"; fails otherwise
 // The choice for a value of HGS_RASTER_ISA (null or empty: the best the CPU supports); fails with a message

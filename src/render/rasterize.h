@@ -18,14 +18,19 @@
 // a_{n,j} = sum_p M_j(p) alpha_n(p) T_n(p) (the blending weight a Gaussian receives inside mask j); their
 // gradient enters S and <value, g> as the per-pixel value sum_j dL/da_{n,j} M_j(p).
 // Sparse channel groups (e.g. the hybrid method's object channels, where a Gaussian belongs to one or two of K
-// objects): a Gaussian adds its value rows to its own groups only; composited and differentiated from the same
-// visit lists as the extra channels, at a cost per visit of its entries instead of all G * GW channels.
-// Extra channels (C of them, e.g. the hybrid method's 4 per object) are kept out of the walks, which would
-// read-modify-write C packs of batch state per visit: forward records each batch's visits (Gaussian, weight
-// pack) and then sums w * extra per batch, 12 channels at a time in registers; backward computes every visit's
-// <extra, dL/dextra> batch by batch before its walk (the walk needs it only as one number per pixel) and, after
-// each Gaussian's visits, its channel gradients sum_visits w * dL/dextra the same way. Pixel-weight maps are
-// visited only where they are non-zero in a batch (with hard object masks, one map per batch).
+// objects): a Gaussian adds its value rows to its own groups only, at a cost per visit of its entries instead of
+// all G * GW channels.
+// Extra channels and groups take one of two paths (ChannelPath). Many channels (C > 4, e.g. the dense object
+// layout or the no-SCL ablation's language channels) are kept out of the walks, which would read-modify-write C
+// packs of batch state per visit: forward records each batch's visits (Gaussian, weight pack) and then sums
+// w * extra per batch, 12 channels at a time in registers; backward computes every visit's <extra, dL/dextra>
+// batch by batch before its walk (the walk needs it only as one number per pixel) and, after each Gaussian's
+// visits, its channel gradients sum_visits w * dL/dextra the same way ("visit lists"). A few (C <= 4, e.g. the
+// hybrid method's base render) and the groups are folded into the walks: each visit adds w * value to the
+// batch's channel state and, backward, the value's dot with the batch's gradient to <value, g> and w * g to the
+// Gaussian's gradient sums (on the stack), with no lists to write and read back. Both paths sum the same terms
+// in the same order: bitwise-equal results (test_groups.cpp). Pixel-weight maps are visited only where they are
+// non-zero in a batch (with hard object masks, one map per batch), and a Gaussian's sums only for the maps it met.
 // Gradients of a (tile, Gaussian) pair are stored in that pair's slot and the slots are reduced per Gaussian in a
 // fixed order, so results are bitwise deterministic for any thread count and schedule. Parallel over tiles with
 // OpenMP (dynamic schedule); all scratch lives in RasterWorkspace (no allocation once warm).
@@ -44,6 +49,11 @@ constexpr double kAlphaMax = 0.99;                    // alpha = min(kAlphaMax, 
 constexpr double kAlphaMinInverse = 255.0;            // binning tests opacity * 255 >= 1 and ln(255 opacity)
 constexpr double kAlphaMin = 1.0 / kAlphaMinInverse;  // a Gaussian is skipped at a pixel when alpha < 1/255
 constexpr double kTransmittanceMin = 1e-4;            // a pixel stops when T * (1 - alpha) < 1e-4
+
+// How extra channels and groups are composited and differentiated: kAuto folds a few dense channels (at most 4)
+// and groups into the walks and keeps more channels out of them (visit lists; the top of this file); the others
+// force one (benchmarks, tests; kFolded where allowed). Both give the same values.
+enum class ChannelPath { kAuto, kVisitLists, kFolded };
 
 template <class T>
 struct RasterInputs {
@@ -68,6 +78,7 @@ struct RasterInputs {
   const int* group_ptr = nullptr;  // [N + 1]
   const int* group_id = nullptr;   // [E] in [0, G)
   const T* group_val = nullptr;    // [E, GW]
+  ChannelPath channel_path = ChannelPath::kAuto;
 };
 
 template <class T>
@@ -129,6 +140,7 @@ struct RasterWorkspace {
     RasterScratch vk;      // per-batch visit lists of a tile: Gaussian index (int) [visits]
     RasterScratch vw;      // ... and its weight (forward) or extra-channel dot (backward), packs [visits]
     RasterScratch wacc;    // forward weight-sum accumulators, packs [n, J]
+    RasterScratch wmet;    // forward: the maps each Gaussian met, bits [n]
     RasterScratch dw;      // backward d(weight_sums) of the tile's Gaussians, T [n, J]
     RasterScratch bstate;  // per-batch state, packs [batches, 7 + C + J]
     RasterScratch blast;   // per-batch active / last-contributor masks [2, batches]

@@ -3,8 +3,11 @@
 // each pixel's last contributor: T_i = T_{i+1} / (1 - alpha_i) is rebuilt from the saved final T and one scalar
 // per pixel S = sum_{j>i} w_j <value_j, dL/dout> gives dL/dalpha_i = T_i <value_i, g> - (S + T_final (<bg, g_rgb>
 // - g_alpha)) / (1 - alpha_i); no gradient flows through the kAlphaMax clamp, and pixels below kAlphaMin are
-// skipped as in forward. Extra-channel dots are precomputed per visit (extra_dots) and the channel gradients
-// summed per Gaussian afterwards (extra_grads). Per-(tile, Gaussian) slots are reduced per Gaussian in a fixed
+// skipped as in forward. Extra channels and groups: folded into the walk (each visit's dot and the Gaussian's
+// gradient sums on the stack), or, with many channels, dots precomputed per visit (extra_dots, group_dots) and
+// the channel gradients summed per Gaussian afterwards (extra_grads, group_grads); the same sums in the same
+// order, with the walk's fused multiply-adds pinned (simd::fmadd) so that both paths round alike. Per-(tile,
+// Gaussian) slots are reduced per Gaussian in a fixed
 // order, so the result is bitwise deterministic for any thread count.
 #include "render/raster_isa.h"
 
@@ -29,23 +32,41 @@ enum Grad { gMx, gMy, gA, gB, gC, gOp, gR, gG, gBl, gZ, kNumGrads };
 
 // Extra channels of one batch, backward: dot[v] = <extra_{g_v}, g> for the batch's visits, g [C] (the batch's
 // upstream gradient packs) held in registers a chunk at a time.
+// One chunk of CH channels of <e, g>: even and odd channels in two sums.
+template <int CH, class T>
+inline __attribute__((always_inline)) simd::Pack<T> chunk_dot(const T* e, const simd::Pack<T>* gc) {
+  simd::Pack<T> d0 = simd::Pack<T>{}, d1 = simd::Pack<T>{};
+  for (int i = 0; i + 1 < CH; i += 2) {
+    d0 += e[i] * gc[i];
+    d1 += e[i + 1] * gc[i + 1];
+  }
+  if (CH % 2) d0 += e[CH - 1] * gc[CH - 1];
+  return d0 + d1;
+}
+
+// <e, g> of one visit over C channels: the chunks summed in order.
+template <class T>
+inline __attribute__((always_inline)) simd::Pack<T> extra_dot(const T* e, int C, const simd::Pack<T>* g) {
+  simd::Pack<T> dot = simd::Pack<T>{};
+  for_channel_chunks(C, [&]<int CH>(int c0) { dot += chunk_dot<CH>(e + c0, g + c0); });
+  return dot;
+}
+
+// dot[v] = <extra_{g_v}, g> for a batch's visits. A few channels: extra_dot per visit (the folded walk's own
+// function, so both paths agree bitwise); more: chunk by chunk over the visits, the chunk's gradient packs in
+// registers, the same sums in the same order.
 template <class T>
 void extra_dots(const int* vk, int cnt, const T* ex, int C, int XS, const simd::Pack<T>* g, simd::Pack<T>* dot) {
   using P = simd::Pack<T>;
+  if (C <= kFoldMaxChannels) {
+    for (int v = 0; v < cnt; ++v) dot[v] = extra_dot(ex + size_t(vk[v]) * XS, C, g);
+    return;
+  }
   for (int v = 0; v < cnt; ++v) dot[v] = P{};
   for_channel_chunks(C, [&]<int CH>(int c0) {
     P gc[CH];
     for (int i = 0; i < CH; ++i) gc[i] = g[c0 + i];
-    for (int v = 0; v < cnt; ++v) {
-      const T* e = ex + size_t(vk[v]) * XS + c0;
-      P d0 = P{}, d1 = P{};
-      for (int i = 0; i + 1 < CH; i += 2) {
-        d0 += e[i] * gc[i];
-        d1 += e[i + 1] * gc[i + 1];
-      }
-      if (CH % 2) d0 += e[CH - 1] * gc[CH - 1];
-      dot[v] += d0 + d1;
-    }
+    for (int v = 0; v < cnt; ++v) dot[v] += chunk_dot<CH>(ex + size_t(vk[v]) * XS + c0, gc);
   });
 }
 
@@ -100,13 +121,14 @@ void group_grads(const int* vb, const simd::Pack<T>* vw, int cnt, const simd::Pa
 // Backward of one tile, Gaussian-major: the tile's Gaussians are walked back to front (k = n-1 .. 0); each visits
 // the batches its mask names, whose per-pixel state (T, S) lives in per-thread scratch, while its gradient
 // sums stay in registers and are stored once per (tile, Gaussian) pair.
-template <class T, bool kDepth, bool kExtra>
+template <class T, bool kDepth, int kX>
 void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typename RasterWorkspace<T>::PerThread& w,
                    const T* final_T, const int32_t* last, const RasterGrads<T>& g, const T* records, T* tile_records,
                    const uint32_t* ws_masks, T* pair_grad, const size_t* group_off, T* pair_group) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
   using I = typename std::remove_reference<decltype(M{}[0])>::type;
+  constexpr bool kExtra = kX != kNoChannels, kLists = kX == kVisitLists, kFold = kX == kFolded;
   const int W = bins.width, H = bins.height, C = in.num_extra, XS = in.extra_stride > 0 ? in.extra_stride : C;
   const int F = kNumGrads + C;
   const int GWg = g.d_groups ? in.group_grad_width : 0, GT = in.num_groups * GWg;  // group gradient channels
@@ -182,7 +204,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
   int voff[kBatches + 1], vcur[kBatches];
   int* vk = nullptr;
   P* vdot = nullptr;
-  if (kExtra) {
+  if (kLists) {
     int vcnt[kBatches] = {};
     std::tie(vk, vdot) = size_visit_lists<P>(w, masks, n, live, voff);
     for (int k = 0; k < n; ++k)
@@ -208,11 +230,20 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
     int nkv = 0;
     const T* rc = td.rec + size_t(k) * kRecord;
     const T* dw = J > 0 ? DW + size_t(k) * J : nullptr;
+    // Folded channels: the Gaussian's extra row and group entries; their gradient sums (ae, ag) on the stack.
+    const int gi = bins.tile_gauss[s + k];
+    const T* xr = kFold && C > 0 ? in.extra + size_t(gi) * XS : nullptr;
+    const int e0 = kFold && GT > 0 ? in.group_ptr[gi] : 0, ne = kFold && GT > 0 ? in.group_ptr[gi + 1] - e0 : 0;
+    P ae[kFoldMaxChannels], ag[kFoldMaxEntries * kFoldMaxWidth];
+    if constexpr (kFold) {
+      for (int c = 0; c < C; ++c) ae[c] = P{};
+      for (int i = 0; i < ne * GWg; ++i) ag[i] = P{};
+    }
     while (mb) {
       const int bt = __builtin_ctz(mb);
       mb &= mb - 1;
       if (k >= kmax[bt]) continue;
-      const int vi = kExtra ? voff[bt] + --vcur[bt] : 0;  // this visit in the batch's list (walked backwards)
+      const int vi = kLists ? voff[bt] + --vcur[bt] : 0;  // this visit in the batch's list (walked backwards)
       P* st = bst + size_t(bt) * BS;
       const M inr = (M{} + I(k)) < blast[bt];
       const T fy = T(ty0 + bt / kBatchesPerRow) + T(0.5);
@@ -232,7 +263,18 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
       const P wgt = alpha * Ti;
       P dot = rc[kCr] * gr + rc[kCg] * gg + rc[kCb] * gb;
       if (kDepth) dot += rc[kZ] * st[bD];
-      if (kExtra) dot += vdot[vi];
+      if constexpr (kLists) dot += vdot[vi];
+      if constexpr (kFold) {  // extra_dots + group_dots of this visit, in their order
+        P vd = C > 0 ? extra_dot(xr, C, st + kBatchFixed) : P{};
+        P gd = P{};
+        for (int e = 0; e < ne; ++e) {
+          const P* gs = st + GO + size_t(in.group_id[e0 + e]) * GWg;
+          const T* x = in.group_val + size_t(e0 + e) * in.group_width;
+          for (int i = 0; i < GWg; ++i) gd += x[i] * gs[i];
+        }
+        if (GT > 0) vd += gd;
+        dot += vd;
+      }
       if (J > 0) {
         // Pixel-weight sums: only the maps that are non-zero in this batch (one, inside a hard object mask).
         const P* sw = st + kBatchFixed + C;
@@ -241,7 +283,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
         dot += d0;
       }
       const P S = st[bS];
-      P dLda = Ti * dot - (S + st[bBg]) * ioma;
+      P dLda = simd::fmadd(Ti, dot, -((S + st[bBg]) * ioma));  // one rounding in both channel paths
       st[bS] = c ? S + wgt * dot : S;
       st[bT] = c ? Ti : st[bT];
       const P wm = c ? wgt : P{};
@@ -249,7 +291,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
       aG += wm * gg;
       aBl += wm * gb;
       if (kDepth) aZ += wm * st[bD];
-      if (kExtra) {
+      if constexpr (kLists) {
         kvb[nkv] = bt;
         kvw[nkv++] = wm;
       }
@@ -257,11 +299,18 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
       aOp += gauss * dLda;
       const P pw = araw * dLda;  // dL/dpower
       const P pdx = pw * dx;
-      aMx += rc[kA] * pdx + bdy * pw;
-      aMy += rc[kB] * pdx + (rc[kC] * dy) * pw;
+      aMx += simd::fmadd(simd::splat(rc[kA]), pdx, bdy * pw);  // as GCC contracts them, pinned (fmadd)
+      aMy += simd::fmadd(simd::splat(rc[kB]), pdx, (rc[kC] * dy) * pw);
       aA += pdx * dx;
       aB += pdx * dy;
       aC += pw * (dy * dy);
+      if constexpr (kFold) {  // extra_grads / group_grads of this visit
+        for (int c = 0; c < C; ++c) ae[c] += wm * st[kBatchFixed + c];
+        for (int e = 0; e < ne; ++e) {
+          const P* gs = st + GO + size_t(in.group_id[e0 + e]) * GWg;
+          for (int i = 0; i < GWg; ++i) ag[e * GWg + i] += wm * gs[i];
+        }
+      }
     }
     // per-pair results (dpower/dmx = -(a dx + b dy), dpower/da = -dx^2 / 2, dpower/db = -dx dy, ...)
     o[gMx] = -simd::hsum<T>(aMx);
@@ -274,14 +323,22 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
     o[gG] = simd::hsum<T>(aG);
     o[gBl] = simd::hsum<T>(aBl);
     o[gZ] = kDepth ? simd::hsum<T>(aZ) : T(0);
-    if (kExtra) extra_grads<T>(kvb, kvw, nkv, bst + kBatchFixed, BS, C, o + kNumGrads);
-    else
+    if constexpr (kLists) {
+      extra_grads<T>(kvb, kvw, nkv, bst + kBatchFixed, BS, C, o + kNumGrads);
+    } else if constexpr (kFold) {
+      for (int c = 0; c < C; ++c) o[kNumGrads + c] = simd::hsum<T>(ae[c]);
+    } else {
       for (int ch = 0; ch < C; ++ch) o[kNumGrads + ch] = T(0);
-    if (GT > 0) {
-      const int gi = bins.tile_gauss[s + k], pr = bins.tile_pair[s + k];
-      const int ne = in.group_ptr[gi + 1] - in.group_ptr[gi];
-      T* og = pair_group + group_off[gi] + size_t(pr - bins.pair_offset[gi]) * ne * GWg;
-      group_grads<T>(kvb, kvw, nkv, bst + GO, BS, in, gi, og);
+    }
+    if (kExtra && GT > 0) {
+      const int pr = bins.tile_pair[s + k];
+      const int nent = in.group_ptr[gi + 1] - in.group_ptr[gi];
+      T* og = pair_group + group_off[gi] + size_t(pr - bins.pair_offset[gi]) * nent * GWg;
+      if constexpr (kLists) {
+        group_grads<T>(kvb, kvw, nkv, bst + GO, BS, in, gi, og);
+      } else if constexpr (kFold) {
+        for (int i = 0; i < nent * GWg; ++i) og[i] = simd::hsum<T>(ag[i]);
+      }
     }
   }
 }
@@ -306,6 +363,12 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
                                                   size_t(in.group_ptr[i + 1] - in.group_ptr[i]) * GWg;
     if (ws.pair_group.size() < ws.group_off[in.n]) ws.pair_group.resize(ws.group_off[in.n]);
   }
+  int max_entries = 0;  // the most group entries of one Gaussian (the folded backward's bound)
+  if (groups) {
+#pragma omp parallel for schedule(static) reduction(max : max_entries)
+    for (int i = 0; i < in.n; ++i) max_entries = std::max(max_entries, in.group_ptr[i + 1] - in.group_ptr[i]);
+  }
+  const int x = ext ? channel_path(in, C, groups ? in.num_groups * GWg : 0, max_entries, GWg) : kNoChannels;
   const size_t* GOF = groups ? ws.group_off.data() : nullptr;
   T* PGR = groups ? ws.pair_group.data() : nullptr;
   T* pg = ws.pair_grad.data();
@@ -317,10 +380,16 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
     auto& w = ws.threads[omp_get_thread_num()];
 #pragma omp for schedule(dynamic, 1)
     for (int t = 0; t < bins.num_tiles; ++t) {
-      if (dep && ext) backward_tile<T, true, true>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GOF, PGR);
-      else if (dep) backward_tile<T, true, false>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GOF, PGR);
-      else if (ext) backward_tile<T, false, true>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GOF, PGR);
-      else backward_tile<T, false, false>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GOF, PGR);
+      if (dep && x == kVisitLists)
+        backward_tile<T, true, kVisitLists>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GOF, PGR);
+      else if (dep && x == kFolded)
+        backward_tile<T, true, kFolded>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GOF, PGR);
+      else if (dep) backward_tile<T, true, kNoChannels>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GOF, PGR);
+      else if (x == kVisitLists)
+        backward_tile<T, false, kVisitLists>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GOF, PGR);
+      else if (x == kFolded)
+        backward_tile<T, false, kFolded>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GOF, PGR);
+      else backward_tile<T, false, kNoChannels>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GOF, PGR);
     }
     // reduce pair slots per Gaussian in a fixed order
 #pragma omp for schedule(static)

@@ -91,6 +91,20 @@ inline __attribute__((always_inline)) void weighted_rows(const P* vw, int cnt, R
   }
 }
 
+// How a call's extra channels and groups are composited and differentiated (rasterize.h): not at all, from
+// per-batch visit lists after the walk, or folded into the walk's own visit loop. ChannelPath::kAuto folds at
+// most kFoldMaxChannels dense channels with groups of at most kFoldMaxEntries entries per Gaussian (`max_entries`,
+// checked by backward, whose fold keeps each entry's gradient sums on the stack) and group gradients of width at
+// most kFoldMaxWidth; kFolded folds where allowed, kVisitLists never folds.
+enum ChannelPathKernel { kNoChannels = 0, kVisitLists = 1, kFolded = 2 };
+constexpr int kFoldMaxChannels = 4, kFoldMaxEntries = 4, kFoldMaxWidth = 4;
+template <class T>
+int channel_path(const RasterInputs<T>& in, int C, int GT, int max_entries, int grad_width) {
+  if (C <= 0 && GT <= 0) return kNoChannels;
+  const bool foldable = C <= kFoldMaxChannels && max_entries <= kFoldMaxEntries && grad_width <= kFoldMaxWidth;
+  return in.channel_path == ChannelPath::kVisitLists || !foldable ? kVisitLists : kFolded;
+}
+
 template <class T>
 void ensure_threads(RasterWorkspace<T>& ws) {
   const size_t nt = size_t(std::max(1, omp_get_max_threads()));

@@ -4,7 +4,8 @@
 // back (Gaussian-major) over the batches of their masks that still have a live pixel: alpha = min(kAlphaMax,
 // opacity exp(power)), skipped below kAlphaMin, the pixel stops (without accumulating) when T (1 - alpha) <
 // kTransmittanceMin, else w = alpha T is accumulated into colour / depth / pixel-weight sums. Extra channels and
-// sparse groups are summed afterwards from each batch's recorded visits (composite_extras, composite_groups). Saves
+// sparse groups are added in the walk (the folded path) or summed afterwards from each batch's recorded visits
+// (composite_extras, composite_groups: many channels), in the same order either way. Saves
 // final T and the last contributor per pixel for backward; per-pair weight sums are reduced per Gaussian in a fixed
 // order.
 #include "render/raster_isa.h"
@@ -144,12 +145,13 @@ void build_masks(const Binning& bins, int tile, const TileData<T>& td, uint32_t*
 // Forward of one tile, Gaussian-major: the tile's Gaussians are walked front to back; each updates the batches
 // its mask names that still have a live pixel (per-batch accumulators in per-thread scratch); a batch drops out
 // when all its pixels hit the transmittance cut-off, the tile ends when no batch is left.
-template <class T, bool kDepth, bool kExtra>
+template <class T, bool kDepth, int kX>
 void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typename RasterWorkspace<T>::PerThread& w,
                   const T* records, T* tile_records, uint32_t* ws_masks, T* pair_w, const RasterOutputs<T>& out) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
   using I = typename std::remove_reference<decltype(M{}[0])>::type;
+  constexpr bool kExtra = kX != kNoChannels, kLists = kX == kVisitLists;
   const int W = bins.width, H = bins.height, C = in.num_extra, J = in.num_weights;
   const int GT = in.num_groups * in.group_width;  // group channels, after the pixel-weight maps in the state
   const int XS = in.extra_stride > 0 ? in.extra_stride : C;
@@ -166,6 +168,11 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   M* bact = w.blast.template get<M>(size_t(2) * kBatches);
   M* blast = bact + kBatches;
   P* wacc = J > 0 ? w.wacc.template get<P>(size_t(n) * J) : nullptr;
+  // The maps each Gaussian has met so far (bit j: wacc row j is written): a sum starts at its first term, and
+  // only met maps are summed at the end (a Gaussian of a hard mask meets one or two of the J maps). More than 32
+  // maps: every sum is zeroed up front and summed.
+  uint32_t* met = J > 0 ? w.wmet.template get<uint32_t>(size_t(n)) : nullptr;
+  const bool all_maps = J > 32;
   const P lane = simd::iota_pack<T>();
   const M lane_i = __builtin_convertvector(lane, M);
   uint32_t alive = 0;
@@ -193,19 +200,23 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   int voff[kBatches + 1], vcnt[kBatches] = {};
   int* vk = nullptr;
   P* vw = nullptr;
-  if (kExtra && n > 0) std::tie(vk, vw) = size_visit_lists<P>(w, masks, n, all_batches, voff);
+  if (kLists && n > 0) std::tie(vk, vw) = size_visit_lists<P>(w, masks, n, all_batches, voff);
+  const int s = bins.tile_start[tile];
   int kend = 0;  // Gaussians [kend, n) were never reached (all batches terminated)
   for (int k = 0; k < n && alive; ++k) {
     kend = k + 1;
     uint32_t mb = masks[k] & alive;
-    if (!mb) {
-      if (J > 0)
-        for (int jj = 0; jj < J; ++jj) wacc[size_t(k) * J + jj] = P{};
-      continue;
-    }
+    if (J > 0) met[k] = 0;
+    if (!mb) continue;
     const T* rc = td.rec + size_t(k) * kRecord;
+    // Folded channels: the Gaussian's extra row and group entries, added in the walk.
+    const int gi = kX == kFolded ? bins.tile_gauss[s + k] : 0;
+    const T* xr = kX == kFolded && C > 0 ? in.extra + size_t(gi) * XS : nullptr;
+    const int e0 = kX == kFolded && GT > 0 ? in.group_ptr[gi] : 0,
+              e1 = kX == kFolded && GT > 0 ? in.group_ptr[gi + 1] : 0;
     P* wa = J > 0 ? wacc + size_t(k) * J : nullptr;
-    for (int jj = 0; jj < J; ++jj) wa[jj] = P{};
+    if (all_maps)
+      for (int jj = 0; jj < J; ++jj) wa[jj] = P{};
     const M kk = M{} + I(k + 1);
     while (mb) {
       const int bt = __builtin_ctz(mb);
@@ -231,12 +242,28 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
       st[bG] += wgt * rc[kCg];
       st[bB] += wgt * rc[kCb];
       if (kDepth) st[bD] += wgt * rc[kZ];
-      if (kExtra) {
+      if constexpr (kLists) {
         const int v = voff[bt] + vcnt[bt]++;
-        vk[v] = bins.tile_gauss[bins.tile_start[tile] + k];
+        vk[v] = bins.tile_gauss[s + k];
         vw[v] = wgt;
       }
-      for_batch_maps(jmask[bt], J, [&](int jj) { wa[jj] += wgt * st[kBatchFixed + C + jj]; });
+      if constexpr (kX == kFolded) {  // the sums of composite_extras / composite_groups, in the same order
+        for (int c = 0; c < C; ++c) st[kBatchFixed + c] += wgt * xr[c];
+        for (int e = e0; e < e1; ++e) {
+          P* d = st + GO + size_t(in.group_id[e]) * in.group_width;
+          const T* x = in.group_val + size_t(e) * in.group_width;
+          for (int i = 0; i < in.group_width; ++i) d[i] += wgt * x[i];
+        }
+      }
+      for_batch_maps(jmask[bt], J, [&](int jj) {
+        const P v = wgt * st[kBatchFixed + C + jj];
+        if (all_maps || (met[k] >> jj) & 1) {
+          wa[jj] += v;
+        } else {
+          wa[jj] = v;
+          met[k] |= 1u << jj;
+        }
+      });
       st[bT] = acc ? testT : Tr;
       blast[bt] = acc ? kk : blast[bt];
       bact[bt] = active;
@@ -249,7 +276,7 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
     const int py = ty0 + bt / kBatchesPerRow, px0 = tx0 + (bt % kBatchesPerRow) * kLanes;
     const int nvalid = std::min(kLanes, W - px0);
     P* st = bst + size_t(bt) * BS;
-    if (kExtra && vcnt[bt] > 0) {
+    if (kLists && vcnt[bt] > 0) {
       if (C > 0) composite_extras<T>(vk + voff[bt], vw + voff[bt], vcnt[bt], in.extra, C, XS, st + kBatchFixed);
       if (GT > 0) composite_groups<T>(vk + voff[bt], vw + voff[bt], vcnt[bt], in, st + GO);
     }
@@ -270,11 +297,11 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
     }
   }
   if (J > 0 && any_g) {
-    const int s = bins.tile_start[tile];
     for (int k = 0; k < n; ++k) {
       T* o = pair_w + size_t(bins.tile_pair[s + k]) * J;
       if (k < kend && (masks[k] & all_batches))
-        for (int jj = 0; jj < J; ++jj) o[jj] = simd::hsum<T>(wacc[size_t(k) * J + jj]);
+        for (int jj = 0; jj < J; ++jj)
+          o[jj] = all_maps || (met[k] >> jj) & 1 ? simd::hsum<T>(wacc[size_t(k) * J + jj]) : T(0);
       else
         for (int jj = 0; jj < J; ++jj) o[jj] = 0;
     }
@@ -287,7 +314,8 @@ template <class T>
 void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws,
                        const RasterOutputs<T>& out) {
   ensure_threads(ws);
-  const bool dep = in.depth != nullptr, ext = in.num_extra > 0 || in.num_groups * in.group_width > 0;
+  const bool dep = in.depth != nullptr;
+  const int x = channel_path(in, in.num_extra, in.num_groups * in.group_width, 0, 0);
   if (ws.masks.size() < size_t(bins.num_pairs)) ws.masks.resize(size_t(bins.num_pairs));
   uint32_t* MK = ws.masks.data();
   if (ws.records.size() < size_t(in.n) * kRecord) ws.records.resize(size_t(in.n) * kRecord);
@@ -304,10 +332,12 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
     auto& w = ws.threads[omp_get_thread_num()];
 #pragma omp for schedule(dynamic, 1)
     for (int t = 0; t < bins.num_tiles; ++t) {
-      if (dep && ext) forward_tile<T, true, true>(in, bins, t, w, R, TR, MK, PW, out);
-      else if (dep) forward_tile<T, true, false>(in, bins, t, w, R, TR, MK, PW, out);
-      else if (ext) forward_tile<T, false, true>(in, bins, t, w, R, TR, MK, PW, out);
-      else forward_tile<T, false, false>(in, bins, t, w, R, TR, MK, PW, out);
+      if (dep && x == kVisitLists) forward_tile<T, true, kVisitLists>(in, bins, t, w, R, TR, MK, PW, out);
+      else if (dep && x == kFolded) forward_tile<T, true, kFolded>(in, bins, t, w, R, TR, MK, PW, out);
+      else if (dep) forward_tile<T, true, kNoChannels>(in, bins, t, w, R, TR, MK, PW, out);
+      else if (x == kVisitLists) forward_tile<T, false, kVisitLists>(in, bins, t, w, R, TR, MK, PW, out);
+      else if (x == kFolded) forward_tile<T, false, kFolded>(in, bins, t, w, R, TR, MK, PW, out);
+      else forward_tile<T, false, kNoChannels>(in, bins, t, w, R, TR, MK, PW, out);
     }
     if (J > 0) {
 #pragma omp for schedule(static)

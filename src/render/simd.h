@@ -59,6 +59,24 @@ inline __attribute__((always_inline)) Pack<T> iota_pack() {
   return p;
 }
 
+// a * b + c with one rounding, whatever the compiler would contract: GCC fuses a * b + c into an FMA only when
+// both sit in one basic block after its code motion, which the surrounding code can change (the backward's folded
+// and list paths must round alike).
+inline __attribute__((always_inline)) Pack<float> fmadd(Pack<float> a, Pack<float> b, Pack<float> c) {
+#if defined(__FMA__)
+  return (Pack<float>)_mm256_fmadd_ps((__m256)a, (__m256)b, (__m256)c);
+#else
+  Pack<float> r;
+  for (int l = 0; l < kLanes; ++l) r[l] = std::fma(a[l], b[l], c[l]);
+  return r;
+#endif
+}
+inline __attribute__((always_inline)) Pack<double> fmadd(Pack<double> a, Pack<double> b, Pack<double> c) {
+  Pack<double> r;
+  for (int l = 0; l < kLanes; ++l) r[l] = std::fma(a[l], b[l], c[l]);
+  return r;
+}
+
 template <class T>
 inline __attribute__((always_inline)) Pack<T> vmin(Pack<T> a, Pack<T> b) {
   return a < b ? a : b;

@@ -1,7 +1,7 @@
 // The two compilations of the rasterizer kernels (render/raster_isa.h: the portable AVX2 one and the AVX-512
 // one) compute bitwise-equal results: renders and gradients of whole scenes, float and double, with extra
-// channels, pixel-weight maps and partial batches. The finite-difference and reference tests run on the
-// compilation the CPU selects, so this carries them over to the other one.
+// channels (both channel paths), pixel-weight maps and partial batches. The finite-difference and reference tests run
+// on the compilation the CPU selects, so this carries them over to the other one.
 #include <gtest/gtest.h>
 
 #include <string>
@@ -65,6 +65,10 @@ TEST(RasterIsa, Avx512AndAvx2GiveBitwiseEqualFloatResults) {
   Scene s = random_scene(800, 69, 48, 62, 0.9, 29);
   s.add_label_weights(3, 6);
   compare_isas<float>(s);
+  // 4 extra channels: composited in the walks themselves (rasterize.h's folded channel path).
+  Scene f = random_scene(800, 69, 48, 63, 0.9, 4);
+  f.add_label_weights(3, 6);
+  compare_isas<float>(f);
 }
 
 TEST(RasterIsa, Avx512AndAvx2GiveBitwiseEqualDoubleResults) {
@@ -73,6 +77,9 @@ TEST(RasterIsa, Avx512AndAvx2GiveBitwiseEqualDoubleResults) {
   Scene s = random_scene(300, 64, 48, 61, 0.9, 5);
   s.add_label_weights(2, 6);
   compare_isas<double>(s);
+  Scene f = random_scene(300, 64, 48, 64, 0.9, 3);  // the folded channel path
+  f.add_label_weights(2, 6);
+  compare_isas<double>(f);
 }
 
 TEST(RasterIsa, NamesAndChoice) {
