@@ -122,8 +122,11 @@ void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
   const int W = v.view.cam.width, H = v.view.cam.height, C = layout_.total(), u = v.view_index, n = v.model.n;
   const long HW = long(W) * H;
   const auto tb0 = std::chrono::steady_clock::now();
+  // The object losses overwrite the colour channels' gradient and the renderer reads only those and the S others
+  // (its gradient-free opacity and base channels stay unread), so only the others, which the no-SCL ablation's
+  // cosine loss adds to, need zeros.
   d_channels_.resize(size_t(HW) * C);
-  parallel_fill(d_channels_, 0.f);
+  if (layout_.S > 0) parallel_fill(d_channels_, 0.f);
   const float* rendered = io.out.extra.data();  // [H, W, C] in the object layout
   if (cfg_.sparse_objects) {
     render_.resize(size_t(HW) * C);
@@ -131,8 +134,9 @@ void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
     rendered = render_.data();
   }
   const auto t0 = std::chrono::steady_clock::now();
-  const ObjectLossValues ov =
-      object_losses_(v.view.image, data_.masks[u].labels, rendered, layout_, objects_, d_channels_.data());
+  if (cfg_.sparse_objects) color_sum_.resize(size_t(HW) * 3);
+  const ObjectLossValues ov = object_losses_(v.view.image, data_.masks[u].labels, rendered, layout_, objects_,
+                                             d_channels_.data(), cfg_.sparse_objects ? color_sum_.data() : nullptr);
   last_.app = float(ov.app);
   last_.bro = float(ov.bro);
   io.objective.add("app", cfg_.lambda_app, ov.app);
@@ -164,7 +168,7 @@ void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
   if (cfg_.sparse_objects) {  // base colour: the sum of the objects' gradients; each group: its object's
     const SparseLayout sl{layout_.S};
     d_dense_.resize(size_t(HW) * sl.total());
-    dense_object_grad(HW, layout_, d_channels_.data(), d_dense_.data());
+    dense_object_grad(HW, layout_, d_channels_.data(), color_sum_.data(), d_dense_.data());
     io.dout.extra = d_dense_.data();
     io.dout.extra_grad_channels = sl.grad_channels();
     io.dout.groups = d_channels_.data() + layout_.color(0);
@@ -222,7 +226,8 @@ void HybridMethod::after_step(const train::StepEnd& end) {
 void HybridMethod::release() {
   object_losses_.release();
   semantic_.release();
-  for (auto* v : {&dq_, &channels_, &d_channels_, &d_wsum_, &render_, &d_dense_}) std::vector<float>().swap(*v);
+  for (auto* v : {&dq_, &channels_, &d_channels_, &d_wsum_, &render_, &d_dense_, &color_sum_})
+    std::vector<float>().swap(*v);
   groups_ = ObjectGroups{};
 }
 

@@ -75,6 +75,7 @@ class HybridMethod final : public train::Method {
   std::vector<float> render_;      // [H, W, C] the object layout assembled from the sparse render
   std::vector<float> d_channels_;  // [H, W, C] dL/d the object layout's channels
   std::vector<float> d_dense_;     // [H, W, 4 + S] dL/d the base channels (sparse_objects)
+  std::vector<float> color_sum_;   // [H, W, 3] the object colour gradients summed over the objects (sparse_objects)
   std::vector<float> dq_;          // [N, L]
   std::vector<float> d_wsum_;      // [N, Jf]
   LastLosses last_;

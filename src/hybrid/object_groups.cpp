@@ -88,7 +88,7 @@ void assemble_object_render(long hw, const ObjectLayout& lay, const float* dense
   }
 }
 
-void dense_object_grad(long hw, const ObjectLayout& lay, const float* d_out, float* d_dense) {
+void dense_object_grad(long hw, const ObjectLayout& lay, const float* d_out, const float* color_sum, float* d_dense) {
   const int C = lay.total(), J = lay.J, S = lay.S;
   const SparseLayout sl{S};
   const int CD = sl.total();
@@ -96,15 +96,19 @@ void dense_object_grad(long hw, const ObjectLayout& lay, const float* d_out, flo
   for (long p = 0; p < hw; ++p) {
     const float* g = d_out + size_t(p) * C;
     float* d = d_dense + size_t(p) * CD;
-    float s0 = 0, s1 = 0, s2 = 0;
-    for (int j = 0; j < J; ++j) {
-      s0 += g[lay.color(j)];
-      s1 += g[lay.color(j) + 1];
-      s2 += g[lay.color(j) + 2];
+    if (color_sum) {
+      for (int c = 0; c < 3; ++c) d[c] = color_sum[size_t(p) * 3 + c];
+    } else {
+      float s0 = 0, s1 = 0, s2 = 0;
+      for (int j = 0; j < J; ++j) {
+        s0 += g[lay.color(j)];
+        s1 += g[lay.color(j) + 1];
+        s2 += g[lay.color(j) + 2];
+      }
+      d[0] = s0;
+      d[1] = s1;
+      d[2] = s2;
     }
-    d[0] = s0;
-    d[1] = s1;
-    d[2] = s2;
     for (int c = 0; c < S; ++c) d[sl.other() + c] = g[lay.other() + c];
     d[sl.base_opacity()] = 0.f;
   }

@@ -55,9 +55,10 @@ void build_object_groups(int n, int L, int J, const SparseLayout& sl, const int*
 // dense [HW, 4 + S], groups [HW, 4 J] renders -> out [HW, lay.total()] (lay.base must be set).
 void assemble_object_render(long hw, const ObjectLayout& lay, const float* dense, const float* groups, float* out);
 
-// d_out [HW, lay.total()] (object colour and other gradients) -> d_dense [HW, 4 + S]: base colour = sum_j d colour_j,
-// others copied, the opacity 0. The groups' own upstream gradient is d_out itself (colour j at lay.color(j)).
-void dense_object_grad(long hw, const ObjectLayout& lay, const float* d_out, float* d_dense);
+// d_out [HW, lay.total()] (object colour and other gradients) -> d_dense [HW, 4 + S]: base colour = sum_j d colour_j
+// (color_sum [HW, 3] when the object losses summed it already, else summed here), others copied, the opacity 0. The
+// groups' own upstream gradient is d_out itself (colour j at lay.color(j)).
+void dense_object_grad(long hw, const ObjectLayout& lay, const float* d_out, const float* color_sum, float* d_dense);
 
 // grad_dense [N, 4 + S], grad_groups [E, 4] (the renderer's channel gradients) -> dq [N, L] and dcolor [N, 3]
 // (both added).

@@ -70,11 +70,12 @@ void ObjectLosses::release() {
 }
 
 ObjectLossValues ObjectLosses::operator()(const Image& image, const LabelMap& lab, const float* extra,
-                                          const ObjectLayout& lay, const std::vector<int>& objs, float* d_extra) {
+                                          const ObjectLayout& lay, const std::vector<int>& objs, float* d_extra,
+                                          float* color_sum) {
   const size_t threads = size_t(std::max(1, omp_get_max_threads()));
   if (scratch_.size() < threads) scratch_.resize(threads, Scratch(cfg_.lambda_dssim));
-  if (lay.base && opt_.boxes && !objs.empty()) return box_path(image, lab, extra, lay, objs, d_extra);
-  return full_path(image, lab, extra, lay, objs, d_extra);
+  if (lay.base && opt_.boxes && !objs.empty()) return box_path(image, lab, extra, lay, objs, d_extra, color_sum);
+  return full_path(image, lab, extra, lay, objs, d_extra, color_sum);
 }
 
 // Object k over the whole image. pred [H, W, 3], opac [H, W] -> grad [H, W, 3] (overwritten) = d(lambda_app app
@@ -114,7 +115,8 @@ void ObjectLosses::score_full(Scratch& w, const Image& image, const LabelMap& la
 }
 
 ObjectLossValues ObjectLosses::full_path(const Image& image, const LabelMap& lab, const float* extra,
-                                         const ObjectLayout& lay, const std::vector<int>& objs, float* d_extra) {
+                                         const ObjectLayout& lay, const std::vector<int>& objs, float* d_extra,
+                                         float* color_sum) {
   times_ = {};
   const int W = image.width, H = image.height, J = static_cast<int>(objs.size()), C = lay.total();
   const size_t HW = size_t(W) * H;
@@ -136,13 +138,19 @@ ObjectLossValues ObjectLosses::full_path(const Image& image, const LabelMap& lab
   for (int j = 0; j < J; ++j)
     score_full(scratch_[omp_get_thread_num()], image, lab, objs[j], J, &pred_[size_t(j) * HW * 3],
                &opac_[size_t(j) * HW], &grad_[size_t(j) * HW * 3], app_[j], bro_[j]);
-  // Gradients back to the interleaved layout (the colour channels of a pixel are contiguous).
-  if (d_extra) {
+  // Gradients back to the interleaved layout (the colour channels of a pixel are contiguous), and their sum.
+  if (d_extra || color_sum) {
 #pragma omp parallel for schedule(static)
     for (long p = 0; p < long(HW); ++p) {
-      float* d = &d_extra[size_t(p) * C];
+      float sum[3] = {0.f, 0.f, 0.f};
       for (int j = 0; j < J; ++j)
-        for (int c = 0; c < 3; ++c) d[lay.color(j) + c] += grad_[(size_t(j) * HW + p) * 3 + c];
+        for (int c = 0; c < 3; ++c) {
+          const float v = grad_[(size_t(j) * HW + p) * 3 + c] + 0.f;  // + 0: a -0 stored as +0 (see scatter)
+          if (d_extra) d_extra[size_t(p) * C + lay.color(j) + c] = v;
+          sum[c] += v;
+        }
+      if (color_sum)
+        for (int c = 0; c < 3; ++c) color_sum[size_t(p) * 3 + c] = sum[c];
     }
   }
   grads_ = ObjectGradients{};
@@ -425,9 +433,12 @@ void ObjectLosses::finish_box(int W, int H, int j) {
   }
 }
 
-// Step 4: d_extra [H, W, C] += each object's gradient: own inside R, the base pair's combination outside. Pixel
-// by pixel: the base pair's values are loaded once for the J colour triples of the pixel.
-void ObjectLosses::scatter(int H, int W, const ObjectLayout& lay, bool bro_grad, float* d_extra) const {
+// Step 4: d_extra [H, W, C] = each object's gradient: own inside R, the base pair's combination outside; and
+// color_sum [H, W, 3] their sum over the objects. Pixel by pixel: the base pair's values are loaded once for the
+// J colour triples of the pixel. (Each value is stored + 0, so a -0 is stored as +0: the bits of the sum into a
+// zeroed buffer this replaced.)
+void ObjectLosses::scatter(int H, int W, const ObjectLayout& lay, bool bro_grad, float* d_extra,
+                           float* color_sum) const {
   const int C = lay.total(), J = static_cast<int>(obj_.size());
   const float s_app = grads_.app_scale;
   const bool has_base = !base_app_.empty();  // else every object is scored over the whole image
@@ -445,9 +456,9 @@ void ObjectLosses::scatter(int H, int W, const ObjectLayout& lay, bool bro_grad,
         own[j] = in_rows ? obj_[j].own.data() + size_t(y - R.y0) * R.width() * 3 : nullptr;
       }
       for (int x = 0; x < W; ++x) {
-        float* const px = d_extra + (size_t(y) * W + x) * C;
+        float* const px = d_extra ? d_extra + (size_t(y) * W + x) * C : nullptr;
         const size_t i = (size_t(y) * W + x) * 3;
-        float g[3] = {}, u[3] = {}, p[3] = {};
+        float g[3] = {}, u[3] = {}, p[3] = {}, sum[3] = {0.f, 0.f, 0.f};
         if (has_base)
           for (int c = 0; c < 3; ++c) {
             g[c] = s_app * base_app_[i + c];
@@ -455,24 +466,30 @@ void ObjectLosses::scatter(int H, int W, const ObjectLayout& lay, bool bro_grad,
             p[c] = base_pred_[i + c];
           }
         for (int j = 0; j < J; ++j) {
-          float* d = px + lay.color(j);
+          float v[3];
           if (x >= xa[j] && x < xb[j]) {
             const float* o = own[j] + size_t(x - xa[j]) * 3;
-            for (int c = 0; c < 3; ++c) d[c] += o[c];
+            for (int c = 0; c < 3; ++c) v[c] = o[c] + 0.f;
           } else if (bro_grad) {
             const float gs = obj_[j].bro_scale, a = obj_[j].proj;
-            for (int c = 0; c < 3; ++c) d[c] += g[c] + (gs * u[c] - a * p[c]);
+            for (int c = 0; c < 3; ++c) v[c] = (g[c] + (gs * u[c] - a * p[c])) + 0.f;
           } else {
-            for (int c = 0; c < 3; ++c) d[c] += g[c];
+            for (int c = 0; c < 3; ++c) v[c] = g[c] + 0.f;
           }
+          if (px)
+            for (int c = 0; c < 3; ++c) px[lay.color(j) + c] = v[c];
+          for (int c = 0; c < 3; ++c) sum[c] += v[c];
         }
+        if (color_sum)
+          for (int c = 0; c < 3; ++c) color_sum[i + c] = sum[c];
       }
     }
   }
 }
 
 ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab, const float* extra,
-                                        const ObjectLayout& lay, const std::vector<int>& objs, float* d_extra) {
+                                        const ObjectLayout& lay, const std::vector<int>& objs, float* d_extra,
+                                        float* color_sum) {
   const int W = image.width, H = image.height, J = static_cast<int>(objs.size());
   const size_t HW = size_t(W) * H;
   const bool bro_on = cfg_.use_bro && cfg_.lambda_bro > 0;
@@ -566,7 +583,7 @@ ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab,
     grads_.base_pred = base_pred_.data();
     if (bro_on) grads_.base_unit = base_unit_.data();
   }
-  if (d_extra) scatter(H, W, lay, any_box && bro_on, d_extra);
+  if (d_extra || color_sum) scatter(H, W, lay, any_box && bro_on, d_extra, color_sum);
   times_ = {ms(t0, t1), ms(t1, t2), ms(t2, t3), ms(t3, Clock::now())};
   ObjectLossValues v;
   for (int j = 0; j < J; ++j) {

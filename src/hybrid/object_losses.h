@@ -84,10 +84,12 @@ class ObjectLosses {
  public:
   explicit ObjectLosses(const HybridConfig& cfg, const ObjectLossOptions& opt = {}) : cfg_(cfg), opt_(opt) {}
   // image [H, W, 3]; labels [H, W] (confidence-filtered mask); extra [H, W, C] the render of the layout's
-  // channels; objs [J] the objects of the layout. Adds lambda_app * d(app) + lambda_bro * d(bro) to the colour
-  // channels of d_extra [H, W, C] (may be null: gradients() then has them).
+  // channels; objs [J] the objects of the layout. Writes lambda_app * d(app) + lambda_bro * d(bro) to the colour
+  // channels of d_extra [H, W, C] (overwritten, every pixel; the other channels untouched; may be null:
+  // gradients() then has them) and, when color_sum [H, W, 3] is given, their sum over the J objects there (the
+  // sparse layout's base colour gradient, object_groups.h).
   ObjectLossValues operator()(const Image& image, const LabelMap& labels, const float* extra, const ObjectLayout& lay,
-                              const std::vector<int>& objs, float* d_extra);
+                              const std::vector<int>& objs, float* d_extra, float* color_sum = nullptr);
   // The last call's gradient, sparse (valid until the next call or release()).
   const ObjectGradients& gradients() const { return grads_; }
   // Wall time of the last call's phases of the box path, ms (0 on the path without boxes): finding the boxes,
@@ -122,9 +124,9 @@ class ObjectLosses {
   };
 
   ObjectLossValues full_path(const Image& image, const LabelMap& labels, const float* extra, const ObjectLayout& lay,
-                             const std::vector<int>& objs, float* d_extra);
+                             const std::vector<int>& objs, float* d_extra, float* color_sum);
   ObjectLossValues box_path(const Image& image, const LabelMap& labels, const float* extra, const ObjectLayout& lay,
-                            const std::vector<int>& objs, float* d_extra);
+                            const std::vector<int>& objs, float* d_extra, float* color_sum);
   void score_full(Scratch& w, const Image& image, const LabelMap& labels, int k, int J, const float* pred,
                   const float* opac, float* grad, double& app, double& bro);
   void find_boxes(const LabelMap& labels, const float* extra, const ObjectLayout& lay, const std::vector<int>& objs);
@@ -134,7 +136,7 @@ class ObjectLosses {
                   int j, int k, int y0, int y1);
   void finish_box(int W, int H, int j);
   void base_sums(const PixelBox& r, int W, double* out) const;
-  void scatter(int H, int W, const ObjectLayout& lay, bool bro_grad, float* d_extra) const;
+  void scatter(int H, int W, const ObjectLayout& lay, bool bro_grad, float* d_extra, float* color_sum) const;
 
   HybridConfig cfg_;
   ObjectLossOptions opt_;

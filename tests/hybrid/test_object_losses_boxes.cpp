@@ -10,6 +10,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -226,29 +227,37 @@ TEST(ObjectLossesBoxes, WithoutTheBaseRenderTheOptionChangesNothing) {
     for (int i = 0; i < lay.total(); ++i) ASSERT_EQ(a.d[p * lay.total() + i], b.d[p * lay.total() + i]);
 }
 
-TEST(ObjectLossesBoxes, GradientsAddToDExtraAndLeaveOtherChannels) {
+TEST(ObjectLossesBoxes, GradientsOverwriteTheColourChannelsAndLeaveOtherChannels) {
+  // The colour channels of d_extra are written whatever they held (the bits of a zeroed buffer's), the others
+  // (opacities, base) are not touched, and color_sum holds the colour gradients summed over the objects in order;
+  // with boxes and over whole images.
   const Case c = synthetic(9);
   const HybridConfig cfg;
-  const Result ref = run(c, cfg, {});
-  ObjectLosses losses(cfg);
-  std::mt19937 rng(3);
-  std::uniform_real_distribution<float> U(-1, 1);
-  std::vector<float> init(c.extra.size()), d;
-  for (auto& v : init) v = U(rng);
-  d = init;
-  losses(c.image, c.lab, c.extra.data(), c.lay, c.objs, d.data());
-  const int C = c.lay.total();
-  double err = 0, scale = 0;
-  for (size_t i = 0; i < d.size(); ++i) {
-    const int ch = int(i % C);
-    if (ch >= 3 * c.lay.J) {
-      ASSERT_EQ(d[i], init[i]) << "channel " << ch;  // the other channel, opacities and base: untouched
-    } else {
-      err = std::max(err, double(std::abs((d[i] - init[i]) - ref.d[i])));
-      scale = std::max(scale, double(std::abs(ref.d[i])));
+  for (bool boxes : {true, false}) {
+    const Result ref = run(c, cfg, {.boxes = boxes});
+    ObjectLosses losses(cfg, {.boxes = boxes});
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<float> U(-1, 1);
+    std::vector<float> init(c.extra.size()), d, sum(size_t(c.W) * c.H * 3, std::nanf(""));
+    for (auto& v : init) v = U(rng);
+    d = init;
+    losses(c.image, c.lab, c.extra.data(), c.lay, c.objs, d.data(), sum.data());
+    const int C = c.lay.total(), J = c.lay.J;
+    for (size_t i = 0; i < d.size(); ++i) {
+      const int ch = int(i % C);
+      if (ch >= 3 * J) ASSERT_EQ(d[i], init[i]) << "channel " << ch;  // the other channel, opacities and base
+      else ASSERT_EQ(std::bit_cast<uint32_t>(d[i]), std::bit_cast<uint32_t>(ref.d[i])) << "channel " << ch;
     }
+    double scale = 0;
+    for (size_t p = 0; p < size_t(c.W) * c.H; ++p)
+      for (int k = 0; k < 3; ++k) {
+        float s = 0.f;
+        for (int j = 0; j < J; ++j) s += ref.d[p * C + c.lay.color(j) + k];
+        ASSERT_EQ(std::bit_cast<uint32_t>(sum[p * 3 + k]), std::bit_cast<uint32_t>(s)) << "pixel " << p;
+        scale = std::max(scale, double(std::abs(s)));
+      }
+    EXPECT_GT(scale, 0) << "boxes " << boxes;
   }
-  EXPECT_LE(err, 1e-6 * 2 + 1e-5 * scale);  // |init| <= 1 rounds the sum
 }
 
 TEST(ObjectLossesBoxes, SparseGradientsDescribeTheDenseOnes) {
