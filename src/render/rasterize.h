@@ -141,18 +141,20 @@ struct RasterWorkspace {
     RasterScratch vw;      // ... and its weight (forward) or extra-channel dot (backward), packs [visits]
     RasterScratch wacc;    // forward weight-sum accumulators, packs [n, J]
     RasterScratch wmet;    // forward: the maps each Gaussian met, bits [n]
+    RasterScratch fold;    // folded channels of the tile's Gaussians, T [n, 4]
     RasterScratch dw;      // backward d(weight_sums) of the tile's Gaussians, T [n, J]
     RasterScratch bstate;  // per-batch state, packs [batches, 7 + C + J]
     RasterScratch blast;   // per-batch active / last-contributor masks [2, batches]
   };
   std::vector<PerThread> threads;
-  std::vector<T> records;         // [N, 16] per-Gaussian records built by forward, reused by backward
-  std::vector<T> tile_records;    // [P, 16] records in tile order (forward gathers, backward reuses)
-  std::vector<uint32_t> masks;    // [P] per (tile, Gaussian) entry: bit b = listed in batch b
-  std::vector<T> pair_grad;       // [P, F]
-  std::vector<T> pair_w;          // [P, J] forward weight sums per pair
-  std::vector<size_t> group_off;  // [N + 1] backward: start of each Gaussian's group-gradient pair slots
-  std::vector<T> pair_group;      // [sum_i pairs_i * entries_i * GWg] group gradients per pair
+  std::vector<T> records;          // [N, 16] per-Gaussian records built by forward, reused by backward
+  std::vector<T> tile_records;     // [P, 16] records in tile order (forward gathers, backward reuses)
+  std::vector<uint32_t> masks;     // [P] per (tile, Gaussian) entry: bit b = listed in batch b
+  std::vector<T> pair_grad;        // [P, F]
+  std::vector<T> pair_w;           // [P, J] forward weight sums per pair
+  std::vector<size_t> group_off;   // [N + 1] backward: start of each Gaussian's group-gradient pair slots
+  std::vector<size_t> pair_gslot;  // [P] backward: the group-gradient slot of each pair, in tile order
+  std::vector<T> pair_group;       // [sum_i pairs_i * entries_i * GWg] group gradients per pair
 };
 
 template <class T>

@@ -124,7 +124,7 @@ void group_grads(const int* vb, const simd::Pack<T>* vw, int cnt, const simd::Pa
 template <class T, bool kDepth, int kX>
 void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typename RasterWorkspace<T>::PerThread& w,
                    const T* final_T, const int32_t* last, const RasterGrads<T>& g, const T* records, T* tile_records,
-                   const uint32_t* ws_masks, T* pair_grad, const size_t* group_off, T* pair_group) {
+                   const uint32_t* ws_masks, T* pair_grad, const size_t* pair_gslot, T* pair_group) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
   using I = typename std::remove_reference<decltype(M{}[0])>::type;
@@ -219,6 +219,11 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
       if (GT > 0) group_dots<T>(vk + voff[bt], vcnt[bt], in, bst + size_t(bt) * BS + GO, vdot + voff[bt]);
     }
   }
+  T* fx = nullptr;  // folded extra channels in tile order [n, 4]
+  if (kFold && C > 0) {
+    fx = w.fold.template get<T>(size_t(n) * kFoldMaxChannels);
+    gather_tile_channels(bins, tile, in.extra, C, XS, fx);
+  }
   int kvb[kBatches];  // this Gaussian's visits with a contribution: batch, masked weight
   P kvw[kBatches];
   const P lane = simd::iota_pack<T>();
@@ -230,10 +235,10 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
     int nkv = 0;
     const T* rc = td.rec + size_t(k) * kRecord;
     const T* dw = J > 0 ? DW + size_t(k) * J : nullptr;
-    // Folded channels: the Gaussian's extra row and group entries; their gradient sums (ae, ag) on the stack.
-    const int gi = bins.tile_gauss[s + k];
-    const T* xr = kFold && C > 0 ? in.extra + size_t(gi) * XS : nullptr;
-    const int e0 = kFold && GT > 0 ? in.group_ptr[gi] : 0, ne = kFold && GT > 0 ? in.group_ptr[gi + 1] - e0 : 0;
+    // Folded channels: the Gaussian's extra row (tile order) and group entries (from its record); their gradient
+    // sums (ae, ag) on the stack.
+    const T* xr = kFold && C > 0 ? fx + size_t(k) * kFoldMaxChannels : nullptr;
+    const int e0 = kFold && GT > 0 ? record_int(rc[kE0]) : 0, ne = kFold && GT > 0 ? record_int(rc[kNe]) : 0;
     P ae[kFoldMaxChannels], ag[kFoldMaxEntries * kFoldMaxWidth];
     if constexpr (kFold) {
       for (int c = 0; c < C; ++c) ae[c] = P{};
@@ -331,13 +336,11 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
       for (int ch = 0; ch < C; ++ch) o[kNumGrads + ch] = T(0);
     }
     if (kExtra && GT > 0) {
-      const int pr = bins.tile_pair[s + k];
-      const int nent = in.group_ptr[gi + 1] - in.group_ptr[gi];
-      T* og = pair_group + group_off[gi] + size_t(pr - bins.pair_offset[gi]) * nent * GWg;
+      T* og = pair_group + pair_gslot[s + k];
       if constexpr (kLists) {
-        group_grads<T>(kvb, kvw, nkv, bst + GO, BS, in, gi, og);
+        group_grads<T>(kvb, kvw, nkv, bst + GO, BS, in, bins.tile_gauss[s + k], og);
       } else if constexpr (kFold) {
-        for (int i = 0; i < nent * GWg; ++i) og[i] = simd::hsum<T>(ag[i]);
+        for (int i = 0; i < ne * GWg; ++i) og[i] = simd::hsum<T>(ag[i]);
       }
     }
   }
@@ -370,6 +373,17 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
   }
   const int x = ext ? channel_path(in, C, groups ? in.num_groups * GWg : 0, max_entries, GWg) : kNoChannels;
   const size_t* GOF = groups ? ws.group_off.data() : nullptr;
+  if (groups) {  // each pair's slot in tile order (the walks then write them without looking up its Gaussian)
+    if (ws.pair_gslot.size() < size_t(bins.num_pairs)) ws.pair_gslot.resize(size_t(bins.num_pairs));
+    size_t* slot = ws.pair_gslot.data();
+#pragma omp parallel for schedule(static)
+    for (int t = 0; t < bins.num_pairs; ++t) {
+      const int gi = bins.tile_gauss[t];
+      slot[t] = GOF[gi] + size_t(bins.tile_pair[t] - bins.pair_offset[gi]) *
+                              size_t(in.group_ptr[gi + 1] - in.group_ptr[gi]) * GWg;
+    }
+  }
+  const size_t* GSL = groups ? ws.pair_gslot.data() : nullptr;
   T* PGR = groups ? ws.pair_group.data() : nullptr;
   T* pg = ws.pair_grad.data();
   const uint32_t* MK = ws.masks.data();
@@ -381,15 +395,15 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
 #pragma omp for schedule(dynamic, 1)
     for (int t = 0; t < bins.num_tiles; ++t) {
       if (dep && x == kVisitLists)
-        backward_tile<T, true, kVisitLists>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GOF, PGR);
+        backward_tile<T, true, kVisitLists>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GSL, PGR);
       else if (dep && x == kFolded)
-        backward_tile<T, true, kFolded>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GOF, PGR);
-      else if (dep) backward_tile<T, true, kNoChannels>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GOF, PGR);
+        backward_tile<T, true, kFolded>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GSL, PGR);
+      else if (dep) backward_tile<T, true, kNoChannels>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GSL, PGR);
       else if (x == kVisitLists)
-        backward_tile<T, false, kVisitLists>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GOF, PGR);
+        backward_tile<T, false, kVisitLists>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GSL, PGR);
       else if (x == kFolded)
-        backward_tile<T, false, kFolded>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GOF, PGR);
-      else backward_tile<T, false, kNoChannels>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GOF, PGR);
+        backward_tile<T, false, kFolded>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GSL, PGR);
+      else backward_tile<T, false, kNoChannels>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GSL, PGR);
     }
     // reduce pair slots per Gaussian in a fixed order
 #pragma omp for schedule(static)

@@ -20,7 +20,30 @@ constexpr int kBatches = kTileSize * kBatchesPerRow;  // 32 batches of 8 pixels 
 
 // Gaussian records: one 16-scalar record per Gaussian (one cache line for float), built once per forward in index
 // order and copied per tile into contiguous per-thread scratch (the inner loops read them with broadcasts).
-enum Field { kMx, kMy, kHa, kB, kHc, kA, kC, kOp, kCr, kCg, kCb, kZ, kMahal, kEy, kRecord = 16 };
+// kE0, kNe: the Gaussian's first group entry and its number of entries (int bits, record_int), so the walks find a
+// Gaussian's groups in its tile record instead of in the [N + 1] group_ptr array (a cache miss per (tile,
+// Gaussian) pair at a few hundred thousand Gaussians).
+enum Field { kMx, kMy, kHa, kB, kHc, kA, kC, kOp, kCr, kCg, kCb, kZ, kMahal, kEy, kE0, kNe, kRecord = 16 };
+
+template <class T>
+inline void set_record_int(T& slot, int32_t v) {
+  slot = T(0);
+  std::memcpy(&slot, &v, sizeof v);
+}
+template <class T>
+inline int32_t record_int(const T& slot) {
+  int32_t v;
+  std::memcpy(&v, &slot, sizeof v);
+  return v;
+}
+
+// The folded channels of a tile's Gaussians, copied once per tile into per-thread scratch: x [n, kFoldMaxChannels]
+// (the first C values of each Gaussian's row of ex [N, XS]), read by the walk in tile order.
+template <class T>
+void gather_tile_channels(const Binning& bins, int tile, const T* ex, int C, int XS, T* x) {
+  const int s = bins.tile_start[tile], n = bins.tile_start[tile + 1] - s;
+  for (int k = 0; k < n; ++k) std::memcpy(x + size_t(k) * 4, ex + size_t(bins.tile_gauss[s + k]) * XS, sizeof(T) * C);
+}
 
 template <class T>
 struct TileData {

@@ -48,7 +48,12 @@ void build_records(const RasterInputs<T>& in, const Binning& bins, T* records) {
     r[kMahal] = T(m);
     const double det = double(a) * double(c) - double(b) * double(b);
     r[kEy] = m > 0 && det > 0 ? T(std::sqrt(m * double(a) / det) + 1e-3) : T(-1);
-    r[14] = r[15] = 0;
+    if (in.num_groups > 0 && in.group_ptr) {
+      set_record_int(r[kE0], in.group_ptr[g]);
+      set_record_int(r[kNe], in.group_ptr[g + 1] - in.group_ptr[g]);
+    } else {
+      r[kE0] = r[kNe] = 0;
+    }
   }
 }
 
@@ -201,6 +206,11 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   int* vk = nullptr;
   P* vw = nullptr;
   if (kLists && n > 0) std::tie(vk, vw) = size_visit_lists<P>(w, masks, n, all_batches, voff);
+  T* fx = nullptr;  // folded extra channels in tile order [n, 4]
+  if (kX == kFolded && C > 0 && n > 0) {
+    fx = w.fold.template get<T>(size_t(n) * kFoldMaxChannels);
+    gather_tile_channels(bins, tile, in.extra, C, XS, fx);
+  }
   const int s = bins.tile_start[tile];
   int kend = 0;  // Gaussians [kend, n) were never reached (all batches terminated)
   for (int k = 0; k < n && alive; ++k) {
@@ -209,11 +219,10 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
     if (J > 0) met[k] = 0;
     if (!mb) continue;
     const T* rc = td.rec + size_t(k) * kRecord;
-    // Folded channels: the Gaussian's extra row and group entries, added in the walk.
-    const int gi = kX == kFolded ? bins.tile_gauss[s + k] : 0;
-    const T* xr = kX == kFolded && C > 0 ? in.extra + size_t(gi) * XS : nullptr;
-    const int e0 = kX == kFolded && GT > 0 ? in.group_ptr[gi] : 0,
-              e1 = kX == kFolded && GT > 0 ? in.group_ptr[gi + 1] : 0;
+    // Folded channels: the Gaussian's extra row (tile order) and group entries (from its record), added in the walk.
+    const T* xr = kX == kFolded && C > 0 ? fx + size_t(k) * kFoldMaxChannels : nullptr;
+    const int e0 = kX == kFolded && GT > 0 ? record_int(rc[kE0]) : 0;
+    const int e1 = kX == kFolded && GT > 0 ? e0 + record_int(rc[kNe]) : 0;
     P* wa = J > 0 ? wacc + size_t(k) * J : nullptr;
     if (all_maps)
       for (int jj = 0; jj < J; ++jj) wa[jj] = P{};
