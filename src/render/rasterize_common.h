@@ -42,7 +42,10 @@ inline int32_t record_int(const T& slot) {
 template <class T>
 void gather_tile_channels(const Binning& bins, int tile, const T* ex, int C, int XS, T* x) {
   const int s = bins.tile_start[tile], n = bins.tile_start[tile + 1] - s;
-  for (int k = 0; k < n; ++k) std::memcpy(x + size_t(k) * 4, ex + size_t(bins.tile_gauss[s + k]) * XS, sizeof(T) * C);
+  for (int k = 0; k < n; ++k) {
+    const T* e = ex + size_t(bins.tile_gauss[s + k]) * XS;
+    for (int c = 0; c < C; ++c) x[size_t(k) * 4 + c] = e[c];  // C <= 4: no memcpy call per Gaussian
+  }
 }
 
 template <class T>
