@@ -30,7 +30,7 @@
 // batch's channel state and, backward, the value's dot with the batch's gradient to <value, g> and w * g to the
 // Gaussian's gradient sums (on the stack), with no lists to write and read back. Both paths sum the same terms
 // in the same order: bitwise-equal results (test_groups.cpp). Pixel-weight maps are visited only where they are
-// non-zero in a batch (with hard object masks, one map per batch), and a Gaussian's sums only for the maps it met.
+// non-zero in a batch (with hard object masks, one map per batch).
 // Gradients of a (tile, Gaussian) pair are stored in that pair's slot and the slots are reduced per Gaussian in a
 // fixed order, so results are bitwise deterministic for any thread count and schedule. Parallel over tiles with
 // OpenMP (dynamic schedule); all scratch lives in RasterWorkspace (no allocation once warm).
@@ -140,7 +140,6 @@ struct RasterWorkspace {
     RasterScratch vk;      // per-batch visit lists of a tile: Gaussian index (int) [visits]
     RasterScratch vw;      // ... and its weight (forward) or extra-channel dot (backward), packs [visits]
     RasterScratch wacc;    // forward weight-sum accumulators, packs [n, J]
-    RasterScratch wmet;    // forward: the maps each Gaussian met, bits [n]
     RasterScratch fold;    // folded channels of the tile's Gaussians, T [n, 4]
     RasterScratch dw;      // backward d(weight_sums) of the tile's Gaussians, T [n, J]
     RasterScratch bstate;  // per-batch state, packs [batches, 7 + C + J]

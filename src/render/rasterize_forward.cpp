@@ -173,11 +173,6 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   M* bact = w.blast.template get<M>(size_t(2) * kBatches);
   M* blast = bact + kBatches;
   P* wacc = J > 0 ? w.wacc.template get<P>(size_t(n) * J) : nullptr;
-  // The maps each Gaussian has met so far (bit j: wacc row j is written): a sum starts at its first term, and
-  // only met maps are summed at the end (a Gaussian of a hard mask meets one or two of the J maps). More than 32
-  // maps: every sum is zeroed up front and summed.
-  uint32_t* met = J > 0 ? w.wmet.template get<uint32_t>(size_t(n)) : nullptr;
-  const bool all_maps = J > 32;
   const P lane = simd::iota_pack<T>();
   const M lane_i = __builtin_convertvector(lane, M);
   uint32_t alive = 0;
@@ -216,16 +211,18 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   for (int k = 0; k < n && alive; ++k) {
     kend = k + 1;
     uint32_t mb = masks[k] & alive;
-    if (J > 0) met[k] = 0;
-    if (!mb) continue;
+    if (!mb) {
+      if (J > 0)
+        for (int jj = 0; jj < J; ++jj) wacc[size_t(k) * J + jj] = P{};
+      continue;
+    }
     const T* rc = td.rec + size_t(k) * kRecord;
     // Folded channels: the Gaussian's extra row (tile order) and group entries (from its record), added in the walk.
     const T* xr = kX == kFolded && C > 0 ? fx + size_t(k) * kFoldMaxChannels : nullptr;
     const int e0 = kX == kFolded && GT > 0 ? record_int(rc[kE0]) : 0;
     const int e1 = kX == kFolded && GT > 0 ? e0 + record_int(rc[kNe]) : 0;
     P* wa = J > 0 ? wacc + size_t(k) * J : nullptr;
-    if (all_maps)
-      for (int jj = 0; jj < J; ++jj) wa[jj] = P{};
+    for (int jj = 0; jj < J; ++jj) wa[jj] = P{};
     const M kk = M{} + I(k + 1);
     while (mb) {
       const int bt = __builtin_ctz(mb);
@@ -264,15 +261,7 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
           for (int i = 0; i < in.group_width; ++i) d[i] += wgt * x[i];
         }
       }
-      for_batch_maps(jmask[bt], J, [&](int jj) {
-        const P v = wgt * st[kBatchFixed + C + jj];
-        if (all_maps || (met[k] >> jj) & 1) {
-          wa[jj] += v;
-        } else {
-          wa[jj] = v;
-          met[k] |= 1u << jj;
-        }
-      });
+      for_batch_maps(jmask[bt], J, [&](int jj) { wa[jj] += wgt * st[kBatchFixed + C + jj]; });
       st[bT] = acc ? testT : Tr;
       blast[bt] = acc ? kk : blast[bt];
       bact[bt] = active;
@@ -309,8 +298,7 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
     for (int k = 0; k < n; ++k) {
       T* o = pair_w + size_t(bins.tile_pair[s + k]) * J;
       if (k < kend && (masks[k] & all_batches))
-        for (int jj = 0; jj < J; ++jj)
-          o[jj] = all_maps || (met[k] >> jj) & 1 ? simd::hsum<T>(wacc[size_t(k) * J + jj]) : T(0);
+        for (int jj = 0; jj < J; ++jj) o[jj] = simd::hsum<T>(wacc[size_t(k) * J + jj]);
       else
         for (int jj = 0; jj < J; ++jj) o[jj] = 0;
     }
