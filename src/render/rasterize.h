@@ -133,7 +133,8 @@ class RasterScratch {
 };
 
 // Scratch reused between calls; backward must get the workspace of the forward it differentiates (grown, never
-// shrunk): per-thread tile buffers and per-pair gradients.
+// shrunk), and the same channel groups: per-thread tile buffers, per-pair gradients, and the tile records, which
+// carry each Gaussian's group entries (first, count) from forward to backward.
 template <class T>
 struct RasterWorkspace {
   struct PerThread {

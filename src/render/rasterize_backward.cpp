@@ -30,9 +30,8 @@ namespace {
 // Backward accumulator slots per Gaussian (and per pair); extras follow.
 enum Grad { gMx, gMy, gA, gB, gC, gOp, gR, gG, gBl, gZ, kNumGrads };
 
-// Extra channels of one batch, backward: dot[v] = <extra_{g_v}, g> for the batch's visits, g [C] (the batch's
-// upstream gradient packs) held in registers a chunk at a time.
-// One chunk of CH channels of <e, g>: even and odd channels in two sums.
+// One chunk of CH channels of <e, g> (e a Gaussian's values, g the batch's upstream gradient packs): even and
+// odd channels in two sums.
 template <int CH, class T>
 inline __attribute__((always_inline)) simd::Pack<T> chunk_dot(const T* e, const simd::Pack<T>* gc) {
   simd::Pack<T> d0 = simd::Pack<T>{}, d1 = simd::Pack<T>{};
@@ -52,9 +51,10 @@ inline __attribute__((always_inline)) simd::Pack<T> extra_dot(const T* e, int C,
   return dot;
 }
 
-// dot[v] = <extra_{g_v}, g> for a batch's visits. A few channels: extra_dot per visit (the folded walk's own
-// function, so both paths agree bitwise); more: chunk by chunk over the visits, the chunk's gradient packs in
-// registers, the same sums in the same order.
+// Extra channels of one batch, backward (the visit-list path): dot[v] = <extra_{g_v}, g> for the batch's visits,
+// g [C] the batch's upstream gradient packs. A few channels: extra_dot per visit (the folded walk's own function,
+// so both paths agree bitwise); more: chunk by chunk over the visits, the chunk's gradient packs in registers,
+// the same sums in the same order.
 template <class T>
 void extra_dots(const int* vk, int cnt, const T* ex, int C, int XS, const simd::Pack<T>* g, simd::Pack<T>* dot) {
   using P = simd::Pack<T>;
