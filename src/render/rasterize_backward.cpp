@@ -82,22 +82,26 @@ void extra_grads(const int* vb, const simd::Pack<T>* vw, int cnt, const simd::Pa
   });
 }
 
+// One Gaussian's sum_e <val_e[0, GWg), g[id_e]> over its entries [e0, e1), g [G * GWg] a batch's group gradient
+// packs (the visit-list path's group_dots and the folded walk both call this).
+template <class T>
+inline __attribute__((always_inline)) simd::Pack<T> group_dot(const RasterInputs<T>& in, int e0, int e1, int GWg,
+                                                              const simd::Pack<T>* g) {
+  simd::Pack<T> d = simd::Pack<T>{};
+  for (int e = e0; e < e1; ++e) {
+    const simd::Pack<T>* gs = g + size_t(in.group_id[e]) * GWg;
+    const T* x = in.group_val + size_t(e) * in.group_width;
+    for (int i = 0; i < GWg; ++i) d += x[i] * gs[i];
+  }
+  return d;
+}
+
 // Sparse groups of one batch, backward: dot[v] += sum_e <val_e[0, GWg), g[id_e]> over the entries of the visit's
 // Gaussian, g [G * GWg] the batch's group gradient packs.
 template <class T>
 void group_dots(const int* vk, int cnt, const RasterInputs<T>& in, const simd::Pack<T>* g, simd::Pack<T>* dot) {
-  using P = simd::Pack<T>;
-  const int GW = in.group_width, GWg = in.group_grad_width;
-  for (int v = 0; v < cnt; ++v) {
-    const int gi = vk[v];
-    P d = P{};
-    for (int e = in.group_ptr[gi]; e < in.group_ptr[gi + 1]; ++e) {
-      const P* gs = g + size_t(in.group_id[e]) * GWg;
-      const T* x = in.group_val + size_t(e) * GW;
-      for (int i = 0; i < GWg; ++i) d += x[i] * gs[i];
-    }
-    dot[v] += d;
-  }
+  const int GWg = in.group_grad_width;
+  for (int v = 0; v < cnt; ++v) dot[v] += group_dot(in, in.group_ptr[vk[v]], in.group_ptr[vk[v] + 1], GWg, g);
 }
 
 // Group gradients of one (tile, Gaussian) pair: o[e', i] = sum over its visits v of hsum(w_v * g_{b_v}[id_e, i])
@@ -271,13 +275,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
       if constexpr (kLists) dot += vdot[vi];
       if constexpr (kFold) {  // extra_dots + group_dots of this visit, in their order
         P vd = C > 0 ? extra_dot(xr, C, st + kBatchFixed) : P{};
-        P gd = P{};
-        for (int e = 0; e < ne; ++e) {
-          const P* gs = st + GO + size_t(in.group_id[e0 + e]) * GWg;
-          const T* x = in.group_val + size_t(e0 + e) * in.group_width;
-          for (int i = 0; i < GWg; ++i) gd += x[i] * gs[i];
-        }
-        if (GT > 0) vd += gd;
+        if (GT > 0) vd += group_dot(in, e0, e0 + ne, GWg, st + GO);
         dot += vd;
       }
       if (J > 0) {

@@ -131,6 +131,19 @@ int channel_path(const RasterInputs<T>& in, int C, int GT, int max_entries, int 
   return in.channel_path == ChannelPath::kVisitLists || !foldable ? kVisitLists : kFolded;
 }
 
+// One visit's group values: dst[id_e * GW + i] += w val_e[i] for the Gaussian's entries [e0, e1), dst [G * GW] a
+// batch's group packs (forward; the visit-list path's composite_groups and the folded walk both call this).
+template <class T>
+inline __attribute__((always_inline)) void add_group_values(const RasterInputs<T>& in, int e0, int e1, simd::Pack<T> w,
+                                                            simd::Pack<T>* dst) {
+  const int GW = in.group_width;
+  for (int e = e0; e < e1; ++e) {
+    simd::Pack<T>* d = dst + size_t(in.group_id[e]) * GW;
+    const T* x = in.group_val + size_t(e) * GW;
+    for (int i = 0; i < GW; ++i) d[i] += w * x[i];
+  }
+}
+
 template <class T>
 void ensure_threads(RasterWorkspace<T>& ws) {
   const size_t nt = size_t(std::max(1, omp_get_max_threads()));

@@ -85,16 +85,7 @@ void composite_extras(const int* vk, const simd::Pack<T>* vw, int cnt, const T* 
 // id [E], val [E, GW]; dst [G * GW] packs.
 template <class T>
 void composite_groups(const int* vk, const simd::Pack<T>* vw, int cnt, const RasterInputs<T>& in, simd::Pack<T>* dst) {
-  const int GW = in.group_width;
-  for (int v = 0; v < cnt; ++v) {
-    const int g = vk[v];
-    const simd::Pack<T> wv = vw[v];
-    for (int e = in.group_ptr[g]; e < in.group_ptr[g + 1]; ++e) {
-      simd::Pack<T>* d = dst + size_t(in.group_id[e]) * GW;
-      const T* x = in.group_val + size_t(e) * GW;
-      for (int i = 0; i < GW; ++i) d[i] += wv * x[i];
-    }
-  }
+  for (int v = 0; v < cnt; ++v) add_group_values(in, in.group_ptr[vk[v]], in.group_ptr[vk[v] + 1], vw[v], dst);
 }
 
 // Batch masks of a tile, masks [n]: bit (row * 2 + half) is set when the Gaussian can reach the 8-pixel batch
@@ -255,11 +246,7 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
       }
       if constexpr (kX == kFolded) {  // the sums of composite_extras / composite_groups, in the same order
         for (int c = 0; c < C; ++c) st[kBatchFixed + c] += wgt * xr[c];
-        for (int e = e0; e < e1; ++e) {
-          P* d = st + GO + size_t(in.group_id[e]) * in.group_width;
-          const T* x = in.group_val + size_t(e) * in.group_width;
-          for (int i = 0; i < in.group_width; ++i) d[i] += wgt * x[i];
-        }
+        add_group_values(in, e0, e1, wgt, st + GO);
       }
       for_batch_maps(jmask[bt], J, [&](int jj) { wa[jj] += wgt * st[kBatchFixed + C + jj]; });
       st[bT] = acc ? testT : Tr;
