@@ -338,9 +338,10 @@ def query(model, scene, text, views=None, min_relevancy=0.0, mask_threshold=0.5,
 
 def evaluate(model, scene, protocol="instances", mode="both", relevancy="objects", mask_threshold=0.5, clip=None,
              overlays=None, progress=False):
-    """Evaluates a trained hybrid model with a benchmark protocol (lerf-ovs, 3d-ovs or instances) in object mode,
-    pixel mode or both, as `hgs eval` does; returns the report as a dict {"reports": [...]} (report.json's
-    layout: per mode the records, the means, mAcc / mIoU / mBIoU). overlays: a folder for overlay PNGs."""
+    """Evaluates a trained hybrid model with a benchmark protocol (lerf-ovs, 3d-ovs, 3d-ovs-labelled or instances)
+    in object mode, pixel mode or both, as `hgs eval` does; returns the report as a dict {"reports": [...]}
+    (report.json's layout: per mode the records, the means, mAcc / mIoU / mBIoU). overlays: a folder for overlay
+    PNGs."""
     scene, model = _as_scene(scene), _as_model(model)
     session = QuerySession(scene, model, "" if clip is None else os.fspath(clip))
     text = session.evaluate(protocol, mode, relevancy, float(mask_threshold),

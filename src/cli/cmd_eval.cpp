@@ -33,14 +33,18 @@ void print_summary(const eval::EvalReport& r) {
              lerf ? fmt::format("  pixel acc {:>6}", pct(m.macc)) : std::string(), m.count);
   const auto c = r.extra.find("miou_ceiling");
   if (c != r.extra.end() && c->is_number() && c->get<double>() < 1)
-    fmt::print("           no prediction can score above {} mIoU here (3D-OVS scores a class absent from a frame 0)\n",
-               pct(c->get<double>()));
+    fmt::print(
+        "           no prediction can score above {} mIoU here (3D-OVS scores a class absent from a frame 0 and "
+        "gives unlabelled pixels a class; 3d-ovs-labelled does neither)\n",
+        pct(c->get<double>()));
+  if (r.protocol == "3d-ovs-labelled")
+    fmt::print("           scored on the pixels the ground truth labels and the classes each frame shows\n");
 }
 
 // One line on what a mode measures, printed under its figures (so that a newcomer can read them).
 std::string what_the_mode_measures(const eval::EvalReport& r) {
   if (r.mode == "object")
-    return r.protocol == "3d-ovs"
+    return r.protocol.starts_with("3d-ovs")
                ? "every class takes its best object, every other object (the background too) the class it is "
                  "closest to; a pixel the class of the objects it shows"
                : "every query answered by its best object: mask = that object's rendered opacity > threshold";
@@ -50,9 +54,10 @@ std::string what_the_mode_measures(const eval::EvalReport& r) {
                             : rel == "objects-lerf" ? "LERF relevancy of the object-conditioned language map"
                             : rel == "lerf"         ? "LERF relevancy of the raw rendered language map"
                                                     : "LERF relevancy of the raw language map times the foreground";
-  return r.protocol == "3d-ovs" ? "every pixel on its own: the class with the highest " + score
-                                : "every pixel on its own: " + score +
-                                      ", LangSplat's post-processing (30-px box, min-max, threshold, 7x7 majority)";
+  return r.protocol.starts_with("3d-ovs")
+             ? "every pixel on its own: the class that scores highest by " + score
+             : "every pixel on its own: " + score +
+                   ", LangSplat's post-processing (30-px box, min-max, threshold, 7x7 majority)";
 }
 
 void run_eval(const EvalArgs& a) {
@@ -89,13 +94,15 @@ CommandRegistration reg(
        auto a = std::make_shared<EvalArgs>();
        sub.add_option("SCENE", a->scene, "Scene folder (with label/, segmentations/ or gt/instances/)")->required();
        sub.add_option("MODEL", a->model, "Model folder (point_cloud.ply) or PLY file")->required();
-       sub.add_option("--protocol", a->protocol, "lerf-ovs, 3d-ovs or instances")
-           ->check(CLI::IsMember({"lerf-ovs", "3d-ovs", "instances"}))
+       sub.add_option("--protocol", a->protocol,
+                      "lerf-ovs, 3d-ovs, 3d-ovs-labelled (3D-OVS on the labelled pixels and the classes in view "
+                      "only, see query/evaluate.h) or instances")
+           ->check(CLI::IsMember({"lerf-ovs", "3d-ovs", "3d-ovs-labelled", "instances"}))
            ->capture_default_str();
        sub.add_option("--out", a->out, "report.json path (report.md and overlays/ go beside it)")->required();
        sub.add_option("--mode", a->mode,
-                      "object (each query's best object; on 3d-ovs background pixels take the language field's "
-                      "class, see query/evaluate.h), pixel (every pixel scored on a rendered language map, LangSplat's "
+                      "object (each query's best object; on 3d-ovs every object is classified, the background "
+                      "too, see query/evaluate.h), pixel (every pixel scored on a rendered language map, LangSplat's "
                       "protocol; --relevancy) or both")
            ->check(CLI::IsMember({"object", "pixel", "both"}))
            ->capture_default_str();

@@ -91,8 +91,25 @@ std::vector<uint16_t> argmax_classes(const std::vector<std::vector<float>>& rel,
   return pred;
 }
 
+double ovs_ceiling(const std::vector<Mask>& gt, OvsScoring scoring) {
+  if (gt.empty()) fail("eval: 3D-OVS evaluation needs at least one class mask");
+  if (scoring == OvsScoring::LabelledOnly) return 1.0;
+  const size_t n = gt[0].size(), C = gt.size();
+  size_t present = 0, largest = 0, labelled = 0;
+  for (const Mask& m : gt) {
+    const size_t g = size_t(std::count_if(m.begin(), m.end(), [](uint8_t v) { return v != 0; }));
+    present += g > 0;
+    largest = std::max(largest, g);
+  }
+  for (size_t i = 0; i < n; ++i)
+    labelled += std::any_of(gt.begin(), gt.end(), [&](const Mask& m) { return m[i] != 0; });
+  const double V = double(n - labelled);
+  if (present < C || V == 0) return double(present) / double(C);
+  return (double(C) - V / (double(largest) + V)) / double(C);
+}
+
 OvsImageResult evaluate_3dovs_prediction(const std::vector<uint16_t>& prediction, const std::vector<Mask>& gt,
-                                         int width, int height, int boundary_d) {
+                                         int width, int height, int boundary_d, OvsScoring scoring) {
   const size_t n = size_t(width) * height;
   if (width <= 0 || height <= 0 || prediction.size() != n)
     fail("eval: class prediction holds {} values, expected {}x{}", prediction.size(), width, height);
@@ -102,40 +119,53 @@ OvsImageResult evaluate_3dovs_prediction(const std::vector<uint16_t>& prediction
     if (gt[c].size() != n)
       fail("eval: ground-truth mask of class {} holds {} pixels, expected {}x{}", c, gt[c].size(), width, height);
   if (boundary_d <= 0) boundary_d = boundary_width(width, height);
+  const bool labelled_only = scoring == OvsScoring::LabelledOnly;
+  Mask scored(n, 1);  // the pixels scored: all, or those the ground truth labels
+  if (labelled_only)
+    for (size_t i = 0; i < n; ++i)
+      scored[i] = std::any_of(gt.begin(), gt.end(), [&](const Mask& m) { return m[i] != 0; });
   OvsImageResult R;
   R.prediction = prediction;
   R.iou.resize(C);
   R.biou.resize(C);
+  R.ceiling = ovs_ceiling(gt, scoring);
   Mask pm(n);
+  size_t counted = 0;
   for (size_t c = 0; c < C; ++c) {
-    for (size_t i = 0; i < n; ++i) pm[i] = prediction[i] == c ? 1 : 0;
+    for (size_t i = 0; i < n; ++i) pm[i] = prediction[i] == c && scored[i] ? 1 : 0;
     const Confusion cf = confusion(gt[c], pm, width, height);
+    const bool in_frame = cf.tp + cf.fn > 0;
+    if (labelled_only && !in_frame) {
+      R.iou[c] = R.biou[c] = std::numeric_limits<double>::quiet_NaN();
+      continue;
+    }
     const bool absent = cf.tp + cf.fp + cf.fn == 0;
     R.iou[c] = absent ? 0.0 : double(cf.tp) / double(cf.tp + cf.fp + cf.fn);
     R.biou[c] = absent ? 0.0 : boundary_iou(gt[c], pm, width, height, boundary_d);
+    R.miou += R.iou[c];
+    R.mbiou += R.biou[c];
+    ++counted;
   }
-  long correct = 0;
+  long correct = 0, total = 0;
   for (size_t i = 0; i < n; ++i) {
+    if (!scored[i]) continue;
     const size_t p = prediction[i];
     bool ok = p < C;
     for (size_t c = 0; c < C && ok; ++c) ok = (gt[c][i] != 0) == (c == p);
     correct += ok;
+    ++total;
   }
-  for (size_t c = 0; c < C; ++c) {
-    R.miou += R.iou[c];
-    R.mbiou += R.biou[c];
-  }
-  R.miou /= double(C);
-  R.mbiou /= double(C);
-  R.accuracy = double(correct) / double(n);
+  R.miou = counted ? R.miou / double(counted) : std::numeric_limits<double>::quiet_NaN();
+  R.mbiou = counted ? R.mbiou / double(counted) : std::numeric_limits<double>::quiet_NaN();
+  R.accuracy = total ? double(correct) / double(total) : std::numeric_limits<double>::quiet_NaN();
   return R;
 }
 
 OvsImageResult evaluate_3dovs_image(const std::vector<std::vector<float>>& relevancy, const std::vector<Mask>& gt,
-                                    int width, int height, int boundary_d) {
+                                    int width, int height, int boundary_d, OvsScoring scoring) {
   if (relevancy.size() != gt.size())
     fail("eval: {} class relevancy maps for {} ground-truth classes", relevancy.size(), gt.size());
-  return evaluate_3dovs_prediction(argmax_classes(relevancy, width, height), gt, width, height, boundary_d);
+  return evaluate_3dovs_prediction(argmax_classes(relevancy, width, height), gt, width, height, boundary_d, scoring);
 }
 
 }  // namespace hgs::eval

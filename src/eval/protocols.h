@@ -67,16 +67,32 @@ LerfQueryResult evaluate_lerf_query(const std::vector<float>& relevancy, int wid
 
 struct OvsImageResult {
   std::vector<uint16_t> prediction;  // [H, W] class index per pixel
-  std::vector<double> iou, biou;     // [C]
+  std::vector<double> iou, biou;     // [C]; NaN for a class not scored (labelled-only scoring, class absent)
   double miou = 0, mbiou = 0, accuracy = 0;
+  double ceiling = 0;  // the highest mIoU any argmax prediction can score on this frame (ovs_ceiling)
 };
+// How a 3D-OVS frame is scored. Protocol: as 3D-OVS's own evaluation (sklearn's jaccard_score per class on the
+// argmax, zero_division = 0): every pixel counts, a class absent from the frame scores 0. LabelledOnly: only the
+// pixels the ground truth gives a class are scored (the others are void, as VOC's and Cityscapes' ignore label)
+// and a class absent from the frame is not scored (as LERF-OVS and the instances protocol leave out what a view
+// does not show). On 3D-OVS's own scenes, where the classes cover every pixel and every class is in view, the
+// two agree; on a scene that shows the sky or leaves classes out of some views they do not (docs/ablation.md).
+enum class OvsScoring { Protocol, LabelledOnly };
+// The best mIoU an argmax prediction (one class at every pixel) can score on a frame under the protocol: the
+// ground truth on its labelled pixels and every unlabelled pixel (V of them) given to one class; to a class absent
+// from the frame (scoring 0 anyway) if there is one, else to the largest class (IoU G / (G + V): the loss
+// V / (G + V) is concave in V, so no split of the unlabelled pixels loses less). Masks assumed disjoint.
+// LabelledOnly: 1.
+double ovs_ceiling(const std::vector<Mask>& gt, OvsScoring scoring = OvsScoring::Protocol);
 // Per-pixel argmax over class relevancy maps (`relevancy[c]` is [H, W], C >= 1) -> class index map [H, W].
 std::vector<uint16_t> argmax_classes(const std::vector<std::vector<float>>& relevancy, int width, int height);
 // 3D-OVS metrics of a predicted class map against the class masks (`gt[c]` [H, W], same C as classes).
 OvsImageResult evaluate_3dovs_prediction(const std::vector<uint16_t>& prediction, const std::vector<Mask>& gt,
-                                         int width, int height, int boundary_d = 0);
+                                         int width, int height, int boundary_d = 0,
+                                         OvsScoring scoring = OvsScoring::Protocol);
 // argmax_classes + evaluate_3dovs_prediction.
 OvsImageResult evaluate_3dovs_image(const std::vector<std::vector<float>>& relevancy, const std::vector<Mask>& gt,
-                                    int width, int height, int boundary_d = 0);
+                                    int width, int height, int boundary_d = 0,
+                                    OvsScoring scoring = OvsScoring::Protocol);
 
 }  // namespace hgs::eval

@@ -121,6 +121,7 @@ void add_3dovs_image(EvalReport& report, const std::string& frame, const std::ve
   if (classes.size() != r.iou.size())
     fail("eval: {} class names for a 3D-OVS result with {} classes", classes.size(), r.iou.size());
   for (size_t c = 0; c < classes.size(); ++c) {
+    if (std::isnan(r.iou[c])) continue;  // not scored (labelled-only scoring, the class is not in the frame)
     QueryRecord q;
     q.frame = frame;
     q.query = classes[c];
@@ -221,7 +222,7 @@ std::string report_markdown(const std::vector<EvalReport>& reports) {
     if (r.extra.contains("miou_ceiling") && r.extra["miou_ceiling"].is_number())
       md += fmt::format(
           "\nNo prediction can score above {} mIoU here (a class absent from a frame's ground truth "
-          "scores 0).\n",
+          "scores 0, and every pixel the ground truth leaves unlabelled takes some class).\n",
           pct(r.extra["miou_ceiling"].get<double>()));
     table("Per query", "query", query_means(r), s);
     table("Per frame", "frame", frame_means(r), s);

@@ -115,12 +115,12 @@ EvalReport run_lerf_ovs_masks(const Scene& scene, const MaskFn& fn, const RunOpt
 EvalReport run_3dovs(const Scene& scene, const ClassRelevancyFn& fn, const RunOptions& opt) {
   const OvsLabelSet labels = open_3dovs_labels(scene.root);
   EvalReport rep;
-  rep.protocol = "3d-ovs";
+  rep.protocol = opt.ovs_scoring == OvsScoring::LabelledOnly ? "3d-ovs-labelled" : "3d-ovs";
   rep.scene = scene.root.filename().string();
   rep.mode = "pixel";
   rep.extra = {{"classes", labels.classes}};
   Progress bar("eval 3d-ovs", static_cast<long>(labels.views.size()), opt.progress);
-  long pairs = 0, present = 0;  // (frame, class) pairs, those whose class is in the frame's ground truth
+  double pairs = 0, best = 0;  // (frame, class) pairs, and the sum of their best scores (ovs_ceiling)
   for (size_t i = 0; i < labels.views.size(); ++i) {
     const int vi = labels.views[i].index;
     if (vi < 0 || vi >= static_cast<int>(scene.views.size()))
@@ -133,12 +133,11 @@ EvalReport run_3dovs(const Scene& scene, const ClassRelevancyFn& fn, const RunOp
     if (rel.size() != labels.classes.size())
       fail("eval: {} class relevancy maps for view {}, expected {}", rel.size(), view.name, labels.classes.size());
     for (size_t c = 0; c < rel.size(); ++c) check_size(rel[c], view, "relevancy map of \"" + labels.classes[c] + "\"");
-    OvsImageResult r = evaluate_3dovs_image(rel, gt.masks, view.width, view.height, opt.lerf.boundary_d);
+    OvsImageResult r =
+        evaluate_3dovs_image(rel, gt.masks, view.width, view.height, opt.lerf.boundary_d, opt.ovs_scoring);
     const double secs = since(t0);
-    for (const Mask& m : gt.masks) {
-      ++pairs;
-      present += std::any_of(m.begin(), m.end(), [](uint8_t v) { return v != 0; });
-    }
+    pairs += double(gt.masks.size());
+    best += r.ceiling * double(gt.masks.size());
     const size_t first = rep.records.size();
     add_3dovs_image(rep, view.name, labels.classes, r);
     for (size_t k = first; k < rep.records.size(); ++k) rep.records[k].seconds = secs / double(labels.classes.size());
@@ -154,9 +153,9 @@ EvalReport run_3dovs(const Scene& scene, const ClassRelevancyFn& fn, const RunOp
     bar.update(static_cast<long>(i + 1));
   }
   bar.finish();
-  // The protocol scores a class absent from a frame's ground truth 0 whatever is predicted: the best mIoU any
-  // prediction can reach is at most the share of (frame, class) pairs whose class is present.
-  if (pairs > 0) rep.extra["miou_ceiling"] = double(present) / double(pairs);
+  // The protocol scores a class absent from a frame's ground truth 0 whatever is predicted, and gives every
+  // unlabelled pixel some class: the best mIoU any prediction can reach is the mean of the frames' ceilings.
+  if (pairs > 0 && opt.ovs_scoring == OvsScoring::Protocol) rep.extra["miou_ceiling"] = best / pairs;
   return rep;
 }
 

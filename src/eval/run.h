@@ -27,8 +27,9 @@
 namespace hgs::eval {
 
 struct RunOptions {
-  LerfOptions lerf;                   // LERF-OVS post-processing; lerf.boundary_d also sets d elsewhere
-  std::filesystem::path overlay_dir;  // empty: no PNGs
+  LerfOptions lerf;                               // LERF-OVS post-processing; lerf.boundary_d also sets d elsewhere
+  std::filesystem::path overlay_dir;              // empty: no PNGs
+  OvsScoring ovs_scoring = OvsScoring::Protocol;  // 3D-OVS: the protocol's scoring or labelled pixels only
   bool progress = true;
 };
 
@@ -45,7 +46,9 @@ using ClassRelevancyFn =
 EvalReport run_lerf_ovs(const Scene& scene, const RelevancyFn& fn, const RunOptions& opt = {});
 // LERF-OVS frames and queries scored on masks from `fn` (no localisation). mode "object".
 EvalReport run_lerf_ovs_masks(const Scene& scene, const MaskFn& fn, const RunOptions& opt = {});
-// 3D-OVS: per-pixel argmax over the classes of segmentations/classes.txt, per-class IoU with absent = 0.
+// 3D-OVS: per-pixel argmax over the classes of segmentations/classes.txt, per-class IoU with absent = 0
+// (protocol "3d-ovs"; extra.miou_ceiling the best mean any prediction can score, ovs_ceiling), or with
+// opt.ovs_scoring LabelledOnly the labelled pixels and the classes in view only (protocol "3d-ovs-labelled").
 EvalReport run_3dovs(const Scene& scene, const ClassRelevancyFn& fn, const RunOptions& opt = {});
 // Scenes with gt/instances: every visible object's name (object_names_file, instances.h) against gt/instances
 // on the test views. mode "object"; extra.object_names: the names' file relative to the scene.

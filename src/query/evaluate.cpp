@@ -13,9 +13,9 @@ namespace {
 // The folder holding a protocol's ground truth.
 fs::path protocol_label_dir(const Scene& scene, const std::string& protocol) {
   if (protocol == "instances") return scene.root / "gt" / "instances";
-  if (protocol == "3d-ovs") return scene.segmentation_dir();
+  if (protocol == "3d-ovs" || protocol == "3d-ovs-labelled") return scene.segmentation_dir();
   if (protocol == "lerf-ovs") return scene.label_dir();
-  fail("unknown protocol '{}' (lerf-ovs, 3d-ovs or instances)", protocol);
+  fail("unknown protocol '{}' (lerf-ovs, 3d-ovs, 3d-ovs-labelled or instances)", protocol);
 }
 
 // 3D-OVS object mode (evaluate.h): every label classifies itself (query.h object_class_scores).
@@ -39,6 +39,8 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
          protocol_label_dir(s.scene(), o.protocol).string());
   eval::RunOptions opt;
   opt.progress = o.progress;
+  const bool ovs = o.protocol == "3d-ovs" || o.protocol == "3d-ovs-labelled";
+  if (o.protocol == "3d-ovs-labelled") opt.ovs_scoring = eval::OvsScoring::LabelledOnly;
   const query::Relevancy rel = o.relevancy;
   auto png_dir = [&](const char* mode) { return o.overlay_dir.empty() ? fs::path() : o.overlay_dir / mode; };
   auto object_fn = [&](int view, const std::string& q, std::vector<float>* heat) {
@@ -58,7 +60,7 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
     opt.overlay_dir = png_dir("pixel");
     if (o.protocol == "lerf-ovs") {
       reports.push_back(eval::run_lerf_ovs(s.scene(), pixel_fn, opt));
-    } else if (o.protocol == "3d-ovs") {
+    } else if (ovs) {
       reports.push_back(eval::run_3dovs(
           s.scene(),
           [&](int view, const std::vector<std::string>& classes) { return s.pixel_relevancies(view, classes, rel); },
@@ -73,7 +75,7 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
     opt.overlay_dir = png_dir("object");
     if (o.protocol == "lerf-ovs") {
       reports.push_back(eval::run_lerf_ovs_masks(s.scene(), object_fn, opt));
-    } else if (o.protocol == "3d-ovs") {
+    } else if (ovs) {
       reports.push_back(eval::run_3dovs(
           s.scene(),
           [&](int view, const std::vector<std::string>& classes) {

@@ -12,6 +12,9 @@
 // the argmax over classes is the prediction (eval/protocols.h). Until 2026-11-27 background pixels took the LERF
 // relevancy of the raw language map instead (A_0(p) r_c(p)) and unchosen objects nothing; docs/ablation.md
 // compares the two on 16 models.
+// "3d-ovs-labelled" is 3D-OVS scored on the pixels the ground truth labels and the classes each frame shows
+// (eval::OvsScoring::LabelledOnly): what 3D-OVS measures on its own scenes, whose classes cover every pixel and
+// are all in view, on generated scenes that show the sky or leave classes out of some views.
 // Pixel mode is the protocol's relevancy of a rendered language map (query.h Relevancy: by default the
 // object-conditioned map of eqs. 8-9, `lerf` the raw map as LangSplat scores its field).
 #pragma once
@@ -26,7 +29,7 @@
 namespace hgs::query {
 
 struct EvaluateOptions {
-  std::string protocol = "instances";                      // lerf-ovs | 3d-ovs | instances
+  std::string protocol = "instances";                      // lerf-ovs | 3d-ovs | 3d-ovs-labelled | instances
   bool object = true, pixel = true;                        // modes
   query::Relevancy relevancy = query::Relevancy::Objects;  // pixel mode
   float mask_threshold = 0.5f;                             // object mode

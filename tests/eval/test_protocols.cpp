@@ -156,3 +156,59 @@ TEST(Eval3dOvsProtocol, ArgmaxTiesGoToTheLowerClassAndSizesAreChecked) {
   EXPECT_THROW(argmax_classes({{0.f}}, 2, 1), hgs::Error);
   EXPECT_THROW(evaluate_3dovs_image(rel, {Mask(2, 0)}, 2, 1), hgs::Error);
 }
+
+TEST(Eval3dOvsProtocol, LabelledOnlyScoringLeavesOutUnlabelledPixelsAndClassesNotInView) {
+  // The toy case above: pixel 7 is unlabelled (predicted 1), class 2 is in no mask.
+  std::vector<std::vector<float>> rel = {{0.9f, 0.8f, 0.2f, 0.1f, 0.9f, 0.6f, 0.3f, 0.1f},
+                                         {0.1f, 0.3f, 0.7f, 0.9f, 0.2f, 0.5f, 0.8f, 0.9f},
+                                         std::vector<float>(8, 0.f)};
+  std::vector<Mask> gt = {{1, 1, 0, 0, 1, 0, 0, 0}, {0, 0, 1, 1, 0, 1, 1, 0}, Mask(8, 0)};
+  const OvsImageResult R = evaluate_3dovs_image(rel, gt, 4, 2, 0, OvsScoring::LabelledOnly);
+  EXPECT_EQ(R.prediction, (std::vector<uint16_t>{0, 0, 1, 1, 0, 0, 1, 1}));
+  EXPECT_DOUBLE_EQ(R.iou[0], 3.0 / 4.0);  // pixel 5 still counts against class 0 and for class 1's miss
+  EXPECT_DOUBLE_EQ(R.iou[1], 3.0 / 4.0);  // pixel 7 (unlabelled) is no longer a false positive
+  EXPECT_TRUE(std::isnan(R.iou[2]));      // not in view: not scored
+  EXPECT_TRUE(std::isnan(R.biou[2]));
+  EXPECT_DOUBLE_EQ(R.miou, 0.75);
+  EXPECT_DOUBLE_EQ(R.accuracy, 6.0 / 7.0);  // over the 7 labelled pixels
+  EXPECT_DOUBLE_EQ(R.ceiling, 1.0);
+  // A class predicted where it is not in view still costs the class whose pixels it takes.
+  std::vector<std::vector<float>> rel2 = rel;
+  rel2[2][0] = 2.f;
+  const OvsImageResult R2 = evaluate_3dovs_image(rel2, gt, 4, 2, 0, OvsScoring::LabelledOnly);
+  EXPECT_DOUBLE_EQ(R2.iou[0], 2.0 / 4.0);
+  EXPECT_TRUE(std::isnan(R2.iou[2]));
+  // On a frame whose classes cover every pixel and are all in view the two scorings agree.
+  std::vector<Mask> full = {{1, 1, 0, 0, 1, 0, 0, 0}, {0, 0, 1, 1, 0, 1, 1, 1}};
+  const OvsImageResult P = evaluate_3dovs_image({rel[0], rel[1]}, full, 4, 2);
+  const OvsImageResult L = evaluate_3dovs_image({rel[0], rel[1]}, full, 4, 2, 0, OvsScoring::LabelledOnly);
+  EXPECT_EQ(P.iou, L.iou);
+  EXPECT_EQ(P.biou, L.biou);
+  EXPECT_DOUBLE_EQ(P.accuracy, L.accuracy);
+}
+
+TEST(Eval3dOvsProtocol, CeilingIsTheBestAnyArgmaxPredictionScoresByBruteForce) {
+  // Every prediction of C classes on a W x H frame (C^(W H) of them) against random disjoint class masks with
+  // unlabelled pixels and, in some frames, classes not in view: the best protocol mIoU equals ovs_ceiling.
+  std::mt19937 rng(7);
+  const int W = 3, H = 2, n = W * H;
+  for (int C : {2, 3}) {
+    for (int trial = 0; trial < 40; ++trial) {
+      std::vector<Mask> gt(C, Mask(n, 0));
+      std::uniform_int_distribution<int> pick(-1, C - 1);  // -1: unlabelled
+      for (int i = 0; i < n; ++i)
+        if (const int c = pick(rng); c >= 0) gt[c][i] = 1;
+      size_t total = 1;
+      for (int i = 0; i < n; ++i) total *= size_t(C);
+      double best = 0;
+      std::vector<uint16_t> pred(n);
+      for (size_t code = 0; code < total; ++code) {
+        size_t v = code;
+        for (int i = 0; i < n; ++i, v /= size_t(C)) pred[i] = uint16_t(v % size_t(C));
+        best = std::max(best, evaluate_3dovs_prediction(pred, gt, W, H).miou);
+      }
+      EXPECT_NEAR(ovs_ceiling(gt), best, 1e-12) << "C " << C << " trial " << trial;
+      EXPECT_NEAR(evaluate_3dovs_prediction(pred, gt, W, H).ceiling, ovs_ceiling(gt), 0);
+    }
+  }
+}
