@@ -338,8 +338,8 @@ def query(model, scene, text, views=None, min_relevancy=0.0, mask_threshold=0.5,
 
 def evaluate(model, scene, protocol="instances", mode="both", relevancy="objects", mask_threshold=0.5, clip=None,
              overlays=None, progress=False):
-    """Evaluates a trained hybrid model with a benchmark protocol (lerf-ovs, 3d-ovs, 3d-ovs-labelled or instances)
-    in object mode, pixel mode or both, as `hgs eval` does; returns the report as a dict {"reports": [...]}
+    """Evaluates a trained hybrid model with a benchmark protocol (lerf-ovs, 3d-ovs or instances, or a variant:
+    3d-ovs-labelled, lerf-ovs-scaled, instances-scaled; see `hgs eval --help`) in object mode, pixel mode or both, as `hgs eval` does; returns the report as a dict {"reports": [...]}
     (report.json's layout: per mode the records, the means, mAcc / mIoU / mBIoU). overlays: a folder for overlay
     PNGs."""
     scene, model = _as_scene(scene), _as_model(model)

@@ -61,8 +61,7 @@ pb::array pixel_relevancy(query::Session& s, pb::handle view, const std::string&
 std::string evaluate(query::Session& s, const std::string& protocol, const std::string& mode,
                      const std::string& relevancy, float mask_threshold, const std::string& overlay_dir,
                      bool progress) {
-  if (protocol != "lerf-ovs" && protocol != "3d-ovs" && protocol != "3d-ovs-labelled" && protocol != "instances")
-    fail("protocol must be lerf-ovs, 3d-ovs, 3d-ovs-labelled or instances, got '{}'", protocol);
+  query::parse_protocol(protocol);  // fails with the list of protocols
   if (mode != "object" && mode != "pixel" && mode != "both") fail("mode must be object, pixel or both, got '{}'", mode);
   if (!query::has_protocol_labels(s.scene(), protocol))
     fail("{}: no labels for the {} protocol", s.scene().root.string(), protocol);

@@ -76,8 +76,7 @@ std::vector<std::string> protocols_for(const std::string& spec, const std::vecto
       size_t e = spec.find(',', b);
       if (e == std::string::npos) e = spec.size();
       const std::string p = spec.substr(b, e - b);
-      if (p != "instances" && p != "3d-ovs" && p != "3d-ovs-labelled" && p != "lerf-ovs")
-        fail("--protocol: '{}' is not one of instances, 3d-ovs, 3d-ovs-labelled, lerf-ovs (or auto)", p);
+      query::parse_protocol(p);  // fails with the list of protocols
       out.push_back(p);
       b = e + 1;
     }
@@ -388,10 +387,10 @@ CommandRegistration reg(
        sub.add_flag("--eq15-row", a->eq15_row,
                     "Add the full method trained on eq. 15 alone (--lambda-rgb 0); the other rows keep the default "
                     "full-image photometric loss");
-       sub.add_option(
-              "--protocol", a->protocol,
-              "instances, 3d-ovs, 3d-ovs-labelled, lerf-ovs, or a comma-separated list of them; auto = instances when "
-              "gt/instances/ exists, else lerf-ovs")
+       sub.add_option("--protocol", a->protocol,
+                      "a protocol of `hgs eval` (instances, 3d-ovs, lerf-ovs, their -labelled / -scaled variants) or a "
+                      "comma-separated list of them; auto = instances when "
+                      "gt/instances/ exists, else lerf-ovs")
            ->capture_default_str();
        sub.add_option("--mode", a->mode, "object, pixel or both (query/evaluate.h)")
            ->check(CLI::IsMember({"object", "pixel", "both"}))

@@ -27,7 +27,7 @@ void print_summary(const eval::EvalReport& r) {
   eval::MeanRow m = eval::scene_mean(r);
   auto pct = [](double v) { return std::isnan(v) ? std::string("-") : fmt::format("{:.2f}", 100 * v); };
   // LERF-OVS papers report the localisation accuracy as their accuracy; the pixel accuracy is named apart.
-  const bool lerf = r.protocol == "lerf-ovs";
+  const bool lerf = r.protocol.starts_with("lerf-ovs");
   fmt::print("{:<10} {:<7} {} {:>6}  mIoU {:>6}  mBIoU {:>6}{}  ({} records)\n", r.protocol, r.mode,
              lerf ? "mAcc(loc)" : "mAcc", pct(eval::paper_accuracy(m, r.protocol)), pct(m.miou), pct(m.mbiou),
              lerf ? fmt::format("  pixel acc {:>6}", pct(m.macc)) : std::string(), m.count);
@@ -54,10 +54,13 @@ std::string what_the_mode_measures(const eval::EvalReport& r) {
                             : rel == "objects-lerf" ? "LERF relevancy of the object-conditioned language map"
                             : rel == "lerf"         ? "LERF relevancy of the raw rendered language map"
                                                     : "LERF relevancy of the raw language map times the foreground";
+  const bool scaled = r.extra.contains("lerf_windows");
   return r.protocol.starts_with("3d-ovs")
              ? "every pixel on its own: the class that scores highest by " + score
              : "every pixel on its own: " + score +
-                   ", LangSplat's post-processing (30-px box, min-max, threshold, 7x7 majority)";
+                   (scaled ? ", LangSplat's post-processing with its windows scaled to the image (box 30 and 7x7 "
+                             "majority at 1000 px wide, x width / 1000)"
+                           : ", LangSplat's post-processing (30-px box, min-max, threshold, 7x7 majority)");
 }
 
 void run_eval(const EvalArgs& a) {
@@ -95,9 +98,10 @@ CommandRegistration reg(
        sub.add_option("SCENE", a->scene, "Scene folder (with label/, segmentations/ or gt/instances/)")->required();
        sub.add_option("MODEL", a->model, "Model folder (point_cloud.ply) or PLY file")->required();
        sub.add_option("--protocol", a->protocol,
-                      "lerf-ovs, 3d-ovs, 3d-ovs-labelled (3D-OVS on the labelled pixels and the classes in view "
-                      "only, see query/evaluate.h) or instances")
-           ->check(CLI::IsMember({"lerf-ovs", "3d-ovs", "3d-ovs-labelled", "instances"}))
+                      "lerf-ovs, 3d-ovs or instances as their papers score them; 3d-ovs-labelled (3D-OVS on the "
+                      "labelled pixels and the classes in view only); lerf-ovs-scaled, instances-scaled (pixel "
+                      "mode's 30-px box and 7x7 majority scaled to the image, x width / 1000); see query/evaluate.h")
+           ->check(CLI::IsMember(query::protocol_names()))
            ->capture_default_str();
        sub.add_option("--out", a->out, "report.json path (report.md and overlays/ go beside it)")->required();
        sub.add_option("--mode", a->mode,

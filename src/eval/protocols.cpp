@@ -72,6 +72,16 @@ LerfQueryResult evaluate_lerf_query(const std::vector<float>& relevancy, int wid
   return R;
 }
 
+LerfOptions scaled_lerf_options(int width, const LerfOptions& base) {
+  if (width <= 0) fail("eval: cannot scale LERF's windows to an image {} pixels wide", width);
+  LerfOptions o = base;
+  const double f = double(width) / double(kLerfReferenceWidth);
+  o.box = std::max(1, static_cast<int>(std::lround(base.box * f)));
+  const int m = static_cast<int>(std::floor(base.majority * f));
+  o.majority = m >= 3 ? (m % 2 ? m : m - 1) : 1;
+  return o;
+}
+
 std::vector<uint16_t> argmax_classes(const std::vector<std::vector<float>>& rel, int width, int height) {
   if (rel.empty()) fail("eval: 3D-OVS argmax needs at least one class relevancy map");
   if (rel.size() > 65535) fail("eval: too many classes ({})", rel.size());

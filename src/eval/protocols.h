@@ -38,6 +38,13 @@ struct LerfOptions {
   int boundary_d = 0;      // boundary IoU width; <= 0: Cheng et al.'s d from the image size
 };
 
+// LangSplat's windows were set on LERF-OVS frames about this wide (issue 36).
+constexpr int kLerfReferenceWidth = 1000;
+// The box and majority windows scaled to an image `width` pixels wide (x width / kLerfReferenceWidth): the box
+// rounded, at least 1; the majority window the odd number at or below its scaled size (<= 1: no majority filter).
+// At 1000 px they are LangSplat's (30, 7); at 160 px (5, 1); at 320 px (10, 1).
+LerfOptions scaled_lerf_options(int width, const LerfOptions& base = {});
+
 struct LerfPost {
   std::vector<float> boxed;       // [H, W] box_k(v)
   std::vector<float> smoothed;    // [H, W] 0.5 (box_k(v) + v)

@@ -69,7 +69,7 @@ json num(double v) { return std::isnan(v) ? json(nullptr) : json(v); }
 }  // namespace
 
 double paper_accuracy(const MeanRow& m, const std::string& protocol) {
-  return protocol == "lerf-ovs" ? m.loc_acc : m.macc;
+  return protocol.starts_with("lerf-ovs") ? m.loc_acc : m.macc;
 }
 
 namespace {

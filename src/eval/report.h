@@ -50,7 +50,7 @@ struct EvalReport {
   nlohmann::json extra = nlohmann::json::object();  // free-form: options, timings, paths
 };
 
-// The "mAcc" of a protocol's papers: localisation accuracy for "lerf-ovs", pixel accuracy otherwise.
+// The "mAcc" of a protocol's papers: localisation accuracy for "lerf-ovs" (and -scaled), pixel accuracy otherwise.
 double paper_accuracy(const MeanRow& m, const std::string& protocol);
 
 // Record of one LERF-OVS (frame, query) evaluation (iou, biou, acc, localisation).

@@ -75,18 +75,23 @@ std::string safe_file_name(const std::string& s) {
   return o;
 }
 
+LerfOptions lerf_options_for(const RunOptions& opt, int width) {
+  return opt.lerf_scaled ? scaled_lerf_options(width, opt.lerf) : opt.lerf;
+}
+
 EvalReport run_lerf_ovs(const Scene& scene, const RelevancyFn& fn, const RunOptions& opt) {
   EvalReport rep;
   rep.protocol = "lerf-ovs";
   rep.scene = scene.root.filename().string();
   rep.mode = "pixel";
   rep.extra = {{"box", opt.lerf.box}, {"threshold", opt.lerf.threshold}, {"majority", opt.lerf.majority}};
+  if (opt.lerf_scaled) rep.extra["lerf_windows"] = "scaled to each image (x width / 1000)";
   for_each_lerf_query(scene, opt, "eval lerf-ovs", [&](int vi, const Image& img, const LerfCategory& cat) {
     const View& view = scene.views[vi];
     const auto t0 = Clock::now();
     const std::vector<float> rel = fn(vi, cat.name);
     check_size(rel, view, "relevancy map of \"" + cat.name + "\"");
-    const LerfQueryResult r = evaluate_lerf_query(rel, view.width, view.height, cat, opt.lerf);
+    const LerfQueryResult r = evaluate_lerf_query(rel, view.width, view.height, cat, lerf_options_for(opt, view.width));
     rep.records.push_back(lerf_record(view.name, cat.name, r, since(t0)));
     write_pngs(opt, view, img, cat.name, r.post.mask, cat.mask, rel);
   });

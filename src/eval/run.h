@@ -30,6 +30,7 @@ struct RunOptions {
   LerfOptions lerf;                               // LERF-OVS post-processing; lerf.boundary_d also sets d elsewhere
   std::filesystem::path overlay_dir;              // empty: no PNGs
   OvsScoring ovs_scoring = OvsScoring::Protocol;  // 3D-OVS: the protocol's scoring or labelled pixels only
+  bool lerf_scaled = false;  // LERF-OVS pixel mode: lerf's windows scaled to each image (scaled_lerf_options)
   bool progress = true;
 };
 
@@ -41,6 +42,9 @@ using MaskFn = std::function<Mask(int view, const std::string& query, std::vecto
 // Relevancy maps [C][H, W] of every class on scene.views[view]; argmax over classes is the prediction.
 using ClassRelevancyFn =
     std::function<std::vector<std::vector<float>>(int view, const std::vector<std::string>& classes)>;
+
+// The LERF post-processing options for an image `width` pixels wide: opt.lerf, scaled when opt.lerf_scaled.
+LerfOptions lerf_options_for(const RunOptions& opt, int width);
 
 // LERF-OVS, pixel-level: relevancy -> LERF post-processing -> IoU / BIoU / acc / localisation. mode "pixel".
 EvalReport run_lerf_ovs(const Scene& scene, const RelevancyFn& fn, const RunOptions& opt = {});

@@ -12,10 +12,10 @@ namespace {
 
 // The folder holding a protocol's ground truth.
 fs::path protocol_label_dir(const Scene& scene, const std::string& protocol) {
-  if (protocol == "instances") return scene.root / "gt" / "instances";
-  if (protocol == "3d-ovs" || protocol == "3d-ovs-labelled") return scene.segmentation_dir();
-  if (protocol == "lerf-ovs") return scene.label_dir();
-  fail("unknown protocol '{}' (lerf-ovs, 3d-ovs, 3d-ovs-labelled or instances)", protocol);
+  const std::string labels = parse_protocol(protocol).labels;
+  if (labels == "instances") return scene.root / "gt" / "instances";
+  if (labels == "3d-ovs") return scene.segmentation_dir();
+  return scene.label_dir();
 }
 
 // 3D-OVS object mode (evaluate.h): every label classifies itself (query.h object_class_scores).
@@ -29,6 +29,41 @@ std::vector<std::vector<float>> object_class_scores(query::Session& s, render::G
 
 }  // namespace
 
+namespace {
+
+// Every protocol: name, labels, 3D-OVS scoring, LERF windows scaled.
+const std::vector<ProtocolSpec>& protocol_table() {
+  using eval::OvsScoring;
+  static const std::vector<ProtocolSpec> t = {
+      {"instances", "instances", OvsScoring::Protocol, false},
+      {"instances-scaled", "instances", OvsScoring::Protocol, true},
+      {"3d-ovs", "3d-ovs", OvsScoring::Protocol, false},
+      {"3d-ovs-labelled", "3d-ovs", OvsScoring::LabelledOnly, false},
+      {"lerf-ovs", "lerf-ovs", OvsScoring::Protocol, false},
+      {"lerf-ovs-scaled", "lerf-ovs", OvsScoring::Protocol, true},
+  };
+  return t;
+}
+
+}  // namespace
+
+const std::vector<std::string>& protocol_names() {
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> n;
+    for (const auto& p : protocol_table()) n.push_back(p.name);
+    return n;
+  }();
+  return names;
+}
+
+ProtocolSpec parse_protocol(const std::string& name) {
+  for (const auto& p : protocol_table())
+    if (p.name == name) return p;
+  std::string list;
+  for (const auto& n : protocol_names()) list += (list.empty() ? "" : ", ") + n;
+  fail("unknown protocol '{}' (one of {})", name, list);
+}
+
 bool has_protocol_labels(const Scene& scene, const std::string& protocol) {
   return fs::is_directory(protocol_label_dir(scene, protocol));
 }
@@ -37,10 +72,11 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
   if (!has_protocol_labels(s.scene(), o.protocol))
     fail("{}: no labels for the {} protocol (needs {})", s.scene().root.string(), o.protocol,
          protocol_label_dir(s.scene(), o.protocol).string());
+  const ProtocolSpec spec = parse_protocol(o.protocol);
   eval::RunOptions opt;
   opt.progress = o.progress;
-  const bool ovs = o.protocol == "3d-ovs" || o.protocol == "3d-ovs-labelled";
-  if (o.protocol == "3d-ovs-labelled") opt.ovs_scoring = eval::OvsScoring::LabelledOnly;
+  opt.ovs_scoring = spec.ovs_scoring;
+  opt.lerf_scaled = spec.lerf_scaled;
   const query::Relevancy rel = o.relevancy;
   auto png_dir = [&](const char* mode) { return o.overlay_dir.empty() ? fs::path() : o.overlay_dir / mode; };
   auto object_fn = [&](int view, const std::string& q, std::vector<float>* heat) {
@@ -50,7 +86,7 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
   auto pixel_mask_fn = [&](int view, const std::string& q, std::vector<float>* heat) {
     std::vector<float> r = s.pixel_relevancy(view, q, rel);
     const View& v = s.scene().views[view];
-    eval::Mask m = eval::lerf_postprocess(r, v.width, v.height, opt.lerf).mask;
+    eval::Mask m = eval::lerf_postprocess(r, v.width, v.height, eval::lerf_options_for(opt, v.width)).mask;
     if (heat) *heat = std::move(r);
     return m;
   };
@@ -58,9 +94,9 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
   std::vector<eval::EvalReport> reports;
   auto run_pixel = [&] {
     opt.overlay_dir = png_dir("pixel");
-    if (o.protocol == "lerf-ovs") {
+    if (spec.labels == "lerf-ovs") {
       reports.push_back(eval::run_lerf_ovs(s.scene(), pixel_fn, opt));
-    } else if (ovs) {
+    } else if (spec.labels == "3d-ovs") {
       reports.push_back(eval::run_3dovs(
           s.scene(),
           [&](int view, const std::vector<std::string>& classes) { return s.pixel_relevancies(view, classes, rel); },
@@ -69,13 +105,15 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
       reports.push_back(eval::run_instances(s.scene(), pixel_mask_fn, opt));
     }
     reports.back().mode = "pixel";
+    reports.back().protocol = spec.name;
     reports.back().extra["relevancy"] = query::relevancy_name(rel);
+    if (spec.lerf_scaled) reports.back().extra["lerf_windows"] = "scaled to each image (x width / 1000)";
   };
   auto run_object = [&] {
     opt.overlay_dir = png_dir("object");
-    if (o.protocol == "lerf-ovs") {
+    if (spec.labels == "lerf-ovs") {
       reports.push_back(eval::run_lerf_ovs_masks(s.scene(), object_fn, opt));
-    } else if (ovs) {
+    } else if (spec.labels == "3d-ovs") {
       reports.push_back(eval::run_3dovs(
           s.scene(),
           [&](int view, const std::vector<std::string>& classes) {
@@ -86,8 +124,9 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
       reports.push_back(eval::run_instances(s.scene(), object_fn, opt));
     }
     reports.back().mode = "object";
+    reports.back().protocol = spec.name;
   };
-  if (o.protocol == "instances") {
+  if (spec.labels == "instances") {
     if (o.object) run_object();
     if (o.pixel) run_pixel();
   } else {

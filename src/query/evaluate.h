@@ -28,8 +28,24 @@
 
 namespace hgs::query {
 
+// The protocols by name: a benchmark's labels and how they are scored.
+//   lerf-ovs, 3d-ovs, instances: as the benchmarks' papers score them;
+//   3d-ovs-labelled: 3D-OVS on the labelled pixels and the classes in view (eval::OvsScoring::LabelledOnly);
+//   lerf-ovs-scaled, instances-scaled: pixel mode's LERF post-processing windows (LangSplat's 30-px box and 7x7
+//   majority filter, set on frames about 1000 px wide) scaled to each image (eval::scaled_lerf_options), for
+//   images far smaller than LERF's; object mode is the same as without "-scaled".
+struct ProtocolSpec {
+  std::string name;    // as given
+  std::string labels;  // the benchmark whose labels it reads: lerf-ovs, 3d-ovs or instances
+  eval::OvsScoring ovs_scoring = eval::OvsScoring::Protocol;
+  bool lerf_scaled = false;
+};
+// Fails with the list of names on an unknown one.
+ProtocolSpec parse_protocol(const std::string& name);
+const std::vector<std::string>& protocol_names();
+
 struct EvaluateOptions {
-  std::string protocol = "instances";                      // lerf-ovs | 3d-ovs | 3d-ovs-labelled | instances
+  std::string protocol = "instances";                      // a protocol_names() entry
   bool object = true, pixel = true;                        // modes
   query::Relevancy relevancy = query::Relevancy::Objects;  // pixel mode
   float mask_threshold = 0.5f;                             // object mode

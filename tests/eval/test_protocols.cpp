@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <tuple>
 
 #include "core/error.h"
 #include "eval/protocols.h"
@@ -211,4 +212,17 @@ TEST(Eval3dOvsProtocol, CeilingIsTheBestAnyArgmaxPredictionScoresByBruteForce) {
       EXPECT_NEAR(evaluate_3dovs_prediction(pred, gt, W, H).ceiling, ovs_ceiling(gt), 0);
     }
   }
+}
+
+TEST(LerfPostprocess, ScaledWindowsAreLangSplatsAtTheReferenceWidth) {
+  const LerfOptions d;
+  for (auto [w, box, maj] :
+       {std::tuple{1000, 30, 7}, {160, 5, 1}, {320, 10, 1}, {500, 15, 3}, {640, 19, 3}, {2000, 60, 13}, {10, 1, 1}}) {
+    const LerfOptions o = scaled_lerf_options(w);
+    EXPECT_EQ(o.box, box) << w;
+    EXPECT_EQ(o.majority, maj) << w;
+    EXPECT_EQ(o.threshold, d.threshold);
+    EXPECT_EQ(o.boundary_d, d.boundary_d);
+  }
+  EXPECT_THROW(scaled_lerf_options(0), hgs::Error);
 }

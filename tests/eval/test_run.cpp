@@ -82,6 +82,36 @@ TEST(EvalRun, LerfOvsWithTwoDFeatures) {
   EXPECT_THROW(run_lerf_ovs(F.scene, bad, opt), hgs::Error);
 }
 
+TEST(EvalRun, LerfOvsScaledWindowsAreTheScaledOptionsOnEveryView) {
+  // lerf_scaled runs each view with scaled_lerf_options(its width): the same records as the scaled options given
+  // by hand (the fixture's views are 320 px wide: box 10, no majority filter), and not those of LangSplat's.
+  Fixture& F = fx();
+  RelevancyFn fn = [&](int view, const std::string& q) {
+    int dim = 0;
+    auto feat = F.features(view, dim);
+    const auto& e = F.scene.text_embeddings.at(q);
+    return lerf_relevancy_map(feat.data(), feat.size() / dim, dim, e.data(), F.canonical);
+  };
+  RunOptions scaled, by_hand, fixed;
+  scaled.progress = by_hand.progress = fixed.progress = false;
+  scaled.lerf_scaled = true;
+  by_hand.lerf = scaled_lerf_options(320);
+  EXPECT_EQ(by_hand.lerf.box, 10);
+  EXPECT_EQ(by_hand.lerf.majority, 1);
+  const EvalReport a = run_lerf_ovs(F.scene, fn, scaled), b = run_lerf_ovs(F.scene, fn, by_hand),
+                   c = run_lerf_ovs(F.scene, fn, fixed);
+  ASSERT_EQ(a.records.size(), b.records.size());
+  bool differs = false;
+  for (size_t i = 0; i < a.records.size(); ++i) {
+    EXPECT_EQ(a.records[i].iou, b.records[i].iou);
+    EXPECT_EQ(a.records[i].loc, b.records[i].loc);
+    differs |= a.records[i].iou != c.records[i].iou;
+  }
+  EXPECT_TRUE(differs);
+  EXPECT_TRUE(a.extra.contains("lerf_windows"));
+  EXPECT_FALSE(c.extra.contains("lerf_windows"));
+}
+
 TEST(EvalRun, OraclesScorePerfectlyAndEmptyMasksScoreZero) {
   Fixture& F = fx();
   const auto names = load_object_names(F.scene.root);

@@ -96,6 +96,23 @@ TEST(AblateCli, RowsSeedsProtocolsModesAndResume) {
   }
   EXPECT_TRUE(pixel_changed);
   EXPECT_NE(read_file_text(tmp / "a" / "ablation.md").find("## 3d-ovs/pixel (relevancy lerf)"), std::string::npos);
+  // The scoring variants on the kept models: their object mode is the base protocol's where only pixel mode's
+  // windows change (instances-scaled), and every key is written.
+  r = test::run_hgs("ablate " + s + " --out " + out +
+                    " --iters 30 --rows ends --seeds 2 --protocol instances,instances-scaled,3d-ovs-labelled"
+                    " --mode both --quiet --reevaluate");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto va = nlohmann::json::parse(read_file_text(tmp / "a" / "ablation.json"));
+  for (const auto& run : va["runs"]) {
+    const auto& res = run["run"]["results"];
+    for (const char* key :
+         {"instances-scaled/object", "instances-scaled/pixel", "3d-ovs-labelled/object", "3d-ovs-labelled/pixel"})
+      ASSERT_TRUE(res.contains(key)) << key;
+    EXPECT_EQ(res["instances-scaled/object"], res["instances/object"]);
+  }
+  r = test::run_hgs("ablate " + s + " --out " + (tmp / "c").string() + " --iters 5 --protocol instances,bogus --quiet");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("unknown protocol 'bogus' (one of instances, instances-scaled"), std::string::npos) << r.err;
   // A protocol without labels is a clear error before any training.
   fs::remove_all(tmp / "s" / "segmentations");
   r = test::run_hgs("ablate " + s + " --out " + (tmp / "b").string() + " --iters 5 --protocol 3d-ovs --quiet");
