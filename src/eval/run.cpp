@@ -85,7 +85,11 @@ EvalReport run_lerf_ovs(const Scene& scene, const RelevancyFn& fn, const RunOpti
   rep.scene = scene.root.filename().string();
   rep.mode = "pixel";
   rep.extra = {{"box", opt.lerf.box}, {"threshold", opt.lerf.threshold}, {"majority", opt.lerf.majority}};
-  if (opt.lerf_scaled) rep.extra["lerf_windows"] = "scaled to each image (x width / 1000)";
+  if (opt.lerf_scaled) {  // the windows differ per image width: the rule instead of one box and majority
+    rep.extra.erase("box");
+    rep.extra.erase("majority");
+    rep.extra["lerf_windows"] = fmt::format("scaled to each image (x width / {})", kLerfReferenceWidth);
+  }
   for_each_lerf_query(scene, opt, "eval lerf-ovs", [&](int vi, const Image& img, const LerfCategory& cat) {
     const View& view = scene.views[vi];
     const auto t0 = Clock::now();

@@ -107,7 +107,9 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
     reports.back().mode = "pixel";
     reports.back().protocol = spec.name;
     reports.back().extra["relevancy"] = query::relevancy_name(rel);
-    if (spec.lerf_scaled) reports.back().extra["lerf_windows"] = "scaled to each image (x width / 1000)";
+    if (spec.lerf_scaled)
+      reports.back().extra["lerf_windows"] =
+          fmt::format("scaled to each image (x width / {})", eval::kLerfReferenceWidth);
   };
   auto run_object = [&] {
     opt.overlay_dir = png_dir("object");
