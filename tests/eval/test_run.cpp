@@ -37,6 +37,15 @@ struct Fixture {
     for (const char* c : {"object", "things", "stuff", "texture"}) canonical.push_back(scene.text_embeddings.at(c));
   }
   std::vector<float> features(int view, int& dim) const { return *scene.load_features(view, dim); }
+  // The 2D baseline's LERF relevancy of a query on a view's features.
+  RelevancyFn feature_relevancy() const {
+    return [this](int view, const std::string& q) {
+      int dim = 0;
+      auto feat = features(view, dim);
+      const auto& e = scene.text_embeddings.at(q);
+      return lerf_relevancy_map(feat.data(), feat.size() / dim, dim, e.data(), canonical);
+    };
+  }
 };
 
 Fixture& fx() {
@@ -48,12 +57,7 @@ Fixture& fx() {
 
 TEST(EvalRun, LerfOvsWithTwoDFeatures) {
   Fixture& F = fx();
-  RelevancyFn fn = [&](int view, const std::string& q) {
-    int dim = 0;
-    auto feat = F.features(view, dim);
-    const auto& e = F.scene.text_embeddings.at(q);
-    return lerf_relevancy_map(feat.data(), feat.size() / dim, dim, e.data(), F.canonical);
-  };
+  const RelevancyFn fn = F.feature_relevancy();
   RunOptions opt;
   opt.progress = false;
   opt.overlay_dir = F.tmp / "png";
@@ -86,12 +90,7 @@ TEST(EvalRun, LerfOvsScaledWindowsAreTheScaledOptionsOnEveryView) {
   // lerf_scaled runs each view with scaled_lerf_options(its width): the same records as the scaled options given
   // by hand (the fixture's views are 320 px wide: box 10, no majority filter), and not those of LangSplat's.
   Fixture& F = fx();
-  RelevancyFn fn = [&](int view, const std::string& q) {
-    int dim = 0;
-    auto feat = F.features(view, dim);
-    const auto& e = F.scene.text_embeddings.at(q);
-    return lerf_relevancy_map(feat.data(), feat.size() / dim, dim, e.data(), F.canonical);
-  };
+  const RelevancyFn fn = F.feature_relevancy();
   RunOptions scaled, by_hand, fixed;
   scaled.progress = by_hand.progress = fixed.progress = false;
   scaled.lerf_scaled = true;
