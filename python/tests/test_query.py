@@ -85,5 +85,20 @@ def test_evaluate_matches_the_command_line(hybrid_model, scene, scene_dir, hgs_b
 
     assert len(py["records"]) > 0
     assert untimed(py["records"]) == untimed(cli["records"])
-    with pytest.raises(hgs.Error, match="protocol"):
+    with pytest.raises(hgs.Error, match="unknown protocol 'nope'"):
         hgs.evaluate(hybrid_model, scene, protocol="nope")
+
+
+def test_evaluate_protocol_variants(hybrid_model, scene):
+    # The named scoring variants: the report names the variant; instances-scaled changes pixel mode only.
+    base = hgs.evaluate(hybrid_model, scene, protocol="instances", mode="both")["reports"]
+    scaled = hgs.evaluate(hybrid_model, scene, protocol="instances-scaled", mode="both")["reports"]
+    assert [r["protocol"] for r in scaled] == ["instances-scaled"] * 2
+    def untimed(records):
+        return [{k: v for k, v in r.items() if k != "seconds"} for r in records]
+
+    assert untimed(scaled[0]["records"]) == untimed(base[0]["records"])  # object mode
+    assert "lerf_windows" in scaled[1]["extra"] and "lerf_windows" not in base[1]["extra"]
+    labelled = hgs.evaluate(hybrid_model, scene, protocol="3d-ovs-labelled", mode="object")["reports"]
+    assert labelled[0]["protocol"] == "3d-ovs-labelled"
+    assert "miou_ceiling" not in labelled[0]["extra"]
