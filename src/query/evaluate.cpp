@@ -10,6 +10,20 @@ namespace fs = std::filesystem;
 
 namespace {
 
+// Every protocol: name, labels, 3D-OVS scoring, LERF windows scaled.
+const std::vector<ProtocolSpec>& protocol_table() {
+  using eval::OvsScoring;
+  static const std::vector<ProtocolSpec> t = {
+      {"instances", "instances", OvsScoring::Protocol, false},
+      {"instances-scaled", "instances", OvsScoring::Protocol, true},
+      {"3d-ovs", "3d-ovs", OvsScoring::Protocol, false},
+      {"3d-ovs-labelled", "3d-ovs", OvsScoring::LabelledOnly, false},
+      {"lerf-ovs", "lerf-ovs", OvsScoring::Protocol, false},
+      {"lerf-ovs-scaled", "lerf-ovs", OvsScoring::Protocol, true},
+  };
+  return t;
+}
+
 // The folder holding a protocol's ground truth.
 fs::path protocol_label_dir(const Scene& scene, const std::string& protocol) {
   const std::string labels = parse_protocol(protocol).labels;
@@ -25,24 +39,6 @@ std::vector<std::vector<float>> object_class_scores(query::Session& s, render::G
   for (const auto& c : classes) texts.push_back(s.text().embed(c).data());
   return query::object_class_scores(r, s.model(), render::camera_from_view(s.scene().views.at(view)), s.objects(),
                                     texts, s.text().canonical());
-}
-
-}  // namespace
-
-namespace {
-
-// Every protocol: name, labels, 3D-OVS scoring, LERF windows scaled.
-const std::vector<ProtocolSpec>& protocol_table() {
-  using eval::OvsScoring;
-  static const std::vector<ProtocolSpec> t = {
-      {"instances", "instances", OvsScoring::Protocol, false},
-      {"instances-scaled", "instances", OvsScoring::Protocol, true},
-      {"3d-ovs", "3d-ovs", OvsScoring::Protocol, false},
-      {"3d-ovs-labelled", "3d-ovs", OvsScoring::LabelledOnly, false},
-      {"lerf-ovs", "lerf-ovs", OvsScoring::Protocol, false},
-      {"lerf-ovs-scaled", "lerf-ovs", OvsScoring::Protocol, true},
-  };
-  return t;
 }
 
 }  // namespace
