@@ -101,19 +101,30 @@ std::vector<uint16_t> argmax_classes(const std::vector<std::vector<float>>& rel,
   return pred;
 }
 
+namespace {
+
+// The pixels some class mask covers, gt [C][H, W] -> [H, W].
+Mask labelled_pixels(const std::vector<Mask>& gt) {
+  Mask l(gt[0].size(), 0);
+  for (const Mask& m : gt)
+    for (size_t i = 0; i < l.size(); ++i) l[i] |= m[i] != 0;
+  return l;
+}
+
+}  // namespace
+
 double ovs_ceiling(const std::vector<Mask>& gt, OvsScoring scoring) {
   if (gt.empty()) fail("eval: 3D-OVS evaluation needs at least one class mask");
   if (scoring == OvsScoring::LabelledOnly) return 1.0;
   const size_t n = gt[0].size(), C = gt.size();
-  size_t present = 0, largest = 0, labelled = 0;
+  size_t present = 0, largest = 0;
   for (const Mask& m : gt) {
     const size_t g = size_t(std::count_if(m.begin(), m.end(), [](uint8_t v) { return v != 0; }));
     present += g > 0;
     largest = std::max(largest, g);
   }
-  for (size_t i = 0; i < n; ++i)
-    labelled += std::any_of(gt.begin(), gt.end(), [&](const Mask& m) { return m[i] != 0; });
-  const double V = double(n - labelled);
+  const Mask lab = labelled_pixels(gt);
+  const double V = double(n - size_t(std::count(lab.begin(), lab.end(), uint8_t(1))));
   if (present < C || V == 0) return double(present) / double(C);
   return (double(C) - V / (double(largest) + V)) / double(C);
 }
@@ -130,10 +141,7 @@ OvsImageResult evaluate_3dovs_prediction(const std::vector<uint16_t>& prediction
       fail("eval: ground-truth mask of class {} holds {} pixels, expected {}x{}", c, gt[c].size(), width, height);
   if (boundary_d <= 0) boundary_d = boundary_width(width, height);
   const bool labelled_only = scoring == OvsScoring::LabelledOnly;
-  Mask scored(n, 1);  // the pixels scored: all, or those the ground truth labels
-  if (labelled_only)
-    for (size_t i = 0; i < n; ++i)
-      scored[i] = std::any_of(gt.begin(), gt.end(), [&](const Mask& m) { return m[i] != 0; });
+  const Mask scored = labelled_only ? labelled_pixels(gt) : Mask(n, 1);  // the pixels scored
   OvsImageResult R;
   R.prediction = prediction;
   R.iou.resize(C);

@@ -79,6 +79,8 @@ LerfOptions lerf_options_for(const RunOptions& opt, int width) {
   return opt.lerf_scaled ? scaled_lerf_options(width, opt.lerf) : opt.lerf;
 }
 
+std::string scaled_lerf_rule() { return fmt::format("scaled to each image (x width / {})", kLerfReferenceWidth); }
+
 EvalReport run_lerf_ovs(const Scene& scene, const RelevancyFn& fn, const RunOptions& opt) {
   EvalReport rep;
   rep.protocol = "lerf-ovs";
@@ -88,7 +90,7 @@ EvalReport run_lerf_ovs(const Scene& scene, const RelevancyFn& fn, const RunOpti
   if (opt.lerf_scaled) {  // the windows differ per image width: the rule instead of one box and majority
     rep.extra.erase("box");
     rep.extra.erase("majority");
-    rep.extra["lerf_windows"] = fmt::format("scaled to each image (x width / {})", kLerfReferenceWidth);
+    rep.extra["lerf_windows"] = scaled_lerf_rule();
   }
   for_each_lerf_query(scene, opt, "eval lerf-ovs", [&](int vi, const Image& img, const LerfCategory& cat) {
     const View& view = scene.views[vi];

@@ -45,6 +45,8 @@ using ClassRelevancyFn =
 
 // The LERF post-processing options for an image `width` pixels wide: opt.lerf, scaled when opt.lerf_scaled.
 LerfOptions lerf_options_for(const RunOptions& opt, int width);
+// How a report names scaled windows (its extra.lerf_windows).
+std::string scaled_lerf_rule();
 
 // LERF-OVS, pixel-level: relevancy -> LERF post-processing -> IoU / BIoU / acc / localisation. mode "pixel".
 EvalReport run_lerf_ovs(const Scene& scene, const RelevancyFn& fn, const RunOptions& opt = {});

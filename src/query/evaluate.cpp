@@ -103,9 +103,7 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
     reports.back().mode = "pixel";
     reports.back().protocol = spec.name;
     reports.back().extra["relevancy"] = query::relevancy_name(rel);
-    if (spec.lerf_scaled)
-      reports.back().extra["lerf_windows"] =
-          fmt::format("scaled to each image (x width / {})", eval::kLerfReferenceWidth);
+    if (spec.lerf_scaled) reports.back().extra["lerf_windows"] = eval::scaled_lerf_rule();
   };
   auto run_object = [&] {
     opt.overlay_dir = png_dir("object");
