@@ -54,12 +54,13 @@ std::string what_the_mode_measures(const eval::EvalReport& r) {
                             : rel == "objects-lerf" ? "LERF relevancy of the object-conditioned language map"
                             : rel == "lerf"         ? "LERF relevancy of the raw rendered language map"
                                                     : "LERF relevancy of the raw language map times the foreground";
-  const bool scaled = r.extra.contains("lerf_windows");
+  const auto windows = r.extra.find("lerf_windows");
+  const bool scaled = windows != r.extra.end() && windows->is_string();
   return r.protocol.starts_with("3d-ovs")
              ? "every pixel on its own: the class that scores highest by " + score
              : "every pixel on its own: " + score +
-                   (scaled ? ", LangSplat's post-processing with its windows scaled to the image (box 30 and 7x7 "
-                             "majority at 1000 px wide, x width / 1000)"
+                   (scaled ? ", LangSplat's post-processing with its 30-px box and 7x7 majority " +
+                                 windows->get<std::string>()
                            : ", LangSplat's post-processing (30-px box, min-max, threshold, 7x7 majority)");
 }
 
