@@ -1,0 +1,118 @@
+#!/usr/bin/env python3
+"""Table 3's paired differences pooled over every (scene, training seed) pair measured so far.
+
+The runs were made by `hgs ablate` in several sessions, on machines whose run folders are gone; their per-pair
+mIoU is listed in docs/ablation.md and transcribed here (PAIRS), so the pooled tables of that file can be
+recomputed and extended. The statistic is `hgs ablate`'s own (src/cli/cmd_ablate.cpp `paired`): the mean of the
+per-pair differences and the half-width of its 95 % interval, Student's t with n - 1 degrees of freedom.
+
+Each pair: its noise level, name, and per row the mIoU (percent) of instances object / instances pixel /
+3D-OVS object / 3D-OVS pixel (LangSplat's fixed windows, the `3d-ovs` protocol with the sky scored).
+
+    python3 bench/table3_pool.py            # both noise levels, markdown tables
+"""
+import math
+
+COLUMNS = ["inst. object", "inst. pixel", "3D-OVS object", "3D-OVS pixel"]
+LOO = ["all off", "no OF", "no SCL", "no BRO", "full", "eq15"]  # --rows leave-one-out --eq15-row
+MIDDLE = ["OF alone", "SCL alone", "BRO alone"]  # --rows middle
+
+
+def row(s):
+    return [float(x) for x in s.split("/")]
+
+
+def pair(noise, name, loo, middle=None):
+    rows = {r: row(s) for r, s in zip(LOO, loo)}
+    if middle:
+        rows.update({r: row(s) for r, s in zip(MIDDLE, middle)})
+    return {"noise": noise, "name": name, "rows": rows}
+
+
+PAIRS = [
+    # medium noise: tabletop / room, seeds 51, 52, 53 (hgs synth --noise medium --width 160 --height 120 --views 32)
+    pair("medium", "tabletop s51 (0)", ["70.64/65.72/62.80/12.78", "71.24/68.14/70.50/71.21", "92.60/77.28/76.71/23.52", "92.47/85.53/89.79/90.48", "92.64/85.72/89.82/90.41", "79.68/75.74/79.02/80.05"]),
+    pair("medium", "tabletop s52 (0)", ["38.33/42.06/32.28/13.57", "48.44/44.59/52.35/53.60", "88.69/73.71/75.91/14.81", "89.75/85.92/89.09/89.61", "89.80/86.08/89.12/89.59", "80.06/80.36/80.50/81.54"]),
+    pair("medium", "room s51 (0)", ["79.25/59.78/54.22/19.45", "77.62/69.01/69.11/69.35", "80.16/61.86/59.32/24.79", "84.18/77.54/73.79/73.99", "82.34/74.66/72.90/74.00", "77.80/73.11/70.23/69.56"]),
+    pair("medium", "room s52 (0)", ["53.96/48.35/44.89/19.37", "53.44/45.81/54.27/53.96", "79.27/63.93/58.98/19.57", "84.45/72.94/74.14/72.64", "83.96/71.48/73.97/72.27", "73.11/65.94/66.92/68.73"]),
+    pair("medium", "tabletop s51 (1)", ["70.95/63.16/64.09/13.30", "72.89/69.62/71.63/72.36", "92.55/77.36/76.62/23.35", "92.58/85.84/89.90/90.58", "92.57/85.83/89.70/90.45", "79.91/78.53/79.32/80.79"]),
+    pair("medium", "room s51 (1)", ["77.40/58.68/53.93/19.45", "77.36/69.68/68.68/68.57", "74.45/62.84/55.97/24.56", "82.48/74.91/72.56/73.74", "84.20/75.71/73.76/73.51", "80.73/74.15/71.29/69.64"]),
+    pair("medium", "tabletop s52 (1)", ["40.14/41.71/37.77/13.40", "47.23/45.12/51.55/52.57", "86.60/71.64/73.79/14.81", "90.27/86.00/89.18/89.73", "90.11/86.17/89.38/89.87", "79.90/80.18/80.23/81.60"]),
+    pair("medium", "room s52 (1)", ["54.89/46.13/42.21/19.56", "53.41/44.94/53.90/53.15", "77.02/63.38/57.30/19.55", "83.68/72.22/74.42/73.01", "83.92/70.20/74.02/72.17", "73.50/66.30/68.05/69.70"]),
+    pair("medium", "tabletop s53 (0)", ["68.07/65.34/69.34/13.56", "68.92/69.65/72.94/73.61", "84.02/79.09/77.81/15.43", "86.97/85.85/92.37/92.05", "86.99/85.85/92.37/91.89", "80.56/84.05/84.74/85.46"]),
+    pair("medium", "room s53 (0)", ["63.52/53.24/42.78/20.48", "63.32/56.71/50.43/51.00", "76.74/71.51/51.97/25.23", "83.17/79.38/61.84/61.74", "82.75/78.93/61.20/61.29", "76.72/76.35/57.85/59.35"]),
+    # session of 2026-11-28: all 8 rows and eq. 15 (--rows all --eq15-row)
+    pair("medium", "tabletop s53 (1)", ["68.71/67.70/70.31/13.70", "68.43/70.25/72.51/73.36", "84.85/79.45/79.41/15.39", "87.73/86.05/92.84/92.44", "86.92/85.85/91.56/91.11", "79.43/82.24/84.05/84.91"],
+         ["84.59/78.26/79.07/15.42", "67.67/68.16/72.05/73.01", "68.75/67.36/70.41/13.60"]),
+    pair("medium", "room s53 (1)", ["61.79/55.62/43.46/20.82", "62.95/56.63/50.10/51.08", "75.55/68.58/51.34/25.55", "78.03/79.61/61.74/61.72", "82.61/79.00/61.25/61.36", "76.95/78.90/58.55/59.81"],
+         ["79.05/69.98/51.90/27.33", "61.83/56.86/49.41/50.27", "63.64/57.73/43.73/20.83"]),
+    # high noise (hgs synth --noise high): th = tabletop, rh = room
+    pair("high", "th_s8081 (6029)", ["42.71/40.88/45.32/13.33", "42.96/43.62/50.16/50.34", "63.31/73.06/62.96/14.45", "72.05/85.85/88.60/88.39", "77.22/86.38/89.06/88.61", "71.89/84.17/83.13/83.06"]),
+    pair("high", "rh_s8083 (0)", ["47.06/46.56/46.76/24.67", "49.62/46.96/52.81/53.33", "63.81/64.52/54.74/24.86", "70.79/72.67/70.16/70.17", "71.31/70.57/70.00/69.56", "64.99/68.09/63.37/65.78"]),
+    pair("high", "th_s8085 (0)", ["67.93/65.09/66.51/13.28", "67.43/67.52/69.05/70.62", "77.19/72.41/72.29/15.31", "84.53/85.47/89.11/91.05", "84.23/85.51/89.41/91.01", "79.88/77.03/81.72/82.12"],
+         ["77.63/71.87/72.52/15.14", "67.37/66.26/68.42/69.76", "64.62/65.06/56.45/13.22"]),
+    pair("high", "th_s8081 (1)", ["43.84/41.56/44.68/13.17", "42.59/42.16/49.32/49.33", "62.65/73.98/62.40/14.44", "75.39/84.13/87.11/86.65", "76.10/86.03/88.39/87.71", "66.45/78.15/78.74/79.24"],
+         ["62.28/72.74/62.16/14.46", "41.73/41.75/48.40/48.55", "31.72/42.06/39.79/13.48"]),
+    pair("high", "rh_s8083 (1)", ["45.10/46.56/46.05/24.52", "49.22/44.94/52.76/53.25", "63.14/63.96/53.96/24.91", "70.96/72.15/69.79/69.54", "70.74/72.73/70.09/69.84", "64.21/69.45/62.90/65.37"]),
+    pair("high", "th_s8085 (1)", ["67.85/64.03/66.69/13.30", "66.16/65.82/67.86/68.95", "78.02/72.27/72.90/15.25", "85.16/85.51/89.20/90.98", "84.69/84.97/89.34/90.81", "80.04/79.96/82.00/82.29"]),
+]
+
+T975 = [12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160, 2.145, 2.131,
+        2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042]
+
+
+def paired(d):
+    n = len(d)
+    m = sum(d) / n
+    if n < 2:
+        return m, float("nan"), n
+    sd = math.sqrt(sum((x - m) ** 2 for x in d) / (n - 1))
+    t = T975[n - 2] if n - 1 <= 30 else 1.96
+    return m, t * sd / math.sqrt(n), n
+
+
+DIFFS = [("full - all off", "full", "all off"), ("OF alone - all off", "OF alone", "all off"),
+         ("SCL alone - all off", "SCL alone", "all off"), ("BRO alone - all off", "BRO alone", "all off"),
+         ("no OF - all off", "no OF", "all off"), ("no SCL - all off", "no SCL", "all off"),
+         ("no BRO - all off", "no BRO", "all off"),
+         ("OF added to the other two", "full", "no OF"), ("SCL added to the other two", "full", "no SCL"),
+         ("BRO added to the other two", "full", "no BRO"), ("eq. 15 alone - full", "eq15", "full")]
+
+
+def middle_rows(pairs):
+    """Each pair's single-component rows minus its all-off row (the pairs that have them)."""
+    have = [p for p in pairs if "OF alone" in p["rows"]]
+    if not have:
+        return
+    print("| pair | " + " | ".join(f"{r} - all off" for r in MIDDLE) + " |")
+    print("|---|" + "---|" * len(MIDDLE))
+    for p in have:
+        off = p["rows"]["all off"]
+        cells = [" / ".join(f"{p['rows'][r][c] - off[c]:+.2f}" for c in range(len(COLUMNS))) for r in MIDDLE]
+        print(f"| {p['name']} ({p['noise']}) | " + " | ".join(cells) + " |")
+    print()
+
+
+def table(pairs, title):
+    print(f"### {title}: {len(pairs)} pairs\n")
+    print("| difference | pairs | " + " | ".join(COLUMNS) + " |")
+    print("|---|---|" + "---|" * len(COLUMNS))
+    for name, a, b in DIFFS:
+        have = [p for p in pairs if a in p["rows"] and b in p["rows"]]
+        if not have:
+            continue
+        cells = []
+        for c in range(len(COLUMNS)):
+            m, h, n = paired([p["rows"][a][c] - p["rows"][b][c] for p in have])
+            cells.append(f"{m:+.2f} ± {h:.2f}" if n > 1 else f"{m:+.2f}")
+        print(f"| {name} | {len(have)} | " + " | ".join(cells) + " |")
+    above = sum(p["rows"]["full"][c] > p["rows"]["all off"][c] for p in pairs for c in range(len(COLUMNS)))
+    print(f"\nfull above all off in {above} of {len(COLUMNS) * len(pairs)} cells; pairs: "
+          + ", ".join(p["name"] for p in pairs) + "\n")
+
+
+if __name__ == "__main__":
+    for noise in ("medium", "high"):
+        table([p for p in PAIRS if p["noise"] == noise], f"{noise} noise")
+    print("### The single-component rows, per pair (" + " / ".join(COLUMNS) + ")\n")
+    middle_rows(PAIRS)
