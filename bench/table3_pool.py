@@ -71,12 +71,10 @@ def paired(d):
     return m, t * sd / math.sqrt(n), n
 
 
-DIFFS = [("full - all off", "full", "all off"), ("OF alone - all off", "OF alone", "all off"),
-         ("SCL alone - all off", "SCL alone", "all off"), ("BRO alone - all off", "BRO alone", "all off"),
-         ("no OF - all off", "no OF", "all off"), ("no SCL - all off", "no SCL", "all off"),
-         ("no BRO - all off", "no BRO", "all off"),
-         ("OF added to the other two", "full", "no OF"), ("SCL added to the other two", "full", "no SCL"),
-         ("BRO added to the other two", "full", "no BRO"), ("eq. 15 alone - full", "eq15", "full")]
+# Every row minus all off, each component added to the other two (full minus the row without it), and eq. 15.
+DIFFS = ([(f"{r} - all off", r, "all off") for r in ["full", *MIDDLE, "no OF", "no SCL", "no BRO"]]
+         + [(f"{c} added to the other two", "full", f"no {c}") for c in ("OF", "SCL", "BRO")]
+         + [("eq. 15 alone - full", "eq15", "full")])
 
 
 def middle_rows(pairs):
