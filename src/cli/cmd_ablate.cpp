@@ -49,14 +49,16 @@ struct Row {
 };
 
 std::vector<Row> make_rows(const AblateArgs& a) {
-  if (a.rows != "all" && a.rows != "ends" && a.rows != "middle" && a.rows != "full" && a.rows != "leave-one-out")
-    fail("--rows: all, ends, middle, full or leave-one-out");
+  if (a.rows != "all" && a.rows != "ends" && a.rows != "middle" && a.rows != "full" && a.rows != "leave-one-out" &&
+      a.rows != "single")
+    fail("--rows: all, ends, middle, full, leave-one-out or single");
   const float lambda_rgb = hybrid::HybridConfig{}.lambda_rgb;
   std::vector<Row> rows;
   for (int r = 0; r < 8; ++r) {
     const bool end = r == 0 || r == 7, one_short = r == 3 || r == 5 || r == 6;  // the full method less one
+    const bool alone = r == 1 || r == 2 || r == 4;                                   // one component on
     if ((a.rows == "ends" && !end) || (a.rows == "middle" && end) || (a.rows == "full" && r != 7) ||
-        (a.rows == "leave-one-out" && !end && !one_short))
+        (a.rows == "leave-one-out" && !end && !one_short) || (a.rows == "single" && !alone))
       continue;
     const bool of = r & 1, scl = r & 2, bro = r & 4;
     rows.push_back({fmt::format("of{}_scl{}_bro{}", int(of), int(scl), int(bro)), of, scl, bro, lambda_rgb});
@@ -376,9 +378,10 @@ CommandRegistration reg(
        sub.add_option("--rows", a->rows,
                       "all (8 rows), ends (all-off and all-on only), middle (the six others), full (the full method "
                       "alone) or leave-one-out (the ends and the three rows with one component off: what each adds "
-                      "to the other two); the summaries cover the rows asked, and --rows all on the same --out later "
+                      "to the other two), single (the three rows with one component on: with leave-one-out on the "
+                      "same --out, all 8); the summaries cover the rows asked, and --rows all on the same --out later "
                       "reuses every run on disk")
-           ->check(CLI::IsMember({"all", "ends", "middle", "full", "leave-one-out"}))
+           ->check(CLI::IsMember({"all", "ends", "middle", "full", "leave-one-out", "single"}))
            ->capture_default_str();
        sub.add_flag(
            "--reevaluate", a->reevaluate,

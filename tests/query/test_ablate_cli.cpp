@@ -110,6 +110,15 @@ TEST(AblateCli, RowsSeedsProtocolsModesAndResume) {
       ASSERT_TRUE(res.contains(key)) << key;
     EXPECT_EQ(res["instances-scaled/object"], res["instances/object"]);
   }
+  // --rows single: the three rows with one component on, nothing else (with leave-one-out, the 8 rows).
+  r = test::run_hgs("ablate " + s + " --out " + (tmp / "single").string() +
+                    " --iters 5 --rows single --protocol instances --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto sj = nlohmann::json::parse(read_file_text(tmp / "single" / "ablation.json"));
+  ASSERT_EQ(sj["summary"].size(), 3u);
+  EXPECT_EQ(sj["summary"][0]["row"], "of1_scl0_bro0");
+  EXPECT_EQ(sj["summary"][1]["row"], "of0_scl1_bro0");
+  EXPECT_EQ(sj["summary"][2]["row"], "of0_scl0_bro1");
   r = test::run_hgs("ablate " + s + " --out " + (tmp / "c").string() + " --iters 5 --protocol instances,bogus --quiet");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("unknown protocol 'bogus' (one of instances, instances-scaled"), std::string::npos) << r.err;
