@@ -56,7 +56,7 @@ std::vector<Row> make_rows(const AblateArgs& a) {
   std::vector<Row> rows;
   for (int r = 0; r < 8; ++r) {
     const bool end = r == 0 || r == 7, one_short = r == 3 || r == 5 || r == 6;  // the full method less one
-    const bool alone = r == 1 || r == 2 || r == 4;                                   // one component on
+    const bool alone = r == 1 || r == 2 || r == 4;                              // one component on
     if ((a.rows == "ends" && !end) || (a.rows == "middle" && end) || (a.rows == "full" && r != 7) ||
         (a.rows == "leave-one-out" && !end && !one_short) || (a.rows == "single" && !alone))
       continue;
