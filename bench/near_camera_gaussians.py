@@ -70,6 +70,10 @@ def project(images, cameras, name, xyz):  # depth [N], u [N], v [N], (w, h, fx)
     return z, fx * p[:, 0] * iz + cx, fy * p[:, 1] * iz + cy, (w, h, fx)
 
 
+def near_and_over(z, u, v, radius, w, h, depth_limit):  # [N]: nearer than depth_limit, footprint on the image
+    return (z > 0) & (z < depth_limit) & (u > -radius) & (u < w + radius) & (v > -radius) & (v < h + radius)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("scene")
@@ -96,8 +100,7 @@ def main():
     inside = (z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
     median = np.median(z[inside])
     radius = 3 * fx * scale / np.where(z > 1e-9, z, 1e-9)
-    found = (z > 0) & (z < a.near * median) & (radius > a.wide * w) & (u > -radius) & (u < w + radius) & \
-        (v > -radius) & (v < h + radius)
+    found = near_and_over(z, u, v, radius, w, h, a.near * median) & (radius > a.wide * w)
     print(f"{a.view}: {inside.sum()} of {len(g)} Gaussian centres in view, median depth {median:.3f}; "
           f"{found.sum()} nearer than {a.near} x that with a 3-sigma radius above {a.wide} x {w} px")
     for i in np.where(found)[0]:
@@ -106,8 +109,8 @@ def main():
             if other == a.view:
                 continue
             zo, uo, vo, (wo, ho, fxo) = project(images, cameras, other, xyz[i:i + 1])
-            ro = 3 * fxo * scale[i] / max(zo[0], 1e-9)
-            if 0 < zo[0] < a.near * median and -ro < uo[0] < wo + ro and -ro < vo[0] < ho + ro:
+            ro = 3 * fxo * scale[i:i + 1] / np.where(zo > 1e-9, zo, 1e-9)
+            if near_and_over(zo, uo, vo, ro, wo, ho, a.near * median)[0]:
                 near_others.append(f"{other} ({zo[0] / median:.3f})")
         print(f"  #{i}: depth {z[i] / median:.3f} x median, radius {radius[i]:.0f} px, opacity {opacity[i]:.3f}, "
               f"centre ({u[i]:.0f}, {v[i]:.0f}) px; as near to: {', '.join(near_others) or 'no other camera'}")
