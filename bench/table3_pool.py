@@ -10,7 +10,7 @@ Each pair: its noise level, name, and per row the mIoU (percent) of instances ob
 3D-OVS object / 3D-OVS pixel (LangSplat's fixed windows, the `3d-ovs` protocol with the sky scored).
 
     python3 bench/table3_pool.py            # both noise levels, markdown tables
-    python3 bench/table3_pool.py --show DIR # a run folder of `hgs ablate`: each run's figures as PAIRS holds them
+    python3 bench/table3_pool.py --show DIR...  # `hgs ablate` run folders: each run's figures, and PAIRS entries
 """
 import json
 import math
@@ -120,21 +120,35 @@ def table(pairs, title):
 
 
 KEYS = ["instances/object", "instances/pixel", "3d-ovs/object", "3d-ovs/pixel"]  # COLUMNS in ablation.json
+ROW_NAMES = {"of0_scl0_bro0": "all off", "of0_scl1_bro1": "no OF", "of1_scl0_bro1": "no SCL", "of1_scl1_bro0": "no BRO",
+             "of1_scl1_bro1": "full", "of1_scl1_bro1_eq15": "eq15", "of1_scl0_bro0": "OF alone",
+             "of0_scl1_bro0": "SCL alone", "of0_scl0_bro1": "BRO alone"}  # hgs ablate's row names -> LOO / MIDDLE
 
 
-def show(folder):
-    """Each run of an `hgs ablate` folder (ablation.json) as the row strings of PAIRS, to be transcribed."""
-    with open(f"{folder}/ablation.json") as f:
-        runs = json.load(f)["runs"]
-    for r in runs:
-        res = r["run"]["results"]
-        cells = [f"{100 * res[k]['miou']:.2f}" if k in res and res[k]["miou"] is not None else "nan" for k in KEYS]
-        print(f"{r['scene']} seed {r['seed']} {r['row']}: \"{'/'.join(cells)}\"")
+def show(folders):
+    """Each run of `hgs ablate` folders (ablation.json) as the row strings of PAIRS, and for every (scene, seed)
+    whose leave-one-out rows are all there, its PAIRS entry (noise left as NOISE to fill in)."""
+    rows = {}  # (scene, seed) -> {row name: "a/b/c/d"}
+    for folder in folders:
+        with open(f"{folder}/ablation.json") as f:
+            runs = json.load(f)["runs"]
+        for r in runs:
+            res = r["run"]["results"]
+            cells = [f"{100 * res[k]['miou']:.2f}" if k in res and res[k]["miou"] is not None else "nan"
+                     for k in KEYS]
+            print(f"{r['scene']} seed {r['seed']} {r['row']}: \"{'/'.join(cells)}\"")
+            rows.setdefault((r["scene"], r["seed"]), {})[ROW_NAMES.get(r["row"], r["row"])] = "/".join(cells)
+    for (scene, seed), have in rows.items():
+        if not all(r in have for r in LOO):
+            continue
+        loo = ", ".join(f'"{have[r]}"' for r in LOO)
+        middle = (", [" + ", ".join(f'"{have[r]}"' for r in MIDDLE) + "]") if all(r in have for r in MIDDLE) else ""
+        print(f'    pair("NOISE", "{scene} ({seed})", [{loo}]{middle}),')
 
 
 if __name__ == "__main__":
-    if len(sys.argv) == 3 and sys.argv[1] == "--show":
-        show(sys.argv[2])
+    if len(sys.argv) >= 3 and sys.argv[1] == "--show":
+        show(sys.argv[2:])
         sys.exit(0)
     for noise in ("medium", "high"):
         table([p for p in PAIRS if p["noise"] == noise], f"{noise} noise")
