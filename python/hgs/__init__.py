@@ -62,6 +62,10 @@ from ._hgs import (  # noqa: E402  (after the environment above)
 sys.modules[__name__ + ".clip"] = clip
 sys.modules[__name__ + ".sam"] = sam
 
+# The near plane hgs.render and QuerySession cull a model at: Model.load and hgs.train set it on the instance
+# (the model's config); a model made from arrays, copied or selected has the renderer's default.
+Model.near_plane = 0.01
+
 __all__ = [
     "Error", "Model", "QueryResult", "QuerySession", "Scene", "StepInfo", "Trainer", "View", "clip", "evaluate",
     "method_names", "query", "render", "sam", "set_threads", "synth", "train",
@@ -237,6 +241,7 @@ def train(scene, out=None, method="hybrid", iters=30000, callback=None, callback
     if save_every:
         _snapshot(trainer, out, with_ply=False)
     model = trainer.finish()
+    model.near_plane = float(config.get("near_plane", 0.01))  # hgs.render and QuerySession cull as training did
     if bar is not None:
         note = {"callback": " (stopped by the callback)", "interrupted": " (interrupted)"}.get(stopped, "")
         bar.finish(it - start, f"N {model.n}{note}")

@@ -30,6 +30,14 @@ inline pb::array view_array(const pb::dtype& dt, void* data, std::vector<pb::ssi
   return pb::array(dt, std::move(shape), {}, data, owner);
 }
 
+// The near plane to render a Python model at: `given` when not None, else the model's `near_plane` attribute
+// (Model.load and hgs.train set it from the model's config), else render's default 0.01.
+inline float model_near_plane_of(pb::handle model, pb::handle given) {
+  if (!given.is_none()) return given.cast<float>();
+  if (pb::hasattr(model, "near_plane")) return model.attr("near_plane").cast<float>();
+  return 0.01f;
+}
+
 // A numpy array that takes over `v` (moved into a capsule, no copy of the elements). Shape in elements.
 template <class T>
 pb::array_t<T> take_vector(std::vector<T>&& v, std::vector<pb::ssize_t> shape) {

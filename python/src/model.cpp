@@ -9,6 +9,7 @@
 #include "core/error.h"
 #include "core/fs.h"
 #include "hybrid/fields.h"
+#include "model/near_plane.h"
 #include "model/ply.h"
 #include "query/query.h"
 
@@ -83,10 +84,20 @@ void bind_model(pb::module_& m) {
       .def_static(
           "load",
           [](const fs::path& path) {
-            pb::gil_scoped_release nogil;
-            return std::make_shared<GaussianModel>(read_model_ply(model_file(path)));
+            std::shared_ptr<GaussianModel> g;
+            float near_plane = 0;
+            {
+              pb::gil_scoped_release nogil;
+              g = std::make_shared<GaussianModel>(read_model_ply(model_file(path)));
+              near_plane = model_near_plane(model_file(path));
+            }
+            pb::object o = pb::cast(g);
+            o.attr("near_plane") = near_plane;
+            return o;
           },
-          pb::arg("path"), "Reads a model PLY, or MODEL/point_cloud.ply of a model folder")
+          pb::arg("path"),
+          "Reads a model PLY, or MODEL/point_cloud.ply of a model folder; its near_plane attribute is the "
+          "config.json's beside it (0.01 without one), which hgs.render and hgs.QuerySession cull at")
       .def(
           "save",
           [](const GaussianModel& g, const fs::path& path) {

@@ -87,13 +87,17 @@ void bind_query(pb::module_& m) {
   pb::class_<query::Session, SessionPtr>(
       m, "QuerySession",
       "A scene and a trained hybrid model ready for text queries (the model must not change while it is used)")
-      .def(pb::init([](std::shared_ptr<Scene> scene, std::shared_ptr<GaussianModel> model, const std::string& clip) {
-             pb::gil_scoped_release nogil;
-             return std::make_shared<query::Session>(scene, model, clip, "hgs.query");
-           }),
-           pb::arg("scene"), pb::arg("model"), pb::arg("clip") = "",
+      .def(pb::init(
+               [](std::shared_ptr<Scene> scene, pb::object model_obj, const std::string& clip, pb::object near_plane) {
+                 auto model = model_obj.cast<std::shared_ptr<GaussianModel>>();
+                 const float near = model_near_plane_of(model_obj, near_plane);
+                 pb::gil_scoped_release nogil;
+                 return std::make_shared<query::Session>(scene, model, clip, "hgs.query", near);
+               }),
+           pb::arg("scene"), pb::arg("model"), pb::arg("clip") = "", pb::arg("near_plane") = pb::none(),
            "Object embeddings of the model; texts are embedded from the scene's text_embeddings.json, or by the "
-           "OpenCLIP weights `clip` (.safetensors) when given")
+           "OpenCLIP weights `clip` (.safetensors) when given. Renders cull at near_plane (default: the model's "
+           "near_plane attribute, set by Model.load and hgs.train, else 0.01)")
       .def("ask", &ask, pb::arg("text"), pb::arg("min_relevancy") = 0.f,
            "Every object ranked for `text`, best first: dicts with id, name, relevancy, cosine, chosen (the best "
            "one, plus every other with relevancy >= min_relevancy when it is > 0)")

@@ -6,6 +6,7 @@
 #include "common.h"
 #include "core/error.h"
 #include "hybrid/fields.h"
+#include "model/near_plane.h"
 #include "model/render_inputs.h"
 #include "render/camera_from_view.h"
 #include "render/renderer.h"
@@ -17,6 +18,7 @@ struct RenderRequest {
   bool depth = true, objects = true, language = false;
   float background[3] = {0, 0, 0};
   int sh_degree = -1;  // -1 = the model's
+  float near_plane = render::kDefaultNearPlane;
 };
 
 struct RenderResult {
@@ -30,7 +32,7 @@ RenderResult render_view(const GaussianModel& m, const View& v, const RenderRequ
   r.H = v.height, r.W = v.width;
   const bool hybrid = hybrid::ConstHybridFields::present(m);
   if (rq.language && !hybrid) fail("render: language=True needs a hybrid model (this one has no language embeddings)");
-  const render::Camera cam = render::camera_from_view(v);
+  const render::Camera cam = render::camera_from_view(v, rq.near_plane);
   render::GaussianRenderer renderer;
   render::GaussianInputs in = render_inputs(m);
   if (rq.sh_degree >= 0) in.sh_degree = std::min(rq.sh_degree, m.sh_degree);
@@ -58,10 +60,11 @@ RenderResult render_view(const GaussianModel& m, const View& v, const RenderRequ
 }
 
 pb::dict render_py(const GaussianModel& m, const Scene& s, pb::handle view, bool depth, bool objects, bool language,
-                   pb::object background, int sh_degree) {
+                   pb::object background, int sh_degree, float near_plane) {
   const int vi = view_index(s, view);
   RenderRequest rq;
   rq.depth = depth, rq.objects = objects, rq.language = language, rq.sh_degree = sh_degree;
+  rq.near_plane = checked_near_plane(near_plane, "render: near_plane");
   if (!background.is_none()) {
     auto b = background.cast<std::vector<float>>();
     if (b.size() == 1) b = {b[0], b[0], b[0]};
@@ -93,17 +96,19 @@ pb::object as_background(pb::object b) {
 void bind_render(pb::module_& m) {
   m.def(
       "render",
-      [](const GaussianModel& model, const Scene& s, pb::handle view, bool depth, bool objects, bool language,
-         pb::object background, int sh_degree) {
-        return render_py(model, s, view, depth, objects, language, as_background(background), sh_degree);
+      [](pb::object model, const Scene& s, pb::handle view, bool depth, bool objects, bool language,
+         pb::object background, int sh_degree, pb::object near_plane) {
+        return render_py(model.cast<const GaussianModel&>(), s, view, depth, objects, language,
+                         as_background(background), sh_degree, model_near_plane_of(model, near_plane));
       },
       pb::arg("model"), pb::arg("scene"), pb::arg("view"), pb::kw_only(), pb::arg("depth") = true,
       pb::arg("objects") = true, pb::arg("language") = false, pb::arg("background") = pb::none(),
-      pb::arg("sh_degree") = -1,
+      pb::arg("sh_degree") = -1, pb::arg("near_plane") = pb::none(),
       "Renders view `view` (index or name) of `scene`. Returns a dict of numpy arrays: rgb float32 [H, W, 3], "
       "alpha [H, W], depth [H, W]; for hybrid models objects [H, W, L] (per-label opacity, column 0 = background) "
       "and, with language=True, language [H, W, D]. background: RGB in [0, 1] (default black); sh_degree: "
-      "the SH degree used (-1 = the model's)");
+      "the SH degree used (-1 = the model's); near_plane: cull Gaussians nearer than this to the camera (default: "
+      "the model's near_plane attribute, set by Model.load and hgs.train, else 0.01)");
 }
 
 }  // namespace hgs::py

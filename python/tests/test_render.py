@@ -42,3 +42,22 @@ def test_render_errors(hybrid_model, scene):
         hgs.render(hybrid_model, scene, 99)
     with pytest.raises(ValueError, match="background"):
         hgs.render(hybrid_model, scene, 0, background=(1, 0))
+
+
+def test_near_plane(rgb_model, scene, tmp_path):
+    # hgs.train sets the model's near_plane from its configuration; hgs.render culls at it unless told another,
+    # and Model.load reads it from the config.json beside the PLY.
+    assert rgb_model.near_plane == pytest.approx(0.01)
+    a = hgs.render(rgb_model, scene, 1)
+    assert a["alpha"].max() > 0.5
+    far = hgs.render(rgb_model, scene, 1, near_plane=100.0)  # the cameras are about 1 unit from the scene
+    assert far["alpha"].max() == 0
+    m = hgs.train(scene, method="rgb", iters=40, progress=False, near_plane=100.0, out=tmp_path / "m")
+    assert m.near_plane == pytest.approx(100.0)
+    assert hgs.render(m, scene, 1)["alpha"].max() == 0
+    loaded = hgs.Model.load(tmp_path / "m")
+    assert loaded.near_plane == pytest.approx(100.0)
+    np.testing.assert_array_equal(hgs.render(loaded, scene, 1, near_plane=0.01)["rgb"],
+                                  hgs.render(m, scene, 1, near_plane=0.01)["rgb"])
+    with pytest.raises(hgs.Error, match="near"):
+        hgs.render(rgb_model, scene, 1, near_plane=-1.0)

@@ -10,6 +10,7 @@
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/progress.h"
+#include "model/near_plane.h"
 #include "model/ply.h"
 #include "model/render_inputs.h"
 #include "render/camera_from_view.h"
@@ -23,6 +24,7 @@ namespace {
 struct RenderArgs {
   std::string scene, model, out, split = "test";
   int downscale = 1, threads = 0;
+  float near_plane = 0;  // 0: as MODEL/config.json says
   bool white_bg = false, black_bg = false, quiet = false;
 };
 
@@ -46,6 +48,7 @@ void run_render(const RenderArgs& a) {
   }
   if (a.white_bg) white = true;
   if (a.black_bg) white = false;
+  const float near_plane = a.near_plane > 0 ? a.near_plane : model_near_plane(model_path);
   GaussianModel model = read_model_ply(model_path);
   Scene scene = load_scene(a.scene, {a.downscale, false});
   std::vector<int> idx;
@@ -71,7 +74,7 @@ void run_render(const RenderArgs& a) {
   for (size_t k = 0; k < idx.size(); ++k) {
     const View& v = scene.views[idx[k]];
     Image gt = scene.load_image(v.index);
-    renderer.forward(render::camera_from_view(v), in, rs, ro);
+    renderer.forward(render::camera_from_view(v, near_plane), in, rs, ro);
     Image img;
     const ViewScore score = score_view(ro.rgb, gt, img, ws);
     const float psnr = score.psnr, ssim = score.ssim;
@@ -93,13 +96,11 @@ void run_render(const RenderArgs& a) {
     bar.update(long(k + 1), fmt::format("psnr {:.2f}", psnr));
   }
   const double nv = double(idx.size());
-  nlohmann::json metrics = {{"split", a.split},
-                            {"model", fs::absolute(model_path).lexically_normal().string()},
-                            {"num_views", idx.size()},
-                            {"num_gaussians", model.n},
-                            {"mean_psnr", sum_psnr / nv},
-                            {"mean_ssim", sum_ssim / nv},
-                            {"views", per_view}};
+  nlohmann::json metrics = {
+      {"split", a.split},           {"model", fs::absolute(model_path).lexically_normal().string()},
+      {"num_views", idx.size()},    {"num_gaussians", model.n},
+      {"near_plane", near_plane},   {"mean_psnr", sum_psnr / nv},
+      {"mean_ssim", sum_ssim / nv}, {"views", per_view}};
   atomic_write_text(out / "metrics.json", metrics.dump(2) + "\n");
   bar.finish();
   if (!a.quiet)
@@ -123,6 +124,9 @@ CommandRegistration reg(
        auto* w =
            sub.add_flag("--white-bg", a->white_bg, "White background (default: as in MODEL/config.json, else black)");
        sub.add_flag("--black-bg", a->black_bg, "Black background")->excludes(w);
+       sub.add_option("--near-plane", a->near_plane,
+                      "Cull Gaussians nearer than this to the camera (default: as in MODEL/config.json, else 0.01)")
+           ->check(CLI::PositiveNumber);
        sub.add_flag("--quiet", a->quiet, "No progress output");
        return [a] { run_render(*a); };
      }});

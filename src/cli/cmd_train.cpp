@@ -39,6 +39,7 @@ struct TrainArgs {
   std::string lang_storage = "half", bro_gradient = "scale-invariant", bro_norm = "image", unconfident = "unobserved";
   int iters = 30000, downscale = 1, threads = 0, sh_degree = 3, save_every = 0, batch = 1, test_every = 0;
   uint64_t seed = 0;
+  float near_plane = render::kDefaultNearPlane;
   bool no_densify = false, white_bg = false, quiet = false;
 };
 
@@ -51,6 +52,7 @@ train::TrainConfig train_config(const TrainArgs& a) {
   cfg.seed = a.seed;
   cfg.densify = !a.no_densify;
   cfg.white_bg = a.white_bg;
+  cfg.near_plane = a.near_plane;
   cfg.save_every = a.save_every;
   cfg.batch = a.batch;
   cfg.batch_lr = a.batch_lr;
@@ -131,8 +133,8 @@ struct LossEma {
 // far (the scoring itself excluded), for curves and time-to-quality figures.
 class HeldOutCurve {
  public:
-  HeldOutCurve(const TrainArgs& a, const Scene& scene, bool writer)
-      : every_(a.test_every), last_(a.iters), white_(a.white_bg) {
+  HeldOutCurve(const TrainArgs& a, const Scene& scene, bool writer, float near_plane)
+      : every_(a.test_every), last_(a.iters), white_(a.white_bg), near_(near_plane) {
     if (every_ <= 0 || !writer) return;
     views_ = scene.test_indices();
     if (views_.empty()) fail("--test-every: {} has no held-out views (its split puts every view in training)", a.scene);
@@ -142,7 +144,7 @@ class HeldOutCurve {
                   std::chrono::steady_clock::time_point t0) {
     if (views_.empty() || !(it / every_ > (it - G) / every_ || it >= last_)) return;
     const auto ts = std::chrono::steady_clock::now();
-    const ViewScore sc = score_views(scene, views_, trainer.model(), white_, images_);
+    const ViewScore sc = score_views(scene, views_, trainer.model(), white_, near_, images_);
     const double train_s = std::chrono::duration<double>(ts - t0).count() - seconds_;
     seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
     curve_.push_back({{"iteration", it},
@@ -159,6 +161,7 @@ class HeldOutCurve {
  private:
   int every_, last_;
   bool white_;
+  float near_;
   std::vector<int> views_;
   std::vector<Image> images_;
   nlohmann::json curve_ = nlohmann::json::array();
@@ -324,7 +327,7 @@ void run_train(const TrainArgs& a) {
   const int start = trainer.iteration();
   RunTimes rt;
   LossEma ema;
-  HeldOutCurve held_out(a, scene, writer);
+  HeldOutCurve held_out(a, scene, writer, trainer.config().near_plane);  // a resumed run's, as trained
   train_loop(a, scene, trainer, mpi.rank(), writer, progress, rt, ema, held_out);
   if (!writer) return;  // every rank holds the same model; rank 0 writes it
   write_model_ply(out / "point_cloud.ply", trainer.model());
@@ -436,6 +439,11 @@ void add_run_options(CLI::App& sub, TrainArgs& a) {
   sub.add_option("--resume", a.resume, "Continue from a checkpoint (MODEL/checkpoints/iter_N.ckpt)");
   sub.add_flag("--no-densify", a.no_densify, "Keep the Gaussian count fixed (no clone/split/prune/opacity reset)");
   sub.add_flag("--white-bg", a.white_bg, "White background (default black)");
+  sub.add_option("--near-plane", a.near_plane,
+                 "Cull Gaussians nearer than this to a camera (scene units), in training and, through "
+                 "MODEL/config.json, wherever the model is rendered; 3DGS uses 0.2")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   sub.add_flag("--quiet", a.quiet, "No progress output");
 }
 

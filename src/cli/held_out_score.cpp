@@ -22,7 +22,7 @@ ViewScore score_view(const std::vector<float>& rgb, const Image& gt, Image& clam
 }
 
 ViewScore score_views(const Scene& scene, const std::vector<int>& idx, const GaussianModel& model, bool white,
-                      std::vector<Image>& images) {
+                      float near_plane, std::vector<Image>& images) {
   if (images.size() != idx.size()) {
     images.clear();
     for (int i : idx) images.push_back(scene.load_image(i));
@@ -37,7 +37,7 @@ ViewScore score_views(const Scene& scene, const std::vector<int>& idx, const Gau
   Image clamped;
   double psnr = 0, ssim = 0;
   for (size_t k = 0; k < idx.size(); ++k) {
-    renderer.forward(render::camera_from_view(scene.views[idx[k]]), in, rs, ro);
+    renderer.forward(render::camera_from_view(scene.views[idx[k]], near_plane), in, rs, ro);
     const ViewScore s = score_view(ro.rgb, images[k], clamped, ws);
     psnr += s.psnr;
     ssim += s.ssim;

@@ -18,9 +18,9 @@ struct ViewScore {
 // rgb [H, W, 3] (the renderer's output) against gt [H, W, 3]; `clamped` receives the render clamped to [0, 1].
 ViewScore score_view(const std::vector<float>& rgb, const Image& gt, Image& clamped, train::SsimWorkspace<float>& ws);
 
-// Renders `model` in each of the scene's views `idx` (background 1 if white else 0) and returns the means of
-// their scores. `images` caches the ground-truth images between calls (filled on the first).
+// Renders `model` in each of the scene's views `idx` (background 1 if white else 0, culling at `near_plane`) and
+// returns the means of their scores. `images` caches the ground-truth images between calls (filled on the first).
 ViewScore score_views(const Scene& scene, const std::vector<int>& idx, const GaussianModel& model, bool white,
-                      std::vector<Image>& images);
+                      float near_plane, std::vector<Image>& images);
 
 }  // namespace hgs::cli

@@ -10,6 +10,7 @@
 #include "core/npy.h"
 #include "core/progress.h"
 #include "masks/rle.h"
+#include "model/near_plane.h"
 #include "model/ply.h"
 #include "model/render_inputs.h"
 #include "render/camera_from_view.h"
@@ -95,12 +96,13 @@ std::function<std::vector<float>(const View&)> depth_from_model(const fs::path& 
   const fs::path ply = fs::is_directory(model_arg) ? model_arg / "point_cloud.ply" : model_arg;
   auto model = std::make_shared<GaussianModel>(read_model_ply(ply));
   auto renderer = std::make_shared<render::GaussianRenderer>();
-  return [model, renderer](const View& v) {
+  const float near_plane = model_near_plane(ply);
+  return [model, renderer, near_plane](const View& v) {
     render::GaussianInputs in = render_inputs(*model);
     render::RenderSettings rs;
     rs.want_depth = true;
     render::RenderOutputs out;
-    renderer->forward(render::camera_from_view(v), in, rs, out);
+    renderer->forward(render::camera_from_view(v, near_plane), in, rs, out);
     std::vector<float> d(out.alpha.size(), 0.f);
     for (size_t p = 0; p < d.size(); ++p)
       if (out.alpha[p] >= 0.5f) d[p] = out.depth[p] / out.alpha[p];

@@ -3,7 +3,6 @@
 #include <algorithm>
 
 #include "core/error.h"
-#include "render/camera_from_view.h"
 
 namespace hgs::query {
 namespace fs = std::filesystem;
@@ -37,8 +36,7 @@ std::vector<std::vector<float>> object_class_scores(query::Session& s, render::G
                                                     const std::vector<std::string>& classes) {
   std::vector<const float*> texts;  // [C] each [D]
   for (const auto& c : classes) texts.push_back(s.text().embed(c).data());
-  return query::object_class_scores(r, s.model(), render::camera_from_view(s.scene().views.at(view)), s.objects(),
-                                    texts, s.text().canonical());
+  return query::object_class_scores(r, s.model(), s.camera(view), s.objects(), texts, s.text().canonical());
 }
 
 }  // namespace

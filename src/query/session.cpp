@@ -1,6 +1,7 @@
 #include "query/session.h"
 
 #include "core/error.h"
+#include "model/near_plane.h"
 #include "model/ply.h"
 #include "render/camera_from_view.h"
 
@@ -11,15 +12,22 @@ Session::Session(const std::filesystem::path& scene, const std::filesystem::path
     : scene_(std::make_shared<const Scene>(load_scene(scene, {downscale, false}))),
       model_(std::make_shared<const GaussianModel>(read_model_ply(model_ply))),
       text_(*scene_, clip_path),
-      oe_(object_embeddings(*model_)) {
+      oe_(object_embeddings(*model_)),
+      near_plane_(model_near_plane(model_ply)) {
   check_dims(model_ply.string());
 }
 
 Session::Session(std::shared_ptr<const Scene> scene, std::shared_ptr<const GaussianModel> model,
-                 const std::filesystem::path& clip_path, const std::string& where)
-    : scene_(std::move(scene)), model_(std::move(model)), text_(*scene_, clip_path), oe_(object_embeddings(*model_)) {
+                 const std::filesystem::path& clip_path, const std::string& where, float near_plane)
+    : scene_(std::move(scene)),
+      model_(std::move(model)),
+      text_(*scene_, clip_path),
+      oe_(object_embeddings(*model_)),
+      near_plane_(checked_near_plane(near_plane, where + ": near_plane")) {
   check_dims(where);
 }
+
+render::Camera Session::camera(int view) const { return render::camera_from_view(scene_->views.at(view), near_plane_); }
 
 void Session::check_dims(const std::string& where) const {
   if (oe_.dim != text_.dim())
@@ -43,7 +51,7 @@ ObjectAnswer Session::ask(const std::string& text, const QueryOptions& opt) {
 
 std::vector<float> Session::object_opacity(int view, const std::vector<int>& objects) {
   const View& v = scene_->views.at(view);
-  std::vector<float> A = render_object_opacity(renderer_, *model_, render::camera_from_view(v), objects);
+  std::vector<float> A = render_object_opacity(renderer_, *model_, camera(view), objects);
   const size_t HW = size_t(v.width) * v.height, J = objects.size();
   std::vector<float> sum(HW, 0.f);
   for (size_t p = 0; p < HW; ++p)
@@ -66,16 +74,14 @@ eval::Mask Session::answer_mask(int view, const std::string& text, float thresho
 
 std::vector<float> Session::pixel_relevancy(int view, const std::string& text, Relevancy variant) {
   const auto& e = text_.embed(text);
-  return render_relevancy(renderer_, *model_, render::camera_from_view(scene_->views.at(view)), e.data(),
-                          text_.canonical(), variant, &oe_);
+  return render_relevancy(renderer_, *model_, camera(view), e.data(), text_.canonical(), variant, &oe_);
 }
 
 std::vector<std::vector<float>> Session::pixel_relevancies(int view, const std::vector<std::string>& texts,
                                                            Relevancy variant) {
   std::vector<const float*> e;
   for (const auto& t : texts) e.push_back(text_.embed(t).data());  // embed() keeps each embedding (cache)
-  return render_relevancies(renderer_, *model_, render::camera_from_view(scene_->views.at(view)), e, text_.canonical(),
-                            variant, &oe_);
+  return render_relevancies(renderer_, *model_, camera(view), e, text_.canonical(), variant, &oe_);
 }
 
 }  // namespace hgs::query

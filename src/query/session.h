@@ -29,18 +29,22 @@ struct ObjectAnswer {
 
 class Session {
  public:
+  // Renders cull at the near plane in the config.json beside `model_ply` (model/near_plane.h).
   Session(const std::filesystem::path& scene, const std::filesystem::path& model_ply, int downscale,
           const std::filesystem::path& clip_path);
   // On a scene and a model already in memory, shared, not copied (the Python binding); `where` names the model
   // in errors. The model must not change while the session lives (its object embeddings are computed here).
   Session(std::shared_ptr<const Scene> scene, std::shared_ptr<const GaussianModel> model,
-          const std::filesystem::path& clip_path, const std::string& where);
+          const std::filesystem::path& clip_path, const std::string& where,
+          float near_plane = render::kDefaultNearPlane);
 
   const Scene& scene() const { return *scene_; }
   const GaussianModel& model() const { return *model_; }
   TextEmbedder& text() { return text_; }
   const ObjectEmbeddings& objects() const { return oe_; }
   std::string object_name(int id) const;  // masks/objects.json name, or "object <id>"
+  // The renderer's camera of a scene view, culling at the model's near plane.
+  render::Camera camera(int view) const;
 
   ObjectAnswer ask(const std::string& text, const QueryOptions& opt = {});
   // Opacity of the chosen objects in a view, summed: [H, W] (heatmap of the object mode).
@@ -62,6 +66,7 @@ class Session {
   TextEmbedder text_;
   ObjectEmbeddings oe_;
   render::GaussianRenderer renderer_;
+  float near_plane_ = render::kDefaultNearPlane;
 
   void check_dims(const std::string& where) const;  // the model's D against the text embeddings'
 };

@@ -3,8 +3,9 @@
 
 namespace hgs::render {
 
-Camera camera_from_view(const View& v) {
+Camera camera_from_view(const View& v, float near_plane) {
   Camera c;
+  c.near_plane = near_plane;
   c.width = v.width;
   c.height = v.height;
   c.fx = float(v.fx);

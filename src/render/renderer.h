@@ -67,12 +67,16 @@
 
 namespace hgs::render {
 
+// Camera-space depth below which a Gaussian is culled, unless a model says otherwise (TrainConfig::near_plane;
+// gsplat's default; 3DGS's rasterizer culls at 0.2 scene units).
+inline constexpr float kDefaultNearPlane = 0.01f;
+
 struct Camera {
   int width = 0, height = 0;
   float fx = 0, fy = 0, cx = 0, cy = 0;
   float R[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};  // world -> camera, row-major
   float t[3] = {0, 0, 0};
-  float near_plane = 0.01f;  // Gaussians with camera-space depth below this are culled
+  float near_plane = kDefaultNearPlane;  // Gaussians with camera-space depth below this are culled
 };
 
 // Read-only views of the Gaussian parameters (plain arrays, not owned). T = float in production; the pipeline is

@@ -316,6 +316,7 @@ void Trainer::load_checkpoint(const std::filesystem::path& path) {
     // Everything parsed and checked: commit (the method checks its own state before it takes it).
     method_->state_loaded(where, h.value("method_config", json(nullptr)), m.n, method);
     cfg_ = c;
+    for (TrainView& v : views_) v.cam.near_plane = cfg_.near_plane;  // the run continues as it was trained
     model_ = std::move(m);
     for (size_t i = 0; i < a.size(); ++i) {
       AdamParam& p = adam_.params[i];

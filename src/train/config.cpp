@@ -33,6 +33,7 @@ nlohmann::json TrainConfig::to_json() const {
           {"sh_degree", sh_degree},
           {"densify", densify},
           {"white_bg", white_bg},
+          {"near_plane", near_plane},
           {"seed", seed},
           {"lambda_dssim", lambda_dssim},
           {"lr_position_init", lr_position_init},
@@ -82,6 +83,9 @@ TrainConfig TrainConfig::from_json(const nlohmann::json& j, const std::string& w
   get("sh_degree", c.sh_degree);
   get("densify", c.densify);
   get("white_bg", c.white_bg);
+  get("near_plane", c.near_plane);
+  if (!(c.near_plane > 0) || !std::isfinite(c.near_plane))
+    fail("{}: 'near_plane' must be a number > 0, got {}", where, c.near_plane);
   get("seed", c.seed);
   get("lambda_dssim", c.lambda_dssim);
   get("lr_position_init", c.lr_position_init);

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "render/renderer.h"
 #include "train/densify.h"
 
 namespace hgs::train {
@@ -19,6 +20,10 @@ struct TrainConfig {
   int sh_degree = 3;  // maximum SH degree
   bool densify = true;
   bool white_bg = false;
+  // Camera-space depth below which Gaussians are culled in training and, through MODEL/config.json, wherever the
+  // model is rendered (model/near_plane.h). 3DGS's rasterizer uses 0.2 scene units (COLMAP scenes normalised to
+  // a camera extent of about 10); the default keeps gsplat's 0.01 (docs/scaling.md, "The near plane").
+  float near_plane = render::kDefaultNearPlane;
   uint64_t seed = 0;
   float lambda_dssim = 0.2f;
   // Learning rates (3DGS). Positions are scaled by the scene extent and decay log-linearly over `iters`.

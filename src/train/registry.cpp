@@ -56,7 +56,7 @@ std::unique_ptr<Trainer> make_trainer(const Scene& scene, const std::vector<int>
   }
   if (idx.empty()) fail("{}: the scene has no training views", scene.root.string());
   std::unique_ptr<Method> m = f.make(scene, idx, cfg, options, progress);
-  auto views = load_train_views(scene, idx, progress);
+  auto views = load_train_views(scene, idx, progress, cfg.near_plane);
   const float extent = scene_extent(scene, idx);
   GaussianModel init = init_from_points(scene.points, scene.point_colors, cfg.sh_degree);
   return std::make_unique<Trainer>(cfg, std::move(init), std::move(views), extent, std::move(m), reducer);

@@ -8,7 +8,9 @@
 
 namespace hgs::train {
 
-// Loads the training images of `idx` in parallel, with a progress bar when `progress`.
-std::vector<TrainView> load_train_views(const Scene& scene, const std::vector<int>& idx, bool progress);
+// Loads the training images of `idx` in parallel, with a progress bar when `progress`; the cameras cull at
+// `near_plane` (TrainConfig::near_plane).
+std::vector<TrainView> load_train_views(const Scene& scene, const std::vector<int>& idx, bool progress,
+                                        float near_plane = render::kDefaultNearPlane);
 
 }  // namespace hgs::train

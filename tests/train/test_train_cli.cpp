@@ -94,6 +94,40 @@ TEST_F(TrainCli, RgbConvergesAndWritesOutputs) {
   EXPECT_EQ(w, 96);
 }
 
+// --near-plane: training writes it to config.json, `hgs render` culls at the config's value unless told another,
+// and a bad value in config.json is a one-line error naming the file.
+TEST_F(TrainCli, NearPlaneTravelsWithTheModel) {
+  test::TempDir out;
+  auto r = test::run_hgs("train " + scene() + " --method rgb --no-densify --iters 100 --near-plane 0.05 --out " +
+                         (out / "m").string() + " --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  auto cfg = read_json(out / "m" / "config.json");
+  EXPECT_FLOAT_EQ(cfg["near_plane"].get<float>(), 0.05f);
+  auto render = [&](const std::string& name, const std::string& extra) {
+    auto rr = test::run_hgs("render " + scene() + " " + (out / "m").string() + " --out " + (out / name).string() +
+                            extra + " --quiet");
+    EXPECT_EQ(rr.exit_code, 0) << rr.err;
+    return read_json(out / name / "metrics.json");
+  };
+  const auto as_trained = render("r", "");
+  EXPECT_FLOAT_EQ(as_trained["near_plane"].get<float>(), 0.05f);
+  // The scene's cameras are about 1 unit from the objects: a near plane of 100 culls every Gaussian.
+  const auto culled = render("far", " --near-plane 100");
+  EXPECT_FLOAT_EQ(culled["near_plane"].get<float>(), 100.f);
+  EXPECT_LT(culled["mean_psnr"].get<double>(), as_trained["mean_psnr"].get<double>() - 3.0);
+  cfg["near_plane"] = 100.0;
+  atomic_write_text(out / "m" / "config.json", cfg.dump(2));
+  const auto from_config = render("cfg", "");
+  EXPECT_EQ(from_config["mean_psnr"], culled["mean_psnr"]);  // the config's value, as the flag's
+  cfg["near_plane"] = -1.0;
+  atomic_write_text(out / "m" / "config.json", cfg.dump(2));
+  r = test::run_hgs("render " + scene() + " " + (out / "m").string() + " --out " + (out / "bad").string() + " --quiet");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.err.find("config.json"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("near plane"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(out / "bad" / "metrics.json"));
+}
+
 TEST_F(TrainCli, NoDensifyKeepsCountAndResumeContinues) {
   test::TempDir out;
   auto r = test::run_hgs("train " + scene() + " --method rgb --no-densify --save-every 100 --iters 200 --out " +

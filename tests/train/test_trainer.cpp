@@ -50,6 +50,11 @@ TEST(TrainConfig, PositionLrDecaysLogLinearly) {
   EXPECT_THROW(TrainConfig::from_json(nlohmann::json{{"iters", "many"}}, "x.json"), Error);
   EXPECT_THROW(TrainConfig::from_json(nlohmann::json{{"batch_lr", "linear"}}, "x.json"), Error);
   EXPECT_EQ(TrainConfig::from_json(nlohmann::json{{"batch_lr", "sqrt-rates"}}, "x.json").batch_lr, "sqrt-rates");
+  // The near plane travels with the configuration (MODEL/config.json, checkpoints); absent, gsplat's 0.01.
+  EXPECT_EQ(TrainConfig::from_json(nlohmann::json{{"near_plane", 0.2}}, "x.json").near_plane, 0.2f);
+  EXPECT_EQ(TrainConfig::from_json(nlohmann::json::object(), "x.json").near_plane, 0.01f);
+  EXPECT_THROW(TrainConfig::from_json(nlohmann::json{{"near_plane", 0}}, "x.json"), Error);
+  EXPECT_THROW(TrainConfig::from_json(nlohmann::json{{"near_plane", -0.2}}, "x.json"), Error);
 }
 
 // A tiny problem: 40 Gaussians in front of a 32x24 camera, target = render of a different random model.
