@@ -11,7 +11,8 @@
 namespace hgs {
 
 float checked_near_plane(double value, const std::string& where) {
-  if (!std::isfinite(value) || value <= 0 || value > 1e30) fail("{}: the near plane must be a number > 0, got {}", where, value);
+  if (!std::isfinite(value) || value <= 0 || value > 1e30)
+    fail("{}: the near plane must be a number > 0, got {}", where, value);
   return float(value);
 }
 

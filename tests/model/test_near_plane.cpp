@@ -15,7 +15,7 @@ namespace {
 
 TEST(NearPlane, ReadBesideThePly) {
   test::TempDir d;
-  const auto ply = d / "point_cloud.ply";  // need not exist: only the config beside it is read
+  const auto ply = d / "point_cloud.ply";                       // need not exist: only the config beside it is read
   EXPECT_EQ(model_near_plane(ply), render::kDefaultNearPlane);  // no config.json
   atomic_write_text(d / "config.json", R"({"method": "rgb"})");
   EXPECT_EQ(model_near_plane(ply), render::kDefaultNearPlane);  // trained before the key existed
