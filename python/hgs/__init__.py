@@ -63,7 +63,7 @@ sys.modules[__name__ + ".clip"] = clip
 sys.modules[__name__ + ".sam"] = sam
 
 # The near plane hgs.render and QuerySession cull a model at: Model.load and hgs.train set it on the instance
-# (the model's config); a model made from arrays, copied or selected has the renderer's default.
+# (the model's config), copy and select carry it over; a model made from arrays has the renderer's default.
 Model.near_plane = 0.01
 
 __all__ = [

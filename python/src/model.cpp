@@ -70,6 +70,15 @@ ModelPtr from_arrays(pb::handle means, pb::handle log_scales, pb::handle rotatio
   return m;
 }
 
+// A model derived from `self` (copy, select) keeps the near plane its instance was given (Model.load, hgs.train):
+// it is seen from the same cameras.
+pb::object derived(const pb::object& self, std::shared_ptr<GaussianModel> g) {
+  pb::object o = pb::cast(std::move(g));
+  const pb::dict own = self.attr("__dict__");
+  if (own.contains("near_plane")) o.attr("near_plane") = own["near_plane"];
+  return o;
+}
+
 }  // namespace
 
 void bind_model(pb::module_& m) {
@@ -114,7 +123,11 @@ void bind_model(pb::module_& m) {
           "Writes the model as a 3DGS PLY (atomically): to `path` when it ends in .ply, else to "
           "path/point_cloud.ply; returns the file written")
       .def(
-          "copy", [](const GaussianModel& g) { return std::make_shared<GaussianModel>(g); }, "A deep copy")
+          "copy",
+          [](const pb::object& self) {
+            return derived(self, std::make_shared<GaussianModel>(self.cast<const GaussianModel&>()));
+          },
+          "A deep copy (with the instance's near_plane)")
       .def_readonly("n", &GaussianModel::n, "Number of Gaussians N")
       .def("__len__", [](const GaussianModel& g) { return g.n; })
       .def_readonly("sh_degree", &GaussianModel::sh_degree, "SH degree stored (0..3)")
@@ -189,12 +202,18 @@ void bind_model(pb::module_& m) {
           "Every extra per-Gaussian group by name (obj = q, obj_id = z, lang = f, ...), as views")
       .def(
           "select",
-          [](const GaussianModel& g, const std::vector<int>& objects, bool remove) {
-            pb::gil_scoped_release nogil;
-            return std::make_shared<GaussianModel>(query::select_objects(g, objects, remove));
+          [](const pb::object& self, const std::vector<int>& objects, bool remove) {
+            const GaussianModel& g = self.cast<const GaussianModel&>();
+            std::shared_ptr<GaussianModel> out;
+            {
+              pb::gil_scoped_release nogil;
+              out = std::make_shared<GaussianModel>(query::select_objects(g, objects, remove));
+            }
+            return derived(self, std::move(out));
           },
           pb::arg("objects"), pb::arg("remove") = false,
-          "Hybrid: a copy with the Gaussians whose hard id is one of `objects` (or all others with remove=True)")
+          "Hybrid: a copy with the Gaussians whose hard id is one of `objects` (or all others with remove=True), "
+          "with the instance's near_plane")
       .def("__repr__", [](const GaussianModel& g) {
         return fmt::format("<hgs.Model {} Gaussians, SH degree {}, {}>", g.n, g.sh_degree,
                            hybrid::ConstHybridFields::present(g) ? "hybrid" : "rgb");

@@ -55,9 +55,19 @@ def test_near_plane(rgb_model, scene, tmp_path):
     m = hgs.train(scene, method="rgb", iters=40, progress=False, near_plane=100.0, out=tmp_path / "m")
     assert m.near_plane == pytest.approx(100.0)
     assert hgs.render(m, scene, 1)["alpha"].max() == 0
+    assert m.copy().near_plane == pytest.approx(100.0)  # a copy is seen from the same cameras
+    assert hgs.render(m.copy(), scene, 1)["alpha"].max() == 0
     loaded = hgs.Model.load(tmp_path / "m")
     assert loaded.near_plane == pytest.approx(100.0)
     np.testing.assert_array_equal(hgs.render(loaded, scene, 1, near_plane=0.01)["rgb"],
                                   hgs.render(m, scene, 1, near_plane=0.01)["rgb"])
     with pytest.raises(hgs.Error, match="near"):
         hgs.render(rgb_model, scene, 1, near_plane=-1.0)
+
+
+def test_select_keeps_the_near_plane(hybrid_model):
+    m = hybrid_model.copy()
+    m.near_plane = 0.5
+    assert m.select([1]).near_plane == pytest.approx(0.5)
+    assert m.select([1], remove=True).near_plane == pytest.approx(0.5)
+    assert hgs.Model(m.means, m.log_scales, m.rotations, m.opacity_logits, m.sh).near_plane == pytest.approx(0.01)

@@ -7,7 +7,8 @@
 
 namespace hgs::hybrid {
 
-void hide_occluded_all(const GaussianModel& m, const std::vector<MaskView>& views, ObservationTable& table) {
+void hide_occluded_all(const GaussianModel& m, const std::vector<MaskView>& views, float near_plane,
+                       ObservationTable& table) {
   render::GaussianRenderer r;
   render::GaussianInputs in = render_inputs(m);
   in.sh_degree = 0;  // colours do not matter here
@@ -24,6 +25,7 @@ void hide_occluded_all(const GaussianModel& m, const std::vector<MaskView>& view
     cam.fy = float(v.fy);
     cam.cx = float(v.cx);
     cam.cy = float(v.cy);
+    cam.near_plane = near_plane;
     for (int k = 0; k < 9; ++k) cam.R[k] = float(v.R[k]);
     for (int k = 0; k < 3; ++k) cam.t[k] = float(v.t[k]);
     r.forward(cam, in, rs, out);
@@ -58,10 +60,10 @@ const std::vector<float>& ObjectAssociation::weights() const {
   return w_;
 }
 
-void ObjectAssociation::refresh(GaussianModel& m, HybridFields& h) {
+void ObjectAssociation::refresh(GaussianModel& m, HybridFields& h, float near_plane) {
   observe(m.mean.data(), m.n, *masks_, table_);
   // The occlusion test is part of Observation Fusion; the single-view assignment (no-OF ablation) keeps eq. 3's V.
-  if (cfg_.use_of && cfg_.occlusion_test) hide_occluded_all(m, *masks_, table_);
+  if (cfg_.use_of && cfg_.occlusion_test) hide_occluded_all(m, *masks_, near_plane, table_);
   if (cfg_.use_of) fuse(m.n, h);
   else single_view_assignment(table_, L_, h.q->data.data());
   update_hard_ids(m.n, h);

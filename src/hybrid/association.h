@@ -17,8 +17,10 @@ namespace hgs::hybrid {
 
 // The occlusion test of Observation Fusion for every view (fusion.h, hide_occluded): renders the model's depth
 // in each view (surface depth = expected depth / alpha where alpha > 0.5) and marks hidden Gaussians' entries of
-// `table` as no observation. Costs one render per training view.
-void hide_occluded_all(const GaussianModel& m, const std::vector<MaskView>& views, ObservationTable& table);
+// `table` as no observation. Costs one render per training view. near_plane: the training cameras' (a Gaussian
+// nearer to the camera than it is culled in training, so it is no surface here either).
+void hide_occluded_all(const GaussianModel& m, const std::vector<MaskView>& views, float near_plane,
+                       ObservationTable& table);
 
 class ObjectAssociation {
  public:
@@ -29,8 +31,9 @@ class ObjectAssociation {
   // parameters' scales).
   void attach(train::Adam& optim);
   void set_config(const HybridConfig& cfg) { cfg_ = cfg; }
-  // Rebuilds the observation table from the current centres, then q (fused or single-view) and z.
-  void refresh(GaussianModel& m, HybridFields& h);
+  // Rebuilds the observation table from the current centres, then q (fused or single-view) and z. near_plane:
+  // the training cameras' (the occlusion test's depth renders).
+  void refresh(GaussianModel& m, HybridFields& h, float near_plane);
   // q = softmax(s(w) / T) from the current table and logits (OF only).
   void fuse(int n, HybridFields& h);
   // z = argmax q.

@@ -40,8 +40,9 @@ void HybridMethod::attach(GaussianModel& model, train::Adam& optim, const std::v
     return g->f16 ? train::ParamValues{nullptr, &g->half} : train::ParamValues{&g->data, nullptr};
   };
   assoc_.attach(optim);
+  views_ = &views;
   HybridFields fields = HybridFields::bind(model, "hybrid");
-  assoc_.refresh(model, fields);
+  assoc_.refresh(model, fields, near_plane());
 }
 
 // f: random (seeded) for a new model; a model's own f is kept, converted to the configured storage.
@@ -215,11 +216,15 @@ void HybridMethod::update(const train::UpdateIO& io) {
   semantic_.update(io.model.n, fields, io.optim, io.grad_scale);
 }
 
+float HybridMethod::near_plane() const {
+  return views_ && !views_->empty() ? views_->front().cam.near_plane : render::kDefaultNearPlane;
+}
+
 void HybridMethod::after_step(const train::StepEnd& end) {
   HybridFields fields = HybridFields::bind(end.model, "hybrid");
   // The table is rebuilt every fusion_every images seen: in the step that covers a multiple of it.
   const int prev = end.iteration - 1, cur = end.images_seen, fe = cfg_.fusion_every;
-  if (end.densified || (fe > 0 && cur / fe > prev / fe)) assoc_.refresh(end.model, fields);
+  if (end.densified || (fe > 0 && cur / fe > prev / fe)) assoc_.refresh(end.model, fields, near_plane());
   else assoc_.update_hard_ids(end.model.n, fields);
 }
 

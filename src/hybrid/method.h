@@ -61,10 +61,14 @@ class HybridMethod final : public train::Method {
     ObjectLosses::PhaseTimes app_phases;
   };
   void init_language(GaussianModel& model) const;
+  float near_plane() const;  // the training cameras'
 
   HybridConfig cfg_;
   HybridData data_;
   uint64_t seed_;
+  // The trainer's views (attach; the trainer owns this method, cannot be moved and sets a resumed run's near plane
+  // on them in place): the occlusion test renders depth at their near plane.
+  const std::vector<train::TrainView>* views_ = nullptr;
   ObjectAssociation assoc_;
   ObjectLosses object_losses_;
   SemanticPass semantic_;

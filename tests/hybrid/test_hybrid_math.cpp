@@ -9,10 +9,12 @@
 #include <random>
 
 #include "fd_check.h"
+#include "hybrid/association.h"
 #include "hybrid/bro.h"
 #include "hybrid/fusion.h"
 #include "hybrid/object_channels.h"
 #include "hybrid/scl.h"
+#include "render/renderer.h"
 
 using namespace hgs;
 using namespace hgs::hybrid;
@@ -299,6 +301,30 @@ TEST(ObservationFusion, HiddenGaussiansAreNoObservation) {
   EXPECT_EQ(tab.label[1], 1);
   EXPECT_EQ(tab.label[2], kNoObservation);
   EXPECT_EQ(tab.label[3], 1);
+}
+
+TEST(ObservationFusion, OcclusionDepthIsRenderedAtTheTrainingNearPlane) {
+  // An opaque wall 0.1 in front of the camera covering the image, and a small opaque Gaussian at depth 2 behind it.
+  // At the default plane the wall is the surface and hides the Gaussian; with the cameras' plane at 0.2 the wall is
+  // culled (training never shows it), so the Gaussian is the surface and stays observed.
+  GaussianModel m;
+  m.sh_degree = 0;
+  m.resize(2);
+  m.mean = {0.f, 0.f, 0.1f, 0.f, 0.f, 2.f};
+  m.log_scale = {-1.f, -1.f, -4.f, -2.f, -2.f, -2.f};
+  m.quat = {1.f, 0.f, 0.f, 0.f, 1.f, 0.f, 0.f, 0.f};
+  m.opacity_logit = {6.f, 6.f};
+  m.sh.assign(6, 1.f);
+  const std::vector<MaskView> views = {pinhole_view(1)};
+  for (float plane : {render::kDefaultNearPlane, 0.2f}) {
+    SCOPED_TRACE(plane);
+    ObservationTable tab;
+    observe(m.mean.data(), m.n, views, tab);
+    ASSERT_EQ(tab.label[1], 1);
+    hide_occluded_all(m, views, plane, tab);
+    EXPECT_EQ(tab.label[0], 1);  // the wall is never behind anything
+    EXPECT_EQ(tab.label[1], plane > 0.1f ? 1 : kNoObservation);
+  }
 }
 
 TEST(ObjectChannels, GradientToQAndColour) {

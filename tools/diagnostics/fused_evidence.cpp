@@ -13,6 +13,7 @@
 #include "hybrid/association.h"
 #include "hybrid/data.h"
 #include "hybrid/fusion.h"
+#include "model/near_plane.h"
 #include "model/ply.h"
 #include "object_stats.h"
 #include "scene/scene.h"
@@ -51,7 +52,9 @@ int main(int argc, char** argv) try {
   }
   hybrid::ObservationTable tab;
   hybrid::observe(m.mean.data(), m.n, data.masks, tab);
-  if (visible) hybrid::hide_occluded_all(m, data.masks, tab);
+  // At the plane the model was trained with (MODEL/config.json).
+  if (visible)
+    hybrid::hide_occluded_all(m, data.masks, model_near_plane(std::string(argv[2]) + "/point_cloud.ply"), tab);
   int L = data.num_labels, U = tab.num_views;
   const ExtraGroup* z = m.find_extra("obj_id");
   if (!z) throw std::runtime_error(std::string(argv[2]) + ": not a hybrid model (no obj_id)");
