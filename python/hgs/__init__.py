@@ -62,8 +62,9 @@ from ._hgs import (  # noqa: E402  (after the environment above)
 sys.modules[__name__ + ".clip"] = clip
 sys.modules[__name__ + ".sam"] = sam
 
-# The near plane hgs.render and QuerySession cull a model at: Model.load and hgs.train set it on the instance
-# (the model's config), copy and select carry it over; a model made from arrays has the renderer's default.
+# The near plane hgs.render and QuerySession cull a model at: Model.load, hgs.train and Trainer.model / finish set
+# it on the instance (the model's config), copy and select carry it over; a model made from arrays has the
+# renderer's default.
 Model.near_plane = 0.01
 
 __all__ = [
@@ -240,8 +241,7 @@ def train(scene, out=None, method="hybrid", iters=30000, callback=None, callback
         config["resumed_from"] = os.fspath(resume)
     if save_every:
         _snapshot(trainer, out, with_ply=False)
-    model = trainer.finish()
-    model.near_plane = float(config.get("near_plane", 0.01))  # hgs.render and QuerySession cull as training did
+    model = trainer.finish()  # with the run's near_plane: hgs.render and QuerySession cull as training did
     if bar is not None:
         note = {"callback": " (stopped by the callback)", "interrupted": " (interrupted)"}.get(stopped, "")
         bar.finish(it - start, f"N {model.n}{note}")

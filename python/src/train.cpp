@@ -97,17 +97,25 @@ class PyTrainer {
   int iteration() const { return live().iteration(); }
   int step_views() const { return live().step_views(); }
   int iters() const { return live().config().iters; }
-  std::shared_ptr<GaussianModel> model_copy() const {
+  // Both carry the run's near plane as the model's near_plane attribute (hgs.render and QuerySession cull at it).
+  pb::object model_copy() const {
     live();
-    return std::make_shared<GaussianModel>(trainer_->model());
+    pb::object o = pb::cast(std::make_shared<GaussianModel>(trainer_->model()));
+    o.attr("near_plane") = trainer_->config().near_plane;
+    return o;
   }
   // Ends training: the model moves out (no copy) and the trainer is released.
-  std::shared_ptr<GaussianModel> finish() {
+  pb::object finish() {
     live();
+    const float near_plane = trainer_->config().near_plane;
     auto m = std::make_shared<GaussianModel>(std::move(trainer_->model()));
-    pb::gil_scoped_release nogil;
-    trainer_.reset();
-    return m;
+    {
+      pb::gil_scoped_release nogil;
+      trainer_.reset();
+    }
+    pb::object o = pb::cast(std::move(m));
+    o.attr("near_plane") = near_plane;
+    return o;
   }
   std::string config_text() const { return config_.dump(); }
   void save_checkpoint(const std::filesystem::path& p) const {

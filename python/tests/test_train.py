@@ -110,18 +110,20 @@ def test_checkpoints_and_resume(scene, tmp_path):
 
 
 def test_trainer_step_by_step(scene):
-    t = hgs.Trainer(scene, "rgb", 6, {"densify": False})
+    t = hgs.Trainer(scene, "rgb", 6, {"densify": False, "near_plane": 0.05})
     infos = [t.step() for _ in range(3)]
     assert t.iteration == 3 and t.step_views == 1 and t.iters == 6
     assert all(i.num_gaussians == len(scene.points) and i.ms > 0 for i in infos)
     assert set(infos[0].terms) == {"rgb"} and infos[0].loss == pytest.approx(infos[0].terms["rgb"])
     assert set(infos[0].times) >= {"forward", "backward", "update"}
     snapshot = t.model  # a copy: later steps do not change it
+    assert snapshot.near_plane == pytest.approx(0.05)  # seen as the run sees it
     before = snapshot.means.copy()
     t.step()
     np.testing.assert_array_equal(snapshot.means, before)
     m = t.finish()
     assert not np.array_equal(m.means, before)
+    assert m.near_plane == pytest.approx(0.05)
     with pytest.raises(hgs.Error, match="finished"):
         t.step()
 
