@@ -61,7 +61,7 @@ const std::vector<float>& ObjectAssociation::weights() const {
 }
 
 void ObjectAssociation::refresh(GaussianModel& m, HybridFields& h, float near_plane) {
-  observe(m.mean.data(), m.n, *masks_, table_);
+  observe(m.mean.data(), m.n, *masks_, table_, near_plane);
   // The occlusion test is part of Observation Fusion; the single-view assignment (no-OF ablation) keeps eq. 3's V.
   if (cfg_.use_of && cfg_.occlusion_test) hide_occluded_all(m, *masks_, near_plane, table_);
   if (cfg_.use_of) fuse(m.n, h);

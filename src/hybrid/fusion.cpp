@@ -22,14 +22,14 @@ std::vector<uint8_t> confident_pixels(const std::vector<float>& conf, float tau1
 
 namespace {
 
-// Eq. 3 for one centre in one view: camera-space depth z and, when z > 0 and the projection lies in the image,
-// the pixel (ix, iy). Returns false otherwise (V_{n,u} = 0). Shared by observe() and hide_occluded(), which must
-// agree on the pixel.
-inline bool project_centre(const MaskView& v, const float* c, double& z, int& ix, int& iy) {
+// Eq. 3 for one centre in one view: camera-space depth z and, when z > 0, z >= near and the projection lies in
+// the image, the pixel (ix, iy). Returns false otherwise (V_{n,u} = 0). Shared by observe() and hide_occluded(),
+// which must agree on the pixel.
+inline bool project_centre(const MaskView& v, const float* c, double near, double& z, int& ix, int& iy) {
   const double X = c[0], Y = c[1], Z = c[2];
   const double* R = v.R;
   z = R[6] * X + R[7] * Y + R[8] * Z + v.t[2];
-  if (!(z > 0)) return false;
+  if (!(z > 0 && z >= near)) return false;
   const double x = R[0] * X + R[1] * Y + R[2] * Z + v.t[0];
   const double y = R[3] * X + R[4] * Y + R[5] * Z + v.t[1];
   const double px = v.fx * x / z + v.cx, py = v.fy * y / z + v.cy;
@@ -49,13 +49,14 @@ void hide_occluded(const float* means, int n, const MaskView& v, const float* su
     uint16_t& l = table.label[size_t(i) * U + u];
     double z;
     int ix, iy;
-    if (l == kNoObservation || !project_centre(v, means + 3 * i, z, ix, iy)) continue;
+    if (l == kNoObservation || !project_centre(v, means + 3 * i, 0.0, z, ix, iy)) continue;  // observed: z >= near
     const float d = surface_depth[size_t(iy) * v.width + ix];
     if (d > 0 && z > d * (1 + kOcclusionTolerance)) l = kNoObservation;
   }
 }
 
-void observe(const float* means, int n, const std::vector<MaskView>& views, ObservationTable& table) {
+void observe(const float* means, int n, const std::vector<MaskView>& views, ObservationTable& table,
+             double near_plane) {
   const int U = static_cast<int>(views.size());
   table.n = n;
   table.num_views = U;
@@ -66,7 +67,7 @@ void observe(const float* means, int n, const std::vector<MaskView>& views, Obse
       const MaskView& v = views[u];
       double z;
       int ix, iy;
-      if (!project_centre(v, means + 3 * i, z, ix, iy)) continue;
+      if (!project_centre(v, means + 3 * i, near_plane, z, ix, iy)) continue;
       if (!v.observed.empty() && !v.observed[size_t(iy) * v.width + ix]) continue;
       table.label[size_t(i) * U + u] = v.labels.at(ix, iy);
     }

@@ -68,8 +68,11 @@ struct ObservationTable {
   std::vector<uint16_t> label;  // [N, U]: observed label, or kNoObservation
 };
 
-// means [N, 3]
-void observe(const float* means, int n, const std::vector<MaskView>& views, ObservationTable& table);
+// Eq. 3's V and the labels: Gaussian n is observed in view u when its centre projects into the image at a
+// camera-space depth of at least near_plane (the training cameras': the renderer culls nearer centres, so that
+// view never sees it). means [N, 3]
+void observe(const float* means, int n, const std::vector<MaskView>& views, ObservationTable& table,
+             double near_plane = 0.01);
 // Marks view u's observations of Gaussians hidden behind the surface as none. surface_depth [H, W] (0 = no
 // surface: no test there).
 void hide_occluded(const float* means, int n, const MaskView& view, const float* surface_depth, int u,

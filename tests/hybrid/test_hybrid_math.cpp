@@ -303,10 +303,11 @@ TEST(ObservationFusion, HiddenGaussiansAreNoObservation) {
   EXPECT_EQ(tab.label[3], 1);
 }
 
-TEST(ObservationFusion, OcclusionDepthIsRenderedAtTheTrainingNearPlane) {
+TEST(ObservationFusion, TheTrainingNearPlaneInObservationsAndOcclusion) {
   // An opaque wall 0.1 in front of the camera covering the image, and a small opaque Gaussian at depth 2 behind it.
-  // At the default plane the wall is the surface and hides the Gaussian; with the cameras' plane at 0.2 the wall is
-  // culled (training never shows it), so the Gaussian is the surface and stays observed.
+  // At the default plane the wall is observed, is the surface and hides the Gaussian. With the cameras' plane at
+  // 0.2 the renderer culls the wall (training never shows it): it is no observation (eq. 3's V = 0) and no surface,
+  // so the Gaussian behind it is the surface and stays observed.
   GaussianModel m;
   m.sh_degree = 0;
   m.resize(2);
@@ -319,12 +320,19 @@ TEST(ObservationFusion, OcclusionDepthIsRenderedAtTheTrainingNearPlane) {
   for (float plane : {render::kDefaultNearPlane, 0.2f}) {
     SCOPED_TRACE(plane);
     ObservationTable tab;
-    observe(m.mean.data(), m.n, views, tab);
+    observe(m.mean.data(), m.n, views, tab, plane);
+    EXPECT_EQ(tab.label[0], plane > 0.1f ? kNoObservation : 1);
     ASSERT_EQ(tab.label[1], 1);
     hide_occluded_all(m, views, plane, tab);
-    EXPECT_EQ(tab.label[0], 1);  // the wall is never behind anything
+    EXPECT_EQ(tab.label[0], plane > 0.1f ? kNoObservation : 1);  // the wall is never behind anything
     EXPECT_EQ(tab.label[1], plane > 0.1f ? 1 : kNoObservation);
   }
+  // The plane applies to the centre's depth: just in front of it, no observation; at it, observed.
+  ObservationTable tab;
+  observe(m.mean.data(), m.n, views, tab, 0.1000001);
+  EXPECT_EQ(tab.label[0], kNoObservation);
+  observe(m.mean.data(), m.n, views, tab, 0.0999999);
+  EXPECT_EQ(tab.label[0], 1);
 }
 
 TEST(ObjectChannels, GradientToQAndColour) {
