@@ -32,7 +32,7 @@ class ObjectAssociation {
   void attach(train::Adam& optim);
   void set_config(const HybridConfig& cfg) { cfg_ = cfg; }
   // Rebuilds the observation table from the current centres, then q (fused or single-view) and z. near_plane:
-  // the training cameras' (the occlusion test's depth renders).
+  // the training cameras' (no observation nearer than it; the occlusion test's depth renders at it).
   void refresh(GaussianModel& m, HybridFields& h, float near_plane);
   // q = softmax(s(w) / T) from the current table and logits (OF only).
   void fuse(int n, HybridFields& h);

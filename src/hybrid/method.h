@@ -67,7 +67,7 @@ class HybridMethod final : public train::Method {
   HybridData data_;
   uint64_t seed_;
   // The trainer's views (attach; the trainer owns this method, cannot be moved and sets a resumed run's near plane
-  // on them in place): the occlusion test renders depth at their near plane.
+  // on them in place): the observation table is built at their near plane.
   const std::vector<train::TrainView>* views_ = nullptr;
   ObjectAssociation assoc_;
   ObjectLosses object_losses_;

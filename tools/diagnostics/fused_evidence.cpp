@@ -51,10 +51,10 @@ int main(int argc, char** argv) try {
     for (size_t j = 0; j < idx.size(); ++j) data.masks[j].labels = diag::exact_labels(sc, sc.views[idx[j]], names);
   }
   hybrid::ObservationTable tab;
-  hybrid::observe(m.mean.data(), m.n, data.masks, tab);
-  // At the plane the model was trained with (MODEL/config.json).
-  if (visible)
-    hybrid::hide_occluded_all(m, data.masks, model_near_plane(std::string(argv[2]) + "/point_cloud.ply"), tab);
+  // At the plane the model was trained with (MODEL/config.json), as training's observations are.
+  const float near_plane = model_near_plane(std::string(argv[2]) + "/point_cloud.ply");
+  hybrid::observe(m.mean.data(), m.n, data.masks, tab, near_plane);
+  if (visible) hybrid::hide_occluded_all(m, data.masks, near_plane, tab);
   int L = data.num_labels, U = tab.num_views;
   const ExtraGroup* z = m.find_extra("obj_id");
   if (!z) throw std::runtime_error(std::string(argv[2]) + ": not a hybrid model (no obj_id)");
