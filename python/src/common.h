@@ -12,6 +12,8 @@
 #include <utility>
 #include <vector>
 
+#include "model/gaussian_model.h"
+#include "render/renderer.h"
 #include "scene/scene.h"
 
 namespace hgs::py {
@@ -35,7 +37,14 @@ inline pb::array view_array(const pb::dtype& dt, void* data, std::vector<pb::ssi
 inline float model_near_plane_of(pb::handle model, pb::handle given) {
   if (!given.is_none()) return given.cast<float>();
   if (pb::hasattr(model, "near_plane")) return model.attr("near_plane").cast<float>();
-  return 0.01f;
+  return render::kDefaultNearPlane;
+}
+
+// `g` as an hgs.Model whose near_plane attribute is `near_plane` (Model.load, Trainer.model / finish).
+inline pb::object model_with_near_plane(std::shared_ptr<GaussianModel> g, float near_plane) {
+  pb::object o = pb::cast(std::move(g));
+  o.attr("near_plane") = near_plane;
+  return o;
 }
 
 // A numpy array that takes over `v` (moved into a capsule, no copy of the elements). Shape in elements.

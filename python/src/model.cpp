@@ -100,9 +100,7 @@ void bind_model(pb::module_& m) {
               g = std::make_shared<GaussianModel>(read_model_ply(model_file(path)));
               near_plane = model_near_plane(model_file(path));
             }
-            pb::object o = pb::cast(g);
-            o.attr("near_plane") = near_plane;
-            return o;
+            return model_with_near_plane(std::move(g), near_plane);
           },
           pb::arg("path"),
           "Reads a model PLY, or MODEL/point_cloud.ply of a model folder; its near_plane attribute is the "

@@ -100,9 +100,7 @@ class PyTrainer {
   // Both carry the run's near plane as the model's near_plane attribute (hgs.render and QuerySession cull at it).
   pb::object model_copy() const {
     live();
-    pb::object o = pb::cast(std::make_shared<GaussianModel>(trainer_->model()));
-    o.attr("near_plane") = trainer_->config().near_plane;
-    return o;
+    return model_with_near_plane(std::make_shared<GaussianModel>(trainer_->model()), trainer_->config().near_plane);
   }
   // Ends training: the model moves out (no copy) and the trainer is released.
   pb::object finish() {
@@ -113,9 +111,7 @@ class PyTrainer {
       pb::gil_scoped_release nogil;
       trainer_.reset();
     }
-    pb::object o = pb::cast(std::move(m));
-    o.attr("near_plane") = near_plane;
-    return o;
+    return model_with_near_plane(std::move(m), near_plane);
   }
   std::string config_text() const { return config_.dump(); }
   void save_checkpoint(const std::filesystem::path& p) const {

@@ -4,8 +4,9 @@
 // after that. So the preinit below re-executes the program once (its path from /proc/self/exe, same arguments) with the
 // variables added, marked HGS_OPENBLAS_ENV=1; values the user set are kept, and HGS_OPENBLAS_ENV=0 turns this
 // off. Put HGS_OPENBLAS_PREINIT() in one source file of each executable that runs SAM or CLIP products (hgs,
-// bench_sam, test_clip). A Python process cannot re-execute itself: the package `hgs` sets the same two variables
-// from openblas_core_for_this_cpu() and kOpenblasThreadTimeout before it loads the library (python/hgs/__init__.py).
+// bench_sam, bench_clip, test_clip, test_sam). A Python process cannot re-execute itself: the package `hgs` sets the
+// same two variables from openblas_core_for_this_cpu() and kOpenblasThreadTimeout before it loads the library
+// (python/hgs/__init__.py).
 //
 // OPENBLAS_CORETYPE: Debian's OpenBLAS picks its kernels by the CPU model number, and on a virtual machine
 // whose CPUID names no model it knows (seen: a 16-core Sapphire Rapids guest reporting "Intel Xeon Processor")

@@ -39,6 +39,7 @@
 #include <vector>
 
 #include "core/image.h"
+#include "render/renderer.h"
 
 namespace hgs::hybrid {
 
@@ -72,7 +73,7 @@ struct ObservationTable {
 // camera-space depth of at least near_plane (the training cameras': the renderer culls nearer centres, so that
 // view never sees it). means [N, 3]
 void observe(const float* means, int n, const std::vector<MaskView>& views, ObservationTable& table,
-             double near_plane = 0.01);
+             double near_plane = render::kDefaultNearPlane);
 // Marks view u's observations of Gaussians hidden behind the surface as none. surface_depth [H, W] (0 = no
 // surface: no test there).
 void hide_occluded(const float* means, int n, const MaskView& view, const float* surface_depth, int u,

@@ -216,9 +216,7 @@ void HybridMethod::update(const train::UpdateIO& io) {
   semantic_.update(io.model.n, fields, io.optim, io.grad_scale);
 }
 
-float HybridMethod::near_plane() const {
-  return views_ && !views_->empty() ? views_->front().cam.near_plane : render::kDefaultNearPlane;
-}
+float HybridMethod::near_plane() const { return views_->front().cam.near_plane; }
 
 void HybridMethod::after_step(const train::StepEnd& end) {
   HybridFields fields = HybridFields::bind(end.model, "hybrid");

@@ -11,6 +11,7 @@
 #include <tuple>
 
 #include "core/error.h"
+#include "core/half.h"
 #include "eval/instances.h"
 #include "hybrid/bro.h"
 #include "hybrid/method.h"
@@ -475,9 +476,17 @@ TEST(HybridTrainer, ViewLogitGradientThroughTheStep) {
 
 TEST(HybridTrainer, SparseAndDenseObjectChannelsGiveTheSameStep) {
   // The object channels as a base render plus sparse per-object groups (the default) and as 4 dense channels per
-  // object are the same function (object_groups.h): from the same model, the first steps' loss terms agree to
-  // float rounding and so do the parameters and view logits after them (full method, SCL and the no-SCL
-  // ablation's semantic channels between the groups).
+  // object are the same function (object_groups.h): from the same model, the first step's gradient of every
+  // parameter agrees to float rounding, and the first three steps' loss terms agree (full method, SCL and the
+  // no-SCL ablation's semantic channels between the groups).
+  //
+  // The gradients are read from Adam's first moment after the first step (m = (1 - beta1) g), not from the
+  // parameters after a few steps: Adam's first update moves each parameter by about lr * sign(g) whatever |g| is,
+  // so a gradient made of rounding alone (the rotations of the initial isotropic Gaussians: max |g| ~ 1e-11
+  // against 1e-4 for the means) steps in a direction set by rounding, and the two paths' parameters then drift
+  // apart by up to 6e-4 in three steps (measured), by an amount that changes with the last bits of the initial
+  // model. The gradients themselves agree to 1e-7 of their largest value (measured: 0.9-2.1e-7 for the means,
+  // scales, opacities and SH, 1e-7 to 6e-7 for the view logits).
   Tiny t;
   for (bool scl : {true, false}) {
     hybrid::HybridConfig hc;
@@ -486,24 +495,38 @@ TEST(HybridTrainer, SparseAndDenseObjectChannelsGiveTheSameStep) {
     auto a = t.trainer(hc, 300);
     hc.sparse_objects = false;
     auto b = t.trainer(hc, 300);
+    const char* tag = scl ? " SCL" : " no SCL";
     for (int it = 0; it < 3; ++it) {
       const train::StepInfo x = a->step(), y = b->step();
       ASSERT_EQ(x.terms.size(), y.terms.size());
       for (size_t k = 0; k < x.terms.size(); ++k)
         EXPECT_NEAR(x.terms[k].value, y.terms[k].value, 1e-5 * (std::abs(y.terms[k].value) + 1e-3))
-            << x.terms[k].name << " step " << it << (scl ? " SCL" : " no SCL");
+            << x.terms[k].name << " step " << it << tag;
+      if (it > 0) continue;
+      int compared = 0;
+      for (const train::AdamParam& pa : a->adam().params) {
+        const train::AdamParam* pb = b->adam().find(pa.name);
+        ASSERT_NE(pb, nullptr) << pa.name;
+        ASSERT_EQ(pa.bf16, pb->bf16) << pa.name;
+        std::vector<float> ma = pa.m, mb = pb->m;  // [rows, dim] first moments after one step
+        if (pa.bf16) {
+          ma.resize(pa.m16.size()), mb.resize(pb->m16.size());
+          std::transform(pa.m16.begin(), pa.m16.end(), ma.begin(), bf16_to_float);
+          std::transform(pb->m16.begin(), pb->m16.end(), mb.begin(), bf16_to_float);
+        }
+        ASSERT_EQ(ma.size(), mb.size()) << pa.name;
+        double d = 0, m = 0;
+        for (size_t i = 0; i < ma.size(); ++i)
+          d = std::max(d, double(std::abs(ma[i] - mb[i]))), m = std::max(m, double(std::abs(mb[i])));
+        // float32 moments: 1e-4 of the largest (500x the measured rounding); bfloat16 moments hold 8 bits, one
+        // unit at the largest value is 2^-8 of it. The absolute floor covers gradients of rounding alone (the
+        // rotations, see above).
+        const double tol = (pa.bf16 ? 1e-2 : 1e-4) * m + 1e-9;
+        EXPECT_LE(d, tol) << pa.name << tag << ": first-step gradients differ (largest |m| " << m << ")";
+        compared += m > 1e-7;
+      }
+      EXPECT_GE(compared, 5) << "means, scales, opacities, SH and the view logits carry gradients" << tag;
     }
-    auto close = [](const std::vector<float>& u, const std::vector<float>& v, const char* what) {
-      ASSERT_EQ(u.size(), v.size()) << what;
-      double d = 0, m = 0;
-      for (size_t i = 0; i < u.size(); ++i)
-        d = std::max(d, double(std::abs(u[i] - v[i]))), m = std::max(m, double(std::abs(v[i])));
-      EXPECT_LE(d, 1e-4 * m) << what;
-    };
-    close(a->model().mean, b->model().mean, "mean");
-    close(a->model().opacity_logit, b->model().opacity_logit, "opacity");
-    close(a->model().sh, b->model().sh, "sh");
-    close(view_logits(*a), view_logits(*b), "view logits");
     EXPECT_NE(view_logits(*b), std::vector<float>(view_logits(*b).size(), 0.f)) << "the logits moved";
   }
 }
