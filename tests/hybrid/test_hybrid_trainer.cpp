@@ -484,9 +484,10 @@ TEST(HybridTrainer, SparseAndDenseObjectChannelsGiveTheSameStep) {
   // parameters after a few steps: Adam's first update moves each parameter by about lr * sign(g) whatever |g| is,
   // so a gradient made of rounding alone (the rotations of the initial isotropic Gaussians: max |g| ~ 1e-11
   // against 1e-4 for the means) steps in a direction set by rounding, and the two paths' parameters then drift
-  // apart by up to 6e-4 in three steps (measured), by an amount that changes with the last bits of the initial
-  // model. The gradients themselves agree to 1e-7 of their largest value (measured: 0.9-2.1e-7 for the means,
-  // scales, opacities and SH, 1e-7 to 6e-7 for the view logits).
+  // apart (an earlier form of this test compared the parameters after three steps to 1e-4 of their largest; it
+  // held on the development machines and failed on an Emerald Rapids guest with 6e-4 against a bound of 2.3e-4,
+  // which part of the run rounds differently there was not found). The gradients themselves agree to 1e-7 of their
+  // largest value (measured: 0.9-2.1e-7 for the means, scales, opacities and SH, 1e-7 to 6e-7 for the view logits).
   Tiny t;
   for (bool scl : {true, false}) {
     hybrid::HybridConfig hc;
