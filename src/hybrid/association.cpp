@@ -3,6 +3,7 @@
 #include "core/error.h"
 #include "hybrid/assign.h"
 #include "model/render_inputs.h"
+#include "render/camera_from_view.h"
 #include "render/renderer.h"
 
 namespace hgs::hybrid {
@@ -18,16 +19,7 @@ void hide_occluded_all(const GaussianModel& m, const std::vector<MaskView>& view
   std::vector<float> surface;
   for (size_t u = 0; u < views.size(); ++u) {
     const MaskView& v = views[u];
-    render::Camera cam;
-    cam.width = v.width;
-    cam.height = v.height;
-    cam.fx = float(v.fx);
-    cam.fy = float(v.fy);
-    cam.cx = float(v.cx);
-    cam.cy = float(v.cy);
-    cam.near_plane = near_plane;
-    for (int k = 0; k < 9; ++k) cam.R[k] = float(v.R[k]);
-    for (int k = 0; k < 3; ++k) cam.t[k] = float(v.t[k]);
+    const render::Camera cam = render::pinhole_camera(v.width, v.height, v.fx, v.fy, v.cx, v.cy, v.R, v.t, near_plane);
     r.forward(cam, in, rs, out);
     surface.resize(out.alpha.size());
     for (size_t p = 0; p < surface.size(); ++p) surface[p] = out.alpha[p] > 0.5f ? out.depth[p] / out.alpha[p] : 0.f;

@@ -9,4 +9,9 @@ namespace hgs::render {
 
 Camera camera_from_view(const View& v, float near_plane = kDefaultNearPlane);
 
+// The same conversion from plain arrays (a view's geometry kept elsewhere, e.g. hybrid::MaskView):
+// R [3, 3] world -> camera, row-major; t [3].
+Camera pinhole_camera(int width, int height, double fx, double fy, double cx, double cy, const double* R,
+                      const double* t, float near_plane = kDefaultNearPlane);
+
 }  // namespace hgs::render
