@@ -315,15 +315,14 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
         }
       }
     }
-    // per-pair results (dpower/dmx = -(a dx + b dy), dpower/da = -dx^2 / 2, dpower/db = -dx dy, ...)
-    o[gMx] = -simd::hsum<T>(aMx);
-    o[gMy] = -simd::hsum<T>(aMy);
-    o[gA] = T(-0.5) * simd::hsum<T>(aA);
-    o[gB] = -simd::hsum<T>(aB);
-    o[gC] = T(-0.5) * simd::hsum<T>(aC);
-    o[gOp] = simd::hsum<T>(aOp);
-    o[gR] = simd::hsum<T>(aR);
-    o[gG] = simd::hsum<T>(aG);
+    // per-pair results (dpower/dmx = -(a dx + b dy), dpower/da = -dx^2 / 2, dpower/db = -dx dy, ...); the first
+    // 8 slots' lane sums at once (simd::hsum8, bitwise the 8 hsums), scaled as named
+    {
+      static_assert(gMx == 0 && gMy == 1 && gA == 2 && gB == 3 && gC == 4 && gOp == 5 && gR == 6 && gG == 7);
+      const P acc[8] = {aMx, aMy, aA, aB, aC, aOp, aR, aG};
+      const P sums = simd::hsum8(acc) * P{T(-1), T(-1), T(-0.5), T(-1), T(-0.5), T(1), T(1), T(1)};
+      std::memcpy(o, &sums, sizeof(sums));
+    }
     o[gBl] = simd::hsum<T>(aBl);
     o[gZ] = kDepth ? simd::hsum<T>(aZ) : T(0);
     if constexpr (kLists) {

@@ -90,16 +90,23 @@ void composite_groups(const int* vk, const simd::Pack<T>* vw, int cnt, const Ras
 
 // Batch masks of a tile, masks [n]: bit (row * 2 + half) is set when the Gaussian can reach the 8-pixel batch
 // (half a row) with alpha >= 1/255. For each of the 16 pixel rows the exact x-interval where d^T conic d <= m
-// (the alpha >= 1/255 region, with margin; binning.h) is computed in double, 4 rows per vector.
+// (the alpha >= 1/255 region, with margin; binning.h) is computed in double, kMaskRows rows per vector (8 in the
+// AVX-512 compilation, 4 otherwise: the same operations on every row, so the same masks).
+#if defined(HGS_RASTER_AVX512) && defined(__GNUC__) && !defined(__clang__)
+constexpr int kMaskRows = 8;
+#else
+constexpr int kMaskRows = 4;
+#endif
 template <class T>
 void build_masks(const Binning& bins, int tile, const TileData<T>& td, uint32_t* masks) {
-  typedef double v4d __attribute__((vector_size(32)));
-  typedef int64_t v4l __attribute__((vector_size(32)));
+  constexpr int RV = kMaskRows, NQ = kTileSize / RV;
+  typedef double vd __attribute__((vector_size(8 * RV)));
+  typedef int64_t vl __attribute__((vector_size(8 * RV)));
   const int n = td.n;
   const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
-  v4d rowc[4];  // pixel-centre y of the tile rows
-  for (int q = 0; q < 4; ++q)
-    for (int l = 0; l < 4; ++l) rowc[q][l] = ty0 + 4 * q + l + 0.5;
+  vd rowc[NQ];  // pixel-centre y of the tile rows
+  for (int q = 0; q < NQ; ++q)
+    for (int l = 0; l < RV; ++l) rowc[q][l] = ty0 + RV * q + l + 0.5;
   const double bx0[2] = {double(tx0), double(tx0 + kLanes)};
   const double bx1[2] = {double(tx0 + kLanes - 1), double(tx0 + 2 * kLanes - 1)};
   for (int k = 0; k < n; ++k) {
@@ -111,26 +118,30 @@ void build_masks(const Binning& bins, int tile, const TileData<T>& td, uint32_t*
     const double a = double(r[kA]), b = double(r[kB]), c = double(r[kC]);
     const double m = double(r[kMahal]), ndet = b * b - a * c, am = a * m, ia = 1.0 / a;
     uint32_t hit[2] = {0, 0};
-    for (int q = 0; q < 4; ++q) {
-      const v4d dy = v - rowc[q];
-      const v4d disc = dy * dy * ndet + am;
-      const v4l valid = disc >= 0.0;
-      v4d dc = valid ? disc : v4d{};
-#if defined(__AVX__)
-      const v4d sq = (v4d)_mm256_sqrt_pd((__m256d)dc);
+    for (int q = 0; q < NQ; ++q) {
+      const vd dy = v - rowc[q];
+      const vd disc = dy * dy * ndet + am;
+      const vl valid = disc >= 0.0;
+      vd dc = valid ? disc : vd{};
+      vd sq;
+#if defined(HGS_RASTER_AVX512) && defined(__GNUC__) && !defined(__clang__)
+      sq = (vd)_mm512_maskz_sqrt_pd(__mmask8(0xFF), (__m512d)dc);  // maskz: GCC 12 warns on _mm512_sqrt_pd
+#elif defined(__AVX__)
+      sq = (vd)_mm256_sqrt_pd((__m256d)dc);
 #else
-      v4d sq;
-      for (int l = 0; l < 4; ++l) sq[l] = std::sqrt(dc[l]);
+      for (int l = 0; l < RV; ++l) sq[l] = std::sqrt(dc[l]);
 #endif
       // pixel x (centre x + 0.5) with dx = u - x - 0.5 in [(-b dy - sq) / a, (-b dy + sq) / a]
-      const v4d xl = u - (sq - b * dy) * ia - (0.5 + 1e-3);
-      const v4d xr = u + (sq + b * dy) * ia - (0.5 - 1e-3);
+      const vd xl = u - (sq - b * dy) * ia - (0.5 + 1e-3);
+      const vd xr = u + (sq + b * dy) * ia - (0.5 - 1e-3);
       for (int h = 0; h < kBatchesPerRow; ++h) {
-        const v4l hm = valid & (xl <= bx1[h]) & (xr >= bx0[h]);
-#if defined(__AVX__)
-        hit[h] |= uint32_t(_mm256_movemask_pd((__m256d)hm)) << (4 * q);
+        const vl hm = valid & (xl <= bx1[h]) & (xr >= bx0[h]);
+#if defined(HGS_RASTER_AVX512) && defined(__GNUC__) && !defined(__clang__)
+        hit[h] |= uint32_t(_mm512_movepi64_mask((__m512i)hm)) << (RV * q);
+#elif defined(__AVX__)
+        hit[h] |= uint32_t(_mm256_movemask_pd((__m256d)hm)) << (RV * q);
 #else
-        for (int l = 0; l < 4; ++l) hit[h] |= uint32_t(hm[l] & 1) << (4 * q + l);
+        for (int l = 0; l < RV; ++l) hit[h] |= uint32_t(hm[l] & 1) << (RV * q + l);
 #endif
       }
     }

@@ -2,7 +2,8 @@
 //
 // Pipeline (each stage has its own file with forward and backward on plain arrays, templated on the scalar so
 // the tests run the same code in double; float is the production path):
-//   project.{h,cpp}   EWA projection of 3D Gaussians to 2D conics (+0.3 px low-pass), depth, radius
+//   project.{h,cpp}   EWA projection of 3D Gaussians to 2D conics (+0.3 px low-pass), depth, radius; the math
+//                     written once for one Gaussian or a pack of 8 (project_pack.h: float runs 8 per vector)
 //   sh.{h,cpp}        spherical-harmonics colour per view direction (degree 0..3), clamped at 0 as in 3DGS
 //   binning.{h,cpp}   16x16 tile binning, per-tile front-to-back depth order
 //   rasterize.h, rasterize_{forward,backward}.cpp (shared: rasterize_common.h)

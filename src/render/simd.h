@@ -108,6 +108,33 @@ inline __attribute__((always_inline)) T hsum(Pack<T> p) {
   return a + b;
 }
 
+// The lane sums of 8 packs at once: lane j of the result is hsum(v[j]), bitwise (each addition adds the same two
+// operands as hsum's tree; float addition is commutative), in three transposing levels instead of 8 reductions.
+inline __attribute__((always_inline)) Pack<float> hsum8(const Pack<float>* v) {
+#if defined(__AVX__)
+  __m256 t[4];  // level 1: [v_2i[l] + v_2i[l + 4] | v_2i+1[l] + v_2i+1[l + 4]], l = 0..3
+  for (int i = 0; i < 4; ++i) {
+    const __m256 a = (__m256)v[2 * i], b = (__m256)v[2 * i + 1];
+    t[i] = _mm256_add_ps(_mm256_permute2f128_ps(a, b, 0x20), _mm256_permute2f128_ps(a, b, 0x31));
+  }
+  // level 2: lanes (0, 2) and (1, 3) of each half: [a0, b0, a2, b2 | a1, b1, a3, b3] and the same for 4..7
+  const __m256 x = _mm256_add_ps(_mm256_shuffle_ps(t[0], t[1], 0x44), _mm256_shuffle_ps(t[0], t[1], 0xEE));
+  const __m256 y = _mm256_add_ps(_mm256_shuffle_ps(t[2], t[3], 0x44), _mm256_shuffle_ps(t[2], t[3], 0xEE));
+  // level 3: a + b: [h0, h2, h4, h6 | h1, h3, h5, h7], then into order
+  const __m256 h = _mm256_add_ps(_mm256_shuffle_ps(x, y, 0x88), _mm256_shuffle_ps(x, y, 0xDD));
+  return (Pack<float>)_mm256_permutevar8x32_ps(h, _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7));
+#else
+  Pack<float> r;
+  for (int j = 0; j < kLanes; ++j) r[j] = hsum<float>(v[j]);
+  return r;
+#endif
+}
+inline __attribute__((always_inline)) Pack<double> hsum8(const Pack<double>* v) {
+  Pack<double> r;
+  for (int j = 0; j < kLanes; ++j) r[j] = hsum<double>(v[j]);
+  return r;
+}
+
 // exp for x <= ~88: range-reduced polynomial (Cephes expf coefficients); x < -87 flushes to ~0.
 inline __attribute__((always_inline)) Pack<float> vexp(Pack<float> x) {
   typedef Pack<float> P;

@@ -311,13 +311,17 @@ TEST(HybridTrainer, BoundaryLossDoesNotFadeObjectsOnNoisyMasks) {
   // High mask noise (jitter, swaps, misses, merges, low-confidence rims): with eq. 14 as written (a mean over the
   // band, its plain gradient) the objects' rendered opacity inside their true masks (2 px from the edge, BRO's
   // band half-width) falls well below the run without BRO; with the defaults (scale rule and scale-invariant
-  // gradient, hybrid/bro.h) BRO lowers it neither there nor over the whole masks. Means over three scenes: one
-  // 300-step run is chaotic (without BRO, float rounding alone moved one scene's mask opacity by 0.05), so a
-  // single scene measured the noise of the run without BRO more than BRO's effect.
+  // gradient, hybrid/bro.h) BRO lowers it neither there nor over the whole masks by more than the runs' noise.
+  // Means over eight scenes: one 300-step run is chaotic (float rounding alone moves a scene's mask opacity by
+  // up to 0.05), so the per-scene differences default - off scatter with a standard deviation of about 0.04
+  // (measured on these eight scenes with two builds that round the projection differently), and their mean
+  // over eight scenes has a standard error of about 0.015: the bound 0.03 is two of them. Three scenes and a
+  // bound of 0.01 (before 2026-11-29) failed or passed with the rounding of the build. Eq. 14 as written loses
+  // about 0.12 there, far outside the bound.
   struct Opacity {
     double mask = 0, inside = 0;
   };
-  const uint64_t seeds[] = {5, 11, 17};
+  const uint64_t seeds[] = {5, 11, 17, 23, 29, 31, 37, 41};
   auto opacity_after = [&](Tiny& t, bool bro, bool fixed) {
     hybrid::HybridConfig hc;
     hc.use_bro = bro;
@@ -341,8 +345,8 @@ TEST(HybridTrainer, BoundaryLossDoesNotFadeObjectsOnNoisyMasks) {
   }
   std::printf("  means: off %.4f / %.4f, default %.4f / %.4f, as written %.4f / %.4f\n", none.mask, none.inside,
               fixed.mask, fixed.inside, plain.mask, plain.inside);
-  EXPECT_GT(fixed.inside, none.inside - 0.01);
-  EXPECT_GT(fixed.mask, none.mask - 0.01);
+  EXPECT_GT(fixed.inside, none.inside - 0.03);
+  EXPECT_GT(fixed.mask, none.mask - 0.03);
   EXPECT_LT(plain.inside, none.inside - 0.03) << "eq. 14 as written no longer fades objects: revisit hybrid/bro.h";
   EXPECT_LT(plain.mask, none.mask - 0.05);
 }
