@@ -1,10 +1,11 @@
 // Array drivers of the EWA projection (per-Gaussian math in project.h), parallel over Gaussians. float runs 8
 // Gaussians per vector (project_pack.h: each pack's inputs gathered into lanes, the last pack padded with an
 // identity Gaussian whose lanes are never written back); double (the finite-difference tests' renderer) runs
-// one Gaussian at a time. Every Gaussian's result depends only on its own inputs, so on no thread count.
+// one Gaussian at a time. Every Gaussian's result depends only on its own inputs, not on the thread count.
 #include "render/project.h"
 
 #include <algorithm>
+#include <type_traits>
 
 #include "render/project_pack.h"
 
@@ -71,7 +72,7 @@ void project_backward_packs(const CameraT<T>& cam, int n, const T* mean, const T
     const int i0 = pk * kL, cnt = std::min(kL, n - i0);
     bool any = false;
     for (int l = 0; l < cnt; ++l) any |= radius[i0 + l] > 0;
-    P dm[3], dl[3], dq[4];
+    P dm[3] = {}, dl[3] = {}, dq[4] = {};  // stay zero for a pack without a visible Gaussian
     if (any) {
       P m[3], ls[3], q[4], g2[2], gc[3], gd[1];
       gather<T, 3>(mean, 3, i0, cnt, {0, 0, 0}, m);

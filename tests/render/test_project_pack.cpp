@@ -20,8 +20,9 @@ Scene pack_scene(int n, uint32_t seed) {
   Scene s = random_scene(n, 64, 48, seed);
   // a zero quaternion, a Gaussian whose centre is exactly at the camera's depth 0, a far one off the image
   for (int k = 0; k < 4; ++k) s.quat[4 * 3 + k] = 0;
-  for (int k = 0; k < 3; ++k) s.mean[3 * 5 + k] = -(s.cam.R[k] * s.cam.t[0] + s.cam.R[3 + k] * s.cam.t[1] +
-                                                   s.cam.R[6 + k] * s.cam.t[2]);  // the camera centre
+  for (int k = 0; k < 3; ++k)
+    s.mean[3 * 5 + k] =
+        -(s.cam.R[k] * s.cam.t[0] + s.cam.R[3 + k] * s.cam.t[1] + s.cam.R[6 + k] * s.cam.t[2]);  // the camera centre
   s.mean[3 * 6] += 1e3;
   return s;
 }
@@ -117,8 +118,8 @@ TEST(ProjectPacks, FloatPacksMatchTheDoubleProjection) {
                                         ref.depth.data(), ref.radius.data());
   std::vector<float> m2(2 * n), co(3 * n), de(n);
   std::vector<int> rf(n);
-  const int vis = project_forward<float>(camf, n, mf.data(), lf.data(), qf.data(), m2.data(), co.data(), de.data(),
-                                         rf.data());
+  const int vis =
+      project_forward<float>(camf, n, mf.data(), lf.data(), qf.data(), m2.data(), co.data(), de.data(), rf.data());
   EXPECT_NEAR(vis, ref.visible, 2);
   int radius_off = 0, both = 0;
   for (int i = 0; i < n; ++i) {
