@@ -1,7 +1,7 @@
 // Tile binning: per-Gaussian boxes, pair numbering (prefix sum by chunks), LSD radix sort of depth keys (stable,
-// per-thread digit counts), scatter into per-tile lists by chunks of tile rows (each chunk scans the
-// depth-sorted Gaussians' tile rects once): every step on the OpenMP threads, results independent of their
-// count. See binning.h.
+// per-thread digit counts), scatter into per-tile lists by chunks of the depth-sorted Gaussians (per-thread tile
+// counts, lists laid out tile-major then chunk-major): every step on the OpenMP threads, results independent of
+// their count. See binning.h.
 #include "render/binning.h"
 
 #include <omp.h>
@@ -188,49 +188,60 @@ void bin_gaussians(int width, int height, int n, const T* mean2d, const T* conic
   b.num_pairs = total;
   radix_sort(b.keys, b.order, b.keys_tmp, b.order_tmp, int(sizeof(T) == 4 ? 4 : 8));
 
-  // 3. per-tile lists: chunks of tile rows in parallel, each scanning the sorted Gaussians
+  // 3. per-tile lists: the depth-sorted Gaussians in contiguous chunks, one per thread. Each thread counts its
+  // chunk's pairs per tile; the lists are laid out tile-major, then chunk-major inside a tile (so every list stays
+  // in depth order), and each thread writes its own chunk's entries: the serial scan's lists, whatever the thread
+  // count, with each thread reading only its chunk (splitting the tile rows instead made every thread scan every
+  // Gaussian, which did not get faster with more threads).
+  const int m = int(b.order.size());
+  const int T3 = m < 4096 ? 1 : std::max(1, omp_get_max_threads());
   b.tile_start.assign(size_t(b.num_tiles) + 1, 0);
-  b.cursor.resize(size_t(b.num_tiles));
+  b.cursor.assign(size_t(T3) * b.num_tiles, 0);  // [T3, num_tiles] counts, then write cursors
   b.tile_gauss.resize(size_t(total));
   b.tile_pair.resize(size_t(total));
-  const int m = int(b.order.size());
-  const int nthreads = std::max(1, std::min(omp_get_max_threads(), b.tiles_y));
-  // The tile rects in depth order, so that both scans below read them in sequence.
-  b.sorted_rect.resize(size_t(m) * 4);
-#pragma omp parallel for schedule(static) num_threads(nthreads)
-  for (int k = 0; k < m; ++k)
-    std::memcpy(&b.sorted_rect[4 * size_t(k)], &b.trect[4 * size_t(b.order[k])], 4 * sizeof(int));
-#pragma omp parallel num_threads(nthreads)
+  b.sorted_rect.resize(size_t(m) * 4);  // the tile rects in depth order, read in sequence by both scans
+  // Locals: the loops write ints, which could alias the members and the vectors' own fields.
+  const int tiles_x = b.tiles_x, num_tiles = b.num_tiles;
+  int *cursor = b.cursor.data(), *srect = b.sorted_rect.data(), *tgauss = b.tile_gauss.data(),
+      *tpair = b.tile_pair.data();
+  const int *trect = b.trect.data(), *order = b.order.data(), *poff = b.pair_offset.data();
+#pragma omp parallel num_threads(T3)
   {
-    const int tid = omp_get_thread_num(), nt = omp_get_num_threads();
-    const int r0 = int(int64_t(b.tiles_y) * tid / nt), r1 = int(int64_t(b.tiles_y) * (tid + 1) / nt);
-    int* start = b.tile_start.data();
-    for (int k = 0; k < m; ++k) {
-      const int* tr = &b.sorted_rect[4 * size_t(k)];
-      const int ty0 = std::max(tr[2], r0), ty1 = std::min(tr[3], r1 - 1);
-      for (int ty = ty0; ty <= ty1; ++ty)
-        for (int tx = tr[0]; tx <= tr[1]; ++tx) ++start[ty * b.tiles_x + tx + 1];
+    const int t = omp_get_thread_num(), nt = omp_get_num_threads();
+    const int k0 = int(int64_t(m) * t / nt), k1 = int(int64_t(m) * (t + 1) / nt);
+    int* cur = cursor + size_t(t) * num_tiles;
+    // the gather first, in its own loop (independent loads in flight), then the counts from the copy
+    for (int k = k0; k < k1; ++k) std::memcpy(srect + 4 * size_t(k), trect + 4 * size_t(order[k]), 4 * sizeof(int));
+    for (int k = k0; k < k1; ++k) {
+      const int* tr = srect + 4 * size_t(k);
+      const int x0 = tr[0], x1 = tr[1], y0 = tr[2], y1 = tr[3];
+      for (int ty = y0; ty <= y1; ++ty)
+        for (int tx = x0; tx <= x1; ++tx) ++cur[ty * tiles_x + tx];
     }
 #pragma omp barrier
 #pragma omp single
     {
-      for (int t = 0; t < b.num_tiles; ++t) start[t + 1] += start[t];
-    }
-    // write cursors of this chunk's tiles (each thread owns its rows of the shared cursor array)
-    int* cursor = b.cursor.data() + size_t(r0) * b.tiles_x;
-    for (int ty = r0; ty < r1; ++ty)
-      for (int tx = 0; tx < b.tiles_x; ++tx) cursor[size_t(ty - r0) * b.tiles_x + tx] = start[ty * b.tiles_x + tx];
-    for (int k = 0; k < m; ++k) {
-      const int* tr = &b.sorted_rect[4 * size_t(k)];
-      const int ty0 = std::max(tr[2], r0), ty1 = std::min(tr[3], r1 - 1);
-      if (ty0 > ty1) continue;
-      const int g = b.order[k];
-      const int w = tr[1] - tr[0] + 1;
-      for (int ty = ty0; ty <= ty1; ++ty)
-        for (int tx = tr[0]; tx <= tr[1]; ++tx) {
-          const int pos = cursor[size_t(ty - r0) * b.tiles_x + tx]++;
-          b.tile_gauss[pos] = g;
-          b.tile_pair[pos] = b.pair_offset[g] + (ty - tr[2]) * w + (tx - tr[0]);
+      int run = 0;
+      for (int tile = 0; tile < num_tiles; ++tile) {
+        b.tile_start[tile] = run;
+        for (int u = 0; u < nt; ++u) {
+          int& c = cursor[size_t(u) * num_tiles + tile];
+          const int cnt = c;
+          c = run;
+          run += cnt;
+        }
+      }
+      b.tile_start[num_tiles] = run;
+    }  // implicit barrier
+    for (int k = k0; k < k1; ++k) {
+      const int* tr = srect + 4 * size_t(k);
+      const int g = order[k], x0 = tr[0], x1 = tr[1], y0 = tr[2], y1 = tr[3];
+      const int w = x1 - x0 + 1, p0 = poff[g];
+      for (int ty = y0; ty <= y1; ++ty)
+        for (int tx = x0; tx <= x1; ++tx) {
+          const int pos = cur[ty * tiles_x + tx]++;
+          tgauss[pos] = g;
+          tpair[pos] = p0 + (ty - y0) * w + (tx - x0);
         }
     }
   }

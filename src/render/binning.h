@@ -29,7 +29,8 @@ struct Binning {
   std::vector<int> tile_pair;    // [P] pair id of the same entry
   // scratch kept between calls
   std::vector<uint64_t> keys, keys_tmp;
-  std::vector<int> order, order_tmp, counts, cursor;
+  std::vector<int> order, order_tmp, counts;
+  std::vector<int> cursor;       // [threads, num_tiles] per-chunk tile counts, then write cursors
   std::vector<int> sorted_rect;  // [M, 4] trect of the binned Gaussians in depth order (read in sequence)
 };
 
