@@ -39,8 +39,15 @@ void radix_sort(std::vector<uint64_t>& keys, std::vector<int>& vals, std::vector
   vtmp.resize(m);
   const int T = m < 8192 ? 1 : std::max(1, omp_get_max_threads());
   std::vector<size_t> hist(size_t(T) * 256);
+  // The bits that differ between keys: a digit without any is the same everywhere and its pass is skipped
+  // without counting (counting it would add every key to one counter, a chain of dependent increments).
+  uint64_t varying = 0;
+  const uint64_t k0 = m > 0 ? keys[0] : 0;
+#pragma omp parallel for num_threads(T) reduction(| : varying) schedule(static)
+  for (size_t i = 0; i < m; ++i) varying |= keys[i] ^ k0;
   for (int pass = 0; pass < key_bytes; ++pass) {
     const int shift = 8 * pass;
+    if (((varying >> shift) & 255) == 0) continue;
     std::fill(hist.begin(), hist.end(), 0);
     bool trivial = false;
 #pragma omp parallel num_threads(T)
