@@ -86,23 +86,25 @@ double max_abs(const std::vector<T>& a) {
 }
 
 // Renders the scene once with the groups and once with the equivalent dense channels, backward with the same
-// upstream gradients (the groups' read from a strided layout), and compares.
+// upstream gradients (the groups' read from a strided layout, or a contiguous one as the hybrid method's), and
+// compares. The 69-pixel-wide variant has batches past the image edge.
 template <class T>
-void check_against_dense(double tol) {
-  Scene s = random_scene(400, 64, 48, 91, 0.9, 0);
+void check_against_dense(double tol, bool contiguous = false, int width = 64, int height = 48) {
+  Scene s = random_scene(400, width, height, 91, 0.9, 0);
   const Groups gr(s.n, 17);
   const std::vector<T> val = conv<T>(gr.val), dense = conv<T>(gr.dense(s.n));
   const size_t P = size_t(s.cam.width) * s.cam.height;
   std::mt19937 rng(3);
   const std::vector<T> wr = conv<T>(random_weights(3 * P, rng)), wa = conv<T>(random_weights(P, rng));
-  // Upstream group gradients: group g, channel i at [p * 23 + g * 4 + i + 1] (a wider layout); the dense
-  // equivalent has them at [p, g * 4 + i] and 0 in the gradient-free channel.
-  const int row = 23, gstride = 4;
+  // Upstream group gradients: group g, channel i at [p * 23 + g * 4 + i + 1] (a wider layout) or at
+  // [p * 15 + g * 3 + i] (contiguous); the dense equivalent has them at [p, g * 4 + i] and 0 in the gradient-free
+  // channel.
+  const int row = contiguous ? kG * kGWg : 23, gstride = contiguous ? kGWg : 4, off = contiguous ? 0 : 1;
   const std::vector<T> wide = conv<T>(random_weights(P * row, rng));
   std::vector<T> wd(P * kG * kGW, T(0));
   for (size_t p = 0; p < P; ++p)
     for (int g = 0; g < kG; ++g)
-      for (int i = 0; i < kGWg; ++i) wd[(p * kG + g) * kGW + i] = wide[p * row + g * gstride + i + 1];
+      for (int i = 0; i < kGWg; ++i) wd[(p * kG + g) * kGW + i] = wide[p * row + g * gstride + i + off];
 
   std::vector<std::vector<T>> store;
   RendererT<T> rs, rd;
@@ -120,7 +122,7 @@ void check_against_dense(double tol) {
   OutputGradsT<T> ds, dd;
   ds.rgb = dd.rgb = wr.data();
   ds.alpha = dd.alpha = wa.data();
-  ds.groups = wide.data() + 1;
+  ds.groups = wide.data() + off;
   ds.group_row = row;
   ds.group_stride = gstride;
   ds.group_grad_channels = kGWg;
@@ -149,6 +151,12 @@ void check_against_dense(double tol) {
 
 TEST(RenderGroups, MatchDenseChannelsDouble) { check_against_dense<double>(1e-12); }
 TEST(RenderGroups, MatchDenseChannelsFloat) { check_against_dense<float>(2e-5); }
+TEST(RenderGroups, MatchDenseChannelsContiguousGradientsAtTheImageEdgeFloat) {
+  check_against_dense<float>(2e-5, true, 69, 50);
+}
+TEST(RenderGroups, MatchDenseChannelsContiguousGradientsAtTheImageEdgeDouble) {
+  check_against_dense<double>(1e-12, true, 69, 50);
+}
 
 // Finite differences (double) of L = <w_rgb, rgb> + <w_groups, groups> with respect to the group values, the
 // means and the opacity logits, through preprocess, composite and both backward phases.
