@@ -14,7 +14,7 @@ struct Ops<simd::Pack<float>> {
   using S = float;
   using M = simd::Mask<float>;
   static V sqrt(V x) {
-#if defined(__AVX__)
+#if defined(__AVX2__)  // immintrin.h comes with simd.h for AVX2 builds
     return (V)_mm256_sqrt_ps((__m256)x);
 #else
     for (int l = 0; l < simd::kLanes; ++l) x[l] = std::sqrt(x[l]);
@@ -23,7 +23,7 @@ struct Ops<simd::Pack<float>> {
   }
   static V exp(V x) { return simd::vexp(x); }
   static V ceil(V x) {
-#if defined(__AVX__)
+#if defined(__AVX2__)
     return (V)_mm256_round_ps((__m256)x, _MM_FROUND_TO_POS_INF | _MM_FROUND_NO_EXC);
 #else
     for (int l = 0; l < simd::kLanes; ++l) x[l] = std::ceil(x[l]);
@@ -31,7 +31,7 @@ struct Ops<simd::Pack<float>> {
 #endif
   }
   static V floor(V x) {
-#if defined(__AVX__)
+#if defined(__AVX2__)
     return (V)_mm256_round_ps((__m256)x, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
 #else
     for (int l = 0; l < simd::kLanes; ++l) x[l] = std::floor(x[l]);

@@ -111,7 +111,7 @@ inline __attribute__((always_inline)) T hsum(Pack<T> p) {
 // The lane sums of 8 packs at once: lane j of the result is hsum(v[j]), bitwise (each addition adds the same two
 // operands as hsum's tree; float addition is commutative), in three transposing levels instead of 8 reductions.
 inline __attribute__((always_inline)) Pack<float> hsum8(const Pack<float>* v) {
-#if defined(__AVX__)
+#if defined(__AVX2__)
   __m256 t[4];  // level 1: [v_2i[l] + v_2i[l + 4] | v_2i+1[l] + v_2i+1[l + 4]], l = 0..3
   for (int i = 0; i < 4; ++i) {
     const __m256 a = (__m256)v[2 * i], b = (__m256)v[2 * i + 1];
