@@ -24,6 +24,17 @@ inline void gather(const T* a, int stride, int i0, int cnt, const T (&pad)[K], P
     for (int k = 0; k < K; ++k) out[k][l] = a[size_t(stride) * (i0 + l) + k];
 }
 
+// Gaussian i's outputs of project_forward: its projection where visible, zeros and radius 0 where culled.
+template <class T>
+inline void store_projected(size_t i, bool visible, T u, T v, const T (&k)[3], T z, int rad, T* mean2d, T* conic,
+                            T* depth, int* radius) {
+  mean2d[2 * i] = visible ? u : T(0);
+  mean2d[2 * i + 1] = visible ? v : T(0);
+  for (int c = 0; c < 3; ++c) conic[3 * i + c] = visible ? k[c] : T(0);
+  depth[i] = visible ? z : T(0);
+  radius[i] = visible ? rad : 0;
+}
+
 }  // namespace
 
 template <class T>
@@ -42,20 +53,10 @@ int project_forward_packs(const CameraT<T>& cam, int n, const T* mean, const T* 
     ProjectionTrace<P> tr;
     const auto vis = project_lanes<P>(cam, m, ls, q, tr);
     for (int l = 0; l < cnt; ++l) {
-      const size_t i = size_t(i0 + l);
-      if (vis[l]) {
-        mean2d[2 * i] = tr.mean2d[0][l];
-        mean2d[2 * i + 1] = tr.mean2d[1][l];
-        for (int k = 0; k < 3; ++k) conic[3 * i + k] = tr.conic[k][l];
-        depth[i] = tr.tc[2][l];
-        radius[i] = int(tr.rad[l]);
-        ++visible;
-      } else {
-        mean2d[2 * i] = mean2d[2 * i + 1] = 0;
-        conic[3 * i] = conic[3 * i + 1] = conic[3 * i + 2] = 0;
-        depth[i] = 0;
-        radius[i] = 0;
-      }
+      const T k[3] = {tr.conic[0][l], tr.conic[1][l], tr.conic[2][l]};
+      store_projected(size_t(i0 + l), vis[l] != 0, tr.mean2d[0][l], tr.mean2d[1][l], k, tr.tc[2][l], int(tr.rad[l]),
+                      mean2d, conic, depth, radius);
+      visible += vis[l] != 0;
     }
   }
   return visible;
@@ -107,19 +108,10 @@ int project_forward(const CameraT<T>& cam, int n, const T* mean, const T* log_sc
 #pragma omp parallel for schedule(static) reduction(+ : visible)
   for (int i = 0; i < n; ++i) {
     ProjectionTrace<T> tr;
-    if (project_one(cam, mean + 3 * i, log_scale + 3 * i, quat + 4 * i, tr)) {
-      mean2d[2 * i] = tr.mean2d[0];
-      mean2d[2 * i + 1] = tr.mean2d[1];
-      for (int k = 0; k < 3; ++k) conic[3 * i + k] = tr.conic[k];
-      depth[i] = tr.tc[2];
-      radius[i] = tr.radius;
-      ++visible;
-    } else {
-      mean2d[2 * i] = mean2d[2 * i + 1] = 0;
-      conic[3 * i] = conic[3 * i + 1] = conic[3 * i + 2] = 0;
-      depth[i] = 0;
-      radius[i] = 0;
-    }
+    const bool vis = project_one(cam, mean + 3 * i, log_scale + 3 * i, quat + 4 * i, tr);
+    store_projected(size_t(i), vis, tr.mean2d[0], tr.mean2d[1], tr.conic, tr.tc[2], tr.radius, mean2d, conic, depth,
+                    radius);
+    visible += vis;
   }
   return visible;
 }
