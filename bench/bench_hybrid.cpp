@@ -290,7 +290,8 @@ void BM_ObjectSsim(benchmark::State& st) {
 
 // Eqs. 6 and 14 for the 9 objects of view 0 (hybrid/object_losses.h) on a real composite of the object channels
 // with the base channels (q fused from the bench masks, the renderer's SH colours), with boxes (arg 1) or every
-// object over the whole image (arg 0); both give the same values and gradients.
+// object over the whole image (arg 0); both give the same values and gradients. The renders in and the gradients
+// out in the training step's layout (object_groups.h).
 void BM_ObjectLosses(benchmark::State& st) {
   const bench::OmpThreads threads(st, 1);
   auto& s = setup();
@@ -315,15 +316,23 @@ void BM_ObjectLosses(benchmark::State& st) {
   channels.extra = ch.data();
   channels.num_extra = lay.total();
   r.composite(channels, rs, out);
+  // The renders as training reads them (one plane per object, the base last) and the gradients as it writes them
+  // (the objects' colours [H, W, 3 J] and their sum [H, W, 3]).
+  const long HW = long(kW) * kH;
+  const int C = lay.total();
+  std::vector<float> planes(size_t(L + 1) * HW * 4);
+  for (long p = 0; p < HW; ++p)
+    for (int j = 0; j <= L; ++j)
+      for (int c = 0; c < 4; ++c)
+        planes[(size_t(j) * HW + p) * 4 + c] =
+            out.extra[size_t(p) * C + (j < L ? (c < 3 ? lay.color(j) + c : lay.opacity(j))
+                                             : (c < 3 ? lay.base_color() + c : lay.base_opacity()))];
+  const hybrid::ObjectRenders renders = hybrid::ObjectRenders::planar(planes.data(), L, HW);
   hybrid::ObjectLosses losses(hybrid::HybridConfig{}, {.boxes = st.range(0) != 0});
-  std::vector<float> d(out.extra.size());
-  for (auto _ : st) {
-    st.PauseTiming();
-    std::fill(d.begin(), d.end(), 0.f);
-    st.ResumeTiming();
+  std::vector<float> d(size_t(HW) * 3 * L), sum(size_t(HW) * 3);
+  for (auto _ : st)
     benchmark::DoNotOptimize(
-        losses(s.views[0].image, s.data.masks[0].labels, out.extra.data(), lay, objs, d.data()).app);
-  }
+        losses(s.views[0].image, s.data.masks[0].labels, renders, objs, {d.data(), 3L * L, sum.data(), 3}).app);
 }
 
 }  // namespace

@@ -47,16 +47,55 @@ void erode(const float* in, int H, int W, int s, float* out) {
   filter<false>(in, H, W, s, out, row);
 }
 
+namespace {
+
+// The max and the min filter of one image in one pass over it (the windows of filter<>, so the same values):
+// dmax, dmin [H, W] out, rmax, rmin [H, W] scratch.
+void minmax_filter(const float* in, int H, int W, int s, float* dmax, float* dmin, float* rmax, float* rmin) {
+  const int r = s / 2, r2 = s - 1 - r;
+  for (int y = 0; y < H; ++y) {
+    const float* src = in + size_t(y) * W;
+    float* hi = rmax + size_t(y) * W;
+    float* lo = rmin + size_t(y) * W;
+    std::copy(src, src + W, hi);
+    std::copy(src, src + W, lo);
+    for (int d = -r; d <= r2; ++d) {
+      if (d == 0) continue;
+      const int x0 = std::max(0, -d), x1 = std::min(W, W - d);
+#pragma omp simd
+      for (int x = x0; x < x1; ++x) {
+        hi[x] = std::max(hi[x], src[x + d]);
+        lo[x] = std::min(lo[x], src[x + d]);
+      }
+    }
+  }
+  for (int y = 0; y < H; ++y) {
+    float* hi = dmax + size_t(y) * W;
+    float* lo = dmin + size_t(y) * W;
+    std::copy(rmax + size_t(y) * W, rmax + size_t(y + 1) * W, hi);
+    std::copy(rmin + size_t(y) * W, rmin + size_t(y + 1) * W, lo);
+    for (int d = std::max(0, y - r); d <= std::min(H - 1, y + r2); ++d) {
+      if (d == y) continue;
+      const float* shi = rmax + size_t(d) * W;
+      const float* slo = rmin + size_t(d) * W;
+#pragma omp simd
+      for (int x = 0; x < W; ++x) {
+        hi[x] = std::max(hi[x], shi[x]);
+        lo[x] = std::min(lo[x], slo[x]);
+      }
+    }
+  }
+}
+
+}  // namespace
+
 void boundary_band(const float* A, const float* M, int H, int W, int s, float* B, std::vector<float>& tmp) {
   const size_t n = size_t(H) * W;
-  tmp.resize(3 * n);
-  float *d = tmp.data(), *e = tmp.data() + n;
-  std::vector<float> row;
-  filter<true>(A, H, W, s, d, row);
-  filter<false>(A, H, W, s, e, row);
+  tmp.resize(4 * n);
+  float *d = tmp.data(), *e = d + n, *rd = e + n, *re = rd + n;
+  minmax_filter(A, H, W, s, d, e, rd, re);
   for (size_t i = 0; i < n; ++i) B[i] = d[i] - e[i];
-  filter<true>(M, H, W, s, d, row);
-  filter<false>(M, H, W, s, e, row);
+  minmax_filter(M, H, W, s, d, e, rd, re);
   for (size_t i = 0; i < n; ++i) B[i] = std::clamp(B[i] + d[i] - e[i], 0.f, 1.f);
 }
 
@@ -79,13 +118,30 @@ namespace {
 // serves strided layouts).
 // Row y's pair weights, each repeated over the C channels: wx[x, c] = max(B(x, y), B(x + 1, y)) and wy[x, c] =
 // max(B(x, y), B(x, y + 1)) (0 past the last column / row). B [H, W]; wx, wy [W * C].
+template <class T, int kC>
+void pair_weights_c(const float* b, bool next_row, int W, T* wx, T* wy) {
+  for (int x = 0; x < W; ++x) {
+    const float bx = b[x];
+    const T vx = x + 1 < W ? T(std::max(bx, b[x + 1])) : T(0);
+    const T vy = next_row ? T(std::max(bx, b[x + W])) : T(0);
+#pragma GCC unroll 4
+    for (int c = 0; c < kC; ++c) {
+      wx[size_t(x) * kC + c] = vx;
+      wy[size_t(x) * kC + c] = vy;
+    }
+  }
+}
+
 template <class T>
 void pair_weights(const float* B, int y, int H, int W, int C, T* wx, T* wy) {
   const float* b = B + size_t(y) * W;
+  const bool next_row = y + 1 < H;
+  if (C == 3) return pair_weights_c<T, 3>(b, next_row, W, wx, wy);  // the colour images of eq. 14
+  if (C == 1) return pair_weights_c<T, 1>(b, next_row, W, wx, wy);
   for (int x = 0; x < W; ++x)
     for (int c = 0; c < C; ++c) {
       wx[size_t(x) * C + c] = x + 1 < W ? T(std::max(b[x], b[x + 1])) : T(0);
-      wy[size_t(x) * C + c] = y + 1 < H ? T(std::max(b[x], b[x + W])) : T(0);
+      wy[size_t(x) * C + c] = next_row ? T(std::max(b[x], b[x + W])) : T(0);
     }
 }
 

@@ -42,7 +42,7 @@ namespace hgs::hybrid {
 void dilate(const float* in, int H, int W, int s, float* out);
 void erode(const float* in, int H, int W, int s, float* out);
 
-// B = clip(D(A) - E(A) + D(M) - E(M), 0, 1). A, M, B: [H, W]; `tmp` scratch of 2 H W floats.
+// B = clip(D(A) - E(A) + D(M) - E(M), 0, 1). A, M, B: [H, W]; `tmp` scratch (4 H W floats).
 void boundary_band(const float* A, const float* M, int H, int W, int s, float* B, std::vector<float>& tmp);
 
 // Eq. 14 for images with C channels. pred, gt: [H, W, C] (channel stride `cstride` >= C, channels at

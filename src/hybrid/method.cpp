@@ -123,21 +123,33 @@ void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
   const int W = v.view.cam.width, H = v.view.cam.height, C = layout_.total(), u = v.view_index, n = v.model.n;
   const long HW = long(W) * H;
   const auto tb0 = std::chrono::steady_clock::now();
-  // The object losses overwrite the colour channels' gradient and the renderer reads only those and the S others
-  // (its gradient-free opacity and base channels stay unread), so only the others, which the no-SCL ablation's
-  // cosine loss adds to, need zeros.
-  d_channels_.resize(size_t(HW) * C);
-  if (layout_.S > 0) parallel_fill(d_channels_, 0.f);
-  const float* rendered = io.out.extra.data();  // [H, W, C] in the object layout
+  const int J = layout_.J;
+  const SparseLayout sl{layout_.S};
+  ObjectRenders renders;
+  ObjectGradOut gout;
   if (cfg_.sparse_objects) {
-    render_.resize(size_t(HW) * C);
-    assemble_object_render(HW, layout_, io.out.extra.data(), io.out.groups.data(), render_.data());
-    rendered = render_.data();
+    // The object renders assembled into one plane per object; the objects' colour gradients to [H, W, 3 J] (the
+    // renderer's group gradients) and their sum to the base colour's gradient, both overwritten by the object
+    // losses. The S others (the no-SCL ablation's cosine loss adds to them) need zeros; the base opacity's
+    // gradient is never read (the renderer reads the first sl.grad_channels()).
+    planes_.resize(size_t(J + 1) * HW * 4);
+    assemble_object_planes(HW, J, sl, io.out.extra.data(), io.out.groups.data(), planes_.data());
+    renders = ObjectRenders::planar(planes_.data(), J, HW);
+    d_channels_.resize(size_t(HW) * 3 * J);
+    d_dense_.resize(size_t(HW) * sl.total());
+    if (layout_.S > 0) parallel_fill(d_dense_, 0.f);
+    gout = {d_channels_.data(), 3L * J, d_dense_.data() + sl.base_color(), sl.total()};
+  } else {
+    // The object losses overwrite the colour channels' gradient and the renderer reads only those and the S
+    // others (its gradient-free opacity and base channels stay unread), so only the others, which the no-SCL
+    // ablation's cosine loss adds to, need zeros.
+    d_channels_.resize(size_t(HW) * C);
+    if (layout_.S > 0) parallel_fill(d_channels_, 0.f);
+    renders = ObjectRenders::interleaved(io.out.extra.data(), layout_);
+    gout = {d_channels_.data(), C, nullptr, 3};
   }
   const auto t0 = std::chrono::steady_clock::now();
-  if (cfg_.sparse_objects) color_sum_.resize(size_t(HW) * 3);
-  const ObjectLossValues ov = object_losses_(v.view.image, data_.masks[u].labels, rendered, layout_, objects_,
-                                             d_channels_.data(), cfg_.sparse_objects ? color_sum_.data() : nullptr);
+  const ObjectLossValues ov = object_losses_(v.view.image, data_.masks[u].labels, renders, objects_, gout);
   last_.app = float(ov.app);
   last_.bro = float(ov.bro);
   io.objective.add("app", cfg_.lambda_app, ov.app);
@@ -156,7 +168,10 @@ void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
                                  v.slot == 0);
       if (da && sv.anchors > 0) io.dout.weight_sums = da;
     } else {
-      sv = semantic_.cosine(u, W, H, rendered, C, layout_.other(), d_channels_.data());
+      if (cfg_.sparse_objects)  // the others are dense channels of the sparse render
+        sv = semantic_.cosine(u, W, H, io.out.extra.data(), sl.total(), sl.other(), d_dense_.data());
+      else
+        sv = semantic_.cosine(u, W, H, io.out.extra.data(), C, layout_.other(), d_channels_.data());
     }
   }
   last_.sem = float(sv.loss);
@@ -167,13 +182,10 @@ void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
   last_.ms_sem = std::chrono::duration<double, std::milli>(t2 - t1).count();
   last_.app_phases = object_losses_.phase_times();
   if (cfg_.sparse_objects) {  // base colour: the sum of the objects' gradients; each group: its object's
-    const SparseLayout sl{layout_.S};
-    d_dense_.resize(size_t(HW) * sl.total());
-    dense_object_grad(HW, layout_, d_channels_.data(), color_sum_.data(), d_dense_.data());
     io.dout.extra = d_dense_.data();
     io.dout.extra_grad_channels = sl.grad_channels();
-    io.dout.groups = d_channels_.data() + layout_.color(0);
-    io.dout.group_row = C;
+    io.dout.groups = d_channels_.data();
+    io.dout.group_row = 3 * J;
     io.dout.group_stride = 3;
     io.dout.group_grad_channels = ObjectGroups::kGradWidth;
   } else {
@@ -229,7 +241,7 @@ void HybridMethod::after_step(const train::StepEnd& end) {
 void HybridMethod::release() {
   object_losses_.release();
   semantic_.release();
-  for (auto* v : {&dq_, &channels_, &d_channels_, &d_wsum_, &render_, &d_dense_, &color_sum_})
+  for (auto* v : {&dq_, &channels_, &d_channels_, &d_wsum_, &planes_, &d_dense_})
     std::vector<float>().swap(*v);
   groups_ = ObjectGroups{};
 }

@@ -1,8 +1,10 @@
 // Object channels as base + sparse groups (object_groups.h has the derivation): building the entries, assembling
-// the renders into the object layout, and the backward to dq and dc.
+// the renders into one plane per object, and the backward to dq and dc.
 #include "hybrid/object_groups.h"
 
 #include <omp.h>
+
+#include <algorithm>
 
 namespace hgs::hybrid {
 
@@ -68,49 +70,40 @@ void build_object_groups(int n, int L, int J, const SparseLayout& sl, const int*
   }
 }
 
-void assemble_object_render(long hw, const ObjectLayout& lay, const float* dense, const float* groups, float* out) {
-  const int C = lay.total(), J = lay.J, S = lay.S;
-  const SparseLayout sl{S};
-  const int CD = sl.total();
-#pragma omp parallel for schedule(static)
-  for (long p = 0; p < hw; ++p) {
-    const float* d = dense + size_t(p) * CD;
-    const float* gr = groups + size_t(p) * 4 * J;
-    float* o = out + size_t(p) * C;
-    const float bop = d[sl.base_opacity()];
-    for (int j = 0; j < J; ++j) {
-      for (int c = 0; c < 3; ++c) o[lay.color(j) + c] = d[c] + gr[4 * j + c];
-      o[lay.opacity(j)] = bop + gr[4 * j + 3];
+namespace {
+
+// Pixels [p0, p1) of every plane. kCD = 4 when there are no other channels: a pixel's base render is then its 4
+// contiguous dense values, and a plane's pixel one 4-float addition.
+template <int kCD>
+void assemble_rows(long p0, long p1, long hw, int J, int CD, int bo, const float* dense, const float* groups,
+                   float* planes) {
+  const int cd = kCD > 0 ? kCD : CD;
+  for (int j = 0; j <= J; ++j) {
+    float* o = planes + size_t(j) * size_t(hw) * 4;
+    for (long p = p0; p < p1; ++p) {
+      const float* d = dense + size_t(p) * cd;
+      const float base[4] = {d[0], d[1], d[2], d[kCD > 0 ? 3 : bo]};
+      const float* gr = groups + size_t(p) * 4 * J + 4 * j;
+      if (j == J)  // the base render
+        for (int c = 0; c < 4; ++c) o[p * 4 + c] = base[c];
+      else
+        for (int c = 0; c < 4; ++c) o[p * 4 + c] = base[c] + gr[c];
     }
-    for (int c = 0; c < S; ++c) o[lay.other() + c] = d[sl.other() + c];
-    for (int c = 0; c < 3; ++c) o[lay.base_color() + c] = d[c];
-    o[lay.base_opacity()] = bop;
   }
 }
 
-void dense_object_grad(long hw, const ObjectLayout& lay, const float* d_out, const float* color_sum, float* d_dense) {
-  const int C = lay.total(), J = lay.J, S = lay.S;
-  const SparseLayout sl{S};
-  const int CD = sl.total();
+}  // namespace
+
+void assemble_object_planes(long hw, int J, const SparseLayout& sl, const float* dense, const float* groups,
+                            float* planes) {
+  // Blocks of pixels, each written plane by plane: the planes' stores stay sequential, the block's dense and
+  // group rows are read from cache.
+  constexpr long kBlock = 256;
 #pragma omp parallel for schedule(static)
-  for (long p = 0; p < hw; ++p) {
-    const float* g = d_out + size_t(p) * C;
-    float* d = d_dense + size_t(p) * CD;
-    if (color_sum) {
-      for (int c = 0; c < 3; ++c) d[c] = color_sum[size_t(p) * 3 + c];
-    } else {
-      float s0 = 0, s1 = 0, s2 = 0;
-      for (int j = 0; j < J; ++j) {
-        s0 += g[lay.color(j)];
-        s1 += g[lay.color(j) + 1];
-        s2 += g[lay.color(j) + 2];
-      }
-      d[0] = s0;
-      d[1] = s1;
-      d[2] = s2;
-    }
-    for (int c = 0; c < S; ++c) d[sl.other() + c] = g[lay.other() + c];
-    d[sl.base_opacity()] = 0.f;
+  for (long p0 = 0; p0 < hw; p0 += kBlock) {
+    const long p1 = std::min(hw, p0 + kBlock);
+    if (sl.S == 0) assemble_rows<4>(p0, p1, hw, J, 4, 3, dense, groups, planes);
+    else assemble_rows<0>(p0, p1, hw, J, sl.total(), sl.base_opacity(), dense, groups, planes);
   }
 }
 

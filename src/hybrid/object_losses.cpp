@@ -69,13 +69,44 @@ void ObjectLosses::release() {
   grads_ = ObjectGradients{};
 }
 
+ObjectRenders ObjectRenders::interleaved(const float* extra, const ObjectLayout& lay) {
+  ObjectRenders r;
+  for (int j = 0; j < lay.J; ++j) {
+    r.color.push_back(extra + lay.color(j));
+    r.opacity.push_back(extra + lay.opacity(j));
+  }
+  if (lay.base) {
+    r.base_color = extra + lay.base_color();
+    r.base_opacity = extra + lay.base_opacity();
+  }
+  r.stride = lay.total();
+  return r;
+}
+
+ObjectRenders ObjectRenders::planar(const float* planes, int J, long hw) {
+  ObjectRenders r;
+  for (int j = 0; j <= J; ++j) {
+    const float* p = planes + size_t(j) * size_t(hw) * 4;
+    (j < J ? r.color.emplace_back() : r.base_color) = p;
+    (j < J ? r.opacity.emplace_back() : r.base_opacity) = p + 3;
+  }
+  r.stride = 4;
+  return r;
+}
+
 ObjectLossValues ObjectLosses::operator()(const Image& image, const LabelMap& lab, const float* extra,
                                           const ObjectLayout& lay, const std::vector<int>& objs, float* d_extra,
                                           float* color_sum) {
+  return (*this)(image, lab, ObjectRenders::interleaved(extra, lay), objs,
+                 ObjectGradOut{d_extra, lay.total(), color_sum, 3});
+}
+
+ObjectLossValues ObjectLosses::operator()(const Image& image, const LabelMap& lab, const ObjectRenders& renders,
+                                          const std::vector<int>& objs, const ObjectGradOut& out) {
   const size_t threads = size_t(std::max(1, omp_get_max_threads()));
   if (scratch_.size() < threads) scratch_.resize(threads, Scratch(cfg_.lambda_dssim));
-  if (lay.base && opt_.boxes && !objs.empty()) return box_path(image, lab, extra, lay, objs, d_extra, color_sum);
-  return full_path(image, lab, extra, lay, objs, d_extra, color_sum);
+  if (renders.base_color && opt_.boxes && !objs.empty()) return box_path(image, lab, renders, objs, out);
+  return full_path(image, lab, renders, objs, out);
 }
 
 // Object k over the whole image. pred [H, W, 3], opac [H, W] -> grad [H, W, 3] (overwritten) = d(lambda_app app
@@ -114,11 +145,11 @@ void ObjectLosses::score_full(Scratch& w, const Image& image, const LabelMap& la
   bro *= f;  // the term as optimised
 }
 
-ObjectLossValues ObjectLosses::full_path(const Image& image, const LabelMap& lab, const float* extra,
-                                         const ObjectLayout& lay, const std::vector<int>& objs, float* d_extra,
-                                         float* color_sum) {
+ObjectLossValues ObjectLosses::full_path(const Image& image, const LabelMap& lab, const ObjectRenders& renders,
+                                         const std::vector<int>& objs, const ObjectGradOut& out) {
   times_ = {};
-  const int W = image.width, H = image.height, J = static_cast<int>(objs.size()), C = lay.total();
+  const int W = image.width, H = image.height, J = static_cast<int>(objs.size());
+  const long S = renders.stride;
   const size_t HW = size_t(W) * H;
   app_.assign(J, 0.0);
   bro_.assign(J, 0.0);
@@ -128,10 +159,9 @@ ObjectLossValues ObjectLosses::full_path(const Image& image, const LabelMap& lab
   opac_.resize(size_t(J) * HW);
 #pragma omp parallel for schedule(static)
   for (long p = 0; p < long(HW); ++p) {
-    const float* e = &extra[size_t(p) * C];
     for (int j = 0; j < J; ++j) {
-      for (int c = 0; c < 3; ++c) pred_[(size_t(j) * HW + p) * 3 + c] = e[lay.color(j) + c];
-      opac_[size_t(j) * HW + p] = e[lay.opacity(j)];
+      for (int c = 0; c < 3; ++c) pred_[(size_t(j) * HW + p) * 3 + c] = renders.color[j][p * S + c];
+      opac_[size_t(j) * HW + p] = renders.opacity[j][p * S];
     }
   }
 #pragma omp parallel for schedule(dynamic, 1)
@@ -139,18 +169,18 @@ ObjectLossValues ObjectLosses::full_path(const Image& image, const LabelMap& lab
     score_full(scratch_[omp_get_thread_num()], image, lab, objs[j], J, &pred_[size_t(j) * HW * 3],
                &opac_[size_t(j) * HW], &grad_[size_t(j) * HW * 3], app_[j], bro_[j]);
   // Gradients back to the interleaved layout (the colour channels of a pixel are contiguous), and their sum.
-  if (d_extra || color_sum) {
+  if (out.color || out.sum) {
 #pragma omp parallel for schedule(static)
     for (long p = 0; p < long(HW); ++p) {
       float sum[3] = {0.f, 0.f, 0.f};
       for (int j = 0; j < J; ++j)
         for (int c = 0; c < 3; ++c) {
           const float v = grad_[(size_t(j) * HW + p) * 3 + c] + 0.f;  // + 0: a -0 stored as +0 (see scatter)
-          if (d_extra) d_extra[size_t(p) * C + lay.color(j) + c] = v;
+          if (out.color) out.color[p * out.stride + 3 * j + c] = v;
           sum[c] += v;
         }
-      if (color_sum)
-        for (int c = 0; c < 3; ++c) color_sum[size_t(p) * 3 + c] = sum[c];
+      if (out.sum)
+        for (int c = 0; c < 3; ++c) out.sum[p * out.sum_stride + c] = sum[c];
     }
   }
   grads_ = ObjectGradients{};
@@ -172,9 +202,9 @@ ObjectLossValues ObjectLosses::full_path(const Image& image, const LabelMap& lab
 
 // Step 1: each object's box D_k (rows of differing columns, then their hull), R_k and Q_k; the base render to
 // base_pred_ [H, W, 3] and base_opac_ [H, W].
-void ObjectLosses::find_boxes(const LabelMap& lab, const float* extra, const ObjectLayout& lay,
-                              const std::vector<int>& objs) {
-  const int W = lab.width, H = lab.height, J = static_cast<int>(objs.size()), C = lay.total();
+void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders, const std::vector<int>& objs) {
+  const int W = lab.width, H = lab.height, J = static_cast<int>(objs.size());
+  const long S = renders.stride;
   const size_t HW = size_t(W) * H;
   std::vector<int> of_label(*std::max_element(objs.begin(), objs.end()) + 1, -1);  // label -> j
   for (int j = 0; j < J; ++j) of_label[objs[j]] = j;
@@ -186,17 +216,17 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const float* extra, const Obj
   for (int y = 0; y < H; ++y) {
     for (int x = 0; x < W; ++x) {
       const size_t p = size_t(y) * W + x;
-      const float* e = extra + p * C;
-      const float* b = e + lay.base_color();
+      const float* b = renders.base_color + p * S;
+      const float bo = renders.base_opacity[p * S];
       for (int c = 0; c < 3; ++c) base_pred_[p * 3 + c] = b[c];
-      base_opac_[p] = e[lay.base_opacity()];
-      const uint32_t b0 = bits(b[0]), b1 = bits(b[1]), b2 = bits(b[2]), b3 = bits(e[lay.base_opacity()]);
+      base_opac_[p] = bo;
+      const uint32_t b0 = bits(b[0]), b1 = bits(b[1]), b2 = bits(b[2]), b3 = bits(bo);
       const int l = lab.v[p];
       const int jl = l < int(of_label.size()) ? of_label[l] : -1;
       for (int j = 0; j < J; ++j) {
-        const float* o = e + lay.color(j);
+        const float* o = renders.color[j] + p * S;
         const uint32_t diff =
-            (bits(o[0]) ^ b0) | (bits(o[1]) ^ b1) | (bits(o[2]) ^ b2) | (bits(e[lay.opacity(j)]) ^ b3);
+            (bits(o[0]) ^ b0) | (bits(o[1]) ^ b1) | (bits(o[2]) ^ b2) | (bits(renders.opacity[j][p * S]) ^ b3);
         if (diff || j == jl) {
           int& lo = row_lo_[size_t(j) * H + y];
           lo = std::min(lo, x);
@@ -296,11 +326,12 @@ void ObjectLosses::score_base_bro(Scratch& w, int H, int W, int y0, int y1) {
 // Step 2 for rows [y0, y1) of object j's box R (all of them for a small object, a band of the image for a large
 // one): its crop Q = those rows of R grown by dep_, eq. 6 and eq. 14's parts there, kept inside R: own = eq. 6's
 // gradient, unit = eq. 14's unscaled gradient, pred the render, rows[] the per-pixel terms summed over each row.
-void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& lab, const float* extra,
-                              const ObjectLayout& lay, int j, int k, int y0, int y1) {
+void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& lab, const ObjectRenders& renders, int j,
+                              int k, int y0, int y1) {
   Object& o = obj_[j];
-  const int W = image.width, H = image.height, C = lay.total(), J = static_cast<int>(obj_.size());
+  const int W = image.width, H = image.height, J = static_cast<int>(obj_.size());
   const size_t n = size_t(W) * H * 3;
+  const long S = renders.stride;
   const PixelBox R{o.R.x0, y0, o.R.x1, y1};
   const PixelBox Q = R.grown(dep_, W, H);
   const int qw = Q.width(), qh = Q.height(), rw = R.width(), rh = R.height();
@@ -317,12 +348,12 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
   for (int yy = 0; yy < qh; ++yy)
     for (int xx = 0; xx < qw; ++xx) {
       const size_t p = size_t(yy + Q.y0) * W + (xx + Q.x0), q = size_t(yy) * qw + xx;
-      const float* e = extra + p * C;
+      const float* e = renders.color[j] + p * S;
       const float m = lab.v[p] == k ? 1.f : 0.f;
       w.mask[q] = m;
-      w.opac[q] = e[lay.opacity(j)];
+      w.opac[q] = renders.opacity[j][p * S];
       for (int c = 0; c < 3; ++c) {
-        w.pred[q * 3 + c] = e[lay.color(j) + c];
+        w.pred[q * 3 + c] = e[c];
         w.gt[q * 3 + c] = image.px[p * 3 + c] * m;
       }
     }
@@ -437,9 +468,8 @@ void ObjectLosses::finish_box(int W, int H, int j) {
 // color_sum [H, W, 3] their sum over the objects. Pixel by pixel: the base pair's values are loaded once for the
 // J colour triples of the pixel. (Each value is stored + 0, so a -0 is stored as +0: the bits of the sum into a
 // zeroed buffer this replaced.)
-void ObjectLosses::scatter(int H, int W, const ObjectLayout& lay, bool bro_grad, float* d_extra,
-                           float* color_sum) const {
-  const int C = lay.total(), J = static_cast<int>(obj_.size());
+void ObjectLosses::scatter(int H, int W, bool bro_grad, const ObjectGradOut& out) const {
+  const int J = static_cast<int>(obj_.size());
   const float s_app = grads_.app_scale;
   const bool has_base = !base_app_.empty();  // else every object is scored over the whole image
 #pragma omp parallel
@@ -456,7 +486,7 @@ void ObjectLosses::scatter(int H, int W, const ObjectLayout& lay, bool bro_grad,
         own[j] = in_rows ? obj_[j].own.data() + size_t(y - R.y0) * R.width() * 3 : nullptr;
       }
       for (int x = 0; x < W; ++x) {
-        float* const px = d_extra ? d_extra + (size_t(y) * W + x) * C : nullptr;
+        float* const px = out.color ? out.color + (long(y) * W + x) * out.stride : nullptr;
         const size_t i = (size_t(y) * W + x) * 3;
         float g[3] = {}, u[3] = {}, p[3] = {}, sum[3] = {0.f, 0.f, 0.f};
         if (has_base)
@@ -477,19 +507,18 @@ void ObjectLosses::scatter(int H, int W, const ObjectLayout& lay, bool bro_grad,
             for (int c = 0; c < 3; ++c) v[c] = g[c] + 0.f;
           }
           if (px)
-            for (int c = 0; c < 3; ++c) px[lay.color(j) + c] = v[c];
+            for (int c = 0; c < 3; ++c) px[3 * j + c] = v[c];
           for (int c = 0; c < 3; ++c) sum[c] += v[c];
         }
-        if (color_sum)
-          for (int c = 0; c < 3; ++c) color_sum[i + c] = sum[c];
+        if (out.sum)
+          for (int c = 0; c < 3; ++c) out.sum[(long(y) * W + x) * out.sum_stride + c] = sum[c];
       }
     }
   }
 }
 
-ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab, const float* extra,
-                                        const ObjectLayout& lay, const std::vector<int>& objs, float* d_extra,
-                                        float* color_sum) {
+ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab, const ObjectRenders& renders,
+                                        const std::vector<int>& objs, const ObjectGradOut& out) {
   const int W = image.width, H = image.height, J = static_cast<int>(objs.size());
   const size_t HW = size_t(W) * H;
   const bool bro_on = cfg_.use_bro && cfg_.lambda_bro > 0;
@@ -500,7 +529,7 @@ ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab,
   const auto t0 = Clock::now();
   app_.assign(J, 0.0);
   bro_.assign(J, 0.0);
-  find_boxes(lab, extra, lay, objs);
+  find_boxes(lab, renders, objs);
   const auto t1 = Clock::now();
   bool any_box = false;
   for (const Object& o : obj_) any_box |= !o.full;
@@ -555,7 +584,7 @@ ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab,
     const Piece& pc = pieces[t];
     if (pc.id == -1) score_base_app(w, H, W, pc.y0, pc.y1);
     else if (pc.id == -2) score_base_bro(w, H, W, pc.y0, pc.y1);
-    else score_crop(w, image, lab, extra, lay, pc.id, objs[pc.id], pc.y0, pc.y1);
+    else score_crop(w, image, lab, renders, pc.id, objs[pc.id], pc.y0, pc.y1);
   }
   const auto t2 = Clock::now();
   if (any_box)  // the base pair's totals, its rows in order
@@ -583,7 +612,7 @@ ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab,
     grads_.base_pred = base_pred_.data();
     if (bro_on) grads_.base_unit = base_unit_.data();
   }
-  if (d_extra || color_sum) scatter(H, W, lay, any_box && bro_on, d_extra, color_sum);
+  if (out.color || out.sum) scatter(H, W, any_box && bro_on, out);
   times_ = {ms(t0, t1), ms(t1, t2), ms(t2, t3), ms(t3, Clock::now())};
   ObjectLossValues v;
   for (int j = 0; j < J; ++j) {

@@ -80,14 +80,40 @@ struct ObjectGradients {
   const float *base_app = nullptr, *base_unit = nullptr, *base_pred = nullptr;
 };
 
+// Where one view's object renders are: pixel p of object j has its colour at color[j] + p * stride (3 floats)
+// and its opacity at opacity[j][p * stride]; the base render (object_channels.h) likewise, or null without it.
+// Either interleaved, as the dense object channels come from the renderer ([H, W, C] in an ObjectLayout), or
+// planar, as the sparse path assembles them (object_groups.h: one [H, W, 4] plane per object, colour then
+// opacity, so that an object's crop reads contiguous rows instead of a cache line per pixel).
+struct ObjectRenders {
+  std::vector<const float*> color, opacity;  // [J]
+  const float *base_color = nullptr, *base_opacity = nullptr;
+  long stride = 0;
+  int J() const { return static_cast<int>(color.size()); }
+  static ObjectRenders interleaved(const float* extra, const ObjectLayout& lay);  // extra [H, W, lay.total()]
+  static ObjectRenders planar(const float* planes, int J, long hw);  // planes [J + 1, H, W, 4], the base last
+};
+
+// Where the losses write the objects' colour gradients: object j's at color + p * stride + 3 j (color null:
+// nowhere, gradients() has them), and their sum over the objects at sum + p * sum_stride (sum null: not summed).
+struct ObjectGradOut {
+  float* color = nullptr;
+  long stride = 0;
+  float* sum = nullptr;
+  long sum_stride = 3;
+};
+
 class ObjectLosses {
  public:
   explicit ObjectLosses(const HybridConfig& cfg, const ObjectLossOptions& opt = {}) : cfg_(cfg), opt_(opt) {}
-  // image [H, W, 3]; labels [H, W] (confidence-filtered mask); extra [H, W, C] the render of the layout's
-  // channels; objs [J] the objects of the layout. Writes lambda_app * d(app) + lambda_bro * d(bro) to the colour
-  // channels of d_extra [H, W, C] (overwritten, every pixel; the other channels untouched; may be null:
-  // gradients() then has them) and, when color_sum [H, W, 3] is given, their sum over the J objects there (the
-  // sparse layout's base colour gradient, object_groups.h).
+  // image [H, W, 3]; labels [H, W] (confidence-filtered mask); renders the J objects' renders; objs [J] their
+  // labels. Writes lambda_app * d(app) + lambda_bro * d(bro) of each object's colour to out.color (overwritten,
+  // every pixel) and their sum over the J objects to out.sum (the sparse layout's base colour gradient,
+  // object_groups.h).
+  ObjectLossValues operator()(const Image& image, const LabelMap& labels, const ObjectRenders& renders,
+                              const std::vector<int>& objs, const ObjectGradOut& out);
+  // The same on the interleaved render of a layout: extra [H, W, C]; the gradients to the colour channels of
+  // d_extra [H, W, C] (the other channels untouched; may be null) and, when given, their sum to color_sum [H, W, 3].
   ObjectLossValues operator()(const Image& image, const LabelMap& labels, const float* extra, const ObjectLayout& lay,
                               const std::vector<int>& objs, float* d_extra, float* color_sum = nullptr);
   // The last call's gradient, sparse (valid until the next call or release()).
@@ -123,20 +149,20 @@ class ObjectLosses {
     float bro_scale = 0, proj = 0;
   };
 
-  ObjectLossValues full_path(const Image& image, const LabelMap& labels, const float* extra, const ObjectLayout& lay,
-                             const std::vector<int>& objs, float* d_extra, float* color_sum);
-  ObjectLossValues box_path(const Image& image, const LabelMap& labels, const float* extra, const ObjectLayout& lay,
-                            const std::vector<int>& objs, float* d_extra, float* color_sum);
+  ObjectLossValues full_path(const Image& image, const LabelMap& labels, const ObjectRenders& renders,
+                             const std::vector<int>& objs, const ObjectGradOut& out);
+  ObjectLossValues box_path(const Image& image, const LabelMap& labels, const ObjectRenders& renders,
+                            const std::vector<int>& objs, const ObjectGradOut& out);
   void score_full(Scratch& w, const Image& image, const LabelMap& labels, int k, int J, const float* pred,
                   const float* opac, float* grad, double& app, double& bro);
-  void find_boxes(const LabelMap& labels, const float* extra, const ObjectLayout& lay, const std::vector<int>& objs);
+  void find_boxes(const LabelMap& labels, const ObjectRenders& renders, const std::vector<int>& objs);
   void score_base_app(Scratch& w, int H, int W, int y0, int y1);
   void score_base_bro(Scratch& w, int H, int W, int y0, int y1);
-  void score_crop(Scratch& w, const Image& image, const LabelMap& labels, const float* extra, const ObjectLayout& lay,
-                  int j, int k, int y0, int y1);
+  void score_crop(Scratch& w, const Image& image, const LabelMap& labels, const ObjectRenders& renders, int j, int k,
+                  int y0, int y1);
   void finish_box(int W, int H, int j);
   void base_sums(const PixelBox& r, int W, double* out) const;
-  void scatter(int H, int W, const ObjectLayout& lay, bool bro_grad, float* d_extra, float* color_sum) const;
+  void scatter(int H, int W, bool bro_grad, const ObjectGradOut& out) const;
 
   HybridConfig cfg_;
   ObjectLossOptions opt_;

@@ -13,6 +13,7 @@
 #include <bit>
 #include <cmath>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "hybrid/bro.h"
@@ -225,6 +226,54 @@ TEST(ObjectLossesBoxes, WithoutTheBaseRenderTheOptionChangesNothing) {
   EXPECT_EQ(a.v.app, with_base.v.app);  // the base channels themselves change nothing
   for (size_t p = 0; p < size_t(c.W) * c.H; ++p)
     for (int i = 0; i < lay.total(); ++i) ASSERT_EQ(a.d[p * lay.total() + i], b.d[p * lay.total() + i]);
+}
+
+TEST(ObjectLossesBoxes, PlanarRendersAndCompactGradientsAreTheInterleavedOnesBitwise) {
+  // The sparse path's layout (ObjectRenders::planar: one [H, W, 4] plane per object and the base last; gradients
+  // to [H, W, 3 J] and their sum at a stride of 5) gives the values and every gradient bit of the interleaved
+  // layout, with boxes and over whole images, BRO on and off.
+  const Case c = synthetic(11);
+  const int C = c.lay.total(), J = c.lay.J;
+  const long HW = long(c.W) * c.H;
+  std::vector<float> planes(size_t(J + 1) * HW * 4);
+  for (long p = 0; p < HW; ++p)
+    for (int j = 0; j <= J; ++j) {
+      const float* e = &c.extra[size_t(p) * C];
+      float* o = &planes[(size_t(j) * HW + p) * 4];
+      for (int k = 0; k < 3; ++k) o[k] = e[j < J ? c.lay.color(j) + k : c.lay.base_color() + k];
+      o[3] = e[j < J ? c.lay.opacity(j) : c.lay.base_opacity()];
+    }
+  const ObjectRenders planar = ObjectRenders::planar(planes.data(), J, HW);
+  ASSERT_EQ(planar.J(), J);
+  for (bool bro : {true, false})
+    for (bool boxes : {true, false}) {
+      HybridConfig cfg;
+      cfg.use_bro = bro;
+      ObjectLosses a(cfg, {.boxes = boxes}), b(cfg, {.boxes = boxes});
+      std::vector<float> d(c.extra.size(), 0.f), sum(size_t(HW) * 3);
+      const ObjectLossValues va = a(c.image, c.lab, c.extra.data(), c.lay, c.objs, d.data(), sum.data());
+      std::vector<float> g(size_t(HW) * 3 * J, std::nanf("")), sum5(size_t(HW) * 5, std::nanf(""));
+      const ObjectLossValues vb = b(c.image, c.lab, planar, c.objs, {g.data(), 3L * J, sum5.data() + 1, 5});
+      const std::string tag = std::string(bro ? "BRO" : "no BRO") + (boxes ? ", boxes" : ", whole images");
+      EXPECT_EQ(va.app, vb.app) << tag;
+      EXPECT_EQ(va.bro, vb.bro) << tag;
+      double scale = 0;
+      for (long p = 0; p < HW; ++p)
+        for (int k = 0; k < 3; ++k) {
+          for (int j = 0; j < J; ++j) {
+            const float x = d[size_t(p) * C + c.lay.color(j) + k], y = g[size_t(p) * 3 * J + 3 * j + k];
+            ASSERT_EQ(std::bit_cast<uint32_t>(x), std::bit_cast<uint32_t>(y)) << tag << ", pixel " << p;
+            scale = std::max(scale, double(std::abs(x)));
+          }
+          ASSERT_EQ(std::bit_cast<uint32_t>(sum[size_t(p) * 3 + k]), std::bit_cast<uint32_t>(sum5[size_t(p) * 5 + 1 + k]))
+              << tag << ", pixel " << p;
+        }
+      EXPECT_GT(scale, 0) << tag;
+      for (long p = 0; p < HW; ++p) {  // the sum's neighbours untouched
+        ASSERT_TRUE(std::isnan(sum5[size_t(p) * 5])) << tag;
+        ASSERT_TRUE(std::isnan(sum5[size_t(p) * 5 + 4])) << tag;
+      }
+    }
 }
 
 TEST(ObjectLossesBoxes, GradientsOverwriteTheColourChannelsAndLeaveOtherChannels) {
