@@ -145,6 +145,7 @@ struct RasterWorkspace {
     RasterScratch dw;      // backward d(weight_sums) of the tile's Gaussians, T [n, J]
     RasterScratch bstate;  // per-batch state, packs [batches, 7 + C + J]
     RasterScratch blast;   // per-batch active / last-contributor masks [2, batches]
+    RasterScratch groups;  // the tile's channel groups: their list (int) [G], then flags (uint8) [G]
   };
   std::vector<PerThread> threads;
   std::vector<T> records;          // [N, 16] per-Gaussian records built by forward, reused by backward

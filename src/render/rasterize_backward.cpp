@@ -153,6 +153,14 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
   const int BS = kBatchFixed + C + J + GT, GO = kBatchFixed + C + J;
   P* bst = w.bstate.template get<P>(size_t(kBatches) * BS);
   M* blast = w.blast.template get<M>(kBatches);
+  // The groups the tile's Gaussians have entries in: only their upstream gradients are loaded (no Gaussian of
+  // the tile reads another group's).
+  int ng = 0;
+  int* glist = nullptr;
+  if (kExtra && GT > 0) {
+    glist = w.groups.template get<int>(size_t(2) * in.num_groups);  // the list, then the flags
+    ng = tile_groups(in, td, reinterpret_cast<uint8_t*>(glist + in.num_groups), glist);
+  }
   int kmax[kBatches];
   uint32_t jmask[kBatches];  // pixel-weight maps present in each batch (for_batch_maps)
   uint32_t live = 0;         // batches with at least one contributor
@@ -166,7 +174,9 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
     P* st = bst + size_t(bt) * BS;
     P Tf = simd::splat(T(1)), gr = P{}, gg = P{}, gb = P{}, ga = P{}, gd = P{};
     M lastp = M{};
-    for (int c = 0; c < C + J + GT; ++c) st[kBatchFixed + c] = P{};
+    for (int c = 0; c < C + J; ++c) st[kBatchFixed + c] = P{};
+    for (int u = 0; u < ng; ++u)
+      for (int i = 0; i < GWg; ++i) st[GO + glist[u] * GWg + i] = P{};
     for (int l = 0; l < nvalid; ++l) {
       const size_t p = size_t(py) * W + px0 + l;
       Tf[l] = final_T[p];
@@ -183,8 +193,10 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
         for (int c = 0; c < C; ++c) st[kBatchFixed + c][l] = g.d_extra[p * XS + c];
       if (kExtra && GT > 0) {
         const T* dg = g.d_groups + p * size_t(g.d_group_row);
-        for (int gr = 0; gr < in.num_groups; ++gr)
-          for (int i = 0; i < GWg; ++i) st[GO + gr * GWg + i][l] = dg[size_t(gr) * g.d_group_stride + i];
+        for (int u = 0; u < ng; ++u) {
+          const int gi = glist[u];
+          for (int i = 0; i < GWg; ++i) st[GO + gi * GWg + i][l] = dg[size_t(gi) * g.d_group_stride + i];
+        }
       }
       for (int jj = 0; jj < J; ++jj) {
         st[kBatchFixed + C + jj][l] = T(in.pixel_weights[p * J + jj]);
