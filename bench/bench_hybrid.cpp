@@ -316,18 +316,19 @@ void BM_ObjectLosses(benchmark::State& st) {
   channels.extra = ch.data();
   channels.num_extra = lay.total();
   r.composite(channels, rs, out);
-  // The renders as training reads them (one plane per object, the base last) and the gradients as it writes them
-  // (the objects' colours [H, W, 3 J] and their sum [H, W, 3]).
+  // The renders as training reads them (the base render's channels and each object's difference from them) and
+  // the gradients as it writes them (the objects' colours [H, W, 3 J] and their sum [H, W, 3]).
   const long HW = long(kW) * kH;
   const int C = lay.total();
-  std::vector<float> planes(size_t(L + 1) * HW * 4);
-  for (long p = 0; p < HW; ++p)
-    for (int j = 0; j <= L; ++j)
+  std::vector<float> dense(size_t(HW) * 4), groups(size_t(HW) * 4 * L);
+  for (long p = 0; p < HW; ++p) {
+    const float* e = &out.extra[size_t(p) * C];
+    for (int c = 0; c < 4; ++c) dense[size_t(p) * 4 + c] = e[c < 3 ? lay.base_color() + c : lay.base_opacity()];
+    for (int j = 0; j < L; ++j)
       for (int c = 0; c < 4; ++c)
-        planes[(size_t(j) * HW + p) * 4 + c] =
-            out.extra[size_t(p) * C + (j < L ? (c < 3 ? lay.color(j) + c : lay.opacity(j))
-                                             : (c < 3 ? lay.base_color() + c : lay.base_opacity()))];
-  const hybrid::ObjectRenders renders = hybrid::ObjectRenders::planar(planes.data(), L, HW);
+        groups[(size_t(p) * L + j) * 4 + c] = e[c < 3 ? lay.color(j) + c : lay.opacity(j)] - dense[size_t(p) * 4 + c];
+  }
+  const hybrid::ObjectRenders renders = hybrid::ObjectRenders::sparse(dense.data(), 4, 3, groups.data(), L);
   hybrid::ObjectLosses losses(hybrid::HybridConfig{}, {.boxes = st.range(0) != 0});
   std::vector<float> d(size_t(HW) * 3 * L), sum(size_t(HW) * 3);
   for (auto _ : st)

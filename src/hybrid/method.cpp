@@ -128,13 +128,11 @@ void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
   ObjectRenders renders;
   ObjectGradOut gout;
   if (cfg_.sparse_objects) {
-    // The object renders assembled into one plane per object; the objects' colour gradients to [H, W, 3 J] (the
-    // renderer's group gradients) and their sum to the base colour's gradient, both overwritten by the object
-    // losses. The S others (the no-SCL ablation's cosine loss adds to them) need zeros; the base opacity's
-    // gradient is never read (the renderer reads the first sl.grad_channels()).
-    planes_.resize(size_t(J + 1) * HW * 4);
-    assemble_object_planes(HW, J, sl, io.out.extra.data(), io.out.groups.data(), planes_.data());
-    renders = ObjectRenders::planar(planes_.data(), J, HW);
+    // The object renders: the base channels plus each object's group. The objects' colour gradients to
+    // [H, W, 3 J] (the renderer's group gradients) and their sum to the base colour's gradient, both overwritten
+    // by the object losses. The S others (the no-SCL ablation's cosine loss adds to them) need zeros; the base
+    // opacity's gradient is never read (the renderer reads the first sl.grad_channels()).
+    renders = ObjectRenders::sparse(io.out.extra.data(), sl.total(), sl.base_opacity(), io.out.groups.data(), J);
     d_channels_.resize(size_t(HW) * 3 * J);
     d_dense_.resize(size_t(HW) * sl.total());
     if (layout_.S > 0) parallel_fill(d_dense_, 0.f);
@@ -241,7 +239,7 @@ void HybridMethod::after_step(const train::StepEnd& end) {
 void HybridMethod::release() {
   object_losses_.release();
   semantic_.release();
-  for (auto* v : {&dq_, &channels_, &d_channels_, &d_wsum_, &planes_, &d_dense_})
+  for (auto* v : {&dq_, &channels_, &d_channels_, &d_wsum_, &d_dense_})
     std::vector<float>().swap(*v);
   groups_ = ObjectGroups{};
 }

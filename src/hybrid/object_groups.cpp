@@ -1,10 +1,8 @@
-// Object channels as base + sparse groups (object_groups.h has the derivation): building the entries, assembling
-// the renders into one plane per object, and the backward to dq and dc.
+// Object channels as base + sparse groups (object_groups.h has the derivation): building the entries and the
+// backward to dq and dc.
 #include "hybrid/object_groups.h"
 
 #include <omp.h>
-
-#include <algorithm>
 
 namespace hgs::hybrid {
 
@@ -67,43 +65,6 @@ void build_object_groups(int n, int L, int J, const SparseLayout& sl, const int*
       v[3] = dl;
       ++e;
     }
-  }
-}
-
-namespace {
-
-// Pixels [p0, p1) of every plane. kCD = 4 when there are no other channels: a pixel's base render is then its 4
-// contiguous dense values, and a plane's pixel one 4-float addition.
-template <int kCD>
-void assemble_rows(long p0, long p1, long hw, int J, int CD, int bo, const float* dense, const float* groups,
-                   float* planes) {
-  const int cd = kCD > 0 ? kCD : CD;
-  for (int j = 0; j <= J; ++j) {
-    float* o = planes + size_t(j) * size_t(hw) * 4;
-    for (long p = p0; p < p1; ++p) {
-      const float* d = dense + size_t(p) * cd;
-      const float base[4] = {d[0], d[1], d[2], d[kCD > 0 ? 3 : bo]};
-      const float* gr = groups + size_t(p) * 4 * J + 4 * j;
-      if (j == J)  // the base render
-        for (int c = 0; c < 4; ++c) o[p * 4 + c] = base[c];
-      else
-        for (int c = 0; c < 4; ++c) o[p * 4 + c] = base[c] + gr[c];
-    }
-  }
-}
-
-}  // namespace
-
-void assemble_object_planes(long hw, int J, const SparseLayout& sl, const float* dense, const float* groups,
-                            float* planes) {
-  // Blocks of pixels, each written plane by plane: the planes' stores stay sequential, the block's dense and
-  // group rows are read from cache.
-  constexpr long kBlock = 256;
-#pragma omp parallel for schedule(static)
-  for (long p0 = 0; p0 < hw; p0 += kBlock) {
-    const long p1 = std::min(hw, p0 + kBlock);
-    if (sl.S == 0) assemble_rows<4>(p0, p1, hw, J, 4, 3, dense, groups, planes);
-    else assemble_rows<0>(p0, p1, hw, J, sl.total(), sl.base_opacity(), dense, groups, planes);
   }
 }
 

@@ -20,7 +20,9 @@
 //
 // Layouts. Dense channels [N, 4 + S] (SparseLayout): base colour 0..2, the S others 3..3+S, b_n at 3 + S; the first
 // 3 + S carry gradient. Groups [E, 4]: (delta c, delta). Renders come back as dense [H, W, 4 + S] and groups
-// [H, W, 4 J]; assemble_object_planes() writes the object renders the object losses read, one plane per object.
+// [H, W, 4 J], which the object losses read as base + group (ObjectRenders::sparse, object_losses.h); the
+// objects' colour gradients go back as [H, W, 3 J] (the renderer's group gradients: row 3 J, stride 3) and their
+// sum is the base colour's.
 #pragma once
 #include <cstdint>
 #include <vector>
@@ -51,12 +53,6 @@ struct ObjectGroups {
 void build_object_groups(int n, int L, int J, const SparseLayout& sl, const int* objs, const float* q,
                          const float* color, const int* radii, const float* s, const uint8_t* valid, float* dense,
                          ObjectGroups& groups);
-
-// dense [HW, 4 + S], groups [HW, 4 J] renders -> planes [J + 1, HW, 4]: object j's render (colour, opacity) =
-// base + its group, the base render last (ObjectRenders::planar, object_losses.h). The objects' colour gradients
-// go back as [HW, 3 J] (the renderer's group gradients: row 3 J, stride 3) and their sum is the base colour's.
-void assemble_object_planes(long hw, int J, const SparseLayout& sl, const float* dense, const float* groups,
-                            float* planes);
 
 // grad_dense [N, 4 + S], grad_groups [E, 4] (the renderer's channel gradients) -> dq [N, L] and dcolor [N, 3]
 // (both added).

@@ -62,7 +62,7 @@ std::vector<int> sample_objects(const std::vector<int>& present, int m, std::mt1
 }
 
 void ObjectLosses::release() {
-  for (auto* v : {&pred_, &grad_, &opac_, &base_pred_, &base_app_, &base_unit_, &base_opac_, &zeros_})
+  for (auto* v : {&pred_, &grad_, &opac_, &base_pred_, &base_app_, &base_unit_, &base_opac_, &zeros_, &planes_})
     std::vector<float>().swap(*v);
   std::vector<double>().swap(base_terms_);
   std::vector<Object>().swap(obj_);
@@ -79,18 +79,22 @@ ObjectRenders ObjectRenders::interleaved(const float* extra, const ObjectLayout&
     r.base_color = extra + lay.base_color();
     r.base_opacity = extra + lay.base_opacity();
   }
-  r.stride = lay.total();
+  r.stride = r.base_stride = lay.total();
   return r;
 }
 
-ObjectRenders ObjectRenders::planar(const float* planes, int J, long hw) {
+ObjectRenders ObjectRenders::sparse(const float* dense, int dense_stride, int base_opacity, const float* groups,
+                                    int J) {
   ObjectRenders r;
-  for (int j = 0; j <= J; ++j) {
-    const float* p = planes + size_t(j) * size_t(hw) * 4;
-    (j < J ? r.color.emplace_back() : r.base_color) = p;
-    (j < J ? r.opacity.emplace_back() : r.base_opacity) = p + 3;
+  for (int j = 0; j < J; ++j) {
+    r.color.push_back(groups + 4 * j);
+    r.opacity.push_back(groups + 4 * j + 3);
   }
-  r.stride = 4;
+  r.stride = 4L * J;
+  r.base_color = dense;
+  r.base_opacity = dense + base_opacity;
+  r.base_stride = dense_stride;
+  r.deltas = true;
   return r;
 }
 
@@ -149,7 +153,6 @@ ObjectLossValues ObjectLosses::full_path(const Image& image, const LabelMap& lab
                                          const std::vector<int>& objs, const ObjectGradOut& out) {
   times_ = {};
   const int W = image.width, H = image.height, J = static_cast<int>(objs.size());
-  const long S = renders.stride;
   const size_t HW = size_t(W) * H;
   app_.assign(J, 0.0);
   bro_.assign(J, 0.0);
@@ -160,8 +163,8 @@ ObjectLossValues ObjectLosses::full_path(const Image& image, const LabelMap& lab
 #pragma omp parallel for schedule(static)
   for (long p = 0; p < long(HW); ++p) {
     for (int j = 0; j < J; ++j) {
-      for (int c = 0; c < 3; ++c) pred_[(size_t(j) * HW + p) * 3 + c] = renders.color[j][p * S + c];
-      opac_[size_t(j) * HW + p] = renders.opacity[j][p * S];
+      for (int c = 0; c < 3; ++c) pred_[(size_t(j) * HW + p) * 3 + c] = renders.color_at(j, p, c);
+      opac_[size_t(j) * HW + p] = renders.opacity_at(j, p);
     }
   }
 #pragma omp parallel for schedule(dynamic, 1)
@@ -200,39 +203,44 @@ ObjectLossValues ObjectLosses::full_path(const Image& image, const LabelMap& lab
   return v;
 }
 
-// Step 1: each object's box D_k (rows of differing columns, then their hull), R_k and Q_k; the base render to
-// base_pred_ [H, W, 3] and base_opac_ [H, W].
+// Step 1: each object's box D_k (rows of differing columns, then their hull), R_k and Q_k; the objects' renders to
+// planes_ [J, H, W, 4] (the crops then read contiguous rows) and the base render to base_pred_ [H, W, 3] and
+// base_opac_ [H, W], all in this one pass over the renders.
 void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders, const std::vector<int>& objs) {
   const int W = lab.width, H = lab.height, J = static_cast<int>(objs.size());
-  const long S = renders.stride;
   const size_t HW = size_t(W) * H;
-  std::vector<int> of_label(*std::max_element(objs.begin(), objs.end()) + 1, -1);  // label -> j
-  for (int j = 0; j < J; ++j) of_label[objs[j]] = j;
-  row_lo_.assign(size_t(J) * H, W);
-  row_hi_.assign(size_t(J) * H, -1);
+  const long BS = renders.base_stride;
+  row_lo_.resize(size_t(J) * H);
+  row_hi_.resize(size_t(J) * H);
   base_pred_.resize(HW * 3);
   base_opac_.resize(HW);
+  planes_.resize(size_t(J) * HW * 4);
 #pragma omp parallel for schedule(static)
   for (int y = 0; y < H; ++y) {
+    const long p0 = long(y) * W;
     for (int x = 0; x < W; ++x) {
-      const size_t p = size_t(y) * W + x;
-      const float* b = renders.base_color + p * S;
-      const float bo = renders.base_opacity[p * S];
-      for (int c = 0; c < 3; ++c) base_pred_[p * 3 + c] = b[c];
-      base_opac_[p] = bo;
-      const uint32_t b0 = bits(b[0]), b1 = bits(b[1]), b2 = bits(b[2]), b3 = bits(bo);
-      const int l = lab.v[p];
-      const int jl = l < int(of_label.size()) ? of_label[l] : -1;
-      for (int j = 0; j < J; ++j) {
-        const float* o = renders.color[j] + p * S;
-        const uint32_t diff =
-            (bits(o[0]) ^ b0) | (bits(o[1]) ^ b1) | (bits(o[2]) ^ b2) | (bits(renders.opacity[j][p * S]) ^ b3);
-        if (diff || j == jl) {
-          int& lo = row_lo_[size_t(j) * H + y];
+      const long p = p0 + x;
+      for (int c = 0; c < 3; ++c) base_pred_[p * 3 + c] = renders.base_color[p * BS + c];
+      base_opac_[p] = renders.base_opacity[p * BS];
+    }
+    for (int j = 0; j < J; ++j) {  // plane by plane: sequential stores
+      float* pl = &planes_[(size_t(j) * HW + p0) * 4];
+      const uint16_t k = uint16_t(objs[j]);
+      int lo = W, hi = -1;
+      for (int x = 0; x < W; ++x) {
+        const long p = p0 + x;
+        const float v[4] = {renders.color_at(j, p, 0), renders.color_at(j, p, 1), renders.color_at(j, p, 2),
+                            renders.opacity_at(j, p)};
+        for (int c = 0; c < 4; ++c) pl[x * 4 + c] = v[c];
+        const uint32_t diff = (bits(v[0]) ^ bits(base_pred_[p * 3])) | (bits(v[1]) ^ bits(base_pred_[p * 3 + 1])) |
+                              (bits(v[2]) ^ bits(base_pred_[p * 3 + 2])) | (bits(v[3]) ^ bits(base_opac_[p]));
+        if (diff || lab.v[p] == k) {
           lo = std::min(lo, x);
-          row_hi_[size_t(j) * H + y] = x;
+          hi = x;
         }
       }
+      row_lo_[size_t(j) * H + y] = lo;
+      row_hi_[size_t(j) * H + y] = hi;
     }
   }
   const int dep = dep_ = opt_.dilation >= 0 ? opt_.dilation : dependency_radius(cfg_);
@@ -326,12 +334,10 @@ void ObjectLosses::score_base_bro(Scratch& w, int H, int W, int y0, int y1) {
 // Step 2 for rows [y0, y1) of object j's box R (all of them for a small object, a band of the image for a large
 // one): its crop Q = those rows of R grown by dep_, eq. 6 and eq. 14's parts there, kept inside R: own = eq. 6's
 // gradient, unit = eq. 14's unscaled gradient, pred the render, rows[] the per-pixel terms summed over each row.
-void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& lab, const ObjectRenders& renders, int j,
-                              int k, int y0, int y1) {
+void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& lab, int j, int k, int y0, int y1) {
   Object& o = obj_[j];
   const int W = image.width, H = image.height, J = static_cast<int>(obj_.size());
   const size_t n = size_t(W) * H * 3;
-  const long S = renders.stride;
   const PixelBox R{o.R.x0, y0, o.R.x1, y1};
   const PixelBox Q = R.grown(dep_, W, H);
   const int qw = Q.width(), qh = Q.height(), rw = R.width(), rh = R.height();
@@ -348,10 +354,10 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
   for (int yy = 0; yy < qh; ++yy)
     for (int xx = 0; xx < qw; ++xx) {
       const size_t p = size_t(yy + Q.y0) * W + (xx + Q.x0), q = size_t(yy) * qw + xx;
-      const float* e = renders.color[j] + p * S;
+      const float* e = &planes_[(size_t(j) * W * H + p) * 4];
       const float m = lab.v[p] == k ? 1.f : 0.f;
       w.mask[q] = m;
-      w.opac[q] = renders.opacity[j][p * S];
+      w.opac[q] = e[3];
       for (int c = 0; c < 3; ++c) {
         w.pred[q * 3 + c] = e[c];
         w.gt[q * 3 + c] = image.px[p * 3 + c] * m;
@@ -584,7 +590,7 @@ ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab,
     const Piece& pc = pieces[t];
     if (pc.id == -1) score_base_app(w, H, W, pc.y0, pc.y1);
     else if (pc.id == -2) score_base_bro(w, H, W, pc.y0, pc.y1);
-    else score_crop(w, image, lab, renders, pc.id, objs[pc.id], pc.y0, pc.y1);
+    else score_crop(w, image, lab, pc.id, objs[pc.id], pc.y0, pc.y1);
   }
   const auto t2 = Clock::now();
   if (any_box)  // the base pair's totals, its rows in order

@@ -80,18 +80,30 @@ struct ObjectGradients {
   const float *base_app = nullptr, *base_unit = nullptr, *base_pred = nullptr;
 };
 
-// Where one view's object renders are: pixel p of object j has its colour at color[j] + p * stride (3 floats)
-// and its opacity at opacity[j][p * stride]; the base render (object_channels.h) likewise, or null without it.
-// Either interleaved, as the dense object channels come from the renderer ([H, W, C] in an ObjectLayout), or
-// planar, as the sparse path assembles them (object_groups.h: one [H, W, 4] plane per object, colour then
-// opacity, so that an object's crop reads contiguous rows instead of a cache line per pixel).
+// Where one view's object renders are. Either complete, as the dense object channels come from the renderer
+// (interleaved in an ObjectLayout: pixel p of object j has its colour at color[j] + p * stride, 3 floats, and its
+// opacity at opacity[j][p * stride]), or as the sparse path renders them (object_groups.h): the base render's
+// dense channels and, interleaved likewise, each object's group, its difference from the base render (deltas):
+// object j's value is then base + difference, the sum the dense layout's channel holds (the same floats). The base
+// render is at base_color + p * base_stride and base_opacity[p * base_stride] (null without it).
 struct ObjectRenders {
   std::vector<const float*> color, opacity;  // [J]
   const float *base_color = nullptr, *base_opacity = nullptr;
-  long stride = 0;
+  long stride = 0, base_stride = 0;
+  bool deltas = false;
   int J() const { return static_cast<int>(color.size()); }
+  float color_at(int j, long p, int c) const {
+    const float v = color[j][p * stride + c];
+    return deltas ? base_color[p * base_stride + c] + v : v;
+  }
+  float opacity_at(int j, long p) const {
+    const float v = opacity[j][p * stride];
+    return deltas ? base_opacity[p * base_stride] + v : v;
+  }
   static ObjectRenders interleaved(const float* extra, const ObjectLayout& lay);  // extra [H, W, lay.total()]
-  static ObjectRenders planar(const float* planes, int J, long hw);  // planes [J + 1, H, W, 4], the base last
+  // dense [H, W, dense_stride]: the base colour at 0..2, its opacity at base_opacity; groups [H, W, 4 J]: object
+  // j's difference (colour, opacity) at 4 j.
+  static ObjectRenders sparse(const float* dense, int dense_stride, int base_opacity, const float* groups, int J);
 };
 
 // Where the losses write the objects' colour gradients: object j's at color + p * stride + 3 j (color null:
@@ -158,8 +170,7 @@ class ObjectLosses {
   void find_boxes(const LabelMap& labels, const ObjectRenders& renders, const std::vector<int>& objs);
   void score_base_app(Scratch& w, int H, int W, int y0, int y1);
   void score_base_bro(Scratch& w, int H, int W, int y0, int y1);
-  void score_crop(Scratch& w, const Image& image, const LabelMap& labels, const ObjectRenders& renders, int j, int k,
-                  int y0, int y1);
+  void score_crop(Scratch& w, const Image& image, const LabelMap& labels, int j, int k, int y0, int y1);
   void finish_box(int W, int H, int j);
   void base_sums(const PixelBox& r, int W, double* out) const;
   void scatter(int H, int W, bool bro_grad, const ObjectGradOut& out) const;
@@ -175,6 +186,7 @@ class ObjectLosses {
   std::vector<int> row_lo_, row_hi_;                     // [J, H] each row's differing columns
   std::vector<float> base_pred_, base_app_, base_unit_;  // [H, W, 3]
   std::vector<float> base_opac_, zeros_;                 // [H, W], [H, W, 3]
+  std::vector<float> planes_;                            // [J, H, W, 4] the objects' renders (colour, opacity)
   std::vector<double> base_terms_;                       // [H, W, kTerms]
   std::vector<double> base_rows_;                        // [H, kTerms] their sums over each row
   double base_total_[kTerms] = {};                       // their sums over the image (the rows in order)

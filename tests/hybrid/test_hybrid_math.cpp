@@ -13,7 +13,6 @@
 #include "hybrid/bro.h"
 #include "hybrid/fusion.h"
 #include "hybrid/object_channels.h"
-#include "hybrid/object_groups.h"
 #include "hybrid/scl.h"
 #include "render/renderer.h"
 
@@ -334,35 +333,6 @@ TEST(ObservationFusion, TheTrainingNearPlaneInObservationsAndOcclusion) {
   EXPECT_EQ(tab.label[0], kNoObservation);
   observe(m.mean.data(), m.n, views, tab, 0.0999999);
   EXPECT_EQ(tab.label[0], 1);
-}
-
-TEST(ObjectChannels, PlanesAreTheBasePlusEachGroup) {
-  // assemble_object_planes: plane j = the dense base channels + group j (colour, opacity), the last plane the
-  // base render, for S = 0 and 2 other channels between the base colour and opacity, at 1 and 2 threads, over a
-  // pixel count that is not a multiple of the assembly's blocks.
-  std::mt19937 rng(5);
-  std::uniform_real_distribution<float> U(-1, 1);
-  const long HW = 613;
-  const int J = 3;
-  for (int S : {0, 2})
-    for (int threads : {1, 2}) {
-      const SparseLayout sl{S};
-      std::vector<float> dense(size_t(HW) * sl.total()), groups(size_t(HW) * 4 * J);
-      for (auto& v : dense) v = U(rng);
-      for (auto& v : groups) v = U(rng);
-      std::vector<float> planes(size_t(J + 1) * HW * 4, std::nanf(""));
-      const int prev = omp_get_max_threads();
-      omp_set_num_threads(threads);
-      assemble_object_planes(HW, J, sl, dense.data(), groups.data(), planes.data());
-      omp_set_num_threads(prev);
-      for (long p = 0; p < HW; ++p)
-        for (int j = 0; j <= J; ++j)
-          for (int c = 0; c < 4; ++c) {
-            const float base = dense[size_t(p) * sl.total() + (c < 3 ? sl.base_color() + c : sl.base_opacity())];
-            const float want = j < J ? base + groups[size_t(p) * 4 * J + 4 * j + c] : base;
-            ASSERT_EQ(planes[(size_t(j) * HW + p) * 4 + c], want) << "S " << S << " pixel " << p << " plane " << j;
-          }
-    }
 }
 
 TEST(ObjectChannels, GradientToQAndColour) {

@@ -228,23 +228,30 @@ TEST(ObjectLossesBoxes, WithoutTheBaseRenderTheOptionChangesNothing) {
     for (int i = 0; i < lay.total(); ++i) ASSERT_EQ(a.d[p * lay.total() + i], b.d[p * lay.total() + i]);
 }
 
-TEST(ObjectLossesBoxes, PlanarRendersAndCompactGradientsAreTheInterleavedOnesBitwise) {
-  // The sparse path's layout (ObjectRenders::planar: one [H, W, 4] plane per object and the base last; gradients
-  // to [H, W, 3 J] and their sum at a stride of 5) gives the values and every gradient bit of the interleaved
-  // layout, with boxes and over whole images, BRO on and off.
-  const Case c = synthetic(11);
-  const int C = c.lay.total(), J = c.lay.J;
+TEST(ObjectLossesBoxes, SparseRendersAndCompactGradientsAreTheInterleavedOnesBitwise) {
+  // The sparse path's layout (ObjectRenders::sparse: the base render's dense channels, here with 2 other channels
+  // between its colour and opacity, and each object's difference from them in [H, W, 4 J] groups; gradients to
+  // [H, W, 3 J] and their sum at a stride of 5) gives the values and every gradient bit of the interleaved layout
+  // holding base + difference, with boxes and over whole images, BRO on and off.
+  Case c = synthetic(11);
+  const int C = c.lay.total(), J = c.lay.J, CD = 6;
   const long HW = long(c.W) * c.H;
-  std::vector<float> planes(size_t(J + 1) * HW * 4);
-  for (long p = 0; p < HW; ++p)
-    for (int j = 0; j <= J; ++j) {
-      const float* e = &c.extra[size_t(p) * C];
-      float* o = &planes[(size_t(j) * HW + p) * 4];
-      for (int k = 0; k < 3; ++k) o[k] = e[j < J ? c.lay.color(j) + k : c.lay.base_color() + k];
-      o[3] = e[j < J ? c.lay.opacity(j) : c.lay.base_opacity()];
-    }
-  const ObjectRenders planar = ObjectRenders::planar(planes.data(), J, HW);
-  ASSERT_EQ(planar.J(), J);
+  std::vector<float> dense(size_t(HW) * CD, std::nanf("")), groups(size_t(HW) * 4 * J);
+  for (long p = 0; p < HW; ++p) {
+    float* e = &c.extra[size_t(p) * C];
+    float* d = &dense[size_t(p) * CD];
+    for (int k = 0; k < 3; ++k) d[k] = e[c.lay.base_color() + k];
+    d[5] = e[c.lay.base_opacity()];
+    for (int j = 0; j < J; ++j)
+      for (int k = 0; k < 4; ++k) {
+        float& v = e[k < 3 ? c.lay.color(j) + k : c.lay.opacity(j)];
+        float& g = groups[(size_t(p) * J + j) * 4 + k];
+        g = v - d[k < 3 ? k : 5];
+        v = d[k < 3 ? k : 5] + g;  // the interleaved channel: base + difference, as the dense renderer's sum
+      }
+  }
+  const ObjectRenders sparse = ObjectRenders::sparse(dense.data(), CD, 5, groups.data(), J);
+  ASSERT_EQ(sparse.J(), J);
   for (bool bro : {true, false})
     for (bool boxes : {true, false}) {
       HybridConfig cfg;
@@ -253,7 +260,7 @@ TEST(ObjectLossesBoxes, PlanarRendersAndCompactGradientsAreTheInterleavedOnesBit
       std::vector<float> d(c.extra.size(), 0.f), sum(size_t(HW) * 3);
       const ObjectLossValues va = a(c.image, c.lab, c.extra.data(), c.lay, c.objs, d.data(), sum.data());
       std::vector<float> g(size_t(HW) * 3 * J, std::nanf("")), sum5(size_t(HW) * 5, std::nanf(""));
-      const ObjectLossValues vb = b(c.image, c.lab, planar, c.objs, {g.data(), 3L * J, sum5.data() + 1, 5});
+      const ObjectLossValues vb = b(c.image, c.lab, sparse, c.objs, {g.data(), 3L * J, sum5.data() + 1, 5});
       const std::string tag = std::string(bro ? "BRO" : "no BRO") + (boxes ? ", boxes" : ", whole images");
       EXPECT_EQ(va.app, vb.app) << tag;
       EXPECT_EQ(va.bro, vb.bro) << tag;
