@@ -215,34 +215,43 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders,
   base_pred_.resize(HW * 3);
   base_opac_.resize(HW);
   planes_.resize(size_t(J) * HW * 4);
+  // Pixel by pixel (the groups' rows read once, in order), each object's value stored to its plane; the loop is
+  // compiled for each kind of render (complete values or base + difference).
+  auto scan = [&]<bool kDeltas>() {
+    const long S = renders.stride;
 #pragma omp parallel for schedule(static)
-  for (int y = 0; y < H; ++y) {
-    const long p0 = long(y) * W;
-    for (int x = 0; x < W; ++x) {
-      const long p = p0 + x;
-      for (int c = 0; c < 3; ++c) base_pred_[p * 3 + c] = renders.base_color[p * BS + c];
-      base_opac_[p] = renders.base_opacity[p * BS];
-    }
-    for (int j = 0; j < J; ++j) {  // plane by plane: sequential stores
-      float* pl = &planes_[(size_t(j) * HW + p0) * 4];
-      const uint16_t k = uint16_t(objs[j]);
-      int lo = W, hi = -1;
+    for (int y = 0; y < H; ++y) {
+      int* lo = &row_lo_[size_t(y)];
+      int* hi = &row_hi_[size_t(y)];
+      for (int j = 0; j < J; ++j) lo[size_t(j) * H] = W, hi[size_t(j) * H] = -1;
       for (int x = 0; x < W; ++x) {
-        const long p = p0 + x;
-        const float v[4] = {renders.color_at(j, p, 0), renders.color_at(j, p, 1), renders.color_at(j, p, 2),
-                            renders.opacity_at(j, p)};
-        for (int c = 0; c < 4; ++c) pl[x * 4 + c] = v[c];
-        const uint32_t diff = (bits(v[0]) ^ bits(base_pred_[p * 3])) | (bits(v[1]) ^ bits(base_pred_[p * 3 + 1])) |
-                              (bits(v[2]) ^ bits(base_pred_[p * 3 + 2])) | (bits(v[3]) ^ bits(base_opac_[p]));
-        if (diff || lab.v[p] == k) {
-          lo = std::min(lo, x);
-          hi = x;
+        const long p = long(y) * W + x;
+        const float b[4] = {renders.base_color[p * BS], renders.base_color[p * BS + 1], renders.base_color[p * BS + 2],
+                            renders.base_opacity[p * BS]};
+        for (int c = 0; c < 3; ++c) base_pred_[p * 3 + c] = b[c];
+        base_opac_[p] = b[3];
+        const int l = lab.v[p];
+        for (int j = 0; j < J; ++j) {
+          const float* col = renders.color[j] + p * S;
+          const float o = renders.opacity[j][p * S];
+          const float v[4] = {kDeltas ? b[0] + col[0] : col[0], kDeltas ? b[1] + col[1] : col[1],
+                              kDeltas ? b[2] + col[2] : col[2], kDeltas ? b[3] + o : o};
+          float* pl = &planes_[(size_t(j) * HW + p) * 4];
+          uint32_t diff = 0;
+          for (int c = 0; c < 4; ++c) {
+            pl[c] = v[c];
+            diff |= bits(v[c]) ^ bits(b[c]);
+          }
+          if (diff || l == objs[j]) {
+            lo[size_t(j) * H] = std::min(lo[size_t(j) * H], x);
+            hi[size_t(j) * H] = x;
+          }
         }
       }
-      row_lo_[size_t(j) * H + y] = lo;
-      row_hi_[size_t(j) * H + y] = hi;
     }
-  }
+  };
+  if (renders.deltas) scan.template operator()<true>();
+  else scan.template operator()<false>();
   const int dep = dep_ = opt_.dilation >= 0 ? opt_.dilation : dependency_radius(cfg_);
   obj_.resize(J);
   for (int j = 0; j < J; ++j) {
