@@ -487,49 +487,56 @@ void ObjectLosses::scatter(int H, int W, bool bro_grad, const ObjectGradOut& out
   const int J = static_cast<int>(obj_.size());
   const float s_app = grads_.app_scale;
   const bool has_base = !base_app_.empty();  // else every object is scored over the whole image
+  std::vector<float> gs(J), proj(J);
+  for (int j = 0; j < J; ++j) gs[j] = obj_[j].bro_scale, proj[j] = obj_[j].proj;
+  // Compiled for each case of the base pair (with eq. 14's terms, without them, not scored).
+  auto run = [&]<bool kBase, bool kBro>() {
 #pragma omp parallel
-  {
-    std::vector<int> xa(J), xb(J);
-    std::vector<const float*> own(J);
+    {
+      std::vector<int> xa(J), xb(J);
+      std::vector<const float*> own(J);
 #pragma omp for schedule(static)
-    for (int y = 0; y < H; ++y) {
-      for (int j = 0; j < J; ++j) {  // object j's own columns [xa, xb) in this row; own[j] at column xa
-        const PixelBox& R = obj_[j].R;
-        const bool in_rows = y >= R.y0 && y < R.y1;
-        xa[j] = in_rows ? R.x0 : W;
-        xb[j] = in_rows ? R.x1 : W;
-        own[j] = in_rows ? obj_[j].own.data() + size_t(y - R.y0) * R.width() * 3 : nullptr;
-      }
-      for (int x = 0; x < W; ++x) {
-        float* const px = out.color ? out.color + (long(y) * W + x) * out.stride : nullptr;
-        const size_t i = (size_t(y) * W + x) * 3;
-        float g[3] = {}, u[3] = {}, p[3] = {}, sum[3] = {0.f, 0.f, 0.f};
-        if (has_base)
-          for (int c = 0; c < 3; ++c) {
-            g[c] = s_app * base_app_[i + c];
-            u[c] = bro_grad ? base_unit_[i + c] : 0.f;
-            p[c] = base_pred_[i + c];
-          }
-        for (int j = 0; j < J; ++j) {
-          float v[3];
-          if (x >= xa[j] && x < xb[j]) {
-            const float* o = own[j] + size_t(x - xa[j]) * 3;
-            for (int c = 0; c < 3; ++c) v[c] = o[c] + 0.f;
-          } else if (bro_grad) {
-            const float gs = obj_[j].bro_scale, a = obj_[j].proj;
-            for (int c = 0; c < 3; ++c) v[c] = (g[c] + (gs * u[c] - a * p[c])) + 0.f;
-          } else {
-            for (int c = 0; c < 3; ++c) v[c] = g[c] + 0.f;
-          }
-          if (px)
-            for (int c = 0; c < 3; ++c) px[3 * j + c] = v[c];
-          for (int c = 0; c < 3; ++c) sum[c] += v[c];
+      for (int y = 0; y < H; ++y) {
+        for (int j = 0; j < J; ++j) {  // object j's own columns [xa, xb) in this row; own[j] at column xa
+          const PixelBox& R = obj_[j].R;
+          const bool in_rows = y >= R.y0 && y < R.y1;
+          xa[j] = in_rows ? R.x0 : W;
+          xb[j] = in_rows ? R.x1 : W;
+          own[j] = in_rows ? obj_[j].own.data() + size_t(y - R.y0) * R.width() * 3 : nullptr;
         }
-        if (out.sum)
-          for (int c = 0; c < 3; ++c) out.sum[(long(y) * W + x) * out.sum_stride + c] = sum[c];
+        for (int x = 0; x < W; ++x) {
+          float* const px = out.color ? out.color + (long(y) * W + x) * out.stride : nullptr;
+          const size_t i = (size_t(y) * W + x) * 3;
+          float g[3] = {}, u[3] = {}, p[3] = {}, sum[3] = {0.f, 0.f, 0.f};
+          if constexpr (kBase)
+            for (int c = 0; c < 3; ++c) {
+              g[c] = s_app * base_app_[i + c];
+              u[c] = kBro ? base_unit_[i + c] : 0.f;
+              p[c] = base_pred_[i + c];
+            }
+          for (int j = 0; j < J; ++j) {
+            float v[3];
+            if (x >= xa[j] && x < xb[j]) {
+              const float* o = own[j] + size_t(x - xa[j]) * 3;
+              for (int c = 0; c < 3; ++c) v[c] = o[c] + 0.f;
+            } else if constexpr (kBro) {
+              for (int c = 0; c < 3; ++c) v[c] = (g[c] + (gs[j] * u[c] - proj[j] * p[c])) + 0.f;
+            } else {
+              for (int c = 0; c < 3; ++c) v[c] = g[c] + 0.f;
+            }
+            if (px)
+              for (int c = 0; c < 3; ++c) px[3 * j + c] = v[c];
+            for (int c = 0; c < 3; ++c) sum[c] += v[c];
+          }
+          if (out.sum)
+            for (int c = 0; c < 3; ++c) out.sum[(long(y) * W + x) * out.sum_stride + c] = sum[c];
+        }
       }
     }
-  }
+  };
+  if (!has_base) run.template operator()<false, false>();
+  else if (bro_grad) run.template operator()<true, true>();
+  else run.template operator()<true, false>();
 }
 
 ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab, const ObjectRenders& renders,
