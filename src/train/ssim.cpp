@@ -31,37 +31,71 @@ struct Window {
   }
 };
 
-// Horizontal 11-tap pass of one row `r` [W*C] (channel stride C, zero padding) into `o`.
+// Horizontal 11-tap pass of one row `r` [W*C] (channel stride C, zero padding) into `o`: outputs [j0, j1) with
+// the 11 taps summed in registers, vectorised over j (one store per output). r0 is the row shifted so that
+// r0[j + k C] is tap k of output j.
+template <typename T>
+inline void conv_taps(const T* r0, T* o, int j0, int j1, int C, const T* wk) {
+#pragma omp simd
+  for (int j = j0; j < j1; ++j) {
+    T acc = wk[0] * r0[j];
+#pragma GCC unroll 11
+    for (int k = 1; k < kWin; ++k) acc += wk[k] * r0[j + k * C];
+    o[j] = acc;
+  }
+}
+
+inline float fused(float a, float b, float c) { return __builtin_fmaf(a, b, c); }
+inline double fused(double a, double b, double c) { return __builtin_fma(a, b, c); }
+
+// The outputs near the row's ends, whose windows pass its edge: the sum from 0 of the taps inside the row, each
+// one fused multiply-add in tap order. r0 as for conv_taps, with zeros outside the row: a zero tap adds w * 0 to
+// a sum that is never -0, which leaves it unchanged, so these are the sums over the inside taps alone.
+template <typename T>
+inline void conv_end_taps(const T* r0, T* o, int n, int C, const T* wk) {
+#pragma omp simd
+  for (int j = 0; j < n; ++j) {
+    T acc = T(0);
+#pragma GCC unroll 11
+    for (int k = 0; k < kWin; ++k) acc = fused(wk[k], r0[j + k * C], acc);
+    o[j] = acc;
+  }
+}
+
 template <typename T>
 void conv_row(const T* r, T* o, int W, int C) {
   const T* w = ssim_window<T>();
   const int L = W * C, lo = kHalf * C, hi = L - kHalf * C;
+  T wk[kWin];
+  for (int k = 0; k < kWin; ++k) wk[k] = w[k];
+  constexpr int kMaxPadC = 8;
+  if (hi > lo && C <= kMaxPadC) {
+    // The 5 C outputs at each end, vectorised on a copy of the row's end with the padding's zeros in place (the
+    // same sums as the scalar loops below, bitwise). Narrow crops have many rows and few columns: scalar ends
+    // with a test per tap were a third of this pass there.
+    T pad[3 * kHalf * kMaxPadC];
+    const int n = 3 * kHalf * C;  // the end's 5 C outputs read 15 C values
+    for (int i = 0; i < n; ++i) pad[i] = i >= lo && i - lo < L ? r[i - lo] : T(0);
+    conv_end_taps(pad, o, lo, C, wk);
+    for (int i = 0; i < n; ++i) pad[i] = hi - lo + i < L ? r[hi - lo + i] : T(0);
+    conv_end_taps(pad, o + hi, L - hi, C, wk);
+    conv_taps(r - kHalf * C, o, lo, hi, C, wk);
+    return;
+  }
   for (int j = 0; j < std::min(lo, L); ++j) {
     T s = 0;
     for (int k = 0; k < kWin; ++k) {
       int q = j + (k - kHalf) * C;
-      if (q >= 0 && q < L) s += w[k] * r[q];
+      if (q >= 0 && q < L) s = fused(w[k], r[q], s);
     }
     o[j] = s;
   }
-  // Interior: vectorised over j, the 11 taps unrolled and summed in registers (one store per output).
-  if (hi > lo) {
-    T wk[kWin];
-    for (int k = 0; k < kWin; ++k) wk[k] = w[k];
-    const T* r0 = r - kHalf * C;
-#pragma omp simd
-    for (int j = lo; j < hi; ++j) {
-      T acc = wk[0] * r0[j];
-#pragma GCC unroll 11
-      for (int k = 1; k < kWin; ++k) acc += wk[k] * r0[j + k * C];
-      o[j] = acc;
-    }
-  }
+  if (hi > lo) conv_taps(r - kHalf * C, o, lo, hi, C, wk);
   for (int j = std::max(hi, lo); j < L; ++j) {
     T s = 0;
     for (int k = 0; k < kWin; ++k) {
       int q = j + (k - kHalf) * C;
-      if (q >= 0 && q < L) s += w[k] * r[q];
+      if (q >= 0 && q < L) s = fused(w[k], r[q], s);
     }
     o[j] = s;
   }
