@@ -83,6 +83,20 @@ void BM_SsimForwardBackward(benchmark::State& st) {
   for (auto _ : st) benchmark::DoNotOptimize(train::ssim(d.a.data(), d.b.data(), kH, kW, 3, g.data(), ws));
 }
 
+// SSIM forward + backward of a random 3-channel image of 76,800 pixels at width arg (320: the bench image's
+// shape; 40: a narrow crop, many rows and few columns, as the hybrid method's object losses score).
+void BM_SsimWidth(benchmark::State& st) {
+  const bench::OmpThreads threads(st, 1);
+  const int W = static_cast<int>(st.range(0)), H = 76800 / W;
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> U(0, 1);
+  std::vector<float> a(size_t(W) * H * 3), b(a.size()), g(a.size());
+  for (auto& x : a) x = U(rng);
+  for (auto& x : b) x = U(rng);
+  train::SsimWorkspace<float> ws;
+  for (auto _ : st) benchmark::DoNotOptimize(train::ssim(a.data(), b.data(), H, W, 3, g.data(), ws));
+}
+
 void BM_PhotometricLoss(benchmark::State& st) {
   const bench::OmpThreads threads(st, 0);
   auto& d = data();
@@ -134,6 +148,11 @@ void BM_TrainStep(benchmark::State& st) {
 
 BENCHMARK(BM_SsimForward)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_SsimForwardBackward)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_SsimWidth)
+    ->ArgNames({"width", "threads"})
+    ->ArgsProduct({{40, 160, 320, 640}, bench::thread_counts()})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 BENCHMARK(BM_PhotometricLoss)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_AdamUpdate30k)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_TrainStep)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
