@@ -165,11 +165,10 @@ void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
       sv = semantic_.contrastive(u, n, fields, Jf > 0 ? io.out.weight_sums.data() : nullptr, dq_.data(), da, v.rng,
                                  v.slot == 0);
       if (da && sv.anchors > 0) io.dout.weight_sums = da;
+    } else if (cfg_.sparse_objects) {  // the others are dense channels of the sparse render
+      sv = semantic_.cosine(u, W, H, io.out.extra.data(), sl.total(), sl.other(), d_dense_.data());
     } else {
-      if (cfg_.sparse_objects)  // the others are dense channels of the sparse render
-        sv = semantic_.cosine(u, W, H, io.out.extra.data(), sl.total(), sl.other(), d_dense_.data());
-      else
-        sv = semantic_.cosine(u, W, H, io.out.extra.data(), C, layout_.other(), d_channels_.data());
+      sv = semantic_.cosine(u, W, H, io.out.extra.data(), C, layout_.other(), d_channels_.data());
     }
   }
   last_.sem = float(sv.loss);
@@ -239,8 +238,7 @@ void HybridMethod::after_step(const train::StepEnd& end) {
 void HybridMethod::release() {
   object_losses_.release();
   semantic_.release();
-  for (auto* v : {&dq_, &channels_, &d_channels_, &d_wsum_, &d_dense_})
-    std::vector<float>().swap(*v);
+  for (auto* v : {&dq_, &channels_, &d_channels_, &d_wsum_, &d_dense_}) std::vector<float>().swap(*v);
   groups_ = ObjectGroups{};
 }
 

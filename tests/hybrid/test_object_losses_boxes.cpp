@@ -272,7 +272,8 @@ TEST(ObjectLossesBoxes, SparseRendersAndCompactGradientsAreTheInterleavedOnesBit
             ASSERT_EQ(std::bit_cast<uint32_t>(x), std::bit_cast<uint32_t>(y)) << tag << ", pixel " << p;
             scale = std::max(scale, double(std::abs(x)));
           }
-          ASSERT_EQ(std::bit_cast<uint32_t>(sum[size_t(p) * 3 + k]), std::bit_cast<uint32_t>(sum5[size_t(p) * 5 + 1 + k]))
+          ASSERT_EQ(std::bit_cast<uint32_t>(sum[size_t(p) * 3 + k]),
+                    std::bit_cast<uint32_t>(sum5[size_t(p) * 5 + 1 + k]))
               << tag << ", pixel " << p;
         }
       EXPECT_GT(scale, 0) << tag;
