@@ -228,41 +228,59 @@ T bro_loss(const T* pred, const T* gt, int cs, int C, const float* B, int H, int
 }
 
 // Row by row as bro_loss_contiguous: each direction's differences of whole shifted rows, branch-free; the
-// per-element terms are then summed per pixel.
+// per-element terms are then summed per pixel. A value of `unit` gets, in this order, the previous row's y pair
+// (+), its own x pair (-), its left neighbour's x pair (+) and its own y pair (-), each added to the running value
+// from 0: one pass per row writes the row's values and starts the next row's (no zeroing pass, and each term is
+// added exactly where the per-direction loops added it, so the same bits).
 template <class T>
 void bro_parts(const T* pred, const T* gt, int C, const float* B, int H, int W, double* wsum, double* num, T* unit) {
-  const int L = W * C;
-  std::fill(unit, unit + size_t(H) * L, T(0));
-  std::vector<T> wx(L), wy(L), ax(L, T(0)), ay(L, T(0)), g(L);
+  const int L = W * C, X = L - C;  // the x pairs start at elements [0, X)
+  std::vector<T> wx(L), wy(L), ax(L, T(0)), ay(L, T(0)), gx(L), gy(L);
   for (int y = 0; y < H; ++y) {
     pair_weights(B, y, H, W, C, wx.data(), wy.data());
     const T* p = pred + size_t(y) * L;
     const T* q = gt + size_t(y) * L;
     T* u = unit + size_t(y) * L;
+    const bool next = y + 1 < H;
     // x direction: element i pairs with i + C in the same row.
 #pragma omp simd
-    for (int i = 0; i < L - C; ++i) {
+    for (int i = 0; i < X; ++i) {
       const T r = (p[i + C] - p[i]) - (q[i + C] - q[i]);
       ax[i] = wx[i] * std::abs(r);
-      g[i] = wx[i] * T((r > 0) - (r < 0));
+      gx[i] = wx[i] * T((r > 0) - (r < 0));
     }
-    for (int i = 0; i < L - C; ++i) u[i] -= g[i];
-    for (int i = 0; i < L - C; ++i) u[i + C] += g[i];
     // y direction: element i pairs with the same element of the next row.
-    if (y + 1 < H) {
+    if (next) {
 #pragma omp simd
       for (int i = 0; i < L; ++i) {
         const T r = (p[i + L] - p[i]) - (q[i + L] - q[i]);
         ay[i] = wy[i] * std::abs(r);
-        g[i] = wy[i] * T((r > 0) - (r < 0));
-      }
-#pragma omp simd
-      for (int i = 0; i < L; ++i) {
-        u[i] -= g[i];
-        u[i + L] += g[i];
+        gy[i] = wy[i] * T((r > 0) - (r < 0));
       }
     } else {
       std::fill(ay.begin(), ay.end(), T(0));
+    }
+    // The row's unit values: elements [0, C) have no left pair, [X, L) no own x pair (W = 1: neither).
+    const T* g0 = gx.data();
+    auto finish = [&](int i0, int i1, bool own_x, bool left_x) {
+#pragma omp simd
+      for (int i = i0; i < i1; ++i) {
+        T v = y == 0 ? T(0) : u[i];
+        if (own_x) v -= g0[i];
+        if (left_x) v += g0[i - C];
+        if (next) {
+          v -= gy[i];
+          u[i + L] = T(0) + gy[i];
+        }
+        u[i] = v;
+      }
+    };
+    if (W == 1) {
+      finish(0, L, false, false);
+    } else {
+      finish(0, C, true, false);
+      finish(C, X, true, true);
+      finish(X, L, false, true);
     }
     for (int x = 0; x < W; ++x) {
       const size_t i = size_t(x) * C;

@@ -538,3 +538,31 @@ TEST(ObjectLossesBoxes, SsimMapAndBroPartsAgreeWithSsimAndBroLoss) {
   ASSERT_GT(mx, 0);
   EXPECT_LE(err, 1e-6 * mx);
 }
+
+TEST(ObjectLossesBoxes, BroPartsOnThinImagesAndReusedBuffers) {
+  // bro_parts on images one pixel wide or high, two wide, and 1 x 1, with C = 3 and 1, writing into a buffer full
+  // of earlier values (every value is overwritten): its terms and gradient are eq. 14's (bro_loss with every
+  // term's gradient at scale 1 and the normaliser multiplied back).
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<float> U(0, 1);
+  for (auto [W, H] : {std::pair{1, 7}, std::pair{7, 1}, std::pair{2, 5}, std::pair{1, 1}, std::pair{3, 2}})
+    for (int C : {3, 1}) {
+      const int n = W * H * C;
+      std::vector<float> x(n), y(n), B(size_t(W) * H), unit(n, std::nanf("")), gb(n, 0.f);
+      for (auto& v : x) v = U(rng);
+      for (auto& v : y) v = U(rng);
+      for (auto& v : B) v = 0.2f + 0.8f * U(rng);
+      std::vector<double> wsum(size_t(W) * H), num(size_t(W) * H);
+      bro_parts(x.data(), y.data(), C, B.data(), H, W, wsum.data(), num.data(), unit.data());
+      const float eps = 1e-6f;
+      const double band = band_weight_total(B.data(), H, W);
+      const float L = bro_loss(x.data(), y.data(), C, C, B.data(), H, W, eps, gb.data(), 1.f);
+      double ws_total = 0, num_total = 0;
+      for (size_t p = 0; p < wsum.size(); ++p) ws_total += wsum[p], num_total += num[p];
+      EXPECT_NEAR(ws_total, band, 1e-9 * (band + 1)) << W << "x" << H << " C " << C;
+      const double den = C * band + eps;
+      EXPECT_NEAR(num_total / den, L, 1e-6 * (L + 1e-6)) << W << "x" << H << " C " << C;
+      for (int i = 0; i < n; ++i)
+        ASSERT_NEAR(unit[i] / den, gb[i], 1e-6 * (std::abs(gb[i]) + 1e-3)) << W << "x" << H << " C " << C << " " << i;
+    }
+}
