@@ -256,6 +256,12 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
     const T* xr = kFold && C > 0 ? fx + size_t(k) * kFoldMaxChannels : nullptr;
     const int e0 = kFold && GT > 0 ? record_int(rc[kE0]) : 0, ne = kFold && GT > 0 ? record_int(rc[kNe]) : 0;
     P ae[kFoldMaxChannels], ag[kFoldMaxEntries * kFoldMaxWidth];
+    // The common case of one group entry with 3 gradient channels (the hybrid method's object groups): its slot
+    // and values held for the Gaussian's visits instead of looked up on each (the same sums).
+    const bool one3 = kFold && GT > 0 && ne == 1 && GWg == 3;
+    const size_t g1 = one3 ? size_t(in.group_id[e0]) * 3 : 0;
+    const T* gv = one3 ? in.group_val + size_t(e0) * in.group_width : nullptr;
+    const T v0 = one3 ? gv[0] : T(0), v1 = one3 ? gv[1] : T(0), v2 = one3 ? gv[2] : T(0);
     if constexpr (kFold) {
       for (int c = 0; c < C; ++c) ae[c] = P{};
       for (int i = 0; i < ne * GWg; ++i) ag[i] = P{};
@@ -287,7 +293,16 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
       if constexpr (kLists) dot += vdot[vi];
       if constexpr (kFold) {  // extra_dots + group_dots of this visit, in their order
         P vd = C > 0 ? extra_dot(xr, C, st + kBatchFixed) : P{};
-        if (GT > 0) vd += group_dot(in, e0, e0 + ne, GWg, st + GO);
+        if (one3) {  // group_dot's sum
+          const P* gs = st + GO + g1;
+          P d = P{};
+          d += v0 * gs[0];
+          d += v1 * gs[1];
+          d += v2 * gs[2];
+          vd += d;
+        } else if (GT > 0) {
+          vd += group_dot(in, e0, e0 + ne, GWg, st + GO);
+        }
         dot += vd;
       }
       if (J > 0) {
@@ -321,9 +336,16 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
       aC += pw * (dy * dy);
       if constexpr (kFold) {  // extra_grads / group_grads of this visit
         for (int c = 0; c < C; ++c) ae[c] += wm * st[kBatchFixed + c];
-        for (int e = 0; e < ne; ++e) {
-          const P* gs = st + GO + size_t(in.group_id[e0 + e]) * GWg;
-          for (int i = 0; i < GWg; ++i) ag[e * GWg + i] += wm * gs[i];
+        if (one3) {
+          const P* gs = st + GO + g1;
+          ag[0] += wm * gs[0];
+          ag[1] += wm * gs[1];
+          ag[2] += wm * gs[2];
+        } else {
+          for (int e = 0; e < ne; ++e) {
+            const P* gs = st + GO + size_t(in.group_id[e0 + e]) * GWg;
+            for (int i = 0; i < GWg; ++i) ag[e * GWg + i] += wm * gs[i];
+          }
         }
       }
     }

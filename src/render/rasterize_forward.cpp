@@ -223,6 +223,12 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
     const T* xr = kX == kFolded && C > 0 ? fx + size_t(k) * kFoldMaxChannels : nullptr;
     const int e0 = kX == kFolded && GT > 0 ? record_int(rc[kE0]) : 0;
     const int e1 = kX == kFolded && GT > 0 ? e0 + record_int(rc[kNe]) : 0;
+    // The common case of one group entry of width 4 (the hybrid method's object groups): its slot and values
+    // held for the Gaussian's visits instead of looked up on each (the same sums).
+    const bool one4 = kX == kFolded && e1 - e0 == 1 && in.group_width == 4;
+    const size_t g1 = one4 ? size_t(in.group_id[e0]) * 4 : 0;
+    const T* gv = one4 ? in.group_val + size_t(e0) * 4 : nullptr;
+    const T v0 = one4 ? gv[0] : T(0), v1 = one4 ? gv[1] : T(0), v2 = one4 ? gv[2] : T(0), v3 = one4 ? gv[3] : T(0);
     P* wa = J > 0 ? wacc + size_t(k) * J : nullptr;
     for (int jj = 0; jj < J; ++jj) wa[jj] = P{};
     const M kk = M{} + I(k + 1);
@@ -257,7 +263,15 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
       }
       if constexpr (kX == kFolded) {  // the sums of composite_extras / composite_groups, in the same order
         for (int c = 0; c < C; ++c) st[kBatchFixed + c] += wgt * xr[c];
-        add_group_values(in, e0, e1, wgt, st + GO);
+        if (one4) {
+          P* d = st + GO + g1;
+          d[0] += wgt * v0;
+          d[1] += wgt * v1;
+          d[2] += wgt * v2;
+          d[3] += wgt * v3;
+        } else {
+          add_group_values(in, e0, e1, wgt, st + GO);
+        }
       }
       for_batch_maps(jmask[bt], J, [&](int jj) { wa[jj] += wgt * st[kBatchFixed + C + jj]; });
       st[bT] = acc ? testT : Tr;
