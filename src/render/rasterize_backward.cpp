@@ -253,7 +253,10 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
     const T* dw = J > 0 ? DW + size_t(k) * J : nullptr;
     // Folded channels: the Gaussian's extra row (tile order) and group entries (from its record); their gradient
     // sums (ae, ag) on the stack.
-    const T* xr = kFold && C > 0 ? fx + size_t(k) * kFoldMaxChannels : nullptr;
+    // (Copied to a local array: the visits' stores to the batch state cannot alias it, so it stays in registers.)
+    T xr[kFoldMaxChannels];
+    if (kFold)
+      for (int c = 0; c < C; ++c) xr[c] = fx[size_t(k) * kFoldMaxChannels + c];
     const int e0 = kFold && GT > 0 ? record_int(rc[kE0]) : 0, ne = kFold && GT > 0 ? record_int(rc[kNe]) : 0;
     P ae[kFoldMaxChannels], ag[kFoldMaxEntries * kFoldMaxWidth];
     // The common case of one group entry with 3 gradient channels (the hybrid method's object groups): its slot

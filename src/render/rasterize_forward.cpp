@@ -220,7 +220,10 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
     }
     const T* rc = td.rec + size_t(k) * kRecord;
     // Folded channels: the Gaussian's extra row (tile order) and group entries (from its record), added in the walk.
-    const T* xr = kX == kFolded && C > 0 ? fx + size_t(k) * kFoldMaxChannels : nullptr;
+    // (Copied to a local array: the visits' stores to the batch state cannot alias it, so it stays in registers.)
+    T xr[kFoldMaxChannels];
+    if (kX == kFolded)
+      for (int c = 0; c < C; ++c) xr[c] = fx[size_t(k) * kFoldMaxChannels + c];
     const int e0 = kX == kFolded && GT > 0 ? record_int(rc[kE0]) : 0;
     const int e1 = kX == kFolded && GT > 0 ? e0 + record_int(rc[kNe]) : 0;
     // The common case of one group entry of width 4 (the hybrid method's object groups): its slot and values
