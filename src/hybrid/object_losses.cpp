@@ -1,7 +1,7 @@
 // Eqs. 6 and 14 for the J objects of one view. Without boxes (or without the base render): every object over the
 // whole image, one object per task. With boxes (the exactness argument is in object_losses.h):
 //   1. one pass over the interleaved render finds each object's box D_k of pixels that differ from the base
-//      render (or carry its label) and copies the base render to planar images;
+//      render (or carry its label) and copies every object's render and the base render to planar images;
 //   2. tasks: the base pair's eq. 6 and eq. 14 over the image, each small object's terms on its crop Q_k (kept
 //      inside R_k), each large object over the whole image; every task cut into bands of rows (each cropped with
 //      dep rows above and below) that run as pieces, largest first, each writing its rows' terms and row sums;
@@ -18,7 +18,9 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <string>
 
+#include "core/error.h"
 #include "hybrid/bro.h"
 #include "train/ssim.h"
 
@@ -107,6 +109,9 @@ ObjectLossValues ObjectLosses::operator()(const Image& image, const LabelMap& la
 
 ObjectLossValues ObjectLosses::operator()(const Image& image, const LabelMap& lab, const ObjectRenders& renders,
                                           const std::vector<int>& objs, const ObjectGradOut& out) {
+  if (renders.J() != static_cast<int>(objs.size()))
+    throw Error("object losses: " + std::to_string(renders.J()) + " object renders for " +
+                std::to_string(objs.size()) + " objects");
   const size_t threads = size_t(std::max(1, omp_get_max_threads()));
   if (scratch_.size() < threads) scratch_.resize(threads, Scratch(cfg_.lambda_dssim));
   if (renders.base_color && opt_.boxes && !objs.empty()) return box_path(image, lab, renders, objs, out);

@@ -1,10 +1,12 @@
 // The object-conditioned losses of one view: eq. 6 (appearance, (1 - lambda) L1 + lambda (1 - SSIM) of each
 // object render I_k against I * M_k) and eq. 14 (BRO on the band of eq. 13, with the scale rule and the
-// scale-invariant gradient of bro.h), for the J objects present in the view's mask. The object renders come
-// interleaved in the extra channels of one rasterization (object_channels.h). Each object's losses run
-// single-threaded in one thread's scratch (no parallel-region overhead per convolution, each object's images
-// stay in one core's cache), and the gradients go back interleaved. Loss values are summed in object order
-// (deterministic, independent of the thread count).
+// scale-invariant gradient of bro.h), for the J objects present in the view's mask. The object renders come from
+// one rasterization, interleaved per pixel (ObjectRenders below: the dense object channels of object_channels.h,
+// or the base channels and groups of object_groups.h); the box path's first pass lays each object's render out
+// as its own plane, so that an object's crop reads contiguous rows. Each object's losses run single-threaded in
+// one thread's scratch (no parallel-region overhead per convolution, each object's images stay in one core's
+// cache), and the gradients go back interleaved per pixel (ObjectGradOut). Loss values are summed in object
+// order (deterministic, independent of the thread count).
 //
 // Boxes (ObjectLossOptions::boxes, with the layout's base render). Every term of both losses is a sum over
 // pixels p (L1 and the SSIM map over pixels, eq. 14's numerator and band weights over the forward differences,
