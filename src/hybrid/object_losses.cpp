@@ -110,8 +110,8 @@ ObjectLossValues ObjectLosses::operator()(const Image& image, const LabelMap& la
 ObjectLossValues ObjectLosses::operator()(const Image& image, const LabelMap& lab, const ObjectRenders& renders,
                                           const std::vector<int>& objs, const ObjectGradOut& out) {
   if (renders.J() != static_cast<int>(objs.size()))
-    throw Error("object losses: " + std::to_string(renders.J()) + " object renders for " +
-                std::to_string(objs.size()) + " objects");
+    throw Error("object losses: " + std::to_string(renders.J()) + " object renders for " + std::to_string(objs.size()) +
+                " objects");
   const size_t threads = size_t(std::max(1, omp_get_max_threads()));
   if (scratch_.size() < threads) scratch_.resize(threads, Scratch(cfg_.lambda_dssim));
   if (renders.base_color && opt_.boxes && !objs.empty()) return box_path(image, lab, renders, objs, out);
