@@ -5,7 +5,9 @@
 // absent from the render with or without mask pixels) and on a real composite of object_channels() by the
 // renderer, for BRO on / off, scale-invariant or not, with and without the scale rule, three lambda_dssim and
 // three band kernels; the sparse gradient description against the dense one; and a dilation one pixel short of
-// the dependency radius is caught. Also the two helpers the box path adds, train::ssim_map and bro_parts.
+// the dependency radius is caught. Also the two helpers the box path adds, train::ssim_map and bro_parts (on
+// thin images too), the sparse path's layouts against the interleaved one (bitwise), and a count mismatch
+// between the renders and the objects refused.
 #include <gtest/gtest.h>
 #include <omp.h>
 
@@ -16,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "core/error.h"
 #include "hybrid/bro.h"
 #include "hybrid/object_channels.h"
 #include "hybrid/object_losses.h"
@@ -565,4 +568,16 @@ TEST(ObjectLossesBoxes, BroPartsOnThinImagesAndReusedBuffers) {
       for (int i = 0; i < n; ++i)
         ASSERT_NEAR(unit[i] / den, gb[i], 1e-6 * (std::abs(gb[i]) + 1e-3)) << W << "x" << H << " C " << C << " " << i;
     }
+}
+
+TEST(ObjectLossesBoxes, RendersAndObjectsOfDifferentCountsAreRefused) {
+  // An ObjectRenders of J objects with a list of another length: a one-line error, nothing scored.
+  const Case c = synthetic(4);
+  const ObjectRenders r = ObjectRenders::interleaved(c.extra.data(), c.lay);
+  std::vector<int> more = c.objs;
+  more.push_back(more.back() + 1);
+  ObjectLosses losses{HybridConfig{}};
+  std::vector<float> g(size_t(c.W) * c.H * 3 * more.size());
+  const ObjectGradOut out{g.data(), 3L * long(more.size()), nullptr, 3};
+  EXPECT_THROW(losses(c.image, c.lab, r, more, out), Error);
 }
