@@ -6,53 +6,11 @@
 namespace hgs::hybrid {
 namespace {
 
-// Separable max (kMax) or min filter over the window [x - r, x + r2] clipped to the image. Each pass is a
-// max/min of whole shifted rows, so the inner loops are contiguous and vectorise.
-template <bool kMax>
-void filter(const float* in, int H, int W, int s, float* out, std::vector<float>& row) {
-  const int r = s / 2, r2 = s - 1 - r;  // window [x - r, x + r2] (centred for odd s)
-  row.resize(size_t(H) * W);
-  auto pick = [](float a, float b) { return kMax ? std::max(a, b) : std::min(a, b); };
-  for (int y = 0; y < H; ++y) {
-    const float* src = in + size_t(y) * W;
-    float* dst = row.data() + size_t(y) * W;
-    std::copy(src, src + W, dst);
-    for (int d = -r; d <= r2; ++d) {
-      if (d == 0) continue;
-      const int x0 = std::max(0, -d), x1 = std::min(W, W - d);  // x + d inside [0, W)
-#pragma omp simd
-      for (int x = x0; x < x1; ++x) dst[x] = pick(dst[x], src[x + d]);
-    }
-  }
-  for (int y = 0; y < H; ++y) {
-    float* dst = out + size_t(y) * W;
-    std::copy(row.data() + size_t(y) * W, row.data() + size_t(y + 1) * W, dst);
-    for (int d = std::max(0, y - r); d <= std::min(H - 1, y + r2); ++d) {
-      if (d == y) continue;
-      const float* src = row.data() + size_t(d) * W;
-#pragma omp simd
-      for (int x = 0; x < W; ++x) dst[x] = pick(dst[x], src[x]);
-    }
-  }
-}
-
-}  // namespace
-
-void dilate(const float* in, int H, int W, int s, float* out) {
-  std::vector<float> row;
-  filter<true>(in, H, W, s, out, row);
-}
-void erode(const float* in, int H, int W, int s, float* out) {
-  std::vector<float> row;
-  filter<false>(in, H, W, s, out, row);
-}
-
-namespace {
-
-// The max and the min filter of one image in one pass over it (the windows of filter<>, so the same values):
-// dmax, dmin [H, W] out, rmax, rmin [H, W] scratch.
+// Separable max and min filters over the window [x - r, x + r2] clipped to the image (centred for odd s), both in
+// one pass over the image: dmax, dmin [H, W] out, rmax, rmin [H, W] scratch. Each pass is a max / min of whole
+// shifted rows, so the inner loops are contiguous and vectorise.
 void minmax_filter(const float* in, int H, int W, int s, float* dmax, float* dmin, float* rmax, float* rmin) {
-  const int r = s / 2, r2 = s - 1 - r;
+  const int r = s / 2, r2 = s - 1 - r;  // window [x - r, x + r2]
   for (int y = 0; y < H; ++y) {
     const float* src = in + size_t(y) * W;
     float* hi = rmax + size_t(y) * W;
@@ -88,6 +46,16 @@ void minmax_filter(const float* in, int H, int W, int s, float* dmax, float* dmi
 }
 
 }  // namespace
+
+// Dilation and erosion alone (tests and diagnostics): the pair's filter, the other output discarded.
+void dilate(const float* in, int H, int W, int s, float* out) {
+  std::vector<float> tmp(3 * size_t(H) * W);
+  minmax_filter(in, H, W, s, out, tmp.data(), tmp.data() + size_t(H) * W, tmp.data() + 2 * size_t(H) * W);
+}
+void erode(const float* in, int H, int W, int s, float* out) {
+  std::vector<float> tmp(3 * size_t(H) * W);
+  minmax_filter(in, H, W, s, tmp.data(), out, tmp.data() + size_t(H) * W, tmp.data() + 2 * size_t(H) * W);
+}
 
 void boundary_band(const float* A, const float* M, int H, int W, int s, float* B, std::vector<float>& tmp) {
   const size_t n = size_t(H) * W;

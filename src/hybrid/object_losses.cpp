@@ -484,8 +484,8 @@ void ObjectLosses::finish_box(int W, int H, int j) {
   }
 }
 
-// Step 4: d_extra [H, W, C] = each object's gradient: own inside R, the base pair's combination outside; and
-// color_sum [H, W, 3] their sum over the objects. Pixel by pixel: the base pair's values are loaded once for the
+// Step 4: out.color = each object's gradient: own inside R, the base pair's combination outside; and out.sum
+// their sum over the objects (ObjectGradOut). Pixel by pixel: the base pair's values are loaded once for the
 // J colour triples of the pixel. (Each value is stored + 0, so a -0 is stored as +0: the bits of the sum into a
 // zeroed buffer this replaced.)
 void ObjectLosses::scatter(int H, int W, bool bro_grad, const ObjectGradOut& out) const {
