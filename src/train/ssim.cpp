@@ -82,23 +82,19 @@ void conv_row(const T* r, T* o, int W, int C) {
     conv_taps(r - kHalf * C, o, lo, hi, C, wk);
     return;
   }
-  for (int j = 0; j < std::min(lo, L); ++j) {
-    T s = 0;
-    for (int k = 0; k < kWin; ++k) {
-      int q = j + (k - kHalf) * C;
-      if (q >= 0 && q < L) s = fused(w[k], r[q], s);
+  auto scalar_ends = [&](int j0, int j1) {  // the taps inside the row only
+    for (int j = j0; j < j1; ++j) {
+      T s = 0;
+      for (int k = 0; k < kWin; ++k) {
+        int q = j + (k - kHalf) * C;
+        if (q >= 0 && q < L) s = fused(w[k], r[q], s);
+      }
+      o[j] = s;
     }
-    o[j] = s;
-  }
+  };
+  scalar_ends(0, std::min(lo, L));
   if (hi > lo) conv_taps(r - kHalf * C, o, lo, hi, C, wk);
-  for (int j = std::max(hi, lo); j < L; ++j) {
-    T s = 0;
-    for (int k = 0; k < kWin; ++k) {
-      int q = j + (k - kHalf) * C;
-      if (q >= 0 && q < L) s = fused(w[k], r[q], s);
-    }
-    o[j] = s;
-  }
+  scalar_ends(std::max(hi, lo), L);
 }
 
 // Vertical 11-tap pass for output row y of an H-row image whose horizontally filtered rows live in a ring of
