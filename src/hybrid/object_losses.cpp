@@ -217,6 +217,8 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders,
   const long BS = renders.base_stride;
   row_lo_.resize(size_t(J) * H);
   row_hi_.resize(size_t(J) * H);
+  mask_lo_.resize(size_t(J) * H);
+  mask_hi_.resize(size_t(J) * H);
   base_pred_.resize(HW * 3);
   base_opac_.resize(HW);
   planes_.resize(size_t(J) * HW * 4);
@@ -228,7 +230,9 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders,
     for (int y = 0; y < H; ++y) {
       int* lo = &row_lo_[size_t(y)];
       int* hi = &row_hi_[size_t(y)];
-      for (int j = 0; j < J; ++j) lo[size_t(j) * H] = W, hi[size_t(j) * H] = -1;
+      int* mlo = &mask_lo_[size_t(y)];
+      int* mhi = &mask_hi_[size_t(y)];
+      for (int j = 0; j < J; ++j) lo[size_t(j) * H] = mlo[size_t(j) * H] = W, hi[size_t(j) * H] = mhi[size_t(j) * H] = -1;
       for (int x = 0; x < W; ++x) {
         const long p = long(y) * W + x;
         const float b[4] = {renders.base_color[p * BS], renders.base_color[p * BS + 1], renders.base_color[p * BS + 2],
@@ -247,9 +251,14 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders,
             pl[c] = v[c];
             diff |= bits(v[c]) ^ bits(b[c]);
           }
-          if (diff || l == objs[j]) {
+          const bool label = l == objs[j];
+          if (diff || label) {
             lo[size_t(j) * H] = std::min(lo[size_t(j) * H], x);
             hi[size_t(j) * H] = x;
+          }
+          if (label) {
+            mlo[size_t(j) * H] = std::min(mlo[size_t(j) * H], x);
+            mhi[size_t(j) * H] = x;
           }
         }
       }
@@ -259,16 +268,22 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders,
   else scan.template operator()<false>();
   const int dep = dep_ = opt_.dilation >= 0 ? opt_.dilation : dependency_radius(cfg_);
   obj_.resize(J);
-  for (int j = 0; j < J; ++j) {
-    PixelBox D{W, H, 0, 0};
+  // The hull of rows' column ranges [lo, hi] (hi < 0: none in the row).
+  auto hull = [&](const std::vector<int>& lo, const std::vector<int>& hi, int j) {
+    PixelBox b{W, H, 0, 0};
     for (int y = 0; y < H; ++y) {
-      if (row_hi_[size_t(j) * H + y] < 0) continue;
-      D.x0 = std::min(D.x0, row_lo_[size_t(j) * H + y]);
-      D.x1 = std::max(D.x1, row_hi_[size_t(j) * H + y] + 1);
-      D.y0 = std::min(D.y0, y);
-      D.y1 = y + 1;
+      if (hi[size_t(j) * H + y] < 0) continue;
+      b.x0 = std::min(b.x0, lo[size_t(j) * H + y]);
+      b.x1 = std::max(b.x1, hi[size_t(j) * H + y] + 1);
+      b.y0 = std::min(b.y0, y);
+      b.y1 = y + 1;
     }
+    return b;
+  };
+  for (int j = 0; j < J; ++j) {
+    const PixelBox D = hull(row_lo_, row_hi_, j);
     Object& o = obj_[j];
+    o.M = hull(mask_lo_, mask_hi_, j);
     o.R = D.grown(dep, W, H);
     o.Q = o.R.grown(dep, W, H);
     o.full = double(o.Q.area()) > opt_.max_box_fraction * double(HW);
@@ -380,8 +395,10 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
   // Eq. 6: SSIM on the crop with the image's normaliser; L1 and the map summed over each row of R.
   w.sgrad.resize(qn * 3);
   w.smap.resize(qn * 3);
+  // (The target is 0 outside the mask's box: y's passes run there only.)
+  const train::SsimSupport ys{o.M.x0 - Q.x0, o.M.y0 - Q.y0, o.M.x1 - Q.x0, o.M.y1 - Q.y0};
   train::ssim_map_rows(w.pred.data(), w.gt.data(), qh, qw, 3, ry, ry + rh, w.sgrad.data(), w.smap.data(), double(n),
-                       w.ssim);  // R's rows
+                       w.ssim, o.M.empty() ? train::SsimSupport{0, 0, 0, 0} : ys);  // R's rows
   const float lam = cfg_.lambda_dssim, a = (1 - lam) / float(n), b = -lam, s_app = cfg_.lambda_app / J;
   for (int yy = 0; yy < rh; ++yy) {
     const size_t q0 = (size_t(yy + ry) * qw + rx) * 3;

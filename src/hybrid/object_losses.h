@@ -155,6 +155,7 @@ class ObjectLosses {
   enum Term { kL1, kSsim, kWsum, kNum, kGp, kPp, kTerms };
   struct Object {              // one object of the box path
     PixelBox R, Q;             // scored box and crop (image coordinates)
+    PixelBox M;                // the box of its mask's pixels (its target I M_k is 0 outside)
     bool full = false;         // scored over the whole image (R = Q = the image)
     std::vector<float> own;    // [R h, R w, 3] its gradient inside R
     std::vector<float> unit;   // [R h, R w, 3] eq. 14's unscaled gradient inside R (bro_parts)
@@ -186,6 +187,7 @@ class ObjectLosses {
   // Box path.
   std::vector<Object> obj_;                              // [J]
   std::vector<int> row_lo_, row_hi_;                     // [J, H] each row's differing columns
+  std::vector<int> mask_lo_, mask_hi_;                   // [J, H] each row's columns of the object's label
   std::vector<float> base_pred_, base_app_, base_unit_;  // [H, W, 3]
   std::vector<float> base_opac_, zeros_;                 // [H, W], [H, W, 3]
   std::vector<float> planes_;                            // [J, H, W, 4] the objects' renders (colour, opacity)

@@ -8,7 +8,8 @@
 // the window is symmetric so the adjoint of the convolution is the same convolution, giving
 //   dL/dx = w*(g d_mu) + 2 x w*(g d_exx) + y w*(g d_exy).
 // ssim_map also stores the map and takes g = 1/count from the caller (a crop scored as part of a larger image);
-// with y null (an all-zero y) the passes of mu_y, E[yy], E[xy] and of d_exy are skipped (their values are 0).
+// with y null (an all-zero y) the passes of mu_y, E[yy], E[xy] and of d_exy are skipped (their values are 0), and
+// with a support given (ssim_map_rows' `ys`: where y may be non-zero) they run only on and near it.
 #include "train/ssim.h"
 
 #include <omp.h>
@@ -62,28 +63,40 @@ inline void conv_end_taps(const T* r0, T* o, int n, int C, const T* wk) {
   }
 }
 
+// Outputs [j0, j1) of the horizontal pass of row r [W*C] (channel stride C, zero padding) into o, bitwise what
+// the pass over the whole row gives them (each output has its own arithmetic: the interior's conv_taps, the end
+// taps within 5 C of the row's ends, so a part of a row is computed as the whole row computes it); reads r only
+// in [j0 - 5 C, j1 + 5 C).
 template <typename T>
-void conv_row(const T* r, T* o, int W, int C) {
+void conv_row_range(const T* r, T* o, int W, int C, int j0, int j1) {
   const T* w = ssim_window<T>();
   const int L = W * C, lo = kHalf * C, hi = L - kHalf * C;
+  j0 = std::max(0, j0);
+  j1 = std::min(L, j1);
+  if (j0 >= j1) return;
   T wk[kWin];
   for (int k = 0; k < kWin; ++k) wk[k] = w[k];
   constexpr int kMaxPadC = 8;
   if (hi > lo && C <= kMaxPadC) {
     // The 5 C outputs at each end, vectorised on a copy of the row's end with the padding's zeros in place (the
     // same sums as the scalar loops below, bitwise). Narrow crops have many rows and few columns: scalar ends
-    // with a test per tap were a third of this pass there.
+    // with a test per tap were a third of this pass there. Output i of an end reads pad[i, i + 10 C].
     T pad[3 * kHalf * kMaxPadC];
-    const int n = 3 * kHalf * C;  // the end's 5 C outputs read 15 C values
-    for (int i = 0; i < n; ++i) pad[i] = i >= lo && i - lo < L ? r[i - lo] : T(0);
-    conv_end_taps(pad, o, lo, C, wk);
-    for (int i = 0; i < n; ++i) pad[i] = hi - lo + i < L ? r[hi - lo + i] : T(0);
-    conv_end_taps(pad, o + hi, L - hi, C, wk);
-    conv_taps(r - kHalf * C, o, lo, hi, C, wk);
+    if (j0 < lo) {  // left end: pad[i] = r[i - 5 C]
+      const int e = std::min(j1, lo);
+      for (int i = j0; i < e + 2 * lo; ++i) pad[i] = i >= lo ? r[i - lo] : T(0);
+      conv_end_taps(pad + j0, o + j0, e - j0, C, wk);
+    }
+    if (std::min(j1, hi) > std::max(j0, lo)) conv_taps(r - kHalf * C, o, std::max(j0, lo), std::min(j1, hi), C, wk);
+    if (j1 > hi) {  // right end: pad[i] = r[hi - 5 C + i]
+      const int s0 = std::max(j0, hi) - hi, e = j1 - hi;
+      for (int i = s0; i < e + 2 * lo; ++i) pad[i] = hi - lo + i < L ? r[hi - lo + i] : T(0);
+      conv_end_taps(pad + s0, o + hi + s0, e - s0, C, wk);
+    }
     return;
   }
-  auto scalar_ends = [&](int j0, int j1) {  // the taps inside the row only
-    for (int j = j0; j < j1; ++j) {
+  auto scalar_ends = [&](int a, int b) {  // the taps inside the row only
+    for (int j = a; j < b; ++j) {
       T s = 0;
       for (int k = 0; k < kWin; ++k) {
         int q = j + (k - kHalf) * C;
@@ -92,9 +105,15 @@ void conv_row(const T* r, T* o, int W, int C) {
       o[j] = s;
     }
   };
-  scalar_ends(0, std::min(lo, L));
-  if (hi > lo) conv_taps(r - kHalf * C, o, lo, hi, C, wk);
-  scalar_ends(std::max(hi, lo), L);
+  scalar_ends(j0, std::min(j1, lo));
+  if (hi > lo && std::min(j1, hi) > std::max(j0, lo))
+    conv_taps(r - kHalf * C, o, std::max(j0, lo), std::min(j1, hi), C, wk);
+  scalar_ends(std::max(j0, std::max(hi, lo)), j1);
+}
+
+template <typename T>
+void conv_row(const T* r, T* o, int W, int C) {
+  conv_row_range(r, o, W, C, 0, W * C);
 }
 
 // Vertical 11-tap pass for output row y of an H-row image whose horizontally filtered rows live in a ring of
@@ -143,16 +162,34 @@ inline Terms<T> ssim_terms(T* const* mom, int j, T C1, T C2) {
   return {2 * mu1 * mu2 + C1, 2 * s12 + C2, mu1 * mu1 + mu2 * mu2 + C1, s11 + s22 + C2};
 }
 
+// y's support clipped to an H x W image, as value indices: rows [r0, r1), the values [b0, b1) of a row where y
+// may be non-zero and [a0, a1) where its filtered rows and moments may be (5 pixels more on each side). Empty
+// (r0 = r1 = 0) for a null y.
+struct Support {
+  int r0 = 0, r1 = 0, a0 = 0, a1 = 0, b0 = 0, b1 = 0;
+  Support(const SsimSupport& s, bool has_y, int H, int W, int C) {
+    const int x0 = std::max(0, s.x0), x1 = std::min(W, s.x1), y0 = std::max(0, s.y0), y1 = std::min(H, s.y1);
+    if (!has_y || x0 >= x1 || y0 >= y1) return;
+    r0 = y0, r1 = y1;
+    b0 = x0 * C, b1 = x1 * C;
+    a0 = std::max(0, x0 - kHalf) * C, a1 = std::min(W, x1 + kHalf) * C;
+  }
+  bool any() const { return r1 > r0; }
+  bool rows(int r, int margin) const { return any() && r >= r0 - margin && r < r1 + margin; }
+};
+
 // SSIM of output rows [y0, y1) as a line-buffer pipeline, so every intermediate row stays in cache:
 //   product rows (x, y, xx, yy, xy) -> horizontal pass -> ring P (11 rows)
 //   moment row m (vertical pass over P rows m-5..m+5) -> map (summed into row_sum[m]) and, when `coeff` is
 //   given, the three backward coefficients -> horizontal pass -> coeff rows m ([H, 3, L], shared by the bands).
 // Product rows are computed for [y0 - 5, y1 + 5) (clipped), so a band needs nothing from its neighbours; every
 // value is computed with the same arithmetic whatever the banding.
+// y's passes (its product rows, its three moments, the coefficient of E[xy]) run only where they can be non-zero
+// (`sp`); everywhere else those values are 0, as the full passes over y's zeros give them.
 // kMap: the map's values are also stored in `map` [H, L]. `g` is the gradient's normaliser 1 / count.
 template <typename T, bool kMap>
-void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, T* coeff, double* row_sum, T g, T* map,
-               std::vector<T>& buf) {
+void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, const Support& sp, T* coeff,
+               double* row_sum, T g, T* map, std::vector<T>& buf) {
   const int L = W * C;
   const T C1 = T(0.01 * 0.01), C2 = T(0.03 * 0.03);
   buf.resize(size_t(kWin) * 5 * L + size_t(8) * L);
@@ -160,39 +197,41 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, T* c
   T* tmp = P + size_t(kWin) * 5 * L;  // [8][L]: products, moments
   auto prow = [&](int row, int map) { return P + (size_t(row % kWin) * 5 + map) * L; };
   int next_p = std::max(0, y0 - kHalf);  // next product row to compute
-  // y null: an all-zero image, whose moments mu_y, E[yy], E[xy] are 0 (their rows stay zero, no passes).
-  if (!y)
-    for (int k : {1, 3, 4}) std::fill(tmp + size_t(3 + k) * L, tmp + size_t(4 + k) * L, T(0));
+  const int a0 = sp.a0, a1 = sp.a1;  // y's filtered values: [a0, a1) of a row
+  T* mom[5];
+  for (int k = 0; k < 5; ++k) mom[k] = tmp + size_t(3 + k) * L;
+  for (int k : {1, 3, 4}) std::fill(mom[k], mom[k] + L, T(0));  // y's moments outside [a0, a1): 0
+  bool y_moments = false;                                        // mom[1, 3, 4] hold values in [a0, a1)
   for (int m = y0; m < y1; ++m) {
-    for (; next_p <= std::min(H - 1, m + kHalf) && !y; ++next_p) {
+    for (; next_p <= std::min(H - 1, m + kHalf); ++next_p) {
       const T* xr = x + size_t(next_p) * L;
-      T* pxx = tmp;
+      T *pxx = tmp, *pyy = tmp + L, *pxy = tmp + 2 * L;
 #pragma omp simd
       for (int j = 0; j < L; ++j) pxx[j] = xr[j] * xr[j];
       conv_row(xr, prow(next_p, 0), W, C);
       conv_row(pxx, prow(next_p, 2), W, C);
-    }
-    for (; next_p <= std::min(H - 1, m + kHalf); ++next_p) {
-      const T* xr = x + size_t(next_p) * L;
-      const T* yr = y + size_t(next_p) * L;
-      T *pxx = tmp, *pyy = tmp + L, *pxy = tmp + 2 * L;
+      if (sp.rows(next_p, 0)) {  // the outputs [a0, a1), which read the products 5 pixels further
+        const T* yr = y + size_t(next_p) * L;
+        const int c0 = std::max(0, a0 - kHalf * C), c1 = std::min(L, a1 + kHalf * C);
 #pragma omp simd
-      for (int j = 0; j < L; ++j) {
-        pxx[j] = xr[j] * xr[j];
-        pyy[j] = yr[j] * yr[j];
-        pxy[j] = xr[j] * yr[j];
+        for (int j = c0; j < c1; ++j) {
+          pyy[j] = yr[j] * yr[j];
+          pxy[j] = xr[j] * yr[j];
+        }
+        conv_row_range(yr, prow(next_p, 1), W, C, a0, a1);
+        conv_row_range(pyy, prow(next_p, 3), W, C, a0, a1);
+        conv_row_range(pxy, prow(next_p, 4), W, C, a0, a1);
+      } else if (sp.rows(next_p, 2 * kHalf)) {  // a zero row that a moment row of y's reads
+        for (int k : {1, 3, 4}) std::fill(prow(next_p, k) + a0, prow(next_p, k) + a1, T(0));
       }
-      conv_row(xr, prow(next_p, 0), W, C);
-      conv_row(yr, prow(next_p, 1), W, C);
-      conv_row(pxx, prow(next_p, 2), W, C);
-      conv_row(pyy, prow(next_p, 3), W, C);
-      conv_row(pxy, prow(next_p, 4), W, C);
     }
-    T* mom[5];
-    for (int k = 0; k < 5; ++k) {
-      mom[k] = tmp + size_t(3 + k) * L;
-      if (!y && (k == 1 || k == 3 || k == 4)) continue;
-      conv_col<T>([&](int r) { return prow(r, k); }, m, H, L, mom[k]);
+    for (int k : {0, 2}) conv_col<T>([&](int r) { return prow(r, k); }, m, H, L, mom[k]);
+    if (sp.rows(m, kHalf)) {
+      for (int k : {1, 3, 4}) conv_col<T>([&](int r) { return prow(r, k) + a0; }, m, H, a1 - a0, mom[k] + a0);
+      y_moments = true;
+    } else if (y_moments) {
+      for (int k : {1, 3, 4}) std::fill(mom[k] + a0, mom[k] + a1, T(0));
+      y_moments = false;
     }
     T* mrow = kMap ? map + size_t(m) * L : nullptr;
     if (!coeff) {
@@ -225,35 +264,47 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, T* c
       dxy[j] = g * 2 * A1 * inv;
     }
     row_sum[m] = total;
-    // Horizontal pass of the coefficients, in place through a scratch row.
-    for (T* q : {dmu, dxx, dxy}) {
-      if (!y && q == dxy) continue;  // multiplies y
+    // Horizontal pass of the coefficients, in place through a scratch row. E[xy]'s multiplies y: it is needed
+    // only inside y's support, whose outputs read the segment [a0, a1) alone.
+    for (T* q : {dmu, dxx}) {
       std::copy(q, q + L, tmp);
       conv_row(tmp, q, W, C);
+    }
+    if (sp.rows(m, kHalf)) {  // the outputs [b0, b1) read [a0, a1)
+      std::copy(dxy + a0, dxy + a1, tmp + a0);
+      conv_row_range(tmp, dxy, W, C, sp.b0, sp.b1);
     }
   }
 }
 
 // Gradient rows [y0, y1): the vertical pass over the horizontally filtered coefficient rows y-5..y+5 (every
-// band's rows complete: called after all bands ran ssim_band), then dL/dx = v_mu + 2 x v_xx + y v_xy.
+// band's rows complete: called after all bands ran ssim_band), then dL/dx = v_mu + 2 x v_xx + y v_xy, the last
+// term inside y's support only (y is 0 elsewhere).
 template <typename T>
-void ssim_grad_band(const T* x, const T* y, int H, int L, int y0, int y1, const T* coeff, T* grad_x,
-                    std::vector<T>& buf) {
+void ssim_grad_band(const T* x, const T* y, int H, int L, int y0, int y1, const Support& sp, const T* coeff,
+                    T* grad_x, std::vector<T>& buf) {
   buf.resize(std::max(buf.size(), size_t(3) * L));
   T* v[3] = {buf.data(), buf.data() + L, buf.data() + 2 * size_t(L)};
+  const int b0 = sp.b0, b1 = sp.b1;
   for (int yy = y0; yy < y1; ++yy) {
-    for (int k = 0; k < (y ? 3 : 2); ++k)
-      conv_col<T>([&](int r) { return coeff + (size_t(r) * 3 + k) * L; }, yy, H, L, v[k]);
+    const bool with_y = sp.rows(yy, 0);
+    for (int k = 0; k < 2; ++k) conv_col<T>([&](int r) { return coeff + (size_t(r) * 3 + k) * L; }, yy, H, L, v[k]);
+    if (with_y)
+      conv_col<T>([&](int r) { return coeff + (size_t(r) * 3 + 2) * L + b0; }, yy, H, b1 - b0, v[2] + b0);
     const T* xr = x + size_t(yy) * L;
     T* gr = grad_x + size_t(yy) * L;
-    if (!y) {  // an all-zero y
+    auto with_y_term = [&](int j0, int j1) {
+      const T* yr = y + size_t(yy) * L;
 #pragma omp simd
-      for (int j = 0; j < L; ++j) gr[j] = v[0][j] + 2 * xr[j] * v[1][j];
+      for (int j = j0; j < j1; ++j) gr[j] = v[0][j] + 2 * xr[j] * v[1][j] + yr[j] * v[2][j];
+    };
+    if (with_y && b0 == 0 && b1 == L) {  // y anywhere in the row
+      with_y_term(0, L);
       continue;
     }
-    const T* yr = y + size_t(yy) * L;
 #pragma omp simd
-    for (int j = 0; j < L; ++j) gr[j] = v[0][j] + 2 * xr[j] * v[1][j] + yr[j] * v[2][j];
+    for (int j = 0; j < L; ++j) gr[j] = v[0][j] + 2 * xr[j] * v[1][j];
+    if (with_y) with_y_term(b0, b1);
   }
 }
 
@@ -284,18 +335,20 @@ T ssim_map(const T* x, const T* y, int H, int W, int C, T* grad_x, T* map, doubl
   if (grad_x) ws.coeff.resize(size_t(H) * 3 * L);
   T* coeff = grad_x ? ws.coeff.data() : nullptr;
   const T g = T(1) / T(count);
+  const Support sp(SsimSupport{}, y != nullptr, H, W, C);
 #pragma omp parallel num_threads(bands) if (bands > 1)
   {
 #pragma omp for schedule(static, 1)
     for (int b = 0; b < bands; ++b) {
       const int y0 = int(long(H) * b / bands), y1 = int(long(H) * (b + 1) / bands);
-      if (map) ssim_band<T, true>(x, y, H, W, C, y0, y1, coeff, ws.row_sum.data(), g, map, ws.band[b]);
-      else ssim_band<T, false>(x, y, H, W, C, y0, y1, coeff, ws.row_sum.data(), g, map, ws.band[b]);
+      if (map) ssim_band<T, true>(x, y, H, W, C, y0, y1, sp, coeff, ws.row_sum.data(), g, map, ws.band[b]);
+      else ssim_band<T, false>(x, y, H, W, C, y0, y1, sp, coeff, ws.row_sum.data(), g, map, ws.band[b]);
     }
     if (grad_x) {
 #pragma omp for schedule(static, 1)
       for (int b = 0; b < bands; ++b)
-        ssim_grad_band(x, y, H, L, int(long(H) * b / bands), int(long(H) * (b + 1) / bands), coeff, grad_x, ws.band[b]);
+        ssim_grad_band(x, y, H, L, int(long(H) * b / bands), int(long(H) * (b + 1) / bands), sp, coeff, grad_x,
+                       ws.band[b]);
     }
   }
   double total = 0;
@@ -305,7 +358,7 @@ T ssim_map(const T* x, const T* y, int H, int W, int C, T* grad_x, T* map, doubl
 
 template <typename T>
 void ssim_map_rows(const T* x, const T* y, int H, int W, int C, int y0, int y1, T* grad_x, T* map, double count,
-                   SsimWorkspace<T>& ws) {
+                   SsimWorkspace<T>& ws, SsimSupport ys) {
   y0 = std::max(0, y0);
   y1 = std::min(H, y1);
   if (y0 >= y1) return;
@@ -314,8 +367,9 @@ void ssim_map_rows(const T* x, const T* y, int H, int W, int C, int y0, int y1, 
   if (ws.band.empty()) ws.band.resize(1);
   ws.coeff.resize(size_t(H) * 3 * L);  // rows [m0, m1) written
   const T g = T(1) / T(count);
-  ssim_band<T, true>(x, y, H, W, C, m0, m1, ws.coeff.data(), ws.row_sum.data(), g, map, ws.band[0]);
-  ssim_grad_band(x, y, H, L, y0, y1, ws.coeff.data(), grad_x, ws.band[0]);
+  const Support sp(ys, y != nullptr, H, W, C);
+  ssim_band<T, true>(x, y, H, W, C, m0, m1, sp, ws.coeff.data(), ws.row_sum.data(), g, map, ws.band[0]);
+  ssim_grad_band(x, y, H, L, y0, y1, sp, ws.coeff.data(), grad_x, ws.band[0]);
 }
 
 template float ssim<float>(const float*, const float*, int, int, int, float*, SsimWorkspace<float>&);
@@ -324,9 +378,9 @@ template float ssim_map<float>(const float*, const float*, int, int, int, float*
 template double ssim_map<double>(const double*, const double*, int, int, int, double*, double*, double,
                                  SsimWorkspace<double>&);
 template void ssim_map_rows<float>(const float*, const float*, int, int, int, int, int, float*, float*, double,
-                                   SsimWorkspace<float>&);
+                                   SsimWorkspace<float>&, SsimSupport);
 template void ssim_map_rows<double>(const double*, const double*, int, int, int, int, int, double*, double*, double,
-                                    SsimWorkspace<double>&);
+                                    SsimWorkspace<double>&, SsimSupport);
 template double ssim<double>(const double*, const double*, int, int, int, double*, SsimWorkspace<double>&);
 template const float* ssim_window<float>();
 template const double* ssim_window<double>();

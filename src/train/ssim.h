@@ -26,12 +26,21 @@ T ssim(const T* x, const T* y, int H, int W, int C, T* grad_x, SsimWorkspace<T>&
 template <typename T>
 T ssim_map(const T* x, const T* y, int H, int W, int C, T* grad_x, T* map, double count, SsimWorkspace<T>& ws);
 
+// Where y may be non-zero: pixel columns [x0, x1) of rows [y0, y1) (clipped to the image; y must be zero
+// outside). y's three moments are then non-zero only within 5 pixels of it, and the term of the gradient that
+// y multiplies is needed only inside it, so their passes run there alone (an object's masked target inside its
+// crop: hybrid/object_losses.cpp).
+struct SsimSupport {
+  int x0 = 0, y0 = 0, x1 = 1 << 30, y1 = 1 << 30;
+};
+
 // ssim_map for output rows [y0, y1) only: map and grad_x there (other rows are not written), bitwise the values
-// ssim_map gives them; the moments are computed for rows [y0 - 5, y1 + 5) and the products for 5 more on each
-// side. One band, single-threaded (for scoring a band of a larger image inside a parallel region).
+// ssim_map gives them (a gradient value that is 0 may differ in its sign); the moments are computed for rows
+// [y0 - 5, y1 + 5) and the products for 5 more on each side. One band, single-threaded (for scoring a band of a
+// larger image inside a parallel region). `ys`: where y may be non-zero (default: anywhere).
 template <typename T>
 void ssim_map_rows(const T* x, const T* y, int H, int W, int C, int y0, int y1, T* grad_x, T* map, double count,
-                   SsimWorkspace<T>& ws);
+                   SsimWorkspace<T>& ws, SsimSupport ys = {});
 
 // The normalised 1D window (11 taps) shared by the forward and the tests.
 template <typename T>
