@@ -398,7 +398,7 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
   // (The target is 0 outside the mask's box: y's passes run there only.)
   const train::SsimSupport ys{o.M.x0 - Q.x0, o.M.y0 - Q.y0, o.M.x1 - Q.x0, o.M.y1 - Q.y0};
   train::ssim_map_rows(w.pred.data(), w.gt.data(), qh, qw, 3, ry, ry + rh, w.sgrad.data(), w.smap.data(), double(n),
-                       w.ssim, o.M.empty() ? train::SsimSupport{0, 0, 0, 0} : ys);  // R's rows
+                       w.ssim, o.M.empty() ? train::SsimSupport{0, 0, 0, 0} : ys, rx, rx + rw);  // R
   const float lam = cfg_.lambda_dssim, a = (1 - lam) / float(n), b = -lam, s_app = cfg_.lambda_app / J;
   for (int yy = 0; yy < rh; ++yy) {
     const size_t q0 = (size_t(yy + ry) * qw + rx) * 3;

@@ -162,17 +162,26 @@ inline Terms<T> ssim_terms(T* const* mom, int j, T C1, T C2) {
   return {2 * mu1 * mu2 + C1, 2 * s12 + C2, mu1 * mu1 + mu2 * mu2 + C1, s11 + s22 + C2};
 }
 
-// y's support clipped to an H x W image, as value indices: rows [r0, r1), the values [b0, b1) of a row where y
-// may be non-zero and [a0, a1) where its filtered rows and moments may be (5 pixels more on each side). Empty
-// (r0 = r1 = 0) for a null y.
-struct Support {
+// Which values of a row each pass computes, as value indices (pixel column x C), for output columns [ox0, ox1):
+// the gradient there [g0, g1), the moments, the map and the coefficients 5 pixels further [e0, e1) (what the
+// gradient's vertical and horizontal passes read). y's support clipped to the image and to those: rows [r0, r1),
+// the values [b0, b1) of a row where y may be non-zero and [a0, a1) where its filtered rows and moments may be
+// (5 pixels more on each side); r0 = r1 for a null y.
+struct Plan {
+  int g0 = 0, g1 = 0, e0 = 0, e1 = 0;
   int r0 = 0, r1 = 0, a0 = 0, a1 = 0, b0 = 0, b1 = 0;
-  Support(const SsimSupport& s, bool has_y, int H, int W, int C) {
+  Plan(const SsimSupport& s, bool has_y, int H, int W, int C, int ox0 = 0, int ox1 = 1 << 30) {
+    ox0 = std::max(0, ox0), ox1 = std::min(W, ox1);
+    if (ox0 >= ox1) return;
+    g0 = ox0 * C, g1 = ox1 * C;
+    e0 = std::max(0, ox0 - kHalf) * C, e1 = std::min(W, ox1 + kHalf) * C;
     const int x0 = std::max(0, s.x0), x1 = std::min(W, s.x1), y0 = std::max(0, s.y0), y1 = std::min(H, s.y1);
     if (!has_y || x0 >= x1 || y0 >= y1) return;
+    b0 = std::max(g0, x0 * C), b1 = std::min(g1, x1 * C);
+    a0 = std::max(e0, std::max(0, x0 - kHalf) * C), a1 = std::min(e1, std::min(W, x1 + kHalf) * C);
+    if (a0 >= a1) return;  // (then b0 >= b1 too)
+    b1 = std::max(b0, b1);
     r0 = y0, r1 = y1;
-    b0 = x0 * C, b1 = x1 * C;
-    a0 = std::max(0, x0 - kHalf) * C, a1 = std::min(W, x1 + kHalf) * C;
   }
   bool any() const { return r1 > r0; }
   bool rows(int r, int margin) const { return any() && r >= r0 - margin && r < r1 + margin; }
@@ -184,11 +193,13 @@ struct Support {
 //   given, the three backward coefficients -> horizontal pass -> coeff rows m ([H, 3, L], shared by the bands).
 // Product rows are computed for [y0 - 5, y1 + 5) (clipped), so a band needs nothing from its neighbours; every
 // value is computed with the same arithmetic whatever the banding.
-// y's passes (its product rows, its three moments, the coefficient of E[xy]) run only where they can be non-zero
-// (`sp`); everywhere else those values are 0, as the full passes over y's zeros give them.
+// Every pass computes only the values of a row the plan `sp` names: the moments, the map and the coefficients
+// 5 pixels around the output columns, the coefficients' horizontal pass at the output columns; y's passes (its
+// product rows, its three moments, the coefficient of E[xy]) only where they can be non-zero, everywhere else
+// those values are 0, as the full passes over y's zeros give them. row_sum[m] sums the map over [e0, e1).
 // kMap: the map's values are also stored in `map` [H, L]. `g` is the gradient's normaliser 1 / count.
 template <typename T, bool kMap>
-void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, const Support& sp, T* coeff,
+void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, const Plan& sp, T* coeff,
                double* row_sum, T g, T* map, std::vector<T>& buf) {
   const int L = W * C;
   const T C1 = T(0.01 * 0.01), C2 = T(0.03 * 0.03);
@@ -197,7 +208,7 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, cons
   T* tmp = P + size_t(kWin) * 5 * L;  // [8][L]: products, moments
   auto prow = [&](int row, int map) { return P + (size_t(row % kWin) * 5 + map) * L; };
   int next_p = std::max(0, y0 - kHalf);  // next product row to compute
-  const int a0 = sp.a0, a1 = sp.a1;  // y's filtered values: [a0, a1) of a row
+  const int a0 = sp.a0, a1 = sp.a1, e0 = sp.e0, e1 = sp.e1;
   T* mom[5];
   for (int k = 0; k < 5; ++k) mom[k] = tmp + size_t(3 + k) * L;
   for (int k : {1, 3, 4}) std::fill(mom[k], mom[k] + L, T(0));  // y's moments outside [a0, a1): 0
@@ -206,10 +217,11 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, cons
     for (; next_p <= std::min(H - 1, m + kHalf); ++next_p) {
       const T* xr = x + size_t(next_p) * L;
       T *pxx = tmp, *pyy = tmp + L, *pxy = tmp + 2 * L;
+      const int f0 = std::max(0, e0 - kHalf * C), f1 = std::min(L, e1 + kHalf * C);  // what outputs [e0, e1) read
 #pragma omp simd
-      for (int j = 0; j < L; ++j) pxx[j] = xr[j] * xr[j];
-      conv_row(xr, prow(next_p, 0), W, C);
-      conv_row(pxx, prow(next_p, 2), W, C);
+      for (int j = f0; j < f1; ++j) pxx[j] = xr[j] * xr[j];
+      conv_row_range(xr, prow(next_p, 0), W, C, e0, e1);
+      conv_row_range(pxx, prow(next_p, 2), W, C, e0, e1);
       if (sp.rows(next_p, 0)) {  // the outputs [a0, a1), which read the products 5 pixels further
         const T* yr = y + size_t(next_p) * L;
         const int c0 = std::max(0, a0 - kHalf * C), c1 = std::min(L, a1 + kHalf * C);
@@ -225,7 +237,7 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, cons
         for (int k : {1, 3, 4}) std::fill(prow(next_p, k) + a0, prow(next_p, k) + a1, T(0));
       }
     }
-    for (int k : {0, 2}) conv_col<T>([&](int r) { return prow(r, k); }, m, H, L, mom[k]);
+    for (int k : {0, 2}) conv_col<T>([&](int r) { return prow(r, k) + e0; }, m, H, e1 - e0, mom[k] + e0);
     if (sp.rows(m, kHalf)) {
       for (int k : {1, 3, 4}) conv_col<T>([&](int r) { return prow(r, k) + a0; }, m, H, a1 - a0, mom[k] + a0);
       y_moments = true;
@@ -237,7 +249,7 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, cons
     if (!coeff) {
       double total = 0;
 #pragma omp simd reduction(+ : total)
-      for (int j = 0; j < L; ++j) {
+      for (int j = e0; j < e1; ++j) {
         const Terms<T> t = ssim_terms(mom, j, C1, C2);
         const T v = t.A1 * t.A2 * (T(1) / (t.B1 * t.B2));
         total += v;
@@ -251,7 +263,7 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, cons
     T* dxy = coeff + (size_t(m) * 3 + 2) * L;
     double total = 0;
 #pragma omp simd reduction(+ : total)
-    for (int j = 0; j < L; ++j) {
+    for (int j = e0; j < e1; ++j) {
       const Terms<T> t = ssim_terms(mom, j, C1, C2);
       const T mu1 = mom[0][j], mu2 = mom[1][j], A1 = t.A1, A2 = t.A2, B1 = t.B1, B2 = t.B2;
       const T inv = T(1) / (B1 * B2);
@@ -266,9 +278,9 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, cons
     row_sum[m] = total;
     // Horizontal pass of the coefficients, in place through a scratch row. E[xy]'s multiplies y: it is needed
     // only inside y's support, whose outputs read the segment [a0, a1) alone.
-    for (T* q : {dmu, dxx}) {
-      std::copy(q, q + L, tmp);
-      conv_row(tmp, q, W, C);
+    for (T* q : {dmu, dxx}) {  // the outputs [g0, g1) read [e0, e1)
+      std::copy(q + e0, q + e1, tmp + e0);
+      conv_row_range(tmp, q, W, C, sp.g0, sp.g1);
     }
     if (sp.rows(m, kHalf)) {  // the outputs [b0, b1) read [a0, a1)
       std::copy(dxy + a0, dxy + a1, tmp + a0);
@@ -281,14 +293,15 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, cons
 // band's rows complete: called after all bands ran ssim_band), then dL/dx = v_mu + 2 x v_xx + y v_xy, the last
 // term inside y's support only (y is 0 elsewhere).
 template <typename T>
-void ssim_grad_band(const T* x, const T* y, int H, int L, int y0, int y1, const Support& sp, const T* coeff,
+void ssim_grad_band(const T* x, const T* y, int H, int L, int y0, int y1, const Plan& sp, const T* coeff,
                     T* grad_x, std::vector<T>& buf) {
   buf.resize(std::max(buf.size(), size_t(3) * L));
   T* v[3] = {buf.data(), buf.data() + L, buf.data() + 2 * size_t(L)};
-  const int b0 = sp.b0, b1 = sp.b1;
+  const int b0 = sp.b0, b1 = sp.b1, g0 = sp.g0, g1 = sp.g1;
   for (int yy = y0; yy < y1; ++yy) {
     const bool with_y = sp.rows(yy, 0);
-    for (int k = 0; k < 2; ++k) conv_col<T>([&](int r) { return coeff + (size_t(r) * 3 + k) * L; }, yy, H, L, v[k]);
+    for (int k = 0; k < 2; ++k)
+      conv_col<T>([&](int r) { return coeff + (size_t(r) * 3 + k) * L + g0; }, yy, H, g1 - g0, v[k] + g0);
     if (with_y)
       conv_col<T>([&](int r) { return coeff + (size_t(r) * 3 + 2) * L + b0; }, yy, H, b1 - b0, v[2] + b0);
     const T* xr = x + size_t(yy) * L;
@@ -298,12 +311,12 @@ void ssim_grad_band(const T* x, const T* y, int H, int L, int y0, int y1, const 
 #pragma omp simd
       for (int j = j0; j < j1; ++j) gr[j] = v[0][j] + 2 * xr[j] * v[1][j] + yr[j] * v[2][j];
     };
-    if (with_y && b0 == 0 && b1 == L) {  // y anywhere in the row
-      with_y_term(0, L);
+    if (with_y && b0 == g0 && b1 == g1) {  // y anywhere in the row's outputs
+      with_y_term(g0, g1);
       continue;
     }
 #pragma omp simd
-    for (int j = 0; j < L; ++j) gr[j] = v[0][j] + 2 * xr[j] * v[1][j];
+    for (int j = g0; j < g1; ++j) gr[j] = v[0][j] + 2 * xr[j] * v[1][j];
     if (with_y) with_y_term(b0, b1);
   }
 }
@@ -335,7 +348,7 @@ T ssim_map(const T* x, const T* y, int H, int W, int C, T* grad_x, T* map, doubl
   if (grad_x) ws.coeff.resize(size_t(H) * 3 * L);
   T* coeff = grad_x ? ws.coeff.data() : nullptr;
   const T g = T(1) / T(count);
-  const Support sp(SsimSupport{}, y != nullptr, H, W, C);
+  const Plan sp(SsimSupport{}, y != nullptr, H, W, C);
 #pragma omp parallel num_threads(bands) if (bands > 1)
   {
 #pragma omp for schedule(static, 1)
@@ -358,7 +371,7 @@ T ssim_map(const T* x, const T* y, int H, int W, int C, T* grad_x, T* map, doubl
 
 template <typename T>
 void ssim_map_rows(const T* x, const T* y, int H, int W, int C, int y0, int y1, T* grad_x, T* map, double count,
-                   SsimWorkspace<T>& ws, SsimSupport ys) {
+                   SsimWorkspace<T>& ws, SsimSupport ys, int x0, int x1) {
   y0 = std::max(0, y0);
   y1 = std::min(H, y1);
   if (y0 >= y1) return;
@@ -367,7 +380,7 @@ void ssim_map_rows(const T* x, const T* y, int H, int W, int C, int y0, int y1, 
   if (ws.band.empty()) ws.band.resize(1);
   ws.coeff.resize(size_t(H) * 3 * L);  // rows [m0, m1) written
   const T g = T(1) / T(count);
-  const Support sp(ys, y != nullptr, H, W, C);
+  const Plan sp(ys, y != nullptr, H, W, C, x0, x1);
   ssim_band<T, true>(x, y, H, W, C, m0, m1, sp, ws.coeff.data(), ws.row_sum.data(), g, map, ws.band[0]);
   ssim_grad_band(x, y, H, L, y0, y1, sp, ws.coeff.data(), grad_x, ws.band[0]);
 }
@@ -378,9 +391,9 @@ template float ssim_map<float>(const float*, const float*, int, int, int, float*
 template double ssim_map<double>(const double*, const double*, int, int, int, double*, double*, double,
                                  SsimWorkspace<double>&);
 template void ssim_map_rows<float>(const float*, const float*, int, int, int, int, int, float*, float*, double,
-                                   SsimWorkspace<float>&, SsimSupport);
+                                   SsimWorkspace<float>&, SsimSupport, int, int);
 template void ssim_map_rows<double>(const double*, const double*, int, int, int, int, int, double*, double*, double,
-                                    SsimWorkspace<double>&, SsimSupport);
+                                    SsimWorkspace<double>&, SsimSupport, int, int);
 template double ssim<double>(const double*, const double*, int, int, int, double*, SsimWorkspace<double>&);
 template const float* ssim_window<float>();
 template const double* ssim_window<double>();

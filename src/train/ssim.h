@@ -34,13 +34,14 @@ struct SsimSupport {
   int x0 = 0, y0 = 0, x1 = 1 << 30, y1 = 1 << 30;
 };
 
-// ssim_map for output rows [y0, y1) only: map and grad_x there (other rows are not written), bitwise the values
-// ssim_map gives them (a gradient value that is 0 may differ in its sign); the moments are computed for rows
-// [y0 - 5, y1 + 5) and the products for 5 more on each side. One band, single-threaded (for scoring a band of a
-// larger image inside a parallel region). `ys`: where y may be non-zero (default: anywhere).
+// ssim_map for output rows [y0, y1) and output columns [x0, x1) only: grad_x there, bitwise the values ssim_map
+// gives them (a gradient value that is 0 may differ in its sign), and the map there and 5 columns further (other
+// values are not written); the moments are computed for rows [y0 - 5, y1 + 5) and columns [x0 - 5, x1 + 5), the
+// products for 5 more on each side. One band, single-threaded (for scoring a band of a larger image inside a
+// parallel region). `ys`: where y may be non-zero (default: anywhere).
 template <typename T>
 void ssim_map_rows(const T* x, const T* y, int H, int W, int C, int y0, int y1, T* grad_x, T* map, double count,
-                   SsimWorkspace<T>& ws, SsimSupport ys = {});
+                   SsimWorkspace<T>& ws, SsimSupport ys = {}, int x0 = 0, int x1 = 1 << 30);
 
 // The normalised 1D window (11 taps) shared by the forward and the tests.
 template <typename T>

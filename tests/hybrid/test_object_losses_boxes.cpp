@@ -543,18 +543,21 @@ TEST(ObjectLossesBoxes, SsimMapAndBroPartsAgreeWithSsimAndBroLoss) {
   EXPECT_LE(err, 1e-6 * mx);
 }
 
-TEST(ObjectLossesBoxes, SsimWithTheTargetsSupportIsTheFullPassesBitwise) {
-  // ssim_map_rows with `ys` (where y may be non-zero; y's passes run on and near it only) against the full passes,
-  // on a y that is zero outside the box: the map and the gradient bitwise (a zero may differ in its sign, which
-  // == ignores), for boxes inside the image, at its edges and corners, one pixel wide or high, larger than the
-  // image, empty, and bands of rows that cross the box or miss it.
+TEST(ObjectLossesBoxes, SsimOnPartOfARowAndTheTargetsSupportIsTheFullPassesBitwise) {
+  // ssim_map_rows for output columns [x0, x1) and with `ys` (where y may be non-zero; y's passes run on and near
+  // it only) against the full passes, on a y that is zero outside the box: the map and the gradient there bitwise
+  // (a zero may differ in its sign, which == ignores), gradients elsewhere not written; boxes inside the image, at
+  // its edges and corners, one pixel wide or high, larger than the image, empty; bands of rows and of columns that
+  // cross the box or miss it, at the image's edges, one wide.
   const int W = 41, H = 33, C = 3, n = W * H * C;
   std::mt19937 rng(11);
   std::uniform_real_distribution<float> U(0, 1);
   std::vector<float> x(n), y(n);
   for (auto& v : x) v = U(rng);
-  const train::SsimSupport boxes[] = {{12, 9, 25, 20}, {0, 0, 7, 6},    {30, 25, 41, 33}, {17, 3, 18, 30},
+  const train::SsimSupport boxes[] = {{12, 9, 25, 20}, {0, 0, 7, 6},     {30, 25, 41, 33}, {17, 3, 18, 30},
                                       {2, 16, 39, 17}, {-5, -5, 60, 60}, {10, 10, 10, 20}, {0, 0, 41, 33}};
+  const std::pair<int, int> rows[] = {{0, H}, {0, 4}, {8, 21}, {26, H}, {15, 16}};
+  const std::pair<int, int> cols[] = {{0, W}, {0, 9}, {13, 30}, {33, W}, {20, 21}, {4, 37}};
   for (const train::SsimSupport& b : boxes) {
     for (int yy = 0; yy < H; ++yy)
       for (int xx = 0; xx < W; ++xx)
@@ -562,14 +565,22 @@ TEST(ObjectLossesBoxes, SsimWithTheTargetsSupportIsTheFullPassesBitwise) {
           const bool in = xx >= b.x0 && xx < b.x1 && yy >= b.y0 && yy < b.y1;
           y[(size_t(yy) * W + xx) * C + c] = in ? U(rng) : 0.f;
         }
-    for (auto [y0, y1] : {std::pair{0, H}, std::pair{0, 4}, std::pair{8, 21}, std::pair{26, H}, std::pair{15, 16}}) {
-      std::vector<float> g0(n, -7.f), m0(n, -7.f), g1(n, -7.f), m1(n, -7.f);
+    for (auto [y0, y1] : rows) {
+      std::vector<float> g0(n, -7.f), m0(n, -7.f);
       train::SsimWorkspace<float> w0, w1;
       train::ssim_map_rows(x.data(), y.data(), H, W, C, y0, y1, g0.data(), m0.data(), 2.0 * n, w0);
-      train::ssim_map_rows(x.data(), y.data(), H, W, C, y0, y1, g1.data(), m1.data(), 2.0 * n, w1, b);
-      for (int i = 0; i < n; ++i) {
-        ASSERT_EQ(m1[i], m0[i]) << "box " << b.x0 << "," << b.y0 << " rows " << y0 << "-" << y1 << " value " << i;
-        ASSERT_EQ(g1[i], g0[i]) << "box " << b.x0 << "," << b.y0 << " rows " << y0 << "-" << y1 << " value " << i;
+      for (auto [x0, x1] : cols) {
+        std::vector<float> g1(n, -7.f), m1(n, -7.f);
+        train::ssim_map_rows(x.data(), y.data(), H, W, C, y0, y1, g1.data(), m1.data(), 2.0 * n, w1, b, x0, x1);
+        for (int r = 0; r < H; ++r)
+          for (int xx = 0; xx < W; ++xx)
+            for (int c = 0; c < C; ++c) {
+              const size_t i = (size_t(r) * W + xx) * C + c;
+              const bool out = r >= y0 && r < y1 && xx >= x0 && xx < x1;
+              ASSERT_EQ(g1[i], out ? g0[i] : -7.f) << "box " << b.x0 << "," << b.y0 << " rows " << y0 << "-" << y1
+                                                   << " columns " << x0 << "-" << x1 << " at " << xx << "," << r;
+              if (out) ASSERT_EQ(m1[i], m0[i]) << "box " << b.x0 << "," << b.y0 << " at " << xx << "," << r;
+            }
       }
     }
   }
