@@ -128,15 +128,15 @@ void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
   ObjectRenders renders;
   ObjectGradOut gout;
   if (cfg_.sparse_objects) {
-    // The object renders: the base channels plus each object's group. The objects' colour gradients to
-    // [H, W, 3 J] (the renderer's group gradients) and their sum to the base colour's gradient, both overwritten
-    // by the object losses. The S others (the no-SCL ablation's cosine loss adds to them) need zeros; the base
-    // opacity's gradient is never read (the renderer reads the first sl.grad_channels()).
+    // The object renders: the base channels plus each object's group. The objects' colour gradients stay in the
+    // losses' sparse form, which the renderer reads tile by tile (ObjectLosses::group_rows: no [H, W, 3 J]
+    // buffer); their sum goes to the base colour's gradient, overwritten by the object losses. The S others (the
+    // no-SCL ablation's cosine loss adds to them) need zeros; the base opacity's gradient is never read (the
+    // renderer reads the first sl.grad_channels()).
     renders = ObjectRenders::sparse(io.out.extra.data(), sl.total(), sl.base_opacity(), io.out.groups.data(), J);
-    d_channels_.resize(size_t(HW) * 3 * J);
     d_dense_.resize(size_t(HW) * sl.total());
     if (layout_.S > 0) parallel_fill(d_dense_, 0.f);
-    gout = {d_channels_.data(), 3L * J, d_dense_.data() + sl.base_color(), sl.total()};
+    gout = {nullptr, 0, d_dense_.data() + sl.base_color(), sl.total()};
   } else {
     // The object losses overwrite the colour channels' gradient and the renderer reads only those and the S
     // others (its gradient-free opacity and base channels stay unread), so only the others, which the no-SCL
@@ -181,9 +181,8 @@ void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
   if (cfg_.sparse_objects) {  // base colour: the sum of the objects' gradients; each group: its object's
     io.dout.extra = d_dense_.data();
     io.dout.extra_grad_channels = sl.grad_channels();
-    io.dout.groups = d_channels_.data();
-    io.dout.group_row = 3 * J;
-    io.dout.group_stride = 3;
+    io.dout.group_rows = &ObjectLosses::group_rows;
+    io.dout.group_ctx = &object_losses_;
     io.dout.group_grad_channels = ObjectGroups::kGradWidth;
   } else {
     io.dout.extra = d_channels_.data();

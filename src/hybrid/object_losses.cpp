@@ -114,6 +114,7 @@ ObjectLossValues ObjectLosses::operator()(const Image& image, const LabelMap& la
                 " objects");
   const size_t threads = size_t(std::max(1, omp_get_max_threads()));
   if (scratch_.size() < threads) scratch_.resize(threads, Scratch(cfg_.lambda_dssim));
+  width_ = image.width;
   if (renders.base_color && opt_.boxes && !objs.empty()) return box_path(image, lab, renders, objs, out);
   return full_path(image, lab, renders, objs, out);
 }
@@ -559,6 +560,39 @@ void ObjectLosses::scatter(int H, int W, bool bro_grad, const ObjectGradOut& out
   if (!has_base) run.template operator()<false, false>();
   else if (bro_grad) run.template operator()<true, true>();
   else run.template operator()<true, false>();
+}
+
+void ObjectLosses::gradient_row(int j, int y, int x0, int n, float* out) const {
+  const PixelBox& R = grads_.box[j];
+  const bool rows = y >= R.y0 && y < R.y1;
+  const float s_app = grads_.app_scale, gs = grads_.bro_scale[j], pj = grads_.proj[j];
+  for (int l = 0; l < n; ++l) {
+    const int x = x0 + l;
+    float* o = out + 3 * l;
+    if (rows && x >= R.x0 && x < R.x1) {  // its own
+      const float* v = grads_.own[j] + (size_t(y - R.y0) * R.width() + (x - R.x0)) * 3;
+      for (int c = 0; c < 3; ++c) o[c] = v[c] + 0.f;
+      continue;
+    }
+    if (!grads_.base_app) {  // (every box is the whole image then)
+      for (int c = 0; c < 3; ++c) o[c] = 0.f;
+      continue;
+    }
+    // The base pair's combination rounded as scatter's compilation rounds it (its object_losses.o): g = s_app
+    // base_app on its own, gs u - pj p as one fused multiply-subtract of the rounded pj p, then g plus that. Written
+    // out with fma, because here the compiler would otherwise fuse g's product into the sum (g has one use here,
+    // J there). (fma(s, a, 0) is s a rounded, a -0 read as +0, which the final + 0 makes of it anyway.)
+    const size_t i = (size_t(y) * width_ + x) * 3;
+    for (int c = 0; c < 3; ++c) {
+      const float g = std::fma(s_app, grads_.base_app[i + c], 0.f);
+      if (!grads_.base_unit) {
+        o[c] = g + 0.f;
+        continue;
+      }
+      const float pp = pj * grads_.base_pred[i + c];
+      o[c] = (g + std::fma(gs, grads_.base_unit[i + c], -pp)) + 0.f;
+    }
+  }
 }
 
 ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab, const ObjectRenders& renders,

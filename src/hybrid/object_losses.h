@@ -132,6 +132,13 @@ class ObjectLosses {
                               const std::vector<int>& objs, float* d_extra, float* color_sum = nullptr);
   // The last call's gradient, sparse (valid until the next call or release()).
   const ObjectGradients& gradients() const { return grads_; }
+  // Object j's colour gradient of the last call at pixels (x0 .. x0 + n - 1, y): out [n, 3], the values out.color
+  // would have held (bitwise). group_rows is the same for the renderer (render::OutputGradsT::group_rows, ctx =
+  // this), which then needs no [H, W, 3 J] buffer.
+  void gradient_row(int j, int y, int x0, int n, float* out) const;
+  static void group_rows(const void* ctx, int j, int y, int x0, int n, float* out) {
+    static_cast<const ObjectLosses*>(ctx)->gradient_row(j, y, x0, n, out);
+  }
   // Wall time of the last call's phases of the box path, ms (0 on the path without boxes): finding the boxes,
   // the scoring pieces, the per-object scalars, the scatter of the gradients (bench_hybrid's counters).
   struct PhaseTimes {
@@ -180,6 +187,7 @@ class ObjectLosses {
 
   HybridConfig cfg_;
   ObjectLossOptions opt_;
+  int width_ = 0;  // the last call's image width
   std::vector<Scratch> scratch_;    // [threads]
   std::vector<float> pred_, grad_;  // [J, H, W, 3] planar object renders / gradients (path without boxes)
   std::vector<float> opac_;         // [J, H, W]

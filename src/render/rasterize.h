@@ -93,6 +93,9 @@ struct RasterOutputs {
   T* groups = nullptr;       // [H, W, G * GW] (when num_groups > 0)
 };
 
+// The most gradient channels a group may have when its gradients are computed on demand (d_group_rows).
+constexpr int kMaxGroupGradWidth = 8;
+
 // Upstream gradients (null = zero) and per-Gaussian results (overwritten).
 template <class T>
 struct RasterGrads {
@@ -101,9 +104,14 @@ struct RasterGrads {
   const T* d_depth = nullptr;        // [H, W]
   const T* d_extra = nullptr;        // [H, W, C]
   const T* d_weight_sums = nullptr;  // [N, J]
-  // d groups: channel i < GWg of group g at pixel p is d_groups[p * d_group_row + g * d_group_stride + i]
+  // d groups: channel i < GWg of group g at pixel p is d_groups[p * d_group_row + g * d_group_stride + i], or,
+  // with d_group_rows instead, what d_group_rows(d_group_ctx, g, y, x0, n, out) writes to out[l * GWg + i] for
+  // pixel (x0 + l, y), l < n (OutputGradsT::group_rows).
   const T* d_groups = nullptr;
   int d_group_row = 0, d_group_stride = 0;
+  void (*d_group_rows)(const void* ctx, int g, int y, int x0, int n, T* out) = nullptr;
+  const void* d_group_ctx = nullptr;
+  bool group_grads() const { return d_groups != nullptr || d_group_rows != nullptr; }
   T* mean2d = nullptr;     // [N, 2] out
   T* conic = nullptr;      // [N, 3] out (b counted once)
   T* opacity = nullptr;    // [N] out (w.r.t. opacity after the sigmoid)

@@ -135,7 +135,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
   constexpr bool kExtra = kX != kNoChannels, kLists = kX == kVisitLists, kFold = kX == kFolded;
   const int W = bins.width, H = bins.height, C = in.num_extra, XS = in.extra_stride > 0 ? in.extra_stride : C;
   const int F = kNumGrads + C;
-  const int GWg = g.d_groups ? in.group_grad_width : 0, GT = in.num_groups * GWg;  // group gradient channels
+  const int GWg = g.group_grads() ? in.group_grad_width : 0, GT = in.num_groups * GWg;  // group gradient channels
   const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
   TileData<T> td;
   if (!load_records(bins, records, tile_records, false, tile, td)) return;
@@ -191,7 +191,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
       if (kDepth && g.d_depth) gd[l] = g.d_depth[p];
       if (kExtra && g.d_extra)
         for (int c = 0; c < C; ++c) st[kBatchFixed + c][l] = g.d_extra[p * XS + c];
-      if (kExtra && GT > 0) {
+      if (kExtra && GT > 0 && g.d_groups) {
         const T* dg = g.d_groups + p * size_t(g.d_group_row);
         for (int u = 0; u < ng; ++u) {
           const int gi = glist[u];
@@ -204,6 +204,15 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
       }
     }
     if (kmax[bt] == 0) continue;
+    if (kExtra && GT > 0 && g.d_group_rows) {  // the batch's row of each of the tile's groups, on demand
+      T row[kLanes * kMaxGroupGradWidth];
+      for (int u = 0; u < ng; ++u) {
+        const int gi = glist[u];
+        g.d_group_rows(g.d_group_ctx, gi, py, px0, nvalid, row);
+        for (int l = 0; l < nvalid; ++l)
+          for (int i = 0; i < GWg; ++i) st[GO + gi * GWg + i][l] = row[l * GWg + i];
+      }
+    }
     live |= 1u << bt;
     st[bT] = Tf;
     st[bS] = P{};
@@ -388,7 +397,7 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
   ensure_threads(ws);
   const int C = in.num_extra, F = kNumGrads + C, XS = in.extra_stride > 0 ? in.extra_stride : C;
   const bool dep = in.depth != nullptr && g.d_depth != nullptr;
-  const int GWg = g.d_groups ? in.group_grad_width : 0, GW = in.group_width;
+  const int GWg = g.group_grads() ? in.group_grad_width : 0, GW = in.group_width;
   const bool groups = in.num_groups > 0 && GWg > 0;
   const bool ext = (C > 0 && g.d_extra != nullptr) || groups;
   if (ws.pair_grad.size() < size_t(bins.num_pairs) * F) ws.pair_grad.resize(size_t(bins.num_pairs) * F);

@@ -152,6 +152,13 @@ struct OutputGradsT {
   // groups[p * group_row + g * group_stride + i] (so they may live inside another layout).
   const T* groups = nullptr;
   int group_row = 0, group_stride = 0, group_grad_channels = 0;
+  // Or, instead of `groups`, computed on demand: group_rows(group_ctx, g, y, x0, n, out) writes the
+  // group_grad_channels gradient channels of group g at pixels (x0 .. x0 + n - 1, y) to out [n,
+  // group_grad_channels]. Backward asks only for the groups a tile's Gaussians have entries in, eight pixels at a
+  // time, from several threads at once; no [H, W, G * ...] buffer is needed (the hybrid method's object
+  // gradients: hybrid/object_losses.h).
+  void (*group_rows)(const void* ctx, int g, int y, int x0, int n, T* out) = nullptr;
+  const void* group_ctx = nullptr;
 };
 using OutputGrads = OutputGradsT<float>;
 

@@ -96,6 +96,9 @@ void RendererT<T>::composite_backward(const OutputGradsT<T>& dout, ProjectedGrad
   const bool groups = G > 0 && GW > 0;
   if (groups && (dout.group_grad_channels < 0 || dout.group_grad_channels > GW))
     fail("render: {} channels of a group carry gradient but groups have {}", dout.group_grad_channels, GW);
+  if (groups && dout.group_rows && dout.group_grad_channels > kMaxGroupGradWidth)
+    fail("render: group gradients computed on demand carry at most {} channels, not {}", kMaxGroupGradWidth,
+         dout.group_grad_channels);
   if (groups) pg.group_val.resize(size_t(st.ch.group_ptr[n]) * GW);
   else pg.group_val.clear();
 
@@ -116,11 +119,13 @@ void RendererT<T>::composite_backward(const OutputGradsT<T>& dout, ProjectedGrad
   ri.num_weights = st.s.num_pixel_weights;
   set_groups(st.ch, ri);
   RasterGrads<T> rg;
-  if (groups && dout.groups && dout.group_grad_channels > 0) {
+  if (groups && (dout.groups || dout.group_rows) && dout.group_grad_channels > 0) {
     ri.group_grad_width = dout.group_grad_channels;
-    rg.d_groups = dout.groups;
+    rg.d_groups = dout.group_rows ? nullptr : dout.groups;
     rg.d_group_row = dout.group_row;
     rg.d_group_stride = dout.group_stride;
+    rg.d_group_rows = dout.group_rows;
+    rg.d_group_ctx = dout.group_ctx;
   }
   rg.group_val = groups ? pg.group_val.data() : nullptr;
   rg.d_weight_sums = st.s.num_pixel_weights > 0 ? dout.weight_sums : nullptr;

@@ -236,7 +236,7 @@ TEST(ObjectLossesBoxes, SparseRendersAndCompactGradientsAreTheInterleavedOnesBit
   // The sparse path's layout (ObjectRenders::sparse: the base render's dense channels, here with 2 other channels
   // between its colour and opacity, and each object's difference from them in [H, W, 4 J] groups; gradients to
   // [H, W, 3 J] and their sum at a stride of 5) gives the values and every gradient bit of the interleaved layout
-  // holding base + difference, with boxes and over whole images, BRO on and off.
+  // holding base + difference, with boxes and over whole images, BRO on and off; likewise the gradients on demand.
   Case c = synthetic(11);
   const int C = c.lay.total(), J = c.lay.J, CD = 6;
   const long HW = long(c.W) * c.H;
@@ -285,6 +285,28 @@ TEST(ObjectLossesBoxes, SparseRendersAndCompactGradientsAreTheInterleavedOnesBit
         ASSERT_TRUE(std::isnan(sum5[size_t(p) * 5])) << tag;
         ASSERT_TRUE(std::isnan(sum5[size_t(p) * 5 + 4])) << tag;
       }
+      // The gradients on demand (gradient_row, what the renderer reads without the [H, W, 3 J] buffer): the same
+      // bits, in rows cut at every offset and length; and the sum alone (colour null) the same sum.
+      std::vector<float> row(size_t(c.W) * 3);
+      for (int j = 0; j < J; ++j)
+        for (int y = 0; y < c.H; ++y)
+          for (int x0 = 0; x0 < c.W; x0 += 7) {
+            const int n = std::min(1 + (x0 + y) % 9, c.W - x0);
+            std::fill(row.begin(), row.end(), std::nanf(""));
+            b.gradient_row(j, y, x0, n, row.data());
+            for (int l = 0; l < n * 3; ++l)
+              ASSERT_EQ(std::bit_cast<uint32_t>(row[l]),
+                        std::bit_cast<uint32_t>(g[(size_t(y) * c.W + x0) * 3 * J + size_t(l / 3) * 3 * J + 3 * j + l % 3]))
+                  << tag << ", object " << j << " at " << x0 + l / 3 << "," << y;
+            ASSERT_TRUE(std::isnan(row[n * 3])) << tag;  // nothing past the n pixels
+          }
+      std::vector<float> sum_only(size_t(HW) * 3, std::nanf(""));
+      b(c.image, c.lab, sparse, c.objs, {nullptr, 0, sum_only.data(), 3});
+      for (long p = 0; p < HW; ++p)
+        for (int k = 0; k < 3; ++k)
+          ASSERT_EQ(std::bit_cast<uint32_t>(sum_only[size_t(p) * 3 + k]),
+                    std::bit_cast<uint32_t>(sum5[size_t(p) * 5 + 1 + k]))
+              << tag << ", pixel " << p;
     }
 }
 

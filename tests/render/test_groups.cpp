@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <random>
 #include <tuple>
@@ -196,10 +197,26 @@ TEST(RenderGroups, FiniteDifferences) {
   fd_check("group opacity_logit", s.opacity_logit, all_indices(s.opacity_logit.size()), g.opacity_logit, run);
 }
 
+// Upstream group gradients on demand (OutputGradsT::group_rows) from the same [H, W, G * GW] values.
+template <class T>
+struct GroupRowsFromBuffer {
+  const T* values = nullptr;  // [H, W, G * GW]
+  int width = 0;
+  std::atomic<long>* calls = nullptr;
+  static void rows(const void* ctx, int g, int y, int x0, int n, T* out) {
+    const auto& c = *static_cast<const GroupRowsFromBuffer*>(ctx);
+    c.calls->fetch_add(1);
+    for (int l = 0; l < n; ++l)
+      for (int i = 0; i < kGWg; ++i)
+        out[l * kGWg + i] = c.values[(size_t(y) * c.width + x0 + l) * kG * kGW + size_t(g) * kGW + i];
+  }
+};
+
 // The two channel paths of the kernels (rasterize.h: visit lists after the walk, or folded into it) sum the same
 // terms in the same order: bitwise-equal renders and gradients, with 4 dense channels (the hybrid method's base
 // render, the last forward-only), groups of 0 to 3 entries and hard pixel-weight maps, float and double, on a
-// width that leaves partial batches.
+// width that leaves partial batches. The upstream group gradients read from a buffer or computed on demand
+// (group_rows) give the same bits on both paths.
 template <class T>
 void compare_channel_paths() {
   Scene s = random_scene(700, 69, 50, 23, 0.9, 4);
@@ -215,7 +232,9 @@ void compare_channel_paths() {
     RenderOutputsT<T> out;
     ProjectedGradsT<T> pg;
   };
-  auto run = [&](ChannelPath path) {
+  std::atomic<long> calls{0};
+  const GroupRowsFromBuffer<T> source{wg.data(), s.cam.width, &calls};
+  auto run = [&](ChannelPath path, bool on_demand) {
     set_raster_channel_path(path);
     Run r;
     RendererT<T> ren;
@@ -231,15 +250,34 @@ void compare_channel_paths() {
     d.extra = we.data();
     d.extra_grad_channels = 3;
     d.weight_sums = ww.data();
-    d.groups = wg.data();
-    d.group_row = kG * kGW;
-    d.group_stride = kGW;
+    if (on_demand) {
+      d.group_rows = &GroupRowsFromBuffer<T>::rows;
+      d.group_ctx = &source;
+    } else {
+      d.groups = wg.data();
+      d.group_row = kG * kGW;
+      d.group_stride = kGW;
+    }
     d.group_grad_channels = kGWg;
     ren.composite_backward(d, r.pg);
     set_raster_channel_path(ChannelPath::kAuto);
     return r;
   };
-  const Run a = run(ChannelPath::kVisitLists), b = run(ChannelPath::kFolded);
+  const Run a = run(ChannelPath::kVisitLists, false), b = run(ChannelPath::kFolded, false);
+  EXPECT_EQ(calls.load(), 0);
+  for (bool on_demand : {false, true}) {
+    const Run c = run(ChannelPath::kVisitLists, on_demand), e = run(ChannelPath::kFolded, on_demand);
+    for (const Run* r : {&c, &e})
+      for (auto [x, y, what] : {std::tuple{&a.pg.mean2d, &r->pg.mean2d, "mean2d"},
+                                {&a.pg.conic, &r->pg.conic, "conic"},
+                                {&a.pg.opacity, &r->pg.opacity, "opacity"},
+                                {&a.pg.colors, &r->pg.colors, "colors"},
+                                {&a.pg.extra, &r->pg.extra, "extra"},
+                                {&a.pg.group_val, &r->pg.group_val, "group values"}})
+        EXPECT_TRUE(bitwise_equal(*x, *y)) << what << (on_demand ? " on demand" : " from the buffer")
+                                           << ": max difference " << max_abs_diff(*x, *y);
+  }
+  EXPECT_GT(calls.load(), 0);
   EXPECT_GT(max_abs(a.out.groups), 0.1);
   EXPECT_GT(max_abs(a.pg.group_val), 0.0);
   EXPECT_GT(max_abs(a.pg.extra), 0.0);
