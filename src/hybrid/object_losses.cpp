@@ -557,6 +557,54 @@ void ObjectLosses::scatter(int H, int W, bool bro_grad, const ObjectGradOut& out
       }
     }
   };
+  // The sum alone (the renderer reads each object's values on demand, gradient_row): row by row, each object's
+  // row added to the row's sums in object order (each pixel's additions as above), as runs of contiguous values
+  // the compiler vectorises; the base pair's combination written out as gradient_row writes it.
+  auto sum_rows = [&]<bool kBase, bool kBro>() {
+#pragma omp parallel
+    {
+      std::vector<float> g(size_t(W) * 3), acc(size_t(W) * 3);
+#pragma omp for schedule(static)
+      for (int y = 0; y < H; ++y) {
+        const size_t r0 = size_t(y) * W * 3;
+        if constexpr (kBase)
+          for (int i = 0; i < 3 * W; ++i) g[i] = s_app * base_app_[r0 + i];
+        std::fill(acc.begin(), acc.end(), 0.f);
+        for (int j = 0; j < J; ++j) {
+          const PixelBox& R = obj_[j].R;
+          const bool in_rows = y >= R.y0 && y < R.y1;
+          const int a = in_rows ? 3 * R.x0 : 3 * W, b = in_rows ? 3 * R.x1 : 3 * W;
+          if (in_rows) {
+            const float* o = obj_[j].own.data() + size_t(y - R.y0) * R.width() * 3;
+#pragma omp simd
+            for (int i = a; i < b; ++i) acc[i] += o[i - a] + 0.f;
+          }
+          if constexpr (kBase) {
+            const float gj = gs[j], pj = proj[j];
+            auto outside = [&](int i0, int i1) {
+              if constexpr (kBro) {
+                const float *u = &base_unit_[r0], *p = &base_pred_[r0];
+#pragma omp simd
+                for (int i = i0; i < i1; ++i) acc[i] += (g[i] + std::fma(gj, u[i], -(pj * p[i]))) + 0.f;
+              } else {
+#pragma omp simd
+                for (int i = i0; i < i1; ++i) acc[i] += g[i] + 0.f;
+              }
+            };
+            outside(0, a);
+            outside(b, 3 * W);
+          }
+        }
+        for (int x = 0; x < W; ++x)
+          for (int c = 0; c < 3; ++c) out.sum[(long(y) * W + x) * out.sum_stride + c] = acc[size_t(x) * 3 + c];
+      }
+    }
+  };
+  if (!out.color && has_base) {
+    if (bro_grad) sum_rows.template operator()<true, true>();
+    else sum_rows.template operator()<true, false>();
+    return;
+  }
   if (!has_base) run.template operator()<false, false>();
   else if (bro_grad) run.template operator()<true, true>();
   else run.template operator()<true, false>();

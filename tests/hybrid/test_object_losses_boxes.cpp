@@ -307,6 +307,17 @@ TEST(ObjectLossesBoxes, SparseRendersAndCompactGradientsAreTheInterleavedOnesBit
           ASSERT_EQ(std::bit_cast<uint32_t>(sum_only[size_t(p) * 3 + k]),
                     std::bit_cast<uint32_t>(sum5[size_t(p) * 5 + 1 + k]))
               << tag << ", pixel " << p;
+      // ... and it is the sum of the values on demand, in object order.
+      for (int y = 0; y < c.H; ++y) {
+        std::vector<float> s(size_t(c.W) * 3, 0.f);
+        for (int j = 0; j < J; ++j) {
+          b.gradient_row(j, y, 0, c.W, row.data());
+          for (int i = 0; i < c.W * 3; ++i) s[i] += row[i];
+        }
+        for (int i = 0; i < c.W * 3; ++i)
+          ASSERT_EQ(std::bit_cast<uint32_t>(s[i]), std::bit_cast<uint32_t>(sum_only[size_t(y) * c.W * 3 + i]))
+              << tag << ", row " << y;
+      }
     }
 }
 
