@@ -200,7 +200,7 @@ struct Plan {
 // kMap: the map's values are also stored in `map` [H, L]. `g` is the gradient's normaliser 1 / count.
 template <typename T, bool kMap>
 void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, const Plan& sp, T* coeff,
-               double* row_sum, T g, T* map, std::vector<T>& buf) {
+               double* row_sum, T g, T* map, ScratchVector<T>& buf) {
   const int L = W * C;
   const T C1 = T(0.01 * 0.01), C2 = T(0.03 * 0.03);
   buf.resize(size_t(kWin) * 5 * L + size_t(8) * L);
@@ -294,7 +294,7 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, cons
 // term inside y's support only (y is 0 elsewhere).
 template <typename T>
 void ssim_grad_band(const T* x, const T* y, int H, int L, int y0, int y1, const Plan& sp, const T* coeff,
-                    T* grad_x, std::vector<T>& buf) {
+                    T* grad_x, ScratchVector<T>& buf) {
   buf.resize(std::max(buf.size(), size_t(3) * L));
   T* v[3] = {buf.data(), buf.data() + L, buf.data() + 2 * size_t(L)};
   const int b0 = sp.b0, b1 = sp.b1, g0 = sp.g0, g1 = sp.g1;

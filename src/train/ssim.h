@@ -4,13 +4,16 @@
 #pragma once
 #include <vector>
 
+#include "core/scratch_vector.h"
+
 namespace hgs::train {
 
+// (ScratchVector: the passes write every value they read; growth is not zeroed.)
 template <typename T>
 struct SsimWorkspace {
-  std::vector<std::vector<T>> band;  // per row band: line buffers (96 rows of W*C); reused between calls
-  std::vector<double> row_sum;       // [H] SSIM-map sum of each row
-  std::vector<T> coeff;              // [H, 3, W*C] horizontally filtered backward coefficients (with a gradient)
+  std::vector<ScratchVector<T>> band;  // per row band: line buffers (96 rows of W*C); reused between calls
+  std::vector<double> row_sum;         // [H] SSIM-map sum of each row
+  ScratchVector<T> coeff;              // [H, 3, W*C] horizontally filtered backward coefficients (with a gradient)
 };
 
 // Mean SSIM of images x and y, both [H, W, C] (channel-interleaved). When `grad_x` is not null it receives

@@ -612,7 +612,9 @@ TEST(ObjectLossesBoxes, SsimOnPartOfARowAndTheTargetsSupportIsTheFullPassesBitwi
               const bool out = r >= y0 && r < y1 && xx >= x0 && xx < x1;
               ASSERT_EQ(g1[i], out ? g0[i] : -7.f) << "box " << b.x0 << "," << b.y0 << " rows " << y0 << "-" << y1
                                                    << " columns " << x0 << "-" << x1 << " at " << xx << "," << r;
-              if (out) ASSERT_EQ(m1[i], m0[i]) << "box " << b.x0 << "," << b.y0 << " at " << xx << "," << r;
+              if (out) {
+                ASSERT_EQ(m1[i], m0[i]) << "box " << b.x0 << "," << b.y0 << " at " << xx << "," << r;
+              }
             }
       }
     }
