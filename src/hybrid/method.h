@@ -76,7 +76,7 @@ class HybridMethod final : public train::Method {
   std::vector<int> objects_;       // labels scored in this view: present in its mask (all, or a sample)
   std::vector<float> channels_;    // [N, C] object channels, or the base channels (+ f for the no-SCL ablation)
   ObjectGroups groups_;            // the sparse object groups (sparse_objects)
-  std::vector<float> d_channels_;  // [H, W, C] dL/d the object layout's channels; [H, W, 3 J] the groups' (sparse)
+  std::vector<float> d_channels_;  // [H, W, C] dL/d the object layout's channels (dense path only)
   std::vector<float> d_dense_;     // [H, W, 4 + S] dL/d the base channels (sparse_objects)
   std::vector<float> dq_;          // [N, L]
   std::vector<float> d_wsum_;      // [N, Jf]

@@ -21,8 +21,8 @@
 // Layouts. Dense channels [N, 4 + S] (SparseLayout): base colour 0..2, the S others 3..3+S, b_n at 3 + S; the first
 // 3 + S carry gradient. Groups [E, 4]: (delta c, delta). Renders come back as dense [H, W, 4 + S] and groups
 // [H, W, 4 J], which the object losses read as base + group (ObjectRenders::sparse, object_losses.h); the
-// objects' colour gradients go back as [H, W, 3 J] (the renderer's group gradients: row 3 J, stride 3) and their
-// sum is the base colour's.
+// objects' colour gradients go back as the renderer's group gradients, which it reads on demand from the losses'
+// sparse form (ObjectLosses::group_rows), and their sum is the base colour's.
 #pragma once
 #include <cstdint>
 #include <vector>

@@ -5,8 +5,10 @@
 // or the base channels and groups of object_groups.h); the box path's first pass lays each object's render out
 // as its own plane, so that an object's crop reads contiguous rows. Each object's losses run single-threaded in
 // one thread's scratch (no parallel-region overhead per convolution, each object's images stay in one core's
-// cache), and the gradients go back interleaved per pixel (ObjectGradOut). Loss values are summed in object
-// order (deterministic, independent of the thread count).
+// cache), and the gradients go back interleaved per pixel (ObjectGradOut) or stay in sparse form for the renderer
+// to read on demand (gradient_row). Loss values are summed in object order (deterministic, independent of the
+// thread count). SSIM on a crop computes only the columns its outputs need and runs the target's passes only on
+// and near the mask's box (train::ssim_map_rows), bitwise the full passes.
 //
 // Boxes (ObjectLossOptions::boxes, with the layout's base render). Every term of both losses is a sum over
 // pixels p (L1 and the SSIM map over pixels, eq. 14's numerator and band weights over the forward differences,
