@@ -233,7 +233,8 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders,
       int* hi = &row_hi_[size_t(y)];
       int* mlo = &mask_lo_[size_t(y)];
       int* mhi = &mask_hi_[size_t(y)];
-      for (int j = 0; j < J; ++j) lo[size_t(j) * H] = mlo[size_t(j) * H] = W, hi[size_t(j) * H] = mhi[size_t(j) * H] = -1;
+      for (int j = 0; j < J; ++j)
+        lo[size_t(j) * H] = mlo[size_t(j) * H] = W, hi[size_t(j) * H] = mhi[size_t(j) * H] = -1;
       for (int x = 0; x < W; ++x) {
         const long p = long(y) * W + x;
         const float b[4] = {renders.base_color[p * BS], renders.base_color[p * BS + 1], renders.base_color[p * BS + 2],

@@ -156,23 +156,23 @@ class ObjectLosses {
     train::PhotometricLoss loss;
     train::SsimWorkspace<float> ssim;
     // (ScratchVector: every use writes these before it reads them; their growth is not zeroed.)
-    ScratchVector<float> gt, pred;      // [H, W, 3] (of the crop in the box path)
+    ScratchVector<float> gt, pred;          // [H, W, 3] (of the crop in the box path)
     ScratchVector<float> mask, band, opac;  // [H, W]
-    std::vector<float> morph;           // boundary_band's scratch
-    ScratchVector<float> bgrad;         // [H, W, 3] BRO's gradient before its scale component is removed
-    ScratchVector<float> sgrad, smap;   // [H, W, 3] SSIM's gradient and map
-    ScratchVector<double> wsum, num;    // [H, W] eq. 14 per pixel (bro_parts)
+    std::vector<float> morph;               // boundary_band's scratch
+    ScratchVector<float> bgrad;             // [H, W, 3] BRO's gradient before its scale component is removed
+    ScratchVector<float> sgrad, smap;       // [H, W, 3] SSIM's gradient and map
+    ScratchVector<double> wsum, num;        // [H, W] eq. 14 per pixel (bro_parts)
   };
   // The per-pixel terms of the box path: L1, SSIM map, eq. 14's band weight and numerator, <g, p>, <p, p>.
   enum Term { kL1, kSsim, kWsum, kNum, kGp, kPp, kTerms };
-  struct Object {              // one object of the box path
-    PixelBox R, Q;             // scored box and crop (image coordinates)
-    PixelBox M;                // the box of its mask's pixels (its target I M_k is 0 outside)
-    bool full = false;         // scored over the whole image (R = Q = the image)
+  struct Object {               // one object of the box path
+    PixelBox R, Q;              // scored box and crop (image coordinates)
+    PixelBox M;                 // the box of its mask's pixels (its target I M_k is 0 outside)
+    bool full = false;          // scored over the whole image (R = Q = the image)
     ScratchVector<float> own;   // [R h, R w, 3] its gradient inside R (every value written by the pieces)
     ScratchVector<float> unit;  // [R h, R w, 3] eq. 14's unscaled gradient inside R (bro_parts)
     ScratchVector<float> pred;  // [R h, R w, 3] the object's render inside R (for the projection)
-    std::vector<double> rows;  // [R h, kTerms] its per-pixel terms summed over each row of R
+    std::vector<double> rows;   // [R h, kTerms] its per-pixel terms summed over each row of R
     float bro_scale = 0, proj = 0;
   };
 
@@ -192,7 +192,7 @@ class ObjectLosses {
 
   HybridConfig cfg_;
   ObjectLossOptions opt_;
-  int width_ = 0;  // the last call's image width
+  int width_ = 0;                   // the last call's image width
   std::vector<Scratch> scratch_;    // [threads]
   std::vector<float> pred_, grad_;  // [J, H, W, 3] planar object renders / gradients (path without boxes)
   std::vector<float> opac_;         // [J, H, W]

@@ -199,8 +199,8 @@ struct Plan {
 // those values are 0, as the full passes over y's zeros give them. row_sum[m] sums the map over [e0, e1).
 // kMap: the map's values are also stored in `map` [H, L]. `g` is the gradient's normaliser 1 / count.
 template <typename T, bool kMap>
-void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, const Plan& sp, T* coeff,
-               double* row_sum, T g, T* map, ScratchVector<T>& buf) {
+void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, const Plan& sp, T* coeff, double* row_sum,
+               T g, T* map, ScratchVector<T>& buf) {
   const int L = W * C;
   const T C1 = T(0.01 * 0.01), C2 = T(0.03 * 0.03);
   buf.resize(size_t(kWin) * 5 * L + size_t(8) * L);
@@ -212,7 +212,7 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, cons
   T* mom[5];
   for (int k = 0; k < 5; ++k) mom[k] = tmp + size_t(3 + k) * L;
   for (int k : {1, 3, 4}) std::fill(mom[k], mom[k] + L, T(0));  // y's moments outside [a0, a1): 0
-  bool y_moments = false;                                        // mom[1, 3, 4] hold values in [a0, a1)
+  bool y_moments = false;                                       // mom[1, 3, 4] hold values in [a0, a1)
   for (int m = y0; m < y1; ++m) {
     for (; next_p <= std::min(H - 1, m + kHalf); ++next_p) {
       const T* xr = x + size_t(next_p) * L;
@@ -293,8 +293,8 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, cons
 // band's rows complete: called after all bands ran ssim_band), then dL/dx = v_mu + 2 x v_xx + y v_xy, the last
 // term inside y's support only (y is 0 elsewhere).
 template <typename T>
-void ssim_grad_band(const T* x, const T* y, int H, int L, int y0, int y1, const Plan& sp, const T* coeff,
-                    T* grad_x, ScratchVector<T>& buf) {
+void ssim_grad_band(const T* x, const T* y, int H, int L, int y0, int y1, const Plan& sp, const T* coeff, T* grad_x,
+                    ScratchVector<T>& buf) {
   buf.resize(std::max(buf.size(), size_t(3) * L));
   T* v[3] = {buf.data(), buf.data() + L, buf.data() + 2 * size_t(L)};
   const int b0 = sp.b0, b1 = sp.b1, g0 = sp.g0, g1 = sp.g1;
@@ -302,8 +302,7 @@ void ssim_grad_band(const T* x, const T* y, int H, int L, int y0, int y1, const 
     const bool with_y = sp.rows(yy, 0);
     for (int k = 0; k < 2; ++k)
       conv_col<T>([&](int r) { return coeff + (size_t(r) * 3 + k) * L + g0; }, yy, H, g1 - g0, v[k] + g0);
-    if (with_y)
-      conv_col<T>([&](int r) { return coeff + (size_t(r) * 3 + 2) * L + b0; }, yy, H, b1 - b0, v[2] + b0);
+    if (with_y) conv_col<T>([&](int r) { return coeff + (size_t(r) * 3 + 2) * L + b0; }, yy, H, b1 - b0, v[2] + b0);
     const T* xr = x + size_t(yy) * L;
     T* gr = grad_x + size_t(yy) * L;
     auto with_y_term = [&](int j0, int j1) {

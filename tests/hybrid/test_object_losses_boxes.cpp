@@ -296,7 +296,8 @@ TEST(ObjectLossesBoxes, SparseRendersAndCompactGradientsAreTheInterleavedOnesBit
             b.gradient_row(j, y, x0, n, row.data());
             for (int l = 0; l < n * 3; ++l)
               ASSERT_EQ(std::bit_cast<uint32_t>(row[l]),
-                        std::bit_cast<uint32_t>(g[(size_t(y) * c.W + x0) * 3 * J + size_t(l / 3) * 3 * J + 3 * j + l % 3]))
+                        std::bit_cast<uint32_t>(
+                            g[(size_t(y) * c.W + x0) * 3 * J + size_t(l / 3) * 3 * J + 3 * j + l % 3]))
                   << tag << ", object " << j << " at " << x0 + l / 3 << "," << y;
             ASSERT_TRUE(std::isnan(row[n * 3])) << tag;  // nothing past the n pixels
           }

@@ -274,8 +274,8 @@ void compare_channel_paths() {
                                 {&a.pg.colors, &r->pg.colors, "colors"},
                                 {&a.pg.extra, &r->pg.extra, "extra"},
                                 {&a.pg.group_val, &r->pg.group_val, "group values"}})
-        EXPECT_TRUE(bitwise_equal(*x, *y)) << what << (on_demand ? " on demand" : " from the buffer")
-                                           << ": max difference " << max_abs_diff(*x, *y);
+        EXPECT_TRUE(bitwise_equal(*x, *y))
+            << what << (on_demand ? " on demand" : " from the buffer") << ": max difference " << max_abs_diff(*x, *y);
   }
   EXPECT_GT(calls.load(), 0);
   EXPECT_GT(max_abs(a.out.groups), 0.1);
