@@ -34,6 +34,17 @@ int dependency_radius(const HybridConfig& cfg) { return std::max(2 * kSsimRadius
 
 inline uint32_t bits(float v) { return std::bit_cast<uint32_t>(v); }
 
+// Object j's gradient at a value outside its box, from the base pair's there (object_losses.h): g + (gs u - pj p)
+// with g = s_app times eq. 6's base gradient, + 0 so that a -0 is stored as +0. The one definition the scatter,
+// the sum and gradient_row share, written with fma so that the compiler fuses no product differently in each:
+// s_app a rounded on its own (fma(s, a, 0): a -0 read as +0, which the final + 0 makes of it anyway), pj p rounded
+// and subtracted from gs u in one fused multiply-add. (These are the roundings the scatter's plain expression
+// compiled to before.)
+inline float base_app_scaled(float s_app, float a) { return std::fma(s_app, a, 0.f); }
+inline float outside_grad(float g, float gs, float u, float pj, float p) {
+  return (g + std::fma(gs, u, -(pj * p))) + 0.f;
+}
+
 // Eq. 6's gradient of one value: the L1 sign term (a = (1 - lambda) / n, 0 at a tie) plus b = -lambda times
 // SSIM's gradient, as train::PhotometricLoss, then times s_app.
 inline float app_grad(float d, float a, float b, float gs, float s_app) {
@@ -511,8 +522,7 @@ void ObjectLosses::scatter(int H, int W, bool bro_grad, const ObjectGradOut& out
   const int J = static_cast<int>(obj_.size());
   const float s_app = grads_.app_scale;
   const bool has_base = !base_app_.empty();  // else every object is scored over the whole image
-  std::vector<float> gs(J), proj(J);
-  for (int j = 0; j < J; ++j) gs[j] = obj_[j].bro_scale, proj[j] = obj_[j].proj;
+  const std::vector<float>&gs = grads_.bro_scale, &proj = grads_.proj;
   // Compiled for each case of the base pair (with eq. 14's terms, without them, not scored).
   auto run = [&]<bool kBase, bool kBro>() {
 #pragma omp parallel
@@ -534,7 +544,7 @@ void ObjectLosses::scatter(int H, int W, bool bro_grad, const ObjectGradOut& out
           float g[3] = {}, u[3] = {}, p[3] = {}, sum[3] = {0.f, 0.f, 0.f};
           if constexpr (kBase)
             for (int c = 0; c < 3; ++c) {
-              g[c] = s_app * base_app_[i + c];
+              g[c] = base_app_scaled(s_app, base_app_[i + c]);
               u[c] = kBro ? base_unit_[i + c] : 0.f;
               p[c] = base_pred_[i + c];
             }
@@ -544,7 +554,7 @@ void ObjectLosses::scatter(int H, int W, bool bro_grad, const ObjectGradOut& out
               const float* o = own[j] + size_t(x - xa[j]) * 3;
               for (int c = 0; c < 3; ++c) v[c] = o[c] + 0.f;
             } else if constexpr (kBro) {
-              for (int c = 0; c < 3; ++c) v[c] = (g[c] + (gs[j] * u[c] - proj[j] * p[c])) + 0.f;
+              for (int c = 0; c < 3; ++c) v[c] = outside_grad(g[c], gs[j], u[c], proj[j], p[c]);
             } else {
               for (int c = 0; c < 3; ++c) v[c] = g[c] + 0.f;
             }
@@ -560,7 +570,7 @@ void ObjectLosses::scatter(int H, int W, bool bro_grad, const ObjectGradOut& out
   };
   // The sum alone (the renderer reads each object's values on demand, gradient_row): row by row, each object's
   // row added to the row's sums in object order (each pixel's additions as above), as runs of contiguous values
-  // the compiler vectorises; the base pair's combination written out as gradient_row writes it.
+  // the compiler vectorises.
   auto sum_rows = [&]<bool kBase, bool kBro>() {
 #pragma omp parallel
     {
@@ -569,7 +579,7 @@ void ObjectLosses::scatter(int H, int W, bool bro_grad, const ObjectGradOut& out
       for (int y = 0; y < H; ++y) {
         const size_t r0 = size_t(y) * W * 3;
         if constexpr (kBase)
-          for (int i = 0; i < 3 * W; ++i) g[i] = s_app * base_app_[r0 + i];
+          for (int i = 0; i < 3 * W; ++i) g[i] = base_app_scaled(s_app, base_app_[r0 + i]);
         std::fill(acc.begin(), acc.end(), 0.f);
         for (int j = 0; j < J; ++j) {
           const PixelBox& R = obj_[j].R;
@@ -586,7 +596,7 @@ void ObjectLosses::scatter(int H, int W, bool bro_grad, const ObjectGradOut& out
               if constexpr (kBro) {
                 const float *u = &base_unit_[r0], *p = &base_pred_[r0];
 #pragma omp simd
-                for (int i = i0; i < i1; ++i) acc[i] += (g[i] + std::fma(gj, u[i], -(pj * p[i]))) + 0.f;
+                for (int i = i0; i < i1; ++i) acc[i] += outside_grad(g[i], gj, u[i], pj, p[i]);
               } else {
 #pragma omp simd
                 for (int i = i0; i < i1; ++i) acc[i] += g[i] + 0.f;
@@ -627,19 +637,10 @@ void ObjectLosses::gradient_row(int j, int y, int x0, int n, float* out) const {
       for (int c = 0; c < 3; ++c) o[c] = 0.f;
       continue;
     }
-    // The base pair's combination rounded as scatter's compilation rounds it (its object_losses.o): g = s_app
-    // base_app on its own, gs u - pj p as one fused multiply-subtract of the rounded pj p, then g plus that. Written
-    // out with fma, because here the compiler would otherwise fuse g's product into the sum (g has one use here,
-    // J there). (fma(s, a, 0) is s a rounded, a -0 read as +0, which the final + 0 makes of it anyway.)
     const size_t i = (size_t(y) * width_ + x) * 3;
     for (int c = 0; c < 3; ++c) {
-      const float g = std::fma(s_app, grads_.base_app[i + c], 0.f);
-      if (!grads_.base_unit) {
-        o[c] = g + 0.f;
-        continue;
-      }
-      const float pp = pj * grads_.base_pred[i + c];
-      o[c] = (g + std::fma(gs, grads_.base_unit[i + c], -pp)) + 0.f;
+      const float g = base_app_scaled(s_app, grads_.base_app[i + c]);
+      o[c] = grads_.base_unit ? outside_grad(g, gs, grads_.base_unit[i + c], pj, grads_.base_pred[i + c]) : g + 0.f;
     }
   }
 }
