@@ -49,6 +49,7 @@ nlohmann::json TrainConfig::to_json() const {
           {"densify_every", densify_every},
           {"opacity_reset_every", opacity_reset_every},
           {"screen_limit", screen_limit},
+          {"late_prune", late_prune},
           {"densify_grad_threshold", densify_cfg.grad_threshold},
           {"percent_dense", densify_cfg.percent_dense},
           {"min_opacity", densify_cfg.min_opacity},
@@ -101,6 +102,7 @@ TrainConfig TrainConfig::from_json(const nlohmann::json& j, const std::string& w
   get("densify_every", c.densify_every);
   get("opacity_reset_every", c.opacity_reset_every);
   get("screen_limit", c.screen_limit);
+  get("late_prune", c.late_prune);
   get("densify_grad_threshold", c.densify_cfg.grad_threshold);
   get("percent_dense", c.densify_cfg.percent_dense);
   get("min_opacity", c.densify_cfg.min_opacity);

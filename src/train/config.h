@@ -34,6 +34,10 @@ struct TrainConfig {
   // Densification schedule (the 30k values; see scaled_to).
   int densify_from = 500, densify_until = 15000, densify_every = 100, opacity_reset_every = 3000;
   float screen_limit = 20.f;  // px, used after the first opacity reset
+  // Keep the prune (transparent, screen-size and world-size) every densify_every images after densification stops
+  // at densify_until, with no clone, split or opacity reset (3DGS prunes only while densifying). Off by default:
+  // an option against floaters that form late (docs/scaling.md, "Floaters").
+  bool late_prune = false;
   DensifyConfig densify_cfg;
   int save_every = 0;  // checkpoint + PLY every N iterations (0 = never during training)
   // Views per step on this process (--batch); a step of R MPI ranks sees R x batch views. Every iteration count

@@ -145,7 +145,14 @@ DensifyResult densify_and_prune(GaussianModel& model, Adam& adam, DensifyStats& 
       for (int a = 0; a < 3; ++a) ls[a] -= dlog;
     }
   }
-  // Prune.
+  res.pruned = prune_step(model, adam, stats, cfg, extent, screen_limit).pruned;
+  return res;
+}
+
+DensifyResult prune_step(GaussianModel& model, Adam& adam, DensifyStats& stats, const DensifyConfig& cfg, float extent,
+                         float screen_limit) {
+  if (int(stats.max_radius.size()) != model.n)
+    fail("densify: statistics hold {} Gaussians, the model {}", stats.max_radius.size(), model.n);
   std::vector<char> prune(model.n, 0);
   for (int i = 0; i < model.n; ++i) {
     bool p = sigmoid(model.opacity_logit[i]) < cfg.min_opacity;
@@ -153,6 +160,7 @@ DensifyResult densify_and_prune(GaussianModel& model, Adam& adam, DensifyStats& 
       p = p || stats.max_radius[i] > screen_limit || max_scale(model, i) > cfg.max_world_scale * extent;
     prune[i] = p;
   }
+  DensifyResult res;
   res.pruned = prune_gaussians(model, adam, stats, prune);
   stats.reset(model.n);
   return res;

@@ -64,6 +64,11 @@ struct DensifyResult {
 DensifyResult densify_and_prune(GaussianModel& model, Adam& adam, DensifyStats& stats, const DensifyConfig& cfg,
                                 float extent, float screen_limit, std::mt19937_64& rng);
 
+// The prune of densify_and_prune alone (no clone or split); resets the statistics. For `TrainConfig::late_prune`,
+// after densification has stopped.
+DensifyResult prune_step(GaussianModel& model, Adam& adam, DensifyStats& stats, const DensifyConfig& cfg, float extent,
+                         float screen_limit);
+
 // Removes the Gaussians with mask[i] != 0 from the model, Adam and the statistics. Returns the count removed.
 int prune_gaussians(GaussianModel& model, Adam& adam, DensifyStats& stats, const std::vector<char>& mask);
 

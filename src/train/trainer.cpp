@@ -209,7 +209,7 @@ Trainer::StepPlan Trainer::plan_step() {
   p.prev = it_;
   p.iteration = it_ + 1;
   p.grad_scale = p.step_views > 1 ? 1.f / float(p.step_views) : 1.f;
-  p.gather_stats = cfg_.densify && p.iteration < cfg_.densify_until;
+  p.gather_stats = cfg_.densify && (p.iteration < cfg_.densify_until || cfg_.late_prune);
   p.views.resize(p.step_views);
   for (int& vi : p.views) vi = next_view();
   return p;
@@ -361,18 +361,21 @@ void Trainer::update_parameters(const StepPlan& plan, PartClock& clock, StepTime
   info.total = objective_.total();
 }
 
-// Densification and opacity resets on the 3DGS schedule in images seen (statistics gathered until densify_until).
+// Densification and opacity resets on the 3DGS schedule in images seen (statistics gathered until densify_until,
+// or to the end with late_prune, which then prunes alone).
 void Trainer::densify_step(const StepPlan& plan, StepInfo& info) {
   if (!plan.gather_stats) return;
   stats_.add(step_stats_);
+  const bool growing = plan.iteration < cfg_.densify_until;
   if (it_ > cfg_.densify_from && crosses(plan.prev, it_, cfg_.densify_every)) {
     release_step_buffers();
     const float screen = it_ > cfg_.opacity_reset_every ? cfg_.screen_limit : 0.f;
-    info.densify = densify_and_prune(model_, adam_, stats_, cfg_.densify_cfg, extent_, screen, rng_);
+    info.densify = growing ? densify_and_prune(model_, adam_, stats_, cfg_.densify_cfg, extent_, screen, rng_)
+                           : prune_step(model_, adam_, stats_, cfg_.densify_cfg, extent_, screen);
     info.densified = true;
   }
-  if (crosses(plan.prev, it_, cfg_.opacity_reset_every) ||
-      (cfg_.white_bg && plan.prev < cfg_.densify_from && it_ >= cfg_.densify_from))
+  if (growing && (crosses(plan.prev, it_, cfg_.opacity_reset_every) ||
+                  (cfg_.white_bg && plan.prev < cfg_.densify_from && it_ >= cfg_.densify_from)))
     reset_opacity(model_, adam_, 0.01f);
 }
 

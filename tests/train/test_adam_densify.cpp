@@ -337,6 +337,25 @@ TEST(Densify, ScreenAndWorldSizePruning) {
   EXPECT_EQ(g.m.n, 0);
 }
 
+TEST(Densify, PruneStepPrunesAsDensifyAndPruneWithoutGrowing) {
+  // The fixture's Gaussians 0 and 1 would clone and split (densify_and_prune above); prune_step only prunes,
+  // by the same rules.
+  Fixture f;
+  DensifyConfig cfg;
+  DensifyResult r = prune_step(f.m, f.adam, f.stats, cfg, 2.f, 0.f);  // transparent only: Gaussian 3
+  EXPECT_EQ(r.cloned + r.split, 0);
+  EXPECT_EQ(r.pruned, 1);
+  ASSERT_EQ(f.m.n, 3);
+  EXPECT_EQ(f.m.sh[2 * 3], 2.f);
+  EXPECT_EQ(f.stats.count, std::vector<int>(3, 0));
+  Fixture g;
+  r = prune_step(g.m, g.adam, g.stats, cfg, 2.f, 3.f);  // and by screen and world size: 0, 1 and 3
+  EXPECT_EQ(r.pruned, 3);
+  ASSERT_EQ(g.m.n, 1);
+  EXPECT_EQ(g.m.sh[0], 2.f);
+  EXPECT_EQ(g.adam.get("quat").m, std::vector<float>(4, 3.f));
+}
+
 TEST(Densify, OpacityReset) {
   Fixture f;
   reset_opacity(f.m, f.adam, 0.01f);
