@@ -40,7 +40,8 @@ struct TrainArgs {
   int iters = 30000, downscale = 1, threads = 0, sh_degree = 3, save_every = 0, batch = 1, test_every = 0;
   uint64_t seed = 0;
   float near_plane = render::kDefaultNearPlane;
-  bool no_densify = false, white_bg = false, quiet = false, late_prune = false;
+  float late_prune = 0.f;
+  bool no_densify = false, white_bg = false, quiet = false;
 };
 
 // The training configuration of the command line: the 30k schedule scaled to --iters.
@@ -439,10 +440,13 @@ void add_run_options(CLI::App& sub, TrainArgs& a) {
       ->capture_default_str();
   sub.add_option("--resume", a.resume, "Continue from a checkpoint (MODEL/checkpoints/iter_N.ckpt)");
   sub.add_flag("--no-densify", a.no_densify, "Keep the Gaussian count fixed (no clone/split/prune/opacity reset)");
-  sub.add_flag("--late-prune", a.late_prune,
-               "Keep pruning transparent and oversized Gaussians (screen and world size) after densification stops, "
-               "every densification interval (3DGS stops pruning with densification); off by default")
-      ->excludes("--no-densify");
+  sub.add_option("--late-prune", a.late_prune,
+                 "After densification stops, every densification interval, prune the Gaussians whose footprint in "
+                 "a training view was wider than this fraction of the image's larger side, and the transparent "
+                 "ones (0 = off; against floaters near the camera path, docs/scaling.md)")
+      ->check(CLI::Range(0.0, 1000.0))
+      ->excludes("--no-densify")
+      ->capture_default_str();
   sub.add_flag("--white-bg", a.white_bg, "White background (default black)");
   sub.add_option("--near-plane", a.near_plane,
                  "Cull Gaussians nearer than this to a camera (scene units), in training and, through "

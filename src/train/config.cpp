@@ -103,6 +103,7 @@ TrainConfig TrainConfig::from_json(const nlohmann::json& j, const std::string& w
   get("opacity_reset_every", c.opacity_reset_every);
   get("screen_limit", c.screen_limit);
   get("late_prune", c.late_prune);
+  if (!(c.late_prune >= 0)) fail("{}: 'late_prune' must be >= 0, got {}", where, c.late_prune);
   get("densify_grad_threshold", c.densify_cfg.grad_threshold);
   get("percent_dense", c.densify_cfg.percent_dense);
   get("min_opacity", c.densify_cfg.min_opacity);

@@ -34,10 +34,12 @@ struct TrainConfig {
   // Densification schedule (the 30k values; see scaled_to).
   int densify_from = 500, densify_until = 15000, densify_every = 100, opacity_reset_every = 3000;
   float screen_limit = 20.f;  // px, used after the first opacity reset
-  // Keep the prune (transparent, screen-size and world-size) every densify_every images after densification stops
-  // at densify_until, with no clone, split or opacity reset (3DGS prunes only while densifying). Off by default:
-  // an option against floaters that form late (docs/scaling.md, "Floaters").
-  bool late_prune = false;
+  // > 0: after densification stops at densify_until, every densify_every images, prune the Gaussians whose
+  // 3-sigma footprint in a training view of the interval was wider than late_prune x the view's larger side, and
+  // the transparent ones (no clone, split, opacity reset or world-size rule; 3DGS prunes only while densifying).
+  // 0 = off, the default: an option against floaters near the camera path (docs/scaling.md, "Floaters"); 3DGS's
+  // own rules applied late (20 px, 0.1 x extent) empty a model (kumamon: 33.96 -> 4.95 dB).
+  float late_prune = 0.f;
   DensifyConfig densify_cfg;
   int save_every = 0;  // checkpoint + PLY every N iterations (0 = never during training)
   // Views per step on this process (--batch); a step of R MPI ranks sees R x batch views. Every iteration count

@@ -65,7 +65,7 @@ DensifyResult densify_and_prune(GaussianModel& model, Adam& adam, DensifyStats& 
                                 float extent, float screen_limit, std::mt19937_64& rng);
 
 // The prune of densify_and_prune alone (no clone or split); resets the statistics. For `TrainConfig::late_prune`,
-// after densification has stopped.
+// after densification has stopped (with cfg.max_world_scale infinite and the footprint limit it sets).
 DensifyResult prune_step(GaussianModel& model, Adam& adam, DensifyStats& stats, const DensifyConfig& cfg, float extent,
                          float screen_limit);
 

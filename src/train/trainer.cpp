@@ -209,7 +209,7 @@ Trainer::StepPlan Trainer::plan_step() {
   p.prev = it_;
   p.iteration = it_ + 1;
   p.grad_scale = p.step_views > 1 ? 1.f / float(p.step_views) : 1.f;
-  p.gather_stats = cfg_.densify && (p.iteration < cfg_.densify_until || cfg_.late_prune);
+  p.gather_stats = cfg_.densify && (p.iteration < cfg_.densify_until || cfg_.late_prune > 0);
   p.views.resize(p.step_views);
   for (int& vi : p.views) vi = next_view();
   return p;
@@ -369,9 +369,16 @@ void Trainer::densify_step(const StepPlan& plan, StepInfo& info) {
   const bool growing = plan.iteration < cfg_.densify_until;
   if (it_ > cfg_.densify_from && crosses(plan.prev, it_, cfg_.densify_every)) {
     release_step_buffers();
-    const float screen = it_ > cfg_.opacity_reset_every ? cfg_.screen_limit : 0.f;
-    info.densify = growing ? densify_and_prune(model_, adam_, stats_, cfg_.densify_cfg, extent_, screen, rng_)
-                           : prune_step(model_, adam_, stats_, cfg_.densify_cfg, extent_, screen);
+    if (growing) {
+      const float screen = it_ > cfg_.opacity_reset_every ? cfg_.screen_limit : 0.f;
+      info.densify = densify_and_prune(model_, adam_, stats_, cfg_.densify_cfg, extent_, screen, rng_);
+    } else {  // late_prune: footprints against the views' size, no world-size rule
+      int side = 0;
+      for (const TrainView& v : views_) side = std::max({side, v.cam.width, v.cam.height});
+      DensifyConfig c = cfg_.densify_cfg;
+      c.max_world_scale = std::numeric_limits<float>::infinity();
+      info.densify = prune_step(model_, adam_, stats_, c, extent_, cfg_.late_prune * float(side));
+    }
     info.densified = true;
   }
   if (growing && (crosses(plan.prev, it_, cfg_.opacity_reset_every) ||
