@@ -55,6 +55,10 @@ TEST(TrainConfig, PositionLrDecaysLogLinearly) {
   EXPECT_EQ(TrainConfig::from_json(nlohmann::json::object(), "x.json").near_plane, 0.01f);
   EXPECT_THROW(TrainConfig::from_json(nlohmann::json{{"near_plane", 0}}, "x.json"), Error);
   EXPECT_THROW(TrainConfig::from_json(nlohmann::json{{"near_plane", -0.2}}, "x.json"), Error);
+  // The late prune's footprint limit likewise; absent (models before it), off.
+  EXPECT_EQ(TrainConfig::from_json(nlohmann::json{{"late_prune", 0.5}}, "x.json").late_prune, 0.5f);
+  EXPECT_EQ(TrainConfig::from_json(nlohmann::json::object(), "x.json").late_prune, 0.f);
+  EXPECT_THROW(TrainConfig::from_json(nlohmann::json{{"late_prune", -1}}, "x.json"), Error);
 }
 
 // A tiny problem: 40 Gaussians in front of a 32x24 camera, target = render of a different random model.
