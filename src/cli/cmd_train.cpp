@@ -422,12 +422,12 @@ void add_run_options(CLI::App& sub, TrainArgs& a) {
   sub.add_option("--threads", a.threads, "Worker threads (0 = all cores)")->check(CLI::Range(0, 1024));
   sub.add_option("--seed", a.seed, "Random seed (view order, split sampling)")->capture_default_str();
   sub.add_option("--sh-degree", a.sh_degree, "Maximum SH degree")->check(CLI::Range(0, 3))->capture_default_str();
-  sub.add_option("--batch-lr", a.batch_lr,
-                 "Learning-rate rule for several views per step (--batch x ranks = G): none (rates and Adam betas "
-                 "as at one view), sqrt (rates x sqrt(G), betas^G, as Grendel), sqrt-rates (rates x sqrt(G) only) or "
-                 "adaptive (sqrt with a measured gain per parameter group, rates between x sqrt(G) and x G); see "
-                 "train/config.h")
-      ->check(CLI::IsMember({"none", "sqrt", "sqrt-rates", "adaptive"}))
+  sub.add_option(
+         "--batch-lr", a.batch_lr,
+         "Learning-rate rule for several views per step (--batch x ranks = G): none (rates and Adam betas "
+         "as at one view), sqrt (rates x sqrt(G), betas^G, as Grendel) or sqrt-rates (rates x sqrt(G) only); see "
+         "train/config.h")
+      ->check(CLI::IsMember({"none", "sqrt", "sqrt-rates"}))
       ->capture_default_str();
   sub.add_option("--test-every", a.test_every,
                  "Score the held-out views (PSNR, SSIM) every N images seen and at the end; the curve, with the "

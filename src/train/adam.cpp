@@ -69,7 +69,7 @@ void Adam::update(AdamParam& p, float* value, const float* grad, int n) const {
   bool uniform = std::all_of(p.lr.begin(), p.lr.end(), [&](float l) { return l == p.lr[0]; });
   long bad = 0;
   if (uniform) {
-    const float step = p.lr[0] * (lr_scale * p.lr_mult) / bc1;
+    const float step = p.lr[0] * lr_scale / bc1;
 #pragma omp parallel for simd schedule(static) reduction(+ : bad)
     for (size_t i = 0; i < total; ++i) {
       float g = grad[i];
@@ -84,7 +84,7 @@ void Adam::update(AdamParam& p, float* value, const float* grad, int n) const {
     const int d = p.dim;
     float steps[256];
     if (d > 256) fail("adam: parameter '{}' has {} columns with different rates (max 256)", p.name, d);
-    for (int c = 0; c < d; ++c) steps[c] = p.lr[c] * (lr_scale * p.lr_mult) / bc1;
+    for (int c = 0; c < d; ++c) steps[c] = p.lr[c] * lr_scale / bc1;
 #pragma omp parallel for schedule(static) reduction(+ : bad)
     for (long r = 0; r < n; ++r) {
       const size_t o = size_t(r) * d;
@@ -219,7 +219,7 @@ int Adam::row_kernel(AdamParam& p, X* value, long row, const float* g, long ts) 
 #pragma omp simd reduction(+ : bad)
   for (int c = 0; c < d; ++c) bad += nonfinite_bit(g[c]);
   const double t = double(std::max(1L, ts));
-  const float step = p.lr[0] * (lr_scale * p.lr_mult) / float(1.0 - std::pow(double(beta1), t));
+  const float step = p.lr[0] * lr_scale / float(1.0 - std::pow(double(beta1), t));
   const float inv_sqrt_bc2 = float(1.0 / std::sqrt(1.0 - std::pow(double(beta2), t)));
   const size_t o = size_t(row) * d;
   const uint32_t base = uint32_t(o) * 0x9E3779B9u ^ uint32_t(ts) * 0x7FEB352Du;

@@ -40,9 +40,7 @@ struct AdamParam {
   std::vector<float> m, v;              // [N, dim] (float32 moments)
   bool bf16 = false;                    // moments stored in m16 / v16 instead of m / v
   std::vector<uint16_t> m16, v16;       // [N, dim] (bfloat16 moments)
-  long nonfinite = 0;   // NaN / Inf gradient values seen by the updates since the last clear_nonfinite()
-  float lr_mult = 1.f;  // this parameter's factor on Adam::lr_scale (the adaptive batch rule, batch_gain.h)
-  double gain_batch = 0, gain_view = 0;  // that rule's moving averages (batch_gain.h; saved by checkpoints)
+  long nonfinite = 0;  // NaN / Inf gradient values seen by the updates since the last clear_nonfinite()
   void set_lr(float value) { lr.assign(dim, value); }
   size_t rows() const { return (bf16 ? m16.size() : m.size()) / size_t(dim); }
 };

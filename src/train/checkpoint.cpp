@@ -86,9 +86,6 @@ void Trainer::save_checkpoint(const std::filesystem::path& path) const {
                                    {"step", p.step},
                                    {"eps", p.eps},
                                    {"scope", p.scope == ParamScope::Array ? "array" : "gaussian"}});
-  for (size_t i = 0; i < adam_.params.size(); ++i)  // the adaptive batch rule's averages (batch_gain.h), if any
-    if (adam_.params[i].gain_view > 0)
-      h["adam"]["params"][i]["gain"] = {adam_.params[i].gain_batch, adam_.params[i].gain_view};
   std::ostringstream rs;
   rs << rng_;
   h["rng"] = rs.str();
@@ -179,13 +176,6 @@ std::deque<AdamParam> header_params(const json& h, const std::string& where, con
     ap.values = cur.values;
     ap.step = p.contains("step") ? p.at("step").get<long>() : h.at("adam").at("step").get<long>();
     ap.eps = p.value("eps", cur.eps);
-    if (p.contains("gain")) {
-      const std::vector<double> gain = p.at("gain").get<std::vector<double>>();
-      if (gain.size() != 2 || !(gain[0] >= 0) || !(gain[1] >= 0))
-        fail("{}: parameter '{}' has a corrupt batch gain", where, ap.name);
-      ap.gain_batch = gain[0];
-      ap.gain_view = gain[1];
-    }
     ap.lr = p.at("lr").get<std::vector<float>>();
     if (int(ap.lr.size()) != ap.dim)
       fail("{}: parameter '{}' has {} learning rates for {} columns", where, ap.name, ap.lr.size(), ap.dim);

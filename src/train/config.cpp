@@ -59,9 +59,7 @@ nlohmann::json TrainConfig::to_json() const {
           {"batch_lr", batch_lr}};
 }
 
-bool is_batch_lr_rule(const std::string& r) {
-  return r == "none" || r == "sqrt" || r == "sqrt-rates" || r == "adaptive";
-}
+bool is_batch_lr_rule(const std::string& r) { return r == "none" || r == "sqrt" || r == "sqrt-rates"; }
 
 TrainConfig TrainConfig::from_json(const nlohmann::json& j, const std::string& where) {
   TrainConfig c;
@@ -115,7 +113,7 @@ TrainConfig TrainConfig::from_json(const nlohmann::json& j, const std::string& w
   if (c.batch < 1 || c.batch > 4096) fail("{}: 'batch' must be 1..4096, got {}", where, c.batch);
   get("batch_lr", c.batch_lr);
   if (!is_batch_lr_rule(c.batch_lr))
-    fail("{}: 'batch_lr' must be none, sqrt, sqrt-rates or adaptive, got '{}'", where, c.batch_lr);
+    fail("{}: 'batch_lr' must be none, sqrt or sqrt-rates, got '{}'", where, c.batch_lr);
   return c;
 }
 

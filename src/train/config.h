@@ -11,7 +11,7 @@
 
 namespace hgs::train {
 
-// Whether r names a rule of TrainConfig::batch_lr (none, sqrt, sqrt-rates, adaptive).
+// Whether r names a rule of TrainConfig::batch_lr (none, sqrt, sqrt-rates).
 bool is_batch_lr_rule(const std::string& r);
 
 struct TrainConfig {
@@ -50,9 +50,7 @@ struct TrainConfig {
   // (the gradient is the mean over the G views). "sqrt": Grendel's rule (Zhao et al. 2024, "On Scaling Up 3D
   // Gaussian Splatting Training"): every rate times sqrt(G) and betas beta^G, so that after the same number
   // of images the moments have decayed as much as with one view per step. "sqrt-rates": the rates times sqrt(G),
-  // the betas unchanged. "adaptive": Grendel's rule with each 3DGS parameter group's rate multiplied by a gain in
-  // [1, sqrt(G)] measured from the batch's gradients each step (batch_gain.h: between sqrt(G) where the views'
-  // gradients are independent noise and G where they agree). G = 1 is the same step under every rule.
+  // the betas unchanged. G = 1 is the same step under every rule.
   std::string batch_lr = "none";
 
   // Copy for a run of `iterations` with the 30k densification schedule scaled by f = iterations / 30000:

@@ -10,7 +10,6 @@
 
 #include "core/error.h"
 #include "model/render_inputs.h"
-#include "train/batch_gain.h"
 #include "train/gaussian_params.h"
 
 namespace hgs::train {
@@ -30,11 +29,11 @@ Trainer::Trainer(const TrainConfig& cfg, GaussianModel model, std::vector<TrainV
   if (views_.empty()) fail("train: no training views");
   if (cfg_.batch < 1) fail("train: the batch must be at least 1 view, got {}", cfg_.batch);
   if (!is_batch_lr_rule(cfg_.batch_lr))
-    fail("train: unknown batch learning-rate rule '{}' (none, sqrt, sqrt-rates or adaptive)", cfg_.batch_lr);
+    fail("train: unknown batch learning-rate rule '{}' (none, sqrt or sqrt-rates)", cfg_.batch_lr);
   if (cfg_.batch_lr != "none" && step_views() > 1) {  // config.h: the batch rules
     const int G = step_views();
     adam_.lr_scale = float(std::sqrt(double(G)));
-    if (cfg_.batch_lr == "sqrt" || cfg_.batch_lr == "adaptive") {
+    if (cfg_.batch_lr == "sqrt") {
       adam_.beta1 = float(std::pow(double(adam_.beta1), G));
       adam_.beta2 = float(std::pow(double(adam_.beta2), G));
     }
@@ -147,7 +146,7 @@ void Trainer::reduce_and_scale(float grad_scale) {
   Reducer& r = *reducer_;
   if (r.size() > 1) {
     // One buffer: every 3DGS gradient and the statistics' sums (norms, counts); the radii go by maximum.
-    size_t total = 2 * size_t(step_stats_.n) + view_sq_.size();  // view_sq_: the adaptive rule only
+    size_t total = 2 * size_t(step_stats_.n);
     each_grad(grads_, [&](std::vector<float>& v) { total += v.size(); });
     pack_.resize(total);
     size_t o = 0;
@@ -156,15 +155,13 @@ void Trainer::reduce_and_scale(float grad_scale) {
       o += v.size();
     });
     std::copy(step_stats_.v.begin(), step_stats_.v.begin() + 2 * size_t(step_stats_.n), pack_.begin() + o);
-    std::copy(view_sq_.begin(), view_sq_.end(), pack_.end() - ptrdiff_t(view_sq_.size()));
     r.sum(pack_.data(), pack_.size());
     o = 0;
     each_grad(grads_, [&](std::vector<float>& v) {
       std::copy(pack_.begin() + o, pack_.begin() + o + v.size(), v.begin());
       o += v.size();
     });
-    std::copy(pack_.begin() + o, pack_.end() - ptrdiff_t(view_sq_.size()), step_stats_.v.begin());
-    std::copy(pack_.end() - ptrdiff_t(view_sq_.size()), pack_.end(), view_sq_.begin());
+    std::copy(pack_.begin() + o, pack_.end(), step_stats_.v.begin());
     r.max(step_stats_.max_radius(), size_t(step_stats_.n));
   }
   if (grad_scale != 1.f)
@@ -277,7 +274,6 @@ void Trainer::train_view(const StepPlan& plan, int slot, const render::GaussianI
   method_->backward(vs, {renderer_.projected(), pgrads_});  // may add to pgrads_.colors (its channels' colour)
   clock.tick(times.param_grads);
   renderer_.preprocess_backward(pgrads_, slot == 0 ? grads_ : view_grads_);
-  add_view_norms(slot);
   add_view_gradients(slot);
   if (plan.gather_stats)
     step_stats_.add_view(pgrads_.mean2d.data(), renderer_.radii().data(), model_.n, W, H, slot == 0);
@@ -324,31 +320,6 @@ void Trainer::add_view_gradients(int slot) {
   }
 }
 
-// The adaptive batch rule: each view's squared gradient norm per 3DGS parameter group, summed over the step's views
-// in view order (in float, as the ranks' sum adds them, so that R ranks of one view give what --batch R gives).
-void Trainer::add_view_norms(int slot) {
-  if (cfg_.batch_lr != "adaptive" || step_views() <= 1) return;
-  const render::GaussianGrads& g = slot == 0 ? grads_ : view_grads_;
-  if (slot == 0) view_sq_.assign(std::size(kGaussianParams), 0.f);
-  size_t i = 0;
-  for (const GaussianParam& p : kGaussianParams) {
-    const std::vector<float>& v = g.*p.grad;
-    view_sq_[i++] += float(squared_norm(v.data(), v.size()));
-  }
-}
-
-// The adaptive batch rule's gains from the step's mean gradient (after the reduction and the 1 / G) and the views'
-// squared norms: each 3DGS group's lr_mult for this step's update.
-void Trainer::set_adaptive_gains(const StepPlan& plan) {
-  if (cfg_.batch_lr != "adaptive" || plan.step_views <= 1) return;
-  const int G = plan.step_views;
-  size_t i = 0;
-  for (const GaussianParam& p : kGaussianParams) {
-    const std::vector<float>& v = grads_.*p.grad;
-    adaptive_gain(adam_.get(p.name), squared_norm(v.data(), v.size()), double(view_sq_[i++]) / G, G, adam_.beta2);
-  }
-}
-
 // The step's loss values and terms: the mean over this process's views.
 void Trainer::average_views(const ViewSums& sums, StepInfo& info) {
   const int B = cfg_.batch;
@@ -378,7 +349,6 @@ void Trainer::reduce_step(const StepPlan& plan, PartClock& clock, StepTimes& tim
 
 // Adam on the 3DGS parameters, then the method's updates; stops on a non-finite loss or gradient.
 void Trainer::update_parameters(const StepPlan& plan, PartClock& clock, StepTimes& times, StepInfo& info) {
-  set_adaptive_gains(plan);
   for (const GaussianParam& p : kGaussianParams)
     adam_.update(adam_.get(p.name), (model_.*p.value).data(), (grads_.*p.grad).data(), model_.n);
   method_->update({plan.iteration, plan.step_views, plan.grad_scale, model_, adam_, grads_});

@@ -122,9 +122,6 @@ class Trainer {
   render::GaussianGrads view_grads_;  // of the second and later views of a step
   StepStats step_stats_;
   std::vector<float> pack_;  // the gradients and statistic sums sent to the other ranks
-  // The adaptive batch rule (batch_gain.h): per 3DGS parameter group (kGaussianParams order), the sum over the
-  // step's views of each view's squared gradient norm (this process's views, then every rank's).
-  std::vector<float> view_sq_;
   Reducer local_reducer_;
   Reducer* reducer_ = nullptr;
   render::ProjectedGrads pgrads_;
@@ -146,8 +143,6 @@ class Trainer {
   void render_view(const ViewStep& vs, const render::GaussianInputs& in, float background, PartClock& clock,
                    StepTimes& times);
   void add_view_gradients(int slot);
-  void add_view_norms(int slot);
-  void set_adaptive_gains(const StepPlan& plan);
   void average_views(const ViewSums& sums, StepInfo& info);
   void reduce_step(const StepPlan& plan, PartClock& clock, StepTimes& times);
   void update_parameters(const StepPlan& plan, PartClock& clock, StepTimes& times, StepInfo& info);

@@ -98,30 +98,6 @@ TEST_F(MpiTrain, ResumesWithAnotherNumberOfRanks) {
   EXPECT_TRUE(fs::exists(out / "one" / "point_cloud.ply"));
 }
 
-TEST_F(MpiTrain, AdaptiveRuleTwoRanksEqualOneProcessAndResumes) {
-  // The adaptive rule's per-group view norms cross the ranks with the gradients, and its averages travel in the
-  // checkpoint: two ranks, one process with --batch 2, and that process resumed at 100 all write the same model.
-  test::TempDir out;
-  const std::string common =
-      "train " + scene() + " --method rgb --iters 200 --threads 1 --seed 4 --quiet --batch-lr adaptive";
-  auto two = run(mpirun(2, common + " --save-every 100 --out " + (out / "two").string()));
-  ASSERT_EQ(two.exit_code, 0) << two.out << two.err;
-  auto one = test::run_hgs(common + " --batch 2 --out " + (out / "one").string());
-  ASSERT_EQ(one.exit_code, 0) << one.err;
-  EXPECT_TRUE(same_bytes(out / "one" / "point_cloud.ply", out / "two" / "point_cloud.ply"));
-  fs::create_directories(out / "resumed");
-  auto res = test::run_hgs(common + " --batch 2 --out " + (out / "resumed").string() + " --resume " +
-                           (out / "two" / "checkpoints" / "iter_100.ckpt").string());
-  ASSERT_EQ(res.exit_code, 0) << res.err;
-  EXPECT_TRUE(same_bytes(out / "one" / "point_cloud.ply", out / "resumed" / "point_cloud.ply"));
-  // Not Grendel's rule (the test would pass vacuously if the gain were 1).
-  auto sq =
-      test::run_hgs("train " + scene() + " --method rgb --iters 200 --threads 1 --seed 4 --quiet --batch-lr sqrt" +
-                    " --batch 2 --out " + (out / "sqrt").string());
-  ASSERT_EQ(sq.exit_code, 0) << sq.err;
-  EXPECT_FALSE(same_bytes(out / "one" / "point_cloud.ply", out / "sqrt" / "point_cloud.ply"));
-}
-
 TEST_F(MpiTrain, DeadRankEndsTheJobAndTheLastCheckpointResumes) {
   test::TempDir out;
   const std::string common = "train " + scene() + " --method rgb --iters 200 --threads 1 --seed 6 --quiet";
