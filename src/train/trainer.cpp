@@ -125,6 +125,9 @@ namespace {
 // Whether a multiple of `every` lies in (prev, cur]: an event of a schedule counted in images seen happens in the
 // step that covers it (for one view per step: cur % every == 0).
 bool crosses(int prev, int cur, int every) { return every > 0 && cur / every > prev / every; }
+// The last image in (prev, cur] that is a multiple of `every` (0 = none, or every <= 0): the image a schedule's
+// event of this step belongs to.
+int event_image(int prev, int cur, int every) { return crosses(prev, cur, every) ? cur / every * every : 0; }
 
 // The seed of one view's random numbers (method sampling): from the run's seed, the step's first image and the
 // view's place in the global batch, so the split of a batch over ranks does not change them.
@@ -367,11 +370,16 @@ void Trainer::update_parameters(const StepPlan& plan, PartClock& clock, StepTime
 void Trainer::densify_step(const StepPlan& plan, StepInfo& info) {
   if (!plan.gather_stats) return;
   stats_.add(step_stats_);
-  const bool growing = plan.iteration < cfg_.densify_until;
-  if (it_ > cfg_.densify_from && crosses(plan.prev, it_, cfg_.densify_every)) {
+  // Each event at the image that names it, as 3DGS decides at its iteration k: densify when k % every == 0 and
+  // densify_from < k < densify_until, reset opacities when k % reset_every == 0 and k < densify_until. A step of
+  // several views that starts before densify_until may cover an image at or after it; that image is past the
+  // schedule, as it is with one view per step.
+  const int kd = event_image(plan.prev, it_, cfg_.densify_every);
+  const bool grow = kd < cfg_.densify_until;
+  if (kd > cfg_.densify_from && (grow || cfg_.late_prune > 0)) {
     release_step_buffers();
-    if (growing) {
-      const float screen = it_ > cfg_.opacity_reset_every ? cfg_.screen_limit : 0.f;
+    if (grow) {
+      const float screen = kd > cfg_.opacity_reset_every ? cfg_.screen_limit : 0.f;
       info.densify = densify_and_prune(model_, adam_, stats_, cfg_.densify_cfg, extent_, screen, rng_);
     } else {  // late_prune: footprints against the views' size, no world-size rule
       int side = 0;
@@ -382,9 +390,10 @@ void Trainer::densify_step(const StepPlan& plan, StepInfo& info) {
     }
     info.densified = true;
   }
-  if (growing && (crosses(plan.prev, it_, cfg_.opacity_reset_every) ||
-                  (cfg_.white_bg && plan.prev < cfg_.densify_from && it_ >= cfg_.densify_from)))
-    reset_opacity(model_, adam_, 0.01f);
+  const int kr = event_image(plan.prev, it_, cfg_.opacity_reset_every);
+  const bool white_reset = cfg_.white_bg && plan.prev < cfg_.densify_from && it_ >= cfg_.densify_from &&
+                           cfg_.densify_from < cfg_.densify_until;
+  if ((kr > 0 && kr < cfg_.densify_until) || white_reset) reset_opacity(model_, adam_, 0.01f);
 }
 
 }  // namespace hgs::train

@@ -473,5 +473,41 @@ TEST(TrainerBatch, SchedulesCountImagesSeenAndEveryViewIsUsedOncePerEpoch) {
   EXPECT_EQ(g.step_views, std::vector<int>(30, 2));
 }
 
+TEST(TrainerBatch, ScheduleEndsAtTheSameImageForEveryBatch) {
+  // 3DGS densifies at image k when k % every == 0 and from < k < until, and resets opacities when k % reset == 0 and
+  // k < until. With until a multiple of both, the step of four views that covers images 97-100 starts before until
+  // but covers it: it must neither densify nor reset there (it did both before), as one view per step does not.
+  Tiny t(true);
+  TrainConfig cfg = TrainConfig().scaled_to(400);
+  cfg.densify_from = 10;
+  cfg.densify_every = 20;
+  cfg.densify_until = 100;
+  cfg.opacity_reset_every = 50;
+  cfg.densify_cfg.grad_threshold = 1e-5f;
+  std::vector<TrainView> views;
+  for (int k = 0; k < 4; ++k) views.push_back(t.views[k % t.views.size()]);
+  for (int batch : {1, 4}) {
+    cfg.batch = batch;
+    auto tap = std::make_unique<GradTap>();
+    GradTap& g = *tap;
+    Trainer tr(cfg, t.model, views, 1.f, std::move(tap));
+    auto max_opacity = [&] {
+      float m = -1e30f;
+      for (float o : tr.model().opacity_logit) m = std::max(m, o);
+      return 1.f / (1.f + std::exp(-m));
+    };
+    float after_reset = 1, after_until = 0;
+    while (tr.iteration() < 120) {
+      const int prev = tr.iteration();
+      tr.step();
+      if (prev < 50 && tr.iteration() >= 50) after_reset = max_opacity();  // the reset at image 50
+      if (prev < 100 && tr.iteration() >= 100) after_until = max_opacity();
+    }
+    EXPECT_EQ(g.densified_at, (std::vector<int>{20, 40, 60, 80})) << "batch " << batch;
+    EXPECT_LE(after_reset, 0.0101f) << "batch " << batch;  // the reset at 50 happened (the check can see one)
+    EXPECT_GT(after_until, 0.0101f) << "batch " << batch;  // none at 100 (a reset leaves every opacity <= 0.01)
+  }
+}
+
 }  // namespace
 }  // namespace hgs::train
