@@ -135,13 +135,6 @@ def _duration(s):
 
 # ---- training -----------------------------------------------------------------------------------------------
 
-def _atomic_write_text(path, text):
-    tmp = f"{path}.tmp{os.getpid()}"
-    with open(tmp, "w") as f:
-        f.write(text)
-    os.replace(tmp, path)
-
-
 def _as_scene(scene, downscale=1):
     if isinstance(scene, Scene):
         return scene
@@ -154,17 +147,8 @@ def _as_model(model):
     return Model.load(os.fspath(model))
 
 
-def _snapshot(trainer, out, with_ply):
-    # out/checkpoints/iter_<i>.ckpt and, during training, out/point_cloud_iter_<i>.ply (as `hgs train`).
-    it = trainer.iteration
-    os.makedirs(os.path.join(out, "checkpoints"), exist_ok=True)
-    trainer.save_checkpoint(os.path.join(out, "checkpoints", f"iter_{it}.ckpt"))
-    if with_ply:
-        trainer.model.save(os.path.join(out, f"point_cloud_iter_{it}.ply"))
-
-
 def train(scene, out=None, method="hybrid", iters=30000, callback=None, callback_every=100, progress=True,
-          threads=None, resume=None, **options):
+          threads=None, resume=None, test_every=0, **options):
     """Trains Hybrid Gaussians (method="hybrid", the default) or plain 3DGS (method="rgb") on a scene and returns
     the trained hgs.Model.
 
@@ -179,7 +163,10 @@ def train(scene, out=None, method="hybrid", iters=30000, callback=None, callback
     its options (use_of, use_scl, use_bro, lambda_app, lambda_sem, lambda_bro, objects_per_step, ...); see
     docs/python.md. An unknown name raises hgs.Error. With save_every=N (a multiple of the views per step) and
     `out`, a checkpoint out/checkpoints/iter_<i>.ckpt and a PLY are written every N images (and a checkpoint at
-    the end), as `hgs train --save-every` does; resume=CHECKPOINT continues such a run bit for bit.
+    the end), as `hgs train --save-every` does; resume=CHECKPOINT continues such a run bit for bit. test_every=N
+    scores the held-out views every N images (train_stats["test_curve"], as `hgs train --test-every`). The loop,
+    checkpoints, statistics and the output folder are the library's training run, the one `hgs train` uses
+    (train/run.h); model.train_stats is its train_stats.json.
     """
     if "downscale" in options:
         if isinstance(scene, Scene):
@@ -195,71 +182,46 @@ def train(scene, out=None, method="hybrid", iters=30000, callback=None, callback
     save_every = int(options.get("save_every", 0))
     if save_every and out is None:
         raise ValueError("save_every: checkpoints need an output folder (out=...)")
-    if out is not None:  # before training: a folder that cannot be made fails now, not after the run
+    if out is not None:
         out = os.fspath(out)
-        os.makedirs(out, exist_ok=True)
     trainer = Trainer(scene, method, int(iters), dict(options), False)
     G = trainer.step_views
     if save_every % G:
         raise ValueError(f"save_every {save_every} is not a multiple of the {G} views of a step")
+    resumed_from = ""
     if resume is not None:
-        trainer.load_checkpoint(os.fspath(resume))
-        if trainer.iteration >= iters:
-            raise Error(f"{os.fspath(resume)}: checkpoint is at iteration {trainer.iteration}, nothing to do for "
-                        f"iters {iters}")
+        resumed_from = os.fspath(resume)
+        trainer.load_checkpoint(resumed_from)
     start = trainer.iteration
     bar = _Progress("train", iters - start) if progress else None
-    ms, ema, stopped = [], None, None
-    window_ms, window_steps = 0.0, 0
+    window = {"ms": 0.0, "steps": 0}
     t0 = time.perf_counter()
-    try:
-        while trainer.iteration < iters:
-            s = trainer.step()
-            it = trainer.iteration
-            ms.append(s.ms)
-            window_ms += s.ms
-            window_steps += 1
-            ema = s.loss if ema is None else 0.4 * s.loss + 0.6 * ema
-            if save_every and it % save_every == 0 and it < iters:
-                _snapshot(trainer, out, with_ply=True)
-            if bar is not None:
-                bar.update(it - start, f"loss {ema:.4f} psnr {s.psnr:.2f} N {s.num_gaussians} {s.ms:.1f} ms/it")
-            if callback is not None and (it // callback_every > (it - G) // callback_every or it >= iters):
-                info = {"iteration": it, "loss": s.loss, "terms": s.terms, "psnr": s.psnr,
-                        "num_gaussians": s.num_gaussians, "ms_per_iter": window_ms / window_steps / G,
-                        "elapsed_s": time.perf_counter() - t0}
-                window_ms, window_steps = 0.0, 0
-                if callback(info) is False:
-                    stopped = "callback"
-                    break
-    except KeyboardInterrupt:
-        stopped = "interrupted"
-    wall = time.perf_counter() - t0
-    it = trainer.iteration
-    config = json.loads(trainer.config_json)
-    if resume is not None:
-        config["resumed_from"] = os.fspath(resume)
-    if save_every:
-        _snapshot(trainer, out, with_ply=False)
+
+    def on_step(s, it, loss_average):
+        # After every step of the library's run (train/run.h): the progress bar and the user's callback.
+        window["ms"] += s.ms
+        window["steps"] += 1
+        if bar is not None:
+            bar.update(it - start, f"loss {loss_average:.4f} psnr {s.psnr:.2f} N {s.num_gaussians} {s.ms:.1f} ms/it")
+        if callback is not None and (it // callback_every > (it - G) // callback_every or it >= iters):
+            info = {"iteration": it, "loss": s.loss, "terms": s.terms, "psnr": s.psnr,
+                    "num_gaussians": s.num_gaussians, "ms_per_iter": window["ms"] / window["steps"] / G,
+                    "elapsed_s": time.perf_counter() - t0}
+            window["ms"], window["steps"] = 0.0, 0
+            if callback(info) is False:
+                return False
+        return True
+
+    stats = json.loads(trainer.run(int(iters), out or "", save_every, int(test_every),
+                                   resumed_from, on_step))
     model = trainer.finish()  # with the run's near_plane: hgs.render and QuerySession cull as training did
+    stopped = stats["stopped"]
     if bar is not None:
         note = {"callback": " (stopped by the callback)", "interrupted": " (interrupted)"}.get(stopped, "")
-        bar.finish(it - start, f"N {model.n}{note}")
-    srt = sorted(ms)
-    model.train_stats = {
-        "iterations": it, "iterations_this_run": it - start,
-        "median_ms_per_iter": srt[len(srt) // 2] if srt else 0.0,
-        "mean_ms_per_iter": wall * 1000.0 / len(ms) if ms else 0.0,  # the loop's wall time per step
-        "mean_step_ms": sum(ms) / len(ms) if ms else 0.0,  # the library's own time per step (StepInfo.ms)
-        "num_gaussians": model.n, "wall_time_s": wall, "final_train_loss_ema": ema, "stopped": stopped,
-        "threads": None if threads is None else int(threads),
-    }
-    if out is not None:
-        model.save(out)
-        _atomic_write_text(os.path.join(out, "config.json"), json.dumps(config, indent=2) + "\n")
-        _atomic_write_text(os.path.join(out, "train_stats.json"), json.dumps(model.train_stats, indent=2) + "\n")
+        bar.finish(stats["iterations"] - start, f"N {model.n}{note}")
+    model.train_stats = stats
     if stopped == "interrupted":
-        print(f"hgs.train: interrupted at iteration {it}; returning the model so far", file=sys.stderr)
+        print(f"hgs.train: interrupted at iteration {stats['iterations']}; returning the model so far", file=sys.stderr)
     return model
 
 

@@ -1,8 +1,10 @@
 // hgs.Trainer: the library's train::Trainer (make_trainer: training views, SfM initialisation, the method by name)
-// for Python. step() runs one training step with the GIL released and returns a StepInfo; the loop, the callback,
-// the progress bar and Ctrl-C are in hgs.train (python/hgs/__init__.py), one step at a time, so a KeyboardInterrupt
-// lands between two steps. Options: the keys of TrainConfig::to_json and, for method "hybrid", of
-// HybridConfig::to_json (docs/python.md); unknown keys and wrong types are hgs.Error.
+// for Python. run() is the library's training run (train/run.h), the same loop, checkpoints, statistics and model
+// folder as `hgs train`, calling back into Python after every step (hgs.train's callback, progress bar and Ctrl-C,
+// python/hgs/__init__.py), so a KeyboardInterrupt lands between two steps; step() runs one step alone. Options: the
+// keys of TrainConfig::to_json and, for method "hybrid", of HybridConfig::to_json (docs/python.md); unknown keys and
+// wrong types are hgs.Error.
+#include <optional>
 #include <set>
 
 #include <nlohmann/json.hpp>
@@ -14,6 +16,7 @@
 #include "hybrid/config.h"
 #include "hybrid/register.h"
 #include "train/registry.h"
+#include "train/run.h"
 #include "train/trainer.h"
 
 namespace hgs::py {
@@ -78,15 +81,7 @@ class PyTrainer {
       pb::gil_scoped_release nogil;
       trainer_ = train::make_trainer(*scene_, idx, cfg, method, method_options, progress);
     }
-    config_ = trainer_->config().to_json();
-    config_["scene"] = std::filesystem::absolute(scene_->root).lexically_normal().string();
-    config_["downscale"] = scene_->downscale;
-    config_["extent"] = trainer_->extent();
-    config_["train_views"] = idx.size();
-    config_["init_points"] = trainer_->model().n;
-    config_["split"] = scene_->split_source;
-    if (!method_options.is_null()) config_["hybrid"] = method_options;
-    config_["ranks"] = 1;
+    config_ = train::run_config(*trainer_, *scene_, method_options, trainer_->model().n);
   }
 
   train::StepInfo step() {
@@ -114,6 +109,45 @@ class PyTrainer {
     return model_with_near_plane(std::move(m), near_plane);
   }
   std::string config_text() const { return config_.dump(); }
+
+  // The library's training run (train/run.h) to `iters` images: `on_step(step, iteration, loss_average)` is
+  // called with the GIL after every step and ends the run when it returns False; a KeyboardInterrupt (Ctrl-C,
+  // raised while on_step runs or pending when it is due) ends it as "interrupted". With `out` the run writes the
+  // model folder (config.json first; checkpoints every save_every images; point_cloud.ply and train_stats.json
+  // at the end, also after a stop). Another exception from on_step ends the run, writes nothing more and is
+  // raised again. Returns train_stats.json's text.
+  std::string run(int iters, const std::string& out, int save_every, int test_every, const std::string& resumed_from,
+                  pb::object on_step) {
+    live();
+    train::RunOptions ro;
+    ro.out = out;
+    ro.iters = iters;
+    ro.save_every = save_every;
+    ro.test_every = test_every;
+    ro.resumed_from = resumed_from;
+    std::optional<train::TrainingRun> run;
+    std::optional<pb::error_already_set> raised;
+    {
+      pb::gil_scoped_release nogil;
+      run.emplace(*trainer_, *scene_, ro, config_);
+      run->train([&](const train::RunStep& s) {
+        pb::gil_scoped_acquire gil;
+        try {
+          if (PyErr_CheckSignals() != 0) throw pb::error_already_set();
+          if (!on_step.is_none() && !pb::cast<bool>(on_step(s.step, s.iteration, s.average.loss))) return false;
+          if (PyErr_CheckSignals() != 0) throw pb::error_already_set();
+          return true;
+        } catch (pb::error_already_set& e) {
+          if (e.matches(PyExc_KeyboardInterrupt)) run->stop_reason("interrupted");
+          else raised.emplace(std::move(e));
+          return false;
+        }
+      });
+      if (!raised) run->save();
+    }
+    if (raised) throw std::move(*raised);
+    return run->stats().dump();
+  }
   void save_checkpoint(const std::filesystem::path& p) const {
     live();
     pb::gil_scoped_release nogil;
@@ -183,6 +217,11 @@ void bind_train(pb::module_& m) {
       .def_property_readonly("model", &PyTrainer::model_copy, "A copy of the model as it is now")
       .def("finish", &PyTrainer::finish, "Ends training and returns the model (moved out, not copied)")
       .def_property_readonly("config_json", &PyTrainer::config_text, "The run's configuration as JSON text")
+      .def("run", &PyTrainer::run, pb::arg("iters"), pb::arg("out") = "", pb::arg("save_every") = 0,
+           pb::arg("test_every") = 0, pb::arg("resumed_from") = "", pb::arg("on_step") = pb::none(),
+           "The training run to `iters` images (train/run.h; hgs.train drives it): on_step(step, iteration, "
+           "loss_average) after every step, False ends it; writes the model folder `out`; returns "
+           "train_stats.json's text")
       .def("save_checkpoint", &PyTrainer::save_checkpoint, pb::arg("path"))
       .def("load_checkpoint", &PyTrainer::load_checkpoint, pb::arg("path"));
 }

@@ -84,7 +84,12 @@ def test_same_model_as_the_command_line(scene, scene_dir, hgs_binary, tmp_path):
         cfg_cli = json.load(f)
     assert cfg_py == cfg_cli
     with open(py / "train_stats.json") as f:
-        assert json.load(f)["iterations"] == iters
+        stats_py = json.load(f)
+    with open(cli / "train_stats.json") as f:
+        stats_cli = json.load(f)
+    assert stats_py["iterations"] == iters and stats_py["stopped"] is None
+    assert set(stats_py) == set(stats_cli)  # one schema (docs/formats.md), whoever trains
+    assert set(m.train_stats) == set(stats_py) and m.train_stats["wall_time_s"] == stats_py["wall_time_s"]
 
 
 def test_progress_bar_in_a_log(scene, capfd):

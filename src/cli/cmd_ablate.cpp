@@ -4,7 +4,8 @@
 // and modes (query/evaluate.h), and writes mean and standard deviation per row over the (scene, seed) runs, and the
 // paired differences of mIoU (each row minus all-off, each component added to the other two) with 95 % intervals.
 //
-// Layout: DIR/<scene folder name>/seed<S>/<row>/{point_cloud.ply, report.json, report.md, run.json}, then
+// Layout: DIR/<scene folder name>/seed<S>/<row>/ is a model folder (train/run.h: point_cloud.ply, config.json,
+// train_stats.json) with report.json, report.md and run.json, then
 // DIR/ablation.json (every run and the per-row summaries) and DIR/ablation.md (one table per protocol and mode),
 // both rewritten after every run so a long ablation shows its progress. A run whose run.json exists (same
 // iterations, protocols and modes) is reused, so an interrupted ablation continues where it stopped;
@@ -15,19 +16,19 @@
 #include <cmath>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <set>
 
 #include "cli/command.h"
 #include "core/error.h"
 #include "core/fs.h"
-#include "core/progress.h"
 #include "eval/report.h"
 #include "hybrid/config.h"
 #include "hybrid/register.h"
-#include "model/ply.h"
 #include "query/evaluate.h"
 #include "query/session.h"
 #include "train/registry.h"
+#include "train/run.h"
 
 namespace hgs::cli {
 namespace {
@@ -177,14 +178,15 @@ json train_and_evaluate(const AblateArgs& a, const Scene& scene, const std::stri
   const auto t0 = std::chrono::steady_clock::now();
   hybrid::register_method();
   auto trainer = train::make_trainer(scene, scene.train_indices(), cfg, "hybrid", hc.to_json(), false);
-  Progress bar(label, a.iters, !a.quiet);
-  while (trainer->iteration() < a.iters) {
-    auto s = trainer->step();
-    bar.update(trainer->iteration(), fmt::format("loss {:.4f} N {}", s.total, s.num_gaussians));
-  }
-  bar.finish();
+  train::RunOptions ro;
+  ro.out = dir;
+  ro.progress = !a.quiet;
+  ro.label = label;
+  train::TrainingRun training(*trainer, scene, ro,
+                              train::run_config(*trainer, scene, hc.to_json(), trainer->model().n));
+  training.train();
+  training.save();
   const double train_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  write_model_ply(dir / "point_cloud.ply", trainer->model());
   trainer.reset();
   json run = {{"train_seconds", train_s},
               {"iters", a.iters},
@@ -195,9 +197,8 @@ json train_and_evaluate(const AblateArgs& a, const Scene& scene, const std::stri
   return run;
 }
 
-void run_ablate(const AblateArgs& a) {
-  set_threads(a.threads);
-  if (a.seeds < 1) fail("--seeds: at least 1");
+// The scenes of the command line; two with the same folder name would share DIR/<name>/.
+std::vector<Scene> load_scenes(const AblateArgs& a) {
   std::vector<Scene> scenes;
   std::set<std::string> names;
   for (const auto& p : a.scenes) {
@@ -206,114 +207,186 @@ void run_ablate(const AblateArgs& a) {
       fail("{}: two scenes share the folder name '{}' (their runs would share DIR/<name>/)", p,
            fs::absolute(p).lexically_normal().filename().string());
   }
+  return scenes;
+}
+
+// The results gathered so far, over the (scene, seed) runs in run order.
+struct Tally {
+  std::vector<std::map<std::string, std::map<std::string, std::vector<double>>>> acc;  // [row] key -> metric -> v
+  std::vector<std::string> keys;  // "<protocol>/<mode>" in first-seen order
+  json runs = json::array();      // {"scene", "seed", "row", "dir", "run"}
+};
+
+// One table per protocol and mode: mean ± sample std of each row's mAcc, mIoU, mBIoU.
+std::string row_tables(const AblateArgs& a, const std::vector<Row>& rows, const Tally& t) {
+  std::string md;
+  for (const auto& key : t.keys) {
+    md += fmt::format(
+        "\n## {}{}\n\n| OF | SCL | BRO | λ_rgb | mAcc | mIoU | mBIoU | runs |\n|---|---|---|---|---|---|---|---|\n",
+        key, key.find("pixel") != std::string::npos ? fmt::format(" (relevancy {})", a.relevancy) : "");
+    for (size_t r = 0; r < rows.size(); ++r) {
+      auto it = t.acc[r].find(key);
+      if (it == t.acc[r].end()) continue;
+      const auto& v = it->second;
+      md += fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} |\n", rows[r].of ? "x" : "-", rows[r].scl ? "x" : "-",
+                        rows[r].bro ? "x" : "-", rows[r].lambda_rgb, pct_pm(mean_std(v.at("acc"))),
+                        pct_pm(mean_std(v.at("miou"))), pct_pm(mean_std(v.at("mbiou"))), v.at("miou").size());
+    }
+  }
+  return md;
+}
+
+// Paired differences of mIoU over the (scene, seed) runs both rows have: every row minus all-off, and each
+// component added to the other two (the full row minus the full row without it). Returns the JSON and Markdown.
+std::pair<json, std::string> paired_tables(const std::vector<Row>& rows, const Tally& t) {
+  std::map<std::string, std::map<std::string, const json*>> by_run;  // "<scene>/<seed>" -> row -> results
+  for (const auto& run : t.runs)
+    by_run[run["scene"].get<std::string>() + "/" + std::to_string(run["seed"].get<uint64_t>())]
+          [run["row"].get<std::string>()] = &run["run"]["results"];
+  auto diffs = [&](const std::string& key, const std::string& a_row, const std::string& b_row) {
+    std::vector<double> d;
+    for (const auto& [id, rs] : by_run) {
+      auto ia = rs.find(a_row), ib = rs.find(b_row);
+      if (ia == rs.end() || ib == rs.end() || !ia->second->contains(key) || !ib->second->contains(key)) continue;
+      const json &va = (*ia->second)[key]["miou"], &vb = (*ib->second)[key]["miou"];
+      if (va.is_number() && vb.is_number()) d.push_back(va.get<double>() - vb.get<double>());
+    }
+    return paired(d);
+  };
+  json paired_json = json::object();
+  std::string pmd;
+  for (const auto& key : t.keys) {
+    std::vector<std::pair<std::string, Paired>> lines;
+    for (const Row& row : rows)
+      if (row.name != "of0_scl0_bro0")
+        lines.push_back({row.name + " - all off", diffs(key, row.name, "of0_scl0_bro0")});
+    for (const char* c : {"of", "scl", "bro"}) {
+      std::string without = "of1_scl1_bro1";
+      without.replace(without.find(c) + std::string(c).size(), 1, "0");
+      lines.push_back({fmt::format("{} added to the other two", c), diffs(key, "of1_scl1_bro1", without)});
+    }
+    std::string body;
+    for (const auto& [what, p] : lines) {
+      if (p.n == 0) continue;
+      paired_json[key][what] = {{"mean", std::isfinite(p.mean) ? json(p.mean) : json(nullptr)},
+                                {"ci95_half", std::isfinite(p.half) ? json(p.half) : json(nullptr)},
+                                {"runs", p.n}};
+      body += fmt::format("| {} | {} | {} | {} |\n", what, pct(p.mean),
+                          std::isfinite(p.half) ? fmt::format("± {:.2f}", 100 * p.half) : "-", p.n);
+    }
+    if (!body.empty())
+      pmd += fmt::format(
+          "\n### {} (mIoU, paired by scene and seed)\n\n| difference | mean | 95 % interval | runs |\n"
+          "|---|---|---|---|\n{}",
+          key, body);
+  }
+  return {paired_json, pmd.empty() ? pmd : "\n## Paired differences\n" + pmd};
+}
+
+// Per row and key: the runs and the mean and std of each metric.
+json row_summaries(const std::vector<Row>& rows, const Tally& t) {
+  json summary = json::array();
+  for (size_t r = 0; r < rows.size(); ++r) {
+    json res = json::object();
+    for (const auto& [key, v] : t.acc[r]) {
+      json k = {{"runs", v.at("miou").size()}};
+      for (const char* m : {"acc", "miou", "mbiou"}) {
+        auto [mean, sd] = mean_std(v.at(m));
+        k[std::string(m) + "_mean"] = std::isfinite(mean) ? json(mean) : json(nullptr);
+        k[std::string(m) + "_std"] = std::isfinite(sd) ? json(sd) : json(nullptr);
+      }
+      res[key] = k;
+    }
+    summary.push_back({{"row", rows[r].name},
+                       {"of", rows[r].of},
+                       {"scl", rows[r].scl},
+                       {"bro", rows[r].bro},
+                       {"lambda_rgb", rows[r].lambda_rgb},
+                       {"results", res}});
+  }
+  return summary;
+}
+
+// DIR/ablation.json and DIR/ablation.md from the runs so far; returns the Markdown.
+std::string write_summary(const AblateArgs& a, size_t num_scenes, const std::vector<std::string>& protocols,
+                          const std::vector<Row>& rows, const Tally& t) {
+  std::string md = fmt::format(
+      "# Ablation ({} iterations; {} scene(s) x {} seed(s); mean ± sample std over the runs)\n\nScenes: {}\n", a.iters,
+      num_scenes, a.seeds, fmt::join(a.scenes, ", "));
+  md += row_tables(a, rows, t);
+  auto [paired_json, paired_md] = paired_tables(rows, t);
+  md += paired_md;
+  std::vector<std::string> abs_scenes;
+  for (const auto& p : a.scenes) abs_scenes.push_back(fs::absolute(p).lexically_normal().string());
+  const json j = {{"scenes", abs_scenes},
+                  {"seeds", a.seeds},
+                  {"first_seed", a.seed},
+                  {"iters", a.iters},
+                  {"protocols", protocols},
+                  {"mode", a.mode},
+                  {"relevancy", a.relevancy},
+                  {"scl_background", a.scl_background},
+                  {"objects_per_step", a.objects_per_step},
+                  {"summary", row_summaries(rows, t)},
+                  {"paired", paired_json},
+                  {"runs", t.runs}};
+  atomic_write_text(fs::path(a.out) / "ablation.json", j.dump(2) + "\n");
+  atomic_write_text(fs::path(a.out) / "ablation.md", md);
+  return md;
+}
+
+// The run.json of an earlier, interrupted ablation in `dir`, when it ran what is asked now (same iterations and
+// objects per step, every protocol and mode); with --reevaluate its kept model is evaluated again (`again`).
+std::optional<json> reusable_run(const AblateArgs& a, const std::string& scene_path,
+                                 const std::vector<std::string>& protocols, const fs::path& dir, bool& again) {
+  again = false;
+  const fs::path prev = dir / "run.json";
+  if (!fs::exists(prev)) return std::nullopt;
+  try {
+    json p = json::parse(read_file_text(prev));
+    const bool same = p.at("iters").get<int>() == a.iters && p.value("objects_per_step", 0) == a.objects_per_step;
+    bool ok = same;
+    for (const auto& proto : protocols)
+      for (const char* m : {"object", "pixel"})
+        if ((a.mode == "both" || a.mode == m) && !p.at("results").contains(proto + "/" + m)) ok = false;
+    if (same && a.reevaluate && fs::exists(dir / "point_cloud.ply")) {  // the kept model, evaluated again
+      evaluate_run(a, scene_path, protocols, dir, p);
+      ok = again = true;
+    }
+    if (ok) return p;
+  } catch (const Error&) {
+    throw;  // an evaluation that failed: its message, not a silent retraining
+  } catch (const std::exception&) {
+  }
+  return std::nullopt;
+}
+
+// Adds a run's results to the tally and returns its line for the log (`tag`: how it was obtained, e.g. " (reused)").
+std::string record_run(Tally& t, size_t r, const std::string& sname, uint64_t seed, const Row& row, const fs::path& dir,
+                       const json& run, const std::string& tag) {
+  std::string line = fmt::format("{} seed {} {}{}:", sname, seed, row.name, tag);
+  for (auto& [key, v] : run.at("results").items()) {
+    if (std::find(t.keys.begin(), t.keys.end(), key) == t.keys.end()) t.keys.push_back(key);
+    for (const char* m : {"acc", "miou", "mbiou"})
+      t.acc[r][key][m].push_back(v.at(m).is_null() ? NAN : v.at(m).get<double>());
+    line += fmt::format("  {} mIoU {} mBIoU {}", key, pct(t.acc[r][key]["miou"].back()),
+                        pct(t.acc[r][key]["mbiou"].back()));
+  }
+  t.runs.push_back({{"scene", sname}, {"seed", seed}, {"row", row.name}, {"dir", dir.string()}, {"run", run}});
+  return line;
+}
+
+void run_ablate(const AblateArgs& a) {
+  set_threads(a.threads);
+  if (a.seeds < 1) fail("--seeds: at least 1");
+  const std::vector<Scene> scenes = load_scenes(a);
   const std::vector<std::string> protocols = protocols_for(a.protocol, scenes);
   const std::vector<Row> rows = make_rows(a);
   ensure_dir(a.out);
   const int total = int(rows.size() * scenes.size()) * a.seeds;
-  // runs[row][key] -> values over the (scene, seed) runs, in run order.
-  std::vector<std::map<std::string, std::map<std::string, std::vector<double>>>> acc(rows.size());
-  json runs = json::array();
-  std::vector<std::string> keys;  // "<protocol>/<mode>" in first-seen order
+  Tally tally;
+  tally.acc.resize(rows.size());
   int done = 0;
-  auto write_summary = [&] {
-    json summary = json::array();
-    std::string md = fmt::format(
-        "# Ablation ({} iterations; {} scene(s) x {} seed(s); mean ± sample std over the runs)\n\nScenes: {}\n",
-        a.iters, scenes.size(), a.seeds, fmt::join(a.scenes, ", "));
-    for (const auto& key : keys) {
-      md += fmt::format(
-          "\n## {}{}\n\n| OF | SCL | BRO | λ_rgb | mAcc | mIoU | mBIoU | runs |\n|---|---|---|---|---|---|---|---|\n",
-          key, key.find("pixel") != std::string::npos ? fmt::format(" (relevancy {})", a.relevancy) : "");
-      for (size_t r = 0; r < rows.size(); ++r) {
-        auto it = acc[r].find(key);
-        if (it == acc[r].end()) continue;
-        const auto& v = it->second;
-        md +=
-            fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} |\n", rows[r].of ? "x" : "-", rows[r].scl ? "x" : "-",
-                        rows[r].bro ? "x" : "-", rows[r].lambda_rgb, pct_pm(mean_std(v.at("acc"))),
-                        pct_pm(mean_std(v.at("miou"))), pct_pm(mean_std(v.at("mbiou"))), v.at("miou").size());
-      }
-    }
-    // Paired differences of mIoU over the (scene, seed) runs both rows have: every row minus all-off, and each
-    // component added to the other two (the full row minus the full row without it).
-    std::map<std::string, std::map<std::string, const json*>> by_run;  // "<scene>/<seed>" -> row -> results
-    for (const auto& run : runs)
-      by_run[run["scene"].get<std::string>() + "/" + std::to_string(run["seed"].get<uint64_t>())]
-            [run["row"].get<std::string>()] = &run["run"]["results"];
-    auto diffs = [&](const std::string& key, const std::string& a_row, const std::string& b_row) {
-      std::vector<double> d;
-      for (const auto& [id, rs] : by_run) {
-        auto ia = rs.find(a_row), ib = rs.find(b_row);
-        if (ia == rs.end() || ib == rs.end() || !ia->second->contains(key) || !ib->second->contains(key)) continue;
-        const json &va = (*ia->second)[key]["miou"], &vb = (*ib->second)[key]["miou"];
-        if (va.is_number() && vb.is_number()) d.push_back(va.get<double>() - vb.get<double>());
-      }
-      return paired(d);
-    };
-    json paired_json = json::object();
-    std::string pmd;
-    for (const auto& key : keys) {
-      std::vector<std::pair<std::string, Paired>> lines;
-      for (const Row& row : rows)
-        if (row.name != "of0_scl0_bro0")
-          lines.push_back({row.name + " - all off", diffs(key, row.name, "of0_scl0_bro0")});
-      for (const char* c : {"of", "scl", "bro"}) {
-        std::string without = "of1_scl1_bro1";
-        without.replace(without.find(c) + std::string(c).size(), 1, "0");
-        lines.push_back({fmt::format("{} added to the other two", c), diffs(key, "of1_scl1_bro1", without)});
-      }
-      std::string body;
-      for (const auto& [what, p] : lines) {
-        if (p.n == 0) continue;
-        paired_json[key][what] = {{"mean", std::isfinite(p.mean) ? json(p.mean) : json(nullptr)},
-                                  {"ci95_half", std::isfinite(p.half) ? json(p.half) : json(nullptr)},
-                                  {"runs", p.n}};
-        body += fmt::format("| {} | {} | {} | {} |\n", what, pct(p.mean),
-                            std::isfinite(p.half) ? fmt::format("± {:.2f}", 100 * p.half) : "-", p.n);
-      }
-      if (!body.empty())
-        pmd += fmt::format(
-            "\n### {} (mIoU, paired by scene and seed)\n\n| difference | mean | 95 % interval | runs |\n"
-            "|---|---|---|---|\n{}",
-            key, body);
-    }
-    if (!pmd.empty()) md += "\n## Paired differences\n" + pmd;
-    for (size_t r = 0; r < rows.size(); ++r) {
-      json res = json::object();
-      for (const auto& [key, v] : acc[r]) {
-        json k = {{"runs", v.at("miou").size()}};
-        for (const char* m : {"acc", "miou", "mbiou"}) {
-          auto [mean, sd] = mean_std(v.at(m));
-          k[std::string(m) + "_mean"] = std::isfinite(mean) ? json(mean) : json(nullptr);
-          k[std::string(m) + "_std"] = std::isfinite(sd) ? json(sd) : json(nullptr);
-        }
-        res[key] = k;
-      }
-      summary.push_back({{"row", rows[r].name},
-                         {"of", rows[r].of},
-                         {"scl", rows[r].scl},
-                         {"bro", rows[r].bro},
-                         {"lambda_rgb", rows[r].lambda_rgb},
-                         {"results", res}});
-    }
-    std::vector<std::string> abs_scenes;
-    for (const auto& p : a.scenes) abs_scenes.push_back(fs::absolute(p).lexically_normal().string());
-    const json j = {{"scenes", abs_scenes},
-                    {"seeds", a.seeds},
-                    {"first_seed", a.seed},
-                    {"iters", a.iters},
-                    {"protocols", protocols},
-                    {"mode", a.mode},
-                    {"relevancy", a.relevancy},
-                    {"scl_background", a.scl_background},
-                    {"objects_per_step", a.objects_per_step},
-                    {"summary", summary},
-                    {"paired", paired_json},
-                    {"runs", runs}};
-    atomic_write_text(fs::path(a.out) / "ablation.json", j.dump(2) + "\n");
-    atomic_write_text(fs::path(a.out) / "ablation.md", md);
-    return md;
-  };
   for (size_t si = 0; si < scenes.size(); ++si) {
     const std::string sname = fs::absolute(a.scenes[si]).lexically_normal().filename().string();
     for (int k = 0; k < a.seeds; ++k) {
@@ -321,51 +394,25 @@ void run_ablate(const AblateArgs& a) {
       for (size_t r = 0; r < rows.size(); ++r) {
         ++done;
         const fs::path dir = fs::path(a.out) / sname / fmt::format("seed{}", seed) / rows[r].name;
-        json run;
-        const fs::path prev = dir / "run.json";
-        bool reused = false, again = false;
-        if (fs::exists(prev)) {  // an earlier, interrupted ablation: reuse when it ran what is asked now
-          try {
-            json p = json::parse(read_file_text(prev));
-            const bool same =
-                p.at("iters").get<int>() == a.iters && p.value("objects_per_step", 0) == a.objects_per_step;
-            bool ok = same;
-            for (const auto& proto : protocols)
-              for (const char* m : {"object", "pixel"})
-                if ((a.mode == "both" || a.mode == m) && !p.at("results").contains(proto + "/" + m)) ok = false;
-            if (same && a.reevaluate && fs::exists(dir / "point_cloud.ply")) {  // the kept model, evaluated again
-              evaluate_run(a, a.scenes[si], protocols, dir, p);
-              ok = again = true;
-            }
-            if (ok) run = std::move(p), reused = true;
-          } catch (const Error&) {
-            throw;  // an evaluation that failed: its message, not a silent retraining
-          } catch (const std::exception&) {
-          }
-        }
+        bool again = false;
+        std::optional<json> run = reusable_run(a, a.scenes[si], protocols, dir, again);
+        const bool reused = run.has_value();
         if (!reused) {
           ensure_dir(dir);
           run = train_and_evaluate(a, scenes[si], a.scenes[si], rows[r], seed, protocols, dir,
                                    fmt::format("ablate {} {} seed {} ({}/{})", sname, rows[r].name, seed, done, total));
         }
-        std::string line = fmt::format("{} seed {} {}{}:", sname, seed, rows[r].name,
-                                       again    ? " (model reused, evaluated again)"
-                                       : reused ? " (reused)"
-                                                : "");
-        for (auto& [key, v] : run.at("results").items()) {
-          if (std::find(keys.begin(), keys.end(), key) == keys.end()) keys.push_back(key);
-          for (const char* m : {"acc", "miou", "mbiou"})
-            acc[r][key][m].push_back(v.at(m).is_null() ? NAN : v.at(m).get<double>());
-          line += fmt::format("  {} mIoU {} mBIoU {}", key, pct(acc[r][key]["miou"].back()),
-                              pct(acc[r][key]["mbiou"].back()));
-        }
+        const std::string line = record_run(tally, r, sname, seed, rows[r], dir, *run,
+                                            again    ? " (model reused, evaluated again)"
+                                            : reused ? " (reused)"
+                                                     : "");
         if (!a.quiet) fmt::print("{}\n", line);
-        runs.push_back({{"scene", sname}, {"seed", seed}, {"row", rows[r].name}, {"dir", dir.string()}, {"run", run}});
-        write_summary();
+        write_summary(a, scenes.size(), protocols, rows, tally);
       }
     }
   }
-  fmt::print("\n{}\nwrote {}/ablation.json and ablation.md\n", write_summary(), a.out);
+  fmt::print("\n{}\nwrote {}/ablation.json and ablation.md\n", write_summary(a, scenes.size(), protocols, rows, tally),
+             a.out);
 }
 
 CommandRegistration reg(

@@ -6,7 +6,6 @@
 #include <nlohmann/json.hpp>
 
 #include "cli/command.h"
-#include "cli/held_out_score.h"
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/progress.h"
@@ -16,6 +15,7 @@
 #include "render/camera_from_view.h"
 #include "render/renderer.h"
 #include "scene/scene.h"
+#include "train/held_out.h"
 #include "train/ssim.h"
 
 namespace hgs::cli {
@@ -76,7 +76,7 @@ void run_render(const RenderArgs& a) {
     Image gt = scene.load_image(v.index);
     renderer.forward(render::camera_from_view(v, near_plane), in, rs, ro);
     Image img;
-    const ViewScore score = score_view(ro.rgb, gt, img, ws);
+    const train::ViewScore score = train::score_view(ro.rgb, gt, img, ws);
     const float psnr = score.psnr, ssim = score.ssim;
     sum_psnr += psnr;
     sum_ssim += ssim;

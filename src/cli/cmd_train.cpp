@@ -8,25 +8,18 @@
 #include <cstdlib>
 
 #include <algorithm>
-#include <atomic>
-#include <chrono>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "cli/command.h"
-#include "cli/held_out_score.h"
 #include "core/error.h"
-#include "core/fs.h"
-#include "core/process.h"
-#include "core/progress.h"
 #include "hybrid/config.h"
 #include "hybrid/register.h"
-#include "model/ply.h"
 #include "mpi/session.h"
 #include "scene/scene.h"
 #include "train/registry.h"
-#include "train/trainer.h"
+#include "train/run.h"
 
 namespace hgs::cli {
 namespace {
@@ -86,90 +79,6 @@ void check_step_size(const TrainArgs& a, size_t train_views, int ranks) {
          a.batch, ranks);
 }
 
-// MODEL/config.json: the run's configuration and where it came from.
-nlohmann::json run_config(const TrainArgs& a, const Scene& scene, const train::Trainer& trainer, size_t train_views,
-                          int init_points, const std::optional<hybrid::HybridConfig>& hc, int ranks) {
-  nlohmann::json config = trainer.config().to_json();
-  config["scene"] = fs::absolute(scene.root).lexically_normal().string();
-  config["downscale"] = a.downscale;
-  config["extent"] = trainer.extent();
-  config["train_views"] = train_views;
-  config["init_points"] = init_points;
-  config["split"] = scene.split_source;
-  if (hc) config["hybrid"] = hc->to_json();
-  if (!a.resume.empty()) config["resumed_from"] = a.resume;
-  config["ranks"] = ranks;
-  return config;
-}
-
-// Exponential moving averages of the optimised total, each weighted term (in the objective's order) and the
-// training views' PSNR: the progress line and train_stats.json.
-struct LossEma {
-  double loss = 0, psnr = 0;
-  std::vector<std::pair<std::string, double>> terms;
-  void add(const train::StepInfo& s, bool first) {
-    loss = first ? s.total : 0.4 * s.total + 0.6 * loss;
-    if (first || terms.size() != s.terms.size()) {
-      terms.clear();
-      for (const auto& t : s.terms) terms.push_back({t.name, t.weighted()});
-    } else {
-      for (size_t k = 0; k < s.terms.size(); ++k) terms[k].second = 0.4 * s.terms[k].weighted() + 0.6 * terms[k].second;
-    }
-    psnr = first ? s.psnr : 0.4 * s.psnr + 0.6 * psnr;
-  }
-  // " (rgb 0.1234 app 0.0100 ...)" when there is more than one term.
-  std::string terms_text() const {
-    std::string t;
-    if (terms.size() > 1)
-      for (const auto& [name, v] : terms) t += fmt::format("{}{} {:.4f}", t.empty() ? " (" : " ", name, v);
-    return t.empty() ? t : t + ")";
-  }
-  nlohmann::json terms_json() const {
-    nlohmann::json j = nlohmann::json::object();  // weighted: they sum to the total
-    for (const auto& [name, v] : terms) j[name] = v;
-    return j;
-  }
-};
-
-// --test-every: the held-out views' PSNR / SSIM every N images seen and at the end, against the training time so
-// far (the scoring itself excluded), for curves and time-to-quality figures.
-class HeldOutCurve {
- public:
-  HeldOutCurve(const TrainArgs& a, const Scene& scene, bool writer, float near_plane)
-      : every_(a.test_every), last_(a.iters), white_(a.white_bg), near_(near_plane) {
-    if (every_ <= 0 || !writer) return;
-    views_ = scene.test_indices();
-    if (views_.empty()) fail("--test-every: {} has no held-out views (its split puts every view in training)", a.scene);
-  }
-  // After a step that ended at `it` images seen (G of them in this step).
-  void after_step(int it, int G, const Scene& scene, const train::Trainer& trainer, Progress& bar,
-                  std::chrono::steady_clock::time_point t0) {
-    if (views_.empty() || !(it / every_ > (it - G) / every_ || it >= last_)) return;
-    const auto ts = std::chrono::steady_clock::now();
-    const ViewScore sc = score_views(scene, views_, trainer.model(), white_, near_, images_);
-    const double train_s = std::chrono::duration<double>(ts - t0).count() - seconds_;
-    seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
-    curve_.push_back({{"iteration", it},
-                      {"train_seconds", train_s},
-                      {"test_psnr", sc.psnr},
-                      {"test_ssim", sc.ssim},
-                      {"num_gaussians", trainer.model().n}});
-    bar.note(fmt::format("test {:>7}: PSNR {:.2f} dB, SSIM {:.4f} ({} views) after {} of training", it, sc.psnr,
-                         sc.ssim, views_.size(), format_duration(train_s)));
-  }
-  const nlohmann::json& curve() const { return curve_; }
-  double seconds() const { return seconds_; }  // spent scoring, not training
-
- private:
-  int every_, last_;
-  bool white_;
-  float near_;
-  std::vector<int> views_;
-  std::vector<Image> images_;
-  nlohmann::json curve_ = nlohmann::json::array();
-  double seconds_ = 0;
-};
-
 // Test hook (tests/mpi): HGS_TEST_KILL=<rank>:<images> kills that rank with SIGKILL once it has seen that many
 // images, as a crashed machine would. Returns the images for this rank (0 = never).
 int kill_hook(int rank) {
@@ -181,121 +90,11 @@ int kill_hook(int rank) {
   return r == rank ? at : 0;
 }
 
-// MODEL/checkpoints/iter_<it>.ckpt (and, during training, MODEL/point_cloud_iter_<it>.ply). Returns the checkpoint.
-std::string save_snapshot(const fs::path& out, const train::Trainer& trainer, bool with_ply) {
-  const int it = trainer.iteration();
-  ensure_dir(out / "checkpoints");
-  const fs::path ckpt = out / "checkpoints" / fmt::format("iter_{}.ckpt", it);
-  trainer.save_checkpoint(ckpt);
-  if (with_ply) write_model_ply(out / fmt::format("point_cloud_iter_{}.ply", it), trainer.model());
-  return ckpt.string();
-}
-
-// What one run measured, for train_stats.json and the closing lines.
-struct RunTimes {
-  std::vector<float> ms;          // wall ms of each step of this run
-  std::vector<int> iter;          // the iteration (images seen) each step ended at
-  std::vector<float> densify_ms;  // ... and its densification / opacity reset / after_step part
-  train::StepTimes parts;         // summed over the steps
-  double wall = 0;                // seconds, test scoring included
-};
-
-nlohmann::json train_stats(const train::Trainer& trainer, int start, const RunTimes& rt, const LossEma& ema,
-                           const HeldOutCurve& held_out, int ranks, int G) {
-  const std::vector<float>& ms = rt.ms;
-  std::vector<float> sorted = ms;
-  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-  nlohmann::json stats = {{"iterations", trainer.iteration()},
-                          {"iterations_this_run", trainer.iteration() - start},
-                          {"median_ms_per_iter", sorted.empty() ? 0.0 : sorted[sorted.size() / 2]},
-                          {"mean_ms_per_iter", ms.empty() ? 0.0 : (rt.wall - held_out.seconds()) * 1000.0 / ms.size()},
-                          {"peak_rss_mb", peak_rss_mb()},
-                          {"num_gaussians", trainer.model().n},
-                          {"wall_time_s", rt.wall},
-                          {"test_seconds", held_out.seconds()},  // of wall_time_s, spent on --test-every
-                          {"test_curve", held_out.curve()},
-                          {"final_train_loss_ema", ema.loss},
-                          {"final_train_loss_terms_ema", ema.terms_json()},
-                          {"final_train_psnr_ema", ema.psnr},
-                          {"threads", omp_get_max_threads()},
-                          {"ranks", ranks},
-                          {"views_per_step", G},
-                          // this rank's share of the gradient exchange (rank 0; every rank sends about as much)
-                          {"comm_bytes_per_step", ms.empty() ? 0.0 : trainer.reducer().stats.bytes_sent / ms.size()},
-                          {"comm_ms_per_step", ms.empty() ? 0.0 : trainer.reducer().stats.ms / ms.size()}};
-  // The slowest steps (where the mean departs from the median: densification, observation-table rebuilds).
-  std::vector<size_t> order(ms.size());
-  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
-  const size_t top = std::min<size_t>(5, order.size());
-  std::partial_sort(order.begin(), order.begin() + top, order.end(), [&](size_t x, size_t y) { return ms[x] > ms[y]; });
-  nlohmann::json slowest = nlohmann::json::array();
-  for (size_t i = 0; i < top; ++i)
-    slowest.push_back(
-        {{"iteration", rt.iter[order[i]]}, {"ms", ms[order[i]]}, {"densify_ms", rt.densify_ms[order[i]]}});
-  stats["slowest_steps"] = slowest;
-  nlohmann::json part_ms = nlohmann::json::object();
-  train::StepTimes::each([&](const char* name, double train::StepTimes::*m) {
-    part_ms[name] = ms.empty() ? 0.0 : rt.parts.*m / ms.size();
-  });
-  stats["mean_ms_per_part"] = part_ms;
-  return stats;
-}
-
-void print_summary(const nlohmann::json& stats, const fs::path& ply, int ranks) {
-  fmt::print("trained {} iterations in {} ({:.1f} ms/it median), {} Gaussians -> {}\n",
-             stats["iterations_this_run"].get<int>(), format_duration(stats["wall_time_s"].get<double>()),
-             stats["median_ms_per_iter"].get<double>(), stats["num_gaussians"].get<int>(), ply.string());
-  std::string part_line;  // in step order
-  train::StepTimes::each([&](const char* name, double train::StepTimes::*) {
-    part_line +=
-        fmt::format("{}{} {:.1f}", part_line.empty() ? "" : ", ", name, stats["mean_ms_per_part"][name].get<double>());
-  });
-  fmt::print("mean ms per step: {}\n", part_line);
-  if (ranks > 1)
-    fmt::print("gradient exchange per step (rank 0): {:.2f} MB sent, {:.1f} ms\n",
-               stats["comm_bytes_per_step"].get<double>() / 1e6, stats["comm_ms_per_step"].get<double>());
-}
-
-// The training loop of one run: steps until --iters, with progress, held-out scores and checkpoints.
-void train_loop(const TrainArgs& a, const Scene& scene, train::Trainer& trainer, int rank, bool writer, bool progress,
-                RunTimes& rt, LossEma& ema, HeldOutCurve& held_out) {
-  const fs::path out = a.out;
-  const int start = trainer.iteration(), G = trainer.step_views(), kill_at = kill_hook(rank);
-  rt.ms.reserve(a.iters - start);
-  Progress bar("train", a.iters - start, progress);
-  const auto t0 = std::chrono::steady_clock::now();
-  std::string last_ckpt = a.resume;  // the newest checkpoint on disk, for the message of a failed step
-  while (trainer.iteration() < a.iters) {
-    train::StepInfo s;
-    try {
-      s = trainer.step();
-    } catch (const Error& e) {  // e.g. a non-finite loss or gradient: nothing of this run's state is saved
-      if (last_ckpt.empty()) fail("{} (no checkpoint was written: --save-every N keeps one)", e.what());
-      fail("{} (the last checkpoint {} is intact: --resume from it)", e.what(), last_ckpt);
-    }
-    rt.ms.push_back(float(s.ms));
-    rt.iter.push_back(trainer.iteration());
-    rt.densify_ms.push_back(float(s.times.densify));
-    train::StepTimes::each([&](const char*, double train::StepTimes::*m) { rt.parts.*m += s.times.*m; });
-    ema.add(s, rt.ms.size() == 1);
-    const int it = trainer.iteration();
-    if (kill_at > 0 && it >= kill_at) std::raise(SIGKILL);
-    held_out.after_step(it, G, scene, trainer, bar, t0);
-    if (writer && a.save_every > 0 && it % a.save_every == 0 && it < a.iters)
-      last_ckpt = save_snapshot(out, trainer, true);
-    if (progress)
-      bar.update(it - start, fmt::format("loss {:.4f}{} psnr {:.2f} N {} {:.1f} ms/it", ema.loss, ema.terms_text(),
-                                         ema.psnr, s.num_gaussians, s.ms));
-  }
-  rt.wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  bar.finish(fmt::format("loss {:.4f} psnr {:.2f} N {}", ema.loss, ema.psnr, trainer.model().n));
-}
-
 void run_train(const TrainArgs& a) {
   // Under mpirun every rank runs this same function on the same scene and configuration; rank 0 alone writes
   // outputs and shows progress (docs/scaling.md).
   mpi::Session mpi;
-  const int R = mpi.size(), G = a.batch * R;
+  const int R = mpi.size();
   const bool writer = mpi.rank() == 0, progress = !a.quiet && writer;
   // Ranks sharing a machine share its cores: by default each takes its share.
   set_threads(a.threads == 0 && R > 1 ? std::max(1, omp_get_num_procs() / mpi::local_ranks()) : a.threads);
@@ -303,40 +102,33 @@ void run_train(const TrainArgs& a) {
   const std::vector<int> train_idx = scene.train_indices();
   if (train_idx.empty()) fail("{}: the scene has no training views", a.scene);
   check_step_size(a, train_idx.size(), R);
-  const fs::path out = a.out;
-  if (writer) ensure_dir(out);
 
   const std::optional<hybrid::HybridConfig> hc = hybrid_config(a);
+  const nlohmann::json method_options = hc ? hc->to_json() : nlohmann::json();
   hybrid::register_method();
-  auto trainer_ptr = train::make_trainer(scene, train_idx, train_config(a), a.method,
-                                         hc ? hc->to_json() : nlohmann::json(), progress, &mpi.reducer());
+  auto trainer_ptr =
+      train::make_trainer(scene, train_idx, train_config(a), a.method, method_options, progress, &mpi.reducer());
   train::Trainer& trainer = *trainer_ptr;
   const int init_points = trainer.model().n;
-  if (!a.resume.empty()) {
-    trainer.load_checkpoint(a.resume);
-    if (trainer.iteration() >= a.iters)
-      fail("{}: checkpoint is at iteration {}, nothing to do for --iters {}", a.resume, trainer.iteration(), a.iters);
-  }
-  if ((a.iters - trainer.iteration()) % G != 0)
-    fail(
-        "--iters {}: the {} images left after iteration {} are not a multiple of the {} views of a step (--batch "
-        "{} x {} ranks)",
-        a.iters, a.iters - trainer.iteration(), trainer.iteration(), G, a.batch, R);
-  if (writer)
-    atomic_write_text(out / "config.json",
-                      run_config(a, scene, trainer, train_idx.size(), init_points, hc, R).dump(2) + "\n");
+  if (!a.resume.empty()) trainer.load_checkpoint(a.resume);
 
-  const int start = trainer.iteration();
-  RunTimes rt;
-  LossEma ema;
-  HeldOutCurve held_out(a, scene, writer, trainer.config().near_plane);  // a resumed run's, as trained
-  train_loop(a, scene, trainer, mpi.rank(), writer, progress, rt, ema, held_out);
+  train::RunOptions ro;
+  ro.out = a.out;
+  ro.iters = a.iters;
+  ro.save_every = a.save_every;
+  ro.test_every = a.test_every;
+  ro.writer = writer;
+  ro.progress = progress;
+  ro.resumed_from = a.resume;
+  train::TrainingRun run(trainer, scene, ro, train::run_config(trainer, scene, method_options, init_points));
+  const int kill_at = kill_hook(mpi.rank());
+  run.train([&](const train::RunStep& s) {
+    if (kill_at > 0 && s.iteration >= kill_at) std::raise(SIGKILL);
+    return true;
+  });
   if (!writer) return;  // every rank holds the same model; rank 0 writes it
-  write_model_ply(out / "point_cloud.ply", trainer.model());
-  if (a.save_every > 0) save_snapshot(out, trainer, false);
-  const nlohmann::json stats = train_stats(trainer, start, rt, ema, held_out, R, G);
-  atomic_write_text(out / "train_stats.json", stats.dump(2) + "\n");
-  if (progress) print_summary(stats, out / "point_cloud.ply", R);
+  run.save();
+  if (progress) fmt::print("{}\n", run.summary());
 }
 
 // The hybrid method's options (paper components, weights, ablations, approximations).

@@ -1,4 +1,4 @@
-#include "cli/held_out_score.h"
+#include "train/held_out.h"
 
 #include <algorithm>
 
@@ -6,9 +6,9 @@
 #include "render/camera_from_view.h"
 #include "train/loss.h"
 
-namespace hgs::cli {
+namespace hgs::train {
 
-ViewScore score_view(const std::vector<float>& rgb, const Image& gt, Image& clamped, train::SsimWorkspace<float>& ws) {
+ViewScore score_view(const std::vector<float>& rgb, const Image& gt, Image& clamped, SsimWorkspace<float>& ws) {
   clamped = Image(gt.width, gt.height, 3);
   double se = 0;
   for (size_t i = 0; i < clamped.px.size(); ++i) {
@@ -16,8 +16,8 @@ ViewScore score_view(const std::vector<float>& rgb, const Image& gt, Image& clam
     se += double(clamped.px[i] - gt.px[i]) * (clamped.px[i] - gt.px[i]);
   }
   ViewScore s;
-  s.psnr = train::psnr_from_mse(se / double(clamped.px.size()));
-  s.ssim = train::ssim(clamped.px.data(), gt.px.data(), gt.height, gt.width, 3, (float*)nullptr, ws);
+  s.psnr = psnr_from_mse(se / double(clamped.px.size()));
+  s.ssim = ssim(clamped.px.data(), gt.px.data(), gt.height, gt.width, 3, (float*)nullptr, ws);
   return s;
 }
 
@@ -33,7 +33,7 @@ ViewScore score_views(const Scene& scene, const std::vector<int>& idx, const Gau
   render::RenderSettings rs;
   rs.want_depth = false;
   rs.background[0] = rs.background[1] = rs.background[2] = white ? 1.f : 0.f;
-  train::SsimWorkspace<float> ws;
+  SsimWorkspace<float> ws;
   Image clamped;
   double psnr = 0, ssim = 0;
   for (size_t k = 0; k < idx.size(); ++k) {
@@ -47,4 +47,4 @@ ViewScore score_views(const Scene& scene, const std::vector<int>& idx, const Gau
   return m;
 }
 
-}  // namespace hgs::cli
+}  // namespace hgs::train

@@ -9,18 +9,18 @@
 #include "scene/scene.h"
 #include "train/ssim.h"
 
-namespace hgs::cli {
+namespace hgs::train {
 
 struct ViewScore {
   float psnr = 0, ssim = 0;
 };
 
 // rgb [H, W, 3] (the renderer's output) against gt [H, W, 3]; `clamped` receives the render clamped to [0, 1].
-ViewScore score_view(const std::vector<float>& rgb, const Image& gt, Image& clamped, train::SsimWorkspace<float>& ws);
+ViewScore score_view(const std::vector<float>& rgb, const Image& gt, Image& clamped, SsimWorkspace<float>& ws);
 
 // Renders `model` in each of the scene's views `idx` (background 1 if white else 0, culling at `near_plane`) and
 // returns the means of their scores. `images` caches the ground-truth images between calls (filled on the first).
 ViewScore score_views(const Scene& scene, const std::vector<int>& idx, const GaussianModel& model, bool white,
                       float near_plane, std::vector<Image>& images);
 
-}  // namespace hgs::cli
+}  // namespace hgs::train
