@@ -38,7 +38,7 @@ struct LerfOptions {
   int boundary_d = 0;      // boundary IoU width; <= 0: Cheng et al.'s d from the image size
 };
 
-// LangSplat's windows were set on LERF-OVS frames about this wide (issue 36).
+// LangSplat's windows were set on LERF-OVS frames about this wide.
 constexpr int kLerfReferenceWidth = 1000;
 // The box and majority windows scaled to an image `width` pixels wide (x width / kLerfReferenceWidth): the box
 // rounded, at least 1; the majority window the odd number at or below its scaled size (<= 1: no majority filter).

@@ -9,9 +9,8 @@
 // instance. The class score of a pixel is
 //   score_c(p) = sum over the labels k of class c of A_k(p) r_k(c)
 // (query::object_class_scores), A_k the rendered opacity of label k and r_k(c) the LERF relevancy of e_k for c;
-// the argmax over classes is the prediction (eval/protocols.h). Until 2026-11-27 background pixels took the LERF
-// relevancy of the raw language map instead (A_0(p) r_c(p)) and unchosen objects nothing; docs/ablation.md
-// compares the two on 16 models.
+// the argmax over classes is the prediction (eval/protocols.h). docs/ablation.md compares this with scoring the
+// background pixels by the raw language map's relevancy (A_0(p) r_c(p)) and unchosen objects as nothing.
 // "3d-ovs-labelled" is 3D-OVS scored on the pixels the ground truth labels and the classes each frame shows
 // (eval::OvsScoring::LabelledOnly): what 3D-OVS measures on its own scenes, whose classes cover every pixel and
 // are all in view, on generated scenes that show the sky or leave classes out of some views.

@@ -28,7 +28,7 @@ struct SynthOptions {
   // Label style: the background surfaces (table, floor, walls, shelf) get mask ids K + 1 ... K + S too, as SAM2
   // tracks whatever SAM segmented; objects.json names them. The object masks are the same as without it (the
   // surfaces fill the mask's background pixels that show a surface; they carry no noise of their own). On by
-  // default; `--objects-only` turns it off together with the SAM-like errors below (the world of earlier versions).
+  // default; `--objects-only` turns it off together with the SAM-like errors below (object masks only).
   bool surface_masks = true;
   // SAM's typical errors, each a rate (docs/synth.md); negative = the noise level's rate (NoiseLevel):
   double miss_rate = -1;        // an object missed in a view

@@ -71,7 +71,8 @@ TrainingRun::TrainingRun(Trainer& trainer, const Scene& scene, RunOptions opt, j
          opt_.iters, opt_.iters - start_, start_, G);
   if (opt_.save_every < 0 || opt_.save_every % G != 0)
     fail("save_every {} is not a multiple of the {} views of a step", opt_.save_every, G);
-  if (opt_.save_every > 0 && opt_.out.empty()) fail("save_every {}: checkpoints need an output folder", opt_.save_every);
+  if (opt_.save_every > 0 && opt_.out.empty())
+    fail("save_every {}: checkpoints need an output folder", opt_.save_every);
   if (opt_.test_every > 0 && opt_.writer) {
     test_views_ = scene_.test_indices();
     if (test_views_.empty())
@@ -107,8 +108,8 @@ void TrainingRun::score_held_out(int it, Progress& bar, double elapsed) {
                     {"test_psnr", sc.psnr},
                     {"test_ssim", sc.ssim},
                     {"num_gaussians", trainer_.model().n}});
-  bar.note(fmt::format("test {:>7}: PSNR {:.2f} dB, SSIM {:.4f} ({} views) after {} of training", it, sc.psnr,
-                       sc.ssim, test_views_.size(), format_duration(train_s)));
+  bar.note(fmt::format("test {:>7}: PSNR {:.2f} dB, SSIM {:.4f} ({} views) after {} of training", it, sc.psnr, sc.ssim,
+                       test_views_.size(), format_duration(train_s)));
 }
 
 void TrainingRun::train(const StepCallback& on_step) {
@@ -132,8 +133,7 @@ void TrainingRun::train(const StepCallback& on_step) {
     average_.add(s, ms_.size() == 1);
     const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     score_held_out(it, bar, elapsed);
-    if (opt_.writer && opt_.save_every > 0 && it % opt_.save_every == 0 && it < opt_.iters)
-      last_ckpt_ = snapshot(true);
+    if (opt_.writer && opt_.save_every > 0 && it % opt_.save_every == 0 && it < opt_.iters) last_ckpt_ = snapshot(true);
     if (progress)
       bar.update(it - start_, fmt::format("loss {:.4f}{} psnr {:.2f} N {} {:.1f} ms/it", average_.loss,
                                           average_.terms_text(), average_.psnr, s.num_gaussians, s.ms));

@@ -39,7 +39,7 @@ struct LossAverage {
   double loss = 0, psnr = 0;
   std::vector<std::pair<std::string, double>> terms;
   void add(const StepInfo& s, bool first);
-  std::string terms_text() const;      // " (rgb 0.1234 app 0.0100 ...)" with more than one term, else ""
+  std::string terms_text() const;     // " (rgb 0.1234 app 0.0100 ...)" with more than one term, else ""
   nlohmann::json terms_json() const;  // {"rgb": ..., "app": ...}: they sum to the total
 };
 

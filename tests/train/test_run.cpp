@@ -1,7 +1,7 @@
-// train::TrainingRun, the one training run of `hgs train`, `hgs ablate`, the depth model and hgs.train: the callback sees
-// every step and can end the run (with its reason in train_stats.json), the model folder is complete after a
-// stop, checkpoints come at their cadence and resume to the same model, and runs that cannot go as asked fail
-// before writing anything.
+// train::TrainingRun, the one training run of `hgs train`, `hgs ablate`, the depth model and hgs.train: the callback
+// sees every step and can end the run (with its reason in train_stats.json), the model folder is complete after a stop,
+// checkpoints come at their cadence and resume to the same model, and runs that cannot go as asked fail before writing
+// anything.
 #include <gtest/gtest.h>
 
 #include <cstdlib>
@@ -69,10 +69,10 @@ TEST_F(RunTest, CallbackSeesEveryStepAndStopsTheRunWithItsReason) {
   EXPECT_EQ(stats["stopped"], "interrupted");
   EXPECT_EQ(stats["iterations"], 7);
   EXPECT_EQ(stats["iterations_this_run"], 7);
-  for (const char* key : {"median_ms_per_iter", "mean_ms_per_iter", "peak_rss_mb", "num_gaussians", "wall_time_s",
-                          "test_seconds", "test_curve", "final_train_loss_ema", "final_train_loss_terms_ema",
-                          "final_train_psnr_ema", "threads", "ranks", "views_per_step", "slowest_steps",
-                          "mean_ms_per_part", "comm_bytes_per_step"})
+  for (const char* key :
+       {"median_ms_per_iter", "mean_ms_per_iter", "peak_rss_mb", "num_gaussians", "wall_time_s", "test_seconds",
+        "test_curve", "final_train_loss_ema", "final_train_loss_terms_ema", "final_train_psnr_ema", "threads", "ranks",
+        "views_per_step", "slowest_steps", "mean_ms_per_part", "comm_bytes_per_step"})
     EXPECT_TRUE(stats.contains(key)) << key;
   EXPECT_EQ(read_model_ply(out / "m" / "point_cloud.ply").n, t->model().n);
   const json config = read_json(out / "m" / "config.json");
