@@ -5,6 +5,8 @@
 // from arrays (checked dtype and shapes) and 3D selection by object.
 #include <cmath>
 
+#include <nlohmann/json.hpp>
+
 #include "common.h"
 #include "core/error.h"
 #include "core/fs.h"
@@ -107,19 +109,28 @@ void bind_model(pb::module_& m) {
           "config.json's beside it (0.01 without one), which hgs.render and hgs.QuerySession cull at")
       .def(
           "save",
-          [](const GaussianModel& g, const fs::path& path) {
+          [](const pb::object& self, const fs::path& path) {
+            const GaussianModel& g = self.cast<const GaussianModel&>();
+            const float near_plane = self.attr("near_plane").cast<float>();
             fs::path p = path;
-            if (p.extension() != ".ply") {
-              ensure_dir(p);
-              p /= "point_cloud.ply";
-            }
+            const bool folder = p.extension() != ".ply";
             pb::gil_scoped_release nogil;
-            write_model_ply(p, g);
-            return p.string();
+            if (!folder) {
+              write_model_ply(p, g);
+              return p.string();
+            }
+            ensure_dir(p);
+            write_model_ply(p / "point_cloud.ply", g);
+            // A model folder always has its config.json: the training run's when there is one, else the near plane
+            // this model is rendered at (model/near_plane.h).
+            if (!fs::exists(p / "config.json"))
+              atomic_write_text(p / "config.json", nlohmann::json{{"near_plane", near_plane}}.dump(2) + "\n");
+            return (p / "point_cloud.ply").string();
           },
           pb::arg("path"),
           "Writes the model as a 3DGS PLY (atomically): to `path` when it ends in .ply, else to "
-          "path/point_cloud.ply; returns the file written")
+          "path/point_cloud.ply with a config.json holding its near_plane unless the folder has one; returns the "
+          "file written")
       .def(
           "copy",
           [](const pb::object& self) {

@@ -69,6 +69,12 @@ def test_ply_round_trip(hybrid_model, rgb_model, tmp_path):
         assert set(back.extras) == set(m.extras)
         for k, v in m.extras.items():  # files hold float32: half values come back exactly
             np.testing.assert_array_equal(back.extras[k], v.astype(np.float32), err_msg=k)
+    # A model folder has its config.json: the near plane a saved model is rendered at comes back with it.
+    m = rgb_model.copy()
+    m.near_plane = 0.25
+    m.save(str(tmp_path / "near"))
+    assert (tmp_path / "near" / "config.json").exists()
+    assert hgs.Model.load(str(tmp_path / "near")).near_plane == 0.25
 
 
 def test_model_from_arrays(tmp_path):
