@@ -8,13 +8,15 @@
 #include <map>
 #include <set>
 
+#include "clip/scene_features.h"
 #include "core/error.h"
 #include "core/fs.h"
 #include "masks/import.h"
 #include "prepare/run_tool.h"
 #include "prepare/stages.h"
-#include "prepare/view_outputs.h"
+#include "sam/scene_masks.h"
 #include "scene/scene.h"
+#include "train/depth_model.h"
 
 namespace hgs::prepare {
 namespace fs = std::filesystem;
@@ -227,7 +229,7 @@ void mask_stages(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
     if (!p.resuming()) fs::remove_all(sam_dir);
     Scene s = load_scene(opt.scene);
     sam::SamModel m = opt.load_sam();
-    ViewFilesSummary r = write_sam_files(s, m, opt.amg, sam_dir, false, opt.progress);
+    sam::SceneMasksSummary r = sam::write_sam_files(s, m, opt.amg, sam_dir, false, opt.progress);
     return nlohmann::json{{"views", s.views.size()}, {"written", r.written}};
   });
   p.stage("import", {"sam"}, "", [&] {
@@ -239,7 +241,7 @@ void mask_stages(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
   });
   const fs::path depth_ply = work / "depth_model" / "point_cloud.ply";
   p.stage("depth", {"undistort"}, std::to_string(opt.depth_iters), [&] {
-    if (opt.depth_iters > 0) train_depth_model(load_scene(opt.scene), opt.depth_iters, depth_ply, opt.progress);
+    if (opt.depth_iters > 0) train::train_depth_model(load_scene(opt.scene), opt.depth_iters, depth_ply, opt.progress);
     return nlohmann::json{{"iters", opt.depth_iters}};
   });
   const masks::AssociateOptions& ao = opt.associate;
@@ -248,7 +250,7 @@ void mask_stages(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
   p.stage("associate", {"import", "depth"}, assoc_key, [&] {
     masks::AssociateOptions a = opt.associate;
     a.scene = opt.scene, a.force = true, a.progress = opt.progress;
-    if (opt.depth_iters > 0) a.depth = depth_from_model(depth_ply);
+    if (opt.depth_iters > 0) a.depth = train::depth_from_model(depth_ply);
     masks::AssociateSummary r = masks::associate_masks(a);
     return nlohmann::json{{"objects", r.objects.size()}, {"masks", r.masks}, {"views_with_masks", r.views_with_masks}};
   });
@@ -261,7 +263,7 @@ void language_stages(Pipeline& p, const PrepareOptions& opt) {
     if (!p.resuming()) fs::remove_all(opt.scene / "features");
     Scene s = load_scene(opt.scene);
     clip::ClipModel m = opt.load_clip();
-    ViewFilesSummary r = write_clip_features(s, m, opt.dense, false, opt.progress);
+    clip::SceneFeaturesSummary r = clip::write_clip_features(s, m, opt.dense, false, opt.progress);
     return nlohmann::json{{"views", s.views.size()}, {"grid", {r.grid_w, r.grid_h}}, {"dim", m.embed_dim}};
   });
   std::vector<std::string> phrases = opt.phrases;
