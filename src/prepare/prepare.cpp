@@ -16,6 +16,7 @@
 #include "prepare/stages.h"
 #include "sam/scene_masks.h"
 #include "scene/scene.h"
+#include "scene/text_embeddings.h"
 #include "train/depth_model.h"
 
 namespace hgs::prepare {
@@ -32,8 +33,6 @@ const std::vector<std::pair<std::string, std::string>>& stage_groups() {
 }
 
 namespace {
-
-const char* kCanonical[] = {"object", "things", "stuff", "texture"};  // LERF's canonical phrases
 
 // Runs stages in order with their keys, timing them and skipping those the log records complete.
 class Pipeline {
@@ -267,16 +266,15 @@ void language_stages(Pipeline& p, const PrepareOptions& opt) {
     return nlohmann::json{{"views", s.views.size()}, {"grid", {r.grid_w, r.grid_h}}, {"dim", m.embed_dim}};
   });
   std::vector<std::string> phrases = opt.phrases;
-  for (const char* c : kCanonical)
+  for (const char* c : kCanonicalPhrases)
     if (std::find(phrases.begin(), phrases.end(), c) == phrases.end()) phrases.push_back(c);
   p.stage("text", {}, opt.clip_key + nlohmann::json(phrases).dump(), [&] {
     clip::ClipModel m = opt.load_clip();
     if (!m.has_text) fail("{}: the CLIP model has no text tower (text_embeddings.json needs one)", opt.clip_key);
     std::vector<float> e = m.embed_text(phrases);
     nlohmann::json out = nlohmann::json::object();
-    for (size_t i = 0; i < phrases.size(); ++i)
-      out[phrases[i]] = std::vector<float>(e.begin() + i * m.embed_dim, e.begin() + (i + 1) * m.embed_dim);
-    atomic_write_text(opt.scene / "text_embeddings.json", out.dump() + "\n");
+    add_text_embeddings(out, phrases, e, m.embed_dim);
+    write_text_embeddings(opt.scene / "text_embeddings.json", out);
     return nlohmann::json{{"phrases", phrases}};
   });
 }
