@@ -1,4 +1,4 @@
-// The scene's shared helpers: phrase files and the text_embeddings.json writer.
+// The scene's shared helpers: phrase files, the text_embeddings.json writer and the COLMAP model folder of a scene.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -6,6 +6,7 @@
 
 #include "core/error.h"
 #include "core/fs.h"
+#include "scene/colmap.h"
 #include "scene/text_embeddings.h"
 #include "test_util.h"
 
@@ -40,6 +41,21 @@ TEST(TextEmbeddings, WrittenEmbeddingsReadBackPerPhraseAndReplaceEqualOnes) {
 TEST(TextEmbeddings, CanonicalPhrasesAreLerfs) {
   EXPECT_EQ(std::vector<std::string>(kCanonicalPhrases.begin(), kCanonicalPhrases.end()),
             (std::vector<std::string>{"object", "things", "stuff", "texture"}));
+}
+
+TEST(ColmapModelDir, SparseZeroElseSparseWithCamerasElseAnErrorNamingTheScene) {
+  TempDir t;
+  ensure_dir(t / "s" / "sparse");
+  try {
+    colmap_model_dir(t / "s");
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find((t / "s").string() + ": no COLMAP model"), std::string::npos) << e.what();
+  }
+  atomic_write_text(t / "s" / "sparse" / "cameras.bin", "");
+  EXPECT_EQ(colmap_model_dir(t / "s"), t / "s" / "sparse");
+  ensure_dir(t / "s" / "sparse" / "0");
+  EXPECT_EQ(colmap_model_dir(t / "s"), t / "s" / "sparse" / "0");
 }
 
 }  // namespace
