@@ -25,7 +25,6 @@ struct PrepareArgs {
 };
 
 void run_prepare_command(PrepareArgs& a) {
-  clip::set_num_threads(a.threads);
   set_threads(a.threads);
   prepare::PrepareOptions& o = a.o;
   o.input = a.input, o.scene = a.out;
