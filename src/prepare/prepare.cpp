@@ -13,6 +13,7 @@
 #include "core/fs.h"
 #include "masks/import.h"
 #include "prepare/run_tool.h"
+#include "prepare/stage_info.h"
 #include "prepare/stage_options.h"
 #include "prepare/stages.h"
 #include "sam/scene_masks.h"
@@ -68,7 +69,12 @@ class Pipeline {
   }
   // Inside a stage: an earlier run started it with the same key (its per-view outputs may be kept).
   bool resuming() const { return resuming_; }
-  const nlohmann::json& info(const std::string& name) const { return log_.info(name); }
+  // What stage `name` recorded when it completed (stage_info.h); has_info: whether it did.
+  template <class Info>
+  Info info(const std::string& name) const {
+    return log_.info(name).get<Info>();
+  }
+  bool has_info(const std::string& name) const { return !log_.info(name).empty(); }
   const std::vector<StageRun>& runs() const { return runs_; }
   bool stopped() const { return stopped_; }
 
@@ -101,41 +107,35 @@ void check_scene_folder(const fs::path& scene, const fs::path& input) {
   if (fs::equivalent(scene, input, ec)) fail("{}: --out must not be the input folder", scene.string());
 }
 
-nlohmann::json input_info(const InputReport& r, const fs::path& input, bool video) {
-  int resized = 0, rotated = 0;
-  nlohmann::json list = nlohmann::json::array();
+InputInfo input_info(const InputReport& r, const fs::path& input, bool video) {
+  InputInfo in;
+  in.path = input.string(), in.kind = video ? "video" : "photos", in.images = int(r.images.size());
+  in.not_images = r.not_images, in.bad = r.bad, in.blurred = r.blurred;
   for (const InputImage& im : r.images) {
-    resized += im.resized;
-    rotated += im.orientation != 1;
-    list.push_back({im.name, im.width, im.height, im.orientation, im.source});
+    in.resized += im.resized;
+    in.rotated += im.orientation != 1;
+    in.list.push_back({im.name, im.width, im.height, im.orientation, im.source});
   }
-  return {{"path", input.string()},
-          {"kind", video ? "video" : "photos"},
-          {"images", r.images.size()},
-          {"not_images", r.not_images},
-          {"bad", r.bad},
-          {"blurred", r.blurred},
-          {"resized", resized},
-          {"rotated", rotated},
-          {"list", list}};
+  return in;
 }
 
-std::vector<std::string> input_names(const nlohmann::json& info) {
+std::vector<std::string> input_names(const InputInfo& in) {
   std::vector<std::string> names;
-  for (const auto& e : info.at("list")) names.push_back(e.at(0).get<std::string>());
+  for (const InputEntry& e : in.list) names.push_back(e.name);
   return names;
 }
 
-nlohmann::json pose_info(const PoseSummary& s) {
-  return {{"images", s.images},
-          {"registered", s.registered},
-          {"dropped", s.dropped},
-          {"models", s.models},
-          {"cameras", s.cameras},
-          {"points", s.points},
-          {"mean_reprojection_error_px", s.mean_reprojection_error},
-          {"mean_track_length", s.mean_track_length},
-          {"matcher", s.matcher}};
+MappingInfo mapping_info(const PoseSummary& s, const fs::path& model) {
+  return {s.images,
+          s.registered,
+          s.dropped,
+          s.models,
+          s.cameras,
+          s.points,
+          s.mean_reprojection_error,
+          s.mean_track_length,
+          s.matcher,
+          model.string()};
 }
 
 // Fewer than half the images registered: a capture problem the user should see before training on it.
@@ -163,7 +163,7 @@ void input_stage(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
   if (!video && !fs::is_directory(opt.input)) fail("{}: not a folder of photos or a video file", opt.input.string());
   InputReport r =
       video ? import_video(opt.input, work / "input", opt.in) : import_photos(opt.input, work / "input", opt.in);
-  nlohmann::json info = input_info(r, opt.input, video);
+  const nlohmann::json info = input_info(r, opt.input, video);
   if (r.images.size() < 3)
     fail(
         "{}: {} image{} found{}: COLMAP needs at least 3 overlapping views (20-200 photos around the subject work "
@@ -199,7 +199,7 @@ void pose_stages(Pipeline& p, const PrepareOptions& opt, const StageOptions& so,
     if (exe.empty()) exe = require_tool({opt.pose.colmap, "colmap"}, "--colmap");
     return exe;
   };
-  const std::vector<std::string> names = input_names(p.info("input"));
+  const std::vector<std::string> names = input_names(p.info<InputInfo>("input"));
   const int n = int(names.size());
   // The COLMAP settings of the stages: their options, the program and the progress bars.
   PoseOptions po;
@@ -214,7 +214,7 @@ void pose_stages(Pipeline& p, const PrepareOptions& opt, const StageOptions& so,
   });
   p.stage("matching", [&] {
     match_features(colmap(), work, matcher, n, po);
-    return nlohmann::json{{"matcher", matcher}};
+    return nlohmann::json(MatchingInfo{matcher});
   });
   p.stage("mapping", [&] {
     const fs::path best = map_poses(colmap(), work / "input", work, n, po);
@@ -223,17 +223,15 @@ void pose_stages(Pipeline& p, const PrepareOptions& opt, const StageOptions& so,
     int models = 0;
     for (const auto& e : fs::directory_iterator(work / "sparse")) models += e.is_directory();
     s.models = models;
-    nlohmann::json info = pose_info(s);
-    info["model"] = best.string();
-    return info;
+    return nlohmann::json(mapping_info(s, best));
   });
   if (p.stopped()) return;
-  const nlohmann::json m = p.info("mapping");
+  const MappingInfo m = p.info<MappingInfo>("mapping");
   PoseSummary s;
-  s.images = m.at("images"), s.registered = m.at("registered"), s.dropped = m.at("dropped");
+  s.images = m.images, s.registered = m.registered, s.dropped = m.dropped;
   check_registration(s, opt.allow_partial);
   p.stage("undistort", [&] {
-    undistort(colmap(), work / "input", m.at("model").get<std::string>(), work, opt.scene, po);
+    undistort(colmap(), work / "input", m.model, work, opt.scene, po);
     return nlohmann::json::object();
   });
 }
@@ -246,27 +244,27 @@ void mask_stages(Pipeline& p, const PrepareOptions& opt, const StageOptions& so,
     Scene s = load_scene(opt.scene);
     sam::SamModel m = opt.load_sam();
     sam::SceneMasksSummary r = sam::write_sam_files(s, m, so.sam.amg, sam_dir, false, opt.progress);
-    return nlohmann::json{{"views", s.views.size()}, {"written", r.written}};
+    return nlohmann::json(SamInfo{int(s.views.size()), r.written});
   });
   p.stage("import", [&] {
     fs::remove_all(opt.scene / "masks");
     masks::ImportOptions io;
     io.scene = opt.scene, io.from = "sam-json", io.dir = sam_dir, io.force = true, io.progress = opt.progress;
     masks::ImportSummary r = masks::import_masks(io);
-    return nlohmann::json{{"views", r.imported}, {"masks", r.masks}, {"hidden", r.hidden}};
+    return nlohmann::json(ImportInfo{r.imported, r.masks, r.hidden});
   });
   const fs::path depth_ply = work / "depth_model" / "point_cloud.ply";
   const int depth_iters = so.depth.iters;
   p.stage("depth", [&] {
     if (depth_iters > 0) train::train_depth_model(load_scene(opt.scene), depth_iters, depth_ply, opt.progress);
-    return nlohmann::json{{"iters", depth_iters}};
+    return nlohmann::json(DepthInfo{depth_iters});
   });
   p.stage("associate", [&] {
     masks::AssociateOptions a = so.associate.associate;
     a.scene = opt.scene, a.out_masks.clear(), a.names.clear(), a.force = true, a.progress = opt.progress;
     if (depth_iters > 0) a.depth = train::depth_from_model(depth_ply);
     masks::AssociateSummary r = masks::associate_masks(a);
-    return nlohmann::json{{"objects", r.objects.size()}, {"masks", r.masks}, {"views_with_masks", r.views_with_masks}};
+    return nlohmann::json(AssociateInfo{int(r.objects.size()), r.masks, r.views_with_masks});
   });
 }
 
@@ -276,7 +274,7 @@ void language_stages(Pipeline& p, const PrepareOptions& opt, const StageOptions&
     Scene s = load_scene(opt.scene);
     clip::ClipModel m = opt.load_clip();
     clip::SceneFeaturesSummary r = clip::write_clip_features(s, m, so.clip.dense, false, opt.progress);
-    return nlohmann::json{{"views", s.views.size()}, {"grid", {r.grid_w, r.grid_h}}, {"dim", m.embed_dim}};
+    return nlohmann::json(ClipInfo{int(s.views.size()), {r.grid_w, r.grid_h}, m.embed_dim});
   });
   const std::vector<std::string>& phrases = so.text.phrases;
   p.stage("text", [&] {
@@ -286,7 +284,7 @@ void language_stages(Pipeline& p, const PrepareOptions& opt, const StageOptions&
     nlohmann::json out = nlohmann::json::object();
     add_text_embeddings(out, phrases, e, m.embed_dim);
     write_text_embeddings(opt.scene / "text_embeddings.json", out);
-    return nlohmann::json{{"phrases", phrases}};
+    return nlohmann::json(TextInfo{phrases});
   });
 }
 
@@ -313,22 +311,23 @@ nlohmann::json masks_per_view(const fs::path& sam_dir) {
 nlohmann::json prepare_json(const Pipeline& p, const PrepareOptions& opt) {
   nlohmann::json j;
   j["scene"] = opt.scene.string();
-  nlohmann::json in = p.info("input");
-  in.erase("list");
-  j["input"] = in;
-  j["poses"] = p.info("mapping");
-  j["poses"].erase("model");
+  j["input"] = p.info<InputInfo>("input");
+  j["input"].erase("list");
+  j["poses"] = nlohmann::json::object();
+  if (p.has_info("mapping")) {
+    j["poses"] = p.info<MappingInfo>("mapping");
+    j["poses"].erase("model");
+  }
   j["masks"] = nlohmann::json::object();
-  if (opt.load_sam && !p.info("associate").empty()) {
-    nlohmann::json m = p.info("associate");
-    m["masks_per_view"] = masks_per_view(opt.scene / "prepare" / "sam");
-    m["depth_iters"] = p.info("depth").value("iters", 0);
-    j["masks"] = m;
+  if (opt.load_sam && p.has_info("associate")) {
+    j["masks"] = p.info<AssociateInfo>("associate");
+    j["masks"]["masks_per_view"] = masks_per_view(opt.scene / "prepare" / "sam");
+    j["masks"]["depth_iters"] = p.info<DepthInfo>("depth").iters;
   }
   j["language"] = nlohmann::json::object();
-  if (opt.load_clip && !p.info("clip").empty()) {
-    j["language"] = p.info("clip");
-    j["language"]["phrases"] = p.info("text").value("phrases", nlohmann::json::array());
+  if (opt.load_clip && p.has_info("clip")) {
+    j["language"] = p.info<ClipInfo>("clip");
+    j["language"]["phrases"] = p.info<TextInfo>("text").phrases;
   }
   nlohmann::json st = nlohmann::json::array();
   double total = 0;
@@ -350,8 +349,8 @@ PrepareReport run_prepare(const PrepareOptions& opt) {
   ensure_dir(work);
   Pipeline p(opt);
   input_stage(p, opt, work);
-  const nlohmann::json& in = p.info("input");
-  const StageOptions so = stage_options(opt, int(input_names(in).size()), in.value("kind", "") == "video");
+  const InputInfo in = p.info<InputInfo>("input");
+  const StageOptions so = stage_options(opt, in.images, in.kind == "video");
   p.set_options(so);
   if (!p.stopped()) pose_stages(p, opt, so, work);
   if (!p.stopped() && opt.load_sam) mask_stages(p, opt, so, work);
