@@ -2,13 +2,13 @@
 // text_embeddings.json format {"phrase": [D floats], ...} (L2-normalised).
 #include <fmt/format.h>
 
-#include <fstream>
 #include <nlohmann/json.hpp>
 
 #include "cli/command.h"
 #include "clip/model.h"
 #include "core/error.h"
 #include "core/fs.h"
+#include "scene/text_embeddings.h"
 
 namespace hgs::cli {
 namespace {
@@ -24,20 +24,10 @@ struct EmbedTextArgs {
 void run_embed_text(const EmbedTextArgs& a) {
   clip::set_num_threads(a.threads);
   std::vector<std::string> phrases = a.texts;
-  if (!a.text_file.empty()) {
-    std::string body = read_file_text(a.text_file);
-    size_t pos = 0;
-    while (pos <= body.size()) {
-      size_t e = body.find('\n', pos);
-      if (e == std::string::npos) e = body.size();
-      std::string line = body.substr(pos, e - pos);
-      if (!line.empty() && line.back() == '\r') line.pop_back();
-      if (!line.empty()) phrases.push_back(line);
-      pos = e + 1;
-    }
-  }
+  if (!a.text_file.empty())
+    for (const std::string& p : read_phrase_file(a.text_file)) phrases.push_back(p);
   if (a.canonical)
-    for (const char* c : {"object", "things", "stuff", "texture"}) phrases.push_back(c);
+    for (const char* c : kCanonicalPhrases) phrases.push_back(c);
   if (phrases.empty()) fail("embed-text: no phrases (use --text, --text-file or --canonical)");
   nlohmann::json out = nlohmann::json::object();
   if (a.merge && fs::exists(a.out)) {
@@ -59,9 +49,8 @@ void run_embed_text(const EmbedTextArgs& a) {
       fail("{}: holds {}-dimensional embeddings but the model gives {}", a.out, first->size(), m.embed_dim);
   }
   std::vector<float> e = m.embed_text(phrases);
-  for (size_t i = 0; i < phrases.size(); ++i)
-    out[phrases[i]] = std::vector<float>(e.begin() + i * m.embed_dim, e.begin() + (i + 1) * m.embed_dim);
-  atomic_write_text(a.out, out.dump() + "\n");
+  add_text_embeddings(out, phrases, e, m.embed_dim);
+  write_text_embeddings(a.out, out);
   fmt::print("wrote {} phrases (D = {}) to {}\n", phrases.size(), m.embed_dim, a.out);
 }
 

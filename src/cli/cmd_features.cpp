@@ -4,8 +4,8 @@
 
 #include "cli/command.h"
 #include "clip/model.h"
+#include "clip/scene_features.h"
 #include "core/error.h"
-#include "prepare/view_outputs.h"
 #include "scene/scene.h"
 
 namespace hgs::cli {
@@ -35,10 +35,9 @@ void run_features(const FeaturesArgs& a) {
   if (d.input_size < m.vision.patch)
     fail("--input-size {} is smaller than the patch size {}", d.input_size, m.vision.patch);
   const fs::path out_dir = s.root / "features";
-  prepare::ViewFilesSummary r = prepare::write_clip_features(s, m, d, !a.skip_existing, !a.quiet);
-  const int done = r.written + r.skipped, skipped = r.skipped, h = r.grid_h, w = r.grid_w;
-  fmt::print("wrote {} feature maps to {} ({} skipped; D = {}{})\n", done - skipped, out_dir.string(), skipped,
-             m.embed_dim, h ? fmt::format(", last grid {}x{}", w, h) : "");
+  clip::SceneFeaturesSummary r = clip::write_clip_features(s, m, d, !a.skip_existing, !a.quiet);
+  fmt::print("wrote {} feature maps to {} ({} skipped; D = {}{})\n", r.written, out_dir.string(), r.skipped,
+             m.embed_dim, r.grid_h ? fmt::format(", last grid {}x{}", r.grid_w, r.grid_h) : "");
 }
 
 CommandRegistration reg(

@@ -7,7 +7,7 @@
 #include "core/error.h"
 #include "core/npy.h"
 #include "masks/associate.h"
-#include "prepare/view_outputs.h"
+#include "train/depth_model.h"
 
 namespace hgs::cli {
 namespace {
@@ -129,7 +129,7 @@ MasksSubcommandRegistration reg(
          o->out_masks = *out;
          o->names = *names;
          if (!depth_dir->empty()) o->depth = depth_from_folder(*depth_dir);
-         if (!depth_model->empty()) o->depth = prepare::depth_from_model(*depth_model);
+         if (!depth_model->empty()) o->depth = train::depth_from_model(*depth_model);
          masks::AssociateSummary s = masks::associate_masks(*o);
          fmt::print("associated {} masks in {} of {} views", s.masks, s.views_with_masks, s.views);
          if (s.joined_parts) fmt::print(" ({} parts folded into their whole)", s.joined_parts);

@@ -7,8 +7,8 @@
 #include "cli/sam_options.h"
 #include "clip/model.h"
 #include "core/error.h"
-#include "prepare/view_outputs.h"
 #include "sam/amg.h"
+#include "sam/scene_masks.h"
 #include "scene/scene.h"
 
 namespace hgs::cli {
@@ -29,11 +29,9 @@ void run_generate(const GenerateArgs& a) {
   sam::SamModel m = a.model.load(a.sam);
   if (!a.quiet) fmt::print(stderr, "model: {}\n", m.describe());
   const fs::path out_dir = a.out.empty() ? s.root / "sam" : fs::path(a.out);
-  prepare::ViewFilesSummary r = prepare::write_sam_files(s, m, a.amg, out_dir, a.force, !a.quiet);
-  const int done = r.written + r.skipped, skipped = r.skipped;
-  const size_t total = r.items;
-  fmt::print("wrote {} SAM mask files to {} ({} skipped as already done): {} masks\n", done - skipped, out_dir.string(),
-             skipped, total);
+  sam::SceneMasksSummary r = sam::write_sam_files(s, m, a.amg, out_dir, a.force, !a.quiet);
+  fmt::print("wrote {} SAM mask files to {} ({} skipped as already done): {} masks\n", r.written, out_dir.string(),
+             r.skipped, r.masks);
   fmt::print("  next: hgs masks import {} --from sam-json {}\n", a.scene, out_dir.string());
 }
 

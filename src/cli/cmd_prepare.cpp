@@ -9,6 +9,7 @@
 #include "core/fs.h"
 #include "prepare/prepare.h"
 #include "prepare/stages.h"
+#include "scene/text_embeddings.h"
 
 namespace hgs::cli {
 namespace {
@@ -23,22 +24,7 @@ struct PrepareArgs {
   bool quiet = false;
 };
 
-std::vector<std::string> read_phrases(const std::string& file) {
-  std::vector<std::string> out;
-  std::string body = read_file_text(file), line;
-  for (size_t pos = 0; pos <= body.size();) {
-    size_t e = body.find('\n', pos);
-    if (e == std::string::npos) e = body.size();
-    line = body.substr(pos, e - pos);
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    if (!line.empty()) out.push_back(line);
-    pos = e + 1;
-  }
-  return out;
-}
-
 void run_prepare_command(PrepareArgs& a) {
-  clip::set_num_threads(a.threads);
   set_threads(a.threads);
   prepare::PrepareOptions& o = a.o;
   o.input = a.input, o.scene = a.out;
@@ -61,7 +47,7 @@ void run_prepare_command(PrepareArgs& a) {
   }
   o.phrases = a.texts;
   if (!a.phrases_file.empty())
-    for (const std::string& p : read_phrases(a.phrases_file)) o.phrases.push_back(p);
+    for (const std::string& p : read_phrase_file(a.phrases_file)) o.phrases.push_back(p);
   prepare::PrepareReport r = prepare::run_prepare(o);
   fmt::print("{}", r.text());
   fmt::print("  report     {}\n", (o.scene / "prepare.json").string());

@@ -108,7 +108,7 @@ struct Correspondences {
 
 Correspondences read_correspondences(const Scene& s) {
   Correspondences cc;
-  cc.model_dir = fs::is_directory(s.root / "sparse" / "0") ? s.root / "sparse" / "0" : s.root / "sparse";
+  cc.model_dir = colmap_model_dir(s.root);
   cc.model = read_colmap(cc.model_dir);
   cc.images_file = cc.model_dir / (fs::exists(cc.model_dir / "images.bin") ? "images.bin" : "images.txt");
   for (size_t i = 0; i < cc.model.points.size(); ++i) cc.point_index[int64_t(cc.model.points[i].id)] = int(i);

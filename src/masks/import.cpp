@@ -14,6 +14,7 @@
 #include "core/npy.h"
 #include "core/progress.h"
 #include "masks/sources.h"
+#include "scene/colmap.h"
 #include "scene/scene.h"
 
 namespace hgs::masks {
@@ -232,7 +233,7 @@ void write_output(const ImportOptions& opt, int level, const Scene& s, const std
 ImportSummary import_masks(const ImportOptions& opt) {
   const int level = check_options(opt);
   Scene s = load_scene(opt.scene);
-  const fs::path model = fs::is_directory(s.root / "sparse" / "0") ? s.root / "sparse" / "0" : s.root / "sparse";
+  const fs::path model = colmap_model_dir(s.root);
   std::vector<Job> jobs = match_files(s, opt, model);
   if (jobs.empty()) fail("{}: no {} files for any image of the scene", opt.dir.string(), opt.from);
   const bool langsplat = opt.from == "langsplat";

@@ -8,13 +8,18 @@
 #include <map>
 #include <set>
 
+#include "clip/scene_features.h"
 #include "core/error.h"
 #include "core/fs.h"
 #include "masks/import.h"
 #include "prepare/run_tool.h"
+#include "prepare/stage_info.h"
+#include "prepare/stage_options.h"
 #include "prepare/stages.h"
-#include "prepare/view_outputs.h"
+#include "sam/scene_masks.h"
 #include "scene/scene.h"
+#include "scene/text_embeddings.h"
+#include "train/depth_model.h"
 
 namespace hgs::prepare {
 namespace fs = std::filesystem;
@@ -31,23 +36,21 @@ const std::vector<std::pair<std::string, std::string>>& stage_groups() {
 
 namespace {
 
-const char* kCanonical[] = {"object", "things", "stuff", "texture"};  // LERF's canonical phrases
-
 // Runs stages in order with their keys, timing them and skipping those the log records complete.
 class Pipeline {
  public:
   Pipeline(const PrepareOptions& opt) : opt_(opt), log_(opt.scene / "prepare" / "state.json") {}
 
-  // Runs `fn` as stage `name` unless complete with the same key: a hash of `key_text` and the keys of the
-  // stages it reads (`deps`), so that a change reruns exactly the stages downstream of it. Returns false when
-  // --until stopped the run before this stage. `before`: seconds of work done for it before the call (the input
-  // stage computes its key so).
-  bool stage(const std::string& name, const std::vector<std::string>& deps, const std::string& key_text,
-             const std::function<nlohmann::json()>& fn, double before = 0) {
+  // The stage keys: the input's (a hash of what it produced), then every other stage's (stage_options.h).
+  void set_input_key(const std::string& key) { keys_["input"] = key; }
+  void set_options(const StageOptions& o) { keys_ = stage_keys(o, keys_.at("input")); }
+
+  // Runs `fn` as stage `name` unless complete with its key, so that a change reruns exactly the stages
+  // downstream of it. Returns false when --until stopped the run before this stage. `before`: seconds of work
+  // done for it before the call (the input stage computes its key so).
+  bool stage(const std::string& name, const std::function<nlohmann::json()>& fn, double before = 0) {
     if (stopped_) return false;
-    std::string text = name + "|" + key_text;
-    for (const std::string& d : deps) text += "|" + keys_.at(d);
-    const std::string key = keys_[name] = hash_key(text);
+    const std::string key = keys_.at(name);
     StageRun r{name, 0, log_.done(name, key)};
     if (r.reused) {
       r.seconds = log_.seconds(name);
@@ -66,7 +69,12 @@ class Pipeline {
   }
   // Inside a stage: an earlier run started it with the same key (its per-view outputs may be kept).
   bool resuming() const { return resuming_; }
-  const nlohmann::json& info(const std::string& name) const { return log_.info(name); }
+  // What stage `name` recorded when it completed (stage_info.h); has_info: whether it did.
+  template <class Info>
+  Info info(const std::string& name) const {
+    return log_.info(name).get<Info>();
+  }
+  bool has_info(const std::string& name) const { return !log_.info(name).empty(); }
   const std::vector<StageRun>& runs() const { return runs_; }
   bool stopped() const { return stopped_; }
 
@@ -84,7 +92,7 @@ class Pipeline {
   }
   const PrepareOptions& opt_;
   StageLog log_;
-  std::map<std::string, std::string> keys_;  // stage -> key, of the stages run or skipped so far
+  std::map<std::string, std::string> keys_;  // stage -> key
   std::vector<StageRun> runs_;
   bool stopped_ = false, resuming_ = false;
 };
@@ -99,41 +107,35 @@ void check_scene_folder(const fs::path& scene, const fs::path& input) {
   if (fs::equivalent(scene, input, ec)) fail("{}: --out must not be the input folder", scene.string());
 }
 
-nlohmann::json input_info(const InputReport& r, const fs::path& input, bool video) {
-  int resized = 0, rotated = 0;
-  nlohmann::json list = nlohmann::json::array();
+InputInfo input_info(const InputReport& r, const fs::path& input, bool video) {
+  InputInfo in;
+  in.path = input.string(), in.kind = video ? "video" : "photos", in.images = int(r.images.size());
+  in.not_images = r.not_images, in.bad = r.bad, in.blurred = r.blurred;
   for (const InputImage& im : r.images) {
-    resized += im.resized;
-    rotated += im.orientation != 1;
-    list.push_back({im.name, im.width, im.height, im.orientation, im.source});
+    in.resized += im.resized;
+    in.rotated += im.orientation != 1;
+    in.list.push_back({im.name, im.width, im.height, im.orientation, im.source});
   }
-  return {{"path", input.string()},
-          {"kind", video ? "video" : "photos"},
-          {"images", r.images.size()},
-          {"not_images", r.not_images},
-          {"bad", r.bad},
-          {"blurred", r.blurred},
-          {"resized", resized},
-          {"rotated", rotated},
-          {"list", list}};
+  return in;
 }
 
-std::vector<std::string> input_names(const nlohmann::json& info) {
+std::vector<std::string> input_names(const InputInfo& in) {
   std::vector<std::string> names;
-  for (const auto& e : info.at("list")) names.push_back(e.at(0).get<std::string>());
+  for (const InputEntry& e : in.list) names.push_back(e.name);
   return names;
 }
 
-nlohmann::json pose_info(const PoseSummary& s) {
-  return {{"images", s.images},
-          {"registered", s.registered},
-          {"dropped", s.dropped},
-          {"models", s.models},
-          {"cameras", s.cameras},
-          {"points", s.points},
-          {"mean_reprojection_error_px", s.mean_reprojection_error},
-          {"mean_track_length", s.mean_track_length},
-          {"matcher", s.matcher}};
+MappingInfo mapping_info(const PoseSummary& s, const fs::path& model) {
+  return {s.images,
+          s.registered,
+          s.dropped,
+          s.models,
+          s.cameras,
+          s.points,
+          s.mean_reprojection_error,
+          s.mean_track_length,
+          s.matcher,
+          model.string()};
 }
 
 // Fewer than half the images registered: a capture problem the user should see before training on it.
@@ -161,121 +163,128 @@ void input_stage(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
   if (!video && !fs::is_directory(opt.input)) fail("{}: not a folder of photos or a video file", opt.input.string());
   InputReport r =
       video ? import_video(opt.input, work / "input", opt.in) : import_photos(opt.input, work / "input", opt.in);
-  nlohmann::json info = input_info(r, opt.input, video);
+  const nlohmann::json info = input_info(r, opt.input, video);
   if (r.images.size() < 3)
     fail(
         "{}: {} image{} found{}: COLMAP needs at least 3 overlapping views (20-200 photos around the subject work "
         "best)",
         opt.input.string(), r.images.size(), r.images.size() == 1 ? "" : "s",
         r.not_images.empty() ? "" : fmt::format(" ({} other files skipped)", r.not_images.size()));
+  p.set_input_key(hash_key("input|" + info.dump()));
   p.stage(
-      "input", {}, info.dump(), [&] { return info; },
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+      "input", [&] { return info; }, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
 }
 
-void pose_stages(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
+// Every stage's options from the command's, once the input is known (the matcher depends on it).
+StageOptions stage_options(const PrepareOptions& opt, int n_images, bool video) {
+  StageOptions o;
+  o.features = {opt.pose.camera_model, opt.pose.max_features};
+  PoseOptions po = opt.pose;
+  po.ordered = video;
+  o.matching = {choose_matcher(po, n_images), opt.pose.vocab_tree};
+  o.sam = {opt.sam_key, opt.amg};
+  o.depth.iters = opt.depth_iters;
+  o.associate.associate = opt.associate;
+  o.clip = {opt.clip_key, opt.dense};
+  o.text.model = opt.clip_key;
+  o.text.phrases = opt.phrases;
+  for (const char* c : kCanonicalPhrases)
+    if (std::find(o.text.phrases.begin(), o.text.phrases.end(), c) == o.text.phrases.end()) o.text.phrases.push_back(c);
+  return o;
+}
+
+void pose_stages(Pipeline& p, const PrepareOptions& opt, const StageOptions& so, const fs::path& work) {
   fs::path exe;  // found when a stage needs it: a scene whose poses are complete does not need colmap
   auto colmap = [&] {
     if (exe.empty()) exe = require_tool({opt.pose.colmap, "colmap"}, "--colmap");
     return exe;
   };
-  const nlohmann::json in = p.info("input");
-  const std::vector<std::string> names = input_names(in);
+  const std::vector<std::string> names = input_names(p.info<InputInfo>("input"));
   const int n = int(names.size());
-  PoseOptions po = opt.pose;
-  po.ordered = in.value("kind", "") == "video";
-  const std::string matcher = choose_matcher(po, n);
-  p.stage("features", {"input"}, fmt::format("{} {}", po.camera_model, po.max_features), [&] {
+  // The COLMAP settings of the stages: their options, the program and the progress bars.
+  PoseOptions po;
+  po.colmap = opt.pose.colmap, po.progress = opt.pose.progress;
+  po.camera_model = so.features.camera_model, po.max_features = so.features.max_features;
+  po.matcher = so.matching.matcher, po.vocab_tree = so.matching.vocab_tree;
+  const std::string matcher = so.matching.matcher;
+  p.stage("features", [&] {
     fs::remove(work / "database.db");
     extract_features(colmap(), work / "input", work, po);
     return nlohmann::json::object();
   });
-  p.stage("matching", {"features"}, matcher + " " + po.vocab_tree, [&] {
+  p.stage("matching", [&] {
     match_features(colmap(), work, matcher, n, po);
-    return nlohmann::json{{"matcher", matcher}};
+    return nlohmann::json(MatchingInfo{matcher});
   });
-  p.stage("mapping", {"matching"}, "", [&] {
+  p.stage("mapping", [&] {
     const fs::path best = map_poses(colmap(), work / "input", work, n, po);
     PoseSummary s = summarize_model(best, names);
     s.matcher = matcher;
     int models = 0;
     for (const auto& e : fs::directory_iterator(work / "sparse")) models += e.is_directory();
     s.models = models;
-    nlohmann::json info = pose_info(s);
-    info["model"] = best.string();
-    return info;
+    return nlohmann::json(mapping_info(s, best));
   });
   if (p.stopped()) return;
-  const nlohmann::json m = p.info("mapping");
+  const MappingInfo m = p.info<MappingInfo>("mapping");
   PoseSummary s;
-  s.images = m.at("images"), s.registered = m.at("registered"), s.dropped = m.at("dropped");
+  s.images = m.images, s.registered = m.registered, s.dropped = m.dropped;
   check_registration(s, opt.allow_partial);
-  p.stage("undistort", {"mapping"}, "", [&] {
-    undistort(colmap(), work / "input", m.at("model").get<std::string>(), work, opt.scene, po);
+  p.stage("undistort", [&] {
+    undistort(colmap(), work / "input", m.model, work, opt.scene, po);
     return nlohmann::json::object();
   });
 }
 
-void mask_stages(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
+void mask_stages(Pipeline& p, const PrepareOptions& opt, const StageOptions& so, const fs::path& work) {
   const fs::path sam_dir = work / "sam";
-  const std::string amg_key =
-      fmt::format("{} {} {} {} {} {} {}", opt.sam_key, opt.amg.points_per_side, opt.amg.pred_iou_thresh,
-                  opt.amg.stability_score_thresh, opt.amg.stability_score_offset, opt.amg.box_nms_thresh,
-                  opt.amg.min_mask_region_area);
-  p.stage("sam", {"undistort"}, amg_key, [&] {
+  p.stage("sam", [&] {
     // A run started with the same key keeps the views it wrote; another key starts over.
     if (!p.resuming()) fs::remove_all(sam_dir);
     Scene s = load_scene(opt.scene);
     sam::SamModel m = opt.load_sam();
-    ViewFilesSummary r = write_sam_files(s, m, opt.amg, sam_dir, false, opt.progress);
-    return nlohmann::json{{"views", s.views.size()}, {"written", r.written}};
+    sam::SceneMasksSummary r = sam::write_sam_files(s, m, so.sam.amg, sam_dir, false, opt.progress);
+    return nlohmann::json(SamInfo{int(s.views.size()), r.written});
   });
-  p.stage("import", {"sam"}, "", [&] {
+  p.stage("import", [&] {
     fs::remove_all(opt.scene / "masks");
     masks::ImportOptions io;
     io.scene = opt.scene, io.from = "sam-json", io.dir = sam_dir, io.force = true, io.progress = opt.progress;
     masks::ImportSummary r = masks::import_masks(io);
-    return nlohmann::json{{"views", r.imported}, {"masks", r.masks}, {"hidden", r.hidden}};
+    return nlohmann::json(ImportInfo{r.imported, r.masks, r.hidden});
   });
   const fs::path depth_ply = work / "depth_model" / "point_cloud.ply";
-  p.stage("depth", {"undistort"}, std::to_string(opt.depth_iters), [&] {
-    if (opt.depth_iters > 0) train_depth_model(load_scene(opt.scene), opt.depth_iters, depth_ply, opt.progress);
-    return nlohmann::json{{"iters", opt.depth_iters}};
+  const int depth_iters = so.depth.iters;
+  p.stage("depth", [&] {
+    if (depth_iters > 0) train::train_depth_model(load_scene(opt.scene), depth_iters, depth_ply, opt.progress);
+    return nlohmann::json(DepthInfo{depth_iters});
   });
-  const masks::AssociateOptions& ao = opt.associate;
-  const std::string assoc_key =
-      fmt::format("{} {} {} {} {}", ao.min_views, ao.min_points, ao.min_affinity, ao.max_area, ao.drop_surfaces);
-  p.stage("associate", {"import", "depth"}, assoc_key, [&] {
-    masks::AssociateOptions a = opt.associate;
-    a.scene = opt.scene, a.force = true, a.progress = opt.progress;
-    if (opt.depth_iters > 0) a.depth = depth_from_model(depth_ply);
+  p.stage("associate", [&] {
+    masks::AssociateOptions a = so.associate.associate;
+    a.scene = opt.scene, a.out_masks.clear(), a.names.clear(), a.force = true, a.progress = opt.progress;
+    if (depth_iters > 0) a.depth = train::depth_from_model(depth_ply);
     masks::AssociateSummary r = masks::associate_masks(a);
-    return nlohmann::json{{"objects", r.objects.size()}, {"masks", r.masks}, {"views_with_masks", r.views_with_masks}};
+    return nlohmann::json(AssociateInfo{int(r.objects.size()), r.masks, r.views_with_masks});
   });
 }
 
-void language_stages(Pipeline& p, const PrepareOptions& opt) {
-  const std::string dense_key =
-      fmt::format("{} {} {} {}", opt.clip_key, opt.dense.input_size, opt.dense.tile_size, opt.dense.max_tokens);
-  p.stage("clip", {"undistort"}, dense_key, [&] {
+void language_stages(Pipeline& p, const PrepareOptions& opt, const StageOptions& so) {
+  p.stage("clip", [&] {
     if (!p.resuming()) fs::remove_all(opt.scene / "features");
     Scene s = load_scene(opt.scene);
     clip::ClipModel m = opt.load_clip();
-    ViewFilesSummary r = write_clip_features(s, m, opt.dense, false, opt.progress);
-    return nlohmann::json{{"views", s.views.size()}, {"grid", {r.grid_w, r.grid_h}}, {"dim", m.embed_dim}};
+    clip::SceneFeaturesSummary r = clip::write_clip_features(s, m, so.clip.dense, false, opt.progress);
+    return nlohmann::json(ClipInfo{int(s.views.size()), {r.grid_w, r.grid_h}, m.embed_dim});
   });
-  std::vector<std::string> phrases = opt.phrases;
-  for (const char* c : kCanonical)
-    if (std::find(phrases.begin(), phrases.end(), c) == phrases.end()) phrases.push_back(c);
-  p.stage("text", {}, opt.clip_key + nlohmann::json(phrases).dump(), [&] {
+  const std::vector<std::string>& phrases = so.text.phrases;
+  p.stage("text", [&] {
     clip::ClipModel m = opt.load_clip();
     if (!m.has_text) fail("{}: the CLIP model has no text tower (text_embeddings.json needs one)", opt.clip_key);
     std::vector<float> e = m.embed_text(phrases);
     nlohmann::json out = nlohmann::json::object();
-    for (size_t i = 0; i < phrases.size(); ++i)
-      out[phrases[i]] = std::vector<float>(e.begin() + i * m.embed_dim, e.begin() + (i + 1) * m.embed_dim);
-    atomic_write_text(opt.scene / "text_embeddings.json", out.dump() + "\n");
-    return nlohmann::json{{"phrases", phrases}};
+    add_text_embeddings(out, phrases, e, m.embed_dim);
+    write_text_embeddings(opt.scene / "text_embeddings.json", out);
+    return nlohmann::json(TextInfo{phrases});
   });
 }
 
@@ -302,22 +311,23 @@ nlohmann::json masks_per_view(const fs::path& sam_dir) {
 nlohmann::json prepare_json(const Pipeline& p, const PrepareOptions& opt) {
   nlohmann::json j;
   j["scene"] = opt.scene.string();
-  nlohmann::json in = p.info("input");
-  in.erase("list");
-  j["input"] = in;
-  j["poses"] = p.info("mapping");
-  j["poses"].erase("model");
+  j["input"] = p.info<InputInfo>("input");
+  j["input"].erase("list");
+  j["poses"] = nlohmann::json::object();
+  if (p.has_info("mapping")) {
+    j["poses"] = p.info<MappingInfo>("mapping");
+    j["poses"].erase("model");
+  }
   j["masks"] = nlohmann::json::object();
-  if (opt.load_sam && !p.info("associate").empty()) {
-    nlohmann::json m = p.info("associate");
-    m["masks_per_view"] = masks_per_view(opt.scene / "prepare" / "sam");
-    m["depth_iters"] = p.info("depth").value("iters", 0);
-    j["masks"] = m;
+  if (opt.load_sam && p.has_info("associate")) {
+    j["masks"] = p.info<AssociateInfo>("associate");
+    j["masks"]["masks_per_view"] = masks_per_view(opt.scene / "prepare" / "sam");
+    j["masks"]["depth_iters"] = p.info<DepthInfo>("depth").iters;
   }
   j["language"] = nlohmann::json::object();
-  if (opt.load_clip && !p.info("clip").empty()) {
-    j["language"] = p.info("clip");
-    j["language"]["phrases"] = p.info("text").value("phrases", nlohmann::json::array());
+  if (opt.load_clip && p.has_info("clip")) {
+    j["language"] = p.info<ClipInfo>("clip");
+    j["language"]["phrases"] = p.info<TextInfo>("text").phrases;
   }
   nlohmann::json st = nlohmann::json::array();
   double total = 0;
@@ -339,9 +349,12 @@ PrepareReport run_prepare(const PrepareOptions& opt) {
   ensure_dir(work);
   Pipeline p(opt);
   input_stage(p, opt, work);
-  if (!p.stopped()) pose_stages(p, opt, work);
-  if (!p.stopped() && opt.load_sam) mask_stages(p, opt, work);
-  if (!p.stopped() && opt.load_clip) language_stages(p, opt);
+  const InputInfo in = p.info<InputInfo>("input");
+  const StageOptions so = stage_options(opt, in.images, in.kind == "video");
+  p.set_options(so);
+  if (!p.stopped()) pose_stages(p, opt, so, work);
+  if (!p.stopped() && opt.load_sam) mask_stages(p, opt, so, work);
+  if (!p.stopped() && opt.load_clip) language_stages(p, opt, so);
   PrepareReport r;
   r.stages = p.runs();
   r.json = prepare_json(p, opt);

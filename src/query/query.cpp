@@ -10,8 +10,6 @@
 
 namespace hgs::query {
 
-const char* const kCanonicalPhrases[4] = {"object", "things", "stuff", "texture"};
-
 ObjectEmbeddings object_embeddings(const GaussianModel& m) {
   const auto h = hybrid::ConstHybridFields::bind(m, "query");
   const ExtraGroup *q = h.q, *f = h.f, *z = h.z;

@@ -22,8 +22,6 @@
 
 namespace hgs::query {
 
-extern const char* const kCanonicalPhrases[4];  // "object", "things", "stuff", "texture"
-
 struct ObjectEmbeddings {
   int num_labels = 0, dim = 0;
   std::vector<float> e;       // [L, D] unit vectors (zero for objects without Gaussians)

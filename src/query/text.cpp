@@ -5,6 +5,7 @@
 #include "clip/model.h"
 #include "core/error.h"
 #include "query/query.h"
+#include "scene/text_embeddings.h"
 
 namespace hgs::query {
 

@@ -386,4 +386,15 @@ Eigen::Vector4d rotmat_to_qvec(const Eigen::Matrix3d& R) {
   return {q.w(), q.x(), q.y(), q.z()};
 }
 
+std::filesystem::path colmap_model_dir(const std::filesystem::path& scene) {
+  const std::filesystem::path sparse = scene / "sparse";
+  if (std::filesystem::is_directory(sparse / "0")) return sparse / "0";
+  std::error_code ec;
+  const bool cameras = std::filesystem::exists(sparse / "cameras.bin", ec);
+  if (ec) fail("{}: cannot access ({})", (sparse / "cameras.bin").string(), ec.message());
+  if (!std::filesystem::is_directory(sparse) || !cameras)
+    fail("{}: no COLMAP model (expected sparse/0/ with cameras, images, points3D)", scene.string());
+  return sparse;
+}
+
 }  // namespace hgs

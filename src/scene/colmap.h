@@ -42,6 +42,10 @@ struct ColmapModel {
   std::vector<ColmapPoint> points;
 };
 
+// The COLMAP model of a scene folder: SCENE/sparse/0/, or SCENE/sparse/ itself when it holds cameras.bin.
+// Fails naming the scene when neither is there.
+std::filesystem::path colmap_model_dir(const std::filesystem::path& scene);
+
 // Reads SPARSE_DIR/{cameras,images,points3D}.bin, or the .txt trio when the .bin files are absent.
 ColmapModel read_colmap(const std::filesystem::path& sparse_dir);
 ColmapModel read_colmap_bin(const std::filesystem::path& sparse_dir);

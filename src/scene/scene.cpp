@@ -67,16 +67,6 @@ json read_json(const fs::path& p) {
   }
 }
 
-// The COLMAP model's folder: sparse/0/, or sparse/ itself when it holds cameras.bin.
-fs::path find_model(const fs::path& root) {
-  fs::path sparse = root / "sparse" / "0";
-  if (!fs::is_directory(sparse)) {
-    if (fs::is_directory(root / "sparse") && path_exists(root / "sparse" / "cameras.bin")) sparse = root / "sparse";
-    else fail("{}: no COLMAP model (expected sparse/0/ with cameras, images, points3D)", root.string());
-  }
-  return sparse;
-}
-
 // One view of COLMAP image `im` at downscale F, with the paths of its image (images_F/ when there), mask,
 // confidence and features. Sizes and poses from the file are checked before anything is sized or rendered by them.
 View make_view(const fs::path& root, const fs::path& sparse, const ColmapModel& m, const ColmapImage& im, int F) {
@@ -230,7 +220,7 @@ Scene load_scene(const fs::path& root_in, const SceneOptions& opt) {
   s.downscale = std::max(1, opt.downscale);
   if (!path_exists(s.root)) fail("{}: scene folder not found", s.root.string());
   if (!fs::is_directory(s.root)) fail("{}: not a folder", s.root.string());
-  const fs::path sparse = find_model(s.root);
+  const fs::path sparse = colmap_model_dir(s.root);
   if (!fs::is_directory(s.root / "images")) fail("{}: images/ folder not found", s.root.string());
   ColmapModel m = read_colmap(sparse);
   if (m.images.empty()) fail("{}: the COLMAP model lists no images", sparse.string());

@@ -18,6 +18,7 @@
 #include "masks/flatten.h"
 #include "masks/rle.h"
 #include "scene/colmap.h"
+#include "scene/text_embeddings.h"
 #include "synth/synth.h"
 
 namespace hgs::synth {
@@ -313,13 +314,13 @@ void write_text_embeddings(const Generation& g) {
   std::vector<std::string> distract = g.world.unused_names;
   for (const char* d : {"violin", "sports car", "umbrella", "laptop computer"}) distract.push_back(d);
   for (auto& d : distract) te[d] = float_array(noisy(concept_vector(d, D), 0.15, rng));
-  for (const char* c : {"object", "things", "stuff", "texture"}) {
+  for (const char* c : kCanonicalPhrases) {
     auto own = concept_vector(c, D);
     std::vector<float> v(D);
     for (int d = 0; d < D; ++d) v[d] = cc.context[d] + 0.6f * own[d];
     te[c] = float_array(noisy(v, 0.0, rng));
   }
-  atomic_write_text(g.tmp / "text_embeddings.json", te.dump() + "\n");
+  hgs::write_text_embeddings(g.tmp / "text_embeddings.json", te);
 }
 
 // Camera-space point at the centre of pixel (x, y) at depth z. Not inlined: the point is rounded before the
