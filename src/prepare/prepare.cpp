@@ -253,16 +253,16 @@ void mask_stages(Pipeline& p, const PrepareOptions& opt, const StageOptions& so,
     masks::ImportSummary r = masks::import_masks(io);
     return nlohmann::json(ImportInfo{r.imported, r.masks, r.hidden});
   });
-  const fs::path depth_ply = work / "depth_model" / "point_cloud.ply";
+  const fs::path depth_model = work / "depth_model";  // a model folder (train/run.h)
   const int depth_iters = so.depth.iters;
   p.stage("depth", [&] {
-    if (depth_iters > 0) train::train_depth_model(load_scene(opt.scene), depth_iters, depth_ply, opt.progress);
+    if (depth_iters > 0) train::train_depth_model(load_scene(opt.scene), depth_iters, depth_model, opt.progress);
     return nlohmann::json(DepthInfo{depth_iters});
   });
   p.stage("associate", [&] {
     masks::AssociateOptions a = so.associate.associate;
     a.scene = opt.scene, a.out_masks.clear(), a.names.clear(), a.force = true, a.progress = opt.progress;
-    if (depth_iters > 0) a.depth = train::depth_from_model(depth_ply);
+    if (depth_iters > 0) a.depth = train::depth_from_model(depth_model);
     masks::AssociateSummary r = masks::associate_masks(a);
     return nlohmann::json(AssociateInfo{int(r.objects.size()), r.masks, r.views_with_masks});
   });

@@ -1,18 +1,15 @@
 // Depth model training and its per-view depth (see depth_model.h).
 #include "train/depth_model.h"
 
-#include <fmt/format.h>
-
 #include <memory>
 
-#include "core/fs.h"
-#include "core/progress.h"
 #include "model/near_plane.h"
 #include "model/ply.h"
 #include "model/render_inputs.h"
 #include "render/camera_from_view.h"
 #include "render/renderer.h"
 #include "train/registry.h"
+#include "train/run.h"
 
 namespace hgs::train {
 namespace fs = std::filesystem;
@@ -35,20 +32,19 @@ std::function<std::vector<float>(const View&)> depth_from_model(const fs::path& 
   };
 }
 
-void train_depth_model(const Scene& scene, int iters, const fs::path& out_ply, bool progress) {
+void train_depth_model(const Scene& scene, int iters, const fs::path& out, bool progress) {
   std::vector<int> idx(scene.views.size());
   for (size_t i = 0; i < idx.size(); ++i) idx[i] = int(i);
-  TrainConfig cfg;
+  TrainConfig cfg;  // the 30k schedule: densification starts at image 500 as in 3DGS, whatever `iters`
   cfg.iters = iters;
   std::unique_ptr<Trainer> t = make_trainer(scene, idx, cfg, "rgb", nullptr, progress);
-  Progress bar("depth model", iters, progress);
-  while (t->iteration() < iters) {
-    StepInfo s = t->step();
-    bar.update(t->iteration(), fmt::format("N {} {:.0f} ms/it", s.num_gaussians, s.ms));
-  }
-  bar.finish(fmt::format("{} Gaussians", t->model().n));
-  ensure_dir(out_ply.parent_path());
-  write_model_ply(out_ply, t->model());
+  RunOptions ro;
+  ro.out = out;
+  ro.progress = progress;
+  ro.label = "depth model";
+  TrainingRun run(*t, scene, ro, run_config(*t, scene, nullptr, t->model().n));
+  run.train();
+  run.save();
 }
 
 }  // namespace hgs::train

@@ -13,7 +13,8 @@ namespace hgs::train {
 // sum_n z_n alpha_n T_n / alpha where its opacity alpha >= 0.5, else 0 (none). [H, W] per view.
 std::function<std::vector<float>(const View&)> depth_from_model(const std::filesystem::path& model);
 
-// `iters` steps of plain 3DGS (`--method rgb`) on every view of the scene, written to out_ply.
-void train_depth_model(const Scene& scene, int iters, const std::filesystem::path& out_ply, bool progress);
+// `iters` steps of plain 3DGS (`--method rgb`) on every view of the scene through the training run (train/run.h),
+// written to the model folder `out` (point_cloud.ply, config.json, train_stats.json).
+void train_depth_model(const Scene& scene, int iters, const std::filesystem::path& out, bool progress);
 
 }  // namespace hgs::train
