@@ -3,13 +3,13 @@
 // (Linear weights [out, in], fused qkv, projections [width, D]) and checks every shape.
 #include <fmt/format.h>
 
-#include <fstream>
 #include <nlohmann/json.hpp>
 
 #include "clip/model.h"
 #include "clip/safetensors.h"
 #include "clip/transformer.h"
 #include "core/error.h"
+#include "core/json_file.h"
 
 namespace hgs::clip {
 namespace {
@@ -34,7 +34,7 @@ ConfigHints read_config(const fs::path& weights) {
   try {
     fs::path hf = dir / "config.json";
     if (fs::is_regular_file(hf)) {
-      nlohmann::json j = nlohmann::json::parse(std::ifstream(hf));
+      nlohmann::json j = read_json_file(hf);
       if (j.contains("vision_config")) {
         auto& v = j["vision_config"];
         if (v.contains("num_attention_heads")) h.vision_heads = v["num_attention_heads"].get<int>();
@@ -47,7 +47,7 @@ ConfigHints read_config(const fs::path& weights) {
     }
     fs::path oc = dir / "open_clip_config.json";
     if (fs::is_regular_file(oc)) {
-      nlohmann::json j = nlohmann::json::parse(std::ifstream(oc));
+      nlohmann::json j = read_json_file(oc);
       auto& m = j.contains("model_cfg") ? j["model_cfg"] : j;
       if (m.contains("quick_gelu")) h.act = m["quick_gelu"].get<bool>() ? Activation::QuickGELU : Activation::GELU;
       if (m.contains("text_cfg") && m["text_cfg"].contains("heads")) h.text_heads = m["text_cfg"]["heads"].get<int>();

@@ -7,12 +7,12 @@
 #include <fmt/format.h>
 
 #include <algorithm>
-#include <fstream>
 #include <nlohmann/json.hpp>
 
 #include "clip/safetensors.h"
 #include "clip/transformer.h"
 #include "core/error.h"
+#include "core/json_file.h"
 #include "sam/model.h"
 
 namespace hgs::sam {
@@ -129,7 +129,7 @@ ConfigHints read_config(const fs::path& weights) {
   fs::path cfg = (weights.parent_path().empty() ? fs::path(".") : weights.parent_path()) / "config.json";
   if (!fs::is_regular_file(cfg)) return h;
   try {
-    nlohmann::json j = nlohmann::json::parse(std::ifstream(cfg));
+    nlohmann::json j = read_json_file(cfg);
     if (j.contains("mask_decoder_config") && j["mask_decoder_config"].contains("num_attention_heads"))
       h.decoder_heads = j["mask_decoder_config"]["num_attention_heads"].get<int>();
     if (j.contains("vision_config")) {
