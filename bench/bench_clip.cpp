@@ -9,7 +9,7 @@
 #include <random>
 
 #include "clip/model.h"
-#include "clip/openblas_env.h"
+#include "nn/openblas_env.h"
 
 // OpenBLAS with the kernels chosen for this CPU, as in hgs (clip/openblas_env.h: on a CPU model the library does not
 // know it would measure its SSE3 fallback, 5-6x slower).

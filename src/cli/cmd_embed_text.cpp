@@ -9,6 +9,7 @@
 #include "clip/model.h"
 #include "core/error.h"
 #include "core/fs.h"
+#include "nn/thread_pool.h"
 
 namespace hgs::cli {
 namespace {
@@ -22,7 +23,7 @@ struct EmbedTextArgs {
 };
 
 void run_embed_text(const EmbedTextArgs& a) {
-  clip::set_num_threads(a.threads);
+  nn::set_num_threads(a.threads);
   std::vector<std::string> phrases = a.texts;
   if (!a.text_file.empty()) {
     std::string body = read_file_text(a.text_file);

@@ -3,16 +3,16 @@
 // _hgs, whose OpenBLAS reads the environment once, when it is loaded.
 #include <pybind11/pybind11.h>
 
-#include "clip/openblas_env.h"
+#include "nn/openblas_env.h"
 
 PYBIND11_MODULE(_openblas_env, m) {
   m.doc() = "OPENBLAS_CORETYPE / OPENBLAS_THREAD_TIMEOUT as the hgs executables set them (clip/openblas_env.h)";
   m.def(
       "core_for_this_cpu",
       [] {
-        const char* c = hgs::clip::openblas_core_for_this_cpu();
+        const char* c = hgs::nn::openblas_core_for_this_cpu();
         return c ? pybind11::object(pybind11::str(c)) : pybind11::object(pybind11::none());
       },
       "SkylakeX with AVX-512, Haswell with AVX2 + FMA, else None (the library's own choice)");
-  m.attr("thread_timeout") = hgs::clip::kOpenblasThreadTimeout;
+  m.attr("thread_timeout") = hgs::nn::kOpenblasThreadTimeout;
 }
