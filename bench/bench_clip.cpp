@@ -125,7 +125,7 @@ void BM_ImageDenseBf16(benchmark::State& state) {
   std::mt19937 rng(2);
   auto x = randn(size_t(side) * side * 3, 1.f, rng);
   for (auto _ : state) benchmark::DoNotOptimize(m.dense_tensor(x.data(), side, side));
-  state.SetLabel(bf16_kernel_name());
+  state.SetLabel(hgs::nn::bf16_kernel_name());
   state.counters["FLOPS"] = benchmark::Counter(vision_flops(side, true), benchmark::Counter::kIsIterationInvariantRate);
 }
 BENCHMARK(BM_ImageDenseBf16)->Arg(448)->Unit(benchmark::kMillisecond)->UseRealTime();
