@@ -11,7 +11,7 @@
 #include "clip/model.h"
 #include "nn/openblas_env.h"
 
-// OpenBLAS with the kernels chosen for this CPU, as in hgs (clip/openblas_env.h: on a CPU model the library does not
+// OpenBLAS with the kernels chosen for this CPU, as in hgs (nn/openblas_env.h: on a CPU model the library does not
 // know it would measure its SSE3 fallback, 5-6x slower).
 HGS_OPENBLAS_PREINIT();
 

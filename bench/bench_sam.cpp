@@ -30,7 +30,7 @@ using namespace hgs;
 using namespace hgs::sam;
 
 HGS_OPENBLAS_PREINIT();
-// OpenBLAS's kernels in the run's header (clip/openblas_env.h: a generic one makes every product 5-6x slower).
+// OpenBLAS's kernels in the run's header (nn/openblas_env.h: a generic one makes every product 5-6x slower).
 const bool kOpenBlasContext = (benchmark::AddCustomContext("openblas_core", openblas_get_corename()), true);
 
 namespace {
@@ -301,7 +301,7 @@ void BM_SgemmReference(benchmark::State& state) {
 }
 BENCHMARK(BM_SgemmReference)->Apply(threads_only)->Unit(benchmark::kMillisecond)->UseRealTime();
 
-// The same product in bfloat16 (clip/gemm_bf16.h: the operands rounded beforehand, float32 accumulation).
+// The same product in bfloat16 (nn/gemm_bf16.h: the operands rounded beforehand, float32 accumulation).
 void BM_Bf16GemmReference(benchmark::State& state) {
   Threads threads(state);
   const int n = int(state.range(0)), k = 768, o = 3072;

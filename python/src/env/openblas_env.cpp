@@ -1,4 +1,4 @@
-// hgs._openblas_env: the OpenBLAS settings of clip/openblas_env.h for the Python package, in a module of its own
+// hgs._openblas_env: the OpenBLAS settings of nn/openblas_env.h for the Python package, in a module of its own
 // that does not load OpenBLAS: hgs/__init__.py reads them and puts them in the environment before it imports
 // _hgs, whose OpenBLAS reads the environment once, when it is loaded.
 #include <pybind11/pybind11.h>
@@ -6,7 +6,7 @@
 #include "nn/openblas_env.h"
 
 PYBIND11_MODULE(_openblas_env, m) {
-  m.doc() = "OPENBLAS_CORETYPE / OPENBLAS_THREAD_TIMEOUT as the hgs executables set them (clip/openblas_env.h)";
+  m.doc() = "OPENBLAS_CORETYPE / OPENBLAS_THREAD_TIMEOUT as the hgs executables set them (nn/openblas_env.h)";
   m.def(
       "core_for_this_cpu",
       [] {
