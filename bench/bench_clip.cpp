@@ -9,9 +9,9 @@
 #include <random>
 
 #include "clip/model.h"
-#include "clip/openblas_env.h"
+#include "nn/openblas_env.h"
 
-// OpenBLAS with the kernels chosen for this CPU, as in hgs (clip/openblas_env.h: on a CPU model the library does not
+// OpenBLAS with the kernels chosen for this CPU, as in hgs (nn/openblas_env.h: on a CPU model the library does not
 // know it would measure its SSE3 fallback, 5-6x slower).
 HGS_OPENBLAS_PREINIT();
 
@@ -125,7 +125,7 @@ void BM_ImageDenseBf16(benchmark::State& state) {
   std::mt19937 rng(2);
   auto x = randn(size_t(side) * side * 3, 1.f, rng);
   for (auto _ : state) benchmark::DoNotOptimize(m.dense_tensor(x.data(), side, side));
-  state.SetLabel(bf16_kernel_name());
+  state.SetLabel(hgs::nn::bf16_kernel_name());
   state.counters["FLOPS"] = benchmark::Counter(vision_flops(side, true), benchmark::Counter::kIsIterationInvariantRate);
 }
 BENCHMARK(BM_ImageDenseBf16)->Arg(448)->Unit(benchmark::kMillisecond)->UseRealTime();

@@ -20,8 +20,9 @@
 
 #include "bench_threads.h"
 #include "clip/model.h"
-#include "clip/openblas_env.h"
 #include "core/process.h"
+#include "nn/openblas_env.h"
+#include "nn/thread_pool.h"
 #include "sam/amg.h"
 #include "sam/model.h"
 
@@ -29,7 +30,7 @@ using namespace hgs;
 using namespace hgs::sam;
 
 HGS_OPENBLAS_PREINIT();
-// OpenBLAS's kernels in the run's header (clip/openblas_env.h: a generic one makes every product 5-6x slower).
+// OpenBLAS's kernels in the run's header (nn/openblas_env.h: a generic one makes every product 5-6x slower).
 const bool kOpenBlasContext = (benchmark::AddCustomContext("openblas_core", openblas_get_corename()), true);
 
 namespace {
@@ -123,16 +124,14 @@ const SamModel& vit_b(int bf16 = 0) {
 }
 
 // Benchmark argument 0 = float32, 1 = bfloat16 products; the label names the precision (and oneDNN's kernel).
-void label(benchmark::State& state, int bf16) { state.SetLabel(bf16 ? "bf16 " + clip::bf16_kernel_name() : "f32"); }
+void label(benchmark::State& state, int bf16) { state.SetLabel(bf16 ? "bf16 " + nn::bf16_kernel_name() : "f32"); }
 
-// Argument 1: the thread count of OpenMP, the element-wise pool and OpenBLAS (clip::set_num_threads, what
+// Argument 1: the thread count of OpenMP, the element-wise pool and OpenBLAS (nn::set_num_threads, what
 // --threads sets) for the benchmark's lifetime.
 class Threads {
  public:
-  explicit Threads(const benchmark::State& st) : prev_(omp_get_max_threads()) {
-    clip::set_num_threads(int(st.range(1)));
-  }
-  ~Threads() { clip::set_num_threads(prev_); }
+  explicit Threads(const benchmark::State& st) : prev_(omp_get_max_threads()) { nn::set_num_threads(int(st.range(1))); }
+  ~Threads() { nn::set_num_threads(prev_); }
   Threads(const Threads&) = delete;
   Threads& operator=(const Threads&) = delete;
 
@@ -302,18 +301,18 @@ void BM_SgemmReference(benchmark::State& state) {
 }
 BENCHMARK(BM_SgemmReference)->Apply(threads_only)->Unit(benchmark::kMillisecond)->UseRealTime();
 
-// The same product in bfloat16 (clip/gemm_bf16.h: the operands rounded beforehand, float32 accumulation).
+// The same product in bfloat16 (nn/gemm_bf16.h: the operands rounded beforehand, float32 accumulation).
 void BM_Bf16GemmReference(benchmark::State& state) {
   Threads threads(state);
   const int n = int(state.range(0)), k = 768, o = 3072;
   std::mt19937 rng(5);
-  auto a = clip::to_bf16(randn(size_t(n) * k, 1.f, rng)), b = clip::to_bf16(randn(size_t(o) * k, 1.f, rng));
+  auto a = nn::to_bf16(randn(size_t(n) * k, 1.f, rng)), b = nn::to_bf16(randn(size_t(o) * k, 1.f, rng));
   std::vector<float> c(size_t(n) * o);
   for (auto _ : state) {
-    clip::gemm_bf16(n, o, k, a.data(), k, b.data(), k, true, 1.f, nullptr, 0.f, c.data(), o);
+    nn::gemm_bf16(n, o, k, a.data(), k, b.data(), k, true, 1.f, nullptr, 0.f, c.data(), o);
     benchmark::DoNotOptimize(c.data());
   }
-  state.SetLabel(clip::bf16_kernel_name());
+  state.SetLabel(nn::bf16_kernel_name());
   state.counters["FLOPS"] = benchmark::Counter(2.0 * n * k * o, benchmark::Counter::kIsIterationInvariantRate);
 }
 BENCHMARK(BM_Bf16GemmReference)->Apply(threads_only)->Unit(benchmark::kMillisecond)->UseRealTime();

@@ -22,7 +22,7 @@ from . import _openblas_env
 
 def _set_openblas_env():
     # OpenBLAS reads these once, when the library is loaded (by _hgs below, or by numpy before it): the same
-    # choice as the hgs executables make (src/clip/openblas_env.h). Values the user set are kept, and
+    # choice as the hgs executables make (src/nn/openblas_env.h). Values the user set are kept, and
     # HGS_OPENBLAS_ENV=0 leaves everything to OpenBLAS.
     if os.environ.get("HGS_OPENBLAS_ENV") == "0":
         return

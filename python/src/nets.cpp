@@ -2,10 +2,10 @@
 // (.safetensors; nothing is downloaded). CLIP: text embeddings [T, D], image embeddings [D], dense MaskCLIP
 // features [h, w, D]. SAM: the image embedding, prompted masks (every output token) and the automatic mask
 // generator. Images are numpy [H, W, 3], uint8 or float32 in [0, 1]. Heavy calls release the GIL.
-#include "clip/gemm_bf16.h"
 #include "clip/model.h"
 #include "common.h"
 #include "core/error.h"
+#include "nn/gemm_bf16.h"
 #include "sam/amg.h"
 #include "sam/model.h"
 
@@ -40,7 +40,7 @@ void bind_clip(pb::module_& m) {
       .def(pb::init([](const std::filesystem::path& path, const std::string& precision) {
              pb::gil_scoped_release nogil;
              auto c = std::make_shared<clip::ClipModel>(clip::ClipModel::load(path));
-             c->set_precision(clip::parse_precision(precision, "precision"));
+             c->set_precision(nn::parse_precision(precision, "precision"));
              return c;
            }),
            pb::arg("path"), pb::arg("precision") = "f32",
@@ -142,7 +142,7 @@ void bind_sam(pb::module_& m) {
   pb::class_<sam::SamModel, Sam>(m, "Model", "Native SAM (ViT image encoder + mask decoder) on user-supplied weights")
       .def(pb::init([](const std::filesystem::path& path, const std::string& precision) {
              sam::SamOptions o;
-             o.precision = clip::parse_precision(precision, "precision");
+             o.precision = nn::parse_precision(precision, "precision");
              pb::gil_scoped_release nogil;
              return std::make_shared<sam::SamModel>(sam::SamModel::load(path, o));
            }),

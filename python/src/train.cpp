@@ -15,6 +15,7 @@
 #include "core/process.h"
 #include "hybrid/config.h"
 #include "hybrid/register.h"
+#include "nn/thread_pool.h"
 #include "train/registry.h"
 #include "train/run.h"
 #include "train/trainer.h"
@@ -175,8 +176,8 @@ class PyTrainer {
 void bind_train(pb::module_& m) {
   hybrid::register_method();
   // The default thread count, as the hgs command sets it (cli/main.cpp): the CPUs this process may use.
-  if (!std::getenv("OMP_NUM_THREADS")) clip::set_num_threads(available_cpus());
-  m.def("set_threads", &clip::set_num_threads, pb::arg("n"),
+  if (!std::getenv("OMP_NUM_THREADS")) nn::set_num_threads(available_cpus());
+  m.def("set_threads", &nn::set_num_threads, pb::arg("n"),
         "Worker threads of OpenMP and OpenBLAS (n > 0; the default is every CPU this process may use)");
   m.def("method_names", &train::method_names, "Registered training methods ('rgb', 'hybrid')");
 

@@ -8,6 +8,7 @@
 #include "clip/model.h"
 #include "core/error.h"
 #include "core/fs.h"
+#include "nn/thread_pool.h"
 #include "scene/text_embeddings.h"
 
 namespace hgs::cli {
@@ -22,7 +23,7 @@ struct EmbedTextArgs {
 };
 
 void run_embed_text(const EmbedTextArgs& a) {
-  clip::set_num_threads(a.threads);
+  nn::set_num_threads(a.threads);
   std::vector<std::string> phrases = a.texts;
   if (!a.text_file.empty())
     for (const std::string& p : read_phrase_file(a.text_file)) phrases.push_back(p);

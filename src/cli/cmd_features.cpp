@@ -6,6 +6,7 @@
 #include "clip/model.h"
 #include "clip/scene_features.h"
 #include "core/error.h"
+#include "nn/thread_pool.h"
 #include "scene/scene.h"
 
 namespace hgs::cli {
@@ -19,13 +20,13 @@ struct FeaturesArgs {
 };
 
 void run_features(const FeaturesArgs& a) {
-  clip::set_num_threads(a.threads);
+  nn::set_num_threads(a.threads);
   Scene s = load_scene(a.scene, {a.downscale, false});
   clip::ClipOptions opt;
   opt.activation = clip::parse_activation(a.act);
   clip::ClipModel m = clip::ClipModel::load(a.clip, opt);
   if (!m.has_vision) fail("{}: the model has no vision tower", a.clip);
-  m.set_precision(clip::parse_precision(a.precision, "--precision"));
+  m.set_precision(nn::parse_precision(a.precision, "--precision"));
   if (!a.quiet) fmt::print(stderr, "model: {}\n", m.describe());
   clip::DenseOptions d;
   d.input_size = a.input_size;

@@ -7,6 +7,7 @@
 #include "clip/model.h"
 #include "core/error.h"
 #include "core/fs.h"
+#include "nn/thread_pool.h"
 #include "sam/model.h"
 #include "scene/scene.h"
 
@@ -53,7 +54,7 @@ int find_view(const Scene& s, const std::string& v) {
 }
 
 void run_click(const ClickArgs& a) {
-  clip::set_num_threads(a.threads);
+  nn::set_num_threads(a.threads);
   Scene s = load_scene(a.scene, {a.downscale, false});
   const int vi = find_view(s, a.view);
   sam::Prompt p;

@@ -7,6 +7,7 @@
 #include "cli/sam_options.h"
 #include "clip/model.h"
 #include "core/error.h"
+#include "nn/thread_pool.h"
 #include "sam/amg.h"
 #include "sam/scene_masks.h"
 #include "scene/scene.h"
@@ -24,7 +25,7 @@ struct GenerateArgs {
 };
 
 void run_generate(const GenerateArgs& a) {
-  clip::set_num_threads(a.threads);
+  nn::set_num_threads(a.threads);
   Scene s = load_scene(a.scene, {a.downscale, false});
   sam::SamModel m = a.model.load(a.sam);
   if (!a.quiet) fmt::print(stderr, "model: {}\n", m.describe());

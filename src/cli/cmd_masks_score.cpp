@@ -1,12 +1,12 @@
 // `hgs masks score SCENE [--masks DIR]`: how well a synthetic scene's masks follow its true objects
-// (src/masks/score.h).
+// (src/eval/association_score.h).
 #include <fmt/format.h>
 
 #include <nlohmann/json.hpp>
 
 #include "cli/masks_command.h"
 #include "core/fs.h"
-#include "masks/score.h"
+#include "eval/association_score.h"
 
 namespace hgs::cli {
 namespace {
@@ -34,7 +34,7 @@ MasksSubcommandRegistration reg(
        return [=] {
          const std::filesystem::path d =
              dir->empty() ? std::filesystem::path(*scene) / "masks" : std::filesystem::path(*dir);
-         masks::MaskScore s = masks::score_masks(*scene, d, *min_px, *test_only);
+         eval::AssociationScore s = eval::score_association(*scene, d, *min_px, *test_only);
          fmt::print(
              "{}: {} views, {} (view, object) pairs: mean IoU {:.4f}, per-object mean {:.4f}, IoU >= 0.5 in {:.1f}%\n",
              d.string(), s.views, s.pairs, s.mean_iou, s.object_mean_iou, 100 * s.pairs_above_half);

@@ -7,6 +7,7 @@
 #include "clip/model.h"
 #include "core/error.h"
 #include "core/fs.h"
+#include "nn/thread_pool.h"
 #include "prepare/prepare.h"
 #include "prepare/stages.h"
 #include "scene/text_embeddings.h"
@@ -40,7 +41,7 @@ void run_prepare_command(PrepareArgs& a) {
     o.load_clip = [a, precision] {
       clip::ClipModel m = clip::ClipModel::load(a.clip, {});
       if (!m.has_vision) fail("{}: the CLIP model has no vision tower", a.clip);
-      m.set_precision(clip::parse_precision(precision, "--precision"));
+      m.set_precision(nn::parse_precision(precision, "--precision"));
       return m;
     };
     o.clip_key = fmt::format("{} {}", prepare::hash_file_identity(a.clip), precision);

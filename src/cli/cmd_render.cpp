@@ -8,6 +8,7 @@
 #include "cli/command.h"
 #include "core/error.h"
 #include "core/fs.h"
+#include "core/json_file.h"
 #include "core/progress.h"
 #include "model/near_plane.h"
 #include "model/ply.h"
@@ -38,12 +39,7 @@ void run_render(const RenderArgs& a) {
   }
   bool white = false;
   if (!config_path.empty() && fs::exists(config_path)) {
-    nlohmann::json j;
-    try {
-      j = nlohmann::json::parse(read_file_text(config_path));
-    } catch (const nlohmann::json::exception&) {
-      fail("{}: not valid JSON", config_path.string());
-    }
+    const nlohmann::json j = read_json_file(config_path);
     if (j.contains("white_bg") && j["white_bg"].is_boolean()) white = j["white_bg"].get<bool>();
   }
   if (a.white_bg) white = true;

@@ -8,9 +8,10 @@
 
 #include "cli/command.h"
 #include "clip/model.h"
-#include "clip/openblas_env.h"
 #include "core/error.h"
 #include "core/process.h"
+#include "nn/openblas_env.h"
+#include "nn/thread_pool.h"
 
 HGS_OPENBLAS_PREINIT();
 
@@ -21,7 +22,7 @@ std::vector<CommandSpec>& registry() {
   return r;
 }
 
-void set_threads(int threads) { hgs::clip::set_num_threads(threads); }  // OpenMP, the pool and OpenBLAS
+void set_threads(int threads) { hgs::nn::set_num_threads(threads); }  // OpenMP, the pool and OpenBLAS
 
 namespace {
 

@@ -4,7 +4,7 @@
 #include <CLI/CLI.hpp>
 #include <string>
 
-#include "clip/gemm_bf16.h"
+#include "nn/gemm_bf16.h"
 #include "sam/model.h"
 
 namespace hgs::cli {
@@ -28,7 +28,7 @@ struct SamModelOptions {
         ->capture_default_str();
   }
   sam::SamModel load(const std::string& weights) const {
-    return sam::SamModel::load(weights, {decoder_heads, vit_heads, clip::parse_precision(precision, "--precision")});
+    return sam::SamModel::load(weights, {decoder_heads, vit_heads, nn::parse_precision(precision, "--precision")});
   }
 };
 

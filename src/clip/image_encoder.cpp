@@ -8,10 +8,12 @@
 #include <algorithm>
 #include <cmath>
 
+#include "clip/block.h"
 #include "clip/model.h"
 #include "clip/preprocess.h"
-#include "clip/transformer.h"
 #include "core/error.h"
+#include "nn/resize.h"
+#include "nn/transformer.h"
 
 namespace hgs::clip {
 
@@ -33,17 +35,17 @@ void ClipModel::vision_forward(const float* img, int H, int W, bool dense, std::
     }
   std::vector<float> x(size_t(n) * w);
   std::copy(vision.cls.begin(), vision.cls.end(), x.begin());  // x[0] = cls, x[1:] = cols Wpatch^T
-  linear(vision.patch_embed, cols.data(), np, x.data() + w);
+  nn::linear(vision.patch_embed, cols.data(), np, x.data() + w);
   // Positional embeddings, interpolated to [gh, gw] when needed.
   const float* pos_grid = vision.pos.data() + w;
   std::vector<float> interp;
   if (gh != vision.grid || gw != vision.grid) {
-    interp = resize_bicubic(pos_grid, vision.grid, vision.grid, w, gh, gw);
+    interp = nn::resize_bicubic(pos_grid, vision.grid, vision.grid, w, gh, gw);
     pos_grid = interp.data();
   }
   for (int j = 0; j < w; ++j) x[j] += vision.pos[j];
   for (size_t i = 0; i < size_t(np) * w; ++i) x[w + i] += pos_grid[i];
-  layer_norm(vision.ln_pre, x.data(), n, w, x.data());
+  nn::layer_norm(vision.ln_pre, x.data(), n, w, x.data());
 
   const int L = int(vision.tr.blocks.size());
   Workspace ws;
@@ -53,25 +55,25 @@ void ClipModel::vision_forward(const float* img, int H, int W, bool dense, std::
     block_forward(vision.tr.blocks[l], vision.tr.heads, act, segs, false, x.data(), n, ws);
   if (!dense) {
     out.resize(size_t(D));
-    layer_norm(vision.ln_post, x.data(), 1, w, ws.h.data());
-    matmul(ws.h.data(), 1, w, vision.proj.data(), D, out.data());
+    nn::layer_norm(vision.ln_post, x.data(), 1, w, ws.h.data());
+    nn::matmul(ws.h.data(), 1, w, vision.proj.data(), D, out.data());
     return;
   }
   if (L == 0) fail("{}: dense features need at least one transformer block", path.string());
   const Block& b = vision.tr.blocks[L - 1];
   // Value path for the patch tokens only (rows 1 .. n-1).
-  layer_norm(b.ln1, x.data() + w, np, w, ws.h.data());
-  linear(vision.last_value, ws.h.data(), np, ws.attn.data());
-  linear(b.out, ws.attn.data(), np, ws.h.data());
-  layer_norm(vision.ln_post, ws.h.data(), np, w, ws.h.data());
+  nn::layer_norm(b.ln1, x.data() + w, np, w, ws.h.data());
+  nn::linear(vision.last_value, ws.h.data(), np, ws.attn.data());
+  nn::linear(b.out, ws.attn.data(), np, ws.h.data());
+  nn::layer_norm(vision.ln_post, ws.h.data(), np, w, ws.h.data());
   out.resize(size_t(np) * D);
-  matmul(ws.h.data(), np, w, vision.proj.data(), D, out.data());
+  nn::matmul(ws.h.data(), np, w, vision.proj.data(), D, out.data());
 }
 
 std::vector<float> ClipModel::embed_image_tensor(const float* x, int H, int W, bool normalize) const {
   std::vector<float> out;
   vision_forward(x, H, W, false, out);
-  if (normalize) l2_normalize_rows(out.data(), 1, embed_dim);
+  if (normalize) nn::l2_normalize_rows(out.data(), 1, embed_dim);
   return out;
 }
 
@@ -117,7 +119,7 @@ DenseFeatures ClipModel::dense_features(const Image& img, const DenseOptions& op
             gw = std::max(1, int(std::lround(img.width * s / p)));
   const int H = gh * p, W = gw * p;
   std::vector<float> x =
-      (H == img.height && W == img.width) ? img.px : resize_aa(img.px.data(), img.height, img.width, 3, H, W);
+      (H == img.height && W == img.width) ? img.px : nn::resize_aa(img.px.data(), img.height, img.width, 3, H, W);
   clip_normalize(x.data(), size_t(H) * W);
 
   DenseFeatures f;
@@ -149,7 +151,7 @@ DenseFeatures ClipModel::dense_features(const Image& img, const DenseOptions& op
     for (size_t c = 0; c < count.size(); ++c)
       for (int d = 0; d < D; ++d) f.data[c * D + d] /= count[c];
   }
-  if (opt.normalize) l2_normalize_rows(f.data.data(), gh * gw, D);
+  if (opt.normalize) nn::l2_normalize_rows(f.data.data(), gh * gw, D);
   return f;
 }
 

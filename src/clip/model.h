@@ -1,6 +1,6 @@
 // A CLIP model (vision + text towers) read from a safetensors file in open_clip or Hugging Face CLIPModel
 // naming, with the architecture inferred from tensor shapes; forward passes run on the CPU in float32 with
-// OpenBLAS sgemm for every matrix product (see transformer.h).
+// OpenBLAS sgemm for every matrix product (the kernels of nn/transformer.h, the block of block.h).
 //
 //   auto m = hgs::clip::ClipModel::load("open_clip_model.safetensors");
 //   std::vector<float> t = m.embed_text({"a photo of a cat"});   // [T, D], L2-normalised
@@ -13,18 +13,21 @@
 #include <vector>
 
 #include "core/image.h"
-
-#include "clip/gemm_bf16.h"
+#include "nn/gemm_bf16.h"
+#include "nn/transformer.h"
 
 namespace hgs::clip {
 
+// The layers and options of a CLIP model are the network runtime's (src/nn).
+using nn::Activation;
+using nn::LayerNorm;
+using nn::Linear;
+using nn::Precision;
+
 enum class Naming { OpenClip, HuggingFace };
-enum class Activation { GELU, QuickGELU };  // x*Phi(x) (erf) and x*sigmoid(1.702x)
 
 // "gelu" / "quick_gelu" -> the activation; "auto" or "" -> nullopt. Throws hgs::Error for anything else.
 std::optional<Activation> parse_activation(const std::string& s);
-// Sets the thread count of OpenBLAS and OpenMP (0 = leave the defaults: all cores).
-void set_num_threads(int n);
 
 struct ClipOptions {
   // Attention heads per tower; 0 = from config.json (HF) / open_clip_config.json beside the weights, else
@@ -33,17 +36,6 @@ struct ClipOptions {
   // Default: from the config file if it names one, else GELU for open_clip naming (LAION models) and
   // QuickGELU for Hugging Face naming (OpenAI models).
   std::optional<Activation> activation;
-};
-
-struct Linear {
-  int in = 0, out = 0;
-  std::vector<float> w;            // [out, in]
-  std::vector<float> b;            // [out]
-  std::vector<uint16_t> w16 = {};  // [out, in] w rounded to bfloat16 when the model runs in bf16, else empty
-};
-
-struct LayerNorm {
-  std::vector<float> g, b;  // [width]
 };
 
 struct Block {
@@ -107,7 +99,7 @@ class ClipModel {
   std::string describe() const;  // one line: naming, widths, layers, heads, patch, D, activation
 
   // BF16: the vision tower's linear layers (patch embedding, every block's qkv / out / MLP, the MaskCLIP value
-  // path) run in bfloat16 with float32 sums (gemm_bf16.h), an approximation; attention, LayerNorm and the text
+  // path) run in bfloat16 with float32 sums (nn/gemm_bf16.h), an approximation; attention, LayerNorm and the text
   // tower stay float32. F32 (the default) drops the rounded weights again.
   void set_precision(Precision p);
   Precision precision = Precision::F32;

@@ -3,13 +3,13 @@
 // (Linear weights [out, in], fused qkv, projections [width, D]) and checks every shape.
 #include <fmt/format.h>
 
-#include <fstream>
 #include <nlohmann/json.hpp>
 
 #include "clip/model.h"
-#include "clip/safetensors.h"
-#include "clip/transformer.h"
 #include "core/error.h"
+#include "core/json_file.h"
+#include "nn/safetensors.h"
+#include "nn/transformer.h"
 
 namespace hgs::clip {
 namespace {
@@ -34,7 +34,7 @@ ConfigHints read_config(const fs::path& weights) {
   try {
     fs::path hf = dir / "config.json";
     if (fs::is_regular_file(hf)) {
-      nlohmann::json j = nlohmann::json::parse(std::ifstream(hf));
+      nlohmann::json j = read_json_file(hf);
       if (j.contains("vision_config")) {
         auto& v = j["vision_config"];
         if (v.contains("num_attention_heads")) h.vision_heads = v["num_attention_heads"].get<int>();
@@ -47,7 +47,7 @@ ConfigHints read_config(const fs::path& weights) {
     }
     fs::path oc = dir / "open_clip_config.json";
     if (fs::is_regular_file(oc)) {
-      nlohmann::json j = nlohmann::json::parse(std::ifstream(oc));
+      nlohmann::json j = read_json_file(oc);
       auto& m = j.contains("model_cfg") ? j["model_cfg"] : j;
       if (m.contains("quick_gelu")) h.act = m["quick_gelu"].get<bool>() ? Activation::QuickGELU : Activation::GELU;
       if (m.contains("text_cfg") && m["text_cfg"].contains("heads")) h.text_heads = m["text_cfg"]["heads"].get<int>();
@@ -64,7 +64,7 @@ ConfigHints read_config(const fs::path& weights) {
 }
 
 struct Loader {
-  const SafeTensors& st;
+  const nn::SafeTensors& st;
   std::string file() const { return st.path().string(); }
 
   std::vector<float> get(const std::string& name, const std::vector<int64_t>& shape) {
@@ -73,7 +73,7 @@ struct Loader {
   int64_t dim(const std::string& name, int i) {
     const auto& t = st.info(name);
     if (int(t.shape.size()) <= i)
-      fail("{}: tensor '{}' has shape {}, too few dimensions", file(), name, shape_str(t.shape));
+      fail("{}: tensor '{}' has shape {}, too few dimensions", file(), name, nn::shape_str(t.shape));
     return t.shape[i];
   }
   LayerNorm ln(const std::string& prefix, int w) { return {get(prefix + ".weight", {w}), get(prefix + ".bias", {w})}; }
@@ -158,8 +158,15 @@ int grid_from_positions(int64_t n_pos, const std::string& file, const std::strin
 
 }  // namespace
 
+std::optional<Activation> parse_activation(const std::string& s) {
+  if (s.empty() || s == "auto") return std::nullopt;
+  if (s == "gelu") return Activation::GELU;
+  if (s == "quick_gelu" || s == "quickgelu") return Activation::QuickGELU;
+  fail("--act: unknown activation \"{}\" (auto, gelu or quick_gelu)", s);
+}
+
 ClipModel ClipModel::load(const std::filesystem::path& path, const ClipOptions& opt) {
-  SafeTensors st(path);
+  nn::SafeTensors st(path);
   Loader L{st};
   const std::string file = path.string();
   ConfigHints cfg = read_config(path);
@@ -187,7 +194,7 @@ ClipModel ClipModel::load(const std::filesystem::path& path, const ClipOptions& 
     VisionTower& v = m.vision;
     const auto& ci = st.info(conv);
     if (ci.shape.size() != 4 || ci.shape[1] != 3 || ci.shape[2] != ci.shape[3])
-      fail("{}: tensor '{}' has shape {}, expected [width, 3, patch, patch]", file, conv, shape_str(ci.shape));
+      fail("{}: tensor '{}' has shape {}, expected [width, 3, patch, patch]", file, conv, nn::shape_str(ci.shape));
     const int w = int(ci.shape[0]);
     v.patch = int(ci.shape[2]);
     v.patch_embed = {3 * v.patch * v.patch, w, L.get(conv, {w, 3, v.patch, v.patch}), std::vector<float>(w, 0.f)};
@@ -248,7 +255,7 @@ void ClipModel::set_precision(Precision p) {
   for (Block& b : vision.tr.blocks)
     for (Linear* l : {&b.qkv, &b.out, &b.fc, &b.proj}) ls.push_back(l);
   for (Linear* l : ls) {
-    if (p == Precision::BF16 && !l->w.empty()) use_bf16(*l);
+    if (p == Precision::BF16 && !l->w.empty()) nn::use_bf16(*l);
     else l->w16.clear();
   }
 }
@@ -262,7 +269,7 @@ std::string ClipModel::describe() const {
   if (has_text)
     s += fmt::format("; text width {} x {} layers, {} heads, context {}, vocab {}", text.tr.width,
                      text.tr.blocks.size(), text.tr.heads, text.context, text.vocab);
-  if (precision == Precision::BF16) s += fmt::format("; vision linear layers in bf16 ({})", bf16_kernel_name());
+  if (precision == Precision::BF16) s += fmt::format("; vision linear layers in bf16 ({})", nn::bf16_kernel_name());
   return s;
 }
 

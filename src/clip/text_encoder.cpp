@@ -4,10 +4,11 @@
 // the padding CLIP runs through the model is skipped (same result, less work). Output: ln_final(x[eot]) @ proj.
 #include <algorithm>
 
+#include "clip/block.h"
 #include "clip/model.h"
 #include "clip/tokenizer.h"
-#include "clip/transformer.h"
 #include "core/error.h"
+#include "nn/transformer.h"
 
 namespace hgs::clip {
 
@@ -46,9 +47,9 @@ std::vector<float> ClipModel::embed_tokens(const std::vector<std::vector<int>>& 
     const float* r = x.data() + size_t(segs[s].start + segs[s].len - 1) * w;
     std::copy(r, r + w, pooled.data() + size_t(s) * w);
   }
-  layer_norm(text.ln_final, pooled.data(), T, w, pooled.data());
-  matmul(pooled.data(), T, w, text.proj.data(), D, out.data());
-  if (normalize) l2_normalize_rows(out.data(), T, D);
+  nn::layer_norm(text.ln_final, pooled.data(), T, w, pooled.data());
+  nn::matmul(pooled.data(), T, w, text.proj.data(), D, out.data());
+  if (normalize) nn::l2_normalize_rows(out.data(), T, D);
   return out;
 }
 

@@ -20,7 +20,7 @@
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/image.h"
-#include "eval/json_file.h"
+#include "core/json_file.h"
 
 namespace hgs::eval {
 

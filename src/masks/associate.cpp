@@ -17,6 +17,7 @@
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/image.h"
+#include "core/json_file.h"
 #include "core/npy.h"
 #include "core/progress.h"
 #include "masks/cluster.h"
@@ -32,14 +33,6 @@ namespace fs = std::filesystem;
 using json = nlohmann::json;
 
 namespace {
-
-json read_json(const fs::path& p) {
-  try {
-    return json::parse(read_file_text(p));
-  } catch (const json::exception& e) {
-    fail("{}: invalid JSON ({})", p.string(), e.what());
-  }
-}
 
 bool non_empty_dir(const fs::path& d) { return fs::is_directory(d) && !fs::is_empty(d); }
 
@@ -136,16 +129,16 @@ struct InputInfo {
 
 InputInfo read_input_info(const AssociateOptions& opt, const fs::path& in) {
   InputInfo ii;
-  ii.names_file = opt.names.empty() ? json() : read_json(opt.names);
+  ii.names_file = opt.names.empty() ? json() : read_json_file(opt.names);
   if (!opt.names.empty() && !ii.names_file.is_object())
     fail("{}: expected {{\"<stem>\": {{\"<id>\": \"name\"}}}}", opt.names.string());
   if (fs::exists(in / "objects.json")) {
-    json j = read_json(in / "objects.json");
+    json j = read_json_file(in / "objects.json");
     if (!j.is_object()) fail("{}: expected {{\"<id>\": \"name\"}}", (in / "objects.json").string());
     for (auto& [k, v] : j.items())
       if (v.is_string()) ii.global_names[std::atoi(k.c_str())] = v.get<std::string>();
   }
-  ii.import_info = fs::exists(in / "import.json") ? read_json(in / "import.json") : json();
+  ii.import_info = fs::exists(in / "import.json") ? read_json_file(in / "import.json") : json();
   const std::string import_format = ii.import_info.is_object() ? ii.import_info.value("format", "") : "";
   ii.sam_scores = import_format == "sam-json" || import_format == "sam-png";
   return ii;

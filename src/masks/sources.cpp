@@ -6,6 +6,7 @@
 
 #include "core/error.h"
 #include "core/fs.h"
+#include "core/json_file.h"
 #include "masks/png_index.h"
 
 namespace hgs::masks {
@@ -40,12 +41,7 @@ std::vector<std::string> split_csv_line(const std::string& line) {
 
 std::vector<SourceMask> read_sam_json(const fs::path& file, int width, int height) {
   const std::string name = file.string();
-  json j;
-  try {
-    j = json::parse(read_file_text(file));
-  } catch (const json::exception& e) {  // parse_error, and out_of_range for a number too large
-    fail("{}: invalid JSON ({})", name, e.what());
-  }
+  const json j = read_json_file(file);
   if (!j.is_array()) fail("{}: expected a JSON list of masks (SAM automatic mask generator output)", name);
   std::vector<SourceMask> out;
   for (size_t i = 0; i < j.size(); ++i) {

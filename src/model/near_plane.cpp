@@ -5,7 +5,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
-#include "core/fs.h"
+#include "core/json_file.h"
 #include "render/renderer.h"
 
 namespace hgs {
@@ -19,12 +19,7 @@ float checked_near_plane(double value, const std::string& where) {
 float model_near_plane(const std::filesystem::path& model_ply) {
   const std::filesystem::path config = model_ply.parent_path() / "config.json";
   if (!std::filesystem::exists(config)) return render::kDefaultNearPlane;
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(read_file_text(config));
-  } catch (const nlohmann::json::exception&) {
-    fail("{}: not valid JSON", config.string());
-  }
+  const nlohmann::json j = read_json_file(config);
   if (!j.is_object() || !j.contains("near_plane")) return render::kDefaultNearPlane;
   if (!j["near_plane"].is_number()) fail("{}: 'near_plane' is not a number", config.string());
   return checked_near_plane(j["near_plane"].get<double>(), config.string() + ": 'near_plane'");

@@ -8,8 +8,8 @@
 #include <optional>
 #include <utility>
 
-#include "clip/thread_pool.h"
 #include "core/error.h"
+#include "nn/thread_pool.h"
 
 namespace hgs::sam {
 
@@ -120,10 +120,10 @@ void set_box_area(AmgMask& a, int W, int H) {
 
 // fn(u) for u in [0, n) on the pool's threads, thread p taking u = p, p + T, p + 2T, ... (T threads): the
 // costly items (masks that pass the thresholds) tend to be neighbours, so contiguous chunks would balance badly.
-// An exception of fn reaches the caller (clip::parallel_for).
+// An exception of fn reaches the caller (nn::parallel_for).
 void each_of(int n, const std::function<void(int)>& fn) {
-  const int T = std::min(clip::pool_threads(), std::max(n, 1));
-  clip::parallel_for(T, 2, [&](long p0, long p1) {
+  const int T = std::min(nn::pool_threads(), std::max(n, 1));
+  nn::parallel_for(T, 2, [&](long p0, long p1) {
     for (long p = p0; p < p1; ++p)
       for (long u = p; u < n; u += T) fn(int(u));
   });

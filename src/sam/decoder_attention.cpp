@@ -6,9 +6,9 @@
 #include <algorithm>
 #include <cmath>
 
-#include "clip/gemm_bf16.h"
-#include "clip/thread_pool.h"
-#include "clip/transformer.h"
+#include "nn/gemm_bf16.h"
+#include "nn/thread_pool.h"
+#include "nn/transformer.h"
 
 namespace hgs::sam {
 
@@ -17,7 +17,7 @@ void attend_few_queries(const Attention& a, int heads, const float* qin, int nq,
   const int C = a.q.in, I = a.q.out, hd = I / heads, R = heads * nq;
   const float scale = 1.f / std::sqrt(float(hd));
   w.q.resize(size_t(nq) * I);
-  clip::linear(a.q, qin, nq, w.q.data());
+  nn::linear(a.q, qin, nq, w.q.data());
   // qk [heads * nq, C]: row (h, i) = scale * Q_h[i] W_k[h rows]  (W_k [I, C])
   w.qk.resize(size_t(R) * C);
   for (int h = 0; h < heads; ++h)
@@ -27,17 +27,17 @@ void attend_few_queries(const Attention& a, int heads, const float* qin, int nq,
   w.z.resize(size_t(R) * C);  // P X_v
   if (bf16) {
     w.a16.resize(size_t(R) * C);
-    clip::convert_to_bf16_serial(w.qk.data(), R, C, C, w.a16.data());
-    xk16 = clip::rounded_or_convert(xk16, xk, n, C, w.b16);
-    clip::gemm_bf16(R, n, C, w.a16.data(), C, xk16, C, true, 1.f, nullptr, 0.f, w.s.data(), n);
-    clip::softmax_rows(w.s.data(), R, n, false);
+    nn::convert_to_bf16_serial(w.qk.data(), R, C, C, w.a16.data());
+    xk16 = nn::rounded_or_convert(xk16, xk, n, C, w.b16);
+    nn::gemm_bf16(R, n, C, w.a16.data(), C, xk16, C, true, 1.f, nullptr, 0.f, w.s.data(), n);
+    nn::softmax_rows(w.s.data(), R, n, false);
     w.a16.resize(size_t(R) * n);
-    clip::convert_to_bf16_serial(w.s.data(), R, n, n, w.a16.data());
-    xv16 = clip::rounded_or_convert(xv16, xv, n, C, w.c16);
-    clip::gemm_bf16(R, C, n, w.a16.data(), n, xv16, C, false, 1.f, nullptr, 0.f, w.z.data(), C);
+    nn::convert_to_bf16_serial(w.s.data(), R, n, n, w.a16.data());
+    xv16 = nn::rounded_or_convert(xv16, xv, n, C, w.c16);
+    nn::gemm_bf16(R, C, n, w.a16.data(), n, xv16, C, false, 1.f, nullptr, 0.f, w.z.data(), C);
   } else {
     cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, R, n, C, 1.f, w.qk.data(), C, xk, C, 0.f, w.s.data(), n);
-    clip::softmax_rows(w.s.data(), R, n, false);
+    nn::softmax_rows(w.s.data(), R, n, false);
     cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, R, C, n, 1.f, w.s.data(), n, xv, C, 0.f, w.z.data(), C);
   }
   // o [nq, I]: head h's columns = Z_h W_v[h rows]^T + b_v[h]
@@ -49,7 +49,7 @@ void attend_few_queries(const Attention& a, int heads, const float* qin, int nq,
     cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, nq, hd, C, 1.f, w.z.data() + size_t(h) * nq * C, C,
                 a.v.w.data() + size_t(h) * hd * C, C, 1.f, oh, I);
   }
-  clip::linear(a.out, w.o.data(), nq, out);
+  nn::linear(a.out, w.o.data(), nq, out);
 }
 
 void attend_few_keys(const Attention& a, int heads, const float* xq, const float* qproj, int n, const float* kin,
@@ -58,13 +58,13 @@ void attend_few_keys(const Attention& a, int heads, const float* xq, const float
   const float scale = 1.f / std::sqrt(float(hd));
   if (!qproj) {
     w.q.resize(size_t(n) * I);
-    clip::linear(a.q, xq, n, w.q.data());
+    nn::linear(a.q, xq, n, w.q.data());
     qproj = w.q.data();
   }
   w.k.resize(size_t(nk) * I);
   w.v.resize(size_t(nk) * I);
-  clip::linear(a.k, kin, nk, w.k.data());
-  clip::linear(a.v, vin, nk, w.v.data());
+  nn::linear(a.k, kin, nk, w.k.data());
+  nn::linear(a.v, vin, nk, w.v.data());
   // vo [heads * nk, C]: row (h, t) = V_h[t] W_o[:, h cols]^T  (W_o [C, I])
   w.vo.resize(size_t(R) * C);
   for (int h = 0; h < heads; ++h)
@@ -86,13 +86,13 @@ void attend_few_keys(const Attention& a, int heads, const float* xq, const float
         si[h * nk + t] = scale * acc;
       }
   }
-  clip::softmax_rows(w.s.data(), n * heads, nk, false);  // [n, heads, nk] = [n * heads, nk] row-major
+  nn::softmax_rows(w.s.data(), n * heads, nk, false);  // [n, heads, nk] = [n * heads, nk] row-major
   if (bf16) {
     w.a16.resize(size_t(n) * R);
     w.c16.resize(size_t(R) * C);
-    clip::convert_to_bf16_serial(w.s.data(), n, R, R, w.a16.data());
-    clip::convert_to_bf16_serial(w.vo.data(), R, C, C, w.c16.data());
-    clip::gemm_bf16(n, C, R, w.a16.data(), R, w.c16.data(), C, false, 1.f, a.out.b.data(), 0.f, out, C);
+    nn::convert_to_bf16_serial(w.s.data(), n, R, R, w.a16.data());
+    nn::convert_to_bf16_serial(w.vo.data(), R, C, C, w.c16.data());
+    nn::gemm_bf16(n, C, R, w.a16.data(), R, w.c16.data(), C, false, 1.f, a.out.b.data(), 0.f, out, C);
   } else {
     for (int i = 0; i < n; ++i) std::copy(a.out.b.begin(), a.out.b.end(), out + size_t(i) * C);
     cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, n, C, R, 1.f, w.s.data(), R, w.vo.data(), C, 1.f, out, C);

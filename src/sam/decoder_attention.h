@@ -21,7 +21,7 @@ struct AttnWork {
 };
 
 // out [nq, C] = attention(qin [nq, C] -> keys xk [n, C], values xv [n, C]), nq small. With `bf16`, the two
-// products over the n image tokens run in bfloat16 (clip/gemm_bf16.h; xk, xv and the scores rounded).
+// products over the n image tokens run in bfloat16 (nn/gemm_bf16.h; xk, xv and the scores rounded).
 // xk16 / xv16 (optional, bf16 only): xk and xv already rounded, [n, C] each (the caller shares them between
 // products); xk / xv may then be null.
 void attend_few_queries(const Attention& a, int heads, const float* qin, int nq, const float* xk, const float* xv,

@@ -15,9 +15,9 @@
 #include <cmath>
 #include <functional>
 
-#include "clip/thread_pool.h"
-#include "clip/transformer.h"
 #include "core/error.h"
+#include "nn/thread_pool.h"
+#include "nn/transformer.h"
 #include "sam/model.h"
 
 namespace hgs::sam {
@@ -35,7 +35,7 @@ void add_rel_pos(const float* q, int ldq, int row0, int nq, int s, int hd, const
   tw.resize(size_t(nq) * r);
   cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, nq, r, hd, 1.f, q, ldq, rel_h, hd, 0.f, th.data(), r);
   cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, nq, r, hd, 1.f, q, ldq, rel_w, hd, 0.f, tw.data(), r);
-  clip::parallel_for(nq, 16, [&](long i0, long i1) {
+  nn::parallel_for(nq, 16, [&](long i0, long i1) {
     for (long i = i0; i < i1; ++i) {
       const int qi = int(row0 + i) / s, qj = int(row0 + i) % s;
       const float* a = th.data() + size_t(i) * r;
@@ -68,7 +68,7 @@ void vit_attention(const VitLayer& l, int g, int C, int heads, bool bf16, const 
   // windows in parallel (every copy and scatter of this file runs on the pool: a serial pass over the 3 M
   // values of the token grid is a few percent of a layer at one thread, and so caps the scaling).
   w.win.resize(size_t(M) * C);
-  clip::parallel_for(long(nw) * s, 2, [&](long r0, long r1) {
+  nn::parallel_for(long(nw) * s, 2, [&](long r0, long r1) {
     for (long r = r0; r < r1; ++r) {
       const int wy = int(r / s), i = int(r % s), y = wy * s + i;
       for (int wx = 0; wx < nw; ++wx)
@@ -81,20 +81,20 @@ void vit_attention(const VitLayer& l, int g, int C, int heads, bool bf16, const 
     }
   });
   w.qkv.resize(size_t(M) * 3 * I);
-  clip::linear(l.qkv, w.win.data(), M, w.qkv.data());
+  nn::linear(l.qkv, w.win.data(), M, w.qkv.data());
   w.attn.resize(size_t(M) * I);
   if (bf16) {  // keys and values rounded once for every query block, each window's heads contiguous
     w.k16.resize(size_t(M) * I);
     w.v16.resize(size_t(M) * I);
     if (nw == 1) {  // one global window: split_heads_bf16 runs its rows on the pool
-      clip::split_heads_bf16(w.qkv.data() + I, n, 3 * I, heads, hd, w.k16.data());
-      clip::split_heads_bf16(w.qkv.data() + 2 * I, n, 3 * I, heads, hd, w.v16.data());
+      nn::split_heads_bf16(w.qkv.data() + I, n, 3 * I, heads, hd, w.k16.data());
+      nn::split_heads_bf16(w.qkv.data() + 2 * I, n, 3 * I, heads, hd, w.v16.data());
     } else {
-      clip::parallel_for(nw * nw, 2, [&](long w0, long w1) {
+      nn::parallel_for(nw * nw, 2, [&](long w0, long w1) {
         for (long wi = w0; wi < w1; ++wi) {
           const float* base = w.qkv.data() + size_t(wi) * n * 3 * I;
-          clip::split_heads_bf16(base + I, n, 3 * I, heads, hd, w.k16.data() + size_t(wi) * n * I);
-          clip::split_heads_bf16(base + 2 * I, n, 3 * I, heads, hd, w.v16.data() + size_t(wi) * n * I);
+          nn::split_heads_bf16(base + I, n, 3 * I, heads, hd, w.k16.data() + size_t(wi) * n * I);
+          nn::split_heads_bf16(base + 2 * I, n, 3 * I, heads, hd, w.v16.data() + size_t(wi) * n * I);
         }
       });
     }
@@ -104,7 +104,7 @@ void vit_attention(const VitLayer& l, int g, int C, int heads, bool bf16, const 
   // of several per head).
   // The units are equal in cost, so with T threads they are cut until T divides their count or there are at
   // least 8 per thread (windowed layers: 25 windows at ViT-B, 13 + 12 on two threads lost ~4 % of the attention).
-  const int T = clip::pool_threads();
+  const int T = nn::pool_threads();
   int rows = std::min(n, std::max(16, (1 << 19) / n));
   int blocks = (n + rows - 1) / rows;
   for (int b = blocks + 1; T > 1 && (nw * nw * blocks) % T != 0 && nw * nw * blocks < 8 * T && (n + b - 1) / b >= 16;
@@ -130,22 +130,22 @@ void vit_attention(const VitLayer& l, int g, int C, int heads, bool bf16, const 
         };
       float* out = w.attn.data() + (size_t(wi) * n + r0) * I;
       if (bf16) {
-        clip::multi_head_attention_bf16(qb, 3 * I, w.k16.data() + size_t(wi) * n * I, w.v16.data() + size_t(wi) * n * I,
-                                        nq, n, heads, hd, scale, out, I, scores.data(), false, bias);
+        nn::multi_head_attention_bf16(qb, 3 * I, w.k16.data() + size_t(wi) * n * I, w.v16.data() + size_t(wi) * n * I,
+                                      nq, n, heads, hd, scale, out, I, scores.data(), false, bias);
       } else {
-        clip::multi_head_attention(qb, 3 * I, base + I, 3 * I, base + 2 * I, 3 * I, nq, n, heads, hd, scale, out, I,
-                                   scores.data(), false, bias);
+        nn::multi_head_attention(qb, 3 * I, base + I, 3 * I, base + 2 * I, 3 * I, nq, n, heads, hd, scale, out, I,
+                                 scores.data(), false, bias);
       }
     }
     if (split) omp_set_num_threads(omp_threads);
   };
-  if (split) clip::parallel_for(units, 2, run);
+  if (split) nn::parallel_for(units, 2, run);
   else run(0, units);
   if (split) openblas_set_num_threads(blas_threads);
   w.out.resize(size_t(M) * C);
-  clip::linear(l.proj, w.attn.data(), M, w.out.data());
+  nn::linear(l.proj, w.attn.data(), M, w.out.data());
   // Scatter back, grid rows in parallel (each grid token is in exactly one window).
-  clip::parallel_for(g, 2, [&](long y0, long y1) {
+  nn::parallel_for(g, 2, [&](long y0, long y1) {
     for (long y = y0; y < y1; ++y) {
       const int wy = int(y) / s, i = int(y) % s;
       for (int xx = 0; xx < g; ++xx) {
@@ -161,7 +161,7 @@ void vit_attention(const VitLayer& l, int g, int C, int heads, bool bf16, const 
 // im2col of a 3x3 convolution with zero padding 1 on x [g, g, C]: cols [g * g, 9 * C] ordered (ky, kx, c).
 void im2col3x3(const float* x, int g, int C, std::vector<float>& cols) {
   cols.resize(size_t(g) * g * 9 * C);
-  clip::parallel_for(g, 2, [&](long y0, long y1) {
+  nn::parallel_for(g, 2, [&](long y0, long y1) {
     for (long y = y0; y < y1; ++y)
       for (int xx = 0; xx < g; ++xx) {
         float* o = cols.data() + (size_t(y) * g + xx) * 9 * C;
@@ -183,7 +183,7 @@ std::vector<float> SamModel::encode(const float* x, std::vector<std::vector<floa
   const int g = v.grid, P = v.patch, C = v.hidden, N = g * g, S = image_size(), K = 3 * P * P;
   // Patch embedding: cols [N, 3 * P * P] ordered (c, ky, kx) like the conv weight.
   std::vector<float> cols(size_t(N) * K);
-  clip::parallel_for(g, 2, [&](long p0, long p1) {
+  nn::parallel_for(g, 2, [&](long p0, long p1) {
     for (long py = p0; py < p1; ++py)
       for (int px = 0; px < g; ++px) {
         float* o = cols.data() + (size_t(py) * g + px) * K;
@@ -194,8 +194,8 @@ std::vector<float> SamModel::encode(const float* x, std::vector<std::vector<floa
       }
   });
   std::vector<float> tok(size_t(N) * C);
-  clip::linear(v.patch_embed, cols.data(), N, tok.data());
-  clip::parallel_for(N, 64, [&](long t0, long t1) {
+  nn::linear(v.patch_embed, cols.data(), N, tok.data());
+  nn::parallel_for(N, 64, [&](long t0, long t1) {
     for (size_t i = size_t(t0) * C; i < size_t(t1) * C; ++i) tok[i] += v.pos[i];
   });
   if (stages) {
@@ -205,24 +205,24 @@ std::vector<float> SamModel::encode(const float* x, std::vector<std::vector<floa
   VitWork w;
   w.h.resize(size_t(N) * C);
   for (const VitLayer& l : v.layers) {
-    clip::layer_norm(l.ln1, tok.data(), N, C, w.h.data(), kVitEps);
-    vit_attention(l, g, C, l.heads > 0 ? l.heads : v.heads, precision == clip::Precision::BF16, w.h.data(), tok.data(),
+    nn::layer_norm(l.ln1, tok.data(), N, C, w.h.data(), kVitEps);
+    vit_attention(l, g, C, l.heads > 0 ? l.heads : v.heads, precision == nn::Precision::BF16, w.h.data(), tok.data(),
                   w);
-    clip::layer_norm(l.ln2, tok.data(), N, C, w.h.data(), kVitEps);
+    nn::layer_norm(l.ln2, tok.data(), N, C, w.h.data(), kVitEps);
     w.mlp.resize(size_t(N) * l.fc1.out);
-    clip::linear(l.fc1, w.h.data(), N, w.mlp.data());
-    clip::activation(clip::Activation::GELU, w.mlp.data(), w.mlp.size());
-    clip::linear_add(l.fc2, w.mlp.data(), N, tok.data());
+    nn::linear(l.fc1, w.h.data(), N, w.mlp.data());
+    nn::activation(nn::Activation::GELU, w.mlp.data(), w.mlp.size());
+    nn::linear_add(l.fc2, w.mlp.data(), N, tok.data());
     if (stages) stages->push_back(tok);
   }
   // Neck.
   const int O = v.out;
   std::vector<float> a(size_t(N) * O), out(size_t(N) * O);
-  clip::linear(v.neck1, tok.data(), N, a.data());
-  clip::layer_norm(v.neck_ln1, a.data(), N, O, a.data(), kVitEps);
+  nn::linear(v.neck1, tok.data(), N, a.data());
+  nn::layer_norm(v.neck_ln1, a.data(), N, O, a.data(), kVitEps);
   im2col3x3(a.data(), g, O, cols);
-  clip::linear(v.neck2, cols.data(), N, out.data());
-  clip::layer_norm(v.neck_ln2, out.data(), N, O, out.data(), kVitEps);
+  nn::linear(v.neck2, cols.data(), N, out.data());
+  nn::layer_norm(v.neck_ln2, out.data(), N, O, out.data(), kVitEps);
   return out;
 }
 

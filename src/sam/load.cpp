@@ -7,19 +7,19 @@
 #include <fmt/format.h>
 
 #include <algorithm>
-#include <fstream>
 #include <nlohmann/json.hpp>
 
-#include "clip/safetensors.h"
-#include "clip/transformer.h"
 #include "core/error.h"
+#include "core/json_file.h"
+#include "nn/safetensors.h"
+#include "nn/transformer.h"
 #include "sam/model.h"
 
 namespace hgs::sam {
 namespace {
 namespace fs = std::filesystem;
-using clip::SafeTensors;
-using clip::shape_str;
+using nn::SafeTensors;
+using nn::shape_str;
 
 void replace_all(std::string& s, const std::string& a, const std::string& b) {
   for (size_t p = s.find(a); p != std::string::npos; p = s.find(a, p + b.size())) s.replace(p, a.size(), b);
@@ -129,7 +129,7 @@ ConfigHints read_config(const fs::path& weights) {
   fs::path cfg = (weights.parent_path().empty() ? fs::path(".") : weights.parent_path()) / "config.json";
   if (!fs::is_regular_file(cfg)) return h;
   try {
-    nlohmann::json j = nlohmann::json::parse(std::ifstream(cfg));
+    nlohmann::json j = read_json_file(cfg);
     if (j.contains("mask_decoder_config") && j["mask_decoder_config"].contains("num_attention_heads"))
       h.decoder_heads = j["mask_decoder_config"]["num_attention_heads"].get<int>();
     if (j.contains("vision_config")) {
@@ -323,28 +323,27 @@ SamModel SamModel::load(const std::filesystem::path& path, const SamOptions& opt
   return m;
 }
 
-void SamModel::set_precision(clip::Precision p) {
+void SamModel::set_precision(nn::Precision p) {
   precision = p;
   VisionEncoder& v = vision;
-  std::vector<clip::Linear*> large{&v.patch_embed, &v.neck1, &v.neck2};
+  std::vector<nn::Linear*> large{&v.patch_embed, &v.neck1, &v.neck2};
   for (VitLayer& l : v.layers)
-    for (clip::Linear* x : {&l.qkv, &l.proj, &l.fc1, &l.fc2}) large.push_back(x);
-  // The decoder's projections of the image tokens (its few-token ones stay float32: kFewRows in clip::linear).
+    for (nn::Linear* x : {&l.qkv, &l.proj, &l.fc1, &l.fc2}) large.push_back(x);
+  // The decoder's projections of the image tokens (its few-token ones stay float32: kFewRows in nn::linear).
   MaskDecoder& d = decoder;
   auto attention = [&](Attention& a) {
-    for (clip::Linear* x : {&a.q, &a.k, &a.v, &a.out}) large.push_back(x);
+    for (nn::Linear* x : {&a.q, &a.k, &a.v, &a.out}) large.push_back(x);
   };
   for (TwoWayLayer& l : d.layers) {
     attention(l.token_to_image);
     attention(l.image_to_token);
   }
   attention(d.final_attn);
-  for (clip::Linear* l : large) {
-    if (p == clip::Precision::BF16) clip::use_bf16(*l);
+  for (nn::Linear* l : large) {
+    if (p == nn::Precision::BF16) nn::use_bf16(*l);
     else l->w16.clear();
   }
-  for (Upconv* u : {&d.up1, &d.up2})
-    u->w16 = p == clip::Precision::BF16 ? clip::to_bf16(u->w) : std::vector<uint16_t>{};
+  for (Upconv* u : {&d.up1, &d.up2}) u->w16 = p == nn::Precision::BF16 ? nn::to_bf16(u->w) : std::vector<uint16_t>{};
 }
 
 std::string SamModel::describe() const {
@@ -368,7 +367,7 @@ std::string SamModel::describe() const {
              naming == Naming::HuggingFace ? "Hugging Face" : "segment-anything", vision.hidden, vision.layers.size(),
              vit, vision.patch, image_size(), windows.empty() ? "-" : windows, global, vision.out,
              decoder.layers.size(), decoder.heads, decoder.tokens) +
-         (precision == clip::Precision::BF16 ? fmt::format("; bf16 products ({})", clip::bf16_kernel_name()) : "");
+         (precision == nn::Precision::BF16 ? fmt::format("; bf16 products ({})", nn::bf16_kernel_name()) : "");
 }
 
 }  // namespace hgs::sam

@@ -14,9 +14,9 @@
 #include <algorithm>
 #include <cmath>
 
-#include "clip/thread_pool.h"
-#include "clip/transformer.h"
 #include "core/error.h"
+#include "nn/thread_pool.h"
+#include "nn/transformer.h"
 #include "sam/decoder_attention.h"
 #include "sam/model.h"
 
@@ -46,7 +46,7 @@ void attend(const Attention& a, int heads, const float* qin, int nq, const float
             float* out, Proj& w, std::vector<float>& scores, const Proj* kv = nullptr) {
   const int I = a.q.out, hd = I / heads;
   w.q.resize(size_t(nq) * I);
-  clip::linear(a.q, qin, nq, w.q.data());
+  nn::linear(a.q, qin, nq, w.q.data());
   const float *K, *V;
   if (kv) {
     K = kv->k.data();
@@ -54,16 +54,16 @@ void attend(const Attention& a, int heads, const float* qin, int nq, const float
   } else {
     w.k.resize(size_t(nk) * I);
     w.v.resize(size_t(nk) * I);
-    clip::linear(a.k, kin, nk, w.k.data());
-    clip::linear(a.v, vin, nk, w.v.data());
+    nn::linear(a.k, kin, nk, w.k.data());
+    nn::linear(a.v, vin, nk, w.v.data());
     K = w.k.data();
     V = w.v.data();
   }
   w.o.resize(size_t(nq) * I);
   scores.resize(size_t(nq) * nk);
-  clip::multi_head_attention(w.q.data(), I, K, I, V, I, nq, nk, heads, hd, 1.f / std::sqrt(float(hd)), w.o.data(), I,
-                             scores.data());
-  clip::linear(a.out, w.o.data(), nq, out);
+  nn::multi_head_attention(w.q.data(), I, K, I, V, I, nq, nk, heads, hd, 1.f / std::sqrt(float(hd)), w.o.data(), I,
+                           scores.data());
+  nn::linear(a.out, w.o.data(), nq, out);
 }
 
 void relu(float* x, size_t n) {
@@ -75,7 +75,7 @@ std::vector<float> run_mlp(const Mlp& m, const float* x) {
   std::vector<float> a(x, x + m.layers.front().in), b;
   for (size_t j = 0; j < m.layers.size(); ++j) {
     b.resize(m.layers[j].out);
-    clip::linear(m.layers[j], a.data(), 1, b.data());
+    nn::linear(m.layers[j], a.data(), 1, b.data());
     if (j + 1 < m.layers.size()) relu(b.data(), b.size());
     a.swap(b);
   }
@@ -92,11 +92,11 @@ void upconv(const Upconv& u, const float* x, int g, std::vector<float>& y, std::
   y.resize(size_t(g) * g * 4 * u.out);
   out.resize(size_t(4) * g * g * u.out);
   if (!u.w16.empty()) {
-    rounded = clip::rounded_or_convert(rounded, x, g * g, u.in, x16);
-    clip::gemm_bf16(g * g, 4 * u.out, u.in, rounded, u.in, u.w16.data(), 4 * u.out, false, 1.f, nullptr, 0.f, y.data(),
-                    4 * u.out);
+    rounded = nn::rounded_or_convert(rounded, x, g * g, u.in, x16);
+    nn::gemm_bf16(g * g, 4 * u.out, u.in, rounded, u.in, u.w16.data(), 4 * u.out, false, 1.f, nullptr, 0.f, y.data(),
+                  4 * u.out);
   } else {
-    clip::matmul(x, g * g, u.in, u.w.data(), 4 * u.out, y.data());
+    nn::matmul(x, g * g, u.in, u.w.data(), 4 * u.out, y.data());
   }
   const int G = 2 * g;
   for (int i = 0; i < g; ++i)
@@ -117,7 +117,7 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
   if (d.layers.empty()) fail("SAM mask decoder has no layers");
   const std::vector<float> pe = dense_pe();  // [N, C]
   std::vector<float> src0(size_t(N) * C), kpe(size_t(N) * C);
-  clip::parallel_for(N, 64, [&](long t0, long t1) {  // image tokens on the pool (serial, they capped the scaling)
+  nn::parallel_for(N, 64, [&](long t0, long t1) {  // image tokens on the pool (serial, they capped the scaling)
     for (size_t i = size_t(t0) * C; i < size_t(t1) * C; ++i) {
       src0[i] = emb[i] + prompt.no_mask[i % C];
       kpe[i] = src0[i] + pe[i];
@@ -128,28 +128,28 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
   const Attention& a0 = d.layers[0].token_to_image;
   kv0.k.resize(size_t(N) * a0.k.out);
   kv0.v.resize(size_t(N) * a0.v.out);
-  clip::linear(a0.k, kpe.data(), N, kv0.k.data());
-  clip::linear(a0.v, src0.data(), N, kv0.v.data());
+  nn::linear(a0.k, kpe.data(), N, kv0.k.data());
+  nn::linear(a0.v, src0.data(), N, kv0.v.data());
   // ... and the first block's image-to-token query projection.
   const Attention& i0 = d.layers[0].image_to_token;
   std::vector<float> q0(size_t(N) * i0.q.out);
-  clip::linear(i0.q, kpe.data(), N, q0.data());
+  nn::linear(i0.q, kpe.data(), N, q0.data());
 
   // bf16: the first block's keys and values split by head and rounded once per batch (multi_head_attention_bf16).
-  const bool bf16 = precision == clip::Precision::BF16;
+  const bool bf16 = precision == nn::Precision::BF16;
   const int I0 = a0.q.out, hd0 = I0 / heads;
   std::vector<uint16_t> k0_16, v0_16;
   if (bf16) {
     k0_16.resize(size_t(N) * I0);
     v0_16.resize(size_t(N) * I0);
-    clip::split_heads_bf16(kv0.k.data(), N, I0, heads, hd0, k0_16.data());
-    clip::split_heads_bf16(kv0.v.data(), N, I0, heads, hd0, v0_16.data());
+    nn::split_heads_bf16(kv0.k.data(), N, I0, heads, hd0, k0_16.data());
+    nn::split_heads_bf16(kv0.v.data(), N, I0, heads, hd0, v0_16.data());
   }
 
   std::vector<Prediction> res(B);
   // Several prompts: one prompt per thread with single-threaded OpenBLAS (one hand-off per batch instead of one
   // per matrix product; on a shared machine the per-call thread hand-offs cost more than the products).
-  const bool per_prompt = B > 1 && clip::pool_threads() > 1;
+  const bool per_prompt = B > 1 && nn::pool_threads() > 1;
   const int blas_threads = openblas_get_num_threads();
   if (per_prompt) openblas_set_num_threads(1);
   auto body = [&](long b0, long b1) {
@@ -169,8 +169,8 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
       if (bf16) {
         kk16.resize(keys.size());
         keys16.resize(keys.size());
-        clip::sum_to_bf16_serial(keys.data(), pe.data(), keys.size(), kk16.data());
-        clip::convert_to_bf16_serial(keys.data(), N, C, C, keys16.data());
+        nn::sum_to_bf16_serial(keys.data(), pe.data(), keys.size(), kk16.data());
+        nn::convert_to_bf16_serial(keys.data(), N, C, C, keys16.data());
       } else {
         add(keys.data(), pe.data(), keys.size(), kk);
       }
@@ -193,17 +193,17 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
           attend(l.self_attn, heads, qq.data(), Tt, qq.data(), q.data(), Tt, tmp.data(), w, scores);
           for (size_t i = 0; i < q.size(); ++i) q[i] += tmp[i];
         }
-        clip::layer_norm(l.ln1, q.data(), Tt, C, q.data(), d.ln_eps);
+        nn::layer_norm(l.ln1, q.data(), Tt, C, q.data(), d.ln_eps);
         add(q.data(), qpe.data(), q.size(), qq);
         if (li == 0 && bf16) {
           const Attention& a = l.token_to_image;
           w.q.resize(size_t(Tt) * I0);
           w.o.resize(size_t(Tt) * I0);
           scores.resize(size_t(Tt) * N);
-          clip::linear(a.q, qq.data(), Tt, w.q.data());
-          clip::multi_head_attention_bf16(w.q.data(), I0, k0_16.data(), v0_16.data(), Tt, N, heads, hd0,
-                                          1.f / std::sqrt(float(hd0)), w.o.data(), I0, scores.data());
-          clip::linear(a.out, w.o.data(), Tt, tmp.data());
+          nn::linear(a.q, qq.data(), Tt, w.q.data());
+          nn::multi_head_attention_bf16(w.q.data(), I0, k0_16.data(), v0_16.data(), Tt, N, heads, hd0,
+                                        1.f / std::sqrt(float(hd0)), w.o.data(), I0, scores.data());
+          nn::linear(a.out, w.o.data(), Tt, tmp.data());
         } else if (li == 0) {
           attend(l.token_to_image, heads, qq.data(), Tt, nullptr, nullptr, N, tmp.data(), w, scores, &kv0);
         } else {
@@ -212,38 +212,38 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
                              kk16.data(), keys16.data());
         }
         for (size_t i = 0; i < q.size(); ++i) q[i] += tmp[i];
-        clip::layer_norm(l.ln2, q.data(), Tt, C, q.data(), d.ln_eps);
+        nn::layer_norm(l.ln2, q.data(), Tt, C, q.data(), d.ln_eps);
         mlp.resize(size_t(Tt) * l.mlp1.out);
-        clip::linear(l.mlp1, q.data(), Tt, mlp.data());
+        nn::linear(l.mlp1, q.data(), Tt, mlp.data());
         relu(mlp.data(), mlp.size());
-        clip::linear_add(l.mlp2, mlp.data(), Tt, q.data());
-        clip::layer_norm(l.ln3, q.data(), Tt, C, q.data(), d.ln_eps);
+        nn::linear_add(l.mlp2, mlp.data(), Tt, q.data());
+        nn::layer_norm(l.ln3, q.data(), Tt, C, q.data(), d.ln_eps);
         add(q.data(), qpe.data(), q.size(), qq);
         // kk = keys + pe is still current for li > 0 (the token-to-image attention changed the tokens only).
         const float* qp = li == 0 ? q0.data() : nullptr;
         if (li > 0 && bf16) {  // the query projection from the rounded kk16 of the token-to-image attention
           const Linear& lq = l.image_to_token.q;
           qproj.resize(size_t(N) * lq.out);
-          clip::gemm_bf16(N, lq.out, C, kk16.data(), C, lq.w16.data(), C, true, 1.f, lq.b.data(), 0.f, qproj.data(),
-                          lq.out);
+          nn::gemm_bf16(N, lq.out, C, kk16.data(), C, lq.w16.data(), C, true, 1.f, lq.b.data(), 0.f, qproj.data(),
+                        lq.out);
           qp = qproj.data();
         }
         attend_few_keys(l.image_to_token, heads, qp ? nullptr : kk.data(), qp, N, qq.data(), q.data(), Tt, tmp.data(),
                         aw, bf16);
         for (size_t i = 0; i < keys.size(); ++i) keys[i] += tmp[i];
-        clip::layer_norm(l.ln4, keys.data(), N, C, keys.data(), d.ln_eps);
+        nn::layer_norm(l.ln4, keys.data(), N, C, keys.data(), d.ln_eps);
       }
       add(q.data(), qpe.data(), q.size(), qq);
       image_operands();
       attend_few_queries(d.final_attn, heads, qq.data(), Tt, kk.data(), keys.data(), N, tmp.data(), aw, bf16,
                          kk16.data(), keys16.data());
       for (size_t i = 0; i < q.size(); ++i) q[i] += tmp[i];
-      clip::layer_norm(d.ln_final, q.data(), Tt, C, q.data(), d.ln_final_eps);
+      nn::layer_norm(d.ln_final, q.data(), Tt, C, q.data(), d.ln_final_eps);
 
       // Upscaling: [g, g, C] -> [2g, 2g, C/4] (LN, GELU) -> [4g, 4g, C/8] (GELU).
       upconv(d.up1, keys.data(), g, y, x16, u1, bf16 ? keys16.data() : nullptr);  // keys16 is still current
-      clip::layer_norm(d.up_ln, u1.data(), 4 * N, d.up1.out, u1.data(), 1e-6f);
-      clip::activation(clip::Activation::GELU, u1.data(), u1.size());
+      nn::layer_norm(d.up_ln, u1.data(), 4 * N, d.up1.out, u1.data(), 1e-6f);
+      nn::activation(nn::Activation::GELU, u1.data(), u1.size());
       upconv(d.up2, u1.data(), 2 * g, y, x16, u2);
       const int D = d.up2.out, P = 16 * N;
       std::vector<float> hyper(size_t(d.tokens) * D);
@@ -263,7 +263,7 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
       for (int p0 = 0; p0 < P; p0 += kBlock) {
         const int np = std::min(kBlock, P - p0);
         float* px = u2.data() + size_t(p0) * D;
-        clip::gelu_serial(px, long(np) * D);
+        nn::gelu_serial(px, long(np) * D);
         for (int t = 0; t < d.tokens; ++t) {
           const float* h = hyper.data() + size_t(t) * D;
           float* o = r.lowres.data() + size_t(t) * P + p0;
@@ -280,7 +280,7 @@ std::vector<Prediction> SamModel::decode(const float* emb, const float* sparse, 
     }
     if (per_prompt) omp_set_num_threads(omp_threads);
   };
-  if (per_prompt) clip::parallel_for(B, 2, body);
+  if (per_prompt) nn::parallel_for(B, 2, body);
   else body(0, B);
   if (per_prompt) openblas_set_num_threads(blas_threads);
   return res;

@@ -1,7 +1,7 @@
 // SAM (Segment Anything) read from safetensors in the Hugging Face `SamModel` naming or segment-anything's own
 // state-dict naming, with the sizes read from the tensors; forward passes in float32 on the CPU, every matrix
-// product an OpenBLAS sgemm through src/clip's kernels (linear, layer norm, multi-head attention, GELU), or
-// with SamOptions::precision = BF16 the large products in bfloat16 on oneDNN (clip/gemm_bf16.h).
+// product an OpenBLAS sgemm through src/nn's kernels (linear, layer norm, multi-head attention, GELU), or
+// with SamOptions::precision = BF16 the large products in bfloat16 on oneDNN (nn/gemm_bf16.h).
 //
 //   auto m = hgs::sam::SamModel::load("model.safetensors");
 //   hgs::sam::ImageEmbedding e = m.embed(image);                    // preprocessing + ViT + neck
@@ -14,14 +14,14 @@
 #include <string>
 #include <vector>
 
-#include "clip/gemm_bf16.h"
-#include "clip/model.h"
 #include "core/image.h"
+#include "nn/gemm_bf16.h"
+#include "nn/transformer.h"
 
 namespace hgs::sam {
 
-using clip::LayerNorm;
-using clip::Linear;
+using nn::LayerNorm;
+using nn::Linear;
 
 enum class Naming { HuggingFace, SegmentAnything };
 
@@ -34,9 +34,9 @@ struct SamOptions {
   // Given, it must agree with every layer's tables and serves the layers without tables.
   int vit_heads = 0;
   // F32: every product in float32 (the reference path). BF16: the image encoder's and mask decoder's large
-  // products in bfloat16 with float32 accumulation (clip/gemm_bf16.h), an approximation; docs/sam.md has its
+  // products in bfloat16 with float32 accumulation (nn/gemm_bf16.h), an approximation; docs/sam.md has its
   // error and speed.
-  clip::Precision precision = clip::Precision::F32;
+  nn::Precision precision = nn::Precision::F32;
 };
 
 // One ViT layer. Its widths are its own (SlimSAM's pruned models differ per layer): attention width
@@ -133,14 +133,14 @@ class SamModel {
   static SamModel load(const std::filesystem::path& path, const SamOptions& opt = {});
 
   Naming naming = Naming::HuggingFace;
-  clip::Precision precision = clip::Precision::F32;
+  nn::Precision precision = nn::Precision::F32;
   VisionEncoder vision;
   PromptEncoder prompt;
   MaskDecoder decoder;
   std::filesystem::path path;
 
   // Rounds the weights of the large products to bfloat16 (BF16) or drops the rounded copies (F32).
-  void set_precision(clip::Precision p);
+  void set_precision(nn::Precision p);
 
   int image_size() const { return vision.grid * vision.patch; }
   int channels() const { return vision.out; }

@@ -5,8 +5,8 @@
 // at +0.5. The dense positional encoding of the embedding grid uses cell centres ((j + 0.5) / g, (i + 0.5) / g).
 #include <cmath>
 
-#include "clip/thread_pool.h"
 #include "core/error.h"
+#include "nn/thread_pool.h"
 #include "sam/model.h"
 
 namespace hgs::sam {
@@ -28,7 +28,7 @@ void fourier(const std::vector<float>& G, int C, float x, float y, float* out) {
 std::vector<float> SamModel::dense_pe() const {
   const int g = vision.grid, C = channels();
   std::vector<float> pe(size_t(g) * g * C);
-  clip::parallel_for(g, 2, [&](long i0, long i1) {  // 1 M sines and cosines at ViT-B: rows on the pool
+  nn::parallel_for(g, 2, [&](long i0, long i1) {  // 1 M sines and cosines at ViT-B: rows on the pool
     for (long i = i0; i < i1; ++i)
       for (int j = 0; j < g; ++j)
         fourier(prompt.gauss, C, (j + 0.5f) / g, (i + 0.5f) / g, pe.data() + (size_t(i) * g + j) * C);

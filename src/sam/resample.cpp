@@ -3,9 +3,9 @@
 
 #include <algorithm>
 
-#include "clip/preprocess.h"
-#include "clip/thread_pool.h"
 #include "core/error.h"
+#include "nn/resize.h"
+#include "nn/thread_pool.h"
 #include "sam/model.h"
 
 namespace hgs::sam {
@@ -54,7 +54,7 @@ std::vector<float> resize_planes_bilinear(const float* src, int n, int h, int w,
   const Lin tx = lin_taps(cw, ow), ty = lin_taps(ch, oh);
   const int rows = keep_h > 0 ? keep_h : oh, cols = keep_w > 0 ? keep_w : ow;
   std::vector<float> out(size_t(n) * rows * cols);
-  clip::parallel_for(long(n) * rows, 16, [&](long r0, long r1) {
+  nn::parallel_for(long(n) * rows, 16, [&](long r0, long r1) {
     for (long r = r0; r < r1; ++r) {
       const int p = int(r / rows), y = int(r % rows);
       const float* a = src + (size_t(p) * h + ty.i0[y]) * w;
@@ -80,7 +80,7 @@ std::vector<float> SamModel::preprocess(const Image& img, int* input_h, int* inp
   preprocess_shape(img.height, img.width, S, &h, &w);
   std::vector<float> r = (h == img.height && w == img.width)
                              ? img.px
-                             : clip::resize_aa(img.px.data(), img.height, img.width, 3, h, w, clip::AaFilter::Bilinear);
+                             : nn::resize_aa(img.px.data(), img.height, img.width, 3, h, w, nn::AaFilter::Bilinear);
   std::vector<float> out(size_t(S) * S * 3, 0.f);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x)

@@ -2,7 +2,7 @@
 //   resize_planes_bilinear: torch.nn.functional.interpolate(mode="bilinear", align_corners=False) without
 //     antialiasing, on n planes [n, h, w]: source coordinate (i + 0.5) * in / out - 0.5 clamped at 0, the two
 //     neighbours (upper one clamped to the last row / column) weighted linearly. Separable: rows, then columns.
-//   Preprocessing uses src/clip's antialiased resize with the triangle filter (clip::resize_aa, AaFilter::Bilinear).
+//   Preprocessing uses src/nn's antialiased resize with the triangle filter (nn::resize_aa, AaFilter::Bilinear).
 #pragma once
 #include <vector>
 

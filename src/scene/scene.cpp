@@ -14,6 +14,7 @@
 
 #include "core/error.h"
 #include "core/fs.h"
+#include "core/json_file.h"
 #include "core/npy.h"
 #include "scene/colmap.h"
 
@@ -57,15 +58,6 @@ bool path_exists(const fs::path& p) {
 }
 
 constexpr uint64_t kMaxSide = 1 << 16;  // largest camera width or height accepted (pixels)
-
-json read_json(const fs::path& p) {
-  std::string text = read_file_text(p);
-  try {
-    return json::parse(text);
-  } catch (const json::exception& e) {  // parse_error, and out_of_range for a number too large
-    fail("{}: invalid JSON ({})", p.string(), e.what());
-  }
-}
 
 // One view of COLMAP image `im` at downscale F, with the paths of its image (images_F/ when there), mask,
 // confidence and features. Sizes and poses from the file are checked before anything is sized or rendered by them.
@@ -149,7 +141,7 @@ void load_points(Scene& s, const ColmapModel& m, const fs::path& sparse) {
 // masks/objects.json: {"1": "name", ...}.
 std::map<int, std::string> read_object_names(const fs::path& objects) {
   std::map<int, std::string> names;
-  json j = read_json(objects);
+  json j = read_json_file(objects);
   if (!j.is_object()) fail("{}: expected an object {{\"1\": \"name\", ...}}", objects.string());
   for (auto& [k, val] : j.items()) {
     int id;
@@ -167,7 +159,7 @@ std::map<int, std::string> read_object_names(const fs::path& objects) {
 // text_embeddings.json: {"phrase": [D floats], ...}, every D the same.
 std::map<std::string, std::vector<float>> read_text_embeddings(const fs::path& te) {
   std::map<std::string, std::vector<float>> out;
-  json j = read_json(te);
+  json j = read_json_file(te);
   if (!j.is_object()) fail("{}: expected an object {{\"phrase\": [floats], ...}}", te.string());
   size_t dim = 0;
   for (auto& [k, val] : j.items()) {

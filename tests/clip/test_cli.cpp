@@ -5,12 +5,12 @@
 #include <nlohmann/json.hpp>
 
 #include "clip/model.h"
-#include "clip/safetensors.h"
 #include "clip_test_util.h"
 #include "core/fs.h"
 #include "core/half.h"
 #include "core/image.h"
 #include "core/npy.h"
+#include "nn/safetensors.h"
 #include "scene/colmap.h"
 #include "test_util.h"
 
@@ -68,7 +68,7 @@ TEST(ClipCli, EmbedTextMatchesLibrary) {
 TEST(ClipCli, EmbedTextErrors) {
   test::TempDir t;
   std::vector<float> v(4, 0.f);
-  clip::write_safetensors(t / "x.safetensors", {{"foo", {4}, v.data()}});
+  nn::write_safetensors(t / "x.safetensors", {{"foo", {4}, v.data()}});
   auto out = t / "o.json";
   auto r = test::run_hgs("embed-text --clip " + (t / "x.safetensors").string() + " --text cat --out " + out.string());
   EXPECT_EQ(r.exit_code, 1);

@@ -8,10 +8,16 @@
 #include <random>
 #include <stdexcept>
 
-#include "clip/thread_pool.h"
-#include "clip/transformer.h"
+#include "clip/block.h"
+#include "nn/openblas_env.h"
+#include "nn/thread_pool.h"
+#include "nn/transformer.h"
+
+// OpenBLAS with the kernels hgs picks for this CPU, as in the hgs binary (nn/openblas_env.h).
+HGS_OPENBLAS_PREINIT();
 
 using namespace hgs::clip;
+using namespace hgs::nn;
 
 namespace {
 

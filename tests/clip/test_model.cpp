@@ -10,15 +10,16 @@
 
 #include "clip/model.h"
 #include "clip/preprocess.h"
-#include "clip/safetensors.h"
 #include "clip_test_util.h"
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/half.h"
+#include "nn/safetensors.h"
 #include "test_util.h"
 
 using namespace hgs;
 using namespace hgs::clip;
+using namespace hgs::nn;
 using hgs::test::max_rel_err;
 using hgs::test::ref_array;
 
@@ -207,7 +208,7 @@ TEST(ClipModel, TiledDenseFeatures) {
   EXPECT_GT(max_rel_err(m.dense_features(img, o).data, sum), 1e-4);
 }
 
-// --precision bf16: the vision tower's linear layers in bfloat16. On 36 patches (+ CLS: above clip::linear's
+// --precision bf16: the vision tower's linear layers in bfloat16. On 36 patches (+ CLS: above nn::linear's
 // few-row float32 path) the dense features stay within a bound of float32 (observed relative RMS ~3e-3) and
 // differ from them (the rounding ran); back to F32 they are float32's bit for bit.
 TEST(ClipModel, Bf16DenseFeaturesWithinBoundOfFloat32) {

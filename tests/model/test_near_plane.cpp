@@ -26,7 +26,7 @@ TEST(NearPlane, ReadBesideThePly) {
   atomic_write_text(d / "config.json", R"({"near_plane": -1})");
   EXPECT_FILE_ERROR(model_near_plane(ply), d / "config.json", "near plane must be a number > 0");
   atomic_write_text(d / "config.json", R"({"near_plane": 0.2)");
-  EXPECT_FILE_ERROR(model_near_plane(ply), d / "config.json", "not valid JSON");
+  EXPECT_FILE_ERROR(model_near_plane(ply), d / "config.json", "invalid JSON");
 }
 
 TEST(NearPlane, CameraCullsNearerGaussians) {

@@ -12,9 +12,9 @@
 #include <string>
 #include <vector>
 
-#include "clip/safetensors.h"
 #include "core/image.h"
 #include "core/npy.h"
+#include "nn/safetensors.h"
 #include "sam/amg.h"
 #include "sam/model.h"
 
@@ -100,9 +100,9 @@ inline void rewrite(const std::filesystem::path& dst, const std::function<std::s
                     const std::string& reshape_name = "", const std::vector<int64_t>& new_shape = {},
                     const std::filesystem::path& src = sam_data("tiny_sam.safetensors"),
                     const std::function<void(const std::string&, std::vector<float>&)>& edit = {}) {
-  clip::SafeTensors st(src);
+  nn::SafeTensors st(src);
   std::vector<std::vector<float>> data;
-  std::vector<clip::TensorToWrite> out;
+  std::vector<nn::TensorToWrite> out;
   const auto names = st.names();
   data.reserve(names.size());
   for (const std::string& n : names) {
@@ -114,7 +114,7 @@ inline void rewrite(const std::filesystem::path& dst, const std::function<std::s
     if (n == reshape_name) shape = new_shape;
     out.push_back({m, shape, data.back().data()});
   }
-  clip::write_safetensors(dst, out, clip::StDType::F32);
+  nn::write_safetensors(dst, out, nn::StDType::F32);
 }
 
 inline std::string sub(std::string s, const std::string& re, const std::string& by) {

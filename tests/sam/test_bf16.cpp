@@ -17,7 +17,7 @@ namespace {
 const sam::SamModel& tiny_bf16() {
   static const sam::SamModel m = [] {
     sam::SamOptions o;
-    o.precision = clip::Precision::BF16;
+    o.precision = nn::Precision::BF16;
     return sam::SamModel::load(sam_data("tiny_sam.safetensors"), o);
   }();
   return m;
@@ -46,12 +46,12 @@ double mask_disagreement(const std::vector<float>& a, const std::vector<float>& 
 
 TEST(SamBf16, ModelRunsInBf16AndSaysSo) {
   const sam::SamModel& m = tiny_bf16();
-  EXPECT_EQ(m.precision, clip::Precision::BF16);
+  EXPECT_EQ(m.precision, nn::Precision::BF16);
   EXPECT_FALSE(m.vision.layers[0].qkv.w16.empty());
   EXPECT_FALSE(m.decoder.up1.w16.empty());
   EXPECT_NE(m.describe().find("bf16 products"), std::string::npos) << m.describe();
   sam::SamModel f = tiny_bf16();
-  f.set_precision(clip::Precision::F32);  // back to the exact path: the float32 reference again
+  f.set_precision(nn::Precision::F32);  // back to the exact path: the float32 reference again
   EXPECT_TRUE(f.vision.layers[0].qkv.w16.empty());
   std::vector<float> px = sam_ref("pixels.npy");
   EXPECT_LT(max_rel_err(f.encode(px.data()), sam_ref("embedding.npy")), 1e-5);

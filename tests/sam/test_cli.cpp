@@ -5,15 +5,15 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
-#include "clip/openblas_env.h"
 #include "core/image.h"
 #include "masks/rle.h"
+#include "nn/openblas_env.h"
 #include "sam/amg.h"
 #include "sam_test_util.h"
 #include "scene/scene.h"
 #include "test_util.h"
 
-// The test process runs OpenBLAS with the kernels hgs picks for itself (clip/openblas_env.h), so that the library's
+// The test process runs OpenBLAS with the kernels hgs picks for itself (nn/openblas_env.h), so that the library's
 // products here and the hgs processes' products agree to the bit: on a CPU whose model OpenBLAS does not know (seen:
 // an Emerald Rapids guest) the library alone falls back to its SSE3 kernels, whose sums round differently.
 HGS_OPENBLAS_PREINIT();

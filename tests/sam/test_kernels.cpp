@@ -7,7 +7,7 @@
 #include <cmath>
 #include <random>
 
-#include "clip/transformer.h"
+#include "nn/transformer.h"
 #include "sam/decoder_attention.h"
 #include "sam/model.h"
 #include "sam_test_util.h"
@@ -213,7 +213,7 @@ TEST(SamKernels, ReassociatedDecoderAttentionMatchesPlainAttention) {
   sam::attend_few_keys(a, heads, img.data(), nullptr, many, tok.data(), tok2.data(), few, out2.data(), w);
   const std::vector<float> ref = plain_attention(a, heads, img, many, tok, tok2, few);
   EXPECT_LT(max_rel_err(out2, ref), 2e-5);
-  clip::linear(a.q, img.data(), many, qp.data());
+  nn::linear(a.q, img.data(), many, qp.data());
   sam::attend_few_keys(a, heads, nullptr, qp.data(), many, tok.data(), tok2.data(), few, out3.data(), w);
   EXPECT_EQ(out3, out2);
 }

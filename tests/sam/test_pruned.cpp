@@ -7,8 +7,8 @@
 #include <nlohmann/json.hpp>
 #include <regex>
 
-#include "clip/safetensors.h"
 #include "core/error.h"
+#include "nn/safetensors.h"
 #include "sam/amg.h"
 #include "sam_test_util.h"
 #include "test_util.h"
@@ -230,10 +230,10 @@ TEST(SamPruned, LayerWithoutRelativePositionsUsesTheConfig) {
 // pruned model saved that way in segment-anything naming, optionally with one tensor given another shape.
 void write_split_qkv(const std::filesystem::path& dst, const std::string& reshape_name = "",
                      const std::vector<int64_t>& new_shape = {}) {
-  clip::SafeTensors st(pruned_file());
+  nn::SafeTensors st(pruned_file());
   const auto names = st.names();
   std::vector<std::vector<float>> data;
-  std::vector<clip::TensorToWrite> out;
+  std::vector<nn::TensorToWrite> out;
   data.reserve(3 * names.size());
   const std::regex qkv(R"((.*\.attn\.)qkv\.(weight|bias))");
   for (const std::string& n : names) {
@@ -254,13 +254,13 @@ void write_split_qkv(const std::filesystem::path& dst, const std::string& reshap
       out.push_back({m, m == reshape_name ? new_shape : shape, data.back().data()});
     }
   }
-  clip::write_safetensors(dst, out, clip::StDType::F32);
+  nn::write_safetensors(dst, out, nn::StDType::F32);
 }
 
 TEST(SamPruned, SeparateQkvLinearsLoad) {
   TempDir t;
   write_split_qkv(t / "split.safetensors");
-  clip::SafeTensors st(t / "split.safetensors");
+  nn::SafeTensors st(t / "split.safetensors");
   ASSERT_TRUE(st.has("image_encoder.blocks.1.attn.k.weight"));
   ASSERT_FALSE(st.has("image_encoder.blocks.1.attn.qkv.weight"));
   sam::SamModel m = sam::SamModel::load(t / "split.safetensors");
@@ -272,10 +272,10 @@ TEST(SamPruned, SeparateQkvLinearsLoad) {
   EXPECT_EQ(a, b);
   EXPECT_LT(max_rel_err(a[3], pref("layer2.npy")), 1e-5);
   // SlimSAM's checkpoints hold the encoder in a DataParallel wrapper: 'image_encoder.module.*' also loads.
-  clip::SafeTensors sp(t / "split.safetensors");
+  nn::SafeTensors sp(t / "split.safetensors");
   const auto sp_names = sp.names();
   std::vector<std::vector<float>> sp_data;
-  std::vector<clip::TensorToWrite> sp_out;
+  std::vector<nn::TensorToWrite> sp_out;
   sp_data.reserve(sp_names.size());
   for (const std::string& n : sp_names) {
     sp_data.push_back(sp.to_float(n));
@@ -283,7 +283,7 @@ TEST(SamPruned, SeparateQkvLinearsLoad) {
     if (m2.rfind("image_encoder.", 0) == 0) m2.insert(14, "module.");
     sp_out.push_back({m2, sp.info(n).shape, sp_data.back().data()});
   }
-  clip::write_safetensors(t / "dp.safetensors", sp_out, clip::StDType::F32);
+  nn::write_safetensors(t / "dp.safetensors", sp_out, nn::StDType::F32);
   sam::SamModel dp = sam::SamModel::load(t / "dp.safetensors");
   EXPECT_EQ(dp.encode(px.data()), m.encode(px.data()));
   EXPECT_EQ(dp.naming, sam::Naming::SegmentAnything);

@@ -1,5 +1,6 @@
-// Greedy one-to-one matching of mask ids to true objects on summed per-view IoU, then mean per-view IoU (score.h).
-#include "masks/score.h"
+// Greedy one-to-one matching of mask ids to true objects on summed per-view IoU, then mean per-view IoU
+// (association_score.h).
+#include "eval/association_score.h"
 
 #include <algorithm>
 #include <tuple>
@@ -9,10 +10,10 @@
 #include "eval/metrics.h"
 #include "scene/scene.h"
 
-namespace hgs::masks {
+namespace hgs::eval {
 namespace fs = std::filesystem;
 
-MaskScore score_masks(const fs::path& scene, const fs::path& masks_dir, int min_pixels, bool test_only) {
+AssociationScore score_association(const fs::path& scene, const fs::path& masks_dir, int min_pixels, bool test_only) {
   Scene s = load_scene(scene);
   struct ViewCounts {
     fs::path gt, pred;  // the label maps, read again for the boundaries
@@ -42,7 +43,7 @@ MaskScore score_masks(const fs::path& scene, const fs::path& masks_dir, int min_
   std::vector<std::tuple<double, int, int>> cand;
   for (auto& [pg, t] : total) cand.emplace_back(-t, pg.first, pg.second);
   std::sort(cand.begin(), cand.end());
-  MaskScore r;
+  AssociationScore r;
   std::map<int, int> used_pred;
   for (auto& [t, p, g] : cand) {
     if (r.match.count(g) || used_pred.count(p)) continue;
@@ -55,7 +56,7 @@ MaskScore score_masks(const fs::path& scene, const fs::path& masks_dir, int min_
   int above = 0;
   for (auto& c : vc) {
     const LabelMap gt = load_label_png(c.gt), pr = load_label_png(c.pred);
-    eval::Mask gm(gt.v.size()), pm(gt.v.size());
+    Mask gm(gt.v.size()), pm(gt.v.size());
     for (auto& [g, ga] : c.gt_area) {
       if (ga < min_pixels) continue;
       double iou = 0;
@@ -68,7 +69,7 @@ MaskScore score_masks(const fs::path& scene, const fs::path& masks_dir, int min_
       }
       const int p = it == r.match.end() ? -1 : it->second;
       for (size_t i = 0; i < gt.v.size(); ++i) gm[i] = gt.v[i] == g, pm[i] = int(pr.v[i]) == p;
-      const double b = eval::boundary_iou(gm, pm, gt.width, gt.height);  // gm has a boundary: never NaN
+      const double b = boundary_iou(gm, pm, gt.width, gt.height);  // gm has a boundary: never NaN
       sum += iou;
       bsum += b;
       above += iou >= 0.5;
@@ -87,4 +88,4 @@ MaskScore score_masks(const fs::path& scene, const fs::path& masks_dir, int min_
   return r;
 }
 
-}  // namespace hgs::masks
+}  // namespace hgs::eval

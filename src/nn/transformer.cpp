@@ -1,27 +1,16 @@
-// CLIP transformer block kernels: see transformer.h.
-#include "clip/transformer.h"
+// Transformer kernels: see transformer.h.
+#include "nn/transformer.h"
 
-#include "clip/fastmath.h"
-#include "clip/gemm_bf16.h"
-#include "clip/thread_pool.h"
+#include "nn/fastmath.h"
+#include "nn/gemm_bf16.h"
+#include "nn/thread_pool.h"
 
 #include <cblas.h>
 
-#include <omp.h>
 #include <algorithm>
 #include <cmath>
 
-#include "core/error.h"
-
-namespace hgs::clip {
-
-void Workspace::reserve(int n, int width, int mlp_width, int max_len) {
-  h.resize(size_t(n) * width);
-  qkv.resize(size_t(n) * 3 * width);
-  attn.resize(size_t(n) * width);
-  mlp.resize(size_t(n) * mlp_width);
-  scores.resize(size_t(max_len) * max_len);
-}
+namespace hgs::nn {
 
 namespace {
 
@@ -247,41 +236,4 @@ void multi_head_attention_bf16(const float* q, int ldq, const uint16_t* k, const
   }
 }
 
-void block_forward(const Block& b, int heads, Activation act, const std::vector<Segment>& segs, bool causal, float* x,
-                   int n, Workspace& ws) {
-  const int w = b.qkv.in, hd = w / heads, w3 = 3 * w;
-  const float scale = 1.f / std::sqrt(float(hd));
-  // Attention.
-  layer_norm(b.ln1, x, n, w, ws.h.data());
-  linear(b.qkv, ws.h.data(), n, ws.qkv.data());
-  for (const Segment& sg : segs) {
-    const float* base = ws.qkv.data() + size_t(sg.start) * w3;
-    multi_head_attention(base, w3, base + w, w3, base + 2 * w, w3, sg.len, sg.len, heads, hd, scale,
-                         ws.attn.data() + size_t(sg.start) * w, w, ws.scores.data(), causal);
-  }
-  linear_add(b.out, ws.attn.data(), n, x);
-  // MLP.
-  layer_norm(b.ln2, x, n, w, ws.h.data());
-  linear(b.fc, ws.h.data(), n, ws.mlp.data());
-  activation(act, ws.mlp.data(), size_t(n) * b.fc.out);
-  linear_add(b.proj, ws.mlp.data(), n, x);
-}
-
-}  // namespace hgs::clip
-
-namespace hgs::clip {
-
-std::optional<Activation> parse_activation(const std::string& s) {
-  if (s.empty() || s == "auto") return std::nullopt;
-  if (s == "gelu") return Activation::GELU;
-  if (s == "quick_gelu" || s == "quickgelu") return Activation::QuickGELU;
-  fail("--act: unknown activation \"{}\" (auto, gelu or quick_gelu)", s);
-}
-
-void set_num_threads(int n) {
-  if (n <= 0) return;
-  openblas_set_num_threads(n);
-  omp_set_num_threads(n);
-}
-
-}  // namespace hgs::clip
+}  // namespace hgs::nn

@@ -1,7 +1,7 @@
 // bfloat16 products on oneDNN: see gemm_bf16.h. One matmul primitive per (shape, strides, options, threads),
 // created on first use and kept (creating one costs ~0.1-1 ms: kernel generation); memory objects wrap the
 // callers' pointers, nothing is copied except the rounding of operands by to_bf16.
-#include "clip/gemm_bf16.h"
+#include "nn/gemm_bf16.h"
 
 #include <omp.h>
 #include <oneapi/dnnl/dnnl.hpp>
@@ -12,12 +12,12 @@
 #include <unordered_map>
 #include <vector>
 
-#include "clip/fastmath.h"
-#include "clip/thread_pool.h"
 #include "core/error.h"
 #include "core/half.h"
+#include "nn/fastmath.h"
+#include "nn/thread_pool.h"
 
-namespace hgs::clip {
+namespace hgs::nn {
 
 Precision parse_precision(const std::string& s, const char* what) {
   if (s == "f32" || s == "fp32" || s == "float32") return Precision::F32;
@@ -179,4 +179,4 @@ std::string bf16_kernel_name() {
   }
 }
 
-}  // namespace hgs::clip
+}  // namespace hgs::nn

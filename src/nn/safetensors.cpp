@@ -1,5 +1,5 @@
 // safetensors reader and writer: see safetensors.h (mmap + nlohmann-json header, bounds checks per tensor).
-#include "clip/safetensors.h"
+#include "nn/safetensors.h"
 
 #include <fcntl.h>
 #include <sys/mman.h>
@@ -13,7 +13,7 @@
 #include "core/fs.h"
 #include "core/half.h"
 
-namespace hgs::clip {
+namespace hgs::nn {
 namespace {
 
 size_t dtype_bytes(StDType t) { return t == StDType::F32 ? 4 : 2; }
@@ -211,4 +211,4 @@ void write_safetensors(const std::filesystem::path& path, const std::vector<Tens
   atomic_write_bytes(path, buf.data(), buf.size());
 }
 
-}  // namespace hgs::clip
+}  // namespace hgs::nn

@@ -8,9 +8,9 @@
 #include <map>
 #include <vector>
 
-namespace hgs::masks {
+namespace hgs::eval {
 
-struct MaskScore {
+struct AssociationScore {
   int views = 0;                     // views with both a mask and a gt instance map
   int pairs = 0;                     // (view, object) pairs scored
   double mean_iou = 0;               // mean over the pairs
@@ -24,7 +24,7 @@ struct MaskScore {
 
 // `masks_dir` holds <stem>.png label maps of the scene's views (default: SCENE/masks); test_only: the scene's test
 // views alone (those the evaluation scores a model on).
-MaskScore score_masks(const std::filesystem::path& scene, const std::filesystem::path& masks_dir, int min_pixels = 16,
-                      bool test_only = false);
+AssociationScore score_association(const std::filesystem::path& scene, const std::filesystem::path& masks_dir,
+                                   int min_pixels = 16, bool test_only = false);
 
-}  // namespace hgs::masks
+}  // namespace hgs::eval

@@ -1,4 +1,4 @@
-// bfloat16 products (src/clip/gemm_bf16.h) against brute-force references: the rounding itself, gemm_bf16 on
+// bfloat16 products (src/nn/gemm_bf16.h) against brute-force references: the rounding itself, gemm_bf16 on
 // rounded operands (only the float32 summation order may differ), and the bf16 linear layer and attention
 // against their float32 versions within the bound that rounding both operands to 8 significant bits allows.
 #include <gtest/gtest.h>
@@ -9,12 +9,12 @@
 #include <random>
 #include <vector>
 
-#include "clip/gemm_bf16.h"
-#include "clip/transformer.h"
 #include "core/error.h"
 #include "core/half.h"
+#include "nn/gemm_bf16.h"
+#include "nn/transformer.h"
 
-namespace hgs::clip {
+namespace hgs::nn {
 namespace {
 
 std::vector<float> randn(size_t n, std::mt19937& rng, float scale = 1.f) {
@@ -137,7 +137,7 @@ double rounding_bound(const float* x, const float* w, int k) {
 
 TEST(GemmBf16, LinearLayerWithinTheRoundingBoundOfFloat32) {
   std::mt19937 rng(11);
-  for (int n : {13, 100}) {  // above clip::linear's few-row path (<= 12 rows stay float32)
+  for (int n : {13, 100}) {  // above nn::linear's few-row path (<= 12 rows stay float32)
     Linear l;
     l.in = 96, l.out = 40;
     l.w = randn(size_t(l.out) * l.in, rng, 0.1f);
@@ -203,4 +203,4 @@ TEST(GemmBf16, ParsePrecision) {
 }
 
 }  // namespace
-}  // namespace hgs::clip
+}  // namespace hgs::nn

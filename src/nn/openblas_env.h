@@ -4,8 +4,8 @@
 // after that. So the preinit below re-executes the program once (its path from /proc/self/exe, same arguments) with the
 // variables added, marked HGS_OPENBLAS_ENV=1; values the user set are kept, and HGS_OPENBLAS_ENV=0 turns this
 // off. Put HGS_OPENBLAS_PREINIT() in one source file of each executable that runs SAM or CLIP products (hgs,
-// bench_sam, bench_clip, test_clip, test_sam). A Python process cannot re-execute itself: the package `hgs` sets the
-// same two variables from openblas_core_for_this_cpu() and kOpenblasThreadTimeout before it loads the library
+// bench_sam, bench_clip, test_nn, test_clip, test_sam). A Python process cannot re-execute itself: the package `hgs`
+// sets the same two variables from openblas_core_for_this_cpu() and kOpenblasThreadTimeout before it loads the library
 // (python/hgs/__init__.py).
 //
 // OPENBLAS_CORETYPE: Debian's OpenBLAS picks its kernels by the CPU model number, and on a virtual machine
@@ -16,14 +16,14 @@
 // the library.
 //
 // OPENBLAS_THREAD_TIMEOUT=4: the pthread build lets an idle worker spin on sched_yield for 2^28 cycles (~0.1 s)
-// after each product. hgs runs its element-wise loops and attention units on its own pool (clip/thread_pool.h)
+// after each product. hgs runs its element-wise loops and attention units on its own pool (nn/thread_pool.h)
 // between products, and there the spinning workers took the cores from the pool's threads (4-5 % of a 2-thread
 // SAM embedding); 2^4 cycles makes them sleep at once, and waking them costs microseconds against products of
 // milliseconds.
 #pragma once
 #include <unistd.h>
 
-namespace hgs::clip {
+namespace hgs::nn {
 
 // The value of OPENBLAS_THREAD_TIMEOUT set here (see above).
 inline constexpr char kOpenblasThreadTimeout[] = "4";
@@ -81,8 +81,8 @@ inline void set_openblas_env(int, char** argv, char** envp) {
   execve(self, argv, env);  // returns only on failure: go on with the library's own choices
 }
 
-}  // namespace hgs::clip
+}  // namespace hgs::nn
 
 #define HGS_OPENBLAS_PREINIT()                                                                                      \
   __attribute__((section(".preinit_array"), used)) static void (*const hgs_openblas_preinit)(int, char**, char**) = \
-      &hgs::clip::set_openblas_env
+      &hgs::nn::set_openblas_env

@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-namespace hgs::clip {
+namespace hgs::nn {
 
 enum class Precision { F32, BF16 };
 
@@ -40,4 +40,4 @@ void gemm_bf16(int m, int n, int k, const uint16_t* a, int lda, const uint16_t* 
 // The oneDNN kernel that bfloat16 products use on this CPU (e.g. "brg:avx512_core_amx_bf16"), for reports.
 std::string bf16_kernel_name();
 
-}  // namespace hgs::clip
+}  // namespace hgs::nn

@@ -1,30 +1,28 @@
-// Pre-LayerNorm transformer blocks as in CLIP (x += attn(ln_1(x)); x += mlp(ln_2(x))), float32 on the CPU.
+// Transformer kernels of the CLIP and SAM forwards, float32 on the CPU (bfloat16 products optional, gemm_bf16.h).
 // All matrix products are cblas_sgemm calls on whole token matrices (OpenBLAS threads them); attention runs
 // per sequence and head as two sgemm calls (Q K^T, then P V) with a row softmax in between. LayerNorm,
 // activation and softmax are vectorised loops (fastmath.h) split over a blocking thread pool (thread_pool.h):
 // OpenMP regions between the OpenBLAS calls made both thread pools spin against each other and halved the
-// speed on 2 cores. Several independent sequences can be packed
-// into one token matrix (`Segment`s): linear layers see all of them at once, attention stays within each.
-// Buffers live in a Workspace sized once per forward call; nothing is allocated per token or per layer.
+// speed on 2 cores.
 #pragma once
+#include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <vector>
 
-#include "clip/model.h"
+namespace hgs::nn {
 
-namespace hgs::clip {
+enum class Activation { GELU, QuickGELU };  // x*Phi(x) (erf) and x*sigmoid(1.702x)
 
-struct Segment {
-  int start = 0, len = 0;  // rows [start, start + len) of the token matrix
+struct Linear {
+  int in = 0, out = 0;
+  std::vector<float> w;            // [out, in]
+  std::vector<float> b;            // [out]
+  std::vector<uint16_t> w16 = {};  // [out, in] w rounded to bfloat16 when the model runs in bf16, else empty
 };
 
-struct Workspace {
-  std::vector<float> h;       // [N, width]
-  std::vector<float> qkv;     // [N, 3 * width]
-  std::vector<float> attn;    // [N, width]
-  std::vector<float> mlp;     // [N, mlp]
-  std::vector<float> scores;  // [max_len, max_len]
-  void reserve(int n, int width, int mlp_width, int max_len);
+struct LayerNorm {
+  std::vector<float> g, b;  // [width]
 };
 
 // y [N, out] = x [N, in] W^T + b. With l.w16 set (use_bf16), products of more than a few rows run in bfloat16
@@ -58,13 +56,9 @@ void multi_head_attention_bf16(const float* q, int ldq, const uint16_t* k, const
                                int hd, float scale, float* out, int ldo, float* scores, bool causal = false,
                                const std::function<void(int, float*)>& bias = {});
 
-// One block applied in place to x [N, width].
-void block_forward(const Block& b, int heads, Activation act, const std::vector<Segment>& segs, bool causal, float* x,
-                   int n, Workspace& ws);
-
 // x [N, n_out] = x [N, k] P for a projection matrix P [k, n_out].
 void matmul(const float* x, int n, int k, const float* p, int n_out, float* y);
 
 void l2_normalize_rows(float* x, int n, int d);
 
-}  // namespace hgs::clip
+}  // namespace hgs::nn

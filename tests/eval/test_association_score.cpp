@@ -1,13 +1,13 @@
-// `hgs masks score` (masks/score.h) on a hand-made scene: ids matched one to one whatever their numbers, IoU and
-// boundary IoU of every (view, object) pair against a brute-force reference, the test views alone on request.
+// `hgs masks score` (eval/association_score.h) on a hand-made scene: ids matched one to one whatever their numbers,
+// IoU and boundary IoU of every (view, object) pair against a brute-force reference, the test views alone on request.
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <vector>
 
 #include "core/image.h"
-#include "masks/score.h"
-#include "masks_test_util.h"
+#include "eval/association_score.h"
+#include "masks/masks_test_util.h"
 #include "test_util.h"
 
 using namespace hgs;
@@ -44,7 +44,7 @@ void rect(LabelMap& m, int k, int x0, int y0, int x1, int y1) {
 
 }  // namespace
 
-TEST(MaskScore, IdsMatchedOneToOneAndBoundariesAgainstBruteForce) {
+TEST(AssociationScore, IdsMatchedOneToOneAndBoundariesAgainstBruteForce) {
   test::TempDir tmp;
   std::vector<std::string> names;
   for (int i = 0; i < 9; ++i) names.push_back("frame_" + std::to_string(i) + ".png");  // views 0 and 8 are test
@@ -71,7 +71,7 @@ TEST(MaskScore, IdsMatchedOneToOneAndBoundariesAgainstBruteForce) {
       if (v % 8 == 0) tsum += i1, tbsum += b1, ++tpairs;
     }
   }
-  const masks::MaskScore s = masks::score_masks(tmp.path, tmp.path / "masks", 1);
+  const eval::AssociationScore s = eval::score_association(tmp.path, tmp.path / "masks", 1);
   EXPECT_EQ(s.views, 9);
   EXPECT_EQ(s.pairs, pairs);
   EXPECT_EQ(s.match.at(1), 7);
@@ -81,7 +81,7 @@ TEST(MaskScore, IdsMatchedOneToOneAndBoundariesAgainstBruteForce) {
   EXPECT_NEAR(s.found_mean_biou, found / above, 1e-12);
   EXPECT_LT(s.mean_biou, 1.0);
   EXPECT_GT(s.mean_biou, 0.0);
-  const masks::MaskScore t = masks::score_masks(tmp.path, tmp.path / "masks", 1, true);
+  const eval::AssociationScore t = eval::score_association(tmp.path, tmp.path / "masks", 1, true);
   EXPECT_EQ(t.views, 2);
   EXPECT_EQ(t.pairs, tpairs);
   EXPECT_NEAR(t.mean_iou, tsum / tpairs, 1e-12);

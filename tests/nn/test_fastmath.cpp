@@ -3,11 +3,11 @@
 
 #include <cmath>
 
-#include "clip/fastmath.h"
+#include "nn/fastmath.h"
 
-using namespace hgs::clip;
+using namespace hgs::nn;
 
-TEST(ClipFastMath, ExpMatchesLibm) {
+TEST(FastMath, ExpMatchesLibm) {
   double worst = 0;
   for (double x = -80; x <= 80; x += 0.001) {
     double ref = std::exp(double(float(x)));
@@ -19,7 +19,7 @@ TEST(ClipFastMath, ExpMatchesLibm) {
   EXPECT_TRUE(std::isfinite(fast_exp(1000.f)));
 }
 
-TEST(ClipFastMath, ErfMatchesLibm) {
+TEST(FastMath, ErfMatchesLibm) {
   double worst = 0;
   for (double x = -8; x <= 8; x += 0.0005)
     worst = std::max(worst, std::fabs(fast_erf(float(x)) - std::erf(double(float(x)))));

@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-namespace hgs::clip {
+namespace hgs::nn {
 
 enum class StDType { F32, F16, BF16, Other };
 
@@ -63,4 +63,4 @@ struct TensorToWrite {
 void write_safetensors(const std::filesystem::path& path, const std::vector<TensorToWrite>& tensors,
                        StDType dtype = StDType::F32, const std::map<std::string, std::string>& metadata = {});
 
-}  // namespace hgs::clip
+}  // namespace hgs::nn

@@ -28,7 +28,7 @@
 #define HGS_AVX512_CLONE __attribute__((target_clones("arch=x86-64-v4", "default")))
 #endif
 
-namespace hgs::clip {
+namespace hgs::nn {
 
 inline float fast_exp(float x) {
   x = std::min(std::max(x, -87.0f), 88.0f);                // min / max rather than branches: the loops vectorise
@@ -57,4 +57,4 @@ inline float fast_erf(float x) {
   return std::copysign(y, x);
 }
 
-}  // namespace hgs::clip
+}  // namespace hgs::nn

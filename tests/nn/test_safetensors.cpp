@@ -4,13 +4,13 @@
 #include <cstring>
 #include <fstream>
 
-#include "clip/safetensors.h"
 #include "core/error.h"
 #include "core/half.h"
+#include "nn/safetensors.h"
 #include "test_util.h"
 
 using namespace hgs;
-using namespace hgs::clip;
+using namespace hgs::nn;
 
 namespace {
 

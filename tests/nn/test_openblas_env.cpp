@@ -1,4 +1,4 @@
-// The OpenBLAS settings of clip/openblas_env.h reach the library: its kernels are the ones chosen for this CPU
+// The OpenBLAS settings of nn/openblas_env.h reach the library: its kernels are the ones chosen for this CPU
 // (or the ones the user named), never the SSE3 fallback on a CPU with AVX2.
 #include <cblas.h>
 #include <gtest/gtest.h>
@@ -7,13 +7,13 @@
 #include <cstdlib>
 #include <string>
 
-#include "clip/openblas_env.h"
+#include "nn/openblas_env.h"
 
 HGS_OPENBLAS_PREINIT();
 
 TEST(OpenBlasEnv, CoreTypeIsSetBeforeTheLibraryStarts) {
   const char* env = std::getenv("OPENBLAS_CORETYPE");
-  const char* ours = hgs::clip::openblas_core_for_this_cpu();
+  const char* ours = hgs::nn::openblas_core_for_this_cpu();
   if (!ours && !env) GTEST_SKIP() << "no AVX2 on this CPU: the core type is left to OpenBLAS";
   ASSERT_NE(env, nullptr) << "the preinit did not run";
   const std::string core = openblas_get_corename();

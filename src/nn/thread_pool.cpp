@@ -1,7 +1,9 @@
 // Blocking thread pool: see thread_pool.h. One job at a time (calls from several threads serialise on a mutex);
 // workers are started lazily and live for the process. An exception thrown by a chunk is caught where it was
 // thrown (it must not leave a worker thread) and the first one is rethrown to the caller once every chunk ended.
-#include "clip/thread_pool.h"
+#include "nn/thread_pool.h"
+
+#include <cblas.h>
 
 #include <omp.h>
 
@@ -12,7 +14,7 @@
 #include <thread>
 #include <vector>
 
-namespace hgs::clip {
+namespace hgs::nn {
 namespace {
 
 class Pool {
@@ -117,4 +119,10 @@ void parallel_for(long n, long min_parallel, const std::function<void(long, long
   });
 }
 
-}  // namespace hgs::clip
+void set_num_threads(int n) {
+  if (n <= 0) return;
+  openblas_set_num_threads(n);
+  omp_set_num_threads(n);
+}
+
+}  // namespace hgs::nn
