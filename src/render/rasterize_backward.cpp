@@ -398,7 +398,7 @@ inline __attribute__((always_inline)) void backward_gaussian(const RasterInputs<
   PairSums<T> a{};
   // Folded channels: the Gaussian's extra row and group entries; their gradient sums (ae, ag) on the stack.
   FoldedGaussian<T, 3> fg;
-  if constexpr (kX == kFolded) fg = folded_gaussian<T, 3>(in, rc, fx, C, GT > 0, GWg);
+  load_folded<T, 3>(in, rc, fx, kX == kFolded ? C : 0, kX == kFolded && GT > 0, GWg, fg);
   P ae[kFoldMaxChannels], ag[kFoldMaxEntries * kFoldMaxWidth];
   if constexpr (kX == kFolded) {
     for (int c = 0; c < C; ++c) ae[c] = P{};

@@ -212,28 +212,23 @@ inline __attribute__((always_inline)) GaussianAtBatch<T> eval_gaussian(const T* 
 template <class T, int NV>
 struct FoldedGaussian {
   T x[kFoldMaxChannels];
-  int e0 = 0, ne = 0;
-  bool one = false;
-  size_t slot = 0;  // id_e0 * NV, when `one`
-  T v[NV] = {};     // val_e0[0, NV), when `one`
+  int e0, ne;
+  bool one;
+  size_t slot;  // id_e0 * NV, when `one`
+  T v[NV];      // val_e0[0, NV), when `one`
 };
+// Fills f in place (no copy of the record per Gaussian); C = 0 and groups = false give the empty record of the
+// paths that do not fold.
 template <class T, int NV>
-inline __attribute__((always_inline)) FoldedGaussian<T, NV> folded_gaussian(const RasterInputs<T>& in, const T* rc,
-                                                                            const T* x, int C, bool groups,
-                                                                            int slot_width) {
-  FoldedGaussian<T, NV> f;
+inline __attribute__((always_inline)) void load_folded(const RasterInputs<T>& in, const T* rc, const T* x, int C,
+                                                       bool groups, int slot_width, FoldedGaussian<T, NV>& f) {
   for (int c = 0; c < C; ++c) f.x[c] = x[c];
-  if (groups) {
-    f.e0 = record_int(rc[kE0]);
-    f.ne = record_int(rc[kNe]);
-  }
+  f.e0 = groups ? record_int(rc[kE0]) : 0;
+  f.ne = groups ? record_int(rc[kNe]) : 0;
   f.one = f.ne == 1 && slot_width == NV;
-  if (f.one) {
-    f.slot = size_t(in.group_id[f.e0]) * NV;
-    const T* gv = in.group_val + size_t(f.e0) * in.group_width;
-    for (int i = 0; i < NV; ++i) f.v[i] = gv[i];
-  }
-  return f;
+  f.slot = f.one ? size_t(in.group_id[f.e0]) * NV : 0;
+  const T* gv = f.one ? in.group_val + size_t(f.e0) * in.group_width : nullptr;
+  for (int i = 0; i < NV; ++i) f.v[i] = f.one ? gv[i] : T(0);
 }
 
 template <class T>

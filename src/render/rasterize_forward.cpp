@@ -354,9 +354,8 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
     if (!mb) continue;
     const T* rc = td.rec + size_t(k) * kRecord;
     FoldedGaussian<T, 4> fg;
-    if constexpr (kX == kFolded)
-      fg =
-          folded_gaussian<T, 4>(in, rc, C > 0 ? fx + size_t(k) * kFoldMaxChannels : nullptr, C, GT > 0, in.group_width);
+    load_folded<T, 4>(in, rc, kX == kFolded && C > 0 ? fx + size_t(k) * kFoldMaxChannels : nullptr,
+                      kX == kFolded ? C : 0, kX == kFolded && GT > 0, in.group_width, fg);
     const int gi = kX == kVisitLists ? bins.tile_gauss[s + k] : 0;
     forward_gaussian<T, kDepth, kX>(in, rc, k, gi, fg, b, jmask, tx0, ty0, mb, alive, wa, vl);
   }
