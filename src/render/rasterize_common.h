@@ -76,8 +76,7 @@ bool load_records(const Binning& bins, const T* records, T* tile_records, bool g
 // them, the count is returned (used [G] is scratch). No Gaussian of the tile reads another group's upstream
 // gradient, so backward loads these groups' only. (The hybrid method's object groups: a tile sees one or two of
 // the view's objects, and each pixel's row holds the gradients of all of them.) Forward keeps every group: its
-// output is dense, and writing the others' zeros apart from the state was slower than the plain copy (measured:
-// the hybrid step's forward 23.4 -> 26 ms).
+// output is dense, and writing the others' zeros apart from the state is slower than the plain copy.
 template <class T>
 int tile_groups(const RasterInputs<T>& in, const TileData<T>& td, uint8_t* used, int* list) {
   const int G = in.num_groups;
