@@ -100,11 +100,8 @@ inline int clamp_ceil(T v, int lo, int hi) {
   return int(v);
 }
 
-}  // namespace
-
-template <class T>
-void bin_gaussians(int width, int height, int n, const T* mean2d, const T* conic, const T* opacity, const T* depth,
-                   const int* radius, Binning& b) {
+// Sizes b's per-Gaussian arrays and the tile grid of a width x height image.
+void start_binning(int width, int height, int n, Binning& b) {
   b.width = width;
   b.height = height;
   b.tiles_x = (width + kTileSize - 1) / kTileSize;
@@ -115,49 +112,54 @@ void bin_gaussians(int width, int height, int n, const T* mean2d, const T* conic
   b.pair_offset.resize(size_t(n) + 1);
   b.counts.resize(size_t(n));
   b.mahal.resize(size_t(n));
+}
 
-  // 1. boxes
-#pragma omp parallel for schedule(static)
-  for (int i = 0; i < n; ++i) {
-    int* bb = &b.bbox[4 * size_t(i)];
-    int* tr = &b.trect[4 * size_t(i)];
-    bb[0] = tr[0] = 1;
-    bb[1] = tr[1] = 0;
-    bb[2] = tr[2] = 1;
-    bb[3] = tr[3] = 0;
-    b.counts[i] = 0;
-    b.mahal[i] = -1;
-    const T o = opacity[i];
-    if (radius[i] <= 0 || !(o * T(kAlphaMinInverse) >= T(1))) continue;
-    const T u = mean2d[2 * i], v = mean2d[2 * i + 1];
-    const T a = conic[3 * i], bc = conic[3 * i + 1], c = conic[3 * i + 2];
-    const T det = a * c - bc * bc;
-    // alpha >= 1/255 needs d^T conic d <= m; bounding box of that ellipse is +-sqrt(m * cov_xx), +-sqrt(m * cov_yy)
-    const T m = T(2) * std::log(T(kAlphaMinInverse) * o) * T(1.0001) + T(1e-4);
-    b.mahal[i] = double(m);
-    const T ex = std::sqrt(std::max(T(0), m * c / det)) + T(1e-3);
-    const T ey = std::sqrt(std::max(T(0), m * a / det)) + T(1e-3);
-    // pixel x is evaluated at x + 0.5
-    bb[0] = clamp_ceil(u - ex - T(0.5), 0, width);
-    bb[1] = clamp_floor(u + ex - T(0.5), -1, width - 1);
-    bb[2] = clamp_ceil(v - ey - T(0.5), 0, height);
-    bb[3] = clamp_floor(v + ey - T(0.5), -1, height - 1);
-    const T r = T(radius[i]);
-    const int sx0 = clamp_ceil(u - r - T(0.5), 0, width), sx1 = clamp_floor(u + r - T(0.5), -1, width - 1);
-    const int sy0 = clamp_ceil(v - r - T(0.5), 0, height), sy1 = clamp_floor(v + r - T(0.5), -1, height - 1);
-    const int x0 = std::max(sx0, bb[0]), x1 = std::min(sx1, bb[1]);
-    const int y0 = std::max(sy0, bb[2]), y1 = std::min(sy1, bb[3]);
-    if (x0 > x1 || y0 > y1 || bb[0] > bb[1] || bb[2] > bb[3]) continue;
-    tr[0] = x0 / kTileSize;
-    tr[1] = x1 / kTileSize;
-    tr[2] = y0 / kTileSize;
-    tr[3] = y1 / kTileSize;
-    b.counts[i] = (tr[1] - tr[0] + 1) * (tr[3] - tr[2] + 1);
-  }
+// 1. Gaussian i's boxes: bb [4] the pixel box of its alpha >= 1/255 ellipse (inclusive x0, x1, y0, y1; empty as
+// 1, 0), tr [4] the tiles of that box clipped to its projected radius; its pair count and its ellipse's
+// Mahalanobis bound m (-1 when it cannot reach alpha 1/255).
+template <class T>
+inline void gaussian_box(const Binning& b, int i, const T* mean2d, const T* conic, const T* opacity, const int* radius,
+                         int* bb, int* tr, int& count, double& mahal) {
+  bb[0] = tr[0] = 1;
+  bb[1] = tr[1] = 0;
+  bb[2] = tr[2] = 1;
+  bb[3] = tr[3] = 0;
+  count = 0;
+  mahal = -1;
+  const T o = opacity[i];
+  if (radius[i] <= 0 || !(o * T(kAlphaMinInverse) >= T(1))) return;
+  const int width = b.width, height = b.height;
+  const T u = mean2d[2 * i], v = mean2d[2 * i + 1];
+  const T a = conic[3 * i], bc = conic[3 * i + 1], c = conic[3 * i + 2];
+  const T det = a * c - bc * bc;
+  // alpha >= 1/255 needs d^T conic d <= m; bounding box of that ellipse is +-sqrt(m * cov_xx), +-sqrt(m * cov_yy)
+  const T m = T(2) * std::log(T(kAlphaMinInverse) * o) * T(1.0001) + T(1e-4);
+  mahal = double(m);
+  const T ex = std::sqrt(std::max(T(0), m * c / det)) + T(1e-3);
+  const T ey = std::sqrt(std::max(T(0), m * a / det)) + T(1e-3);
+  // pixel x is evaluated at x + 0.5
+  bb[0] = clamp_ceil(u - ex - T(0.5), 0, width);
+  bb[1] = clamp_floor(u + ex - T(0.5), -1, width - 1);
+  bb[2] = clamp_ceil(v - ey - T(0.5), 0, height);
+  bb[3] = clamp_floor(v + ey - T(0.5), -1, height - 1);
+  const T r = T(radius[i]);
+  const int sx0 = clamp_ceil(u - r - T(0.5), 0, width), sx1 = clamp_floor(u + r - T(0.5), -1, width - 1);
+  const int sy0 = clamp_ceil(v - r - T(0.5), 0, height), sy1 = clamp_floor(v + r - T(0.5), -1, height - 1);
+  const int x0 = std::max(sx0, bb[0]), x1 = std::min(sx1, bb[1]);
+  const int y0 = std::max(sy0, bb[2]), y1 = std::min(sy1, bb[3]);
+  if (x0 > x1 || y0 > y1 || bb[0] > bb[1] || bb[2] > bb[3]) return;
+  tr[0] = x0 / kTileSize;
+  tr[1] = x1 / kTileSize;
+  tr[2] = y0 / kTileSize;
+  tr[3] = y1 / kTileSize;
+  count = (tr[1] - tr[0] + 1) * (tr[3] - tr[2] + 1);
+}
 
-  // 2. Gaussian-major pair numbering and the depth order of binned Gaussians: a two-pass prefix sum over
-  // contiguous chunks of Gaussians (sums per chunk, then each chunk numbers its pairs and places its binned
-  // Gaussians from its offsets), so the result is the serial loop's.
+// 2. Gaussian-major pair numbering (pair_offset [n + 1]) and the depth keys and order of the binned Gaussians: a
+// two-pass prefix sum over contiguous chunks of Gaussians (sums per chunk, then each chunk numbers its pairs and
+// places its binned Gaussians from its offsets), so the result is the serial loop's. Returns the pair count.
+template <class T>
+int number_pairs(int n, const T* depth, Binning& b) {
   const int T2 = n < 8192 ? 1 : std::max(1, omp_get_max_threads());
   std::vector<int64_t> chunk_pairs(size_t(T2) + 1, 0), chunk_binned(size_t(T2) + 1, 0);
   int total = 0, binned = 0;
@@ -192,14 +194,32 @@ void bin_gaussians(int width, int height, int n, const T* mean2d, const T* conic
     }
   }
   b.pair_offset[n] = total;
-  b.num_pairs = total;
-  radix_sort(b.keys, b.order, b.keys_tmp, b.order_tmp, int(sizeof(T) == 4 ? 4 : 8));
+  return total;
+}
 
-  // 3. per-tile lists: the depth-sorted Gaussians in contiguous chunks, one per thread. Each thread counts its
-  // chunk's pairs per tile; the lists are laid out tile-major, then chunk-major inside a tile (so every list stays
-  // in depth order), and each thread writes its own chunk's entries: the serial scan's lists, whatever the thread
-  // count, with each thread reading only its chunk (splitting the tile rows instead made every thread scan every
-  // Gaussian, which did not get faster with more threads).
+// The write cursors of the tile lists: cursor [nt, num_tiles] holds each chunk's pair count per tile and
+// becomes each chunk's first slot in each tile's list (tile-major, then chunk-major); tile_start [num_tiles + 1]
+// gets the lists' starts.
+inline void tile_cursors(int nt, int num_tiles, int* cursor, int* tile_start) {
+  int run = 0;
+  for (int tile = 0; tile < num_tiles; ++tile) {
+    tile_start[tile] = run;
+    for (int u = 0; u < nt; ++u) {
+      int& c = cursor[size_t(u) * num_tiles + tile];
+      const int cnt = c;
+      c = run;
+      run += cnt;
+    }
+  }
+  tile_start[num_tiles] = run;
+}
+
+// 3. per-tile lists: the depth-sorted Gaussians in contiguous chunks, one per thread. Each thread counts its
+// chunk's pairs per tile; the lists are laid out tile-major, then chunk-major inside a tile (so every list stays
+// in depth order), and each thread writes its own chunk's entries: the serial scan's lists, whatever the thread
+// count, with each thread reading only its chunk (splitting the tile rows instead made every thread scan every
+// Gaussian, which did not get faster with more threads).
+void build_tile_lists(int total, Binning& b) {
   const int m = int(b.order.size());
   const int T3 = m < 4096 ? 1 : std::max(1, omp_get_max_threads());
   b.tile_start.assign(size_t(b.num_tiles) + 1, 0);
@@ -210,7 +230,7 @@ void bin_gaussians(int width, int height, int n, const T* mean2d, const T* conic
   // Locals: the loops write ints, which could alias the members and the vectors' own fields.
   const int tiles_x = b.tiles_x, num_tiles = b.num_tiles;
   int *cursor = b.cursor.data(), *srect = b.sorted_rect.data(), *tgauss = b.tile_gauss.data(),
-      *tpair = b.tile_pair.data();
+      *tpair = b.tile_pair.data(), *tstart = b.tile_start.data();
   const int *trect = b.trect.data(), *order = b.order.data(), *poff = b.pair_offset.data();
 #pragma omp parallel num_threads(T3)
   {
@@ -227,19 +247,7 @@ void bin_gaussians(int width, int height, int n, const T* mean2d, const T* conic
     }
 #pragma omp barrier
 #pragma omp single
-    {
-      int run = 0;
-      for (int tile = 0; tile < num_tiles; ++tile) {
-        b.tile_start[tile] = run;
-        for (int u = 0; u < nt; ++u) {
-          int& c = cursor[size_t(u) * num_tiles + tile];
-          const int cnt = c;
-          c = run;
-          run += cnt;
-        }
-      }
-      b.tile_start[num_tiles] = run;
-    }  // implicit barrier
+    tile_cursors(nt, num_tiles, cursor, tstart);  // implicit barrier
     for (int k = k0; k < k1; ++k) {
       const int* tr = srect + 4 * size_t(k);
       const int g = order[k], x0 = tr[0], x1 = tr[1], y0 = tr[2], y1 = tr[3];
@@ -252,6 +260,22 @@ void bin_gaussians(int width, int height, int n, const T* mean2d, const T* conic
         }
     }
   }
+}
+
+}  // namespace
+
+template <class T>
+void bin_gaussians(int width, int height, int n, const T* mean2d, const T* conic, const T* opacity, const T* depth,
+                   const int* radius, Binning& b) {
+  start_binning(width, height, n, b);
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i)
+    gaussian_box(b, i, mean2d, conic, opacity, radius, &b.bbox[4 * size_t(i)], &b.trect[4 * size_t(i)], b.counts[i],
+                 b.mahal[i]);
+  const int total = number_pairs(n, depth, b);
+  b.num_pairs = total;
+  radix_sort(b.keys, b.order, b.keys_tmp, b.order_tmp, int(sizeof(T) == 4 ? 4 : 8));
+  build_tile_lists(total, b);
 }
 
 template void bin_gaussians<float>(int, int, int, const float*, const float*, const float*, const float*, const int*,

@@ -122,6 +122,301 @@ void group_grads(const int* vb, const simd::Pack<T>* vw, int cnt, const simd::Pa
   }
 }
 
+// A tile's backward batch state in per-thread scratch: per batch BS packs [Tc, S, gr, gg, gb, gd, Tbg, GE[C],
+// MW[J], GG[G * GWg]] (Tc the transmittance being rebuilt, S the sum behind it, the upstream gradients, Tbg =
+// T_final (<bg, g_rgb> - g_alpha); the group gradient channels at GO) and each pixel's last contributor (last).
+enum { bT, bS, bR, bG, bB, bD, bBg, kBatchFixed };
+template <class T>
+struct BackwardBatches {
+  simd::Pack<T>* st;          // [kBatches, BS]
+  simd::Mask<T>* last;        // [kBatches]
+  int C, XS, J, GWg, BS, GO;  // extra channels and their row stride, pixel-weight maps, group gradient width
+};
+
+// One (tile, Gaussian) pair's gradient sums over its visits, lane by lane (dL/dpower terms before their scale).
+template <class T>
+struct PairSums {
+  simd::Pack<T> mx, my, a, b, c, op, r, g, bl, z;
+};
+
+// The extra-channel and group upstream gradients and the pixel-weight maps of batch bt (pixels (py, px0 ..
+// px0 + nvalid)), for the tile's groups glist [ng] only; jmask gets the maps present in the batch.
+template <class T, int kX>
+inline __attribute__((always_inline)) void load_batch_channels(const RasterInputs<T>& in, const RasterGrads<T>& g,
+                                                               int W, int py, int px0, int nvalid, const int* glist,
+                                                               int ng, simd::Pack<T>* st, const BackwardBatches<T>& b,
+                                                               uint32_t& jmask) {
+  const int C = b.C, J = b.J, GWg = b.GWg, GO = b.GO;
+  for (int c = 0; c < C + J; ++c) st[kBatchFixed + c] = simd::Pack<T>{};
+  for (int u = 0; u < ng; ++u)
+    for (int i = 0; i < GWg; ++i) st[GO + glist[u] * GWg + i] = simd::Pack<T>{};
+  for (int l = 0; l < nvalid; ++l) {
+    const size_t p = size_t(py) * W + px0 + l;
+    if (kX != kNoChannels && g.d_extra)
+      for (int c = 0; c < C; ++c) st[kBatchFixed + c][l] = g.d_extra[p * b.XS + c];
+    if (kX != kNoChannels && ng > 0 && g.d_groups) {
+      const T* dg = g.d_groups + p * size_t(g.d_group_row);
+      for (int u = 0; u < ng; ++u) {
+        const int gi = glist[u];
+        for (int i = 0; i < GWg; ++i) st[GO + gi * GWg + i][l] = dg[size_t(gi) * g.d_group_stride + i];
+      }
+    }
+    for (int jj = 0; jj < J; ++jj) {
+      st[kBatchFixed + C + jj][l] = T(in.pixel_weights[p * J + jj]);
+      jmask |= map_bit(jj, st[kBatchFixed + C + jj][l] != T(0));
+    }
+  }
+  if (kX != kNoChannels && ng > 0 && g.d_group_rows) {  // the batch's row of each of the tile's groups, on demand
+    T row[kLanes * kMaxGroupGradWidth];
+    for (int u = 0; u < ng; ++u) {
+      const int gi = glist[u];
+      g.d_group_rows(g.d_group_ctx, gi, py, px0, nvalid, row);
+      for (int l = 0; l < nvalid; ++l)
+        for (int i = 0; i < GWg; ++i) st[GO + gi * GWg + i][l] = row[l * GWg + i];
+    }
+  }
+}
+
+// Starts batch bt of the tile at (tx0, ty0) from forward's final T and last contributors and the upstream
+// gradients (kmax: the batch's last contributor, jmask: its pixel-weight maps). Returns whether any of its
+// pixels has a contributor (the batches the walk visits).
+template <class T, bool kDepth, int kX>
+inline __attribute__((always_inline)) bool start_backward_batch(const RasterInputs<T>& in, const Binning& bins,
+                                                                const RasterGrads<T>& g, const T* final_T,
+                                                                const int32_t* last, int tx0, int ty0, int bt,
+                                                                const int* glist, int ng, const BackwardBatches<T>& b,
+                                                                int& kmax, uint32_t& jmask) {
+  using P = simd::Pack<T>;
+  const int W = bins.width, H = bins.height;
+  kmax = 0;
+  jmask = 0;
+  const int py = ty0 + bt / kBatchesPerRow, px0 = tx0 + (bt % kBatchesPerRow) * kLanes;
+  if (py >= H || px0 >= W) return false;
+  const int nvalid = std::min(kLanes, W - px0);
+  P Tf = simd::splat(T(1)), gr = P{}, gg = P{}, gb = P{}, ga = P{}, gd = P{};
+  simd::Mask<T> lastp = simd::Mask<T>{};
+  for (int l = 0; l < nvalid; ++l) {
+    const size_t p = size_t(py) * W + px0 + l;
+    Tf[l] = final_T[p];
+    lastp[l] = last[p];
+    kmax = std::max(kmax, int(last[p]));
+    if (g.d_rgb) {
+      gr[l] = g.d_rgb[3 * p];
+      gg[l] = g.d_rgb[3 * p + 1];
+      gb[l] = g.d_rgb[3 * p + 2];
+    }
+    if (g.d_alpha) ga[l] = g.d_alpha[p];
+    if (kDepth && g.d_depth) gd[l] = g.d_depth[p];
+  }
+  if (kmax == 0) return false;
+  P* st = b.st + size_t(bt) * b.BS;
+  load_batch_channels<T, kX>(in, g, W, py, px0, nvalid, glist, ng, st, b, jmask);
+  const T bg0 = in.background[0], bg1 = in.background[1], bg2 = in.background[2];
+  st[bT] = Tf;
+  st[bS] = P{};
+  st[bR] = gr;
+  st[bG] = gg;
+  st[bB] = gb;
+  st[bD] = gd;
+  st[bBg] = Tf * (gr * bg0 + gg * bg1 + gb * bg2 - ga);
+  b.last[bt] = lastp;
+  return true;
+}
+
+// The visit-list path: <extra_k, g> (+ the groups' dots) of every (Gaussian, batch) visit of the walk, computed
+// before it batch by batch (extra_dots, the batch's gradient packs in registers), visits in front-to-back
+// order: batch bt's are entries [off[bt], off[bt] + cur[bt]) of the returned dots (the walk takes them from the
+// back). Only the Gaussians before a batch's last contributor (kmax [kBatches]) visit it.
+template <class T>
+simd::Pack<T>* backward_visit_dots(const RasterInputs<T>& in, const Binning& bins, int tile, int n,
+                                   typename RasterWorkspace<T>::PerThread& w, const uint32_t* masks, uint32_t live,
+                                   const int* kmax, const BackwardBatches<T>& b, int* off, int* cur) {
+  using P = simd::Pack<T>;
+  const int GT = b.BS - b.GO;
+  int vcnt[kBatches] = {};
+  const auto [vk, vdot] = size_visit_lists<P>(w, masks, n, live, off);
+  for (int k = 0; k < n; ++k)
+    for (uint32_t mb = masks[k] & live; mb; mb &= mb - 1) {
+      const int bt = __builtin_ctz(mb);
+      if (k < kmax[bt]) vk[off[bt] + vcnt[bt]++] = bins.tile_gauss[bins.tile_start[tile] + k];
+    }
+  for (int bt = 0; bt < kBatches; ++bt) {
+    cur[bt] = vcnt[bt];
+    if (vcnt[bt] == 0) continue;
+    const P* st = b.st + size_t(bt) * b.BS;
+    extra_dots<T>(vk + off[bt], vcnt[bt], in.extra, b.C, b.XS, st + kBatchFixed, vdot + off[bt]);
+    if (GT > 0) group_dots<T>(vk + off[bt], vcnt[bt], in, st + b.GO, vdot + off[bt]);
+  }
+  return vdot;
+}
+
+// <value, g> of one visit (batch state st): colour and depth, the extra channels and groups (precomputed in
+// vdot, or folded: extra_dots + group_dots of the visit, in their order) and the pixel-weight maps present in
+// the batch (jm; dw [J] the Gaussian's weight-sum gradients; one map, inside a hard object mask).
+template <class T, bool kDepth, int kX>
+inline __attribute__((always_inline)) simd::Pack<T> visit_dot(const RasterInputs<T>& in, const T* rc,
+                                                              const FoldedGaussian<T, 3>& fg, const simd::Pack<T>* st,
+                                                              const BackwardBatches<T>& b, simd::Pack<T> gr,
+                                                              simd::Pack<T> gg, simd::Pack<T> gb, uint32_t jm,
+                                                              const T* dw, const simd::Pack<T>* vdot) {
+  using P = simd::Pack<T>;
+  const int C = b.C, J = b.J, GT = b.BS - b.GO;
+  P dot = rc[kCr] * gr + rc[kCg] * gg + rc[kCb] * gb;
+  if (kDepth) dot += rc[kZ] * st[bD];
+  if constexpr (kX == kVisitLists) dot += *vdot;
+  if constexpr (kX == kFolded) {
+    P vd = C > 0 ? extra_dot(fg.x, C, st + kBatchFixed) : P{};
+    if (fg.one) {  // group_dot's sum
+      const P* gs = st + b.GO + fg.slot;
+      P d = P{};
+      for (int i = 0; i < 3; ++i) d += fg.v[i] * gs[i];
+      vd += d;
+    } else if (GT > 0) {
+      vd += group_dot(in, fg.e0, fg.e0 + fg.ne, b.GWg, st + b.GO);
+    }
+    dot += vd;
+  }
+  if (J > 0) {
+    const P* sw = st + kBatchFixed + C;
+    P d0 = P{};
+    for_batch_maps(jm, J, [&](int jj) { d0 += dw[jj] * sw[jj]; });
+    dot += d0;
+  }
+  return dot;
+}
+
+// The folded path's channel gradients of one visit (masked weight wm): ae [C] and ag [ne, GWg] get
+// extra_grads' / group_grads' terms.
+template <class T>
+inline __attribute__((always_inline)) void add_folded_grads(const RasterInputs<T>& in, const FoldedGaussian<T, 3>& fg,
+                                                            const simd::Pack<T>* st, const BackwardBatches<T>& b,
+                                                            simd::Pack<T> wm, simd::Pack<T>* ae, simd::Pack<T>* ag) {
+  const int GWg = b.GWg;
+  for (int c = 0; c < b.C; ++c) ae[c] += wm * st[kBatchFixed + c];
+  if (fg.one) {
+    const simd::Pack<T>* gs = st + b.GO + fg.slot;
+    for (int i = 0; i < 3; ++i) ag[i] += wm * gs[i];
+  } else {
+    for (int e = 0; e < fg.ne; ++e) {
+      const simd::Pack<T>* gs = st + b.GO + size_t(in.group_id[fg.e0 + e]) * GWg;
+      for (int i = 0; i < GWg; ++i) ag[e * GWg + i] += wm * gs[i];
+    }
+  }
+}
+
+// Gaussian k at batch bt, back to front: pixels before their last contributor (inr) with alpha >= kAlphaMin
+// rebuild T_i = T_{i+1} / (1 - alpha), take dL/dalpha = T_i <value, g> - (S + Tbg) / (1 - alpha) and add
+// w <value, g> to S; the pair's sums get the colour / depth / channel gradients (w g) and, where alpha is below
+// the kAlphaMax clamp, the opacity, mean and conic gradients through dL/dpower. The visit-list path records the
+// visit (batch, masked weight) in kvb / kvw for extra_grads / group_grads.
+template <class T, bool kDepth, int kX>
+inline __attribute__((always_inline)) void backward_visit(const RasterInputs<T>& in, const T* rc, int k, int bt,
+                                                          const FoldedGaussian<T, 3>& fg, const BackwardBatches<T>& b,
+                                                          uint32_t jm, const T* dw, int tx0, int ty0,
+                                                          const simd::Pack<T>* vdot, PairSums<T>& a, simd::Pack<T>* ae,
+                                                          simd::Pack<T>* ag, int* kvb, simd::Pack<T>* kvw, int& nkv) {
+  using P = simd::Pack<T>;
+  using M = simd::Mask<T>;
+  P* st = b.st + size_t(bt) * b.BS;
+  const M inr = (M{} + MaskLane<T>(k)) < b.last[bt];
+  const GaussianAtBatch<T> ev = eval_gaussian(rc, tx0, ty0, bt);
+  const M c = inr & (ev.alpha >= T(kAlphaMin));
+  if (!simd::any(c)) return;
+  const P gr = st[bR], gg = st[bG], gb = st[bB];
+  const P ioma = simd::vrecip(T(1) - ev.alpha);
+  const P Ti = st[bT] * ioma;
+  const P wgt = ev.alpha * Ti;
+  const P dot = visit_dot<T, kDepth, kX>(in, rc, fg, st, b, gr, gg, gb, jm, dw, vdot);
+  const P S = st[bS];
+  P dLda = simd::fmadd(Ti, dot, -((S + st[bBg]) * ioma));  // one rounding in both channel paths
+  st[bS] = c ? S + wgt * dot : S;
+  st[bT] = c ? Ti : st[bT];
+  const P wm = c ? wgt : P{};
+  a.r += wm * gr;
+  a.g += wm * gg;
+  a.bl += wm * gb;
+  if (kDepth) a.z += wm * st[bD];
+  if constexpr (kX == kVisitLists) {
+    kvb[nkv] = bt;
+    kvw[nkv++] = wm;
+  }
+  dLda = (c & (ev.araw < T(kAlphaMax))) ? dLda : P{};
+  a.op += ev.gauss * dLda;
+  const P pw = ev.araw * dLda;  // dL/dpower
+  const P pdx = pw * ev.dx;
+  a.mx += simd::fmadd(simd::splat(rc[kA]), pdx, ev.bdy * pw);  // as GCC contracts them, pinned (fmadd)
+  a.my += simd::fmadd(simd::splat(rc[kB]), pdx, (rc[kC] * ev.dy) * pw);
+  a.a += pdx * ev.dx;
+  a.b += pdx * ev.dy;
+  a.c += pw * (ev.dy * ev.dy);
+  if constexpr (kX == kFolded) add_folded_grads(in, fg, st, b, wm, ae, ag);
+}
+
+// Stores one pair's results: o [kNumGrads + C] (dpower/dmx = -(a dx + b dy), dpower/da = -dx^2 / 2, dpower/db =
+// -dx dy, ...; the first 8 slots' lane sums at once, simd::hsum8, bitwise the 8 hsums, scaled as named; then the
+// extra channels) and og [ne, GWg] its group gradients (visit-list path: from the visits kvb / kvw [nkv] of the
+// batch state; folded: from ae / ag).
+template <class T, bool kDepth, int kX>
+inline __attribute__((always_inline)) void store_pair_grads(const RasterInputs<T>& in, const PairSums<T>& a,
+                                                            const simd::Pack<T>* ae, const simd::Pack<T>* ag, int ne,
+                                                            const int* kvb, const simd::Pack<T>* kvw, int nkv,
+                                                            const BackwardBatches<T>& b, int gi, T* o, T* og) {
+  using P = simd::Pack<T>;
+  const int C = b.C, GWg = b.GWg;
+  static_assert(gMx == 0 && gMy == 1 && gA == 2 && gB == 3 && gC == 4 && gOp == 5 && gR == 6 && gG == 7);
+  const P acc[8] = {a.mx, a.my, a.a, a.b, a.c, a.op, a.r, a.g};
+  const P sums = simd::hsum8(acc) * P{T(-1), T(-1), T(-0.5), T(-1), T(-0.5), T(1), T(1), T(1)};
+  std::memcpy(o, &sums, sizeof(sums));
+  o[gBl] = simd::hsum<T>(a.bl);
+  o[gZ] = kDepth ? simd::hsum<T>(a.z) : T(0);
+  if constexpr (kX == kVisitLists) {
+    extra_grads<T>(kvb, kvw, nkv, b.st + kBatchFixed, b.BS, C, o + kNumGrads);
+  } else if constexpr (kX == kFolded) {
+    for (int c = 0; c < C; ++c) o[kNumGrads + c] = simd::hsum<T>(ae[c]);
+  } else {
+    for (int ch = 0; ch < C; ++ch) o[kNumGrads + ch] = T(0);
+  }
+  if (kX != kNoChannels && og) {
+    if constexpr (kX == kVisitLists) {
+      group_grads<T>(kvb, kvw, nkv, b.st + b.GO, b.BS, in, gi, og);
+    } else if constexpr (kX == kFolded) {
+      for (int i = 0; i < ne * GWg; ++i) og[i] = simd::hsum<T>(ag[i]);
+    }
+  }
+}
+
+// Gaussian k of the tile, back to front over the batches mb of its mask (each only before its last
+// contributor, kmax [kBatches]), its gradient sums in registers, stored once for the pair (o, og: its slots).
+template <class T, bool kDepth, int kX>
+inline __attribute__((always_inline)) void backward_gaussian(const RasterInputs<T>& in, const T* rc, int k, int gi,
+                                                             const T* fx, const BackwardBatches<T>& b, const int* kmax,
+                                                             const uint32_t* jmask, const T* dw, int tx0, int ty0,
+                                                             uint32_t mb, const int* voff, int* vcur,
+                                                             const simd::Pack<T>* vdot, T* o, T* og) {
+  using P = simd::Pack<T>;
+  const int C = b.C, GWg = b.GWg, GT = b.BS - b.GO;
+  PairSums<T> a{};
+  // Folded channels: the Gaussian's extra row and group entries; their gradient sums (ae, ag) on the stack.
+  FoldedGaussian<T, 3> fg;
+  load_folded<T, 3>(in, rc, fx, kX == kFolded ? C : 0, kX == kFolded && GT > 0, GWg, fg);
+  P ae[kFoldMaxChannels], ag[kFoldMaxEntries * kFoldMaxWidth];
+  if constexpr (kX == kFolded) {
+    for (int c = 0; c < C; ++c) ae[c] = P{};
+    for (int i = 0; i < fg.ne * GWg; ++i) ag[i] = P{};
+  }
+  int kvb[kBatches];  // the visit-list path: this Gaussian's visits with a contribution, batch and masked weight
+  P kvw[kBatches];
+  int nkv = 0;
+  while (mb) {
+    const int bt = __builtin_ctz(mb);
+    mb &= mb - 1;
+    if (k >= kmax[bt]) continue;
+    const P* vd = kX == kVisitLists ? vdot + voff[bt] + --vcur[bt] : nullptr;  // this visit's (lists walked back)
+    backward_visit<T, kDepth, kX>(in, rc, k, bt, fg, b, jmask[bt], dw, tx0, ty0, vd, a, ae, ag, kvb, kvw, nkv);
+  }
+  store_pair_grads<T, kDepth, kX>(in, a, ae, ag, fg.ne, kvb, kvw, nkv, b, gi, o, og);
+}
+
 // Backward of one tile, Gaussian-major: the tile's Gaussians are walked back to front (k = n-1 .. 0); each visits
 // the batches its mask names, whose per-pixel state (T, S) lives in per-thread scratch, while its gradient
 // sums stay in registers and are stored once per (tile, Gaussian) pair.
@@ -131,261 +426,118 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
                    const uint32_t* ws_masks, T* pair_grad, const size_t* pair_gslot, T* pair_group) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
-  using I = typename std::remove_reference<decltype(M{}[0])>::type;
-  constexpr bool kExtra = kX != kNoChannels, kLists = kX == kVisitLists, kFold = kX == kFolded;
-  const int W = bins.width, H = bins.height, C = in.num_extra, XS = in.extra_stride > 0 ? in.extra_stride : C;
-  const int F = kNumGrads + C;
+  const int C = in.num_extra, XS = in.extra_stride > 0 ? in.extra_stride : C, F = kNumGrads + C;
   const int GWg = g.group_grads() ? in.group_grad_width : 0, GT = in.num_groups * GWg;  // group gradient channels
-  const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
+  const auto [tx0, ty0] = tile_origin(bins, tile);
   TileData<T> td;
   if (!load_records(bins, records, tile_records, false, tile, td)) return;
-  const int n = td.n;
-  const uint32_t* masks = ws_masks + bins.tile_start[tile];
+  const int n = td.n, s = bins.tile_start[tile];
+  const uint32_t* masks = ws_masks + s;
   const int J = g.d_weight_sums ? in.num_weights : 0;
-  T* DW = J > 0 ? w.dw.template get<T>(size_t(n) * J) : nullptr;
-  if (J > 0) {
-    const int s0 = bins.tile_start[tile];
-    for (int k = 0; k < n; ++k)
-      for (int jj = 0; jj < J; ++jj) DW[size_t(k) * J + jj] = g.d_weight_sums[size_t(bins.tile_gauss[s0 + k]) * J + jj];
-  }
-  // per-batch state: [Tc, S, gr, gg, gb, gd, Tbg, GE[C], MW[J], GG[G * GWg]]
-  enum { bT, bS, bR, bG, bB, bD, bBg, kBatchFixed };
-  const int BS = kBatchFixed + C + J + GT, GO = kBatchFixed + C + J;
-  P* bst = w.bstate.template get<P>(size_t(kBatches) * BS);
-  M* blast = w.blast.template get<M>(kBatches);
+  T* DW = J > 0 ? w.dw.template get<T>(size_t(n) * J) : nullptr;  // [n, J] the weight-sum gradients, tile order
+  for (int k = 0; k < n && J > 0; ++k)
+    for (int jj = 0; jj < J; ++jj) DW[size_t(k) * J + jj] = g.d_weight_sums[size_t(bins.tile_gauss[s + k]) * J + jj];
+  BackwardBatches<T> b{nullptr, nullptr, C, XS, J, GWg, kBatchFixed + C + J + GT, kBatchFixed + C + J};
+  b.st = w.bstate.template get<P>(size_t(kBatches) * b.BS);
+  b.last = w.blast.template get<M>(kBatches);
   // The groups the tile's Gaussians have entries in: only their upstream gradients are loaded (no Gaussian of
   // the tile reads another group's).
   int ng = 0;
   int* glist = nullptr;
-  if (kExtra && GT > 0) {
+  if (kX != kNoChannels && GT > 0) {
     glist = w.groups.template get<int>(size_t(2) * in.num_groups);  // the list, then the flags
     ng = tile_groups(in, td, reinterpret_cast<uint8_t*>(glist + in.num_groups), glist);
   }
   int kmax[kBatches];
   uint32_t jmask[kBatches];  // pixel-weight maps present in each batch (for_batch_maps)
   uint32_t live = 0;         // batches with at least one contributor
-  const T bg0 = in.background[0], bg1 = in.background[1], bg2 = in.background[2];
-  for (int bt = 0; bt < kBatches; ++bt) {
-    kmax[bt] = 0;
-    jmask[bt] = 0;
-    const int py = ty0 + bt / kBatchesPerRow, px0 = tx0 + (bt % kBatchesPerRow) * kLanes;
-    if (py >= H || px0 >= W) continue;
-    const int nvalid = std::min(kLanes, W - px0);
-    P* st = bst + size_t(bt) * BS;
-    P Tf = simd::splat(T(1)), gr = P{}, gg = P{}, gb = P{}, ga = P{}, gd = P{};
-    M lastp = M{};
-    for (int c = 0; c < C + J; ++c) st[kBatchFixed + c] = P{};
-    for (int u = 0; u < ng; ++u)
-      for (int i = 0; i < GWg; ++i) st[GO + glist[u] * GWg + i] = P{};
-    for (int l = 0; l < nvalid; ++l) {
-      const size_t p = size_t(py) * W + px0 + l;
-      Tf[l] = final_T[p];
-      lastp[l] = last[p];
-      kmax[bt] = std::max(kmax[bt], int(last[p]));
-      if (g.d_rgb) {
-        gr[l] = g.d_rgb[3 * p];
-        gg[l] = g.d_rgb[3 * p + 1];
-        gb[l] = g.d_rgb[3 * p + 2];
-      }
-      if (g.d_alpha) ga[l] = g.d_alpha[p];
-      if (kDepth && g.d_depth) gd[l] = g.d_depth[p];
-      if (kExtra && g.d_extra)
-        for (int c = 0; c < C; ++c) st[kBatchFixed + c][l] = g.d_extra[p * XS + c];
-      if (kExtra && GT > 0 && g.d_groups) {
-        const T* dg = g.d_groups + p * size_t(g.d_group_row);
-        for (int u = 0; u < ng; ++u) {
-          const int gi = glist[u];
-          for (int i = 0; i < GWg; ++i) st[GO + gi * GWg + i][l] = dg[size_t(gi) * g.d_group_stride + i];
-        }
-      }
-      for (int jj = 0; jj < J; ++jj) {
-        st[kBatchFixed + C + jj][l] = T(in.pixel_weights[p * J + jj]);
-        jmask[bt] |= map_bit(jj, st[kBatchFixed + C + jj][l] != T(0));
-      }
-    }
-    if (kmax[bt] == 0) continue;
-    if (kExtra && GT > 0 && g.d_group_rows) {  // the batch's row of each of the tile's groups, on demand
-      T row[kLanes * kMaxGroupGradWidth];
-      for (int u = 0; u < ng; ++u) {
-        const int gi = glist[u];
-        g.d_group_rows(g.d_group_ctx, gi, py, px0, nvalid, row);
-        for (int l = 0; l < nvalid; ++l)
-          for (int i = 0; i < GWg; ++i) st[GO + gi * GWg + i][l] = row[l * GWg + i];
-      }
-    }
-    live |= 1u << bt;
-    st[bT] = Tf;
-    st[bS] = P{};
-    st[bR] = gr;
-    st[bG] = gg;
-    st[bB] = gb;
-    st[bD] = gd;
-    st[bBg] = Tf * (gr * bg0 + gg * bg1 + gb * bg2 - ga);
-    blast[bt] = lastp;
-  }
-  // Extra channels: <extra_k, g> of every (Gaussian, batch) visit is computed before the walk, batch by batch
-  // (extra_dots, the batch's gradient packs in registers); the walk keeps each Gaussian's visits (batch, masked
-  // weight) and extra_grads sums its channel gradients from them once it is done.
+  for (int bt = 0; bt < kBatches; ++bt)
+    if (start_backward_batch<T, kDepth, kX>(in, bins, g, final_T, last, tx0, ty0, bt, glist, ng, b, kmax[bt],
+                                            jmask[bt]))
+      live |= 1u << bt;
   int voff[kBatches + 1], vcur[kBatches];
-  int* vk = nullptr;
   P* vdot = nullptr;
-  if (kLists) {
-    int vcnt[kBatches] = {};
-    std::tie(vk, vdot) = size_visit_lists<P>(w, masks, n, live, voff);
-    for (int k = 0; k < n; ++k)
-      for (uint32_t mb = masks[k] & live; mb; mb &= mb - 1) {
-        const int bt = __builtin_ctz(mb);
-        if (k < kmax[bt]) vk[voff[bt] + vcnt[bt]++] = bins.tile_gauss[bins.tile_start[tile] + k];
-      }
-    for (int bt = 0; bt < kBatches; ++bt) {
-      vcur[bt] = vcnt[bt];
-      if (vcnt[bt] == 0) continue;
-      extra_dots<T>(vk + voff[bt], vcnt[bt], in.extra, C, XS, bst + size_t(bt) * BS + kBatchFixed, vdot + voff[bt]);
-      if (GT > 0) group_dots<T>(vk + voff[bt], vcnt[bt], in, bst + size_t(bt) * BS + GO, vdot + voff[bt]);
-    }
-  }
+  if (kX == kVisitLists) vdot = backward_visit_dots(in, bins, tile, n, w, masks, live, kmax, b, voff, vcur);
   T* fx = nullptr;  // folded extra channels in tile order [n, 4]
-  if (kFold && C > 0) {
+  if (kX == kFolded && C > 0) {
     fx = w.fold.template get<T>(size_t(n) * kFoldMaxChannels);
     gather_tile_channels(bins, tile, in.extra, C, XS, fx);
   }
-  int kvb[kBatches];  // this Gaussian's visits with a contribution: batch, masked weight
-  P kvw[kBatches];
-  const P lane = simd::iota_pack<T>();
-  const int s = bins.tile_start[tile];
   for (int k = n - 1; k >= 0; --k) {
-    uint32_t mb = masks[k] & live;
     T* o = pair_grad + size_t(bins.tile_pair[s + k]) * F;
-    P aMx = P{}, aMy = P{}, aA = P{}, aB = P{}, aC = P{}, aOp = P{}, aR = P{}, aG = P{}, aBl = P{}, aZ = P{};
-    int nkv = 0;
-    const T* rc = td.rec + size_t(k) * kRecord;
-    const T* dw = J > 0 ? DW + size_t(k) * J : nullptr;
-    // Folded channels: the Gaussian's extra row (tile order) and group entries (from its record); their gradient
-    // sums (ae, ag) on the stack.
-    // (Copied to a local array: the visits' stores to the batch state cannot alias it, so it stays in registers.)
-    T xr[kFoldMaxChannels];
-    if (kFold)
-      for (int c = 0; c < C; ++c) xr[c] = fx[size_t(k) * kFoldMaxChannels + c];
-    const int e0 = kFold && GT > 0 ? record_int(rc[kE0]) : 0, ne = kFold && GT > 0 ? record_int(rc[kNe]) : 0;
-    P ae[kFoldMaxChannels], ag[kFoldMaxEntries * kFoldMaxWidth];
-    // The common case of one group entry with 3 gradient channels (the hybrid method's object groups): its slot
-    // and values held for the Gaussian's visits instead of looked up on each (the same sums).
-    const bool one3 = kFold && GT > 0 && ne == 1 && GWg == 3;
-    const size_t g1 = one3 ? size_t(in.group_id[e0]) * 3 : 0;
-    const T* gv = one3 ? in.group_val + size_t(e0) * in.group_width : nullptr;
-    const T v0 = one3 ? gv[0] : T(0), v1 = one3 ? gv[1] : T(0), v2 = one3 ? gv[2] : T(0);
-    if constexpr (kFold) {
-      for (int c = 0; c < C; ++c) ae[c] = P{};
-      for (int i = 0; i < ne * GWg; ++i) ag[i] = P{};
-    }
-    while (mb) {
-      const int bt = __builtin_ctz(mb);
-      mb &= mb - 1;
-      if (k >= kmax[bt]) continue;
-      const int vi = kLists ? voff[bt] + --vcur[bt] : 0;  // this visit in the batch's list (walked backwards)
-      P* st = bst + size_t(bt) * BS;
-      const M inr = (M{} + I(k)) < blast[bt];
-      const T fy = T(ty0 + bt / kBatchesPerRow) + T(0.5);
-      const P fx = lane + (T(tx0 + (bt % kBatchesPerRow) * kLanes) + T(0.5));
-      const T dy = rc[kMy] - fy;
-      const P dx = rc[kMx] - fx;
-      const T bdy = rc[kB] * dy, hcdy2 = rc[kHc] * dy * dy;
-      const P power = -(dx * (rc[kHa] * dx + bdy) + hcdy2);
-      const P gauss = simd::vexp(power);
-      const P araw = rc[kOp] * gauss;
-      const P alpha = simd::vmin<T>(araw, simd::splat(T(kAlphaMax)));
-      const M c = inr & (alpha >= T(kAlphaMin));
-      if (!simd::any(c)) continue;
-      const P gr = st[bR], gg = st[bG], gb = st[bB];
-      const P ioma = simd::vrecip(T(1) - alpha);
-      const P Ti = st[bT] * ioma;
-      const P wgt = alpha * Ti;
-      P dot = rc[kCr] * gr + rc[kCg] * gg + rc[kCb] * gb;
-      if (kDepth) dot += rc[kZ] * st[bD];
-      if constexpr (kLists) dot += vdot[vi];
-      if constexpr (kFold) {  // extra_dots + group_dots of this visit, in their order
-        P vd = C > 0 ? extra_dot(xr, C, st + kBatchFixed) : P{};
-        if (one3) {  // group_dot's sum
-          const P* gs = st + GO + g1;
-          P d = P{};
-          d += v0 * gs[0];
-          d += v1 * gs[1];
-          d += v2 * gs[2];
-          vd += d;
-        } else if (GT > 0) {
-          vd += group_dot(in, e0, e0 + ne, GWg, st + GO);
-        }
-        dot += vd;
+    T* og = kX != kNoChannels && GT > 0 ? pair_group + pair_gslot[s + k] : nullptr;
+    const T* xk = fx ? fx + size_t(k) * kFoldMaxChannels : nullptr;
+    const int gi = kX == kVisitLists && GT > 0 ? bins.tile_gauss[s + k] : 0;
+    backward_gaussian<T, kDepth, kX>(in, td.rec + size_t(k) * kRecord, k, gi, xk, b, kmax, jmask,
+                                     J > 0 ? DW + size_t(k) * J : nullptr, tx0, ty0, masks[k] & live, voff, vcur, vdot,
+                                     o, og);
+  }
+}
+
+// The group-gradient slots (groups with GWg gradient channels): each Gaussian's, one slot of entries x GWg per
+// pair, Gaussian-major (ws.group_off [n + 1] their offsets in ws.pair_group), and each pair's slot in tile order
+// (ws.pair_gslot [pairs]: the walks write them without looking up its Gaussian). Returns the most group entries
+// of one Gaussian (the folded backward's bound).
+template <class T>
+int group_slots(const RasterInputs<T>& in, const Binning& bins, int GWg, RasterWorkspace<T>& ws) {
+  ws.group_off.resize(size_t(in.n) + 1);
+  ws.group_off[0] = 0;
+  for (int i = 0; i < in.n; ++i)
+    ws.group_off[i + 1] = ws.group_off[i] + size_t(bins.pair_offset[i + 1] - bins.pair_offset[i]) *
+                                                size_t(in.group_ptr[i + 1] - in.group_ptr[i]) * GWg;
+  if (ws.pair_group.size() < ws.group_off[in.n]) ws.pair_group.resize(ws.group_off[in.n]);
+  int max_entries = 0;
+#pragma omp parallel for schedule(static) reduction(max : max_entries)
+  for (int i = 0; i < in.n; ++i) max_entries = std::max(max_entries, in.group_ptr[i + 1] - in.group_ptr[i]);
+  if (ws.pair_gslot.size() < size_t(bins.num_pairs)) ws.pair_gslot.resize(size_t(bins.num_pairs));
+  size_t* slot = ws.pair_gslot.data();
+  const size_t* GOF = ws.group_off.data();
+#pragma omp parallel for schedule(static)
+  for (int t = 0; t < bins.num_pairs; ++t) {
+    const int gi = bins.tile_gauss[t];
+    slot[t] = GOF[gi] +
+              size_t(bins.tile_pair[t] - bins.pair_offset[gi]) * size_t(in.group_ptr[gi + 1] - in.group_ptr[gi]) * GWg;
+  }
+  return max_entries;
+}
+
+// Gaussian i's gradients: the sums of its pair slots in pair order (pg [pairs, F], F = kNumGrads + C; its group
+// slots in pgr from gof [n + 1] when `groups`), so the result does not depend on the thread count.
+template <class T>
+inline __attribute__((always_inline)) void reduce_pairs(const RasterInputs<T>& in, const Binning& bins,
+                                                        const RasterGrads<T>& g, int i, int C, int XS, int GWg,
+                                                        bool groups, const T* pg, const T* pgr, const size_t* gof) {
+  const int F = kNumGrads + C, GW = in.group_width;
+  T s[kNumGrads] = {};
+  T* gex = g.extra ? g.extra + size_t(i) * XS : nullptr;
+  if (gex)
+    for (int ch = 0; ch < XS; ++ch) gex[ch] = 0;  // channels [C, XS) carry no gradient
+  for (int p = bins.pair_offset[i]; p < bins.pair_offset[i + 1]; ++p) {
+    const T* o = pg + size_t(p) * F;
+    for (int f = 0; f < kNumGrads; ++f) s[f] += o[f];
+    if (gex)
+      for (int ch = 0; ch < C; ++ch) gex[ch] += o[kNumGrads + ch];
+  }
+  g.mean2d[2 * i] = s[gMx];
+  g.mean2d[2 * i + 1] = s[gMy];
+  g.conic[3 * i] = s[gA];
+  g.conic[3 * i + 1] = s[gB];
+  g.conic[3 * i + 2] = s[gC];
+  g.opacity[i] = s[gOp];
+  g.color[3 * i] = s[gR];
+  g.color[3 * i + 1] = s[gG];
+  g.color[3 * i + 2] = s[gBl];
+  if (g.depth) g.depth[i] = s[gZ];
+  if (g.group_val && in.num_groups > 0) {  // entries x GW; pair slots are entries x GWg
+    const int e0 = in.group_ptr[i], ne = in.group_ptr[i + 1] - e0;
+    T* gv = g.group_val + size_t(e0) * GW;
+    for (int c = 0; c < ne * GW; ++c) gv[c] = 0;
+    if (groups)
+      for (int p = bins.pair_offset[i]; p < bins.pair_offset[i + 1]; ++p) {
+        const T* o = pgr + gof[i] + size_t(p - bins.pair_offset[i]) * ne * GWg;
+        for (int e = 0; e < ne; ++e)
+          for (int c = 0; c < GWg; ++c) gv[size_t(e) * GW + c] += o[e * GWg + c];
       }
-      if (J > 0) {
-        // Pixel-weight sums: only the maps that are non-zero in this batch (one, inside a hard object mask).
-        const P* sw = st + kBatchFixed + C;
-        P d0 = P{};
-        for_batch_maps(jmask[bt], J, [&](int jj) { d0 += dw[jj] * sw[jj]; });
-        dot += d0;
-      }
-      const P S = st[bS];
-      P dLda = simd::fmadd(Ti, dot, -((S + st[bBg]) * ioma));  // one rounding in both channel paths
-      st[bS] = c ? S + wgt * dot : S;
-      st[bT] = c ? Ti : st[bT];
-      const P wm = c ? wgt : P{};
-      aR += wm * gr;
-      aG += wm * gg;
-      aBl += wm * gb;
-      if (kDepth) aZ += wm * st[bD];
-      if constexpr (kLists) {
-        kvb[nkv] = bt;
-        kvw[nkv++] = wm;
-      }
-      dLda = (c & (araw < T(kAlphaMax))) ? dLda : P{};
-      aOp += gauss * dLda;
-      const P pw = araw * dLda;  // dL/dpower
-      const P pdx = pw * dx;
-      aMx += simd::fmadd(simd::splat(rc[kA]), pdx, bdy * pw);  // as GCC contracts them, pinned (fmadd)
-      aMy += simd::fmadd(simd::splat(rc[kB]), pdx, (rc[kC] * dy) * pw);
-      aA += pdx * dx;
-      aB += pdx * dy;
-      aC += pw * (dy * dy);
-      if constexpr (kFold) {  // extra_grads / group_grads of this visit
-        for (int c = 0; c < C; ++c) ae[c] += wm * st[kBatchFixed + c];
-        if (one3) {
-          const P* gs = st + GO + g1;
-          ag[0] += wm * gs[0];
-          ag[1] += wm * gs[1];
-          ag[2] += wm * gs[2];
-        } else {
-          for (int e = 0; e < ne; ++e) {
-            const P* gs = st + GO + size_t(in.group_id[e0 + e]) * GWg;
-            for (int i = 0; i < GWg; ++i) ag[e * GWg + i] += wm * gs[i];
-          }
-        }
-      }
-    }
-    // per-pair results (dpower/dmx = -(a dx + b dy), dpower/da = -dx^2 / 2, dpower/db = -dx dy, ...); the first
-    // 8 slots' lane sums at once (simd::hsum8, bitwise the 8 hsums), scaled as named
-    {
-      static_assert(gMx == 0 && gMy == 1 && gA == 2 && gB == 3 && gC == 4 && gOp == 5 && gR == 6 && gG == 7);
-      const P acc[8] = {aMx, aMy, aA, aB, aC, aOp, aR, aG};
-      const P sums = simd::hsum8(acc) * P{T(-1), T(-1), T(-0.5), T(-1), T(-0.5), T(1), T(1), T(1)};
-      std::memcpy(o, &sums, sizeof(sums));
-    }
-    o[gBl] = simd::hsum<T>(aBl);
-    o[gZ] = kDepth ? simd::hsum<T>(aZ) : T(0);
-    if constexpr (kLists) {
-      extra_grads<T>(kvb, kvw, nkv, bst + kBatchFixed, BS, C, o + kNumGrads);
-    } else if constexpr (kFold) {
-      for (int c = 0; c < C; ++c) o[kNumGrads + c] = simd::hsum<T>(ae[c]);
-    } else {
-      for (int ch = 0; ch < C; ++ch) o[kNumGrads + ch] = T(0);
-    }
-    if (kExtra && GT > 0) {
-      T* og = pair_group + pair_gslot[s + k];
-      if constexpr (kLists) {
-        group_grads<T>(kvb, kvw, nkv, bst + GO, BS, in, bins.tile_gauss[s + k], og);
-      } else if constexpr (kFold) {
-        for (int i = 0; i < ne * GWg; ++i) og[i] = simd::hsum<T>(ag[i]);
-      }
-    }
   }
 }
 
@@ -397,35 +549,13 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
   ensure_threads(ws);
   const int C = in.num_extra, F = kNumGrads + C, XS = in.extra_stride > 0 ? in.extra_stride : C;
   const bool dep = in.depth != nullptr && g.d_depth != nullptr;
-  const int GWg = g.group_grads() ? in.group_grad_width : 0, GW = in.group_width;
+  const int GWg = g.group_grads() ? in.group_grad_width : 0;
   const bool groups = in.num_groups > 0 && GWg > 0;
   const bool ext = (C > 0 && g.d_extra != nullptr) || groups;
   if (ws.pair_grad.size() < size_t(bins.num_pairs) * F) ws.pair_grad.resize(size_t(bins.num_pairs) * F);
-  if (groups) {  // each Gaussian's group gradients: one slot of entries x GWg per pair, Gaussian-major
-    ws.group_off.resize(size_t(in.n) + 1);
-    ws.group_off[0] = 0;
-    for (int i = 0; i < in.n; ++i)
-      ws.group_off[i + 1] = ws.group_off[i] + size_t(bins.pair_offset[i + 1] - bins.pair_offset[i]) *
-                                                  size_t(in.group_ptr[i + 1] - in.group_ptr[i]) * GWg;
-    if (ws.pair_group.size() < ws.group_off[in.n]) ws.pair_group.resize(ws.group_off[in.n]);
-  }
-  int max_entries = 0;  // the most group entries of one Gaussian (the folded backward's bound)
-  if (groups) {
-#pragma omp parallel for schedule(static) reduction(max : max_entries)
-    for (int i = 0; i < in.n; ++i) max_entries = std::max(max_entries, in.group_ptr[i + 1] - in.group_ptr[i]);
-  }
+  const int max_entries = groups ? group_slots(in, bins, GWg, ws) : 0;
   const int x = ext ? channel_path(in, C, groups ? in.num_groups * GWg : 0, max_entries, GWg) : kNoChannels;
   const size_t* GOF = groups ? ws.group_off.data() : nullptr;
-  if (groups) {  // each pair's slot in tile order (the walks then write them without looking up its Gaussian)
-    if (ws.pair_gslot.size() < size_t(bins.num_pairs)) ws.pair_gslot.resize(size_t(bins.num_pairs));
-    size_t* slot = ws.pair_gslot.data();
-#pragma omp parallel for schedule(static)
-    for (int t = 0; t < bins.num_pairs; ++t) {
-      const int gi = bins.tile_gauss[t];
-      slot[t] = GOF[gi] + size_t(bins.tile_pair[t] - bins.pair_offset[gi]) *
-                              size_t(in.group_ptr[gi + 1] - in.group_ptr[gi]) * GWg;
-    }
-  }
   const size_t* GSL = groups ? ws.pair_gslot.data() : nullptr;
   T* PGR = groups ? ws.pair_group.data() : nullptr;
   T* pg = ws.pair_grad.data();
@@ -450,39 +580,7 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
     }
     // reduce pair slots per Gaussian in a fixed order
 #pragma omp for schedule(static)
-    for (int i = 0; i < in.n; ++i) {
-      T s[kNumGrads] = {};
-      T* gex = g.extra ? g.extra + size_t(i) * XS : nullptr;
-      if (gex)
-        for (int ch = 0; ch < XS; ++ch) gex[ch] = 0;  // channels [C, XS) carry no gradient
-      for (int p = bins.pair_offset[i]; p < bins.pair_offset[i + 1]; ++p) {
-        const T* o = pg + size_t(p) * F;
-        for (int f = 0; f < kNumGrads; ++f) s[f] += o[f];
-        if (gex)
-          for (int ch = 0; ch < C; ++ch) gex[ch] += o[kNumGrads + ch];
-      }
-      g.mean2d[2 * i] = s[gMx];
-      g.mean2d[2 * i + 1] = s[gMy];
-      g.conic[3 * i] = s[gA];
-      g.conic[3 * i + 1] = s[gB];
-      g.conic[3 * i + 2] = s[gC];
-      g.opacity[i] = s[gOp];
-      g.color[3 * i] = s[gR];
-      g.color[3 * i + 1] = s[gG];
-      g.color[3 * i + 2] = s[gBl];
-      if (g.depth) g.depth[i] = s[gZ];
-      if (g.group_val && in.num_groups > 0) {  // entries x GW; pair slots are entries x GWg
-        const int e0 = in.group_ptr[i], ne = in.group_ptr[i + 1] - e0;
-        T* gv = g.group_val + size_t(e0) * GW;
-        for (int c = 0; c < ne * GW; ++c) gv[c] = 0;
-        if (groups)
-          for (int p = bins.pair_offset[i]; p < bins.pair_offset[i + 1]; ++p) {
-            const T* o = PGR + GOF[i] + size_t(p - bins.pair_offset[i]) * ne * GWg;
-            for (int e = 0; e < ne; ++e)
-              for (int c = 0; c < GWg; ++c) gv[size_t(e) * GW + c] += o[e * GWg + c];
-          }
-      }
-    }
+    for (int i = 0; i < in.n; ++i) reduce_pairs(in, bins, g, i, C, XS, GWg, groups, pg, PGR, GOF);
   }
 }
 

@@ -1,12 +1,14 @@
 // Internals shared by the tile rasterizer's forward (rasterize_forward.cpp) and backward
 // (rasterize_backward.cpp) kernels: the pixel batches of a tile, the 16-scalar Gaussian record layout, the copy
-// of a tile's records into scratch, per-batch visit lists, pixel-weight map and channel-chunk iteration. The
+// of a tile's records into scratch, the evaluation of a Gaussian at a batch of pixels (written once for both),
+// a Gaussian's folded channels, per-batch visit lists, pixel-weight map and channel-chunk iteration. The
 // algorithm and the cut-offs (kAlphaMax, kAlphaMin, kTransmittanceMin) are described in rasterize.h.
 #pragma once
 #include <omp.h>
 
 #include <algorithm>
 #include <cstring>
+#include <type_traits>
 #include <utility>
 
 #include "render/rasterize.h"
@@ -74,8 +76,7 @@ bool load_records(const Binning& bins, const T* records, T* tile_records, bool g
 // them, the count is returned (used [G] is scratch). No Gaussian of the tile reads another group's upstream
 // gradient, so backward loads these groups' only. (The hybrid method's object groups: a tile sees one or two of
 // the view's objects, and each pixel's row holds the gradients of all of them.) Forward keeps every group: its
-// output is dense, and writing the others' zeros apart from the state was slower than the plain copy (measured:
-// the hybrid step's forward 23.4 -> 26 ms).
+// output is dense, and writing the others' zeros apart from the state is slower than the plain copy.
 template <class T>
 int tile_groups(const RasterInputs<T>& in, const TileData<T>& td, uint8_t* used, int* list) {
   const int G = in.num_groups;
@@ -163,6 +164,70 @@ inline __attribute__((always_inline)) void add_group_values(const RasterInputs<T
     const T* x = in.group_val + size_t(e) * GW;
     for (int i = 0; i < GW; ++i) d[i] += w * x[i];
   }
+}
+
+// The integer type of a mask lane (the lane-index compares of the tile kernels).
+template <class T>
+using MaskLane = std::remove_reference_t<decltype(simd::Mask<T>{}[0])>;
+
+// The first pixel of a tile (x, y).
+inline std::pair<int, int> tile_origin(const Binning& bins, int tile) {
+  return {(tile % bins.tiles_x) * kTileSize, (tile / bins.tiles_x) * kTileSize};
+}
+
+// One Gaussian at the 8 pixel centres of batch bt of the tile at (tx0, ty0), d = mean - pixel centre:
+// power = -(a dx^2 / 2 + b dx dy + c dy^2 / 2), alpha = min(kAlphaMax, opacity exp(power)) (rasterize.h).
+// Forward and backward both evaluate it here, so backward replays forward's alphas exactly; backward also
+// reads d, b dy and the unclamped opacity exp(power) for the gradient (forward's compilation drops them).
+template <class T>
+struct GaussianAtBatch {
+  simd::Pack<T> dx;     // mean x - pixel centre x, per pixel
+  T dy, bdy;            // mean y - pixel centre y (one row), b dy
+  simd::Pack<T> gauss;  // exp(power)
+  simd::Pack<T> araw;   // opacity exp(power)
+  simd::Pack<T> alpha;  // min(araw, kAlphaMax)
+};
+template <class T>
+inline __attribute__((always_inline)) GaussianAtBatch<T> eval_gaussian(const T* rc, int tx0, int ty0, int bt) {
+  GaussianAtBatch<T> e;
+  const T fy = T(ty0 + bt / kBatchesPerRow) + T(0.5);
+  const simd::Pack<T> fx = simd::iota_pack<T>() + (T(tx0 + (bt % kBatchesPerRow) * kLanes) + T(0.5));
+  e.dy = rc[kMy] - fy;
+  e.dx = rc[kMx] - fx;
+  e.bdy = rc[kB] * e.dy;
+  const T hcdy2 = rc[kHc] * e.dy * e.dy;
+  const simd::Pack<T> power = -(e.dx * (rc[kHa] * e.dx + e.bdy) + hcdy2);
+  e.gauss = simd::vexp(power);
+  e.araw = rc[kOp] * e.gauss;
+  e.alpha = simd::vmin<T>(e.araw, simd::splat(T(kAlphaMax)));
+  return e;
+}
+
+// A Gaussian's folded channels (ChannelPath kFolded), held for its visits: its extra row x [C] (from the tile's
+// gathered channels) and its group entries [e0, e0 + ne) (from its record, when `groups`). The common case of a
+// single entry whose batch slot is NV packs wide (the hybrid method's object groups: 4 values forward, 3
+// gradient channels backward; slot_width is the call's) also holds the slot's offset and the entry's first NV
+// values, so its visits need no lookups (the same sums as the general path).
+template <class T, int NV>
+struct FoldedGaussian {
+  T x[kFoldMaxChannels];
+  int e0, ne;
+  bool one;
+  size_t slot;  // id_e0 * NV, when `one`
+  T v[NV];      // val_e0[0, NV), when `one`
+};
+// Fills f in place (no copy of the record per Gaussian); C = 0 and groups = false give the empty record of the
+// paths that do not fold.
+template <class T, int NV>
+inline __attribute__((always_inline)) void load_folded(const RasterInputs<T>& in, const T* rc, const T* x, int C,
+                                                       bool groups, int slot_width, FoldedGaussian<T, NV>& f) {
+  for (int c = 0; c < C; ++c) f.x[c] = x[c];
+  f.e0 = groups ? record_int(rc[kE0]) : 0;
+  f.ne = groups ? record_int(rc[kNe]) : 0;
+  f.one = f.ne == 1 && slot_width == NV;
+  f.slot = f.one ? size_t(in.group_id[f.e0]) * NV : 0;
+  const T* gv = f.one ? in.group_val + size_t(f.e0) * in.group_width : nullptr;
+  for (int i = 0; i < NV; ++i) f.v[i] = f.one ? gv[i] : T(0);
 }
 
 template <class T>

@@ -149,149 +149,135 @@ void build_masks(const Binning& bins, int tile, const TileData<T>& td, uint32_t*
   }
 }
 
-// Forward of one tile, Gaussian-major: the tile's Gaussians are walked front to back; each updates the batches
-// its mask names that still have a live pixel (per-batch accumulators in per-thread scratch); a batch drops out
-// when all its pixels hit the transmittance cut-off, the tile ends when no batch is left.
-template <class T, bool kDepth, int kX>
-void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typename RasterWorkspace<T>::PerThread& w,
-                  const T* records, T* tile_records, uint32_t* ws_masks, T* pair_w, const RasterOutputs<T>& out) {
+// A tile's forward batch state in per-thread scratch: per batch BS packs [T, R, G, B, D, E[C], MW[J], GR[G * GW]]
+// (the group channels at GO), the pixels still compositing (act) and each pixel's last contributor, 1-based
+// (last).
+enum { bT, bR, bG, bB, bD, kBatchFixed };
+template <class T>
+struct ForwardBatches {
+  simd::Pack<T>* st;    // [kBatches, BS]
+  simd::Mask<T>* act;   // [kBatches]
+  simd::Mask<T>* last;  // [kBatches]
+  int C, J, BS, GO;     // extra channels, pixel-weight maps, state stride, offset of the group channels
+};
+
+// The visit lists of the visit-list path: batch bt's visits (Gaussian index, weight pack) are entries
+// [off[bt], off[bt] + cnt[bt]) of vk and vw, in walk order.
+template <class T>
+struct ForwardVisits {
+  const int* off;  // [kBatches + 1]
+  int* cnt;        // [kBatches]
+  int* vk;
+  simd::Pack<T>* vw;
+};
+
+// Starts the batches of the tile at (tx0, ty0): T = 1, sums zero, the pixel-weight maps loaded (jmask [kBatches]:
+// the maps present in each batch), the pixels inside the image active. Returns the batches inside the image.
+template <class T>
+inline __attribute__((always_inline)) uint32_t start_forward_batches(const RasterInputs<T>& in, const Binning& bins,
+                                                                     int tx0, int ty0, const ForwardBatches<T>& b,
+                                                                     uint32_t* jmask) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
-  using I = typename std::remove_reference<decltype(M{}[0])>::type;
-  constexpr bool kExtra = kX != kNoChannels, kLists = kX == kVisitLists;
-  const int W = bins.width, H = bins.height, C = in.num_extra, J = in.num_weights;
-  const int GT = in.num_groups * in.group_width;  // group channels, after the pixel-weight maps in the state
-  const int XS = in.extra_stride > 0 ? in.extra_stride : C;
-  const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
-  TileData<T> td;
-  const bool any_g = load_records(bins, records, tile_records, true, tile, td);
-  const int n = any_g ? td.n : 0;
-  uint32_t* masks = ws_masks + bins.tile_start[tile];
-  if (any_g) build_masks(bins, tile, td, masks);
-  // per-batch state: [T, R, G, B, D, E[C], MW[J], GR[G * GW]] + active / last masks
-  enum { bT, bR, bG, bB, bD, kBatchFixed };
-  const int BS = kBatchFixed + C + J + GT, GO = kBatchFixed + C + J;
-  P* bst = w.bstate.template get<P>(size_t(kBatches) * BS);
-  M* bact = w.blast.template get<M>(size_t(2) * kBatches);
-  M* blast = bact + kBatches;
-  P* wacc = J > 0 ? w.wacc.template get<P>(size_t(n) * J) : nullptr;
-  const P lane = simd::iota_pack<T>();
-  const M lane_i = __builtin_convertvector(lane, M);
+  const int W = bins.width, H = bins.height, C = b.C, J = b.J;
+  const M lane_i = __builtin_convertvector(simd::iota_pack<T>(), M);
   uint32_t alive = 0;
-  uint32_t jmask[kBatches];  // pixel-weight maps present in each batch (for_batch_maps)
   for (int bt = 0; bt < kBatches; ++bt) {
     jmask[bt] = 0;
     const int py = ty0 + bt / kBatchesPerRow, px0 = tx0 + (bt % kBatchesPerRow) * kLanes;
     if (py >= H || px0 >= W) continue;
     const int nvalid = std::min(kLanes, W - px0);
     alive |= 1u << bt;
-    P* st = bst + size_t(bt) * BS;
+    P* st = b.st + size_t(bt) * b.BS;
     st[bT] = simd::splat(T(1));
-    for (int f = bR; f < BS; ++f) st[f] = P{};
+    for (int f = bR; f < b.BS; ++f) st[f] = P{};
     for (int jj = 0; jj < J; ++jj)
       for (int l = 0; l < nvalid; ++l) {
         st[kBatchFixed + C + jj][l] = T(in.pixel_weights[(size_t(py) * W + px0 + l) * J + jj]);
         jmask[bt] |= map_bit(jj, st[kBatchFixed + C + jj][l] != T(0));
       }
-    bact[bt] = lane_i < I(nvalid);
-    blast[bt] = M{};
+    b.act[bt] = lane_i < MaskLane<T>(nvalid);
+    b.last[bt] = M{};
   }
-  const uint32_t all_batches = alive;
-  // Extra channels: the walk records each batch's visits (Gaussian, weight pack); composite_extras sums them
-  // afterwards, batch by batch.
-  int voff[kBatches + 1], vcnt[kBatches] = {};
-  int* vk = nullptr;
-  P* vw = nullptr;
-  if (kLists && n > 0) std::tie(vk, vw) = size_visit_lists<P>(w, masks, n, all_batches, voff);
-  T* fx = nullptr;  // folded extra channels in tile order [n, 4]
-  if (kX == kFolded && C > 0 && n > 0) {
-    fx = w.fold.template get<T>(size_t(n) * kFoldMaxChannels);
-    gather_tile_channels(bins, tile, in.extra, C, XS, fx);
-  }
-  const int s = bins.tile_start[tile];
-  int kend = 0;  // Gaussians [kend, n) were never reached (all batches terminated)
-  for (int k = 0; k < n && alive; ++k) {
-    kend = k + 1;
-    uint32_t mb = masks[k] & alive;
-    if (!mb) {
-      if (J > 0)
-        for (int jj = 0; jj < J; ++jj) wacc[size_t(k) * J + jj] = P{};
-      continue;
+  return alive;
+}
+
+// Composites Gaussian k of the tile (record rc, input index gi, folded channels fg) into the batches mb of its
+// mask that are still alive: alpha below kAlphaMin is skipped, a pixel whose T (1 - alpha) would fall below
+// kTransmittanceMin stops without accumulating, else w = alpha T is added to the sums (colour, depth, folded
+// channels, wa [J] the Gaussian's pixel-weight sums) or recorded in the batch's visit list, and T *= 1 - alpha.
+// A batch whose pixels have all stopped leaves `alive`.
+template <class T, bool kDepth, int kX>
+inline __attribute__((always_inline)) void forward_gaussian(const RasterInputs<T>& in, const T* rc, int k, int gi,
+                                                            const FoldedGaussian<T, 4>& fg, const ForwardBatches<T>& b,
+                                                            const uint32_t* jmask, int tx0, int ty0, uint32_t mb,
+                                                            uint32_t& alive, simd::Pack<T>* wa,
+                                                            const ForwardVisits<T>& vl) {
+  using P = simd::Pack<T>;
+  using M = simd::Mask<T>;
+  const int C = b.C, J = b.J, GO = b.GO;
+  const M kk = M{} + MaskLane<T>(k + 1);
+  while (mb) {
+    const int bt = __builtin_ctz(mb);
+    mb &= mb - 1;
+    P* st = b.st + size_t(bt) * b.BS;
+    const GaussianAtBatch<T> ev = eval_gaussian(rc, tx0, ty0, bt);
+    M active = b.act[bt];
+    const M valid = active & (ev.alpha >= T(kAlphaMin));
+    if (!simd::any(valid)) continue;
+    const P Tr = st[bT];
+    const P testT = Tr * (T(1) - ev.alpha);
+    const M stop = valid & (testT < T(kTransmittanceMin));
+    active = active & ~stop;
+    const M acc = valid & ~stop;
+    const P wgt = acc ? ev.alpha * Tr : P{};
+    st[bR] += wgt * rc[kCr];
+    st[bG] += wgt * rc[kCg];
+    st[bB] += wgt * rc[kCb];
+    if (kDepth) st[bD] += wgt * rc[kZ];
+    if constexpr (kX == kVisitLists) {
+      const int v = vl.off[bt] + vl.cnt[bt]++;
+      vl.vk[v] = gi;
+      vl.vw[v] = wgt;
     }
-    const T* rc = td.rec + size_t(k) * kRecord;
-    // Folded channels: the Gaussian's extra row (tile order) and group entries (from its record), added in the walk.
-    // (Copied to a local array: the visits' stores to the batch state cannot alias it, so it stays in registers.)
-    T xr[kFoldMaxChannels];
-    if (kX == kFolded)
-      for (int c = 0; c < C; ++c) xr[c] = fx[size_t(k) * kFoldMaxChannels + c];
-    const int e0 = kX == kFolded && GT > 0 ? record_int(rc[kE0]) : 0;
-    const int e1 = kX == kFolded && GT > 0 ? e0 + record_int(rc[kNe]) : 0;
-    // The common case of one group entry of width 4 (the hybrid method's object groups): its slot and values
-    // held for the Gaussian's visits instead of looked up on each (the same sums).
-    const bool one4 = kX == kFolded && e1 - e0 == 1 && in.group_width == 4;
-    const size_t g1 = one4 ? size_t(in.group_id[e0]) * 4 : 0;
-    const T* gv = one4 ? in.group_val + size_t(e0) * 4 : nullptr;
-    const T v0 = one4 ? gv[0] : T(0), v1 = one4 ? gv[1] : T(0), v2 = one4 ? gv[2] : T(0), v3 = one4 ? gv[3] : T(0);
-    P* wa = J > 0 ? wacc + size_t(k) * J : nullptr;
-    for (int jj = 0; jj < J; ++jj) wa[jj] = P{};
-    const M kk = M{} + I(k + 1);
-    while (mb) {
-      const int bt = __builtin_ctz(mb);
-      mb &= mb - 1;
-      P* st = bst + size_t(bt) * BS;
-      const T fy = T(ty0 + bt / kBatchesPerRow) + T(0.5);
-      const P fx = lane + (T(tx0 + (bt % kBatchesPerRow) * kLanes) + T(0.5));
-      const T dy = rc[kMy] - fy;
-      const P dx = rc[kMx] - fx;
-      const T bdy = rc[kB] * dy, hcdy2 = rc[kHc] * dy * dy;
-      const P power = -(dx * (rc[kHa] * dx + bdy) + hcdy2);
-      const P alpha = simd::vmin<T>(rc[kOp] * simd::vexp(power), simd::splat(T(kAlphaMax)));
-      M active = bact[bt];
-      const M valid = active & (alpha >= T(kAlphaMin));
-      if (!simd::any(valid)) continue;
-      const P Tr = st[bT];
-      const P testT = Tr * (T(1) - alpha);
-      const M stop = valid & (testT < T(kTransmittanceMin));
-      active = active & ~stop;
-      const M acc = valid & ~stop;
-      const P wgt = acc ? alpha * Tr : P{};
-      st[bR] += wgt * rc[kCr];
-      st[bG] += wgt * rc[kCg];
-      st[bB] += wgt * rc[kCb];
-      if (kDepth) st[bD] += wgt * rc[kZ];
-      if constexpr (kLists) {
-        const int v = voff[bt] + vcnt[bt]++;
-        vk[v] = bins.tile_gauss[s + k];
-        vw[v] = wgt;
+    if constexpr (kX == kFolded) {  // the sums of composite_extras / composite_groups, in the same order
+      for (int c = 0; c < C; ++c) st[kBatchFixed + c] += wgt * fg.x[c];
+      if (fg.one) {
+        P* d = st + GO + fg.slot;
+        for (int i = 0; i < 4; ++i) d[i] += wgt * fg.v[i];
+      } else {
+        add_group_values(in, fg.e0, fg.e0 + fg.ne, wgt, st + GO);
       }
-      if constexpr (kX == kFolded) {  // the sums of composite_extras / composite_groups, in the same order
-        for (int c = 0; c < C; ++c) st[kBatchFixed + c] += wgt * xr[c];
-        if (one4) {
-          P* d = st + GO + g1;
-          d[0] += wgt * v0;
-          d[1] += wgt * v1;
-          d[2] += wgt * v2;
-          d[3] += wgt * v3;
-        } else {
-          add_group_values(in, e0, e1, wgt, st + GO);
-        }
-      }
-      for_batch_maps(jmask[bt], J, [&](int jj) { wa[jj] += wgt * st[kBatchFixed + C + jj]; });
-      st[bT] = acc ? testT : Tr;
-      blast[bt] = acc ? kk : blast[bt];
-      bact[bt] = active;
-      if (!simd::any(active)) alive &= ~(1u << bt);
     }
+    for_batch_maps(jmask[bt], J, [&](int jj) { wa[jj] += wgt * st[kBatchFixed + C + jj]; });
+    st[bT] = acc ? testT : Tr;
+    b.last[bt] = acc ? kk : b.last[bt];
+    b.act[bt] = active;
+    if (!simd::any(active)) alive &= ~(1u << bt);
   }
+}
+
+// Writes the tile's pixels out (batches all_batches): the visit-list path's extra channels and groups summed
+// first, then colour over the background, alpha, final T, last contributor, depth, extra and group channels.
+template <class T, bool kDepth, int kX>
+inline __attribute__((always_inline)) void write_forward_batches(const RasterInputs<T>& in, const Binning& bins,
+                                                                 int tx0, int ty0, uint32_t all_batches,
+                                                                 const ForwardBatches<T>& b, const ForwardVisits<T>& vl,
+                                                                 const RasterOutputs<T>& out) {
+  using P = simd::Pack<T>;
+  const int W = bins.width, C = b.C, GT = b.BS - b.GO, GO = b.GO;
+  const int XS = in.extra_stride > 0 ? in.extra_stride : C;
   const T bg0 = in.background[0], bg1 = in.background[1], bg2 = in.background[2];
   for (int bt = 0; bt < kBatches; ++bt) {
     if (!((all_batches >> bt) & 1)) continue;
     const int py = ty0 + bt / kBatchesPerRow, px0 = tx0 + (bt % kBatchesPerRow) * kLanes;
     const int nvalid = std::min(kLanes, W - px0);
-    P* st = bst + size_t(bt) * BS;
-    if (kLists && vcnt[bt] > 0) {
-      if (C > 0) composite_extras<T>(vk + voff[bt], vw + voff[bt], vcnt[bt], in.extra, C, XS, st + kBatchFixed);
-      if (GT > 0) composite_groups<T>(vk + voff[bt], vw + voff[bt], vcnt[bt], in, st + GO);
+    P* st = b.st + size_t(bt) * b.BS;
+    if (kX == kVisitLists && vl.cnt[bt] > 0) {
+      const int* vk = vl.vk + vl.off[bt];
+      const P* vw = vl.vw + vl.off[bt];
+      if (C > 0) composite_extras<T>(vk, vw, vl.cnt[bt], in.extra, C, XS, st + kBatchFixed);
+      if (GT > 0) composite_groups<T>(vk, vw, vl.cnt[bt], in, st + GO);
     }
     for (int l = 0; l < nvalid; ++l) {
       const size_t p = size_t(py) * W + px0 + l;
@@ -301,23 +287,80 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
       out.rgb[3 * p + 2] = st[bB][l] + Tr * bg2;
       out.alpha[p] = T(1) - Tr;
       out.final_T[p] = Tr;
-      out.last[p] = int32_t(blast[bt][l]);
+      out.last[p] = int32_t(b.last[bt][l]);
       if (kDepth) out.depth[p] = st[bD][l];
-      if (kExtra)
+      if (kX != kNoChannels)
         for (int c = 0; c < C; ++c) out.extra[p * C + c] = st[kBatchFixed + c][l];
-      if (kExtra)
+      if (kX != kNoChannels)
         for (int c = 0; c < GT; ++c) out.groups[p * GT + c] = st[GO + c][l];
     }
   }
-  if (J > 0 && any_g) {
-    for (int k = 0; k < n; ++k) {
-      T* o = pair_w + size_t(bins.tile_pair[s + k]) * J;
-      if (k < kend && (masks[k] & all_batches))
-        for (int jj = 0; jj < J; ++jj) o[jj] = simd::hsum<T>(wacc[size_t(k) * J + jj]);
-      else
-        for (int jj = 0; jj < J; ++jj) o[jj] = 0;
-    }
+}
+
+// The tile's per-pair pixel-weight sums, pair_w [pairs, J]: each walked Gaussian's lane sums of wacc [n, J], zero
+// for the Gaussians after kend (never reached) or without a batch in the image.
+template <class T>
+void store_pair_weights(const Binning& bins, int tile, int n, int kend, int J, const uint32_t* masks,
+                        uint32_t all_batches, const simd::Pack<T>* wacc, T* pair_w) {
+  const int s = bins.tile_start[tile];
+  for (int k = 0; k < n; ++k) {
+    T* o = pair_w + size_t(bins.tile_pair[s + k]) * J;
+    if (k < kend && (masks[k] & all_batches))
+      for (int jj = 0; jj < J; ++jj) o[jj] = simd::hsum<T>(wacc[size_t(k) * J + jj]);
+    else
+      for (int jj = 0; jj < J; ++jj) o[jj] = 0;
   }
+}
+
+// Forward of one tile, Gaussian-major: the tile's Gaussians are walked front to back; each updates the batches
+// its mask names that still have a live pixel (per-batch accumulators in per-thread scratch); a batch drops out
+// when all its pixels hit the transmittance cut-off, the tile ends when no batch is left.
+template <class T, bool kDepth, int kX>
+void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typename RasterWorkspace<T>::PerThread& w,
+                  const T* records, T* tile_records, uint32_t* ws_masks, T* pair_w, const RasterOutputs<T>& out) {
+  using P = simd::Pack<T>;
+  using M = simd::Mask<T>;
+  const int C = in.num_extra, J = in.num_weights;
+  const int GT = in.num_groups * in.group_width;  // group channels, after the pixel-weight maps in the state
+  const int XS = in.extra_stride > 0 ? in.extra_stride : C;
+  const auto [tx0, ty0] = tile_origin(bins, tile);
+  TileData<T> td;
+  const bool any_g = load_records(bins, records, tile_records, true, tile, td);
+  const int n = any_g ? td.n : 0, s = bins.tile_start[tile];
+  uint32_t* masks = ws_masks + s;
+  if (any_g) build_masks(bins, tile, td, masks);
+  ForwardBatches<T> b{nullptr, nullptr, nullptr, C, J, kBatchFixed + C + J + GT, kBatchFixed + C + J};
+  b.st = w.bstate.template get<P>(size_t(kBatches) * b.BS);
+  b.act = w.blast.template get<M>(size_t(2) * kBatches);
+  b.last = b.act + kBatches;
+  P* wacc = J > 0 ? w.wacc.template get<P>(size_t(n) * J) : nullptr;  // [n, J]
+  uint32_t jmask[kBatches];  // pixel-weight maps present in each batch (for_batch_maps)
+  uint32_t alive = start_forward_batches(in, bins, tx0, ty0, b, jmask);
+  const uint32_t all_batches = alive;
+  int voff[kBatches + 1], vcnt[kBatches] = {};
+  ForwardVisits<T> vl{voff, vcnt, nullptr, nullptr};
+  if (kX == kVisitLists && n > 0) std::tie(vl.vk, vl.vw) = size_visit_lists<P>(w, masks, n, all_batches, voff);
+  T* fx = nullptr;  // folded extra channels in tile order [n, 4]
+  if (kX == kFolded && C > 0 && n > 0) {
+    fx = w.fold.template get<T>(size_t(n) * kFoldMaxChannels);
+    gather_tile_channels(bins, tile, in.extra, C, XS, fx);
+  }
+  int kend = 0;  // Gaussians [kend, n) were never reached (all batches terminated)
+  for (int k = 0; k < n && alive; ++k) {
+    kend = k + 1;
+    const uint32_t mb = masks[k] & alive;
+    P* wa = J > 0 ? wacc + size_t(k) * J : nullptr;
+    for (int jj = 0; jj < J; ++jj) wa[jj] = P{};
+    if (!mb) continue;
+    const T* rc = td.rec + size_t(k) * kRecord;
+    FoldedGaussian<T, 4> fg;
+    load_folded<T, 4>(in, rc, kX == kFolded && C > 0 ? fx + size_t(k) * kFoldMaxChannels : nullptr,
+                      kX == kFolded ? C : 0, kX == kFolded && GT > 0, in.group_width, fg);
+    const int gi = kX == kVisitLists ? bins.tile_gauss[s + k] : 0;
+    forward_gaussian<T, kDepth, kX>(in, rc, k, gi, fg, b, jmask, tx0, ty0, mb, alive, wa, vl);
+  }
+  write_forward_batches<T, kDepth, kX>(in, bins, tx0, ty0, all_batches, b, vl, out);
+  if (J > 0 && any_g) store_pair_weights(bins, tile, n, kend, J, masks, all_batches, wacc, pair_w);
 }
 
 }  // namespace
