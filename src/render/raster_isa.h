@@ -20,7 +20,7 @@ namespace hgs::render {
 enum class RasterIsa { kAvx2, kAvx512 };
 
 bool raster_isa_supported(RasterIsa isa);  // by this CPU
-RasterIsa raster_isa();                    // the one rasterize_forward uses now
+RasterIsa raster_isa();                    // the one rasterize_forward uses on this CPU
 void set_raster_isa(RasterIsa isa);        // fails when the CPU does not support it
 // The channel path (rasterize.h) of every call whose inputs leave it to ChannelPath::kAuto; kAuto restores the
 // kernels' own choice. HGS_RASTER_CHANNELS=lists|folded in the environment sets it at start-up.
