@@ -37,9 +37,8 @@ struct TrainConfig {
   // > 0: after densification stops at densify_until, every densify_every images, prune the Gaussians whose
   // 3-sigma footprint in a training view of the interval was wider than late_prune x the view's larger side, and
   // the transparent ones (no clone, split, opacity reset or world-size rule; 3DGS prunes only while densifying).
-  // 0 = off, the default: an option against floaters near the camera path (docs/scaling.md, "Floaters": at 0.5
-  // it removed them from both kumamon runs that had them); 3DGS's own rules applied late (20 px, 0.1 x extent)
-  // empty a model (kumamon: 33.96 -> 4.95 dB).
+  // 0 = off, the default: an option against floaters near the camera path (docs/scaling.md, "Floaters"), where
+  // 3DGS's own rules applied late (20 px, 0.1 x extent) would empty a model.
   float late_prune = 0.f;
   DensifyConfig densify_cfg;
   int save_every = 0;  // checkpoint + PLY every N iterations (0 = never during training)

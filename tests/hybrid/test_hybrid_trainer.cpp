@@ -315,9 +315,9 @@ TEST(HybridTrainer, BoundaryLossDoesNotFadeObjectsOnNoisyMasks) {
   // Means over eight scenes: one 300-step run is chaotic (float rounding alone moves a scene's mask opacity by
   // up to 0.05), so the per-scene differences default - off scatter with a standard deviation of about 0.04
   // (measured on these eight scenes with two builds that round the projection differently), and their mean
-  // over eight scenes has a standard error of about 0.015: the bound 0.03 is two of them. Three scenes and a
-  // bound of 0.01 (before 2026-11-29) failed or passed with the rounding of the build. Eq. 14 as written loses
-  // about 0.12 there, far outside the bound.
+  // over eight scenes has a standard error of about 0.015: the bound 0.03 is two of them (fewer scenes and a
+  // tighter bound fail or pass with the rounding of the build). Eq. 14 as written loses about 0.12 there, far
+  // outside the bound.
   struct Opacity {
     double mask = 0, inside = 0;
   };

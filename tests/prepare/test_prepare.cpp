@@ -113,7 +113,7 @@ TEST(PrepareGoldcape, PosesAgreeWithTheSharedModelAndTrainingAsksForMasks) {
       "goldcape subset: %d of %d registered, reprojection %.3f px, median centre error %.4f of the scene "
       "size (%.3f), median rotation error %.3f deg\n",
       registered, images, p["mean_reprojection_error_px"].get<double>(), med_pos, size, med_rot);
-  EXPECT_LT(med_pos, 0.01);  // measured 0.0010 (tests/prepare, 2026-11-26)
+  EXPECT_LT(med_pos, 0.01);  // about 0.0010 on goldcape
   EXPECT_LT(med_rot, 1.0);   // measured 0.245 deg
 
   // Training the prepared scene (no --sam) as hybrid says how to get masks.
