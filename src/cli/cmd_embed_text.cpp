@@ -8,6 +8,7 @@
 #include "clip/model.h"
 #include "core/error.h"
 #include "core/fs.h"
+#include "core/json_file.h"
 #include "nn/thread_pool.h"
 #include "scene/text_embeddings.h"
 
@@ -33,9 +34,9 @@ void run_embed_text(const EmbedTextArgs& a) {
   nlohmann::json out = nlohmann::json::object();
   if (a.merge && fs::exists(a.out)) {
     try {
-      out = nlohmann::json::parse(read_file_text(a.out));
-    } catch (const nlohmann::json::exception&) {
-      fail("{}: not valid JSON (cannot --merge into it)", a.out);
+      out = read_json_file(a.out);
+    } catch (const Error& e) {
+      fail("{} (cannot --merge into it)", e.what());
     }
     if (!out.is_object()) fail("{}: not a JSON object of phrases (cannot --merge into it)", a.out);
   }
