@@ -17,6 +17,12 @@ CommandRegistration reg(
        auto out = std::make_shared<std::string>();
        auto threads = std::make_shared<int>(0);
        sub.add_option("--out", *out, "Output scene folder (must not exist or be empty)")->required();
+       sub.add_option("--world", o->world,
+                      "realistic (CLIP's language statistics, SAM2's failures over the capture order; query sets in "
+                      "gt/queries.json) or simple (near-oracle language, mask errors drawn afresh in every view: the "
+                      "world before 0.10); docs/formats.md")
+           ->check(CLI::IsMember({"realistic", "simple"}))
+           ->capture_default_str();
        sub.add_option("--preset", o->preset, "Scene layout: tabletop or room")
            ->check(CLI::IsMember({"tabletop", "room"}))
            ->capture_default_str();

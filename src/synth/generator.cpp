@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <random>
 #include <set>
@@ -19,7 +20,10 @@
 #include "masks/rle.h"
 #include "scene/colmap.h"
 #include "scene/text_embeddings.h"
+#include "synth/language.h"
+#include "synth/query_sets.h"
 #include "synth/synth.h"
+#include "synth/tracks.h"
 
 namespace hgs::synth {
 namespace fs = std::filesystem;
@@ -72,6 +76,7 @@ json shuffle_ids(LabelMap& mask, uint64_t seed) {
 }
 
 void validate(const SynthOptions& o) {
+  if (o.world != "realistic" && o.world != "simple") fail("--world: unknown value '{}' (realistic or simple)", o.world);
   if (o.mask_ids != "consistent" && o.mask_ids != "per-view")
     fail("--mask-ids: unknown value '{}' (consistent or per-view)", o.mask_ids);
   if (o.mask_style != "label" && o.mask_style != "sam")
@@ -95,9 +100,10 @@ struct Concepts {
   std::vector<std::string> names;
   std::vector<std::vector<float>> vectors;  // [C][feature_dim] concept_vector of each name
   // Background surfaces: every concept that is no object ("sky" = nothing hit is none).
-  std::vector<int> surfaces;    // indices into names
-  std::vector<int> surface_of;  // per concept c: 1 + the surface's index for c, else 0
-  std::vector<float> context;   // [feature_dim] the preset's context phrase
+  std::vector<int> surfaces;                 // indices into names
+  std::vector<int> surface_of;               // per concept c: 1 + the surface's index for c, else 0
+  std::vector<float> context;                // [feature_dim] the preset's context phrase
+  std::vector<std::vector<float>> contents;  // realistic world: [C][feature_dim] image_content of each concept
 };
 
 Concepts make_concepts(const World& world, const SynthOptions& opt) {
@@ -115,6 +121,8 @@ Concepts make_concepts(const World& world, const SynthOptions& opt) {
   }
   const std::string context_phrase = opt.preset == "room" ? "a photo of a room" : "a photo of a tabletop";
   cc.context = concept_vector(context_phrase, opt.feature_dim);
+  if (opt.world == "realistic")
+    for (auto& c : cc.names) cc.contents.push_back(image_content(lexeme_of(c), opt.feature_dim));
   return cc;
 }
 
@@ -132,6 +140,9 @@ struct Generation {
   std::vector<int> part_id;        // [K] label style: the mask id of object k's part, 0 = the object is not split
   json mask_ids = json::object();  // per view: id in masks/<stem>.png -> what it truly is
   std::set<int> surface_used;      // --mask-style sam: concepts of the surfaces some view has a mask of
+  bool realistic = false;
+  int first_free_id = 0;                // realistic world: the first id after the surfaces' pieces and the parts
+  std::unique_ptr<Sam2Simulator> sam2;  // realistic world, label style: the tracks over the capture order
 };
 
 std::string stem_of(const RenderedView& rv) { return rv.name.substr(0, rv.name.size() - 4); }
@@ -252,17 +263,53 @@ void write_label_view(Generation& g, int i, const RenderedView& rv) {
               make_npy_f16({size_t(opt.height), size_t(opt.width)}, conf.data()));
 }
 
+// Realistic world, label style, view i (in capture order): the SAM2-like tracks' mask (tracks.h), its confidence
+// and what every id truly is (g.mask_ids, also with consistent ids: a track re-born or swapped shows another
+// object than its name says).
+void write_tracked_view(Generation& g, int i, const RenderedView& rv) {
+  const std::string stem = stem_of(rv);
+  LabelMap mask;
+  std::vector<float> conf;
+  std::map<int, IdTruth> truth;
+  g.sam2->next(i, mask, conf, truth);
+  auto describe = [](const IdTruth& t) {
+    json j = {{"object", t.object}, {"kind", t.kind}};
+    if (t.kind == "surface") j["surface"] = t.surface, j["piece"] = t.piece;
+    if (t.kind == "part") j["part"] = 1;
+    return j;
+  };
+  json ids = json::object();
+  if (g.per_view) {
+    const json shuffled = shuffle_ids(mask, mix(g.opt.seed, 5, i));
+    for (auto& [id, was] : shuffled.items()) ids[id] = describe(truth.at(was["object"].get<int>()));
+  } else {
+    for (auto& [id, t] : truth) ids[std::to_string(id)] = describe(t);
+  }
+  g.mask_ids[stem] = ids;
+  save_label_png(g.tmp / "masks" / (stem + ".png"), mask);
+  if (!conf.empty())
+    write_npy(g.tmp / "masks" / (stem + ".conf.npy"),
+              make_npy_f16({size_t(g.opt.height), size_t(g.opt.width)}, conf.data()));
+}
+
 // Simulated SAM2 masks and confidences (or SAM-style overlapping masks with --mask-style sam) and CLIP-like
 // features of every view.
 void write_masks_and_features(Generation& g, const std::vector<RenderedView>& views) {
   const SynthOptions& opt = g.opt;
   Progress bar("synth: masks+features", opt.views, opt.progress);
+  if (g.realistic && !g.sam_style)
+    g.sam2 = std::make_unique<Sam2Simulator>(g.world, g.cam, views,
+                                             opt.surface_masks ? g.concepts.surfaces : std::vector<int>(),
+                                             g.concepts.names, g.part_id, g.nl, g.first_free_id, mix(opt.seed, 9));
   for (int i = 0; i < opt.views; ++i) {
     if (g.sam_style) write_sam_view(g, views[i], mix(opt.seed, 6, i));
+    else if (g.sam2) write_tracked_view(g, i, views[i]);
     else write_label_view(g, i, views[i]);
     int gh, gw;
-    auto feat = simulate_features(views[i], g.concepts.vectors, g.concepts.context, g.nl.feature, opt.feature_dim,
-                                  mix(opt.seed, 2, i), gh, gw);
+    auto feat = g.realistic ? simulate_dense_features(views[i], g.concepts.contents, g.nl, opt.feature_dim,
+                                                      mix(opt.seed, 2, i), gh, gw)
+                            : simulate_features(views[i], g.concepts.vectors, g.concepts.context, g.nl.feature,
+                                                opt.feature_dim, mix(opt.seed, 2, i), gh, gw);
     write_npy(g.tmp / "features" / (stem_of(views[i]) + ".npy"),
               make_npy_f16({size_t(gh), size_t(gw), size_t(opt.feature_dim)}, feat.data()));
     bar.update(i + 1);
@@ -277,6 +324,11 @@ void write_mask_names(const Generation& g) {
   const int K = g.K;
   const Concepts& cc = g.concepts;
   json names = json::object();
+  if (g.sam2) {
+    for (auto& [id, name] : g.sam2->names()) names[std::to_string(id)] = name;
+    atomic_write_text(g.tmp / "masks" / "objects.json", names.dump(2) + "\n");
+    return;
+  }
   for (auto& o : g.world.objects) names[std::to_string(o.id)] = o.name;
   if (g.opt.surface_masks && !g.sam_style)
     for (size_t j = 0; j < cc.surfaces.size(); ++j) names[std::to_string(K + 1 + int(j))] = cc.names[cc.surfaces[j]];
@@ -305,6 +357,16 @@ void write_truth_names(const Generation& g) {
 void write_text_embeddings(const Generation& g) {
   const int D = g.opt.feature_dim;
   const Concepts& cc = g.concepts;
+  if (g.realistic) {  // the lexicon's embeddings (language.h) and the query sets (query_sets.h)
+    std::vector<std::string> surfaces, distract = g.world.unused_names;
+    for (int c : cc.surfaces) surfaces.push_back(cc.names[c]);
+    for (const char* d : {"violin", "sports car", "umbrella", "laptop computer"}) distract.push_back(d);
+    json te, queries;
+    realistic_text(g.world, surfaces, distract, D, te, queries);
+    hgs::write_text_embeddings(g.tmp / "text_embeddings.json", te);
+    atomic_write_text(g.tmp / "gt" / "queries.json", queries.dump(2) + "\n");
+    return;
+  }
   Rng rng(mix(g.opt.seed, 3));
   json te = json::object();
   for (auto& o : g.world.objects) te[o.name] = float_array(noisy(concept_vector(o.name, D), 0.15, rng));
@@ -486,7 +548,7 @@ void write_record(const Generation& g) {
                  {"small_object_miss", nl.small_miss},
                  {"split", nl.split}}},
                {"feature_dim", opt.feature_dim},
-               {"feature_patch", 16},
+               {"feature_patch", 16},  // the simple world's; the realistic one's grid is "feature_grid"
                {"objects", objs},
                {"synonyms", syn},
                {"distractors", g.world.unused_names},
@@ -500,6 +562,18 @@ void write_record(const Generation& g) {
     if (g.part_id[k]) parts[std::to_string(g.part_id[k])] = k + 1;
   if (!parts.empty()) meta["parts"] = parts;
   if (opt.write_depth) meta["depth"] = "gt/depth";
+  if (g.realistic) {  // the simple world's record keeps its bytes
+    meta["world"] = "realistic";
+    meta["noise_params"]["tracks"] = {
+        {"lose", nl.lose},     {"occluded_lose", nl.occluded_lose}, {"run_mean", nl.run_mean},
+        {"reborn", nl.reborn}, {"edge_bias_px", nl.edge_bias},      {"surface_pieces", nl.pieces}};
+    meta["noise_params"]["language"] = {{"view_bias", nl.view_bias},
+                                        {"confusion", nl.confusion},
+                                        {"patch_noise", nl.patch_noise}};
+    meta["queries"] = "gt/queries.json";
+    meta.erase("feature_patch");
+    meta["feature_grid_short_side"] = kGridShort;
+  }
   atomic_write_text(g.tmp / "synth.json", meta.dump(2) + "\n");
 }
 
@@ -529,19 +603,25 @@ void generate(const fs::path& out, const SynthOptions& options) {
                std::vector<char>(opt.objects, 0),
                std::vector<int>(opt.objects, 0),
                json::object(),
-               {}};
+               {},
+               false,
+               0,
+               nullptr};
   for (int k = 0; k < g.K; ++k) g.split[k] = mix(opt.seed, 7, k) & 1;
   // Label style: the objects whose part SAM cut off (and SAM2 tracked as an object), ids after the surfaces.
-  int next_id = g.K + (opt.surface_masks ? int(concepts.surfaces.size()) : 0) + 1;
+  g.realistic = opt.world == "realistic";
+  const int pieces = g.realistic ? std::max(1, g.nl.pieces) : 1;
+  int next_id = g.K + (opt.surface_masks ? int(concepts.surfaces.size()) * pieces : 0) + 1;
   for (int k = 0; k < g.K && !g.sam_style; ++k)
     if (double(mix(opt.seed, 8, k) >> 11) * 0x1.0p-53 < g.nl.split) g.part_id[k] = next_id++;
+  g.first_free_id = next_id;
   try {
     ensure_dir(tmp);
     const std::vector<RenderedView> views = render_views(g);
     write_masks_and_features(g, views);
     write_mask_names(g);
     write_truth_names(g);
-    if (g.per_view || g.sam_style) atomic_write_text(tmp / "gt" / "mask_ids.json", g.mask_ids.dump(1) + "\n");
+    if (g.per_view || g.sam_style || g.sam2) atomic_write_text(tmp / "gt" / "mask_ids.json", g.mask_ids.dump(1) + "\n");
     write_text_embeddings(g);
     write_colmap_model(g, views);
     write_heldout_labels(g, views);

@@ -14,7 +14,36 @@
 
 namespace hgs::synth {
 
-NoiseLevel noise_level(const std::string& name) {
+NoiseLevel noise_level(const std::string& name, const std::string& world) {
+  if (world == "realistic") {
+    if (name != "none" && name != "low" && name != "medium" && name != "high")
+      fail("--noise: unknown level '{}' (none, low, medium or high)", name);
+    NoiseLevel n;
+    if (name == "none") return n;
+    const int l = name == "low" ? 0 : name == "medium" ? 1 : 2;
+    const double pick[][3] = {                      // low, medium, high
+                              {0.03, 0.05, 0.10},   // merge starts (touching pair, view)
+                              {0.005, 0.01, 0.02},  // identity swaps (touching pair, view)
+                              {0.04, 0.07, 0.10},   // confidence noise
+                              {0.01, 0.02, 0.03},   // small-object loss, added
+                              {0.10, 0.25, 0.40},   // parts
+                              {0.01, 0.02, 0.04},   // track lost
+                              {0.10, 0.12, 0.15},   // track lost when suddenly occluded, added
+                              {3, 3.5, 4},          // mean lost run
+                              {0.3, 0.5, 0.6},      // re-born under a new id
+                              {1, 2, 3},            // edge bias
+                              {2, 3, 4},            // surface pieces
+                              {0.15, 0.20, 0.30},   // view bias
+                              {0.35, 0.55, 0.75},   // confusion
+                              {0.10, 0.15, 0.20}};  // patch noise
+    n.jitter = 1;
+    n.merge = pick[0][l], n.swap = pick[1][l], n.conf_noise = pick[2][l], n.small_miss = pick[3][l];
+    n.split = pick[4][l], n.lose = pick[5][l], n.occluded_lose = pick[6][l], n.run_mean = pick[7][l];
+    n.reborn = pick[8][l], n.edge_bias = int(pick[9][l]), n.pieces = int(pick[10][l]), n.view_bias = pick[11][l];
+    n.confusion = pick[12][l], n.patch_noise = pick[13][l];
+    n.feature = n.patch_noise;  // the SfM points' noise follows whether there is feature noise
+    return n;
+  }
   // miss, jitter, merge, swap, confidence noise, feature noise, small-object miss, split
   if (name == "none") return {0, 0, 0, 0, 0, 0, 0, 0};
   if (name == "low") return {0.02, 1, 0.05, 0.02, 0.04, 0.3, 0.10, 0.10};
@@ -24,12 +53,12 @@ NoiseLevel noise_level(const std::string& name) {
 }
 
 NoiseLevel noise_of(const SynthOptions& opt) {
-  NoiseLevel nl = noise_level(opt.noise);
-  if (opt.miss_rate >= 0) nl.miss = opt.miss_rate;
+  NoiseLevel nl = noise_level(opt.noise, opt.world);
+  if (opt.miss_rate >= 0) (opt.world == "realistic" ? nl.lose : nl.miss) = opt.miss_rate;
   if (opt.small_miss_rate >= 0) nl.small_miss = opt.small_miss_rate;
   if (opt.merge_rate >= 0) nl.merge = opt.merge_rate;
   if (opt.split_rate >= 0) nl.split = opt.split_rate;
-  if (opt.objects_only) nl.small_miss = nl.split = 0;
+  if (opt.objects_only) nl.small_miss = nl.split = 0, nl.pieces = std::min(nl.pieces, 1);
   return nl;
 }
 

@@ -13,6 +13,10 @@
 namespace hgs::synth {
 
 struct SynthOptions {
+  // realistic (the default): CLIP's language statistics and SAM2's failures over the capture order (language.h,
+  // tracks.h); simple: near-oracle language features and mask errors drawn afresh in every view (the world before
+  // 0.10; its scenes are byte for byte those of then).
+  std::string world = "realistic";
   std::string preset = "tabletop";
   uint64_t seed = 1;
   int views = 48;
@@ -50,9 +54,20 @@ struct NoiseLevel {
   double feature = 0;     // relative norm of the per-patch feature noise
   double small_miss = 0;  // added to miss for an object under kSmallObjectFraction of the view's pixels
   double split = 0;       // probability an object's part is a mask of its own (label style; per object, per scene)
+  // The realistic world only (tracks.h, language.h); merge and swap are then per touching pair and view, merge
+  // the start of a merge that lasts while the two touch, swap an identity switch that persists, miss 0.
+  double lose = 0;           // a track lost in a view (starts a lost run)
+  double occluded_lose = 0;  // added to lose when the object's visible area fell below 40 % of its last view's
+  double run_mean = 1;       // mean length of a lost run (views, geometric)
+  double reborn = 0;         // a lost track comes back under a new id
+  int edge_bias = 0;         // max |edge bias| of an object (px, the same in all its views; jitter adds +-1)
+  int pieces = 1;            // pieces of every background surface
+  double view_bias = 0;      // per-view, per-concept semantic bias of the dense features (x kContent)
+  double confusion = 0;      // per-patch mixture of the scene's other concepts (x kContent)
+  double patch_noise = 0;    // per-patch isotropic noise (norm)
 };
 constexpr double kSmallObjectFraction = 0.005;
-NoiseLevel noise_level(const std::string& name);
+NoiseLevel noise_level(const std::string& name, const std::string& world = "simple");
 // The noise level of `opt.noise` with the options' rate overrides and `objects_only` applied.
 NoiseLevel noise_of(const SynthOptions& opt);
 
@@ -101,6 +116,11 @@ std::vector<SamMask> simulate_sam_masks(const RenderedView& v, const Intrinsics&
 // Unit "concept" vector of a phrase in R^D, fixed by the phrase alone (the same in every scene, like a real text
 // encoder).
 std::vector<float> concept_vector(const std::string& phrase, int dim);
+// The realistic world's MaskCLIP-like dense features on a 16-pixel patch grid (dense_features.cpp):
+// [28, 28 W / H, D] (28 cells on the shorter side); contents[c] is image_content of concept c ([D], zero for the
+// sky).
+std::vector<float> simulate_dense_features(const RenderedView& v, const std::vector<std::vector<float>>& contents,
+                                           const NoiseLevel& nl, int dim, uint64_t seed, int& grid_h, int& grid_w);
 // Simulated dense CLIP features on a 16-pixel patch grid: [ceil(H/16), ceil(W/16), D].
 std::vector<float> simulate_features(const RenderedView& v, const std::vector<std::vector<float>>& concepts,
                                      const std::vector<float>& context, double noise, int dim, uint64_t seed,
