@@ -1,9 +1,10 @@
 // SmallSynth: the synth::SynthOptions of a small test scene, with chained setters for what a test changes.
 // It starts at 16 views of 96x72 pixels, 4 objects, 3000 SfM points, 32-dimensional features, one sample per
-// pixel and no progress output, in the objects-only world (masks of the objects alone, no small-object misses, no
-// parts: the world the tests' margins were measured on; sam_like() gives `hgs synth`'s default world); every other
-// field keeps SynthOptions' default (seed 1, medium noise, consistent label masks). Used by the tests and by the
-// fuzz harnesses' tiny scene.
+// pixel and no progress output, in the simple world's objects-only variant (masks of the objects alone, no
+// small-object misses, no parts: the world the tests' margins were measured on; sam_like() adds the simple world's
+// surfaces, misses and parts, realistic() switches to `hgs synth`'s default world, language.h / tracks.h); every
+// other field keeps SynthOptions' default (seed 1, medium noise, consistent label masks). Used by the tests and by
+// the fuzz harnesses' tiny scene.
 #pragma once
 #include <cstdint>
 #include <string>
@@ -50,10 +51,15 @@ class SmallSynth {
     o_.split_rate = d.split_rate;
     return *this;
   }
+  SmallSynth& realistic() {  // `hgs synth`'s default world, with its surfaces, misses and parts
+    o_.world = "realistic";
+    return sam_like();
+  }
   operator synth::SynthOptions() const { return o_; }
 
  private:
-  synth::SynthOptions o_{.views = 16,
+  synth::SynthOptions o_{.world = "simple",
+                         .views = 16,
                          .width = 96,
                          .height = 72,
                          .objects = 4,

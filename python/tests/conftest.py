@@ -12,9 +12,9 @@ import hgs
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 TEST_DATA = os.path.join(REPO, "tests", "data")
 
-# The tiny scene: 12 views of 80 x 60 pixels, 3 objects, 16-dimensional features, in the objects-only world (mask
-# ids 1..3; cf. tests/synth_options.h; test_scene.py checks the default world).
-SYNTH = dict(views=12, width=80, height=60, objects=3, points=1500, feature_dim=16, supersample=1, noise="low",
+# The tiny scene: 12 views of 80 x 60 pixels, 3 objects, 16-dimensional features, in the simple world's objects-only
+# variant (mask ids 1..3; cf. tests/synth_options.h; test_scene.py checks the default world).
+SYNTH = dict(world="simple", views=12, width=80, height=60, objects=3, points=1500, feature_dim=16, supersample=1, noise="low",
              objects_only=True)
 HYBRID_ITERS = 120
 

@@ -79,8 +79,24 @@ def test_downscale(scene_dir):
     assert s2.image(0).shape == (SYNTH["height"] // 2, SYNTH["width"] // 2, 3)
 
 
-def test_synth_default_world_has_surfaces_and_parts(tmp_path):
-    # hgs.synth's defaults are `hgs synth`'s: the background surfaces are mask objects after the objects, and a
+def test_synth_default_world_is_the_realistic_one(tmp_path):
+    # hgs.synth's default world is `hgs synth`'s: realistic, with query sets and surfaces cut into tracked pieces.
+    opts = {k: v for k, v in SYNTH.items() if k not in ("world", "objects_only")}
+    out = hgs.synth(str(tmp_path / "realistic"), **opts)
+    with open(os.path.join(out, "synth.json")) as f:
+        assert json.load(f)["world"] == "realistic"
+    with open(os.path.join(out, "gt", "queries.json")) as f:
+        queries = json.load(f)
+    assert len(queries["names"]) == SYNTH["objects"] and len(queries["synonyms"]) == SYNTH["objects"]
+    with open(os.path.join(out, "masks", "objects.json")) as f:
+        names = json.load(f)
+    assert "wooden table (piece 1)" in names.values()
+    with pytest.raises(Exception, match="--world"):
+        hgs.synth(str(tmp_path / "bad"), world="fancy", **opts)
+
+
+def test_synth_simple_world_has_surfaces_and_parts(tmp_path):
+    # The simple world with its SAM-like defaults: the background surfaces are mask objects after the objects, and a
     # split object's part follows them; objects_only=True gives the masks of the objects alone.
     opts = dict(SYNTH, objects_only=False, split_rate=1.0)
     out = hgs.synth(str(tmp_path / "sam_like"), **opts)

@@ -26,7 +26,15 @@ CommandRegistration reg(
        sub.add_option("--preset", o->preset, "Scene layout: tabletop or room")
            ->check(CLI::IsMember({"tabletop", "room"}))
            ->capture_default_str();
-       sub.add_option("--seed", o->seed, "Random seed (same seed, same bytes)")->capture_default_str();
+       sub.add_option("--seed", o->seed, "Random seed (same seed, same bytes)")
+           ->check(CLI::Validator(
+               [](std::string& v) {
+                 return v.find_first_not_of("0123456789") == std::string::npos && !v.empty() && v.size() <= 19
+                            ? std::string()
+                            : "must be an integer between 0 and 10^19 - 1, got " + v;
+               },
+               "INT >= 0"))
+           ->capture_default_str();
        sub.add_option("--views", o->views, "Number of views")->capture_default_str();
        sub.add_option("--width", o->width, "Image width")->capture_default_str();
        sub.add_option("--height", o->height, "Image height")->capture_default_str();

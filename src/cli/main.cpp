@@ -56,7 +56,13 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    if (e.get_exit_code() == 0) return app.exit(e);  // --help, --version
+    // One line naming the option and what is allowed, like every other error of hgs (CLI11's own message says
+    // which option and range; its second line "Run with --help" is folded into this one).
+    std::string where = "hgs";
+    for (const CLI::App* sub : app.get_subcommands()) where += " " + sub->get_name();
+    std::fprintf(stderr, "hgs: error: %s (see `%s --help`)\n", e.what(), where.c_str());
+    return 2;
   }
   try {
     if (run) run();

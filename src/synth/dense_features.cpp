@@ -1,9 +1,10 @@
 // The realistic world's dense language features, as MaskCLIP gives them from a ViT-B/16 (one feature per patch
-// of the grid `hgs features --input-size 448` gives, upsampled by the user): a patch's content is the area-weighted mean of the contents (language.h) of the
-// things visible in it, each with a per-view bias (an object looks different from each side); blurred with its
-// 8 neighbours (the patch tokens' receptive field: centre 0.4, sides 0.1, corners 0.05), 15 % of it replaced by
-// the view's mean content (the global token leaking into every patch), plus per-patch confusion (a random mixture
-// of the scene's contents: MaskCLIP's noisy per-patch class) and isotropic noise; finally in the image cone:
+// of the grid `hgs features --input-size 448` gives, upsampled by the user): a patch's content is the area-weighted
+// mean of the contents (language.h) of the things visible in it, each with a per-view bias (an object looks different
+// from each side); blurred with its 8 neighbours (the patch tokens' receptive field: centre 0.4, sides 0.1, corners
+// 0.05), 15 % of it replaced by the view's mean content (the global token leaking into every patch), plus per-patch
+// confusion (a random mixture of the scene's contents: MaskCLIP's noisy per-patch class) and isotropic noise; finally
+// in the image cone:
 //   f = normalise(kImageShared g_I + kContent (content + confusion) + noise).
 // Boundaries, small objects and thin parts blur into their surroundings, as real dense CLIP features do.
 #include <algorithm>

@@ -82,7 +82,7 @@ const std::map<std::string, Entry>& lexicon() {
 
 // Colour families: a colour near another shares 0.6 of its vector with it.
 std::string colour_family(const std::string& a) {
-  static const std::map<std::string, std::string> f = {{"lime", "green"}, {"navy", "blue"},  {"teal", "cyan"},
+  static const std::map<std::string, std::string> f = {{"lime", "green"},    {"navy", "blue"},    {"teal", "cyan"},
                                                        {"golden", "yellow"}, {"magenta", "pink"}, {"silver", "grey"}};
   auto it = f.find(a);
   return it == f.end() ? "" : it->second;

@@ -20,7 +20,7 @@ nlohmann::json float_array(const std::vector<float>& v) {
 // The colour and its family's members ("green" for "lime", "lime" for "green"): what "the <attribute> one" could
 // also mean.
 bool colours_collide(const std::string& a, const std::string& b) {
-  static const std::map<std::string, std::string> fam = {{"lime", "green"}, {"navy", "blue"},     {"teal", "cyan"},
+  static const std::map<std::string, std::string> fam = {{"lime", "green"},    {"navy", "blue"},    {"teal", "cyan"},
                                                          {"golden", "yellow"}, {"magenta", "pink"}, {"silver", "grey"}};
   auto family = [&](const std::string& c) {
     auto it = fam.find(c);

@@ -36,7 +36,8 @@ Sam2Simulator::Sam2Simulator(const World& world, const Intrinsics& cam, const st
   tracks_.assign(K_, 1);
   bias_.resize(K_);
   // The level's bias is in pixels of a 320x240 view; SAM's edge errors scale with the image.
-  const int bias = nl_.edge_bias > 0 ? std::max(1, int(std::lround(nl_.edge_bias * std::min(cam.width, cam.height) / 240.0))) : 0;
+  const int bias =
+      nl_.edge_bias > 0 ? std::max(1, int(std::lround(nl_.edge_bias * std::min(cam.width, cam.height) / 240.0))) : 0;
   for (int k = 0; k < K_; ++k) bias_[k] = bias > 0 ? rng_.integer(-bias, bias) : 0;
   surface_of_concept_.assign(concept_names.size(), 0);
   for (size_t j = 0; j < surfaces_.size(); ++j) {
@@ -137,6 +138,17 @@ void Sam2Simulator::next(int i, LabelMap& mask, std::vector<float>& conf, std::m
     std::vector<uint8_t> src(n);
     for (size_t p = 0; p < n; ++p) src[p] = erode ? (m.v[p] != k) : (m.v[p] == k);
     const std::vector<int> d = masks::chessboard_distance(src, w, h);
+    if (erode) {  // SAM's bias thins an object's edge, never the whole object: keep at least half of it
+      std::vector<size_t> depth_count(size_t(-r) + 2, 0);
+      size_t total = 0;
+      for (size_t p = 0; p < n; ++p)
+        if (m.v[p] == k) ++total, ++depth_count[size_t(std::min(d[p], -r + 1))];
+      size_t removed = 0;
+      int radius = 0;
+      for (int q = 1; q <= -r && 2 * (removed + depth_count[size_t(q)]) <= total; ++q)
+        removed += depth_count[size_t(q)], radius = q;
+      r = -radius;
+    }
     for (size_t p = 0; p < n; ++p) {
       if (erode && m.v[p] == k && d[p] <= -r) m.v[p] = 0;
       if (!erode && m.v[p] == 0 && d[p] <= r) m.v[p] = uint16_t(k);

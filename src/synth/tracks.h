@@ -21,10 +21,10 @@ namespace hgs::synth {
 
 // What a mask id truly is in one view.
 struct IdTruth {
-  int object = 0;         // the object it shows (0: a surface)
-  std::string kind;       // "object" | "track" (re-born) | "part" | "surface"
-  std::string surface;    // the surface's concept name (kind "surface")
-  int piece = 0;          // the surface's piece (1..)
+  int object = 0;       // the object it shows (0: a surface)
+  std::string kind;     // "object" | "track" (re-born) | "part" | "surface"
+  std::string surface;  // the surface's concept name (kind "surface")
+  int piece = 0;        // the surface's piece (1..)
 };
 
 class Sam2Simulator {
@@ -49,18 +49,18 @@ class Sam2Simulator {
   const Intrinsics& cam_;
   const std::vector<RenderedView>& views_;
   std::vector<int> surfaces_;
-  std::vector<int> surface_of_concept_;  // concept -> surface index + 1 (0: none)
+  std::vector<int> surface_of_concept_;     // concept -> surface index + 1 (0: none)
   std::vector<std::string> surface_names_;  // [S]
   std::vector<int> part_id_;
   NoiseLevel nl_;
   Rng rng_;
   int K_;
-  std::vector<int> id_;          // [K] the id object k+1 shows under now
-  std::vector<int> lost_left_;   // [K] views of the current lost run still to come
-  std::vector<char> reborn_;     // [K] comes back under a new id
-  std::vector<int> bias_;        // [K] signed edge bias (px): > 0 dilates
-  std::vector<size_t> last_area_;  // [K] pixels in the last view that showed it
-  std::vector<int> tracks_;      // [K] re-born tracks so far
+  std::vector<int> id_;                         // [K] the id object k+1 shows under now
+  std::vector<int> lost_left_;                  // [K] views of the current lost run still to come
+  std::vector<char> reborn_;                    // [K] comes back under a new id
+  std::vector<int> bias_;                       // [K] signed edge bias (px): > 0 dilates
+  std::vector<size_t> last_area_;               // [K] pixels in the last view that showed it
+  std::vector<int> tracks_;                     // [K] re-born tracks so far
   std::map<std::pair<int, int>, bool> merged_;  // touching pairs (a < b) under a's mask
   std::vector<std::vector<Vec3>> seeds_;        // [S] world points of each surface's pieces
   std::vector<int> piece_first_;                // [S] id of each surface's first piece

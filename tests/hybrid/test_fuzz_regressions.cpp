@@ -19,7 +19,7 @@ namespace fs = std::filesystem;
 namespace {
 // The fuzz harnesses' tiny scene (fuzz/util.cpp), on which the inputs were found.
 void write_tiny_scene(const fs::path& out) {
-  const auto r = test::run_hgs("synth --out " + out.string() +
+  const auto r = test::run_hgs("synth --world simple --out " + out.string() +
                                " --views 4 --width 32 --height 24 --objects 3 --points 200 --feature-dim 8 --noise none"
                                " --supersample 1 --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;

@@ -255,7 +255,7 @@ TEST(MasksAssociate, SynthPerViewIdsBecomeTheConsistentIds) {
   test::TempDir t;
   const fs::path pv = t / "pv", cs = t / "cs";
   for (auto& [dir, extra] : {std::pair{pv, "--mask-ids per-view"}, std::pair{cs, ""}}) {
-    auto r = test::run_hgs("synth --out " + dir.string() + " " + kScene + " --noise medium " + extra);
+    auto r = test::run_hgs("synth --world simple --out " + dir.string() + " " + kScene + " --noise medium " + extra);
     ASSERT_EQ(r.exit_code, 0) << r.err;
   }
   auto r = test::run_hgs("masks associate " + pv.string() + " --quiet");
@@ -308,7 +308,8 @@ TEST(MasksAssociate, DepthLiftsObjectsThatHoldTooFewColmapPoints) {
   const fs::path pv = t / "pv";
   std::string scene = kScene;
   scene.replace(scene.find("--points 6000"), 13, "--points 300");
-  auto r = test::run_hgs("synth --out " + pv.string() + " " + scene + " --noise medium --mask-ids per-view --depth");
+  auto r = test::run_hgs("synth --world simple --out " + pv.string() + " " + scene +
+                         " --noise medium --mask-ids per-view --depth");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const json truth = json::parse(read_file_text(pv / "gt" / "mask_ids.json"));
   r = test::run_hgs("masks associate " + pv.string() + " --quiet --out-masks " + (t / "sparse").string());
@@ -343,7 +344,7 @@ TEST(MasksAssociate, SynthSamStyleWholesAndPartsBecomeObjects) {
   test::TempDir t;
   const fs::path s = t / "s";
   // 160 x 120: at 96 x 72 SAM's simulated boundary errors make halves larger than their wholes.
-  auto r = test::run_hgs("synth --out " + s.string() +
+  auto r = test::run_hgs("synth --world simple --out " + s.string() +
                          " --views 16 --width 160 --height 120 --points 6000 --objects 5 --feature-dim 8 "
                          "--supersample 1 --quiet --threads 2 --noise medium --mask-style sam --mask-ids per-view");
   ASSERT_EQ(r.exit_code, 0) << r.err;

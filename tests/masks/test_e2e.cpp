@@ -23,7 +23,7 @@ const std::string kTiny =
     "--views 6 --width 64 --height 48 --objects 4 --points 400 --feature-dim 8 --supersample 1 --quiet --threads 2";
 
 void synth(const fs::path& out, const std::string& extra) {
-  auto r = test::run_hgs("synth --out " + out.string() + " " + kTiny + " " + extra);
+  auto r = test::run_hgs("synth --world simple --out " + out.string() + " " + kTiny + " " + extra);
   ASSERT_EQ(r.exit_code, 0) << r.err;
 }
 

@@ -41,7 +41,7 @@ class MpiTrain : public ::testing::Test {
     setenv("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1", 0);
     if (!have_mpirun()) return;
     dir_ = new test::TempDir;
-    auto r = test::run_hgs("synth --out " + (dir_->path / "scene").string() +
+    auto r = test::run_hgs("synth --world simple --out " + (dir_->path / "scene").string() +
                            " --seed 4 --views 12 --width 64 --height 48 --points 1500 --feature-dim 8 --quiet");
     ASSERT_EQ(r.exit_code, 0) << r.err;
     auto p = run(mpirun(2, "train " + scene() + " --out " + (dir_->path / "probe").string() + " --iters 2 --quiet"));
@@ -121,7 +121,7 @@ TEST_F(MpiTrain, DeadRankEndsTheJobAndTheLastCheckpointResumes) {
 
 TEST(BatchCli, StepSizesThatDoNotDivideAreOneLineErrors) {
   test::TempDir d;
-  auto s = test::run_hgs("synth --out " + (d / "s").string() +
+  auto s = test::run_hgs("synth --world simple --out " + (d / "s").string() +
                          " --views 6 --width 32 --height 24 --points 300 --feature-dim 4 --quiet");
   ASSERT_EQ(s.exit_code, 0) << s.err;
   auto r =

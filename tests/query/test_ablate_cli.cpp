@@ -16,7 +16,7 @@ namespace fs = std::filesystem;
 TEST(AblateCli, RowsSeedsProtocolsModesAndResume) {
   test::TempDir tmp;
   const std::string s = (tmp / "s").string(), out = (tmp / "a").string();
-  auto r = test::run_hgs("synth --out " + s +
+  auto r = test::run_hgs("synth --world simple --out " + s +
                          " --views 16 --width 96 --height 72 --objects 3 --points 2000 "
                          "--noise medium --feature-dim 16 --supersample 1 --seed 4 --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;

@@ -14,7 +14,7 @@ namespace fs = std::filesystem;
 TEST(QueryEndToEnd, TrainQueryExportEval) {
   test::TempDir tmp;
   const std::string s = (tmp / "s").string(), m = (tmp / "m").string();
-  auto r = test::run_hgs("synth --out " + s +
+  auto r = test::run_hgs("synth --world simple --out " + s +
                          " --views 16 --width 128 --height 96 --objects 4 --points 3000 --noise low "
                          "--feature-dim 32 --supersample 1 --seed 5 --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -79,7 +79,7 @@ TEST(QueryEndToEnd, PixelModeFollowsObjectModeInTheSamLikeWorld) {
   // relevancy of the raw map (LangSplat's scoring, which SCL's embeddings leave uncalibrated and noisy).
   test::TempDir tmp;
   const std::string s = (tmp / "s").string(), m = (tmp / "m").string();
-  auto r = test::run_hgs("synth --out " + s +
+  auto r = test::run_hgs("synth --world simple --out " + s +
                          " --views 24 --width 160 --height 120 --feature-dim 64 --supersample 1 --seed 23 --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   r = test::run_hgs("train " + s + " --out " + m + " --iters 1000 --quiet");

@@ -29,8 +29,8 @@ const std::string kAmgArgs =
 
 fs::path make_scene(const TempDir& t) {
   const fs::path s = t / "scene";
-  auto r =
-      run_hgs("synth --out " + s.string() + " --views 3 --width 56 --height 40 --points 400 --feature-dim 4 --quiet");
+  auto r = run_hgs("synth --world simple --out " + s.string() +
+                   " --views 3 --width 56 --height 40 --points 400 --feature-dim 4 --quiet");
   EXPECT_EQ(r.exit_code, 0) << r.err;
   return s;
 }

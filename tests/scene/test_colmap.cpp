@@ -257,7 +257,7 @@ TEST(Cli, InfoOnRealData) {
 TEST(Cli, InfoSaysWhereTheGroundTruthsNamesComeFrom) {
   test::TempDir tmp;
   const fs::path s = tmp / "s";
-  auto g = test::run_hgs("synth --out " + s.string() +
+  auto g = test::run_hgs("synth --world simple --out " + s.string() +
                          " --views 6 --width 48 --height 32 --points 200 --feature-dim 8 --quiet");
   ASSERT_EQ(g.exit_code, 0) << g.err;
   auto r = test::run_hgs("info " + s.string());

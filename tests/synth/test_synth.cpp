@@ -352,9 +352,11 @@ TEST(Synth, GtObjectsJsonNamesTheInstanceIdsInEveryMaskMode) {
 }
 
 TEST(Synth, TheDefaultWorldIsSamLikeAndObjectsOnlyIsTheEarlierOne) {
-  // `hgs synth`'s defaults: surfaces in the masks and the SAM-like rates of the noise level; --objects-only: the
-  // objects' masks alone, without small-object misses or parts.
-  const synth::SynthOptions d;
+  // `hgs synth`'s defaults: the realistic world (test_realistic.cpp); in the simple world, surfaces in the masks
+  // and the SAM-like rates of the noise level; --objects-only: the objects' masks alone, without small-object
+  // misses or parts.
+  EXPECT_EQ(synth::SynthOptions().world, "realistic");
+  const synth::SynthOptions d{.world = "simple"};
   EXPECT_TRUE(d.surface_masks);
   const synth::NoiseLevel med = synth::noise_of(d);
   EXPECT_DOUBLE_EQ(med.small_miss, synth::noise_level("medium").small_miss);

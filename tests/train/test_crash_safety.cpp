@@ -37,7 +37,7 @@ class CrashSafety : public ::testing::Test {
   static void SetUpTestSuite() {
     setenv("OMP_WAIT_POLICY", "passive", 0);
     dir_ = new test::TempDir;
-    auto r = test::run_hgs("synth --out " + (dir_->path / "scene").string() +
+    auto r = test::run_hgs("synth --world simple --out " + (dir_->path / "scene").string() +
                            " --seed 2 --views 12 --width 48 --height 36 --points 400 --noise none --feature-dim 4"
                            " --supersample 1 --quiet");
     ASSERT_EQ(r.exit_code, 0) << r.err;

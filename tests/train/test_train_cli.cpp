@@ -23,7 +23,7 @@ class TrainCli : public ::testing::Test {
   static void SetUpTestSuite() {
     setenv("OMP_WAIT_POLICY", "passive", 0);  // children should not spin on a shared 2-core machine
     dir_ = new test::TempDir;
-    auto r = test::run_hgs("synth --out " + (dir_->path / "scene").string() +
+    auto r = test::run_hgs("synth --world simple --out " + (dir_->path / "scene").string() +
                            " --seed 1 --views 24 --width 96 --height 72 --points 2000 --noise none --feature-dim 4"
                            " --supersample 1 --quiet");
     ASSERT_EQ(r.exit_code, 0) << r.err;

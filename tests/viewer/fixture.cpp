@@ -25,7 +25,7 @@ ViewerFixture make_viewer_fixture(const fs::path& dir) {
   ViewerFixture f;
   f.scene = dir / "scene";
   f.model = dir / "model.ply";
-  RunResult r = run_hgs("synth --out '" + f.scene.string() +
+  RunResult r = run_hgs("synth --world simple --out '" + f.scene.string() +
                         "' --views 16 --width 96 --height 72 --objects 4 --points 3000 --feature-dim 32 "
                         "--supersample 1 --quiet");
   if (r.exit_code != 0) fail("hgs synth failed: {}", r.err);
