@@ -17,7 +17,7 @@ namespace {
 namespace fs = std::filesystem;
 
 struct EvalArgs {
-  std::string scene, model, protocol = "instances", out, clip, relevancy = "objects", mode = "both";
+  std::string scene, model, protocol = "instances", out, clip, relevancy = "objects", mode = "both", queries;
   int downscale = 1, threads = 0;
   float mask_threshold = 0.5f;
   bool no_png = false, quiet = false;
@@ -77,6 +77,7 @@ void run_eval(const EvalArgs& a) {
   opt.pixel = a.mode != "object";
   opt.relevancy = query::parse_relevancy(a.relevancy);
   opt.mask_threshold = a.mask_threshold;
+  opt.query_set = a.queries;
   if (!a.no_png) opt.overlay_dir = dir / "overlays";
   opt.progress = !a.quiet;
   std::vector<eval::EvalReport> reports = query::evaluate_model(s, opt);
@@ -118,6 +119,10 @@ CommandRegistration reg(
                       "(that times the rendered foreground opacity); see query/query.h")
            ->check(CLI::IsMember({"objects", "objects-lerf", "lerf", "foreground"}))
            ->capture_default_str();
+       sub.add_option("--queries", a->queries,
+                      "Instances protocols: ask the phrases of a query set of SCENE/gt/queries.json instead of the "
+                      "objects' names: synonyms (\"coffee cup\"), hypernyms (\"kitchenware\"), attributes (\"the red "
+                      "one\") or names; written by `hgs synth` (docs/formats.md)");
        sub.add_option("--mask-threshold", a->mask_threshold, "Object mode: mask = rendered object opacity > this")
            ->capture_default_str();
        sub.add_option("--clip", a->clip, "OpenCLIP weights to embed the query texts");

@@ -43,6 +43,27 @@ std::map<int, std::string> load_object_names(const fs::path& scene) {
   return names;
 }
 
+std::vector<std::pair<std::string, int>> load_query_set(const fs::path& scene, const std::string& set,
+                                                        const std::map<int, std::string>& names) {
+  const fs::path file = scene / "gt" / "queries.json";
+  if (!fs::is_regular_file(file))
+    fail("{}: file not found (query sets; a scene of `hgs synth --world realistic` has them)", file.string());
+  const nlohmann::json j = read_json_file(file);
+  if (!j.is_object()) fail("{}: expected an object {{\"set\": {{\"phrase\": id, ...}}, ...}}", file.string());
+  if (!j.contains(set) || !j[set].is_object()) {
+    std::string sets;
+    for (auto it = j.begin(); it != j.end(); ++it) sets += (sets.empty() ? "" : ", ") + it.key();
+    fail("{}: no query set '{}' (it has: {})", file.string(), set, sets);
+  }
+  std::vector<std::pair<std::string, int>> out;
+  for (auto it = j[set].begin(); it != j[set].end(); ++it) {
+    if (!it.value().is_number_integer() || !names.count(it.value().get<int>()))
+      fail("{}: query '{}' of set '{}' must name an object id of the scene", file.string(), it.key(), set);
+    out.emplace_back(it.key(), it.value().get<int>());
+  }
+  return out;
+}
+
 InstanceLabels load_instance_masks(const fs::path& scene, const std::string& view_name,
                                    const std::map<int, std::string>& names, int expect_width, int expect_height,
                                    int downscale) {

@@ -18,6 +18,12 @@ std::filesystem::path object_names_file(const std::filesystem::path& scene);
 // id -> name, from object_names_file(scene). Keys must be integers in 1..65535, values non-empty strings.
 std::map<int, std::string> load_object_names(const std::filesystem::path& scene);
 
+// A named query set of SCENE/gt/queries.json ({set: {phrase: object id}}; written by `hgs synth`'s realistic
+// world): (phrase, object id) pairs in phrase order. Fails naming the file and the sets it has when `set` is
+// missing, and naming the phrase when an id is not an object of `names`.
+std::vector<std::pair<std::string, int>> load_query_set(const std::filesystem::path& scene, const std::string& set,
+                                                        const std::map<int, std::string>& names);
+
 struct InstanceLabels {
   int width = 0, height = 0;
   std::vector<int> ids;            // [K] object ids, ascending (every object of `names`)

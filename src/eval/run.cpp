@@ -180,6 +180,14 @@ EvalReport run_instances(const Scene& scene, const MaskFn& fn, const RunOptions&
   rep.mode = "object";
   // Where the objects' names come from: gt/objects.json, or masks/objects.json for a scene without it.
   rep.extra = {{"object_names", fs::relative(object_names_file(scene.root), scene.root).generic_string()}};
+  // The phrases asked: every object's name, or a query set of gt/queries.json.
+  std::vector<std::pair<std::string, int>> queries;
+  if (opt.query_set.empty()) {
+    for (const auto& [id, name] : names) queries.emplace_back(name, id);
+  } else {
+    queries = load_query_set(scene.root, opt.query_set, names);
+    rep.extra["query_set"] = opt.query_set;
+  }
   Progress bar("eval instances", static_cast<long>(test.size()), opt.progress);
   for (size_t i = 0; i < test.size(); ++i) {
     const View& view = scene.views[test[i]];
@@ -190,14 +198,17 @@ EvalReport run_instances(const Scene& scene, const MaskFn& fn, const RunOptions&
       bool visible = false;
       for (auto v : gt.masks[k]) visible |= v != 0;
       if (!visible) continue;
-      const auto t0 = Clock::now();
-      std::vector<float> heat;
-      Mask pred = fn(view.index, gt.names[k], &heat);
-      check_size(pred, view, "predicted mask of \"" + gt.names[k] + "\"");
-      const double secs = since(t0);
-      MaskScores s = score_mask(gt.masks[k], pred, view.width, view.height, opt.lerf.boundary_d);
-      rep.records.push_back({view.name, gt.names[k], s.iou, s.biou, s.acc, -1, secs});
-      write_pngs(opt, view, img, gt.names[k], pred, gt.masks[k], heat);
+      for (const auto& [phrase, id] : queries) {
+        if (id != gt.ids[k]) continue;
+        const auto t0 = Clock::now();
+        std::vector<float> heat;
+        Mask pred = fn(view.index, phrase, &heat);
+        check_size(pred, view, "predicted mask of \"" + phrase + "\"");
+        const double secs = since(t0);
+        MaskScores s = score_mask(gt.masks[k], pred, view.width, view.height, opt.lerf.boundary_d);
+        rep.records.push_back({view.name, phrase, s.iou, s.biou, s.acc, -1, secs});
+        write_pngs(opt, view, img, phrase, pred, gt.masks[k], heat);
+      }
     }
     bar.update(static_cast<long>(i + 1));
   }

@@ -32,6 +32,9 @@ struct RunOptions {
   OvsScoring ovs_scoring = OvsScoring::Protocol;  // 3D-OVS: the protocol's scoring or labelled pixels only
   bool lerf_scaled = false;  // LERF-OVS pixel mode: lerf's windows scaled to each image (scaled_lerf_options)
   bool progress = true;
+  // instances: the phrases asked, a set of SCENE/gt/queries.json (names, synonyms, hypernyms, attributes; each
+  // phrase scored against its object); empty = every object's name.
+  std::string query_set;
 };
 
 // Relevancy map [H, W] of `query` on scene.views[view] (at the view's resolution).

@@ -71,6 +71,9 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
   opt.progress = o.progress;
   opt.ovs_scoring = spec.ovs_scoring;
   opt.lerf_scaled = spec.lerf_scaled;
+  opt.query_set = o.query_set;
+  if (!o.query_set.empty() && spec.labels != "instances")
+    fail("--queries: query sets are asked with the instances protocols (not {})", spec.name);
   const query::Relevancy rel = o.relevancy;
   auto png_dir = [&](const char* mode) { return o.overlay_dir.empty() ? fs::path() : o.overlay_dir / mode; };
   auto object_fn = [&](int view, const std::string& q, std::vector<float>* heat) {

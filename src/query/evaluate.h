@@ -50,6 +50,7 @@ struct EvaluateOptions {
   float mask_threshold = 0.5f;                             // object mode
   std::filesystem::path overlay_dir;                       // PNGs under <overlay_dir>/<mode>/ (empty: none)
   bool progress = true;
+  std::string query_set;  // instances: a query set of gt/queries.json (eval::RunOptions::query_set); empty = names
 };
 
 // The reports of the modes asked for (lerf-ovs and 3d-ovs: pixel then object; instances: object then pixel, as

@@ -11,6 +11,7 @@
 #include "core/fs.h"
 #include "eval/instances.h"
 #include "eval/run.h"
+#include "expect_error.h"
 #include "scene/scene.h"
 #include "synth/synth.h"
 #include "synth_options.h"
@@ -112,4 +113,36 @@ TEST(EvalInstanceNames, ErrorsNameGtObjectsJson) {
     const std::string what = e.what();
     EXPECT_NE(what.find(f.string() + ": key \"x\" is not an object id"), std::string::npos) << what;
   }
+}
+
+TEST(EvalInstanceNames, AQuerySetAsksItsPhrasesOfTheirObjects) {
+  // --queries synonyms: every phrase of the set asked in every test view that shows its object, scored against
+  // that object; a perfect predictor of the phrases' objects scores 1.
+  test::TempDir tmp;
+  const fs::path dir = tmp / "r";
+  synth::generate(dir, test::SmallSynth().realistic().views(9).objects(3).points(300).feature_dim(8).noise("none"));
+  const json sets = json::parse(read_file_text(dir / "gt" / "queries.json"));
+  const std::map<int, std::string> names = load_object_names(dir);
+  const Scene scene = load_scene(dir);
+  std::map<std::string, int> object_of;
+  for (auto& [phrase, id] : sets["synonyms"].items()) object_of[phrase] = id.get<int>();
+  MaskFn oracle = [&](int view, const std::string& q, std::vector<float>*) {
+    InstanceLabels I = load_instance_masks(dir, scene.views[view].name, names);
+    for (size_t k = 0; k < I.ids.size(); ++k)
+      if (object_of.count(q) && I.ids[k] == object_of.at(q)) return I.masks[k];
+    return Mask(I.masks[0].size(), 0);
+  };
+  RunOptions opt;
+  opt.progress = false;
+  opt.query_set = "synonyms";
+  const EvalReport r = run_instances(scene, oracle, opt);
+  ASSERT_FALSE(r.records.empty());
+  EXPECT_EQ(r.extra["query_set"], "synonyms");
+  for (auto& rec : r.records) {
+    EXPECT_TRUE(object_of.count(rec.query)) << rec.query;
+    EXPECT_DOUBLE_EQ(rec.iou, 1.0) << rec.query;
+  }
+  opt.query_set = "adjectives";
+  EXPECT_FILE_ERROR(run_instances(scene, oracle, opt), dir / "gt" / "queries.json",
+                    "no query set 'adjectives' (it has: attributes, ");
 }

@@ -32,13 +32,16 @@ double cosine(const std::vector<float>& a, const std::vector<float>& b) {
 }
 
 const std::vector<std::string> kPool = {
-    "red mug",         "white teapot",      "green apple",          "purple donut",  "blue book",
-    "yellow rubber duck", "brown teddy bear", "wooden toy block",   "pink piggy bank", "orange traffic cone",
-    "red fire extinguisher", "black camera", "cyan water bottle",  "silver tin can", "teal flower pot",
-    "golden ring",     "magenta party hat", "navy backpack",        "lime tennis ball", "orange basketball",
-    "grey stone",      "yellow sponge"};
+    "red mug",           "white teapot",        "green apple",           "purple donut",
+    "blue book",         "yellow rubber duck",  "brown teddy bear",      "wooden toy block",
+    "pink piggy bank",   "orange traffic cone", "red fire extinguisher", "black camera",
+    "cyan water bottle", "silver tin can",      "teal flower pot",       "golden ring",
+    "magenta party hat", "navy backpack",       "lime tennis ball",      "orange basketball",
+    "grey stone",        "yellow sponge"};
 
-std::vector<float> text_of(const std::string& name, int dim) { return synth::text_embedding(synth::lexeme_of(name), dim); }
+std::vector<float> text_of(const std::string& name, int dim) {
+  return synth::text_embedding(synth::lexeme_of(name), dim);
+}
 
 // An ideal image-level embedding of a thing: the image cone plus its content (no bias, no noise).
 std::vector<float> image_of(const std::string& name, int dim) {
@@ -125,7 +128,8 @@ TEST(RealisticWorld, DenseFeaturesPointAtTheirObjectButAreNoOracle) {
     // Cells wholly inside one object.
     std::vector<std::map<int, int>> cover(gh * gw);
     for (int y = 0; y < gt.height; ++y)
-      for (int x = 0; x < gt.width; ++x) cover[size_t(y * gh / gt.height) * gw + size_t(x * gw / gt.width)][gt.at(x, y)]++;
+      for (int x = 0; x < gt.width; ++x)
+        cover[size_t(y * gh / gt.height) * gw + size_t(x * gw / gt.width)][gt.at(x, y)]++;
     for (size_t c = 0; c < gh * gw; ++c) {
       if (cover[c].size() != 1 || cover[c].begin()->first == 0) continue;
       const int k = cover[c].begin()->first;
@@ -168,7 +172,8 @@ std::vector<int> lost_runs(const fs::path& scene, int views, int K, bool has_tru
     for (int id : ids) {
       if (!id) continue;
       if (!has_truth) shown.insert(id);
-      else if (truth[stem].contains(std::to_string(id))) shown.insert(truth[stem][std::to_string(id)]["object"].get<int>());
+      else if (truth[stem].contains(std::to_string(id)))
+        shown.insert(truth[stem][std::to_string(id)]["object"].get<int>());
     }
     for (int k = 1; k <= K; ++k) {
       if (!visible.count(k)) continue;
@@ -229,7 +234,8 @@ TEST(RealisticWorld, TracksAreLostInRunsAndComeBackUnderNewIds) {
   for (auto& [stem, ids] : truth.items()) {
     std::map<std::string, int> per_surface;
     for (auto& [id, t] : ids.items())
-      if (t["kind"] == "surface") pieces_in_a_view = std::max(pieces_in_a_view, ++per_surface[t["surface"].get<std::string>()]);
+      if (t["kind"] == "surface")
+        pieces_in_a_view = std::max(pieces_in_a_view, ++per_surface[t["surface"].get<std::string>()]);
   }
   EXPECT_GE(pieces_in_a_view, 2);
 }
@@ -286,14 +292,19 @@ TEST(RealisticWorld, QuerySetsNameOneObjectEachAndHaveEmbeddings) {
 
 TEST(Synth, BadOptionsGetOneLineNamingTheOptionAndWhatIsAllowed) {
   test::TempDir tmp;
-  const std::vector<std::pair<std::string, std::string>> cases = {
-      {"--world fancy", "{realistic,simple}"}, {"--noise loud", "{none,low,medium,high}"},
-      {"--seed -1", "between 0 and"},         {"--views 1", "between 2 and 10000"},
-      {"--views abc", "--views"},             {"--miss-rate 2", "range 0"},
-      {"--merge-rate -0.5", "range 0"},       {"--supersample 9", "range 1 to 8"},
-      {"--feature-dim 0", "between 1 and 4096"}, {"--width 10", "between 16 and 8192"},
-      {"--objects 99", "between 1 and"},      {"--preset castle", "{tabletop,room}"},
-      {"--points -5", "between 0 and"}};
+  const std::vector<std::pair<std::string, std::string>> cases = {{"--world fancy", "{realistic,simple}"},
+                                                                  {"--noise loud", "{none,low,medium,high}"},
+                                                                  {"--seed -1", "between 0 and"},
+                                                                  {"--views 1", "between 2 and 10000"},
+                                                                  {"--views abc", "--views"},
+                                                                  {"--miss-rate 2", "range 0"},
+                                                                  {"--merge-rate -0.5", "range 0"},
+                                                                  {"--supersample 9", "range 1 to 8"},
+                                                                  {"--feature-dim 0", "between 1 and 4096"},
+                                                                  {"--width 10", "between 16 and 8192"},
+                                                                  {"--objects 99", "between 1 and"},
+                                                                  {"--preset castle", "{tabletop,room}"},
+                                                                  {"--points -5", "between 0 and"}};
   for (const auto& [args, allowed] : cases) {
     const std::string option = args.substr(0, args.find(' '));
     auto r = test::run_hgs("synth --out " + (tmp / "w").string() + " " + args + " --quiet");
