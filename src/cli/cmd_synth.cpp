@@ -65,13 +65,17 @@ CommandRegistration reg(
                     "no parts; for comparisons")
            ->excludes(surfaces);
        auto rate = [&](const char* name, double& v, const char* what) {
-         sub.add_option(name, v, std::string(what) + " (default: the noise level's rate, docs/synth.md)")
+         sub.add_option(name, v, std::string(what) + " (default: the noise level's rate, docs/formats.md)")
              ->check(CLI::Range(0.0, 1.0));
        };
-       rate("--miss-rate", o->miss_rate, "Probability that an object is missed in a view");
+       rate("--miss-rate", o->miss_rate,
+            "Probability that an object is missed in a view (realistic world: that its track is lost, for a run of "
+            "views)");
        rate("--small-miss-rate", o->small_miss_rate,
             "Added to --miss-rate for an object under 0.5 % of the view's pixels (SAM misses small objects)");
-       rate("--merge-rate", o->merge_rate, "Probability that two touching objects share one mask in a view");
+       rate("--merge-rate", o->merge_rate,
+            "Probability that two touching objects share one mask in a view (realistic world: that a merge starts, "
+            "lasting while they touch)");
        rate("--split-rate", o->split_rate,
             "Probability that an object's part (its upper half) is a mask of its own, in every view (label "
             "style; SAM cuts parts off wholes and SAM2 tracks them)");

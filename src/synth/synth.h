@@ -34,7 +34,7 @@ struct SynthOptions {
   // surfaces fill the mask's background pixels that show a surface; they carry no noise of their own). On by
   // default; `--objects-only` turns it off together with the SAM-like errors below (object masks only).
   bool surface_masks = true;
-  // SAM's typical errors, each a rate (docs/synth.md); negative = the noise level's rate (NoiseLevel):
+  // SAM's typical errors, each a rate (docs/formats.md); negative = the noise level's rate (NoiseLevel):
   double miss_rate = -1;        // an object missed in a view
   double small_miss_rate = -1;  // added to miss_rate for an object under 0.5 % of the view's pixels
   double merge_rate = -1;       // two touching objects under one mask in a view
