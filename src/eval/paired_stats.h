@@ -21,8 +21,8 @@ double t975(int dof);
 struct ScenePaired {
   double mean = NAN;  // mean over the scenes of each scene's mean difference
   double half = NAN;  // half-width of its 95 % interval: t975(scenes - 1) * sd(scene means) / sqrt(scenes)
-  int scenes = 0;           // scenes with at least one finite difference (n)
-  int runs = 0;             // finite differences, every (scene, seed)
+  int scenes = 0;     // scenes with at least one finite difference (n)
+  int runs = 0;       // finite differences, every (scene, seed)
 };
 // Paired differences of two rows, one entry per (scene, seed) run: {scene, row A - row B}. Non-finite
 // differences are left out. With one scene the interval is undefined (NaN).

@@ -13,8 +13,8 @@ TEST(PairedByScene, SeedsAveragedWithinASceneThenTOverScenes) {
   // Scene a: seeds 0.10, 0.30 -> 0.20; scene b: 0.40 -> 0.40 (one seed); scene c: 0.00, 0.00, 0.30 -> 0.10.
   // Scene means 0.2, 0.4, 0.1: mean 0.7 / 3; deviations -1/30, 5/30, -4/30, squares (1 + 25 + 16) / 900 =
   // 42 / 900, over n - 1 = 2: 21 / 900, sd = sqrt(21) / 30 = 0.152753; half = t(2) 4.303 * sd / sqrt(3).
-  const ScenePaired p = paired_by_scene(
-      {{"a", 0.1}, {"b", 0.4}, {"c", 0.0}, {"a", 0.3}, {"c", 0.0}, {"c", 0.3}, {"b", std::nan("")}});
+  const ScenePaired p =
+      paired_by_scene({{"a", 0.1}, {"b", 0.4}, {"c", 0.0}, {"a", 0.3}, {"c", 0.0}, {"c", 0.3}, {"b", std::nan("")}});
   EXPECT_EQ(p.scenes, 3);
   EXPECT_EQ(p.runs, 6);  // the NaN difference is no run
   EXPECT_NEAR(p.mean, 0.7 / 3, 1e-12);
