@@ -3,8 +3,11 @@
 
 The runs were made by `hgs ablate` in several sessions, on machines whose run folders are gone; their per-pair
 mIoU is listed in docs/ablation.md and transcribed here (PAIRS), so the pooled tables of that file can be
-recomputed and extended. The statistic is `hgs ablate`'s own (src/cli/cmd_ablate.cpp `paired`): the mean of the
-per-pair differences and the half-width of its 95 % interval, Student's t with n - 1 degrees of freedom.
+recomputed and extended. The statistic is `hgs ablate`'s own (src/eval/paired_stats.h `paired_by_scene`): paired
+by scene, seeds averaged within a scene. A pair's scene is its name without the training seed in brackets; each
+scene's per-pair differences are averaged over its seeds first, and the mean and the half-width of the 95 %
+interval are over the scenes (n = scenes, Student's t with n - 1 degrees of freedom): a scene's seeds share its
+images, masks and features, so they are not independent runs.
 
 The rows of one pair were not always trained on one machine (each session ran on the machine it was given, and
 the single rows often came sessions after a pair's leave-one-out rows), and a pair's figures can move by a few
@@ -97,14 +100,26 @@ T975 = [12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2
         2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042]
 
 
-def paired(d):
-    n = len(d)
-    m = sum(d) / n
+def scene_of(p):
+    """A pair's scene: its name without the training seed, e.g. "room s51 (1)" -> "room s51"."""
+    return p["name"].rsplit(" (", 1)[0]
+
+
+def paired_by_scene(d):
+    """d: [(scene, difference)] one per (scene, seed). Each scene's differences averaged over its seeds, then the
+    mean over the scenes and the half-width of its 95 % interval (Student's t, n - 1 degrees of freedom, n =
+    scenes; NaN with one scene). Returns (mean, half-width, scenes, runs)."""
+    by_scene = {}
+    for scene, x in d:
+        by_scene.setdefault(scene, []).append(x)
+    means = [sum(v) / len(v) for v in by_scene.values()]
+    n = len(means)
+    m = sum(means) / n
     if n < 2:
-        return m, float("nan"), n
-    sd = math.sqrt(sum((x - m) ** 2 for x in d) / (n - 1))
+        return m, float("nan"), n, len(d)
+    sd = math.sqrt(sum((x - m) ** 2 for x in means) / (n - 1))
     t = T975[n - 2] if n - 1 <= 30 else 1.96
-    return m, t * sd / math.sqrt(n), n
+    return m, t * sd / math.sqrt(n), n, len(d)
 
 
 # Every row minus all off, each component added to the other two (full minus the row without it), and eq. 15.
@@ -128,18 +143,20 @@ def middle_rows(pairs):
 
 
 def table(pairs, title):
-    print(f"### {title}: {len(pairs)} pairs\n")
-    print("| difference | pairs | " + " | ".join(COLUMNS) + " |")
-    print("|---|---|" + "---|" * len(COLUMNS))
+    scenes = len({scene_of(p) for p in pairs})
+    print(f"### {title}: {scenes} scenes, {len(pairs)} pairs (paired by scene, seeds averaged within a scene; "
+          "n = scenes)\n")
+    print("| difference | scenes | pairs | " + " | ".join(COLUMNS) + " |")
+    print("|---|---|---|" + "---|" * len(COLUMNS))
     for name, a, b in DIFFS:
         have = [p for p in pairs if a in p["rows"] and b in p["rows"]]
         if not have:
             continue
         cells = []
         for c in range(len(COLUMNS)):
-            m, h, n = paired([p["rows"][a][c] - p["rows"][b][c] for p in have])
+            m, h, n, _ = paired_by_scene([(scene_of(p), p["rows"][a][c] - p["rows"][b][c]) for p in have])
             cells.append(f"{m:+.2f} ± {h:.2f}" if n > 1 else f"{m:+.2f}")
-        print(f"| {name} | {len(have)} | " + " | ".join(cells) + " |")
+        print(f"| {name} | {len({scene_of(p) for p in have})} | {len(have)} | " + " | ".join(cells) + " |")
     above = sum(p["rows"]["full"][c] > p["rows"]["all off"][c] for p in pairs for c in range(len(COLUMNS)))
     print(f"\nfull above all off in {above} of {len(COLUMNS) * len(pairs)} cells; pairs: "
           + ", ".join(p["name"] for p in pairs) + "\n")

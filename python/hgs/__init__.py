@@ -261,7 +261,11 @@ class QueryResult:
         return {self.scene.view(i).name: self.mask(i) for i in self.views}
 
     def relevancy(self, view, relevancy="objects"):
-        """Pixel-level relevancy of the rendered language map for the text, float32 [H, W] (lerf or foreground)."""
+        """A pixel score map for the text, float32 [H, W]. relevancy: "objects" (the default: the cosine with
+        hgs's object-embedding map sum_k A_k e_k, each object's pooled embedding rendered with its opacity; a rule
+        of this project, not in the paper), "objects-lerf" (LERF's relevancy of that map), "lerf" (the paper's
+        language map, eq. 8 summed over objects = sum_n f_n alpha T, scored with LERF's relevancy as LangSplat
+        scores its field) or "foreground" (lerf times the rendered foreground opacity)."""
         return self.session.pixel_relevancy(self.scene.index(view), self.text, relevancy)
 
     def select(self, remove=False):
@@ -291,7 +295,7 @@ def _view_list(scene, views):
 
 def query(model, scene, text, views=None, min_relevancy=0.0, mask_threshold=0.5, clip=None, session=None):
     """Answers a text query on a trained hybrid model: returns a QueryResult (objects ranked by their embedding's
-    cosine with the text, with LERF relevancy; the best one chosen, plus every other with relevancy >=
+    cosine with the text, with their LERF relevancy; the best one chosen, plus every other with relevancy >=
     min_relevancy when that is > 0). views: the views of result.masks ("all" = None, "test", "train", or a list of
     indices / names); masks are rendered when first asked for. Texts are embedded from the scene's
     text_embeddings.json, or by OpenCLIP weights `clip`. A QuerySession given as `session` is reused (several
@@ -304,13 +308,16 @@ def query(model, scene, text, views=None, min_relevancy=0.0, mask_threshold=0.5,
 
 
 def evaluate(model, scene, protocol="instances", mode="both", relevancy="objects", mask_threshold=0.5, clip=None,
-             overlays=None, progress=False):
+             overlays=None, progress=False, paper_map=True):
     """Evaluates a trained hybrid model with a benchmark protocol (lerf-ovs, 3d-ovs or instances, or a variant:
-    3d-ovs-labelled, lerf-ovs-scaled, instances-scaled; see `hgs eval --help`) in object mode, pixel mode or both, as `hgs eval` does; returns the report as a dict {"reports": [...]}
-    (report.json's layout: per mode the records, the means, mAcc / mIoU / mBIoU). overlays: a folder for overlay
-    PNGs."""
+    3d-ovs-labelled, lerf-ovs-scaled, instances-scaled; see `hgs eval --help`) in object mode, pixel mode or both,
+    as `hgs eval` does; returns the report as a dict {"reports": [...]} (report.json's layout: per mode the
+    records, the means, mAcc / mIoU / mBIoU). relevancy: pixel mode's score (QueryResult.relevancy); the default
+    "objects" is hgs's object-embedding map (not in the paper), and with paper_map (default) pixel mode also
+    reports the paper's language map scored with LERF's relevancy (relevancy "lerf") as a report of mode
+    "pixel-paper-map", right after the "pixel" one. overlays: a folder for overlay PNGs."""
     scene, model = _as_scene(scene), _as_model(model)
     session = QuerySession(scene, model, "" if clip is None else os.fspath(clip))
     text = session.evaluate(protocol, mode, relevancy, float(mask_threshold),
-                            "" if overlays is None else os.fspath(overlays), bool(progress))
+                            "" if overlays is None else os.fspath(overlays), bool(progress), bool(paper_map))
     return json.loads(text)

@@ -59,8 +59,8 @@ pb::array pixel_relevancy(query::Session& s, pb::handle view, const std::string&
 }
 
 std::string evaluate(query::Session& s, const std::string& protocol, const std::string& mode,
-                     const std::string& relevancy, float mask_threshold, const std::string& overlay_dir,
-                     bool progress) {
+                     const std::string& relevancy, float mask_threshold, const std::string& overlay_dir, bool progress,
+                     bool paper_map) {
   query::parse_protocol(protocol);  // fails with the list of protocols
   if (mode != "object" && mode != "pixel" && mode != "both") fail("mode must be object, pixel or both, got '{}'", mode);
   if (!query::has_protocol_labels(s.scene(), protocol))
@@ -70,6 +70,7 @@ std::string evaluate(query::Session& s, const std::string& protocol, const std::
   o.object = mode != "pixel";
   o.pixel = mode != "object";
   o.relevancy = relevancy_variant(relevancy);
+  o.paper_map = paper_map;
   o.mask_threshold = mask_threshold;
   o.overlay_dir = overlay_dir;
   o.progress = progress;
@@ -104,12 +105,18 @@ void bind_query(pb::module_& m) {
       .def("object_opacity", &object_opacity, pb::arg("view"), pb::arg("objects"),
            "Rendered opacity of the objects in a view, summed: float32 [H, W]")
       .def("pixel_relevancy", &pixel_relevancy, pb::arg("view"), pb::arg("text"), pb::arg("relevancy") = "objects",
-           "A pixel score map for the text: float32 [H, W] (relevancy: objects = cosine with the object-conditioned "
-           "map, objects-lerf, lerf or foreground = LERF relevancies; query/query.h)")
+           "A pixel score map for the text: float32 [H, W] (relevancy: objects = the cosine with hgs's "
+           "object-embedding map sum_k A_k e_k, each object's pooled embedding rendered with its opacity, not in the "
+           "paper; objects-lerf = LERF's relevancy of that map; lerf = the paper's language map, eq. 8 summed over "
+           "objects = sum_n f_n alpha T, scored with LERF's relevancy as LangSplat scores its field; foreground = "
+           "lerf times the foreground opacity; query/query.h)")
       .def("object_name", &query::Session::object_name, pb::arg("id"))
       .def("evaluate", &evaluate, pb::arg("protocol"), pb::arg("mode") = "both", pb::arg("relevancy") = "objects",
            pb::arg("mask_threshold") = 0.5f, pb::arg("overlay_dir") = "", pb::arg("progress") = false,
-           "Runs a benchmark protocol (lerf-ovs, 3d-ovs, instances) and returns {\"reports\": [...]} as JSON text");
+           pb::arg("paper_map") = true,
+           "Runs a benchmark protocol (lerf-ovs, 3d-ovs, instances) and returns {\"reports\": [...]} as JSON text; "
+           "pixel mode with a relevancy other than lerf adds the paper's language map as mode pixel-paper-map "
+           "(paper_map=False: not)");
 }
 
 }  // namespace hgs::py

@@ -93,12 +93,23 @@ def test_evaluate_protocol_variants(hybrid_model, scene):
     # The named scoring variants: the report names the variant; instances-scaled changes pixel mode only.
     base = hgs.evaluate(hybrid_model, scene, protocol="instances", mode="both")["reports"]
     scaled = hgs.evaluate(hybrid_model, scene, protocol="instances-scaled", mode="both")["reports"]
-    assert [r["protocol"] for r in scaled] == ["instances-scaled"] * 2
+    assert [r["protocol"] for r in scaled] == ["instances-scaled"] * 3
     def untimed(records):
         return [{k: v for k, v in r.items() if k != "seconds"} for r in records]
 
     assert untimed(scaled[0]["records"]) == untimed(base[0]["records"])  # object mode
     assert "lerf_windows" in scaled[1]["extra"] and "lerf_windows" not in base[1]["extra"]
+    # Pixel mode's default rule (hgs's object-embedding map) comes with the paper's language map beside it: the
+    # report relevancy="lerf" gives on its own.
+    assert [r["mode"] for r in base] == ["object", "pixel", "pixel-paper-map"]
+    assert base[1]["extra"]["relevancy"] == "objects" and base[2]["extra"]["relevancy"] == "lerf"
+    lerf = hgs.evaluate(hybrid_model, scene, protocol="instances", mode="pixel", relevancy="lerf")["reports"]
+    assert [r["mode"] for r in lerf] == ["pixel"]
+    assert len(lerf[0]["records"]) > 0
+    assert untimed(lerf[0]["records"]) == untimed(base[2]["records"])
+    assert lerf[0]["summary"]["mIoU"] == base[2]["summary"]["mIoU"]
+    alone = hgs.evaluate(hybrid_model, scene, protocol="instances", mode="pixel", paper_map=False)["reports"]
+    assert [r["mode"] for r in alone] == ["pixel"]
     labelled = hgs.evaluate(hybrid_model, scene, protocol="3d-ovs-labelled", mode="object")["reports"]
     assert labelled[0]["protocol"] == "3d-ovs-labelled"
     assert "miou_ceiling" not in labelled[0]["extra"]

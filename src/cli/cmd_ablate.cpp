@@ -2,7 +2,10 @@
 // Learning and Boundary Reconstruction Optimization each on or off; optionally the full method with eq. 15 alone,
 // --lambda-rgb 0) on every scene and seed, evaluates each model on the held-out views with the chosen protocols
 // and modes (query/evaluate.h), and writes mean and standard deviation per row over the (scene, seed) runs, and the
-// paired differences of mIoU (each row minus all-off, each component added to the other two) with 95 % intervals.
+// paired differences of mIoU (each row minus all-off, each component added to the other two) with 95 % intervals
+// clustered by scene (eval/paired_stats.h: seeds averaged within a scene, n = scenes). Pixel mode with hgs's
+// default rule (the object-embedding map, not in the paper) also reports the paper's language map under
+// "<protocol>/pixel-paper-map" (query/evaluate.h).
 //
 // Layout: DIR/<scene folder name>/seed<S>/<row>/ is a model folder (train/run.h: point_cloud.ply, config.json,
 // train_stats.json) with report.json, report.md and run.json, then
@@ -22,6 +25,7 @@
 #include "cli/command.h"
 #include "core/error.h"
 #include "core/fs.h"
+#include "eval/paired_stats.h"
 #include "eval/report.h"
 #include "hybrid/config.h"
 #include "hybrid/register.h"
@@ -40,7 +44,7 @@ struct AblateArgs {
   std::string out, rows = "all", protocol = "auto", mode = "object", relevancy = "objects", scl_background = "auto";
   int iters = 3000, downscale = 1, threads = 0, seeds = 1, objects_per_step = 0;
   uint64_t seed = 0;
-  bool eq15_row = false, reevaluate = false, quiet = false;
+  bool eq15_row = false, reevaluate = false, quiet = false, no_paper_map = false;
 };
 
 struct Row {
@@ -90,42 +94,7 @@ std::vector<std::string> protocols_for(const std::string& spec, const std::vecto
   return out;
 }
 
-// Mean and sample standard deviation of the finite values.
-std::pair<double, double> mean_std(const std::vector<double>& v) {
-  double s = 0;
-  int n = 0;
-  for (double x : v)
-    if (std::isfinite(x)) s += x, ++n;
-  if (n == 0) return {NAN, NAN};
-  const double m = s / n;
-  double ss = 0;
-  for (double x : v)
-    if (std::isfinite(x)) ss += (x - m) * (x - m);
-  return {m, n > 1 ? std::sqrt(ss / (n - 1)) : NAN};
-}
-
-// Student's t quantile t_{0.975, dof} for a 95 % interval of a mean (dof 1..30, then the normal 1.96 as the limit):
-// a fixed table, the only values the intervals below need.
-double t975(int dof) {
-  static const double t[30] = {12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228,
-                               2.201,  2.179, 2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086,
-                               2.080,  2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042};
-  return dof < 1 ? NAN : dof <= 30 ? t[dof - 1] : 1.96;
-}
-
-// Paired differences d_i (the same scene and seed in both rows): mean, half-width of its 95 % interval, count.
-struct Paired {
-  double mean = NAN, half = NAN;
-  int n = 0;
-};
-Paired paired(const std::vector<double>& d) {
-  auto [m, sd] = mean_std(d);
-  Paired p;
-  for (double x : d) p.n += std::isfinite(x);
-  p.mean = m;
-  p.half = p.n > 1 ? t975(p.n - 1) * sd / std::sqrt(double(p.n)) : NAN;
-  return p;
-}
+using eval::mean_std;
 
 std::string pct(double v) { return std::isfinite(v) ? fmt::format("{:.2f}", 100 * v) : "-"; }
 std::string pct_pm(const std::pair<double, double>& ms) {
@@ -134,7 +103,8 @@ std::string pct_pm(const std::pair<double, double>& ms) {
 }
 
 // Evaluates the model dir/point_cloud.ply with the protocols and modes asked, writes dir/report.json and .md,
-// sets run["results"] {"<protocol>/<mode>": {"acc", "miou", "mbiou", "records"}} and writes dir/run.json.
+// sets run["results"] {"<protocol>/<mode>": {"acc", "miou", "mbiou", "records"}} (mode object, pixel or
+// pixel-paper-map) and writes dir/run.json.
 void evaluate_run(const AblateArgs& a, const std::string& scene_path, const std::vector<std::string>& protocols,
                   const fs::path& dir, json& run) {
   query::Session s(scene_path, dir / "point_cloud.ply", a.downscale, "");
@@ -145,6 +115,7 @@ void evaluate_run(const AblateArgs& a, const std::string& scene_path, const std:
     eo.object = a.mode != "pixel";
     eo.pixel = a.mode != "object";
     eo.relevancy = query::parse_relevancy(a.relevancy);
+    eo.paper_map = !a.no_paper_map;
     eo.progress = false;
     for (auto& r : query::evaluate_model(s, eo)) reports.push_back(std::move(r));
   }
@@ -217,13 +188,25 @@ struct Tally {
   json runs = json::array();      // {"scene", "seed", "row", "dir", "run"}
 };
 
+// What a results key's pixel figures score, for its table's heading ("" for object mode).
+std::string pixel_rule(const std::string& key, const std::string& relevancy) {
+  if (key.ends_with("/pixel-paper-map"))
+    return " (the paper's language map, eq. 8 summed over objects, scored with LERF's relevancy: `--relevancy lerf`)";
+  if (!key.ends_with("/pixel")) return "";
+  const char* what = relevancy == "objects"        ? "hgs's object-embedding map, not in the paper"
+                     : relevancy == "objects-lerf" ? "LERF's relevancy of hgs's object-embedding map, not in the paper"
+                     : relevancy == "lerf"         ? "the paper's language map with LERF's relevancy"
+                                           : "the paper's map's relevancy times the foreground, not in the paper";
+  return fmt::format(" (relevancy {}: {})", relevancy, what);
+}
+
 // One table per protocol and mode: mean ± sample std of each row's mAcc, mIoU, mBIoU.
 std::string row_tables(const AblateArgs& a, const std::vector<Row>& rows, const Tally& t) {
   std::string md;
   for (const auto& key : t.keys) {
     md += fmt::format(
         "\n## {}{}\n\n| OF | SCL | BRO | λ_rgb | mAcc | mIoU | mBIoU | runs |\n|---|---|---|---|---|---|---|---|\n",
-        key, key.find("pixel") != std::string::npos ? fmt::format(" (relevancy {})", a.relevancy) : "");
+        key, pixel_rule(key, a.relevancy));
     for (size_t r = 0; r < rows.size(); ++r) {
       auto it = t.acc[r].find(key);
       if (it == t.acc[r].end()) continue;
@@ -237,26 +220,28 @@ std::string row_tables(const AblateArgs& a, const std::vector<Row>& rows, const 
 }
 
 // Paired differences of mIoU over the (scene, seed) runs both rows have: every row minus all-off, and each
-// component added to the other two (the full row minus the full row without it). Returns the JSON and Markdown.
+// component added to the other two (the full row minus the full row without it), with 95 % intervals clustered
+// by scene (eval::paired_by_scene). Returns the JSON and Markdown.
 std::pair<json, std::string> paired_tables(const std::vector<Row>& rows, const Tally& t) {
-  std::map<std::string, std::map<std::string, const json*>> by_run;  // "<scene>/<seed>" -> row -> results
+  // (scene, seed) -> row -> results
+  std::map<std::pair<std::string, uint64_t>, std::map<std::string, const json*>> by_run;
   for (const auto& run : t.runs)
-    by_run[run["scene"].get<std::string>() + "/" + std::to_string(run["seed"].get<uint64_t>())]
-          [run["row"].get<std::string>()] = &run["run"]["results"];
+    by_run[{run["scene"].get<std::string>(), run["seed"].get<uint64_t>()}][run["row"].get<std::string>()] =
+        &run["run"]["results"];
   auto diffs = [&](const std::string& key, const std::string& a_row, const std::string& b_row) {
-    std::vector<double> d;
+    std::vector<std::pair<std::string, double>> d;  // {scene, a - b} per run
     for (const auto& [id, rs] : by_run) {
       auto ia = rs.find(a_row), ib = rs.find(b_row);
       if (ia == rs.end() || ib == rs.end() || !ia->second->contains(key) || !ib->second->contains(key)) continue;
       const json &va = (*ia->second)[key]["miou"], &vb = (*ib->second)[key]["miou"];
-      if (va.is_number() && vb.is_number()) d.push_back(va.get<double>() - vb.get<double>());
+      if (va.is_number() && vb.is_number()) d.push_back({id.first, va.get<double>() - vb.get<double>()});
     }
-    return paired(d);
+    return eval::paired_by_scene(d);
   };
   json paired_json = json::object();
   std::string pmd;
   for (const auto& key : t.keys) {
-    std::vector<std::pair<std::string, Paired>> lines;
+    std::vector<std::pair<std::string, eval::ScenePaired>> lines;
     for (const Row& row : rows)
       if (row.name != "of0_scl0_bro0")
         lines.push_back({row.name + " - all off", diffs(key, row.name, "of0_scl0_bro0")});
@@ -267,20 +252,25 @@ std::pair<json, std::string> paired_tables(const std::vector<Row>& rows, const T
     }
     std::string body;
     for (const auto& [what, p] : lines) {
-      if (p.n == 0) continue;
+      if (p.runs == 0) continue;
       paired_json[key][what] = {{"mean", std::isfinite(p.mean) ? json(p.mean) : json(nullptr)},
                                 {"ci95_half", std::isfinite(p.half) ? json(p.half) : json(nullptr)},
-                                {"runs", p.n}};
-      body += fmt::format("| {} | {} | {} | {} |\n", what, pct(p.mean),
-                          std::isfinite(p.half) ? fmt::format("± {:.2f}", 100 * p.half) : "-", p.n);
+                                {"scenes", p.scenes},
+                                {"runs", p.runs}};
+      body += fmt::format("| {} | {} | {} | {} | {} |\n", what, pct(p.mean),
+                          std::isfinite(p.half) ? fmt::format("± {:.2f}", 100 * p.half) : "-", p.scenes, p.runs);
     }
     if (!body.empty())
       pmd += fmt::format(
-          "\n### {} (mIoU, paired by scene and seed)\n\n| difference | mean | 95 % interval | runs |\n"
-          "|---|---|---|---|\n{}",
+          "\n### {} (mIoU, paired by scene, seeds averaged within a scene; n = scenes)\n\n"
+          "| difference | mean | 95 % interval | scenes | runs |\n|---|---|---|---|---|\n{}",
           key, body);
   }
-  return {paired_json, pmd.empty() ? pmd : "\n## Paired differences\n" + pmd};
+  return {paired_json, pmd.empty() ? pmd
+                                   : "\n## Paired differences\n\nEach difference is averaged over a scene's seeds "
+                                     "first; the mean is over the scenes and the 95 % interval is Student's t over "
+                                     "them (n - 1 degrees of freedom; none with one scene).\n" +
+                                         pmd};
 }
 
 // Per row and key: the runs and the mean and std of each metric.
@@ -325,6 +315,7 @@ std::string write_summary(const AblateArgs& a, size_t num_scenes, const std::vec
                   {"protocols", protocols},
                   {"mode", a.mode},
                   {"relevancy", a.relevancy},
+                  {"paper_map", !a.no_paper_map},
                   {"scl_background", a.scl_background},
                   {"objects_per_step", a.objects_per_step},
                   {"summary", row_summaries(rows, t)},
@@ -446,9 +437,13 @@ CommandRegistration reg(
            ->check(CLI::IsMember({"object", "pixel", "both"}))
            ->capture_default_str();
        sub.add_option("--relevancy", a->relevancy,
-                      "Pixel mode: objects, objects-lerf, lerf or foreground (as `hgs eval --relevancy`)")
+                      "Pixel mode: objects (hgs's object-embedding map, not in the paper), objects-lerf, lerf (the "
+                      "paper's language map) or foreground (as `hgs eval --relevancy`)")
            ->check(CLI::IsMember({"objects", "objects-lerf", "lerf", "foreground"}))
            ->capture_default_str();
+       sub.add_flag("--no-paper-map", a->no_paper_map,
+                    "Pixel mode with a --relevancy other than lerf: do not also evaluate the paper's language map "
+                    "(by default under <protocol>/pixel-paper-map, with its own tables)");
        sub.add_option("--scl-background", a->scl_background, "As `hgs train --scl-background` (every row)")
            ->check(CLI::IsMember({"auto", "on", "off"}))
            ->capture_default_str();

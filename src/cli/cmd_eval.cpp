@@ -1,8 +1,10 @@
 // `hgs eval SCENE MODEL --protocol lerf-ovs|3d-ovs|instances --out report.json`: evaluates a trained hybrid
 // model with a benchmark protocol (src/eval/run.h) and writes report.json, report.md and overlay PNGs.
-// lerf-ovs reports both the pixel-level (LangSplat protocol) and the object-level mode on the same frames;
-// 3d-ovs the pixel-level argmax over classes and the object-level one; instances (gt/instances maps) the
-// object-level mode and the pixel-level mode (LERF post-processing). --mode picks one (query/evaluate.h).
+// lerf-ovs reports both the pixel-level (LangSplat's post-processing) and the object-level mode on the same
+// frames; 3d-ovs the pixel-level argmax over classes and the object-level one; instances (gt/instances maps) the
+// object-level mode and the pixel-level mode (LERF post-processing). --mode picks one (query/evaluate.h). Pixel
+// mode's default score (hgs's object-embedding map, not in the paper) comes with the paper's language map beside
+// it (mode "pixel-paper-map") unless --no-paper-map.
 #include <fmt/format.h>
 
 #include "cli/command.h"
@@ -10,6 +12,7 @@
 #include "eval/report.h"
 #include "eval/run.h"
 #include "query/evaluate.h"
+#include "query/query.h"
 #include "query/session.h"
 
 namespace hgs::cli {
@@ -20,7 +23,7 @@ struct EvalArgs {
   std::string scene, model, protocol = "instances", out, clip, relevancy = "objects", mode = "both", queries;
   int downscale = 1, threads = 0;
   float mask_threshold = 0.5f;
-  bool no_png = false, quiet = false;
+  bool no_png = false, quiet = false, no_paper_map = false;
 };
 
 void print_summary(const eval::EvalReport& r) {
@@ -49,11 +52,8 @@ std::string what_the_mode_measures(const eval::EvalReport& r) {
                  "closest to; a pixel the class of the objects it shows"
                : "every query answered by its best object: mask = that object's rendered opacity > threshold";
   const auto it = r.extra.find("relevancy");
-  const std::string rel = it != r.extra.end() && it->is_string() ? it->get<std::string>() : "objects";
-  const std::string score = rel == "objects"        ? "the text's cosine with the object-conditioned language map"
-                            : rel == "objects-lerf" ? "LERF relevancy of the object-conditioned language map"
-                            : rel == "lerf"         ? "LERF relevancy of the raw rendered language map"
-                                                    : "LERF relevancy of the raw language map times the foreground";
+  const std::string score = query::relevancy_description(
+      query::parse_relevancy(it != r.extra.end() && it->is_string() ? it->get<std::string>() : "objects"));
   const auto windows = r.extra.find("lerf_windows");
   const bool scaled = windows != r.extra.end() && windows->is_string();
   return r.protocol.starts_with("3d-ovs")
@@ -76,6 +76,7 @@ void run_eval(const EvalArgs& a) {
   opt.object = a.mode != "pixel";
   opt.pixel = a.mode != "object";
   opt.relevancy = query::parse_relevancy(a.relevancy);
+  opt.paper_map = !a.no_paper_map;
   opt.mask_threshold = a.mask_threshold;
   opt.query_set = a.queries;
   if (!a.no_png) opt.overlay_dir = dir / "overlays";
@@ -108,21 +109,26 @@ CommandRegistration reg(
        sub.add_option("--out", a->out, "report.json path (report.md and overlays/ go beside it)")->required();
        sub.add_option("--mode", a->mode,
                       "object (each query's best object; on 3d-ovs every object is classified, the background "
-                      "too, see query/evaluate.h), pixel (every pixel scored on a rendered language map, LangSplat's "
-                      "protocol; --relevancy) or both")
+                      "too, see query/evaluate.h), pixel (every pixel scored on a rendered language map; --relevancy; "
+                      "with the default, the paper's map beside it) or both")
            ->check(CLI::IsMember({"object", "pixel", "both"}))
            ->capture_default_str();
        sub.add_option("--relevancy", a->relevancy,
-                      "Pixel mode, a pixel's score: objects (the cosine of the object-conditioned map sum_k A_k e_k of "
-                      "eqs. 8-9 with the text), objects-lerf (LERF's relevancy of that map), lerf (LERF's relevancy "
-                      "of the raw map sum_n f_n alpha T, as LangSplat's evaluation scores its field) or foreground "
-                      "(that times the rendered foreground opacity); see query/query.h")
+                      "Pixel mode, a pixel's score: objects (the text's cosine with hgs's object-embedding map "
+                      "sum_k A_k e_k: each object's pooled embedding rendered with its opacity, a rule of this "
+                      "project, not in the paper), objects-lerf (LERF's relevancy of that map), lerf (the paper's "
+                      "language map, eq. 8 summed over objects = sum_n f_n alpha T, scored with LERF's relevancy as "
+                      "LangSplat scores its field) or foreground (lerf times the rendered foreground opacity); see "
+                      "query/query.h")
            ->check(CLI::IsMember({"objects", "objects-lerf", "lerf", "foreground"}))
            ->capture_default_str();
        sub.add_option("--queries", a->queries,
                       "Instances protocols: ask the phrases of a query set of SCENE/gt/queries.json instead of the "
                       "objects' names: synonyms (\"coffee cup\"), hypernyms (\"kitchenware\"), attributes (\"the red "
                       "one\") or names; written by `hgs synth` (docs/formats.md)");
+       sub.add_flag("--no-paper-map", a->no_paper_map,
+                    "Pixel mode with a --relevancy other than lerf: do not also evaluate the paper's language map "
+                    "(by default reported beside it as mode pixel-paper-map)");
        sub.add_option("--mask-threshold", a->mask_threshold, "Object mode: mask = rendered object opacity > this")
            ->capture_default_str();
        sub.add_option("--clip", a->clip, "OpenCLIP weights to embed the query texts");

@@ -219,6 +219,8 @@ std::string report_markdown(const std::vector<EvalReport>& reports) {
     md += fmt::format("\n## {} — {}{}\n", cell(r.protocol), cell(r.scene),
                       r.mode.empty() ? "" : " (" + cell(r.mode) + ")");
     const MeanRow s = scene_mean(r);
+    if (r.extra.contains("pixel_score") && r.extra["pixel_score"].is_string())
+      md += fmt::format("\nA pixel's score: {}.\n", r.extra["pixel_score"].get<std::string>());
     if (r.extra.contains("miou_ceiling") && r.extra["miou_ceiling"].is_number())
       md += fmt::format(
           "\nNo prediction can score above {} mIoU here (a class absent from a frame's ground truth "

@@ -44,7 +44,7 @@ struct MeanRow {
 struct EvalReport {
   std::string protocol;  // "lerf-ovs", "3d-ovs", "instances", ...
   std::string scene;
-  std::string mode;  // e.g. "pixel", "object"
+  std::string mode;  // "object", "pixel" or "pixel-paper-map" (query/evaluate.h)
   std::vector<QueryRecord> records;
   std::map<std::string, double> frame_accuracy;     // optional per-frame accuracy overriding the record mean
   nlohmann::json extra = nlohmann::json::object();  // free-form: options, timings, paths

@@ -1,6 +1,8 @@
 // Single-view hard association, the "without OF" ablation (as Segment-then-Splat initialises objects): each
-// Gaussian takes the mask label at its projected centre in the first training view that sees it; q is
-// one-hot and fixed, and there are no view weights. Gaussians no view sees keep their previous q.
+// Gaussian takes the mask label at its projected centre in the first training view that sees it (with
+// HybridConfig::occlusion_test, the first where the centre is not hidden behind the rendered surface:
+// ObjectAssociation::refresh runs the occlusion test before either assignment); q is one-hot and fixed, and
+// there are no view weights. Gaussians no view sees keep their previous q.
 #pragma once
 #include <cstdint>
 

@@ -54,8 +54,10 @@ const std::vector<float>& ObjectAssociation::weights() const {
 
 void ObjectAssociation::refresh(GaussianModel& m, HybridFields& h, float near_plane) {
   observe(m.mean.data(), m.n, *masks_, table_, near_plane);
-  // The occlusion test is part of Observation Fusion; the single-view assignment (no-OF ablation) keeps eq. 3's V.
-  if (cfg_.use_of && cfg_.occlusion_test) hide_occluded_all(m, *masks_, near_plane, table_);
+  // The occlusion test applies to both assignments: the single-view one (no-OF ablation) then takes the label of
+  // the first view where the centre is visible, so that the no-OF rows differ from the full method by eqs. 4-5
+  // alone and Table 3's "OF added" measures fusion, not fusion and the occlusion test together.
+  if (cfg_.occlusion_test) hide_occluded_all(m, *masks_, near_plane, table_);
   if (cfg_.use_of) fuse(m.n, h);
   else single_view_assignment(table_, L_, h.q->data.data());
   update_hard_ids(m.n, h);

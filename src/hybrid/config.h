@@ -24,8 +24,9 @@ struct HybridConfig {
   // current model renders there; fusion.h). On by default together with background_vote 0.5: alone it moves
   // some objects' Gaussians towards their label and others away, background_vote alone lets Gaussians hidden
   // behind an object take its label, and together they beat eq. 4 as written except at low noise (figures:
-  // docs/results.md section 8). Only with OF: the single-view assignment of the no-OF rows keeps eq. 3's V.
-  // false = eq. 3's V (positive depth, in the image).
+  // docs/results.md section 8). The single-view assignment of the no-OF rows uses it too (the first view where
+  // the centre is visible), so that OF's row in Table 3 measures fusion alone; ablation tables made before
+  // this change measured fusion and the occlusion test together. false = eq. 3's V (positive depth, in the image).
   bool occlusion_test = true;
   // T of eq. 5. s_{n,k} is a (weighted) fraction of views, so q_k / q_j = exp((s_k - s_j) / T): at T = 0.1 a label
   // that wins by 20 % of the views still leaves q_k ~ 0.88 and, under heavy mask noise, objects render below

@@ -74,7 +74,7 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
   opt.query_set = o.query_set;
   if (!o.query_set.empty() && spec.labels != "instances")
     fail("--queries: query sets are asked with the instances protocols (not {})", spec.name);
-  const query::Relevancy rel = o.relevancy;
+  query::Relevancy rel = o.relevancy;  // the pixel report being run
   auto png_dir = [&](const char* mode) { return o.overlay_dir.empty() ? fs::path() : o.overlay_dir / mode; };
   auto object_fn = [&](int view, const std::string& q, std::vector<float>* heat) {
     return s.answer_mask(view, q, o.mask_threshold, heat);
@@ -89,8 +89,8 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
   };
   render::GaussianRenderer renderer;
   std::vector<eval::EvalReport> reports;
-  auto run_pixel = [&] {
-    opt.overlay_dir = png_dir("pixel");
+  auto run_pixel_as = [&](const char* mode) {
+    opt.overlay_dir = png_dir(mode);
     if (spec.labels == "lerf-ovs") {
       reports.push_back(eval::run_lerf_ovs(s.scene(), pixel_fn, opt));
     } else if (spec.labels == "3d-ovs") {
@@ -101,10 +101,19 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
     } else {
       reports.push_back(eval::run_instances(s.scene(), pixel_mask_fn, opt));
     }
-    reports.back().mode = "pixel";
+    reports.back().mode = mode;
     reports.back().protocol = spec.name;
     reports.back().extra["relevancy"] = query::relevancy_name(rel);
+    reports.back().extra["pixel_score"] = query::relevancy_description(rel);
     if (spec.lerf_scaled) reports.back().extra["lerf_windows"] = eval::scaled_lerf_rule();
+  };
+  auto run_pixel = [&] {
+    rel = o.relevancy;
+    run_pixel_as("pixel");
+    if (o.paper_map && o.relevancy != query::Relevancy::Lerf) {
+      rel = query::Relevancy::Lerf;
+      run_pixel_as("pixel-paper-map");
+    }
   };
   auto run_object = [&] {
     opt.overlay_dir = png_dir("object");

@@ -14,8 +14,11 @@
 // "3d-ovs-labelled" is 3D-OVS scored on the pixels the ground truth labels and the classes each frame shows
 // (eval::OvsScoring::LabelledOnly): what 3D-OVS measures on its own scenes, whose classes cover every pixel and
 // are all in view, on generated scenes that show the sky or leave classes out of some views.
-// Pixel mode is the protocol's relevancy of a rendered language map (query.h Relevancy: by default the
-// object-conditioned map of eqs. 8-9, `lerf` the raw map as LangSplat scores its field).
+// Pixel mode is the protocol's relevancy of a rendered language map (query.h Relevancy). By default it scores
+// hgs's object-embedding map sum_k A_k(p) e_k (each object's pooled embedding rendered with its opacity; a rule of
+// this project, not in the paper); `lerf` scores the paper's language map (eq. 8 summed over objects =
+// sum_n f_n alpha T) with LERF's relevancy, as LangSplat scores its field. With the default rule the paper's map
+// is evaluated too and reported beside it (mode "pixel-paper-map", EvaluateOptions::paper_map).
 #pragma once
 #include <filesystem>
 #include <string>
@@ -47,14 +50,18 @@ struct EvaluateOptions {
   std::string protocol = "instances";                      // a protocol_names() entry
   bool object = true, pixel = true;                        // modes
   query::Relevancy relevancy = query::Relevancy::Objects;  // pixel mode
-  float mask_threshold = 0.5f;                             // object mode
-  std::filesystem::path overlay_dir;                       // PNGs under <overlay_dir>/<mode>/ (empty: none)
+  // Pixel mode with a relevancy other than Lerf: also the paper's map (Relevancy::Lerf) as a second pixel report,
+  // mode "pixel-paper-map", right after the first (overlays under <overlay_dir>/pixel-paper-map/).
+  bool paper_map = true;
+  float mask_threshold = 0.5f;        // object mode
+  std::filesystem::path overlay_dir;  // PNGs under <overlay_dir>/<mode>/ (empty: none)
   bool progress = true;
   std::string query_set;  // instances: a query set of gt/queries.json (eval::RunOptions::query_set); empty = names
 };
 
 // The reports of the modes asked for (lerf-ovs and 3d-ovs: pixel then object; instances: object then pixel, as
-// `hgs eval` has always written them); each names its mode and, in pixel mode, the relevancy variant.
+// `hgs eval` has always written them; "pixel-paper-map" right after "pixel" when asked for); each names its mode
+// and, in pixel mode, the relevancy variant (extra "relevancy"; "lerf" for the paper's map).
 std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOptions& opt);
 
 // Whether the scene has the labels a protocol needs (gt/instances/, segmentations/, label/).

@@ -87,6 +87,23 @@ const char* relevancy_name(Relevancy v) {
   return "?";
 }
 
+const char* relevancy_description(Relevancy v) {
+  switch (v) {
+    case Relevancy::Objects:
+      return "the text's cosine with hgs's object-embedding map sum_k A_k e_k (each object's pooled embedding "
+             "rendered with its opacity; a rule of this project, not in the paper)";
+    case Relevancy::ObjectsLerf:
+      return "LERF's relevancy of hgs's object-embedding map sum_k A_k e_k (not in the paper)";
+    case Relevancy::Lerf:
+      return "LERF's relevancy of the paper's language map sum_n f_n alpha T (eq. 8 summed over objects), as "
+             "LangSplat scores its field";
+    case Relevancy::Foreground:
+      return "LERF's relevancy of the paper's language map times the rendered foreground opacity (not in the "
+             "paper)";
+  }
+  return "?";
+}
+
 Relevancy parse_relevancy(const std::string& name) {
   for (auto v : {Relevancy::Objects, Relevancy::ObjectsLerf, Relevancy::Lerf, Relevancy::Foreground})
     if (name == relevancy_name(v)) return v;

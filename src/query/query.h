@@ -8,9 +8,11 @@
 // contrastive loss (eq. 10) leaves that offset free, so ranking by relevancy picked the wrong object for 2 of 9
 // names on a trained model whose cosine ranking was right for all 9 (docs/results.md). Its mask in a view
 // is its rendered opacity A_k = sum_n q_{n,k} alpha T, thresholded (default 0.5).
-// Pixel level: a language map is rendered and scored per pixel with LERF's relevancy (Relevancy below): by default
-// the object-conditioned map sum_k A_k(p) e_k (eqs. 8-9: each object's embedding, rendered with its soft object
-// opacity, so its boundaries are the Gaussians'), or the raw map sum_n f_n alpha T as LangSplat scores its field.
+// Pixel level: a language map is rendered and scored per pixel (Relevancy below): by default hgs's object-embedding
+// map sum_k A_k(p) e_k (each object's pooled embedding rendered with its soft object opacity, so its boundaries
+// are the Gaussians'; a rule of this project, not in the paper) by its cosine with the text, or the paper's
+// language map (eq. 8 summed over objects: sum_k S^pred_k = sum_n f_n alpha T) by LERF's relevancy, as LangSplat
+// scores its field.
 // 3D selection: the Gaussians whose hard id z_n is one of the chosen objects (or all others, for removal).
 #pragma once
 #include <map>
@@ -51,24 +53,28 @@ std::vector<int> choose_objects(const std::vector<ObjectScore>& scores, float mi
 std::vector<float> render_object_opacity(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
                                          const std::vector<int>& ks);
 // A pixel's score for a text, from a rendered language map:
-//  Objects:     the cosine (eq. 10's sim) of the text with the object-conditioned map F_obj(p) = sum_k A_k(p) e_k
-//               over every label k (the background's too), A_k = sum_n q_{n,k} alpha T the object's rendered
-//               opacity and e_k its embedding (object_embeddings): eq. 8's map with each Gaussian's f_n replaced
-//               by its objects' embedding. SCL (eqs. 9-10) trains f only through the objects' pooled means, so the
+//  Objects:     hgs's object-embedding map, a rule of this project and not the paper's map: the cosine (eq. 10's
+//               sim) of the text with F_obj(p) = sum_k A_k(p) e_k over every label k (the background's too),
+//               A_k = sum_n q_{n,k} alpha T the object's rendered opacity and e_k its pooled embedding
+//               (object_embeddings): the paper's map with each Gaussian's f_n replaced by its objects'
+//               embedding. SCL (eqs. 9-10) trains f only through the objects' pooled means, so the
 //               part of each f_n that differs from its object's mean stays at its random initialisation (per-pixel
 //               noise in the raw map), and only through cosines among the scene's references, so an embedding's
 //               offset from LERF's canonical phrases is free (the reason object ranking uses the cosine too). The
 //               default (docs/ablation.md, "Pixel mode against object mode").
 //  ObjectsLerf: LERF's relevancy (the min over the canonical phrases of the pairwise softmax at temperature 10) of
-//               the object-conditioned map.
-//  Lerf:        LERF's relevancy of the raw map F(p) = sum_n f_n alpha T, nothing else: LangSplat's evaluation of
-//               its own field.
-//  Foreground:  the raw map's relevancy times the rendered foreground opacity sum_n (1 - q_{n,0}) alpha T, and 0
-//               where nothing is rendered (alpha < 1e-4).
+//               hgs's object-embedding map (not in the paper).
+//  Lerf:        the paper's language map F(p) = sum_n f_n alpha T (eq. 8 summed over the objects k, since
+//               sum_k q_{n,k} = 1) scored with LERF's relevancy, nothing else: LangSplat's evaluation of its own
+//               field. query/evaluate.h reports it beside the default in every pixel evaluation.
+//  Foreground:  the paper's map's relevancy times the rendered foreground opacity sum_n (1 - q_{n,0}) alpha T, and
+//               0 where nothing is rendered (alpha < 1e-4) (not in the paper).
 // On 3D-OVS (the argmax over classes at each pixel) Objects and ObjectsLerf agree: for one pixel LERF's relevancy
 // grows with the cosine.
 enum class Relevancy { Objects, ObjectsLerf, Lerf, Foreground };
-const char* relevancy_name(Relevancy v);             // "objects" | "objects-lerf" | "lerf" | "foreground"
+const char* relevancy_name(Relevancy v);  // "objects" | "objects-lerf" | "lerf" | "foreground"
+// What a variant scores, in words, for reports and help: e.g. "LERF's relevancy of the paper's language map ...".
+const char* relevancy_description(Relevancy v);
 Relevancy parse_relevancy(const std::string& name);  // fails naming the accepted values
 
 // Per-pixel relevancy of a rendered language map for a query: [H, W]. `oe`: the model's object embeddings for

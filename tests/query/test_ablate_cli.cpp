@@ -1,6 +1,7 @@
 // `hgs ablate` through the CLI on a tiny synthetic scene: rows x scenes x seeds with two protocols and both
-// modes, mean and sample standard deviation per row, paired differences, the eq. 15 row, and an interrupted
-// ablation continuing from the runs already on disk.
+// modes (pixel mode with the paper's language map beside the default rule), mean and sample standard deviation per
+// row, paired differences clustered by scene, the eq. 15 row, and an interrupted ablation continuing from the runs
+// already on disk. The interval arithmetic itself: tests/eval/test_paired_stats.cpp.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -31,7 +32,8 @@ TEST(AblateCli, RowsSeedsProtocolsModesAndResume) {
   EXPECT_EQ(j["summary"][1]["lambda_rgb"].get<double>(), 1.0);
   EXPECT_EQ(j["runs"].size(), 6u);  // 3 rows x 2 seeds
   for (const auto& row : j["summary"]) {
-    for (const char* key : {"instances/object", "instances/pixel", "3d-ovs/object", "3d-ovs/pixel"}) {
+    for (const char* key : {"instances/object", "instances/pixel", "instances/pixel-paper-map", "3d-ovs/object",
+                            "3d-ovs/pixel", "3d-ovs/pixel-paper-map"}) {
       ASSERT_TRUE(row["results"].contains(key)) << row["row"] << " " << key;
       const auto& k = row["results"][key];
       EXPECT_EQ(k["runs"], 2);
@@ -46,7 +48,8 @@ TEST(AblateCli, RowsSeedsProtocolsModesAndResume) {
       EXPECT_NEAR(k["miou_std"].get<double>(), std::abs(v[0] - v[1]) / std::sqrt(2.0), 1e-12);
     }
   }
-  // Paired differences: the full row minus all-off, per seed, averaged; their 95 % interval uses t(1) = 12.706.
+  // Paired differences: the full row minus all-off, per seed, averaged over the seeds of the one scene; clustered
+  // by scene, one scene gives no interval (n = 1 scene, not 2 runs).
   for (const char* key : {"instances/object", "3d-ovs/pixel"}) {
     std::map<uint64_t, double> full, off;
     for (const auto& run : j["runs"]) {
@@ -59,15 +62,24 @@ TEST(AblateCli, RowsSeedsProtocolsModesAndResume) {
     for (auto [seed, v] : full) d.push_back(v - off.at(seed));
     const auto& p = j["paired"][key]["of1_scl1_bro1 - all off"];
     EXPECT_EQ(p["runs"], 2);
+    EXPECT_EQ(p["scenes"], 1);
     EXPECT_NEAR(p["mean"].get<double>(), (d[0] + d[1]) / 2, 1e-12) << key;
-    EXPECT_NEAR(p["ci95_half"].get<double>(), 12.706 * std::abs(d[0] - d[1]) / std::sqrt(2.0) / std::sqrt(2.0), 1e-9);
+    EXPECT_TRUE(p["ci95_half"].is_null()) << key;
     EXPECT_FALSE(j["paired"][key].contains("of added to the other two"));  // no middle rows were trained
   }
   // Different seeds train different models.
   EXPECT_NE(j["runs"][1]["run"]["results"]["instances/object"]["miou"],
             j["runs"][4]["run"]["results"]["instances/object"]["miou"]);
   const std::string md = read_file_text(tmp / "a" / "ablation.md");
-  EXPECT_NE(md.find("## 3d-ovs/pixel (relevancy objects)"), std::string::npos) << md;
+  EXPECT_NE(md.find("## 3d-ovs/pixel (relevancy objects: hgs's object-embedding map, not in the paper)"),
+            std::string::npos)
+      << md;
+  EXPECT_NE(md.find("## 3d-ovs/pixel-paper-map (the paper's language map"), std::string::npos) << md;
+  EXPECT_NE(md.find("### 3d-ovs/pixel-paper-map (mIoU, paired by scene, seeds averaged within a scene; n = scenes)"),
+            std::string::npos)
+      << md;
+  EXPECT_NE(md.find("| of1_scl1_bro1 - all off | "), std::string::npos) << md;
+  EXPECT_NE(md.find(" | - | 1 | 2 |\n"), std::string::npos) << md;  // no interval, 1 scene, 2 runs
   EXPECT_NE(md.find(" ± "), std::string::npos);
   // Continuing: every run is on disk, so nothing is trained again and the summary is the same.
   r = test::run_hgs(cmd.substr(0, cmd.size() - 8));  // without --quiet: one line per run
@@ -77,7 +89,8 @@ TEST(AblateCli, RowsSeedsProtocolsModesAndResume) {
   EXPECT_EQ(reused, 6u) << r.out;
   EXPECT_EQ(nlohmann::json::parse(read_file_text(tmp / "a" / "ablation.json"))["summary"], j["summary"]);
   // --reevaluate: the kept models evaluated again (here with another pixel relevancy), nothing trained: the object
-  // figures and training times stay, the pixel figures are the new relevancy's.
+  // figures and training times stay, the pixel figures are the new relevancy's. With --relevancy lerf pixel mode
+  // is the paper's map: the figures the default run reported beside its own under pixel-paper-map, and no second.
   r = test::run_hgs(cmd.substr(0, cmd.size() - 8) + " --reevaluate --relevancy lerf");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   size_t again = 0;
@@ -93,9 +106,14 @@ TEST(AblateCli, RowsSeedsProtocolsModesAndResume) {
     EXPECT_EQ(a["results"]["instances/object"], b["results"]["instances/object"]);
     EXPECT_EQ(a["results"]["3d-ovs/object"], b["results"]["3d-ovs/object"]);
     pixel_changed |= a["results"]["instances/pixel"] != b["results"]["instances/pixel"];
+    for (const std::string p : {"instances", "3d-ovs"}) {
+      EXPECT_EQ(a["results"][p + "/pixel-paper-map"], b["results"][p + "/pixel"]) << p << " run " << i;
+      EXPECT_FALSE(b["results"].contains(p + "/pixel-paper-map"));
+    }
   }
   EXPECT_TRUE(pixel_changed);
-  EXPECT_NE(read_file_text(tmp / "a" / "ablation.md").find("## 3d-ovs/pixel (relevancy lerf)"), std::string::npos);
+  EXPECT_NE(read_file_text(tmp / "a" / "ablation.md").find("## 3d-ovs/pixel (relevancy lerf: the paper's language map"),
+            std::string::npos);
   // The scoring variants on the kept models: their object mode is the base protocol's where only pixel mode's
   // windows change (instances-scaled), and every key is written.
   r = test::run_hgs("ablate " + s + " --out " + out +

@@ -49,22 +49,46 @@ TEST(QueryEndToEnd, TrainQueryExportEval) {
   std::printf("tiny scene, 800 iterations: object-mode mIoU %.3f\n", miou);
   EXPECT_GT(miou, 0.3);  // measured 0.44 (objects are only a few hundred pixels at 128x96)
   EXPECT_TRUE(fs::exists(tmp / "e" / "report.md"));
-  // The pixel-mode report names its relevancy: the object-conditioned map by default, the others on request.
-  ASSERT_EQ(rep["reports"].size(), 2u);
+  // The pixel-mode report names its relevancy: hgs's object-embedding map by default, the others on request; the
+  // paper's language map (LERF's relevancy, `--relevancy lerf`) is reported beside the default.
+  ASSERT_EQ(rep["reports"].size(), 3u);
   EXPECT_EQ(rep["reports"][1]["mode"], "pixel");
   EXPECT_EQ(rep["reports"][1]["extra"]["relevancy"], "objects");
-  EXPECT_NE(r.out.find("pixel mode: every pixel on its own"), std::string::npos) << r.out;  // what it measures
+  EXPECT_EQ(rep["reports"][2]["mode"], "pixel-paper-map");
+  EXPECT_EQ(rep["reports"][2]["extra"]["relevancy"], "lerf");
+  EXPECT_NE(r.out.find("pixel mode: every pixel on its own: the text's cosine with hgs's object-embedding map"),
+            std::string::npos)
+      << r.out;  // what it measures
+  EXPECT_NE(r.out.find("pixel-paper-map mode: every pixel on its own: LERF's relevancy of the paper's language map"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(read_file_text(tmp / "e" / "report.md").find("| pixel-paper-map | lerf |"), std::string::npos);
   EXPECT_FALSE(rep["reports"][0]["extra"].contains("relevancy"));
   r = test::run_hgs("eval " + s + " " + m + " --relevancy foreground --no-png --out " +
                     (tmp / "e2" / "report.json").string() + " --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  rep = nlohmann::json::parse(read_file_text(tmp / "e2" / "report.json"));
-  EXPECT_EQ(rep["reports"][1]["extra"]["relevancy"], "foreground");
+  const auto fg = nlohmann::json::parse(read_file_text(tmp / "e2" / "report.json"));
+  EXPECT_EQ(fg["reports"][1]["extra"]["relevancy"], "foreground");
+  EXPECT_EQ(fg["reports"][2]["mode"], "pixel-paper-map");
   r = test::run_hgs("eval " + s + " " + m + " --relevancy lerf --mode pixel --no-png --out " +
                     (tmp / "e3" / "report.json").string() + " --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  rep = nlohmann::json::parse(read_file_text(tmp / "e3" / "report.json"));
-  EXPECT_EQ(rep["reports"][0]["extra"]["relevancy"], "lerf");
+  const auto lerf = nlohmann::json::parse(read_file_text(tmp / "e3" / "report.json"));
+  ASSERT_EQ(lerf["reports"].size(), 1u);  // the paper's map is pixel mode itself: no second report
+  EXPECT_EQ(lerf["reports"][0]["extra"]["relevancy"], "lerf");
+  // The figure beside the default is what `--relevancy lerf` alone gives, record for record (timings aside).
+  auto untimed = [](nlohmann::json records) {
+    for (auto& x : records) x.erase("seconds");
+    return records;
+  };
+  ASSERT_GT(lerf["reports"][0]["records"].size(), 0u);
+  EXPECT_EQ(untimed(lerf["reports"][0]["records"]), untimed(rep["reports"][2]["records"]));
+  EXPECT_EQ(lerf["reports"][0]["summary"]["mIoU"], rep["reports"][2]["summary"]["mIoU"]);
+  EXPECT_EQ(fg["reports"][2]["summary"]["mIoU"], rep["reports"][2]["summary"]["mIoU"]);
+  r = test::run_hgs("eval " + s + " " + m + " --mode pixel --no-paper-map --no-png --out " +
+                    (tmp / "e4" / "report.json").string() + " --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(read_file_text(tmp / "e4" / "report.json"))["reports"].size(), 1u);
   // Bad input: a model without object data.
   r = test::run_hgs("train " + s + " --out " + (tmp / "rgb").string() + " --method rgb --iters 20 --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -75,8 +99,9 @@ TEST(QueryEndToEnd, TrainQueryExportEval) {
 
 TEST(QueryEndToEnd, PixelModeFollowsObjectModeInTheSamLikeWorld) {
   // Issue 36: on `hgs synth`'s default world (surfaces in the masks, parts, small objects missed) the pixel mode's
-  // default score (the text's cosine with the object-conditioned map) stays near object mode, far above LERF's
-  // relevancy of the raw map (LangSplat's scoring, which SCL's embeddings leave uncalibrated and noisy).
+  // default score (the text's cosine with hgs's object-embedding map) stays near object mode, far above LERF's
+  // relevancy of the paper's language map (LangSplat's scoring, which SCL's embeddings leave uncalibrated and
+  // noisy).
   test::TempDir tmp;
   const std::string s = (tmp / "s").string(), m = (tmp / "m").string();
   auto r = test::run_hgs("synth --world simple --out " + s +
@@ -94,8 +119,8 @@ TEST(QueryEndToEnd, PixelModeFollowsObjectModeInTheSamLikeWorld) {
   const double object = miou("object", "--mode object"), pixel = miou("pixel", "--mode pixel"),
                raw = miou("raw", "--mode pixel --relevancy lerf");
   // Measured 0.786, 0.704 and 0.211 (seed 23, 1000 iterations; deterministic for a build).
-  std::printf("instances mIoU: object %.3f, pixel %.3f, pixel with LERF relevancy of the raw map %.3f\n", object, pixel,
-              raw);
+  std::printf("instances mIoU: object %.3f, pixel %.3f, pixel with the paper's map (LERF relevancy) %.3f\n", object,
+              pixel, raw);
   EXPECT_GT(object, 0.75);
   EXPECT_GT(pixel, object - 0.12);
   EXPECT_GT(pixel, raw + 0.3);

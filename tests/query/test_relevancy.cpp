@@ -1,6 +1,7 @@
 // Pixel-level relevancy of a hybrid model (query::render_relevancy): a rendered language map scored by LERF's
-// rule or its cosine with the text: the object-conditioned map sum_k A_k e_k (by its cosine, the default, or its
-// relevancy), the raw map sum_n f_n alpha T, or the raw map weighted by the rendered foreground opacity.
+// rule or its cosine with the text: hgs's object-embedding map sum_k A_k e_k (by its cosine, the default, or its
+// relevancy; not in the paper), the paper's (raw) map sum_n f_n alpha T, or the raw map weighted by the rendered
+// foreground opacity.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -187,7 +188,7 @@ TEST(Relevancy, ObjectsVariantsScoreTheObjectConditionedMapByBruteForce) {
 
 TEST(Relevancy, ObjectsVariantGivesAnObjectOneEmbeddingWhateverItsGaussiansCarry) {
   // Both blobs in object 1 with embeddings (1, 1, 0, 0) and (1, -1, 0, 0): their object's embedding is the first
-  // axis. The raw map answers the text (0, 1, 0, 0) on the left blob only; the object-conditioned map gives both
+  // axis. The raw map answers the text (0, 1, 0, 0) on the left blob only; the object-embedding map gives both
   // blobs the object's score: LERF's relevancy of the first axis, or its cosine with the text (0).
   TwoBlobs s(0.f);
   ExtraGroup& f = *s.m.find_extra("lang");
