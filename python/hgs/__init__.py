@@ -293,17 +293,20 @@ def _view_list(scene, views):
     return [scene.index(v) for v in views]
 
 
-def query(model, scene, text, views=None, min_relevancy=0.0, mask_threshold=0.5, clip=None, session=None):
+def query(model, scene, text, views=None, min_relevancy=0.0, mask_threshold=0.5, clip=None, session=None,
+          fragment_margin=0.1):
     """Answers a text query on a trained hybrid model: returns a QueryResult (objects ranked by their embedding's
     cosine with the text, with their LERF relevancy; the best one chosen, plus every other with relevancy >=
-    min_relevancy when that is > 0). views: the views of result.masks ("all" = None, "test", "train", or a list of
+    min_relevancy when that is > 0, plus the fragments of the best one: labels within fragment_margin of its cosine
+    whose Gaussians lie where its Gaussians lie, as SAM2 leaves one object under several ids; a rule of hgs,
+    query/fragments.h; 0 = the best label alone). views: the views of result.masks ("all" = None, "test", "train", or a list of
     indices / names); masks are rendered when first asked for. Texts are embedded from the scene's
     text_embeddings.json, or by OpenCLIP weights `clip`. A QuerySession given as `session` is reused (several
     queries on one model)."""
     scene, model = _as_scene(scene), _as_model(model)
     if session is None:
         session = QuerySession(scene, model, "" if clip is None else os.fspath(clip))
-    objects = session.ask(text, float(min_relevancy))
+    objects = session.ask(text, float(min_relevancy), float(fragment_margin))
     return QueryResult(session, model, scene, text, objects, _view_list(scene, views), float(mask_threshold))
 
 

@@ -16,11 +16,11 @@ using SessionPtr = std::shared_ptr<query::Session>;
 
 query::Relevancy relevancy_variant(const std::string& r) { return query::parse_relevancy(r); }
 
-pb::list ask(query::Session& s, const std::string& text, float min_relevancy) {
+pb::list ask(query::Session& s, const std::string& text, float min_relevancy, float fragment_margin) {
   query::ObjectAnswer a;
   {
     pb::gil_scoped_release nogil;
-    a = s.ask(text, {min_relevancy, 0.5f});
+    a = s.ask(text, {min_relevancy, 0.5f, fragment_margin});
   }
   pb::list out;
   for (const auto& sc : a.scores) {
@@ -100,8 +100,11 @@ void bind_query(pb::module_& m) {
            "OpenCLIP weights `clip` (.safetensors) when given. Renders cull at near_plane (default: the model's "
            "near_plane attribute, set by Model.load and hgs.train, else 0.01)")
       .def("ask", &ask, pb::arg("text"), pb::arg("min_relevancy") = 0.f,
+           pb::arg("fragment_margin") = query::kFragmentMargin,
            "Every object ranked for `text`, best first: dicts with id, name, relevancy, cosine, chosen (the best "
-           "one, plus every other with relevancy >= min_relevancy when it is > 0)")
+           "one, plus every other with relevancy >= min_relevancy when it is > 0, plus the fragment rule's labels: "
+           "within fragment_margin of the best cosine and where its Gaussians lie; a rule of hgs, "
+           "query/fragments.h; 0 = off)")
       .def("object_opacity", &object_opacity, pb::arg("view"), pb::arg("objects"),
            "Rendered opacity of the objects in a view, summed: float32 [H, W]")
       .def("pixel_relevancy", &pixel_relevancy, pb::arg("view"), pb::arg("text"), pb::arg("relevancy") = "objects",

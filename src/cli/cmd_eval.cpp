@@ -22,7 +22,7 @@ namespace fs = std::filesystem;
 struct EvalArgs {
   std::string scene, model, protocol = "instances", out, clip, relevancy = "objects", mode = "both", queries;
   int downscale = 1, threads = 0;
-  float mask_threshold = 0.5f;
+  float mask_threshold = 0.5f, fragment_margin = query::kFragmentMargin;
   bool no_png = false, quiet = false, no_paper_map = false;
 };
 
@@ -79,6 +79,7 @@ void run_eval(const EvalArgs& a) {
   opt.paper_map = !a.no_paper_map;
   opt.mask_threshold = a.mask_threshold;
   opt.query_set = a.queries;
+  opt.fragment_margin = a.fragment_margin;
   if (!a.no_png) opt.overlay_dir = dir / "overlays";
   opt.progress = !a.quiet;
   std::vector<eval::EvalReport> reports = query::evaluate_model(s, opt);
@@ -130,6 +131,12 @@ CommandRegistration reg(
                     "Pixel mode with a --relevancy other than lerf: do not also evaluate the paper's language map "
                     "(by default reported beside it as mode pixel-paper-map)");
        sub.add_option("--mask-threshold", a->mask_threshold, "Object mode: mask = rendered object opacity > this")
+           ->capture_default_str();
+       sub.add_option("--fragment-margin", a->fragment_margin,
+                      "Object mode: the answer also takes every label within this cosine of the best one whose "
+                      "Gaussians lie where its Gaussians lie (the fragments SAM2 leaves of one object; a rule of hgs, "
+                      "query/fragments.h); 0 = the best label alone")
+           ->check(CLI::Range(0.0, 2.0))
            ->capture_default_str();
        sub.add_option("--clip", a->clip, "OpenCLIP weights to embed the query texts");
        sub.add_option("--downscale", a->downscale, "Integer image downscale (as used for training)")

@@ -22,7 +22,7 @@ struct QueryArgs {
   std::string scene, model, out, view, split = "test", mode = "object", clip;
   std::vector<std::string> texts;
   int downscale = 1, threads = 0;
-  float min_relevancy = 0, mask_threshold = 0.5f;
+  float min_relevancy = 0, mask_threshold = 0.5f, fragment_margin = query::kFragmentMargin;
   bool quiet = false;
 };
 
@@ -57,7 +57,7 @@ void run_query(const QueryArgs& a) {
   const Scene& scene = session.scene();
   std::vector<int> views = pick_views(scene, a.view, a.split);
   if (views.empty()) fail("--split {}: the scene has no such views", a.split);
-  query::QueryOptions qo{a.min_relevancy, a.mask_threshold};
+  query::QueryOptions qo{a.min_relevancy, a.mask_threshold, a.fragment_margin};
   nlohmann::json result = {{"scene", fs::absolute(a.scene).lexically_normal().string()},
                            {"model", model_ply(a.model).string()},
                            {"mode", a.mode},
@@ -146,6 +146,12 @@ CommandRegistration reg(
                       "Object mode: also choose every object with relevancy >= this (0 = best only)")
            ->capture_default_str();
        sub.add_option("--mask-threshold", a->mask_threshold, "Object mode: mask = rendered object opacity > this")
+           ->capture_default_str();
+       sub.add_option("--fragment-margin", a->fragment_margin,
+                      "Object mode: also choose every label within this cosine of the best one whose Gaussians lie "
+                      "where its Gaussians lie (the fragments SAM2 leaves of one object: a re-born track, a part; a "
+                      "rule of hgs, query/fragments.h); 0 = the best label alone")
+           ->check(CLI::Range(0.0, 2.0))
            ->capture_default_str();
        sub.add_option("--clip", a->clip,
                       "OpenCLIP weights (.safetensors) to embed the text (else SCENE/text_embeddings.json)");

@@ -77,7 +77,7 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
   query::Relevancy rel = o.relevancy;  // the pixel report being run
   auto png_dir = [&](const char* mode) { return o.overlay_dir.empty() ? fs::path() : o.overlay_dir / mode; };
   auto object_fn = [&](int view, const std::string& q, std::vector<float>* heat) {
-    return s.answer_mask(view, q, o.mask_threshold, heat);
+    return s.answer_mask(view, q, o.mask_threshold, heat, o.fragment_margin);
   };
   auto pixel_fn = [&](int view, const std::string& q) { return s.pixel_relevancy(view, q, rel); };
   auto pixel_mask_fn = [&](int view, const std::string& q, std::vector<float>* heat) {

@@ -222,12 +222,18 @@ std::vector<std::vector<float>> render_relevancies(render::GaussianRenderer& r, 
   return maps;
 }
 
-std::vector<int> choose_objects(const std::vector<ObjectScore>& scores, float min_relevancy, const std::string& text) {
+std::vector<int> choose_objects(const std::vector<ObjectScore>& scores, float min_relevancy, const std::string& text,
+                                float fragment_margin, const std::vector<LabelBox>* boxes) {
   if (scores.empty()) fail("the model has no foreground objects to answer \"{}\"", text);
-  std::vector<int> chosen = {scores[0].object};
-  if (min_relevancy > 0)
-    for (size_t i = 1; i < scores.size(); ++i)
-      if (scores[i].relevancy >= min_relevancy) chosen.push_back(scores[i].object);
+  const int best = scores[0].object;
+  std::vector<int> chosen = {best};
+  for (size_t i = 1; i < scores.size(); ++i) {
+    const int k = scores[i].object;
+    const bool relevant = min_relevancy > 0 && scores[i].relevancy >= min_relevancy;
+    const bool fragment = fragment_margin > 0 && boxes && scores[0].cosine - scores[i].cosine <= fragment_margin &&
+                          size_t(std::max(best, k)) < boxes->size() && boxes_meet((*boxes)[best], (*boxes)[k]);
+    if (relevant || fragment) chosen.push_back(k);
+  }
   return chosen;
 }
 

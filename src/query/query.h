@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "model/gaussian_model.h"
+#include "query/fragments.h"
 #include "render/renderer.h"
 
 namespace hgs::query {
@@ -47,7 +48,10 @@ std::vector<ObjectScore> score_objects(const ObjectEmbeddings& oe, const float* 
 // The objects an answer selects from `scores` (best first, as score_objects returns them): the best one always,
 // and with min_relevancy > 0 also every other whose LERF relevancy is at least min_relevancy. Fails naming
 // `text` when there is no object to choose.
-std::vector<int> choose_objects(const std::vector<ObjectScore>& scores, float min_relevancy, const std::string& text);
+// With fragment_margin > 0 and `boxes` ([L], fragments.h), also every label whose cosine is within the margin of the
+// best one's and whose box meets the best one's (the fragment rule).
+std::vector<int> choose_objects(const std::vector<ObjectScore>& scores, float min_relevancy, const std::string& text,
+                                float fragment_margin = 0, const std::vector<LabelBox>* boxes = nullptr);
 
 // Opacity render of objects `ks` (channel j = A_{ks[j]}). Returns [H, W, J].
 std::vector<float> render_object_opacity(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,

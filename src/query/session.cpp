@@ -13,6 +13,7 @@ Session::Session(const std::filesystem::path& scene, const std::filesystem::path
       model_(std::make_shared<const GaussianModel>(read_model_ply(model_ply))),
       text_(*scene_, clip_path),
       oe_(object_embeddings(*model_)),
+      boxes_(label_boxes(*model_, oe_.num_labels)),
       near_plane_(model_near_plane(model_ply)) {
   check_dims(model_ply.string());
 }
@@ -23,6 +24,7 @@ Session::Session(std::shared_ptr<const Scene> scene, std::shared_ptr<const Gauss
       model_(std::move(model)),
       text_(*scene_, clip_path),
       oe_(object_embeddings(*model_)),
+      boxes_(label_boxes(*model_, oe_.num_labels)),
       near_plane_(checked_near_plane(near_plane, where + ": near_plane")) {
   check_dims(where);
 }
@@ -45,7 +47,7 @@ ObjectAnswer Session::ask(const std::string& text, const QueryOptions& opt) {
   a.text = text;
   const auto& e = text_.embed(text);
   a.scores = score_objects(oe_, e.data(), text_.canonical());
-  a.chosen = choose_objects(a.scores, opt.min_relevancy, text);
+  a.chosen = choose_objects(a.scores, opt.min_relevancy, text, opt.fragment_margin, &boxes_);
   return a;
 }
 
@@ -68,8 +70,11 @@ eval::Mask Session::object_mask(int view, const std::vector<int>& objects, float
   return m;
 }
 
-eval::Mask Session::answer_mask(int view, const std::string& text, float threshold, std::vector<float>* opacity) {
-  return object_mask(view, {ask(text).chosen[0]}, threshold, opacity);
+eval::Mask Session::answer_mask(int view, const std::string& text, float threshold, std::vector<float>* opacity,
+                                float fragment_margin) {
+  QueryOptions o;
+  o.fragment_margin = fragment_margin;
+  return object_mask(view, ask(text, o).chosen, threshold, opacity);
 }
 
 std::vector<float> Session::pixel_relevancy(int view, const std::string& text, Relevancy variant) {

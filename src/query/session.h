@@ -9,6 +9,7 @@
 
 #include "eval/metrics.h"
 #include "model/gaussian_model.h"
+#include "query/fragments.h"
 #include "query/query.h"
 #include "query/text.h"
 #include "render/renderer.h"
@@ -19,6 +20,9 @@ namespace hgs::query {
 struct QueryOptions {
   float min_relevancy = 0.f;    // > 0: every object at or above it is chosen (at least the best one)
   float mask_threshold = 0.5f;  // object mode: mask = sum of chosen objects' opacity > threshold
+  // The fragment rule (fragments.h, a rule of this project): labels within this cosine of the best one whose
+  // Gaussians lie where its Gaussians lie join the answer; 0 = the best label alone.
+  float fragment_margin = kFragmentMargin;
 };
 
 struct ObjectAnswer {
@@ -52,8 +56,10 @@ class Session {
   // Mask of the chosen objects: their summed opacity > threshold; `opacity` (optional) receives that sum.
   eval::Mask object_mask(int view, const std::vector<int>& objects, float threshold,
                          std::vector<float>* opacity = nullptr);
-  // Object-level answer in one view: the best object for `text`, its mask and (optionally) its opacity.
-  eval::Mask answer_mask(int view, const std::string& text, float threshold, std::vector<float>* opacity = nullptr);
+  // Object-level answer in one view: the labels chosen for `text` (ask, with the fragment rule's margin), their
+  // mask and (optionally) their opacity.
+  eval::Mask answer_mask(int view, const std::string& text, float threshold, std::vector<float>* opacity = nullptr,
+                         float fragment_margin = kFragmentMargin);
   // Relevancy of a rendered language map (query.h, Relevancy): [H, W].
   std::vector<float> pixel_relevancy(int view, const std::string& text, Relevancy variant = Relevancy::Objects);
   // The same for several texts from one render of the view's language map: [T][H, W].
@@ -65,6 +71,7 @@ class Session {
   std::shared_ptr<const GaussianModel> model_;
   TextEmbedder text_;
   ObjectEmbeddings oe_;
+  std::vector<LabelBox> boxes_;  // [L] for the fragment rule (fragments.h)
   render::GaussianRenderer renderer_;
   float near_plane_ = render::kDefaultNearPlane;
 

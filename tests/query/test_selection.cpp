@@ -95,6 +95,49 @@ TEST(ChooseObjects, ThresholdAddsEveryOtherObjectAtOrAboveIt) {
   EXPECT_EQ(query::choose_objects(s, 1e-6f, "mug"), (std::vector<int>{3, 1, 2, 4}));
 }
 
+TEST(ChooseObjects, FragmentRuleAddsNearbyLabelsThatAnswerNearlyAsWell) {
+  // Labels 1..4 with boxes: 2 overlaps 1, 3 touches 1 within the 20 % growth, 4 is far away.
+  std::vector<query::LabelBox> boxes(5);
+  auto box = [&](int k, float x0, float x1) { boxes[k] = {{x0, 0, 0}, {x1, 1, 1}, true}; };
+  box(1, 0, 1);
+  box(2, 0.5f, 1.5f);
+  box(3, 1.3f, 2.3f);  // gap 0.3 < 0.2 + 0.2 (both grown by 20 % of width 1)
+  box(4, 5, 6);
+  const std::vector<query::ObjectScore> s = {{1, 0.50f, 0.7f}, {2, 0.45f, 0.6f}, {3, 0.41f, 0.6f}, {4, 0.49f, 0.6f}};
+  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.1f, &boxes), (std::vector<int>{1, 2, 3}));  // 4 is elsewhere
+  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.06f, &boxes), (std::vector<int>{1, 2}));    // 3 answers worse
+  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.f, &boxes), (std::vector<int>{1}));         // off
+  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.1f, nullptr), (std::vector<int>{1}));       // no boxes
+  boxes[2].valid = false;                                                                      // too few Gaussians
+  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.1f, &boxes), (std::vector<int>{1, 3}));
+  box(3, 1.5f, 2.5f);  // gap 0.5: apart
+  EXPECT_FALSE(query::boxes_meet(boxes[1], boxes[3]));
+}
+
+TEST(LabelBoxes, PercentilesOfTheOpaqueGaussiansOfEachLabel) {
+  // 101 opaque Gaussians of label 1 at x = 0..100, one transparent Gaussian of label 1 far away, 3 of label 2.
+  GaussianModel m;
+  m.sh_degree = 0;
+  m.resize(105);
+  std::vector<float> ids(105, 1.f);
+  for (int i = 0; i < 105; ++i) {
+    m.mean[3 * i] = float(i);
+    m.opacity_logit[i] = 2.f;
+  }
+  m.mean[3 * 101] = 1e4f;
+  m.opacity_logit[101] = -5.f;
+  for (int i = 102; i < 105; ++i) ids[i] = 2.f;
+  m.add_extra("obj", 3).data.assign(105 * 3, 0.f);
+  m.add_extra("obj_id", 1).data = ids;
+  m.add_extra("lang", 2).data.assign(105 * 2, 0.f);
+  const auto b = query::label_boxes(m, 3);
+  ASSERT_TRUE(b[1].valid);
+  EXPECT_FLOAT_EQ(b[1].lo[0], 5.f);  // the 5th and 95th percentile of 0..100
+  EXPECT_FLOAT_EQ(b[1].hi[0], 95.f);
+  EXPECT_FALSE(b[2].valid);  // fewer than 5 Gaussians
+  EXPECT_FALSE(b[0].valid);
+}
+
 TEST(ChooseObjects, NoObjectIsAClearError) {
   try {
     query::choose_objects({}, 0.f, "red mug");
