@@ -311,16 +311,19 @@ def query(model, scene, text, views=None, min_relevancy=0.0, mask_threshold=0.5,
 
 
 def evaluate(model, scene, protocol="instances", mode="both", relevancy="objects", mask_threshold=0.5, clip=None,
-             overlays=None, progress=False, paper_map=True):
+             overlays=None, progress=False, paper_map=True, queries=None, fragment_margin=0.1):
     """Evaluates a trained hybrid model with a benchmark protocol (lerf-ovs, 3d-ovs or instances, or a variant:
     3d-ovs-labelled, lerf-ovs-scaled, instances-scaled; see `hgs eval --help`) in object mode, pixel mode or both,
     as `hgs eval` does; returns the report as a dict {"reports": [...]} (report.json's layout: per mode the
     records, the means, mAcc / mIoU / mBIoU). relevancy: pixel mode's score (QueryResult.relevancy); the default
     "objects" is hgs's object-embedding map (not in the paper), and with paper_map (default) pixel mode also
     reports the paper's language map scored with LERF's relevancy (relevancy "lerf") as a report of mode
-    "pixel-paper-map", right after the "pixel" one. overlays: a folder for overlay PNGs."""
+    "pixel-paper-map", right after the "pixel" one. overlays: a folder for overlay PNGs. queries: a query set of
+    the scene's gt/queries.json asked instead of the names (instances protocols: "synonyms", "hypernyms",
+    "attributes"). fragment_margin: object mode's fragment rule (see query; 0 = the best label alone)."""
     scene, model = _as_scene(scene), _as_model(model)
     session = QuerySession(scene, model, "" if clip is None else os.fspath(clip))
     text = session.evaluate(protocol, mode, relevancy, float(mask_threshold),
-                            "" if overlays is None else os.fspath(overlays), bool(progress), bool(paper_map))
+                            "" if overlays is None else os.fspath(overlays), bool(progress), bool(paper_map),
+                            "" if queries is None else str(queries), float(fragment_margin))
     return json.loads(text)

@@ -119,7 +119,8 @@ class QuerySession:
     def pixel_relevancy(self, view: ViewKey, text: str, relevancy: str = "objects") -> npt.NDArray[np.float32]: ...
     def object_name(self, id: int) -> str: ...
     def evaluate(self, protocol: str, mode: str = "both", relevancy: str = "objects", mask_threshold: float = 0.5,
-                 overlay_dir: str = "", progress: bool = False, paper_map: bool = True) -> str: ...
+                 overlay_dir: str = "", progress: bool = False, paper_map: bool = True, queries: str = "",
+                 fragment_margin: float = 0.1) -> str: ...
 
 class QueryResult:
     text: str
@@ -149,7 +150,8 @@ def query(model: Union[Model, PathLike], scene: Union[Scene, PathLike], text: st
 def evaluate(model: Union[Model, PathLike], scene: Union[Scene, PathLike], protocol: str = "instances",
              mode: str = "both", relevancy: str = "objects", mask_threshold: float = 0.5,
              clip: Optional[PathLike] = None, overlays: Optional[PathLike] = None,
-             progress: bool = False, paper_map: bool = True) -> Dict[str, Any]: ...
+             progress: bool = False, paper_map: bool = True, queries: Optional[str] = None,
+             fragment_margin: float = 0.1) -> Dict[str, Any]: ...
 def synth(out: PathLike, *, preset: str = "tabletop", seed: int = 1, views: int = 48, width: int = 320,
           height: int = 240, objects: int = 0, points: int = 30000, noise: str = "medium", feature_dim: int = 512,
           mask_ids: str = "consistent", mask_style: str = "label", surface_masks: bool = True,

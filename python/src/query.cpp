@@ -60,7 +60,7 @@ pb::array pixel_relevancy(query::Session& s, pb::handle view, const std::string&
 
 std::string evaluate(query::Session& s, const std::string& protocol, const std::string& mode,
                      const std::string& relevancy, float mask_threshold, const std::string& overlay_dir, bool progress,
-                     bool paper_map) {
+                     bool paper_map, const std::string& queries, float fragment_margin) {
   query::parse_protocol(protocol);  // fails with the list of protocols
   if (mode != "object" && mode != "pixel" && mode != "both") fail("mode must be object, pixel or both, got '{}'", mode);
   if (!query::has_protocol_labels(s.scene(), protocol))
@@ -74,6 +74,8 @@ std::string evaluate(query::Session& s, const std::string& protocol, const std::
   o.mask_threshold = mask_threshold;
   o.overlay_dir = overlay_dir;
   o.progress = progress;
+  o.query_set = queries;
+  o.fragment_margin = fragment_margin;
   nlohmann::json reports = nlohmann::json::array();
   {
     pb::gil_scoped_release nogil;
@@ -116,10 +118,11 @@ void bind_query(pb::module_& m) {
       .def("object_name", &query::Session::object_name, pb::arg("id"))
       .def("evaluate", &evaluate, pb::arg("protocol"), pb::arg("mode") = "both", pb::arg("relevancy") = "objects",
            pb::arg("mask_threshold") = 0.5f, pb::arg("overlay_dir") = "", pb::arg("progress") = false,
-           pb::arg("paper_map") = true,
+           pb::arg("paper_map") = true, pb::arg("queries") = "", pb::arg("fragment_margin") = query::kFragmentMargin,
            "Runs a benchmark protocol (lerf-ovs, 3d-ovs, instances) and returns {\"reports\": [...]} as JSON text; "
            "pixel mode with a relevancy other than lerf adds the paper's language map as mode pixel-paper-map "
-           "(paper_map=False: not)");
+           "(paper_map=False: not); queries: a query set of gt/queries.json for the instances protocols (synonyms, "
+           "hypernyms, attributes; empty = the names); fragment_margin: object mode's fragment rule (0 = off)");
 }
 
 }  // namespace hgs::py

@@ -113,3 +113,14 @@ def test_evaluate_protocol_variants(hybrid_model, scene):
     labelled = hgs.evaluate(hybrid_model, scene, protocol="3d-ovs-labelled", mode="object")["reports"]
     assert labelled[0]["protocol"] == "3d-ovs-labelled"
     assert "miou_ceiling" not in labelled[0]["extra"]
+
+
+def test_fragment_margin_and_query_sets(hybrid_model, scene):
+    # fragment_margin=0: the best label alone; a large margin may only add labels, never drop the best one.
+    name = phrase_of_an_object(scene)
+    best = [o["id"] for o in hgs.query(hybrid_model, scene, name, fragment_margin=0).objects if o["chosen"]]
+    wide = [o["id"] for o in hgs.query(hybrid_model, scene, name, fragment_margin=2.0).objects if o["chosen"]]
+    assert len(best) == 1 and best[0] == wide[0] and set(best) <= set(wide)
+    # The tiny scene is of the simple world: it has no query sets, and asking for one names the file.
+    with pytest.raises(hgs.Error, match="queries.json"):
+        hgs.evaluate(hybrid_model, scene, protocol="instances", mode="object", queries="synonyms")
