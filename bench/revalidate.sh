@@ -4,7 +4,8 @@
 # (medium, high) at 160x120, 32 views, 10k SfM points from the development or the test seeds, then runs
 # `hgs ablate` on each (preset, noise) group: ROWS (default all 8) x 1500 iterations, training seed 3, the
 # instances and 3D-OVS protocols in object and pixel mode (the default rule and the paper's map). Reruns reuse
-# the scenes and every finished run (ablate continues where it stopped). Choose or tune defaults on `dev` only;
+# the scenes and every finished run (ablate continues where it stopped), then asks every full-method model the
+# query sets of gt/queries.json and prints their mIoU against the names'. Choose or tune defaults on `dev` only;
 # `test` reports. About 128 trainings for all rows: hours on 2 cores.
 set -euo pipefail
 if [ $# -lt 3 ] || { [ "$3" != dev ] && [ "$3" != test ]; }; then
@@ -28,4 +29,28 @@ for preset in tabletop room; do
       --protocol instances,3d-ovs --mode both
   done
 done
+# The query sets on every full-method model: object mode, each set against the names (goal: synonyms and hypernyms
+# at 0.9x the names' mIoU or better).
+for model in "$OUT"/ablate_*/*/seed3/of1_scl1_bro1; do
+  [ -f "$model/point_cloud.ply" ] || continue
+  scene="$OUT/scenes/$(basename "$(dirname "$(dirname "$model")")")"
+  for q in names synonyms hypernyms attributes; do
+    [ -f "$model/queries_$q.json" ] || "$HGS" eval "$scene" "$model" --protocol instances --mode object --queries "$q" \
+      --no-png --quiet --out "$model/queries_$q.json" >/dev/null
+  done
+done
+python3 - "$OUT" <<'PY'
+import glob, json, sys
+rows = {}
+for f in sorted(glob.glob(sys.argv[1] + "/ablate_*/*/seed3/of1_scl1_bro1/queries_*.json")):
+    group, q = f.split("/")[-5].replace("ablate_", ""), f.rsplit("queries_", 1)[1][:-5]
+    r = json.load(open(f))["reports"][0]
+    rows.setdefault(group, {}).setdefault(q, []).append(r["summary"]["mIoU"])
+print("| group | scenes | names | synonyms | hypernyms | attributes |\n|---|---|---|---|---|---|")
+for g, d in rows.items():
+    m = {q: 100 * sum(v) / len(v) for q, v in d.items()}
+    cell = lambda q: f"{m[q]:.2f} ({m[q] / m['names']:.2f}x)" if q in m and "names" in m else "-"
+    print(f"| {g} | {len(d.get('names', []))} | {m.get('names', float('nan')):.2f} | {cell('synonyms')} | "
+          f"{cell('hypernyms')} | {cell('attributes')} |")
+PY
 echo "bench/revalidate.sh: tables in $OUT/ablate_*/ablation.md"
