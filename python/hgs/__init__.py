@@ -294,24 +294,28 @@ def _view_list(scene, views):
 
 
 def query(model, scene, text, views=None, min_relevancy=0.0, mask_threshold=0.5, clip=None, session=None,
-          fragment_margin=0.1):
+          fragment_margin=None):
     """Answers a text query on a trained hybrid model: returns a QueryResult (objects ranked by their embedding's
     cosine with the text, with their LERF relevancy; the best one chosen, plus every other with relevancy >=
-    min_relevancy when that is > 0, plus the fragments of the best one: labels within fragment_margin of its cosine
-    whose Gaussians lie where its Gaussians lie, as SAM2 leaves one object under several ids; a rule of hgs,
-    query/fragments.h; 0 = the best label alone). views: the views of result.masks ("all" = None, "test", "train", or a list of
+    min_relevancy when that is > 0, plus the fragments of the best one: labels whose cosine is below its cosine by at
+    most fragment_margin times its lead over the median label and whose Gaussians lie where its Gaussians lie, as
+    SAM2 leaves one object under several ids; a rule of hgs, query/fragments.h; None = the library's default, 0 =
+    the best label alone). views: the views of result.masks ("all" = None, "test", "train", or a list of
     indices / names); masks are rendered when first asked for. Texts are embedded from the scene's
     text_embeddings.json, or by OpenCLIP weights `clip`. A QuerySession given as `session` is reused (several
     queries on one model)."""
     scene, model = _as_scene(scene), _as_model(model)
     if session is None:
         session = QuerySession(scene, model, "" if clip is None else os.fspath(clip))
-    objects = session.ask(text, float(min_relevancy), float(fragment_margin))
+    if fragment_margin is None:
+        objects = session.ask(text, float(min_relevancy))
+    else:
+        objects = session.ask(text, float(min_relevancy), float(fragment_margin))
     return QueryResult(session, model, scene, text, objects, _view_list(scene, views), float(mask_threshold))
 
 
 def evaluate(model, scene, protocol="instances", mode="both", relevancy="objects", mask_threshold=0.5, clip=None,
-             overlays=None, progress=False, paper_map=True, queries=None, fragment_margin=0.1):
+             overlays=None, progress=False, paper_map=True, queries=None, fragment_margin=None):
     """Evaluates a trained hybrid model with a benchmark protocol (lerf-ovs, 3d-ovs or instances, or a variant:
     3d-ovs-labelled, lerf-ovs-scaled, instances-scaled; see `hgs eval --help`) in object mode, pixel mode or both,
     as `hgs eval` does; returns the report as a dict {"reports": [...]} (report.json's layout: per mode the
@@ -320,10 +324,13 @@ def evaluate(model, scene, protocol="instances", mode="both", relevancy="objects
     reports the paper's language map scored with LERF's relevancy (relevancy "lerf") as a report of mode
     "pixel-paper-map", right after the "pixel" one. overlays: a folder for overlay PNGs. queries: a query set of
     the scene's gt/queries.json asked instead of the names (instances protocols: "synonyms", "hypernyms",
-    "attributes"). fragment_margin: object mode's fragment rule (see query; 0 = the best label alone)."""
+    "attributes"). fragment_margin: object mode's fragment rule (see query; None = the library's default, 0 = the
+    best label alone)."""
     scene, model = _as_scene(scene), _as_model(model)
     session = QuerySession(scene, model, "" if clip is None else os.fspath(clip))
-    text = session.evaluate(protocol, mode, relevancy, float(mask_threshold),
-                            "" if overlays is None else os.fspath(overlays), bool(progress), bool(paper_map),
-                            "" if queries is None else str(queries), float(fragment_margin))
+    args = [protocol, mode, relevancy, float(mask_threshold), "" if overlays is None else os.fspath(overlays),
+            bool(progress), bool(paper_map), "" if queries is None else str(queries)]
+    if fragment_margin is not None:
+        args.append(float(fragment_margin))
+    text = session.evaluate(*args)
     return json.loads(text)

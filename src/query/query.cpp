@@ -227,10 +227,16 @@ std::vector<int> choose_objects(const std::vector<ObjectScore>& scores, float mi
   if (scores.empty()) fail("the model has no foreground objects to answer \"{}\"", text);
   const int best = scores[0].object;
   std::vector<int> chosen = {best};
+  // The fragment rule's cosine margin: a fraction of the best label's lead over the median label, so that it means
+  // the same for sharply and for weakly separated embeddings (SCL spreads them; without it they stay close).
+  std::vector<float> cosines;
+  for (const auto& s : scores) cosines.push_back(s.cosine);
+  std::nth_element(cosines.begin(), cosines.begin() + cosines.size() / 2, cosines.end());
+  const float margin = fragment_margin * std::max(0.f, scores[0].cosine - cosines[cosines.size() / 2]);
   for (size_t i = 1; i < scores.size(); ++i) {
     const int k = scores[i].object;
     const bool relevant = min_relevancy > 0 && scores[i].relevancy >= min_relevancy;
-    const bool fragment = fragment_margin > 0 && boxes && scores[0].cosine - scores[i].cosine <= fragment_margin &&
+    const bool fragment = fragment_margin > 0 && boxes && scores[0].cosine - scores[i].cosine <= margin &&
                           size_t(std::max(best, k)) < boxes->size() && boxes_meet((*boxes)[best], (*boxes)[k]);
     if (relevant || fragment) chosen.push_back(k);
   }

@@ -48,8 +48,9 @@ std::vector<ObjectScore> score_objects(const ObjectEmbeddings& oe, const float* 
 // The objects an answer selects from `scores` (best first, as score_objects returns them): the best one always,
 // and with min_relevancy > 0 also every other whose LERF relevancy is at least min_relevancy. Fails naming
 // `text` when there is no object to choose.
-// With fragment_margin > 0 and `boxes` ([L], fragments.h), also every label whose cosine is within the margin of the
-// best one's and whose box meets the best one's (the fragment rule).
+// With fragment_margin > 0 and `boxes` ([L], fragments.h), also every label whose cosine is below the best one's by
+// at most fragment_margin times the best one's lead over the median label, and whose box meets the best one's (the
+// fragment rule).
 std::vector<int> choose_objects(const std::vector<ObjectScore>& scores, float min_relevancy, const std::string& text,
                                 float fragment_margin = 0, const std::vector<LabelBox>* boxes = nullptr);
 

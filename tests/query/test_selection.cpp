@@ -96,20 +96,29 @@ TEST(ChooseObjects, ThresholdAddsEveryOtherObjectAtOrAboveIt) {
 }
 
 TEST(ChooseObjects, FragmentRuleAddsNearbyLabelsThatAnswerNearlyAsWell) {
-  // Labels 1..4 with boxes: 2 overlaps 1, 3 touches 1 within the 20 % growth, 4 is far away.
-  std::vector<query::LabelBox> boxes(5);
+  // Labels 1..5 with boxes: 2 overlaps 1, 3 touches 1 within the 20 % growth, 4 is far away, 5 overlaps 1.
+  std::vector<query::LabelBox> boxes(6);
   auto box = [&](int k, float x0, float x1) { boxes[k] = {{x0, 0, 0}, {x1, 1, 1}, true}; };
   box(1, 0, 1);
   box(2, 0.5f, 1.5f);
   box(3, 1.3f, 2.3f);  // gap 0.3 < 0.2 + 0.2 (both grown by 20 % of width 1)
   box(4, 5, 6);
-  const std::vector<query::ObjectScore> s = {{1, 0.50f, 0.7f}, {2, 0.45f, 0.6f}, {3, 0.41f, 0.6f}, {4, 0.49f, 0.6f}};
-  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.1f, &boxes), (std::vector<int>{1, 2, 3}));  // 4 is elsewhere
-  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.06f, &boxes), (std::vector<int>{1, 2}));    // 3 answers worse
-  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.f, &boxes), (std::vector<int>{1}));         // off
-  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.1f, nullptr), (std::vector<int>{1}));       // no boxes
-  boxes[2].valid = false;                                                                      // too few Gaussians
-  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.1f, &boxes), (std::vector<int>{1, 3}));
+  box(5, 0, 1);
+  // Cosines: best 0.5, median (of 9) 0.12, so the best leads by 0.38 and margin 0.25 allows 0.095 below the best.
+  const std::vector<query::ObjectScore> s = {{1, 0.50f, 0.7f}, {4, 0.49f, 0.6f}, {2, 0.45f, 0.6f},
+                                             {3, 0.41f, 0.6f}, {9, 0.12f, 0.6f}, {5, 0.10f, 0.6f},
+                                             {8, 0.10f, 0.6f}, {7, 0.08f, 0.6f}, {6, 0.05f, 0.6f}};
+  boxes.resize(10);                                                                             // labels 6..9: no box
+  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.25f, &boxes), (std::vector<int>{1, 2, 3}));  // 4 is elsewhere
+  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.15f, &boxes), (std::vector<int>{1, 2}));     // 3 is 0.09 below
+  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.f, &boxes), (std::vector<int>{1}));          // off
+  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.25f, nullptr), (std::vector<int>{1}));       // no boxes
+  // The margin is relative: the same labels with every cosine squeezed 10x towards the median choose the same.
+  std::vector<query::ObjectScore> close = s;
+  for (auto& c : close) c.cosine = 0.3f + (c.cosine - 0.3f) / 10;
+  EXPECT_EQ(query::choose_objects(close, 0.f, "mug", 0.25f, &boxes), (std::vector<int>{1, 2, 3}));
+  boxes[2].valid = false;  // too few Gaussians
+  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.25f, &boxes), (std::vector<int>{1, 3}));
   box(3, 1.5f, 2.5f);  // gap 0.5: apart
   EXPECT_FALSE(query::boxes_meet(boxes[1], boxes[3]));
 }
