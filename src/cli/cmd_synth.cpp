@@ -74,8 +74,8 @@ CommandRegistration reg(
        rate("--small-miss-rate", o->small_miss_rate,
             "Added to --miss-rate for an object under 0.5 % of the view's pixels (SAM misses small objects)");
        rate("--merge-rate", o->merge_rate,
-            "Probability that two touching objects share one mask in a view (realistic world: that a merge starts, "
-            "lasting while they touch)");
+            "Probability that two touching objects share one mask in a view (realistic world: that SAM confuses a "
+            "touching pair, which then shares one mask wherever the two touch)");
        rate("--split-rate", o->split_rate,
             "Probability that an object's part (its upper half) is a mask of its own, in every view (label "
             "style; SAM cuts parts off wholes and SAM2 tracks them)");

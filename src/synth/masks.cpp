@@ -21,21 +21,22 @@ NoiseLevel noise_level(const std::string& name, const std::string& world) {
     NoiseLevel n;
     if (name == "none") return n;
     const int l = name == "low" ? 0 : name == "medium" ? 1 : 2;
-    const double pick[][3] = {                      // low, medium, high
-                              {0.03, 0.05, 0.10},   // merge starts (touching pair, view)
-                              {0.005, 0.01, 0.02},  // identity swaps (touching pair, view)
-                              {0.04, 0.07, 0.10},   // confidence noise
-                              {0.01, 0.02, 0.03},   // small-object loss, added
-                              {0.10, 0.25, 0.40},   // parts
-                              {0.01, 0.02, 0.04},   // track lost
-                              {0.10, 0.12, 0.15},   // track lost when suddenly occluded, added
-                              {3, 3.5, 4},          // mean lost run
-                              {0.3, 0.5, 0.6},      // re-born under a new id
-                              {1, 2, 3},            // edge bias
-                              {2, 3, 4},            // surface pieces
-                              {0.15, 0.20, 0.30},   // view bias
-                              {0.35, 0.55, 0.75},   // confusion
-                              {0.10, 0.15, 0.20}};  // patch noise
+    const double pick[][3] = {// low, medium, high
+                              {0.05, 0.10,
+                               0.20},  // confused pairs (touching pair, drawn once): one mask while they touch
+                              {0.002, 0.005, 0.01},  // identity swaps (touching pair, view)
+                              {0.04, 0.07, 0.10},    // confidence noise
+                              {0.01, 0.02, 0.03},    // small-object loss, added
+                              {0.10, 0.25, 0.40},    // parts
+                              {0.01, 0.02, 0.04},    // track lost
+                              {0.10, 0.12, 0.15},    // track lost when suddenly occluded, added
+                              {3, 3.5, 4},           // mean lost run
+                              {0.3, 0.5, 0.6},       // re-born under a new id
+                              {1, 2, 3},             // edge bias
+                              {2, 3, 4},             // surface pieces
+                              {0.15, 0.20, 0.30},    // view bias
+                              {0.35, 0.55, 0.75},    // confusion
+                              {0.10, 0.15, 0.20}};   // patch noise
     n.jitter = 1;
     n.merge = pick[0][l], n.swap = pick[1][l], n.conf_noise = pick[2][l], n.small_miss = pick[3][l];
     n.split = pick[4][l], n.lose = pick[5][l], n.occluded_lose = pick[6][l], n.run_mean = pick[7][l];

@@ -54,8 +54,8 @@ struct NoiseLevel {
   double feature = 0;     // relative norm of the per-patch feature noise
   double small_miss = 0;  // added to miss for an object under kSmallObjectFraction of the view's pixels
   double split = 0;       // probability an object's part is a mask of its own (label style; per object, per scene)
-  // The realistic world only (tracks.h, language.h); merge and swap are then per touching pair and view, merge
-  // the start of a merge that lasts while the two touch, swap an identity switch that persists, miss 0.
+  // The realistic world only (tracks.h, language.h); merge is then per touching pair (drawn once: the pair shares
+  // one mask wherever the two touch), swap per touching pair and view (an identity switch that persists), miss 0.
   double lose = 0;           // a track lost in a view (starts a lost run)
   double occluded_lose = 0;  // added to lose when the object's visible area fell below 40 % of its last view's
   double run_mean = 1;       // mean length of a lost run (views, geometric)

@@ -117,13 +117,13 @@ void Sam2Simulator::next(int i, LabelMap& mask, std::vector<float>& conf, std::m
     shown[k] = 1;
     last_area_[k - 1] = area[k];
   }
-  // 2. Swaps of touching pairs (persist), merges that start while touching and end when the two part.
-  for (auto& [pair, on] : merged_)
-    if (!touching.count(pair)) on = false;
+  // 2. Swaps of touching pairs (persist); a pair SAM confuses (drawn once, when it first touches) is under one mask
+  // in every view where the two touch (SAM's group granularity), apart where they do not.
+  for (auto& [pair, on] : merged_) on = false;
   for (const auto& pair : touching) {
     if (rng_.chance(nl_.swap)) std::swap(id_[pair.first - 1], id_[pair.second - 1]);
-    bool& on = merged_[pair];
-    if (!on && rng_.chance(nl_.merge)) on = true;
+    if (!confusable_.count(pair)) confusable_[pair] = rng_.chance(nl_.merge);
+    merged_[pair] = confusable_[pair];
   }
   // 3. Object masks with edge bias (object-index space).
   LabelMap m(w, h);

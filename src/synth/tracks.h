@@ -5,7 +5,8 @@
 //     its old id or, re-detected, under a new one (a re-born track, named "<object> (track n)");
 //   - keeps one edge bias in every view (SAM over- or under-segments an object the same way from every side),
 //     with one pixel of per-view jitter;
-//   - merges with a touching object once and stays merged while the two touch;
+//   - shares one mask with a touching object that SAM confuses it with (a pair drawn once), in every view where the
+//     two touch (SAM's group granularity);
 //   - may swap identities with a touching object, and the swap persists (SAM2's identity switch);
 // and every background surface is cut into pieces (Voronoi cells of seed points on it, the same pieces in every
 // view) that SAM2 tracks as objects of their own. Parts (the upper half of a split object) are tracked as before.
@@ -55,15 +56,16 @@ class Sam2Simulator {
   NoiseLevel nl_;
   Rng rng_;
   int K_;
-  std::vector<int> id_;                         // [K] the id object k+1 shows under now
-  std::vector<int> lost_left_;                  // [K] views of the current lost run still to come
-  std::vector<char> reborn_;                    // [K] comes back under a new id
-  std::vector<int> bias_;                       // [K] signed edge bias (px): > 0 dilates
-  std::vector<size_t> last_area_;               // [K] pixels in the last view that showed it
-  std::vector<int> tracks_;                     // [K] re-born tracks so far
-  std::map<std::pair<int, int>, bool> merged_;  // touching pairs (a < b) under a's mask
-  std::vector<std::vector<Vec3>> seeds_;        // [S] world points of each surface's pieces
-  std::vector<int> piece_first_;                // [S] id of each surface's first piece
+  std::vector<int> id_;                             // [K] the id object k+1 shows under now
+  std::vector<int> lost_left_;                      // [K] views of the current lost run still to come
+  std::vector<char> reborn_;                        // [K] comes back under a new id
+  std::vector<int> bias_;                           // [K] signed edge bias (px): > 0 dilates
+  std::vector<size_t> last_area_;                   // [K] pixels in the last view that showed it
+  std::vector<int> tracks_;                         // [K] re-born tracks so far
+  std::map<std::pair<int, int>, bool> merged_;      // touching pairs (a < b) under a's mask in this view
+  std::map<std::pair<int, int>, bool> confusable_;  // pairs seen touching: whether SAM takes the two as one
+  std::vector<std::vector<Vec3>> seeds_;            // [S] world points of each surface's pieces
+  std::vector<int> piece_first_;                    // [S] id of each surface's first piece
   int next_id_;
   std::map<int, std::string> names_;
 };
