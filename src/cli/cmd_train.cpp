@@ -169,6 +169,12 @@ void add_hybrid_options(CLI::App& sub, TrainArgs& a) {
                  "or background (eq. 2 as written)")
       ->check(CLI::IsMember({"unobserved", "background"}))
       ->capture_default_str();
+  sub.add_option("--gaps", h.gaps,
+                 "What an unlabelled mask pixel tells Observation Fusion: background (eq. 2 as written), unobserved "
+                 "(nothing: where the masks cover everything, surfaces too, a gap is a lost track or an eroded edge) "
+                 "or auto (unobserved in views whose masks label >= 90 % of the pixels); see hybrid/config.h")
+      ->check(CLI::IsMember({"background", "unobserved", "auto"}))
+      ->capture_default_str();
   sub.add_option("--background-vote", h.background_vote,
                  "Weight of a background observation in Observation Fusion's evidence (eq. 4; 1 = the paper; see "
                  "hybrid/fusion.h)")

@@ -8,7 +8,7 @@ namespace hgs::hybrid {
 // clang-format off
 #define HGS_HYBRID_FIELDS(X) \
   X(use_of) X(use_scl) X(use_bro) X(lambda_rgb) X(lambda_app) X(lambda_sem) X(lambda_bro) X(lambda_dssim) \
-  X(tau1) X(unconfident_unobserved) X(occlusion_test) X(background_vote) X(temperature) X(fusion_eps) X(tau2) \
+  X(tau1) X(unconfident_unobserved) X(gaps) X(occlusion_test) X(background_vote) X(temperature) X(fusion_eps) X(tau2) \
   X(scl_background) X(fusion_every) X(bro_kernel) X(bro_scale_invariant) X(bro_image_norm) X(sem_geometry) \
   X(bro_eps) X(min_mask_pixels) X(lr_lang) X(lang_half) X(lr_view) X(lang_init_std) X(objects_per_step) \
   X(sparse_objects)
@@ -35,6 +35,8 @@ HybridConfig HybridConfig::from_json(const nlohmann::json& j) {
   if (!j.is_null() && !j.contains("scl_background")) c.scl_background = "off";
   if (c.scl_background != "auto" && c.scl_background != "on" && c.scl_background != "off")
     fail("hybrid configuration: scl_background must be auto, on or off (got '{}')", c.scl_background);
+  if (c.gaps != "background" && c.gaps != "unobserved" && c.gaps != "auto")
+    fail("hybrid configuration: gaps must be background, unobserved or auto (got '{}')", c.gaps);
   if (c.objects_per_step < 0) fail("hybrid configuration: objects_per_step must be >= 0 (got {})", c.objects_per_step);
   return c;
 }

@@ -54,9 +54,15 @@ HybridData load_hybrid_data(const Scene& scene, const std::vector<int>& idx, con
       mv.t[r] = v.t[r];
     }
     mv.labels = *scene.load_mask(idx[j]);
+    const std::vector<uint8_t> gaps_unobserved = gap_pixels(mv.labels, cfg.gaps);  // empty: gaps are background
     if (auto conf = scene.load_confidence(idx[j])) {
       apply_confidence(mv.labels, *conf, cfg.tau1);
       if (cfg.unconfident_unobserved) mv.observed = confident_pixels(*conf, cfg.tau1);
+    }
+    if (!gaps_unobserved.empty()) {
+      if (mv.observed.empty()) mv.observed.assign(mv.labels.v.size(), 1);
+      for (size_t p = 0; p < gaps_unobserved.size(); ++p)
+        if (gaps_unobserved[p]) mv.observed[p] = 0;
     }
     HybridView& hv = d.views[j];
     int D = 0, gh = 0, gw = 0;

@@ -20,6 +20,15 @@ std::vector<uint8_t> confident_pixels(const std::vector<float>& conf, float tau1
   return ok;
 }
 
+std::vector<uint8_t> gap_pixels(const LabelMap& labels, const std::string& gaps) {
+  if (gaps == "background" || labels.v.empty()) return {};
+  std::vector<uint8_t> gap(labels.v.size());
+  size_t unlabelled = 0;
+  for (size_t i = 0; i < gap.size(); ++i) unlabelled += gap[i] = labels.v[i] == 0;
+  if (gaps == "auto" && double(gap.size() - unlabelled) < kGapsCoverage * double(gap.size())) return {};
+  return gap;
+}
+
 namespace {
 
 // Eq. 3 for one centre in one view: camera-space depth z and, when z > 0, z >= near and the projection lies in

@@ -35,6 +35,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <string>
 #include <type_traits>
 #include <vector>
 
@@ -63,6 +64,11 @@ constexpr double kOcclusionTolerance = 0.05;
 void apply_confidence(LabelMap& labels, const std::vector<float>& conf, float tau1);
 // observed[p] = conf[p] >= tau1 ([H, W]; empty when conf is empty).
 std::vector<uint8_t> confident_pixels(const std::vector<float>& conf, float tau1);
+// The unlabelled pixels (label 0) that HybridConfig::gaps makes no observation: [H, W] 1 at such a pixel, or empty
+// when the view's gaps stay background evidence ("background"; "auto" in a view whose masks label less than
+// kGapsCoverage of its pixels).
+constexpr double kGapsCoverage = 0.9;
+std::vector<uint8_t> gap_pixels(const LabelMap& labels, const std::string& gaps);
 
 struct ObservationTable {
   int n = 0, num_views = 0;

@@ -44,6 +44,17 @@ TEST(ApplyConfidence, BelowTau1BecomesBackgroundAndTau1ItselfKeepsTheLabel) {
   EXPECT_EQ(confident_pixels(conf, tau1), (std::vector<uint8_t>{0, 0, 1, 0, 1, 0}));
 }
 
+TEST(GapPixels, UnlabelledPixelsAreNoObservationWhereTheMasksCoverTheView) {
+  // 10 pixels, one unlabelled (90 % labelled) and two unlabelled (80 %).
+  const LabelMap one = label_map(5, 2, {1, 1, 2, 2, 3, 3, 0, 4, 4, 4});
+  const LabelMap two = label_map(5, 2, {1, 0, 2, 2, 3, 3, 0, 4, 4, 4});
+  EXPECT_TRUE(gap_pixels(one, "background").empty());  // eq. 2 as written: every gap is background evidence
+  EXPECT_EQ(gap_pixels(one, "unobserved"), (std::vector<uint8_t>{0, 0, 0, 0, 0, 0, 1, 0, 0, 0}));
+  EXPECT_EQ(gap_pixels(one, "auto"), gap_pixels(one, "unobserved"));  // 90 % labelled: at the threshold
+  EXPECT_TRUE(gap_pixels(two, "auto").empty());                       // 80 %: masks of objects only
+  EXPECT_EQ(gap_pixels(two, "unobserved"), (std::vector<uint8_t>{0, 1, 0, 0, 0, 0, 1, 0, 0, 0}));
+}
+
 TEST(ApplyConfidence, NoConfidenceMapLeavesLabelsAndExtremeThresholds) {
   LabelMap m = label_map(2, 2, {4, 0, 2, 1});  // [2, 2]
   apply_confidence(m, {}, 0.9f);               // no confidence file: no filtering
