@@ -26,9 +26,9 @@ NoiseLevel noise_level(const std::string& name, const std::string& world) {
                                0.20},  // confused pairs (touching pair, drawn once): one mask while they touch
                               {0.002, 0.005, 0.01},  // identity swaps (touching pair, view)
                               {0.04, 0.07, 0.10},    // confidence noise
-                              {0.01, 0.02, 0.03},    // small-object loss, added
+                              {0.02, 0.04, 0.06},    // small-object loss, added
                               {0.10, 0.25, 0.40},    // parts
-                              {0.01, 0.02, 0.04},    // track lost
+                              {0.002, 0.005, 0.01},  // track lost
                               {0.10, 0.12, 0.15},    // track lost when suddenly occluded, added
                               {3, 3.5, 4},           // mean lost run
                               {0.3, 0.5, 0.6},       // re-born under a new id
