@@ -20,7 +20,7 @@ CommandRegistration reg(
        sub.add_option("--world", o->world,
                       "realistic (CLIP's language statistics, SAM2's failures over the capture order; query sets in "
                       "gt/queries.json) or simple (near-oracle language, mask errors drawn afresh in every view: the "
-                      "world before 0.10); docs/formats.md")
+                      "default world before the realistic one); docs/formats.md")
            ->check(CLI::IsMember({"realistic", "simple"}))
            ->capture_default_str();
        sub.add_option("--preset", o->preset, "Scene layout: tabletop or room")

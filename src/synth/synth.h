@@ -14,8 +14,8 @@ namespace hgs::synth {
 
 struct SynthOptions {
   // realistic (the default): CLIP's language statistics and SAM2's failures over the capture order (language.h,
-  // tracks.h); simple: near-oracle language features and mask errors drawn afresh in every view (the world before
-  // 0.10; its scenes are byte for byte those of then).
+  // tracks.h); simple: near-oracle language features and mask errors drawn afresh in every view (the default
+  // world before the realistic one; its scenes are byte for byte those of then).
   std::string world = "realistic";
   std::string preset = "tabletop";
   uint64_t seed = 1;
