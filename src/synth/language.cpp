@@ -80,14 +80,6 @@ const std::map<std::string, Entry>& lexicon() {
 }
 // clang-format on
 
-// Colour families: a colour near another shares 0.6 of its vector with it.
-std::string colour_family(const std::string& a) {
-  static const std::map<std::string, std::string> f = {{"lime", "green"},    {"navy", "blue"},    {"teal", "cyan"},
-                                                       {"golden", "yellow"}, {"magenta", "pink"}, {"silver", "grey"}};
-  auto it = f.find(a);
-  return it == f.end() ? "" : it->second;
-}
-
 std::vector<double> attribute_vector(const std::string& a, int dim) {
   const std::string fam = colour_family(a);
   if (fam.empty()) return word(a, dim);
@@ -114,6 +106,13 @@ std::vector<double> content(const Lexeme& x, int dim) {
 }
 
 }  // namespace
+
+std::string colour_family(const std::string& a) {
+  static const std::map<std::string, std::string> f = {{"lime", "green"},    {"navy", "blue"},    {"teal", "cyan"},
+                                                       {"golden", "yellow"}, {"magenta", "pink"}, {"silver", "grey"}};
+  auto it = f.find(a);
+  return it == f.end() ? "" : it->second;
+}
 
 Lexeme lexeme_of(const std::string& name) {
   auto it = lexicon().find(name);

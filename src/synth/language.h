@@ -35,6 +35,9 @@ bool in_lexicon(const std::string& name);
 std::string synonym_of(const std::string& name);
 // The attribute phrase a user types for a thing by its colour or material ("the red one"); empty when none.
 std::string attribute_phrase(const Lexeme& x);
+// The family of a colour near another ("green" for "lime"; its vector shares 0.6 with the family's); empty for
+// the others.
+std::string colour_family(const std::string& attribute);
 
 // Simulated CLIP text embedding [dim] of a phrase made of `x` (unit norm); `extra_word` adds a word of its own
 // (a synonym's own noun, "one" of an attribute phrase) with weight 0.45 beside the content.

@@ -17,14 +17,11 @@ nlohmann::json float_array(const std::vector<float>& v) {
   return a;
 }
 
-// The colour and its family's members ("green" for "lime", "lime" for "green"): what "the <attribute> one" could
-// also mean.
+// Whether "the <a> one" could also mean a thing of colour b: the same colour or one family ("lime", "green").
 bool colours_collide(const std::string& a, const std::string& b) {
-  static const std::map<std::string, std::string> fam = {{"lime", "green"},    {"navy", "blue"},    {"teal", "cyan"},
-                                                         {"golden", "yellow"}, {"magenta", "pink"}, {"silver", "grey"}};
-  auto family = [&](const std::string& c) {
-    auto it = fam.find(c);
-    return it == fam.end() ? c : it->second;
+  auto family = [](const std::string& c) {
+    const std::string f = colour_family(c);
+    return f.empty() ? c : f;
   };
   return !a.empty() && !b.empty() && family(a) == family(b);
 }
