@@ -33,6 +33,8 @@ HybridConfig HybridConfig::from_json(const nlohmann::json& j) {
   if (!j.is_null() && !j.contains("background_vote")) c.background_vote = 1.0f;
   // Likewise one written before scl_background: eq. 10 without the background.
   if (!j.is_null() && !j.contains("scl_background")) c.scl_background = "off";
+  // And one written before gaps: every unlabelled pixel was background evidence.
+  if (!j.is_null() && !j.contains("gaps")) c.gaps = "background";
   if (c.scl_background != "auto" && c.scl_background != "on" && c.scl_background != "off")
     fail("hybrid configuration: scl_background must be auto, on or off (got '{}')", c.scl_background);
   if (c.gaps != "background" && c.gaps != "unobserved" && c.gaps != "auto")

@@ -24,9 +24,10 @@ struct HybridConfig {
   // evidence, eq. 2's M_{u,0} = 1 - OR_k M_{u,k} as written. "unobserved": nothing, as an unconfident pixel (where
   // SAM + SAM2 segment everything, surfaces included, an unlabelled pixel is a gap: a track lost for a run of
   // views, an eroded edge; as background it outvotes the object's own views, docs/results.md section 10).
-  // "auto": unobserved in a view whose masks label at least 90 % of its pixels, background in the others (masks of
-  // objects only). The masks of eqs. 6 and 14 keep M_{u,0} either way.
-  std::string gaps = "background";
+  // "auto" (the default, chosen on the development seeds, docs/results.md section 10): unobserved in a view whose
+  // masks label at least 90 % of its pixels, background in the others (masks of objects only, as the paper's).
+  // The masks of eqs. 6 and 14 keep M_{u,0} either way.
+  std::string gaps = "auto";
   // Observation Fusion counts a view only where the Gaussian's centre is visible (not behind the surface the
   // current model renders there; fusion.h). On by default together with background_vote 0.5: alone it moves
   // some objects' Gaussians towards their label and others away, background_vote alone lets Gaussians hidden
