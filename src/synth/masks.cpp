@@ -21,9 +21,8 @@ NoiseLevel noise_level(const std::string& name, const std::string& world) {
     NoiseLevel n;
     if (name == "none") return n;
     const int l = name == "low" ? 0 : name == "medium" ? 1 : 2;
-    const double pick[][3] = {// low, medium, high
-                              {0.05, 0.10,
-                               0.20},  // confused pairs (touching pair, drawn once): one mask while they touch
+    const double pick[][3] = {                       // low, medium, high
+                              {0.05, 0.10, 0.20},    // confused pairs (per touching pair, drawn once)
                               {0.002, 0.005, 0.01},  // identity swaps (touching pair, view)
                               {0.04, 0.07, 0.10},    // confidence noise
                               {0.02, 0.04, 0.06},    // small-object loss, added
