@@ -48,12 +48,6 @@ std::vector<float> noisy(const std::vector<float>& base, double rel, Rng& rng) {
   return v;
 }
 
-json float_array(const std::vector<float>& v) {
-  json a = json::array();
-  for (float x : v) a.push_back(std::round(double(x) * 1e6) / 1e6);
-  return a;
-}
-
 // --mask-ids per-view: the ids present in `mask` get a random permutation of 1..m; returns id -> true object.
 json shuffle_ids(LabelMap& mask, uint64_t seed) {
   std::vector<int> present;
@@ -221,6 +215,15 @@ void write_sam_view(Generation& g, const RenderedView& rv, uint64_t seed) {
   g.mask_ids[stem] = ids;
 }
 
+// A label-style view's masks/<stem>.png and, when there is confidence noise, its masks/<stem>.conf.npy (float16).
+void write_label_mask(const Generation& g, const std::string& stem, const LabelMap& mask,
+                      const std::vector<float>& conf) {
+  save_label_png(g.tmp / "masks" / (stem + ".png"), mask);
+  if (!conf.empty())
+    write_npy(g.tmp / "masks" / (stem + ".conf.npy"),
+              make_npy_f16({size_t(g.opt.height), size_t(g.opt.width)}, conf.data()));
+}
+
 // --mask-style label, view i: the simulated SAM2 masks/<stem>.png and its confidence (per-view ids: shuffled,
 // the truth of every id in g.mask_ids).
 void write_label_view(Generation& g, int i, const RenderedView& rv) {
@@ -257,10 +260,7 @@ void write_label_view(Generation& g, int i, const RenderedView& rv) {
       else if (e > K) truth = {{"object", 0}, {"surface", g.concepts.names[g.concepts.surfaces[e - K - 1]]}};
     }
   }
-  save_label_png(g.tmp / "masks" / (stem + ".png"), mask);
-  if (!conf.empty())
-    write_npy(g.tmp / "masks" / (stem + ".conf.npy"),
-              make_npy_f16({size_t(opt.height), size_t(opt.width)}, conf.data()));
+  write_label_mask(g, stem, mask, conf);
 }
 
 // Realistic world, label style, view i (in capture order): the SAM2-like tracks' mask (tracks.h), its confidence
@@ -286,10 +286,7 @@ void write_tracked_view(Generation& g, int i, const RenderedView& rv) {
     for (auto& [id, t] : truth) ids[std::to_string(id)] = describe(t);
   }
   g.mask_ids[stem] = ids;
-  save_label_png(g.tmp / "masks" / (stem + ".png"), mask);
-  if (!conf.empty())
-    write_npy(g.tmp / "masks" / (stem + ".conf.npy"),
-              make_npy_f16({size_t(g.opt.height), size_t(g.opt.width)}, conf.data()));
+  write_label_mask(g, stem, mask, conf);
 }
 
 // Simulated SAM2 masks and confidences (or SAM-style overlapping masks with --mask-style sam) and CLIP-like

@@ -70,6 +70,56 @@ Eigen::Vector3d pixel_world_point(const RenderedView& v, const Intrinsics& K, in
 
 using masks::chessboard_distance;  // masks/per_view.h
 
+std::set<std::pair<int, int>> touching_pairs(const LabelMap& m, int max_label) {
+  std::set<std::pair<int, int>> touching;
+  for (int y = 0; y < m.height; ++y)
+    for (int x = 0; x < m.width; ++x) {
+      const int a = m.at(x, y);
+      if (!a || a > max_label) continue;
+      for (auto [dx, dy] : {std::pair{1, 0}, std::pair{0, 1}}) {
+        if (x + dx >= m.width || y + dy >= m.height) continue;
+        const int b = m.at(x + dx, y + dy);
+        if (b && b <= max_label && b != a) touching.insert({std::min(a, b), std::max(a, b)});
+      }
+    }
+  return touching;
+}
+
+void shift_edge(LabelMap& m, int k, int r, bool keep_half) {
+  if (r == 0) return;
+  const bool erode = r < 0;
+  const size_t n = m.v.size();
+  std::vector<uint8_t> src(n);
+  for (size_t p = 0; p < n; ++p) src[p] = erode ? (m.v[p] != k) : (m.v[p] == k);
+  const std::vector<int> d = chessboard_distance(src, m.width, m.height);
+  if (erode && keep_half) {  // the largest radius that removes at most half of the object
+    std::vector<size_t> depth_count(size_t(-r) + 2, 0);
+    size_t total = 0;
+    for (size_t p = 0; p < n; ++p)
+      if (m.v[p] == k) ++total, ++depth_count[size_t(std::min(d[p], -r + 1))];
+    size_t removed = 0;
+    int radius = 0;
+    for (int q = 1; q <= -r && 2 * (removed + depth_count[size_t(q)]) <= total; ++q)
+      removed += depth_count[size_t(q)], radius = q;
+    r = -radius;
+  }
+  for (size_t p = 0; p < n; ++p) {
+    if (erode && m.v[p] == k && d[p] <= -r) m.v[p] = 0;
+    if (!erode && m.v[p] == 0 && d[p] <= r) m.v[p] = static_cast<uint16_t>(k);
+  }
+}
+
+std::vector<float> edge_confidence(const LabelMap& mask, double noise, Rng& rng) {
+  if (noise <= 0) return {};
+  const std::vector<int> d = chessboard_distance(masks::label_edges(mask), mask.width, mask.height);
+  std::vector<float> conf(mask.v.size());
+  for (size_t i = 0; i < conf.size(); ++i) {
+    const double c = 0.45 + 0.55 * std::min(1.0, d[i] / 4.0) + noise * rng.normal();
+    conf[i] = static_cast<float>(std::clamp(c, 0.0, 1.0));
+  }
+  return conf;
+}
+
 std::vector<SamMask> simulate_sam_masks(const RenderedView& v, const Intrinsics& K, const World& world,
                                         const std::vector<char>& split, const NoiseLevel& nl, uint64_t seed) {
   const int w = v.rgb.width, h = v.rgb.height, nobj = int(world.objects.size());
@@ -137,7 +187,6 @@ std::vector<SamMask> simulate_sam_masks(const RenderedView& v, const Intrinsics&
 
 void simulate_masks(const LabelMap& gt, const NoiseLevel& nl, int num_objects, uint64_t seed, LabelMap& mask,
                     std::vector<float>& conf) {
-  const int w = gt.width, h = gt.height;
   const size_t n = gt.v.size();
   mask = gt;
   Rng rng(seed);
@@ -167,30 +216,11 @@ void simulate_masks(const LabelMap& gt, const NoiseLevel& nl, int num_objects, u
     int r = rng.integer(0, nl.jitter);
     bool erode = rng.chance(0.5);
     if (r == 0) continue;
-    std::vector<uint8_t> src(n);
-    for (size_t i = 0; i < n; ++i) src[i] = erode ? (mask.v[i] != k) : (mask.v[i] == k);
-    std::vector<int> d = chessboard_distance(src, w, h);
-    for (size_t i = 0; i < n; ++i) {
-      if (erode && mask.v[i] == k && d[i] <= r) mask.v[i] = 0;
-      if (!erode && mask.v[i] == 0 && d[i] <= r) mask.v[i] = static_cast<uint16_t>(k);
-    }
+    shift_edge(mask, k, erode ? -r : r, false);
   }
   // 4. merges of touching objects (4-neighbours with two different object labels)
   if (nl.merge > 0) {
-    std::set<std::pair<int, int>> touching;
-    for (int y = 0; y < h; ++y)
-      for (int x = 0; x < w; ++x) {
-        int a = mask.at(x, y);
-        if (!a) continue;
-        if (x + 1 < w) {
-          int b = mask.at(x + 1, y);
-          if (b && b != a) touching.insert({std::min(a, b), std::max(a, b)});
-        }
-        if (y + 1 < h) {
-          int b = mask.at(x, y + 1);
-          if (b && b != a) touching.insert({std::min(a, b), std::max(a, b)});
-        }
-      }
+    const std::set<std::pair<int, int>> touching = touching_pairs(mask, 0xFFFF);
     for (auto [a, b] : touching) {
       if (!rng.chance(nl.merge)) continue;
       for (auto& l : mask.v)
@@ -198,14 +228,7 @@ void simulate_masks(const LabelMap& gt, const NoiseLevel& nl, int num_objects, u
     }
   }
   // 5. confidence
-  conf.clear();
-  if (nl.conf_noise <= 0) return;
-  std::vector<int> d = chessboard_distance(masks::label_edges(mask), w, h);
-  conf.resize(n);
-  for (size_t i = 0; i < n; ++i) {
-    double c = 0.45 + 0.55 * std::min(1.0, d[i] / 4.0) + nl.conf_noise * rng.normal();
-    conf[i] = static_cast<float>(std::clamp(c, 0.0, 1.0));
-  }
+  conf = edge_confidence(mask, nl.conf_noise, rng);
 }
 
 }  // namespace hgs::synth

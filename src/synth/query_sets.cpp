@@ -9,13 +9,13 @@
 #include "synth/language.h"
 
 namespace hgs::synth {
-namespace {
-
 nlohmann::json float_array(const std::vector<float>& v) {
   nlohmann::json a = nlohmann::json::array();
   for (float x : v) a.push_back(std::round(double(x) * 1e6) / 1e6);
   return a;
 }
+
+namespace {
 
 // Whether "the <a> one" could also mean a thing of colour b: the same colour or one family ("lime", "green").
 bool colours_collide(const std::string& a, const std::string& b) {

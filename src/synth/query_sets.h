@@ -22,6 +22,9 @@ void realistic_text(const World& world, const std::vector<std::string>& surfaces
                     const std::vector<std::string>& distractors, int dim, nlohmann::json& text,
                     nlohmann::json& queries);
 
+// A text embedding as text_embeddings.json of `hgs synth` holds it: a JSON array, each float to 6 decimals.
+nlohmann::json float_array(const std::vector<float>& v);
+
 // The query set names, in order.
 inline const std::vector<std::string>& query_set_names() {
   static const std::vector<std::string> n = {"names", "synonyms", "hypernyms", "attributes"};

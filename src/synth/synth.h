@@ -4,6 +4,7 @@
 #pragma once
 #include <cstdint>
 #include <filesystem>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -95,6 +96,16 @@ RenderedView render_view(const World& w, const Intrinsics& K, const Eigen::Matri
 
 // The world point seen at the centre of pixel (x, y) of a rendered view (its depth must be > 0).
 Eigen::Vector3d pixel_world_point(const RenderedView& v, const Intrinsics& K, int x, int y);
+
+// Mask pieces both worlds' simulators share (masks.cpp):
+// the pairs (a < b) of labels in 1..max_label that are 4-neighbours somewhere in `m`;
+std::set<std::pair<int, int>> touching_pairs(const LabelMap& m, int max_label);
+// label k's edge moved by r pixels (square element, chessboard distance): r > 0 grows it into unlabelled pixels,
+// r < 0 shrinks it, by at most the radius that removes half of it with keep_half;
+void shift_edge(LabelMap& m, int k, int r, bool keep_half);
+// a simulated confidence [H, W]: 0.45 at label boundaries rising to 1 at 4 px, plus Gaussian noise of std
+// `noise`, clamped to [0, 1]; empty when noise <= 0.
+std::vector<float> edge_confidence(const LabelMap& mask, double noise, Rng& rng);
 
 // Simulated SAM2 label map for one view and its per-pixel confidence (empty when noise is none).
 void simulate_masks(const LabelMap& gt, const NoiseLevel& nl, int num_objects, uint64_t seed, LabelMap& mask,

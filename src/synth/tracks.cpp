@@ -12,8 +12,6 @@
 #include <cmath>
 #include <set>
 
-#include "masks/per_view.h"
-
 namespace hgs::synth {
 
 Sam2Simulator::Sam2Simulator(const World& world, const Intrinsics& cam, const std::vector<RenderedView>& views,
@@ -82,17 +80,7 @@ void Sam2Simulator::next(int i, LabelMap& mask, std::vector<float>& conf, std::m
   for (uint16_t l : gt.v)
     if (l && l <= K_) area[l]++;
   // Touching pairs in the truth (4-neighbours with two different objects).
-  std::set<std::pair<int, int>> touching;
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      const int a = gt.at(x, y);
-      if (!a || a > K_) continue;
-      for (auto [dx, dy] : {std::pair{1, 0}, std::pair{0, 1}}) {
-        if (x + dx >= w || y + dy >= h) continue;
-        const int b = gt.at(x + dx, y + dy);
-        if (b && b <= K_ && b != a) touching.insert({std::min(a, b), std::max(a, b)});
-      }
-    }
+  const std::set<std::pair<int, int>> touching = touching_pairs(gt, K_);
   // 1. Tracks: lost runs (in capture order, visible or not), re-births, losses.
   std::vector<char> shown(K_ + 1, 0);
   const double small = kSmallObjectFraction * double(n);
@@ -133,26 +121,7 @@ void Sam2Simulator::next(int i, LabelMap& mask, std::vector<float>& conf, std::m
     if (!shown[k]) continue;
     int r = bias_[k - 1];
     if (nl_.jitter > 0 && rng_.chance(0.3)) r += rng_.chance(0.5) ? 1 : -1;
-    if (r == 0) continue;
-    const bool erode = r < 0;
-    std::vector<uint8_t> src(n);
-    for (size_t p = 0; p < n; ++p) src[p] = erode ? (m.v[p] != k) : (m.v[p] == k);
-    const std::vector<int> d = masks::chessboard_distance(src, w, h);
-    if (erode) {  // SAM's bias thins an object's edge, never the whole object: keep at least half of it
-      std::vector<size_t> depth_count(size_t(-r) + 2, 0);
-      size_t total = 0;
-      for (size_t p = 0; p < n; ++p)
-        if (m.v[p] == k) ++total, ++depth_count[size_t(std::min(d[p], -r + 1))];
-      size_t removed = 0;
-      int radius = 0;
-      for (int q = 1; q <= -r && 2 * (removed + depth_count[size_t(q)]) <= total; ++q)
-        removed += depth_count[size_t(q)], radius = q;
-      r = -radius;
-    }
-    for (size_t p = 0; p < n; ++p) {
-      if (erode && m.v[p] == k && d[p] <= -r) m.v[p] = 0;
-      if (!erode && m.v[p] == 0 && d[p] <= r) m.v[p] = uint16_t(k);
-    }
+    shift_edge(m, k, r, true);  // SAM's bias thins an object's edge, never the whole object
   }
   for (const auto& [pair, on] : merged_)
     if (on && shown[pair.first] && shown[pair.second])
@@ -190,14 +159,7 @@ void Sam2Simulator::next(int i, LabelMap& mask, std::vector<float>& conf, std::m
     if (!truth.count(id)) truth[id] = {0, "surface", surface_names_[j], best + 1};
   }
   // 5. Confidence.
-  conf.clear();
-  if (nl_.conf_noise <= 0) return;
-  const std::vector<int> d = masks::chessboard_distance(masks::label_edges(mask), w, h);
-  conf.resize(n);
-  for (size_t p = 0; p < n; ++p) {
-    const double c = 0.45 + 0.55 * std::min(1.0, d[p] / 4.0) + nl_.conf_noise * rng_.normal();
-    conf[p] = static_cast<float>(std::clamp(c, 0.0, 1.0));
-  }
+  conf = edge_confidence(mask, nl_.conf_noise, rng_);
 }
 
 }  // namespace hgs::synth

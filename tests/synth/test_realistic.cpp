@@ -98,7 +98,9 @@ TEST(RealisticLanguage, CategoriesMakeAHierarchy) {
   const synth::Lexeme mug = synth::lexeme_of("red mug");
   const auto cup = synth::text_embedding({"", mug.noun, mug.category, mug.group}, D, synth::synonym_of("red mug"));
   for (const auto& n : kPool)
-    if (n != "red mug") EXPECT_GT(cosine(cup, text_of("red mug", D)), cosine(cup, text_of(n, D))) << n;
+    if (n != "red mug") {
+      EXPECT_GT(cosine(cup, text_of("red mug", D)), cosine(cup, text_of(n, D))) << n;
+    }
   // A hypernym and an attribute phrase are nearer their thing's image than an unrelated thing's.
   const auto kitchenware = synth::text_embedding({"", "", "", mug.group}, D);
   EXPECT_GT(cosine(image_of("red mug", D), kitchenware), cosine(image_of("golden ring", D), kitchenware) + 0.02);
