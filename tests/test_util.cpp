@@ -7,6 +7,8 @@
 #include <random>
 #include <sstream>
 
+#include "core/error.h"
+
 namespace hgs::test {
 namespace fs = std::filesystem;
 
@@ -37,6 +39,15 @@ RunResult run_hgs(const std::string& args) {
 fs::path shared_data(const std::string& name) {
   fs::path p = fs::path(HGS_SHARED_DIR) / "data" / name;
   return fs::is_directory(p) ? p : fs::path();
+}
+
+std::string error_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
 }
 
 }  // namespace hgs::test

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <functional>
 #include <string>
 
 namespace hgs::test {
@@ -23,6 +24,9 @@ struct RunResult {
 };
 // Runs the built `hgs` binary with `args` (a shell-quoted string).
 RunResult run_hgs(const std::string& args);
+
+// The message of the hgs::Error that `f` throws, or "" when it throws none (another exception propagates).
+std::string error_of(const std::function<void()>& f);
 
 // Path of ../shared/data/<name>, or empty when absent.
 std::filesystem::path shared_data(const std::string& name);

@@ -106,17 +106,8 @@ void write(const fs::path& p, const std::string& s) {
   atomic_write_text(p, s);
 }
 
-std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "(no error)";
-}
-
 void expect_error(const std::function<void()>& f, const std::string& file, const std::string& what) {
-  const std::string msg = error_of(f);
+  const std::string msg = hgs::test::error_of(f);
   EXPECT_NE(msg.find(file), std::string::npos) << msg;
   EXPECT_NE(msg.find(what), std::string::npos) << msg;
   EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;

@@ -75,15 +75,6 @@ struct Fixture {
   }
 };
 
-std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
-
 void expect_no_leftovers(const fs::path& scene) {
   for (auto& e : fs::directory_iterator(scene))
     EXPECT_NE(e.path().filename().string()[0], '.') << "left behind: " << e.path();
@@ -204,7 +195,7 @@ TEST(Import, BadInputNamesTheFileAndLeavesNothing) {
     Rle r = rle_encode(b, 3, 3);
     json j = json::array({{{"segmentation", {{"size", {3, 3}}, {"counts", rle_counts_to_string(r.counts)}}}}});
     atomic_write_text(f.t / "bad1" / "a.json", j.dump());
-    std::string e = error_of([&] { import_masks(f.opt("sam-json", f.t / "bad1")); });
+    std::string e = test::error_of([&] { import_masks(f.opt("sam-json", f.t / "bad1")); });
     EXPECT_NE(e.find("a.json: mask 0: RLE size 3x3 (h x w) does not match the image's 4x6"), std::string::npos) << e;
   }
   // 2. Counts that overrun.
@@ -212,28 +203,28 @@ TEST(Import, BadInputNamesTheFileAndLeavesNothing) {
     json j = json::array({sam_entry(box(0, 0, 1, 1), 0.9, 0.9, true)});
     j[0]["segmentation"]["counts"] = json::array({10, 20});
     atomic_write_text(f.t / "bad2" / "a.json", j.dump());
-    std::string e = error_of([&] { import_masks(f.opt("sam-json", f.t / "bad2")); });
+    std::string e = test::error_of([&] { import_masks(f.opt("sam-json", f.t / "bad2")); });
     EXPECT_NE(e.find("a.json: mask 0: RLE counts overrun"), std::string::npos) << e;
   }
   // 3. Masks for an image that is not in the COLMAP model (a good file beside it must not be imported).
   {
     f.write_sam_json(f.t / "bad3");
     atomic_write_text(f.t / "bad3" / "zz.json", "[]");
-    std::string e = error_of([&] { import_masks(f.opt("sam-json", f.t / "bad3")); });
+    std::string e = test::error_of([&] { import_masks(f.opt("sam-json", f.t / "bad3")); });
     EXPECT_NE(e.find("zz.json: masks for an image that is not in the COLMAP model"), std::string::npos) << e;
   }
   // 4. A LangSplat index beyond the feature list.
   {
     test::write_f32(f.t / "bad4" / "a_s.npy", {4, 2, 3}, std::vector<float>(24, 2.f));
     test::write_f32(f.t / "bad4" / "a_f.npy", {2, 3}, std::vector<float>(6, 0.f));
-    std::string e = error_of([&] { import_masks(f.opt("langsplat", f.t / "bad4")); });
+    std::string e = test::error_of([&] { import_masks(f.opt("langsplat", f.t / "bad4")); });
     EXPECT_NE(e.find("a_s.npy: index 2 at pixel (0, 0) of level 0 is beyond the feature list"), std::string::npos) << e;
   }
   // 5. A palette PNG without a palette.
   {
     auto png = encode_palette_png(LabelMap(W, H, 1), {});
     atomic_write_bytes(f.t / "bad5" / "sub" / "c.png", png.data(), png.size());
-    std::string e = error_of([&] { import_masks(f.opt("sam2-png", f.t / "bad5")); });
+    std::string e = test::error_of([&] { import_masks(f.opt("sam2-png", f.t / "bad5")); });
     EXPECT_NE(e.find("c.png: palette PNG without a palette"), std::string::npos) << e;
   }
   EXPECT_FALSE(fs::exists(f.scene / "masks"));
@@ -243,11 +234,11 @@ TEST(Import, BadInputNamesTheFileAndLeavesNothing) {
   {
     atomic_write_text(f.t / "bad6" / "a" / "metadata.csv", "id,area,predicted_iou,stability_score\n0,1,0.9,0.9\n");
     save_png(f.t / "bad6" / "a" / "0.png", Image(3, 3, 1, 1.f));
-    std::string e = error_of([&] { import_masks(f.opt("sam-png", f.t / "bad6")); });
+    std::string e = test::error_of([&] { import_masks(f.opt("sam-png", f.t / "bad6")); });
     EXPECT_NE(e.find("0.png: mask is 3x3 but the image is 6x4"), std::string::npos) << e;
     ImportOptions o = f.opt("sam-json", f.t / "bad1");
     o.level_given = true;
-    EXPECT_NE(error_of([&] { import_masks(o); }).find("--level"), std::string::npos);
+    EXPECT_NE(test::error_of([&] { import_masks(o); }).find("--level"), std::string::npos);
   }
 }
 
@@ -256,12 +247,13 @@ TEST(Import, ExistingMasksNeedForceAndSurviveAFailure) {
   f.write_sam_json(f.t / "sam");
   import_masks(f.opt("sam-json", f.t / "sam"));
   const auto before = read_file_bytes(f.scene / "masks" / "a.png");
-  EXPECT_NE(error_of([&] { import_masks(f.opt("sam-json", f.t / "sam")); }).find("pass --force"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { import_masks(f.opt("sam-json", f.t / "sam")); }).find("pass --force"),
+            std::string::npos);
   // A failing forced import keeps the old masks.
   atomic_write_text(f.t / "sam" / "sub" / "c.json", "[{\"segmentation\": {\"size\": [4, 6], \"counts\": \"T\"}}]");
   ImportOptions o = f.opt("sam-json", f.t / "sam");
   o.force = true;
-  EXPECT_NE(error_of([&] { import_masks(o); }).find("c.json: mask 0"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { import_masks(o); }).find("c.json: mask 0"), std::string::npos);
   EXPECT_EQ(read_file_bytes(f.scene / "masks" / "a.png"), before);
   EXPECT_TRUE(fs::exists(f.scene / "masks" / "sub" / "c.png"));
   expect_no_leftovers(f.scene);

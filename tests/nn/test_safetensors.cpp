@@ -23,15 +23,6 @@ void write_raw(const std::filesystem::path& p, const std::string& header, size_t
   f << zeros;
 }
 
-std::string error_of(const std::function<void()>& fn) {
-  try {
-    fn();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
-
 }  // namespace
 
 TEST(SafeTensors, RoundTripAllDtypes) {
@@ -66,13 +57,14 @@ TEST(SafeTensors, MalformedFilesGiveClearErrors) {
   auto p = t / "bad.safetensors";
   auto load = [&] { SafeTensors st(p); };
 
-  EXPECT_NE(error_of([&] { SafeTensors st(t / "absent.safetensors"); }).find("file not found"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { SafeTensors st(t / "absent.safetensors"); }).find("file not found"),
+            std::string::npos);
 
   {
     std::ofstream f(p, std::ios::binary);
     f << "abc";
   }
-  EXPECT_NE(error_of(load).find("truncated"), std::string::npos);
+  EXPECT_NE(test::error_of(load).find("truncated"), std::string::npos);
 
   write_raw(p, "{\"a\": {\"dtype\": \"F32\", \"shape\": [2], \"data_offsets\": [0, 8]}}", 8);
   {
@@ -80,36 +72,36 @@ TEST(SafeTensors, MalformedFilesGiveClearErrors) {
     uint64_t n = 1u << 30;
     f.write(reinterpret_cast<char*>(&n), 8);
   }
-  EXPECT_NE(error_of(load).find("header length"), std::string::npos);
+  EXPECT_NE(test::error_of(load).find("header length"), std::string::npos);
 
   write_raw(p, "{not json", 0);
-  EXPECT_NE(error_of(load).find("not valid JSON"), std::string::npos);
+  EXPECT_NE(test::error_of(load).find("not valid JSON"), std::string::npos);
 
   write_raw(p, "{\"a\": {\"dtype\": \"F32\", \"shape\": [4], \"data_offsets\": [0, 16]}}", 8);  // truncated data
-  std::string e = error_of(load);
+  std::string e = test::error_of(load);
   EXPECT_NE(e.find("'a'"), std::string::npos) << e;
   EXPECT_NE(e.find("truncated"), std::string::npos) << e;
   EXPECT_NE(e.find(p.string()), std::string::npos) << e;
 
   write_raw(p, "{\"a\": {\"dtype\": \"F32\", \"shape\": [4], \"data_offsets\": [8, 0]}}", 16);
-  EXPECT_NE(error_of(load).find("wrong order"), std::string::npos);
+  EXPECT_NE(test::error_of(load).find("wrong order"), std::string::npos);
 
   write_raw(p, "{\"a\": {\"dtype\": \"F32\", \"shape\": [3], \"data_offsets\": [0, 16]}}", 16);
-  EXPECT_NE(error_of(load).find("should take 12 bytes"), std::string::npos);
+  EXPECT_NE(test::error_of(load).find("should take 12 bytes"), std::string::npos);
 
   write_raw(p, "{\"a\": {\"dtype\": \"F32\", \"shape\": [3]}}", 16);
-  EXPECT_NE(error_of(load).find("malformed header entry"), std::string::npos);
+  EXPECT_NE(test::error_of(load).find("malformed header entry"), std::string::npos);
 
   write_raw(p, "{\"a\": {\"dtype\": \"I64\", \"shape\": [2], \"data_offsets\": [0, 16]}}", 16);
   SafeTensors st(p);
-  e = error_of([&] { st.to_float("a"); });
+  e = test::error_of([&] { st.to_float("a"); });
   EXPECT_NE(e.find("I64"), std::string::npos) << e;
-  e = error_of([&] { st.to_float("missing.weight"); });
+  e = test::error_of([&] { st.to_float("missing.weight"); });
   EXPECT_NE(e.find("missing tensor 'missing.weight'"), std::string::npos) << e;
 
   write_raw(p, "{\"a\": {\"dtype\": \"F32\", \"shape\": [2, 2], \"data_offsets\": [0, 16]}}", 16);
   SafeTensors st2(p);
-  e = error_of([&] { st2.to_float("a", {4, 1}); });
+  e = test::error_of([&] { st2.to_float("a", {4, 1}); });
   EXPECT_NE(e.find("'a' has shape [2, 2] but [4, 1] was expected"), std::string::npos) << e;
   EXPECT_NO_THROW(st2.to_float("a", {2, -1}));
 }

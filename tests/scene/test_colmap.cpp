@@ -82,15 +82,6 @@ void write_scene(const fs::path& root, const ColmapModel& m) {
   for (auto& im : m.images) save_png(root / "images" / im.name, Image(40, 30, 3, 0.5f));
 }
 
-std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "(no error)";
-}
-
 }  // namespace
 
 TEST(Colmap, BinaryRoundTripIsExact) {
@@ -198,11 +189,11 @@ TEST(Scene, UpsampleBilinearMatchesHandComputation) {
 
 TEST(Scene, BadInputsGiveOneLineErrors) {
   test::TempDir tmp;
-  EXPECT_NE(error_of([&] { load_scene(tmp / "missing"); }).find("scene folder not found"), std::string::npos);
+  EXPECT_NE(test::error_of([&] { load_scene(tmp / "missing"); }).find("scene folder not found"), std::string::npos);
   write_scene(tmp / "s", sample_model());
   // image listed but missing
   fs::remove(tmp / "s" / "images" / "c.png");
-  std::string e = error_of([&] { load_scene(tmp / "s"); });
+  std::string e = test::error_of([&] { load_scene(tmp / "s"); });
   EXPECT_NE(e.find("c.png"), std::string::npos) << e;
   EXPECT_NE(e.find("missing"), std::string::npos) << e;
   // truncated .bin
@@ -210,13 +201,13 @@ TEST(Scene, BadInputsGiveOneLineErrors) {
   auto bytes = read_file_bytes(tmp / "t" / "sparse" / "0" / "images.bin");
   bytes.resize(bytes.size() - 9);
   atomic_write_bytes(tmp / "t" / "sparse" / "0" / "images.bin", bytes.data(), bytes.size());
-  e = error_of([&] { load_scene(tmp / "t"); });
+  e = test::error_of([&] { load_scene(tmp / "t"); });
   EXPECT_NE(e.find("images.bin: truncated file"), std::string::npos) << e;
   // unknown (non-pinhole) camera model
   ColmapModel m = sample_model();
   m.cameras[1] = {1, "OPENCV", 40, 30, {35, 35, 20, 15, 0.1, 0.01, 0, 0}};
   write_scene(tmp / "u", m);
-  e = error_of([&] { load_scene(tmp / "u"); });
+  e = test::error_of([&] { load_scene(tmp / "u"); });
   EXPECT_NE(e.find("OPENCV"), std::string::npos) << e;
   EXPECT_NE(e.find("colmap image_undistorter"), std::string::npos) << e;
   // corrupt count in cameras.bin
@@ -225,7 +216,7 @@ TEST(Scene, BadInputsGiveOneLineErrors) {
   auto cb = read_file_bytes(tmp / "v" / "sparse" / "0" / "cameras.bin");
   std::memcpy(cb.data(), &huge, 8);
   atomic_write_bytes(tmp / "v" / "sparse" / "0" / "cameras.bin", cb.data(), cb.size());
-  e = error_of([&] { load_scene(tmp / "v"); });
+  e = test::error_of([&] { load_scene(tmp / "v"); });
   EXPECT_NE(e.find("cameras.bin: corrupt file"), std::string::npos) << e;
 }
 
