@@ -69,13 +69,14 @@ void extract_features(const fs::path& colmap, const fs::path& input_dir, const f
     ensure_dir(list.parent_path());
     atomic_write_text(list, text);
     const long base = done;
+    const std::string dims = fmt::format("{}x{}", size.first, size.second);  // clang-14 cannot capture `size`
     run_tool_or_fail("colmap feature_extractor", colmap,
                      {"feature_extractor", "--database_path", (work / "database.db").string(), "--image_path",
                       input_dir.string(), "--image_list_path", list.string(), "--ImageReader.single_camera", "1",
                       "--ImageReader.camera_model", opt.camera_model, "--SiftExtraction.use_gpu", "0",
                       "--SiftExtraction.max_num_features", std::to_string(opt.max_features)},
                      log_path(work, "features"), counter("Processed file", [&](long i, long) {
-                       bar.update(base + i, fmt::format("{}x{}", size.first, size.second));
+                       bar.update(base + i, dims);
                      }));
     done += long(names.size());
   }
