@@ -14,6 +14,7 @@
 #include "core/image.h"
 #include "eval/visualize.h"
 #include "viewer/display.h"
+#include "viewer/gate.h"
 #include "viewer/static_files.h"
 
 namespace hgs::viewer {
@@ -271,8 +272,22 @@ struct Server::Impl {
   }
 };
 
-Server::Server(query::Session& session, ServerOptions opt)
-    : Server(session, std::move(opt), std::make_unique<httplib::Server>()) {}
+namespace {
+std::unique_ptr<GatedHttpServer> gated(const ServerOptions& o) {
+  GateOptions g;
+  g.threads = std::max(1, o.threads);
+  g.read_timeout_s = o.read_timeout_s, g.write_timeout_s = o.write_timeout_s;
+  g.request_timeout_s = o.request_timeout_s;
+  g.keep_alive_s = o.keep_alive_s, g.keep_alive_max = std::max(1, o.keep_alive_max);
+  g.max_connections = std::max<size_t>(1, o.max_connections);
+  // Room for the largest request the limits accept (request line, header, body), so that the worker, not the
+  // gate, refuses a larger one with its status.
+  g.max_request_bytes = o.max_body + o.max_header_bytes + 16 * 1024;
+  return std::make_unique<GatedHttpServer>(g);
+}
+}  // namespace
+
+Server::Server(query::Session& session, ServerOptions opt) : Server(session, opt, gated(opt)) {}
 
 Server::Server(query::Session& session, ServerOptions opt, std::unique_ptr<httplib::Server> http)
     : http_(std::move(http)), opt_(std::move(opt)) {
@@ -304,8 +319,9 @@ Server::Server(query::Session& session, ServerOptions opt, std::unique_ptr<httpl
   svr.set_write_timeout(opt_.write_timeout_s, 0);
   svr.set_keep_alive_timeout(opt_.keep_alive_s);
   svr.set_keep_alive_max_count(size_t(std::max(1, opt_.keep_alive_max)));
+  gate_ = dynamic_cast<GatedHttpServer*>(http_.get());
   const size_t workers = size_t(std::max(1, opt_.threads));
-  svr.new_task_queue = [workers] { return new httplib::ThreadPool(workers); };
+  if (!gate_) svr.new_task_queue = [workers] { return new httplib::ThreadPool(workers); };
   // SO_REUSEADDR only: httplib's default SO_REUSEPORT would let a second server share a port in use.
   svr.set_socket_options([this](socket_t sock) {
     int yes = 1;
@@ -409,6 +425,7 @@ int Server::start() {
 void Server::stop() {
   if (http_) http_->stop();
   if (thread_.joinable()) thread_.join();
+  if (gate_) gate_->shutdown_gate();
 }
 
 void Server::wait() {

@@ -19,6 +19,8 @@ class Server;
 
 namespace hgs::viewer {
 
+class GatedHttpServer;
+
 struct ServerOptions {
   std::string host = "127.0.0.1";
   int port = 7860;                   // 0 = any free port
@@ -26,12 +28,15 @@ struct ServerOptions {
   size_t max_body = 64 * 1024;       // request bodies above this get 413
   size_t max_text = 256;             // longest accepted query text (bytes of UTF-8)
   // Connection limits (cpp-httplib 0.11: request line and each header line are capped at 8 kB by the library).
-  // A connection holds one worker while it is open, so `threads` bounds the clients served at once, slow ones
-  // included (a client sending nothing for `read_timeout_s` is dropped; see docs/reliability.md).
+  // Connections wait in the gate (viewer/gate.h) until a whole request has arrived, so `threads` bounds the
+  // requests answered at once, not the clients connected: slow clients hold no worker. A connection is dropped
+  // when it sends nothing for `read_timeout_s`, when a request is not whole `request_timeout_s` after its first
+  // byte, or when more than `max_connections` wait (docs/reliability.md).
   int threads = 32;
-  int read_timeout_s = 5, write_timeout_s = 5;
-  int keep_alive_s = 2, keep_alive_max = 100;  // idle keep-alive connections release their worker after this
-  int listen_backlog = 128;                    // pending connections (the library's own default is 5)
+  int read_timeout_s = 5, write_timeout_s = 5, request_timeout_s = 10;
+  int keep_alive_s = 2, keep_alive_max = 100;  // an idle keep-alive connection is closed after keep_alive_s
+  size_t max_connections = 512;
+  int listen_backlog = 128;  // pending connections (the library's own default is 5)
   // Requests with more header fields or header bytes get 431. The library has read them by then (0.11 has
   // no such limit of its own): this bounds what a handler sees, not what one connection may send.
   size_t max_headers = 64, max_header_bytes = 16 * 1024;
@@ -63,7 +68,8 @@ class Server {
   std::unique_ptr<httplib::Server> http_;
   std::thread thread_;
   int port_ = 0;
-  int listen_fd_ = -1;  // the listening socket (its backlog is raised after bind)
+  int listen_fd_ = -1;               // the listening socket (its backlog is raised after bind)
+  GatedHttpServer* gate_ = nullptr;  // http_ when it is the gated server (the default), else null
   ServerOptions opt_;
 };
 
