@@ -12,7 +12,9 @@
 #include "core/error.h"
 #include "core/fs.h"
 #include "masks/import.h"
+#include "prepare/input_dir.h"
 #include "prepare/run_tool.h"
+#include "prepare/scene_lock.h"
 #include "prepare/stage_info.h"
 #include "prepare/stage_options.h"
 #include "prepare/stages.h"
@@ -97,20 +99,39 @@ class Pipeline {
   bool stopped_ = false, resuming_ = false;
 };
 
+// A path the run will read or write, checked before anything else so that a name longer than the file system
+// allows or a folder on the way that cannot be searched is one line naming the path, not an internal error.
+// Returns whether it exists.
+bool check_path(const fs::path& p, const char* what) {
+  for (const fs::path& part : p)
+    if (part.native().size() > 255)
+      fail("{}: a name in the {} path is {} bytes long; file systems allow at most 255", p.string(), what,
+           part.native().size());
+  std::error_code ec;
+  const fs::file_status st = fs::status(p, ec);
+  if (ec && ec != std::errc::no_such_file_or_directory)
+    fail("{}: cannot reach the {} ({})", p.string(), what, ec.message());
+  return fs::exists(st);
+}
+
 // SCENE may be new, empty, or one hgs prepare made; anything else is left alone.
 void check_scene_folder(const fs::path& scene, const fs::path& input) {
   std::error_code ec;
-  if (fs::exists(scene) && !fs::is_directory(scene)) fail("{}: --out exists and is not a folder", scene.string());
-  if (fs::exists(scene) && !fs::is_empty(scene) && !fs::exists(scene / "prepare" / "state.json"))
+  if (!check_path(scene, "--out")) return;
+  if (!fs::is_directory(scene, ec)) fail("{}: --out exists and is not a folder", scene.string());
+  const bool ours = fs::exists(scene / "prepare" / "state.json", ec) || fs::exists(scene / "prepare" / "lock", ec);
+  if (!fs::is_empty(scene, ec) && !ours)
     fail("{}: --out is a folder hgs prepare did not make (no prepare/state.json): give a new or empty folder",
          scene.string());
+  if (ec) fail("{}: cannot read the --out folder ({})", scene.string(), ec.message());
   if (fs::equivalent(scene, input, ec)) fail("{}: --out must not be the input folder", scene.string());
 }
 
 InputInfo input_info(const InputReport& r, const fs::path& input, bool video) {
   InputInfo in;
-  in.path = input.string(), in.kind = video ? "video" : "photos", in.images = int(r.images.size());
-  in.not_images = r.not_images, in.bad = r.bad, in.blurred = r.blurred;
+  in.path = resolved_path(input).string(), in.kind = video ? "video" : "photos", in.images = int(r.images.size());
+  in.not_images = r.not_images, in.bad = r.bad, in.blurred = r.blurred, in.broken_links = r.broken_links;
+  for (const auto& [from, to] : r.renamed) in.renamed.push_back({from, to});
   for (const InputImage& im : r.images) {
     in.resized += im.resized;
     in.rotated += im.orientation != 1;
@@ -135,7 +156,7 @@ MappingInfo mapping_info(const PoseSummary& s, const fs::path& model) {
           s.mean_reprojection_error,
           s.mean_track_length,
           s.matcher,
-          model.string()};
+          model_record(model)};
 }
 
 // Fewer than half the images registered: a capture problem the user should see before training on it.
@@ -170,7 +191,12 @@ void input_stage(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
         "best)",
         opt.input.string(), r.images.size(), r.images.size() == 1 ? "" : "s",
         r.not_images.empty() ? "" : fmt::format(" ({} other files skipped)", r.not_images.size()));
-  p.set_input_key(hash_key("input|" + info.dump()));
+  // The key: what the stage produced (the resolved source paths, names, sizes) and the bytes of every output, so
+  // that the folder typed another way keeps every later stage, and a photo replaced by another of the same size
+  // reruns them.
+  std::string content;
+  for (const InputImage& im : r.images) content += "|" + im.name + ":" + hash_file_content(work / "input" / im.name);
+  p.set_input_key(hash_key("input|" + info.dump() + content));
   p.stage(
       "input", [&] { return info; }, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
 }
@@ -231,7 +257,7 @@ void pose_stages(Pipeline& p, const PrepareOptions& opt, const StageOptions& so,
   s.images = m.images, s.registered = m.registered, s.dropped = m.dropped;
   check_registration(s, opt.allow_partial);
   p.stage("undistort", [&] {
-    undistort(colmap(), work / "input", m.model, work, opt.scene, po);
+    undistort(colmap(), work / "input", model_folder(m, opt.scene), work, opt.scene, po);
     return nlohmann::json::object();
   });
 }
@@ -344,9 +370,11 @@ nlohmann::json prepare_json(const Pipeline& p, const PrepareOptions& opt) {
 }  // namespace
 
 PrepareReport run_prepare(const PrepareOptions& opt) {
+  if (!check_path(opt.input, "INPUT")) fail("{}: no such folder or video file", opt.input.string());
   check_scene_folder(opt.scene, opt.input);
   const fs::path work = opt.scene / "prepare";
   ensure_dir(work);
+  const SceneLock lock(work);
   Pipeline p(opt);
   input_stage(p, opt, work);
   const InputInfo in = p.info<InputInfo>("input");

@@ -28,6 +28,13 @@ std::string PrepareReport::text() const {
     t += "\n";
     if (!in.value("not_images", nlohmann::json::array()).empty())
       t += fmt::format("             skipped (not images): {}\n", list_some(in["not_images"]));
+    if (!in.value("broken_links", nlohmann::json::array()).empty())
+      t += fmt::format("             skipped (links to nothing): {}\n", list_some(in["broken_links"]));
+    if (const auto renamed = in.value("renamed", nlohmann::json::array()); !renamed.empty()) {
+      nlohmann::json pairs = nlohmann::json::array();
+      for (const auto& r : renamed) pairs.push_back(r[0].dump() + " -> " + r[1].get<std::string>());  // escaped
+      t += fmt::format("             renamed (names COLMAP cannot carry): {}\n", list_some(pairs, 3));
+    }
     if (!in.value("bad", nlohmann::json::array()).empty())
       t += fmt::format("             skipped (unreadable): {}\n", list_some(in["bad"], 3));
     if (!in.value("blurred", nlohmann::json::array()).empty())

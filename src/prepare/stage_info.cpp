@@ -12,4 +12,12 @@ void from_json(const nlohmann::json& j, InputEntry& e) {
   j.at(4).get_to(e.source);
 }
 
+std::string model_record(const std::filesystem::path& model) {
+  return (std::filesystem::path("prepare") / "sparse" / model.filename()).string();
+}
+
+std::filesystem::path model_folder(const MappingInfo& m, const std::filesystem::path& scene) {
+  return scene / "prepare" / "sparse" / std::filesystem::path(m.model).filename();
+}
+
 }  // namespace hgs::prepare
