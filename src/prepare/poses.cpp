@@ -63,7 +63,7 @@ void extract_features(const fs::path& colmap, const fs::path& input_dir, const f
   long total = 0, done = 0;
   std::string write_failure;  // the first line that said a write failed
   for (auto& [size, names] : by_size) total += long(names.size());
-  Progress bar("colmap features", total, opt.progress);
+  Progress bar(opt.wide_baseline ? "colmap features (wide-baseline)" : "colmap features", total, opt.progress);
   for (auto& [size, names] : by_size) {
     const fs::path list = work / "lists" / fmt::format("images_{}x{}.txt", size.first, size.second);
     std::string text;
@@ -72,12 +72,26 @@ void extract_features(const fs::path& colmap, const fs::path& input_dir, const f
     atomic_write_text(list, text);
     const long base = done;
     const std::string dims = fmt::format("{}x{}", size.first, size.second);  // clang-14 cannot capture `size`
-    const ToolRun r = run_tool(colmap,
-                               {"feature_extractor", "--database_path", (work / "database.db").string(), "--image_path",
-                                input_dir.string(), "--image_list_path", list.string(), "--ImageReader.single_camera",
-                                "1", "--ImageReader.camera_model", opt.camera_model, "--SiftExtraction.use_gpu", "0",
-                                "--SiftExtraction.max_num_features", std::to_string(opt.max_features)},
-                               log_path(work, "features"),
+    std::vector<std::string> args{"feature_extractor",
+                                  "--database_path",
+                                  (work / "database.db").string(),
+                                  "--image_path",
+                                  input_dir.string(),
+                                  "--image_list_path",
+                                  list.string(),
+                                  "--ImageReader.single_camera",
+                                  "1",
+                                  "--ImageReader.camera_model",
+                                  opt.camera_model,
+                                  "--SiftExtraction.use_gpu",
+                                  "0",
+                                  "--SiftExtraction.max_num_features",
+                                  std::to_string(opt.wide_baseline ? std::max(opt.max_features, kWideFeatures)
+                                                                   : opt.max_features)};
+    if (opt.wide_baseline)
+      args.insert(args.end(),
+                  {"--SiftExtraction.estimate_affine_shape", "1", "--SiftExtraction.domain_size_pooling", "1"});
+    const ToolRun r = run_tool(colmap, args, log_path(work, "features"),
                                counter("Processed file", [&](long i, long) { bar.update(base + i, dims); }));
     if (!r.ok())
       fail("colmap feature_extractor failed ({}): {}; log: {}", r.how_it_ended(),
@@ -108,6 +122,7 @@ void extract_features(const fs::path& colmap, const fs::path& input_dir, const f
 void match_features(const fs::path& colmap, const fs::path& work, const std::string& matcher, int n_images,
                     const PoseOptions& opt) {
   std::vector<std::string> args{"--database_path", (work / "database.db").string(), "--SiftMatching.use_gpu", "0"};
+  if (opt.wide_baseline) args.insert(args.end(), {"--SiftMatching.guided_matching", "1"});
   std::string prog, prefix = "Matching image";
   if (matcher == "exhaustive") {
     prog = "exhaustive_matcher";
@@ -132,7 +147,8 @@ void match_features(const fs::path& colmap, const fs::path& work, const std::str
   // Exhaustive: "Matching block [i/B, j/B]" over B x B blocks of 50 images (COLMAP's block size); the others:
   // "Matching image [i/N]".
   const long B = (n_images + 49) / 50;
-  Progress bar("colmap matching", matcher == "exhaustive" ? B * B : n_images, opt.progress);
+  Progress bar(opt.wide_baseline ? "colmap matching (guided)" : "colmap matching",
+               matcher == "exhaustive" ? B * B : n_images, opt.progress);
   const std::regex block_re(R"(Matching block \[(\d+)/\d+, (\d+)/\d+\])");
   auto per_image = counter(prefix, [&](long i, long) { bar.update(i, matcher); });
   auto on_line = [&](const std::string& line) {
@@ -146,23 +162,23 @@ void match_features(const fs::path& colmap, const fs::path& work, const std::str
 }
 
 fs::path map_poses(const fs::path& colmap, const fs::path& input_dir, const fs::path& work, int n_images,
-                   const PoseOptions& opt) {
-  const fs::path sparse = work / "sparse";
+                   const PoseOptions& opt, const std::string& sparse_name) {
+  const fs::path sparse = work / sparse_name;
   fs::remove_all(sparse);
   ensure_dir(sparse);
-  Progress bar("colmap mapping", n_images, opt.progress);
+  Progress bar(opt.wide_baseline ? "colmap mapping (wide-baseline)" : "colmap mapping", n_images, opt.progress);
   std::regex reg_re(R"(Registering image #\d+ \((\d+)\))");
   // COLMAP discards models under 10 images (Mapper.min_model_size); a small capture may still be usable, and a
   // model holding too few of the images is refused by the registration check that follows.
-  const fs::path log = log_path(work, "mapping");
-  ToolRun r = run_tool(colmap,
-                       {"mapper", "--database_path", (work / "database.db").string(), "--image_path",
-                        input_dir.string(), "--output_path", sparse.string(), "--Mapper.min_model_size", "3"},
-                       log, [&](const std::string& line) {
-                         std::smatch m;
-                         if (std::regex_search(line, m, reg_re))
-                           bar.update(std::min<long>(std::stol(m[1]), n_images), "images registered");
-                       });
+  const fs::path log = log_path(work, sparse_name == "sparse" ? "mapping" : "mapping_" + sparse_name);
+  std::vector<std::string> args{"mapper",        "--database_path",         (work / "database.db").string(),
+                                "--image_path",  input_dir.string(),        "--output_path",
+                                sparse.string(), "--Mapper.min_model_size", "3"};
+  if (opt.wide_baseline) args.insert(args.end(), kWideMapperArgs.begin(), kWideMapperArgs.end());
+  ToolRun r = run_tool(colmap, args, log, [&](const std::string& line) {
+    std::smatch m;
+    if (std::regex_search(line, m, reg_re)) bar.update(std::min<long>(std::stol(m[1]), n_images), "images registered");
+  });
   const bool no_model = r.last_lines.find("failed to create sparse model") != std::string::npos;
   if (!r.ok() && !no_model)
     fail("colmap mapper failed ({}): {}; log: {}", r.how_it_ended(), r.last_lines.substr(r.last_lines.rfind('\n') + 1),
@@ -185,13 +201,9 @@ fs::path map_poses(const fs::path& colmap, const fs::path& input_dir, const fs::
     const size_t n = read_colmap_bin(e.path()).images.size();
     if (n > best_n) best_n = n, best = e.path();
   }
-  if (best.empty())
-    fail(
-        "colmap mapper made no model from {} images: too few matches between the images (more overlap between "
-        "photos, more texture, or --matcher exhaustive); log: {}",
-        n_images, log.string());
-  bar.finish(
-      fmt::format("{} of {} registered in the largest of {} model{}", best_n, n_images, models, models > 1 ? "s" : ""));
+  bar.finish(best.empty() ? std::string("no model")
+                          : fmt::format("{} of {} registered in the largest of {} model{}", best_n, n_images, models,
+                                        models > 1 ? "s" : ""));
   return best;
 }
 

@@ -15,6 +15,7 @@
 #include "prepare/input_dir.h"
 #include "prepare/run_tool.h"
 #include "prepare/scene_lock.h"
+#include "prepare/sparse_retry.h"
 #include "prepare/stage_info.h"
 #include "prepare/stage_options.h"
 #include "prepare/stages.h"
@@ -27,12 +28,11 @@ namespace hgs::prepare {
 namespace fs = std::filesystem;
 
 const std::vector<std::pair<std::string, std::string>>& stage_groups() {
-  static const std::vector<std::pair<std::string, std::string>> g = {{"input", "input"},     {"features", "poses"},
-                                                                     {"matching", "poses"},  {"mapping", "poses"},
-                                                                     {"undistort", "poses"}, {"sam", "masks"},
-                                                                     {"import", "masks"},    {"depth", "masks"},
-                                                                     {"associate", "masks"}, {"clip", "language"},
-                                                                     {"text", "language"}};
+  static const std::vector<std::pair<std::string, std::string>> g = {
+      {"input", "input"},         {"features", "poses"},       {"matching", "poses"},  {"mapping", "poses"},
+      {"retry_mapping", "poses"}, {"retry_features", "poses"}, {"undistort", "poses"}, {"sam", "masks"},
+      {"import", "masks"},        {"depth", "masks"},          {"associate", "masks"}, {"clip", "language"},
+      {"text", "language"}};
   return g;
 }
 
@@ -146,31 +146,6 @@ std::vector<std::string> input_names(const InputInfo& in) {
   return names;
 }
 
-MappingInfo mapping_info(const PoseSummary& s, const fs::path& model) {
-  return {s.images,
-          s.registered,
-          s.dropped,
-          s.models,
-          s.cameras,
-          s.points,
-          s.mean_reprojection_error,
-          s.mean_track_length,
-          s.matcher,
-          model_record(model)};
-}
-
-// Fewer than half the images registered: a capture problem the user should see before training on it.
-void check_registration(const PoseSummary& s, bool allow_partial) {
-  if (allow_partial || 2 * s.registered >= s.images) return;
-  fail(
-      "COLMAP registered only {} of {} images ({:.0f} %; dropped {}{}): the photos overlap too little or lack "
-      "texture; take more overlapping photos, try --matcher exhaustive, or keep going with the registered ones "
-      "with --allow-partial",
-      s.registered, s.images, 100.0 * s.registered / std::max(1, s.images),
-      fmt::join(s.dropped.begin(), s.dropped.begin() + std::min<size_t>(s.dropped.size(), 5), ", "),
-      s.dropped.size() > 5 ? ", ..." : "");
-}
-
 }  // namespace
 
 // ---- stages -------------------------------------------------------------------------------------------------
@@ -243,19 +218,38 @@ void pose_stages(Pipeline& p, const PrepareOptions& opt, const StageOptions& so,
     return nlohmann::json(MatchingInfo{matcher});
   });
   p.stage("mapping", [&] {
-    const fs::path best = map_poses(colmap(), work / "input", work, n, po);
-    PoseSummary s = summarize_model(best, names);
-    s.matcher = matcher;
-    int models = 0;
-    for (const auto& e : fs::directory_iterator(work / "sparse")) models += e.is_directory();
-    s.models = models;
-    return nlohmann::json(mapping_info(s, best));
+    return nlohmann::json(map_and_summarize(colmap(), work / "input", work, names, po, "sparse", opt.scene, "default"));
+  });
+  // A sparse capture: COLMAP's wide-baseline settings, the mapper first (cheap), then everything (poses.h).
+  PoseOptions wide = po;
+  wide.wide_baseline = true;
+  auto announce = [&](const MappingInfo& m, const char* next) {
+    if (opt.progress)
+      fmt::print(stderr, "colmap registered only {} of {} images with {} settings: retrying with {}\n", m.registered,
+                 m.images, m.settings, next);
+  };
+  p.stage("retry_mapping", [&] {
+    const MappingInfo m = p.info<MappingInfo>("mapping");
+    if (registered_enough(m)) return nlohmann::json(m);
+    announce(m, "COLMAP's wide-baseline mapper options");
+    return nlohmann::json(keep_better(m, map_and_summarize(colmap(), work / "input", work, names, wide, "sparse_wide",
+                                                           opt.scene, "wide-baseline mapper")));
+  });
+  p.stage("retry_features", [&] {
+    const MappingInfo m = p.info<MappingInfo>("retry_mapping");
+    if (registered_enough(m)) return nlohmann::json(m);
+    announce(m, "wide-baseline features (8192, affine, domain-size pooling) and guided matching");
+    const fs::path dir = work / "retry";
+    fs::remove_all(dir);
+    ensure_dir(dir);
+    extract_features(colmap(), work / "input", dir, wide);
+    match_features(colmap(), dir, matcher, n, wide);
+    return nlohmann::json(keep_better(m, map_and_summarize(colmap(), work / "input", dir, names, wide, "sparse",
+                                                           opt.scene, "wide-baseline features")));
   });
   if (p.stopped()) return;
-  const MappingInfo m = p.info<MappingInfo>("mapping");
-  PoseSummary s;
-  s.images = m.images, s.registered = m.registered, s.dropped = m.dropped;
-  check_registration(s, opt.allow_partial);
+  const MappingInfo m = p.info<MappingInfo>("retry_features");
+  check_registration(m, opt.allow_partial);
   p.stage("undistort", [&] {
     undistort(colmap(), work / "input", model_folder(m, opt.scene), work, opt.scene, po);
     return nlohmann::json::object();
@@ -340,10 +334,12 @@ nlohmann::json prepare_json(const Pipeline& p, const PrepareOptions& opt) {
   j["input"] = p.info<InputInfo>("input");
   j["input"].erase("list");
   j["poses"] = nlohmann::json::object();
-  if (p.has_info("mapping")) {
-    j["poses"] = p.info<MappingInfo>("mapping");
-    j["poses"].erase("model");
-  }
+  for (const char* stage : {"mapping", "retry_features"})  // the retries' record when they ran
+    if (p.has_info(stage)) {
+      j["poses"] = p.info<MappingInfo>(stage);
+      j["poses"].erase("model_path");
+      j["poses"].erase("model");
+    }
   j["masks"] = nlohmann::json::object();
   if (opt.load_sam && p.has_info("associate")) {
     j["masks"] = p.info<AssociateInfo>("associate");

@@ -47,6 +47,9 @@ std::string PrepareReport::text() const {
         p.value("registered", 0), p.value("images", 0), p.value("matcher", ""), p.value("cameras", 0),
         p.value("cameras", 0) == 1 ? "" : "s", p.value("points", 0), p.value("mean_reprojection_error_px", 0.0),
         p.value("mean_track_length", 0.0));
+    if (!p.value("retried", nlohmann::json::array()).empty())
+      t += fmt::format("             retried (fewer than half registered): {}; kept: {} settings\n",
+                       list_some(p["retried"]), p.value("settings", ""));
     if (!p.value("dropped", nlohmann::json::array()).empty())
       t += fmt::format("             not registered: {}\n", list_some(p["dropped"]));
   }

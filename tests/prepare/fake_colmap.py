@@ -9,6 +9,7 @@
 #   "sleep_in": "<sub>"        that subcommand writes its pid to `pid` next to this script and sleeps 60 s
 #   "register": K              the mapper registers only the first K images (by name)
 #   "robust_register": K       ... but K when run with the wide-baseline options (--Mapper.init_min_num_inliers)
+#   "affine_register": K       ... and K when besides the database holds affine features (estimate_affine_shape)
 # Every call is appended to calls.log next to this script (the subcommand and its arguments, one line).
 import json
 import os
@@ -47,6 +48,9 @@ def feature_extractor(args, cfg):
     db.execute("CREATE TABLE IF NOT EXISTS images (image_id INTEGER PRIMARY KEY, name TEXT UNIQUE, camera_id INTEGER)")
     db.execute("CREATE TABLE IF NOT EXISTS keypoints (image_id INTEGER PRIMARY KEY, rows INTEGER, cols INTEGER, data BLOB)")
     db.execute("CREATE TABLE IF NOT EXISTS descriptors (image_id INTEGER PRIMARY KEY, rows INTEGER, cols INTEGER, data BLOB)")
+    db.execute("CREATE TABLE IF NOT EXISTS fake_settings (name TEXT)")
+    if arg(args, "--SiftExtraction.estimate_affine_shape") == "1":
+        db.execute("INSERT INTO fake_settings VALUES ('affine')")
     with open(arg(args, "--image_list_path")) as f:
         names = [line.rstrip("\n") for line in f if line.strip()]
     if cfg.get("drop_last_feature"):
@@ -92,6 +96,8 @@ def mapper(args, cfg):
     k = cfg.get("register", len(images))
     if "--Mapper.init_min_num_inliers" in args:
         k = cfg.get("robust_register", k)
+        if list(db.execute("SELECT name FROM fake_settings WHERE name = 'affine'")):
+            k = cfg.get("affine_register", k)
     images = images[:k]
     for i, (iid, _, _) in enumerate(images):
         print(f"Registering image #{iid} ({i + 1})", flush=True)

@@ -22,6 +22,7 @@
 
 #include "core/image.h"
 #include "prepare/run_tool.h"
+#include "scene/colmap.h"
 #include "test_util.h"
 
 extern char** environ;
@@ -208,7 +209,7 @@ TEST(PrepareHostile, TheInputPathAsTypedKeepsEveryStageAndNewContentRerunsThem) 
   const std::string rest = " --out scene --colmap " + colmap.string() + " --until poses --quiet";
   RunResult r = run_hgs_in(t.path, "prepare photos" + rest);
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_EQ(rerun(t / "scene").size(), 5u);
+  EXPECT_EQ(rerun(t / "scene").size(), 7u);
   fs::create_directory_symlink(t / "photos", t / "link");
   for (const std::string& typed : {std::string("photos/"), std::string("./photos"), (t / "photos").string(),
                                    std::string("link"), std::string("../") + t.path.filename().string() + "/photos"}) {
@@ -219,7 +220,8 @@ TEST(PrepareHostile, TheInputPathAsTypedKeepsEveryStageAndNewContentRerunsThem) 
   texture_png(t / "photos" / "p2.png", 64, 48, 1234u);
   r = run_hgs_in(t.path, "prepare photos" + rest);
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_EQ(rerun(t / "scene"), (std::set<std::string>{"input", "features", "matching", "mapping", "undistort"}));
+  EXPECT_EQ(rerun(t / "scene"), (std::set<std::string>{"input", "features", "matching", "mapping", "retry_mapping",
+                                                       "retry_features", "undistort"}));
 }
 
 // Issue 60, item 10: the mapping record names the model relative to the scene: a run from another directory, and
@@ -233,18 +235,21 @@ TEST(PrepareHostile, AResumeFromAnotherDirectoryOrACopiedSceneReadsItsOwnModel) 
   const std::string opts = " --colmap " + colmap.string() + " --quiet";
   RunResult r = run_hgs_in(t.path, "prepare photos --out scene --until mapping" + opts);
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_EQ(read_json(t / "scene" / "prepare" / "state.json")["mapping"]["info"]["model"], "prepare/sparse/0");
+  EXPECT_EQ(read_json(t / "scene" / "prepare" / "state.json")["mapping"]["info"]["model_path"], "prepare/sparse/0");
   fs::create_directories(t / "elsewhere");
   r = run_hgs_in(t / "elsewhere", "prepare ../photos --out ../scene --until poses" + opts);
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_EQ(rerun(t / "scene"), std::set<std::string>{"undistort"});
+  EXPECT_EQ(rerun(t / "scene"), (std::set<std::string>{"retry_mapping", "retry_features", "undistort"}));
 
   // A copy made after mapping, with the record as runs before this fix wrote it; the original is gone.
   fs::remove_all(t / "scene" / "sparse");
   fs::remove_all(t / "scene" / "images");
   json state = read_json(t / "scene" / "prepare" / "state.json");
   state.erase("undistort");
-  state["mapping"]["info"]["model"] = "scene/prepare/sparse/0";
+  for (const char* stage : {"mapping", "retry_mapping", "retry_features"}) {
+    state[stage]["info"].erase("model_path");
+    state[stage]["info"]["model"] = "scene/prepare/sparse/0";
+  }
   std::ofstream(t / "scene" / "prepare" / "state.json") << state.dump(2);
   fs::copy(t / "scene", t / "copy", fs::copy_options::recursive);
   fs::remove_all(t / "scene");
@@ -266,7 +271,7 @@ TEST(PrepareHostile, ChangingOneOptionRerunsItsStageAndTheLaterOnesOnly) {
   std::string args =
       "prepare " + in.string() + " --out " + out.string() + " --colmap " + colmap.string() + " --until poses --quiet";
   ASSERT_EQ(run_hgs(args).exit_code, 0);
-  const std::set<std::string> poses{"features", "matching", "mapping", "undistort"};
+  const std::set<std::string> poses{"features", "matching", "mapping", "retry_mapping", "retry_features", "undistort"};
   struct Row {
     std::string option;
     std::set<std::string> stages;
@@ -275,8 +280,8 @@ TEST(PrepareHostile, ChangingOneOptionRerunsItsStageAndTheLaterOnesOnly) {
       {"", {}},
       {"--max-features 2048", poses},
       {"--camera-model PINHOLE", poses},
-      {"--matcher sequential", {"matching", "mapping", "undistort"}},
-      {"--max-size 32", {"input", "features", "matching", "mapping", "undistort"}},
+      {"--matcher sequential", {"matching", "mapping", "retry_mapping", "retry_features", "undistort"}},
+      {"--max-size 32", {"input", "features", "matching", "mapping", "retry_mapping", "retry_features", "undistort"}},
       {"--max-pixels 100000000", {}},  // the same photos pass: the same outputs
       {"--allow-partial", {}},
   };
@@ -286,6 +291,62 @@ TEST(PrepareHostile, ChangingOneOptionRerunsItsStageAndTheLaterOnesOnly) {
     ASSERT_EQ(r.exit_code, 0) << row.option << ": " << r.err;
     EXPECT_EQ(rerun(out), row.stages) << row.option;
   }
+}
+
+// Issue 60, "Sparse captures": fewer than half the photos registered -> COLMAP's wide-baseline mapper options,
+// then wide-baseline features with guided matching, each said in the progress and the report; the model with
+// the most images is kept; a rerun keeps every step. A capture no step saves is refused naming what was tried
+// and advising only what was not.
+TEST(PrepareHostile, ASparseCaptureIsRetriedWithWideBaselineSettings) {
+  REQUIRE_PYTHON();
+  TempDir t;
+  const fs::path in = photos(t, 6), out = t / "scene";
+  // Defaults: 2 images (no model, as COLMAP below 3), the wide mapper: 2, wide features too: 5.
+  const fs::path colmap = fake_colmap(t, {{"register", 2}, {"robust_register", 2}, {"affine_register", 5}});
+  const std::string args =
+      "prepare " + in.string() + " --out " + out.string() + " --colmap " + colmap.string() + " --until poses";
+  RunResult r = run_hgs(args);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json p = read_json(out / "prepare.json")["poses"];
+  EXPECT_EQ(p["registered"], 5) << p.dump();
+  EXPECT_EQ(p["settings"], "wide-baseline features");
+  EXPECT_EQ(p["retried"], json({"wide-baseline mapper: 0 of 6", "wide-baseline features: 5 of 6"}));
+  EXPECT_NE(r.err.find("retrying with COLMAP's wide-baseline mapper options"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("retrying with wide-baseline features"), std::string::npos) << r.err;
+  EXPECT_NE(r.out.find("retried (fewer than half registered): wide-baseline mapper: 0 of 6"), std::string::npos)
+      << r.out;
+  EXPECT_EQ(read_colmap(out / "sparse" / "0").images.size(), 5u);
+  auto calls = [&](const std::string& sub) {
+    std::ifstream f(t / "colmap" / "calls.log");
+    int n = 0;
+    for (std::string line; std::getline(f, line);) n += line.rfind(sub + " ", 0) == 0;
+    return n;
+  };
+  EXPECT_EQ(calls("mapper"), 3);
+  EXPECT_EQ(calls("feature_extractor"), 2);
+  r = run_hgs(args + " --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(rerun(out), std::set<std::string>{});
+  EXPECT_EQ(calls("mapper"), 3) << "a rerun keeps the retries";
+
+  // Nothing helps: refused after both retries, without advising the exhaustive matcher that ran.
+  fake_colmap(t, {{"register", 3}, {"robust_register", 3}, {"affine_register", 3}});
+  const fs::path in8 = t / "photos8", out8 = t / "scene8";
+  fs::create_directories(in8);
+  for (int i = 0; i < 8; ++i) texture_png(in8 / fmt::format("q{}.png", i), 64, 48, 50u + unsigned(i));
+  const std::string args8 =
+      "prepare " + in8.string() + " --out " + out8.string() + " --colmap " + colmap.string() + " --quiet";
+  r = run_hgs(args8);
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("registered only 3 of 8 images"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("retried: wide-baseline mapper: 3 of 8; wide-baseline features: 3 of 8"), std::string::npos)
+      << r.err;
+  EXPECT_EQ(r.err.find("--matcher exhaustive"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("--allow-partial"), std::string::npos) << r.err;
+  EXPECT_TRUE(one_line(r.err)) << r.err;
+  r = run_hgs(args8 + " --allow-partial --until poses");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(read_json(out8 / "prepare.json")["poses"]["registered"], 3);
 }
 
 // Issue 60, item 12: a name over 255 bytes in INPUT or --out, or a folder on the way that cannot be searched, is
