@@ -225,8 +225,8 @@ void pose_stages(Pipeline& p, const PrepareOptions& opt, const StageOptions& so,
   wide.wide_baseline = true;
   auto announce = [&](const MappingInfo& m, const char* next) {
     if (opt.progress)
-      fmt::print(stderr, "colmap registered only {} of {} images with {} settings: retrying with {}\n", m.registered,
-                 m.images, m.settings, next);
+      fmt::print(stderr, "colmap registered only {} of {} images{}: retrying with {}\n", m.registered, m.images,
+                 m.retried.empty() ? "" : " so far", next);
   };
   p.stage("retry_mapping", [&] {
     const MappingInfo m = p.info<MappingInfo>("mapping");
