@@ -86,7 +86,7 @@ void extract_features(const fs::path& colmap, const fs::path& input_dir, const f
                                   "--SiftExtraction.use_gpu",
                                   "0",
                                   "--SiftExtraction.max_num_features",
-                                  std::to_string(opt.wide_baseline ? std::max(opt.max_features, kWideFeatures)
+                                  std::to_string(opt.wide_baseline ? wide_features(opt.max_features)
                                                                    : opt.max_features)};
     if (opt.wide_baseline)
       args.insert(args.end(),

@@ -12,6 +12,7 @@
 //   undistort  image_undistorter to PINHOLE: SCENE/images/ and SCENE/sparse/0/, what `hgs train` reads.
 // Each runs colmap with a progress bar parsed from its log (WORK/logs/<stage>.log).
 #pragma once
+#include <algorithm>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -28,8 +29,8 @@ struct PoseOptions {
   int max_features = 4096;  // SIFT features per image
   bool ordered = false;     // input images are video frames in order
   bool progress = true;
-  // COLMAP's wide-baseline settings (the retries of a sparse capture, see below): features at least
-  // kWideFeatures, affine-covariant with domain-size pooling; guided matching; mapper initialisation and
+  // COLMAP's wide-baseline settings (the retries of a sparse capture, see below): wide_features(max_features)
+  // features, affine-covariant with domain-size pooling; guided matching; mapper initialisation and
   // registration with fewer inliers and a smaller triangulation angle (kWideMapperArgs).
   bool wide_baseline = false;
 };
@@ -38,8 +39,10 @@ struct PoseOptions {
 //   retry_mapping   the mapper again on the same matches with the wide-baseline mapper options (cheap);
 //   retry_features  features, matching and mapping again in WORK/retry/ with every wide-baseline setting.
 // The model with the most registered images is kept. On a capture of 20 goldcape photos 18 degrees apart
-// COLMAP's defaults register 3; these settings by hand, 13 (issue 60).
-inline constexpr int kWideFeatures = 8192;
+// COLMAP's defaults register 3; these settings by hand, 13 (issue 60); hgs prepare 13 of 21 (docs/capture.md).
+// Features: twice --max-features (8192 at the default, what the by-hand run used), so that a user who bounded the
+// cost of features bounds the retry's too.
+inline int wide_features(int max_features) { return std::min(2 * max_features, 65536); }
 inline const std::vector<std::string> kWideMapperArgs = {"--Mapper.init_min_num_inliers",     "50",
                                                          "--Mapper.abs_pose_min_num_inliers", "15",
                                                          "--Mapper.init_min_tri_angle",       "8"};

@@ -223,7 +223,7 @@ void pose_stages(Pipeline& p, const PrepareOptions& opt, const StageOptions& so,
   // A sparse capture: COLMAP's wide-baseline settings, the mapper first (cheap), then everything (poses.h).
   PoseOptions wide = po;
   wide.wide_baseline = true;
-  auto announce = [&](const MappingInfo& m, const char* next) {
+  auto announce = [&](const MappingInfo& m, const std::string& next) {
     if (opt.progress)
       fmt::print(stderr, "colmap registered only {} of {} images{}: retrying with {}\n", m.registered, m.images,
                  m.retried.empty() ? "" : " so far", next);
@@ -238,7 +238,8 @@ void pose_stages(Pipeline& p, const PrepareOptions& opt, const StageOptions& so,
   p.stage("retry_features", [&] {
     const MappingInfo m = p.info<MappingInfo>("retry_mapping");
     if (registered_enough(m)) return nlohmann::json(m);
-    announce(m, "wide-baseline features (8192, affine, domain-size pooling) and guided matching");
+    announce(m, fmt::format("wide-baseline features ({}, affine, domain-size pooling) and guided matching",
+                            wide_features(po.max_features)));
     const fs::path dir = work / "retry";
     fs::remove_all(dir);
     ensure_dir(dir);

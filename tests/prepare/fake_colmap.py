@@ -1,4 +1,4 @@
-#!/usr/bin/env python3
+#!/usr/bin/env -S python3 -S
 # A stand-in for Debian's `colmap` in the tests of `hgs prepare` (given with --colmap): the four subcommands the
 # pose stages run, in milliseconds, with the files COLMAP would write (database.db with the images / keypoints /
 # descriptors tables, WORK/sparse/0/*.bin, the undistorted images and model). Every image registers, with one
