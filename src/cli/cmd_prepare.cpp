@@ -74,7 +74,7 @@ const char* kStages =
     "  poses      COLMAP (Debian's colmap): features (SIFT), matching (--matcher), mapping (largest model\n"
     "             kept; when fewer than half the images register: retry_mapping, retry_features with\n"
     "             COLMAP's wide-baseline settings), undistort (PINHOLE) -> SCENE/images/,\n"
-    "             SCENE/sparse/0/                                                  ~5 min (matching 3.5)\n"
+    "             SCENE/sparse/0/                                                       ~5 min (matching 3.5)\n"
     "  masks      needs --sam: sam (automatic masks of every view), import, depth (--depth-iters RGB steps),\n"
     "             associate (one id per object in every view) -> SCENE/masks/           ~15 s per view + 2 min\n"
     "  language   needs --clip: clip (dense features) -> SCENE/features/, text (--text / --phrases + LERF's\n"
