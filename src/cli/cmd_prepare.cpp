@@ -30,7 +30,6 @@ void run_prepare_command(PrepareArgs& a) {
   prepare::PrepareOptions& o = a.o;
   o.input = a.input, o.scene = a.out;
   o.in.progress = o.pose.progress = o.progress = !a.quiet;
-  if (!fs::exists(o.input)) fail("{}: no such folder or video file", a.input);
   if (!a.sam.empty()) {
     o.load_sam = [a] { return a.sam_model.load(a.sam); };
     o.sam_key = fmt::format("{} {} {} {}", prepare::hash_file_identity(a.sam), a.sam_model.precision,
@@ -49,7 +48,12 @@ void run_prepare_command(PrepareArgs& a) {
   o.phrases = a.texts;
   if (!a.phrases_file.empty())
     for (const std::string& p : read_phrase_file(a.phrases_file)) o.phrases.push_back(p);
-  prepare::PrepareReport r = prepare::run_prepare(o);
+  prepare::PrepareReport r;
+  try {
+    r = prepare::run_prepare(o);
+  } catch (const fs::filesystem_error& e) {  // one line naming the path, not an internal error
+    fail("{}: {}", e.path1().empty() ? a.out : e.path1().string(), e.code().message());
+  }
   fmt::print("{}", r.text());
   fmt::print("  report     {}\n", (o.scene / "prepare.json").string());
   if (!o.until.empty()) return;
@@ -68,13 +72,18 @@ const char* kStages =
     "  input      photos (JPEG/PNG, EXIF orientation applied, --max-size) or video frames (ffmpeg, --fps,\n"
     "             blurred frames dropped) -> SCENE/prepare/input/                       ~1 s\n"
     "  poses      COLMAP (Debian's colmap): features (SIFT), matching (--matcher), mapping (largest model\n"
-    "             kept), undistort (PINHOLE) -> SCENE/images/, SCENE/sparse/0/         ~5 min (matching 3.5)\n"
+    "             kept; when fewer than half the images register: retry_mapping, retry_features with\n"
+    "             COLMAP's wide-baseline settings), undistort (PINHOLE) -> SCENE/images/,\n"
+    "             SCENE/sparse/0/                                                       ~5 min (matching 3.5)\n"
     "  masks      needs --sam: sam (automatic masks of every view), import, depth (--depth-iters RGB steps),\n"
     "             associate (one id per object in every view) -> SCENE/masks/           ~15 s per view + 2 min\n"
     "  language   needs --clip: clip (dense features) -> SCENE/features/, text (--text / --phrases + LERF's\n"
     "             canonical phrases) -> SCENE/text_embeddings.json                       ~2 s per view\n"
     "Every run writes SCENE/prepare.json (images found / registered / dropped, cameras, reprojection error, track\n"
     "length, masks per view, objects, seconds per stage). Work files and logs: SCENE/prepare/.\n"
+    "Photos named so COLMAP cannot carry them (backslash, control characters) are renamed (listed); links to\n"
+    "nothing are skipped (listed). One run per scene at a time (SCENE/prepare/lock); COLMAP and ffmpeg stop with\n"
+    "hgs. Each COLMAP stage checks what it wrote (a full disk fails it, even when COLMAP exits 0).\n"
     "Example: hgs prepare photos/ --out scene --sam sam-vit-b.safetensors --clip clip-vit-b16.safetensors "
     "--text \"red mug\"";
 
@@ -84,7 +93,14 @@ void add_input_options(CLI::App& sub, PrepareArgs& a) {
   sub.add_option("--max-size", a.o.in.max_size, "Longest image side in pixels; larger photos are downscaled (0 = keep)")
       ->capture_default_str()
       ->check(CLI::Range(0, 1 << 16));
-  sub.add_flag("--skip-bad-images", a.o.in.skip_bad, "Skip unreadable or truncated image files (listed in the report)");
+  sub.add_flag("--skip-bad-images", a.o.in.skip_bad,
+               "Skip unreadable, empty, truncated or too large image files (listed in the report)");
+  sub.add_option("--max-pixels", a.o.in.max_pixels,
+                 "Most pixels (width x height) a photo may declare, checked from its header before decoding: a few "
+                 "KB of JPEG can declare 16383 x 16383 (1.6 GB decoded). The default holds 108 MP phones and 100 MP "
+                 "medium format; decoding holds about this many pixels at once across the threads")
+      ->capture_default_str()
+      ->check(CLI::Range(int64_t(1), int64_t(1) << 40));
   sub.add_option("--fps", a.o.in.fps, "Video: frames per second to extract")
       ->capture_default_str()
       ->check(CLI::Range(0.01, 240.0));

@@ -7,6 +7,14 @@
 namespace hgs::prepare {
 namespace fs = std::filesystem;
 
+fs::path resolved_path(const fs::path& p) {
+  std::error_code ec;
+  fs::path r = fs::weakly_canonical(fs::absolute(p, ec), ec);
+  if (ec) r = fs::absolute(p).lexically_normal();
+  if (r.has_parent_path() && r.filename().empty()) r = r.parent_path();
+  return r;
+}
+
 FileStamp file_stamp(const fs::path& path) {
   std::error_code ec;
   FileStamp s;

@@ -20,6 +20,10 @@ struct FileStamp {
   bool operator==(const FileStamp&) const = default;
 };
 
+// `p` absolute with links, "." and ".." resolved and no trailing slash (as far as it exists; the rest lexically
+// normalised): one spelling for every way of typing the same folder or file.
+std::filesystem::path resolved_path(const std::filesystem::path& p);
+
 // The stamp of a file; all zero when it does not exist.
 FileStamp file_stamp(const std::filesystem::path& path);
 nlohmann::json stamp_json(const FileStamp& s);

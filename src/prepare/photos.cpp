@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cctype>
 #include <chrono>
+#include <condition_variable>
 #include <map>
 #include <mutex>
 
@@ -16,6 +17,7 @@
 #include "core/parallel.h"
 #include "prepare/exif.h"
 #include "prepare/input_dir.h"
+#include "prepare/names.h"
 #include "prepare/pixels.h"
 
 namespace hgs::prepare {
@@ -38,30 +40,43 @@ struct Outcome {
   bool done = false;
 };
 
-std::vector<fs::path> list_files(const fs::path& dir) {
+// The regular files of `dir` (links followed) in name order; entries that are links to nothing (dangling, or a
+// loop) go to `broken` whatever their position. Other entries (folders, sockets) are not photos and are left out.
+std::vector<fs::path> list_files(const fs::path& dir, std::vector<std::string>& broken) {
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) fail("{}: not a folder of photos", dir.string());
   std::vector<fs::path> files;
-  for (const auto& e : fs::directory_iterator(dir, ec))
-    if (e.is_regular_file(ec)) files.push_back(e.path());
+  fs::directory_iterator it(dir, ec);
   if (ec) fail("{}: cannot list the folder ({})", dir.string(), ec.message());
-  std::sort(files.begin(), files.end(),
-            [](const fs::path& a, const fs::path& b) { return a.filename() < b.filename(); });
+  for (; it != fs::directory_iterator(); it.increment(ec)) {
+    if (ec) fail("{}: cannot list the folder ({})", dir.string(), ec.message());
+    std::error_code e;  // per entry: a bad entry must not fail the listing
+    const fs::file_status st = it->status(e);
+    if (st.type() == fs::file_type::regular) files.push_back(it->path());
+    else if (it->is_symlink(e) && (st.type() == fs::file_type::not_found || st.type() == fs::file_type::none ||
+                                   st.type() == fs::file_type::unknown))
+      broken.push_back(it->path().string());
+  }
+  auto by_name = [](const fs::path& a, const fs::path& b) { return a.filename() < b.filename(); };
+  std::sort(files.begin(), files.end(), by_name);
+  std::sort(broken.begin(), broken.end());
   return files;
 }
 
 // Output names must stay distinct on any file system (a.JPG and a.jpg) and not take the record's name.
 void check_names(const std::vector<Source>& sources) {
-  std::map<std::string, std::string> seen;
+  std::map<std::string, const Source*> seen;
   for (const Source& s : sources) {
     std::string low = s.name;
     std::transform(low.begin(), low.end(), low.begin(), [](unsigned char c) { return std::tolower(c); });
     if (low == kInputsJson)
       fail("{}: an image may not be named {} (the input stage's record): rename it", s.path.string(), kInputsJson);
-    auto [it, fresh] = seen.emplace(low, s.name);
+    auto [it, fresh] = seen.emplace(low, &s);
     if (!fresh)
-      fail("{}: the names {} and {} differ only in case and would collide as input images: rename one",
-           s.path.parent_path().string(), it->second, s.name);
+      fail("{}: the names {} and {} {} and would collide as input images: rename one", s.path.parent_path().string(),
+           it->second->path.filename().string(), s.path.filename().string(),
+           it->second->name == s.name ? "are the same once characters COLMAP cannot carry are replaced"
+                                      : "differ only in case");
   }
 }
 
@@ -95,8 +110,32 @@ bool reuse(const json& old, const Source& s, const fs::path& out_dir, Outcome& o
   return false;
 }
 
+// Bounds the pixels decoded at once across the threads to `limit` (one image alone may take all of it), so the
+// input stage's memory does not grow with the thread count.
+class PixelBudget {
+ public:
+  explicit PixelBudget(int64_t limit) : limit_(limit) {}
+  void acquire(int64_t n) {
+    std::unique_lock<std::mutex> lock(mu_);
+    cv_.wait(lock, [&] { return used_ == 0 || used_ + n <= limit_; });
+    used_ += n;
+  }
+  void release(int64_t n) {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      used_ -= n;
+    }
+    cv_.notify_all();
+  }
+
+ private:
+  std::mutex mu_;
+  std::condition_variable cv_;
+  int64_t limit_, used_ = 0;
+};
+
 // Checks, decodes, orients, resizes and writes one image; a bad file sets o.bad instead of throwing.
-void convert(const Source& s, const fs::path& out_dir, const InputOptions& opt, Outcome& o) {
+void convert(const Source& s, const fs::path& out_dir, const InputOptions& opt, PixelBudget& budget, Outcome& o) {
   std::vector<uint8_t> bytes;
   try {
     bytes = read_file_bytes(s.path);
@@ -107,7 +146,17 @@ void convert(const Source& s, const fs::path& out_dir, const InputOptions& opt, 
   }
   Pixels px;
   o.bad = incomplete_reason(bytes, s.kind);
-  if (o.bad.empty()) o.bad = decode_rgb(bytes, px);
+  int hw = 0, hh = 0;
+  if (o.bad.empty()) o.bad = image_header_size(bytes, hw, hh);
+  if (!o.bad.empty()) return;
+  const int64_t need = std::min<int64_t>(int64_t(hw) * hh, opt.max_pixels);  // over the limit: refused unread
+  budget.acquire(need);
+  struct Release {
+    PixelBudget& b;
+    int64_t n;
+    ~Release() { b.release(n); }
+  } release{budget, need};
+  o.bad = decode_rgb(bytes, px, opt.max_pixels);
   if (!o.bad.empty()) return;
   const int orientation = s.kind == ImageKind::jpeg ? exif_orientation(bytes.data(), bytes.size()) : 1;
   int w, h;
@@ -139,17 +188,25 @@ json record(const std::vector<Source>& sources, const std::vector<Outcome>& outc
 }  // namespace
 
 namespace {
+bool is_empty_file(const fs::path& p) {
+  std::error_code ec;
+  return fs::file_size(p, ec) == 0 && !ec;
+}
+
 // Sources (images by signature, and files that cannot be read: bad files) and the files that are not images, in
 // name order.
 std::vector<Source> find_sources(const fs::path& dir, InputReport& report) {
   std::vector<Source> sources;
-  for (const fs::path& p : list_files(dir)) {
-    const ImageKind kind = sniff_image(p);
+  for (const fs::path& p : list_files(dir, report.broken_links)) {
+    ImageKind kind = sniff_image(p);
+    if (kind == ImageKind::none && has_image_extension(p) && is_empty_file(p)) kind = ImageKind::empty;
     if (kind == ImageKind::none) {
       report.not_images.push_back(p.string());
       continue;
     }
-    sources.push_back({p, p.filename().string(), kind, file_stamp(p)});
+    const std::string name = colmap_safe_name(p.filename().string());
+    if (name != p.filename().string()) report.renamed.push_back({p.string(), name});
+    sources.push_back({p, name, kind, file_stamp(p)});
   }
   check_names(sources);
   return sources;
@@ -178,7 +235,9 @@ void finish_report(const std::vector<Source>& sources, const std::vector<Outcome
 }  // namespace
 
 InputReport import_photos(const fs::path& dir_in, const fs::path& out_dir, const InputOptions& opt) {
-  const fs::path dir = fs::absolute(dir_in).lexically_normal();
+  // The resolved folder (links, "..", a trailing slash): the sources' paths, and so the stage key, do not depend on
+  // how the folder was typed.
+  const fs::path dir = resolved_path(dir_in);
   check_out_dir(dir, out_dir);
   InputReport report;
   const std::vector<Source> sources = find_sources(dir, report);
@@ -191,10 +250,11 @@ InputReport import_photos(const fs::path& dir_in, const fs::path& out_dir, const
     if (reuse(old, sources[i], out_dir, outcomes[i])) ++report.reused;
     else todo.push_back(long(i));
   std::mutex mu;
+  PixelBudget budget(opt.max_pixels);
   auto last_save = std::chrono::steady_clock::now();
   parallel_for_progress("input images", long(todo.size()), opt.progress && !todo.empty(), [&](long k) {
     Outcome o;
-    convert(sources[todo[k]], out_dir, opt, o);
+    convert(sources[todo[k]], out_dir, opt, budget, o);
     std::lock_guard<std::mutex> lock(mu);
     outcomes[todo[k]] = std::move(o);
     if (std::chrono::steady_clock::now() - last_save > std::chrono::seconds(5)) {

@@ -75,19 +75,32 @@ bool png_reaches_iend(const std::vector<uint8_t>& b) {
 }  // namespace
 
 std::string incomplete_reason(const std::vector<uint8_t>& bytes, ImageKind kind) {
+  if (kind == ImageKind::empty || bytes.empty()) return "empty file (0 bytes: an interrupted copy?)";
   if (kind == ImageKind::jpeg && !jpeg_reaches_eoi(bytes)) return "truncated JPEG (no end marker)";
   if (kind == ImageKind::png && !png_reaches_iend(bytes)) return "truncated PNG (no IEND chunk)";
   return "";
 }
 
-std::string decode_rgb(const std::vector<uint8_t>& bytes, Pixels& out) {
-  constexpr int64_t kMaxPixels = int64_t(1) << 28;  // as core/image.cpp: checked before stb allocates
+std::string image_header_size(const std::vector<uint8_t>& bytes, int& w, int& h) {
   const int n = static_cast<int>(std::min<size_t>(bytes.size(), INT32_MAX));
-  int w = 0, h = 0, c = 0;
+  int c = 0;
+  w = h = 0;
   if (!stbi_info_from_memory(bytes.data(), n, &w, &h, &c))
     return fmt::format("cannot decode image ({})", stbi_failure_reason());
-  if (w < 1 || h < 1 || int64_t(w) * h > kMaxPixels)
-    return fmt::format("image of {}x{} pixels is too large (at most {} pixels)", w, h, kMaxPixels);
+  if (w < 1 || h < 1) return fmt::format("image of {}x{} pixels", w, h);
+  return "";
+}
+
+std::string decode_rgb(const std::vector<uint8_t>& bytes, Pixels& out, int64_t max_pixels) {
+  int w = 0, h = 0, c = 0;
+  if (std::string why = image_header_size(bytes, w, h); !why.empty()) return why;
+  // From the header, before stb allocates anything: a few KB of JPEG may declare 16383 x 16383 (1.6 GB decoded).
+  if (int64_t(w) * h > max_pixels)
+    return fmt::format(
+        "image of {}x{} pixels ({:.0f} MP) is over the limit of {} pixels (--max-pixels; raise it for a camera "
+        "this large)",
+        w, h, double(w) * h / 1e6, max_pixels);
+  const int n = static_cast<int>(std::min<size_t>(bytes.size(), INT32_MAX));
   uint8_t* p = stbi_load_from_memory(bytes.data(), n, &w, &h, &c, 3);
   if (!p) return fmt::format("cannot decode image ({})", stbi_failure_reason());
   out.width = w;

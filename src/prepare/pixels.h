@@ -14,7 +14,8 @@ struct Pixels {
   std::vector<uint8_t> v;  // [H, W, 3], row-major RGB
 };
 
-enum class ImageKind { none, jpeg, png, unreadable };
+// empty: a zero-byte file named like an image (an interrupted copy): unreadable, as a truncated one.
+enum class ImageKind { none, jpeg, png, unreadable, empty };
 
 // The kind of image a file holds by its first bytes (JPEG FF D8 FF, PNG 89 'PNG'); none for anything else;
 // unreadable when the file cannot be opened.
@@ -26,8 +27,12 @@ ImageKind sniff_image(const uint8_t* data, size_t n);
 // EOI, so data appended after EOI (motion photos) is accepted; a PNG is walked chunk by chunk up to IEND.
 std::string incomplete_reason(const std::vector<uint8_t>& bytes, ImageKind kind);
 
-// Decodes to 8-bit RGB (grey replicated, alpha dropped, 16-bit reduced). Returns "" or the reason it failed.
-std::string decode_rgb(const std::vector<uint8_t>& bytes, Pixels& out);
+// The width and height an image's header declares (nothing decoded). Returns "" or the reason it cannot be read.
+std::string image_header_size(const std::vector<uint8_t>& bytes, int& width, int& height);
+
+// Decodes to 8-bit RGB (grey replicated, alpha dropped, 16-bit reduced). Returns "" or the reason it failed; an
+// image whose header declares more than `max_pixels` pixels is refused before anything is allocated.
+std::string decode_rgb(const std::vector<uint8_t>& bytes, Pixels& out, int64_t max_pixels);
 
 // EXIF orientation 1..8 applied: the image as it is meant to be displayed (5..8 swap width and height).
 Pixels apply_orientation(const Pixels& src, int orientation);

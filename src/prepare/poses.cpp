@@ -13,6 +13,7 @@
 #include "core/fs.h"
 #include "core/image.h"
 #include "core/progress.h"
+#include "prepare/colmap_db.h"
 #include "prepare/run_tool.h"
 #include "scene/colmap.h"
 
@@ -60,8 +61,9 @@ void extract_features(const fs::path& colmap, const fs::path& input_dir, const f
     by_size[{w, h}].push_back(n);
   }
   long total = 0, done = 0;
+  std::string write_failure;  // the first line that said a write failed
   for (auto& [size, names] : by_size) total += long(names.size());
-  Progress bar("colmap features", total, opt.progress);
+  Progress bar(opt.wide_baseline ? "colmap features (wide-baseline)" : "colmap features", total, opt.progress);
   for (auto& [size, names] : by_size) {
     const fs::path list = work / "lists" / fmt::format("images_{}x{}.txt", size.first, size.second);
     std::string text;
@@ -70,21 +72,57 @@ void extract_features(const fs::path& colmap, const fs::path& input_dir, const f
     atomic_write_text(list, text);
     const long base = done;
     const std::string dims = fmt::format("{}x{}", size.first, size.second);  // clang-14 cannot capture `size`
-    run_tool_or_fail("colmap feature_extractor", colmap,
-                     {"feature_extractor", "--database_path", (work / "database.db").string(), "--image_path",
-                      input_dir.string(), "--image_list_path", list.string(), "--ImageReader.single_camera", "1",
-                      "--ImageReader.camera_model", opt.camera_model, "--SiftExtraction.use_gpu", "0",
-                      "--SiftExtraction.max_num_features", std::to_string(opt.max_features)},
-                     log_path(work, "features"),
-                     counter("Processed file", [&](long i, long) { bar.update(base + i, dims); }));
+    std::vector<std::string> args{"feature_extractor",
+                                  "--database_path",
+                                  (work / "database.db").string(),
+                                  "--image_path",
+                                  input_dir.string(),
+                                  "--image_list_path",
+                                  list.string(),
+                                  "--ImageReader.single_camera",
+                                  "1",
+                                  "--ImageReader.camera_model",
+                                  opt.camera_model,
+                                  "--SiftExtraction.use_gpu",
+                                  "0",
+                                  "--SiftExtraction.max_num_features",
+                                  std::to_string(opt.wide_baseline ? wide_features(opt.max_features)
+                                                                   : opt.max_features)};
+    if (opt.wide_baseline)
+      args.insert(args.end(),
+                  {"--SiftExtraction.estimate_affine_shape", "1", "--SiftExtraction.domain_size_pooling", "1"});
+    const ToolRun r = run_tool(colmap, args, log_path(work, "features"),
+                               counter("Processed file", [&](long i, long) { bar.update(base + i, dims); }));
+    if (!r.ok())
+      fail("colmap feature_extractor failed ({}): {}; log: {}", r.how_it_ended(),
+           r.last_lines.substr(r.last_lines.rfind('\n') + 1), log_path(work, "features"));
+    if (write_failure.empty()) write_failure = r.write_failure;
     done += long(names.size());
   }
+  // COLMAP 3.8 exits 0 when it cannot write to its database (a full disk): count what it wrote.
+  const std::set<std::string> have = images_with_features(work / "database.db");
+  std::vector<std::string> missing;
+  for (auto& [size, names] : by_size)
+    for (const std::string& n : names)
+      if (!have.count(n)) missing.push_back(n);
+  if (!missing.empty())
+    fail(
+        "colmap feature_extractor exited 0 but wrote features for only {} of {} images to {} (missing {}{}){}: is "
+        "the disk full? Rerun once there is space; log: {}",
+        total - long(missing.size()), total, (work / "database.db").string(),
+        fmt::join(missing.begin(), missing.begin() + std::min<size_t>(missing.size(), 3), ", "),
+        missing.size() > 3 ? ", ..." : "", write_failure.empty() ? "" : " and logged \"" + write_failure + "\"",
+        log_path(work, "features"));
+  if (!write_failure.empty())
+    fail("colmap feature_extractor could not write its output although it exited 0 (is the disk full?): {}; log: {}",
+         write_failure, log_path(work, "features"));
   bar.finish(fmt::format("{} images, {} camera{}", total, by_size.size(), by_size.size() > 1 ? "s" : ""));
 }
 
 void match_features(const fs::path& colmap, const fs::path& work, const std::string& matcher, int n_images,
                     const PoseOptions& opt) {
   std::vector<std::string> args{"--database_path", (work / "database.db").string(), "--SiftMatching.use_gpu", "0"};
+  if (opt.wide_baseline) args.insert(args.end(), {"--SiftMatching.guided_matching", "1"});
   std::string prog, prefix = "Matching image";
   if (matcher == "exhaustive") {
     prog = "exhaustive_matcher";
@@ -109,7 +147,8 @@ void match_features(const fs::path& colmap, const fs::path& work, const std::str
   // Exhaustive: "Matching block [i/B, j/B]" over B x B blocks of 50 images (COLMAP's block size); the others:
   // "Matching image [i/N]".
   const long B = (n_images + 49) / 50;
-  Progress bar("colmap matching", matcher == "exhaustive" ? B * B : n_images, opt.progress);
+  Progress bar(opt.wide_baseline ? "colmap matching (guided)" : "colmap matching",
+               matcher == "exhaustive" ? B * B : n_images, opt.progress);
   const std::regex block_re(R"(Matching block \[(\d+)/\d+, (\d+)/\d+\])");
   auto per_image = counter(prefix, [&](long i, long) { bar.update(i, matcher); });
   auto on_line = [&](const std::string& line) {
@@ -123,43 +162,48 @@ void match_features(const fs::path& colmap, const fs::path& work, const std::str
 }
 
 fs::path map_poses(const fs::path& colmap, const fs::path& input_dir, const fs::path& work, int n_images,
-                   const PoseOptions& opt) {
-  const fs::path sparse = work / "sparse";
+                   const PoseOptions& opt, const std::string& sparse_name) {
+  const fs::path sparse = work / sparse_name;
   fs::remove_all(sparse);
   ensure_dir(sparse);
-  Progress bar("colmap mapping", n_images, opt.progress);
+  Progress bar(opt.wide_baseline ? "colmap mapping (wide-baseline)" : "colmap mapping", n_images, opt.progress);
   std::regex reg_re(R"(Registering image #\d+ \((\d+)\))");
   // COLMAP discards models under 10 images (Mapper.min_model_size); a small capture may still be usable, and a
   // model holding too few of the images is refused by the registration check that follows.
-  const fs::path log = log_path(work, "mapping");
-  ToolRun r = run_tool(colmap,
-                       {"mapper", "--database_path", (work / "database.db").string(), "--image_path",
-                        input_dir.string(), "--output_path", sparse.string(), "--Mapper.min_model_size", "3"},
-                       log, [&](const std::string& line) {
-                         std::smatch m;
-                         if (std::regex_search(line, m, reg_re))
-                           bar.update(std::min<long>(std::stol(m[1]), n_images), "images registered");
-                       });
+  const fs::path log = log_path(work, sparse_name == "sparse" ? "mapping" : "mapping_" + sparse_name);
+  std::vector<std::string> args{"mapper",        "--database_path",         (work / "database.db").string(),
+                                "--image_path",  input_dir.string(),        "--output_path",
+                                sparse.string(), "--Mapper.min_model_size", "3"};
+  if (opt.wide_baseline) args.insert(args.end(), kWideMapperArgs.begin(), kWideMapperArgs.end());
+  ToolRun r = run_tool(colmap, args, log, [&](const std::string& line) {
+    std::smatch m;
+    if (std::regex_search(line, m, reg_re)) bar.update(std::min<long>(std::stol(m[1]), n_images), "images registered");
+  });
   const bool no_model = r.last_lines.find("failed to create sparse model") != std::string::npos;
   if (!r.ok() && !no_model)
     fail("colmap mapper failed ({}): {}; log: {}", r.how_it_ended(), r.last_lines.substr(r.last_lines.rfind('\n') + 1),
          log.string());
+  if (!r.write_failure.empty())
+    fail("colmap mapper could not write its output although it exited 0 (is the disk full?): {}; log: {}",
+         r.write_failure, log.string());
   fs::path best;
   size_t best_n = 0;
   int models = 0;
   for (const auto& e : fs::directory_iterator(sparse)) {
-    if (!e.is_directory() || !fs::exists(e.path() / "images.bin")) continue;
+    if (!e.is_directory()) continue;
+    // A model is its three files; one without them all is a write that did not finish (read_colmap_bin below
+    // also refuses a truncated one, naming the file).
+    for (const char* f : {"cameras.bin", "images.bin", "points3D.bin"})
+      if (!fs::exists(e.path() / f))
+        fail("colmap mapper exited {} but its model {} lacks {} (is the disk full?); log: {}", r.exit_code,
+             e.path().string(), f, log.string());
     ++models;
     const size_t n = read_colmap_bin(e.path()).images.size();
     if (n > best_n) best_n = n, best = e.path();
   }
-  if (best.empty())
-    fail(
-        "colmap mapper made no model from {} images: too few matches between the images (more overlap between "
-        "photos, more texture, or --matcher exhaustive); log: {}",
-        n_images, log.string());
-  bar.finish(
-      fmt::format("{} of {} registered in the largest of {} model{}", best_n, n_images, models, models > 1 ? "s" : ""));
+  bar.finish(best.empty() ? std::string("no model")
+                          : fmt::format("{} of {} registered in the largest of {} model{}", best_n, n_images, models,
+                                        models > 1 ? "s" : ""));
   return best;
 }
 
@@ -175,7 +219,15 @@ void undistort(const fs::path& colmap, const fs::path& input_dir, const fs::path
                    log_path(work, "undistort"),
                    counter("Undistorting image", [&](long i, long) { bar.update(i, "to PINHOLE"); }));
   // COLMAP writes out/images and out/sparse/{cameras,images,points3D}.bin: move them into the scene, replacing
-  // what an earlier run left only now that they are complete.
+  // what an earlier run left only now that they are complete (every image and file there).
+  for (const char* f : {"cameras.bin", "images.bin", "points3D.bin"})
+    if (!fs::exists(out / "sparse" / f))
+      fail("colmap image_undistorter exited 0 but wrote no {} (is the disk full?); log: {}", f,
+           log_path(work, "undistort"));
+  for (const ColmapImage& im : read_colmap_bin(model).images)
+    if (!fs::exists(out / "images" / im.name))
+      fail("colmap image_undistorter exited 0 but wrote no {} (is the disk full?); log: {}",
+           (out / "images" / im.name).string(), log_path(work, "undistort"));
   const fs::path sparse0 = out / "sparse0";
   ensure_dir(sparse0);
   for (const char* f : {"cameras.bin", "images.bin", "points3D.bin"}) fs::rename(out / "sparse" / f, sparse0 / f);

@@ -12,6 +12,7 @@
 //   undistort  image_undistorter to PINHOLE: SCENE/images/ and SCENE/sparse/0/, what `hgs train` reads.
 // Each runs colmap with a progress bar parsed from its log (WORK/logs/<stage>.log).
 #pragma once
+#include <algorithm>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -28,7 +29,23 @@ struct PoseOptions {
   int max_features = 4096;  // SIFT features per image
   bool ordered = false;     // input images are video frames in order
   bool progress = true;
+  // COLMAP's wide-baseline settings (the retries of a sparse capture, see below): wide_features(max_features)
+  // features, affine-covariant with domain-size pooling; guided matching; mapper initialisation and
+  // registration with fewer inliers and a smaller triangulation angle (kWideMapperArgs).
+  bool wide_baseline = false;
 };
+
+// When fewer than half the images register, the pose stages retry on their own, in order, until half register:
+//   retry_mapping   the mapper again on the same matches with the wide-baseline mapper options (cheap);
+//   retry_features  features, matching and mapping again in WORK/retry/ with every wide-baseline setting.
+// The model with the most registered images is kept. On a capture of 20 goldcape photos 18 degrees apart
+// COLMAP's defaults register 3; these settings by hand, 13 (issue 60); hgs prepare 13 of 21 (docs/capture.md).
+// Features: twice --max-features (8192 at the default, what the by-hand run used), so that a user who bounded the
+// cost of features bounds the retry's too.
+inline int wide_features(int max_features) { return std::min(2 * max_features, 65536); }
+inline const std::vector<std::string> kWideMapperArgs = {"--Mapper.init_min_num_inliers",     "50",
+                                                         "--Mapper.abs_pose_min_num_inliers", "15",
+                                                         "--Mapper.init_min_tri_angle",       "8"};
 
 // What a reconstruction holds, for the report.
 struct PoseSummary {
@@ -50,9 +67,11 @@ void extract_features(const std::filesystem::path& colmap, const std::filesystem
                       const std::filesystem::path& work, const PoseOptions& opt);
 void match_features(const std::filesystem::path& colmap, const std::filesystem::path& work, const std::string& matcher,
                     int n_images, const PoseOptions& opt);
-// Runs the mapper; returns the folder of the largest model (WORK/sparse/N). Fails when no model was made.
+// Runs the mapper on WORK/database.db into WORK/<sparse> (log WORK/logs/<sparse>.log); returns the folder of the
+// largest model (WORK/<sparse>/N), or an empty path when the mapper made none.
 std::filesystem::path map_poses(const std::filesystem::path& colmap, const std::filesystem::path& input_dir,
-                                const std::filesystem::path& work, int n_images, const PoseOptions& opt);
+                                const std::filesystem::path& work, int n_images, const PoseOptions& opt,
+                                const std::string& sparse = "sparse");
 // Undistorts `model` into SCENE/images and SCENE/sparse/0 (replacing earlier ones only once complete).
 void undistort(const std::filesystem::path& colmap, const std::filesystem::path& input_dir,
                const std::filesystem::path& model, const std::filesystem::path& work,

@@ -12,7 +12,10 @@
 #include "core/error.h"
 #include "core/fs.h"
 #include "masks/import.h"
+#include "prepare/input_dir.h"
 #include "prepare/run_tool.h"
+#include "prepare/scene_lock.h"
+#include "prepare/sparse_retry.h"
 #include "prepare/stage_info.h"
 #include "prepare/stage_options.h"
 #include "prepare/stages.h"
@@ -25,12 +28,11 @@ namespace hgs::prepare {
 namespace fs = std::filesystem;
 
 const std::vector<std::pair<std::string, std::string>>& stage_groups() {
-  static const std::vector<std::pair<std::string, std::string>> g = {{"input", "input"},     {"features", "poses"},
-                                                                     {"matching", "poses"},  {"mapping", "poses"},
-                                                                     {"undistort", "poses"}, {"sam", "masks"},
-                                                                     {"import", "masks"},    {"depth", "masks"},
-                                                                     {"associate", "masks"}, {"clip", "language"},
-                                                                     {"text", "language"}};
+  static const std::vector<std::pair<std::string, std::string>> g = {
+      {"input", "input"},         {"features", "poses"},       {"matching", "poses"},  {"mapping", "poses"},
+      {"retry_mapping", "poses"}, {"retry_features", "poses"}, {"undistort", "poses"}, {"sam", "masks"},
+      {"import", "masks"},        {"depth", "masks"},          {"associate", "masks"}, {"clip", "language"},
+      {"text", "language"}};
   return g;
 }
 
@@ -97,20 +99,39 @@ class Pipeline {
   bool stopped_ = false, resuming_ = false;
 };
 
+// A path the run will read or write, checked before anything else so that a name longer than the file system
+// allows or a folder on the way that cannot be searched is one line naming the path, not an internal error.
+// Returns whether it exists.
+bool check_path(const fs::path& p, const char* what) {
+  for (const fs::path& part : p)
+    if (part.native().size() > 255)
+      fail("{}: a name in the {} path is {} bytes long; file systems allow at most 255", p.string(), what,
+           part.native().size());
+  std::error_code ec;
+  const fs::file_status st = fs::status(p, ec);
+  if (ec && ec != std::errc::no_such_file_or_directory)
+    fail("{}: cannot reach the {} ({})", p.string(), what, ec.message());
+  return fs::exists(st);
+}
+
 // SCENE may be new, empty, or one hgs prepare made; anything else is left alone.
 void check_scene_folder(const fs::path& scene, const fs::path& input) {
   std::error_code ec;
-  if (fs::exists(scene) && !fs::is_directory(scene)) fail("{}: --out exists and is not a folder", scene.string());
-  if (fs::exists(scene) && !fs::is_empty(scene) && !fs::exists(scene / "prepare" / "state.json"))
+  if (!check_path(scene, "--out")) return;
+  if (!fs::is_directory(scene, ec)) fail("{}: --out exists and is not a folder", scene.string());
+  const bool ours = fs::exists(scene / "prepare" / "state.json", ec) || fs::exists(scene / "prepare" / "lock", ec);
+  if (!fs::is_empty(scene, ec) && !ours)
     fail("{}: --out is a folder hgs prepare did not make (no prepare/state.json): give a new or empty folder",
          scene.string());
+  if (ec) fail("{}: cannot read the --out folder ({})", scene.string(), ec.message());
   if (fs::equivalent(scene, input, ec)) fail("{}: --out must not be the input folder", scene.string());
 }
 
 InputInfo input_info(const InputReport& r, const fs::path& input, bool video) {
   InputInfo in;
-  in.path = input.string(), in.kind = video ? "video" : "photos", in.images = int(r.images.size());
-  in.not_images = r.not_images, in.bad = r.bad, in.blurred = r.blurred;
+  in.path = resolved_path(input).string(), in.kind = video ? "video" : "photos", in.images = int(r.images.size());
+  in.not_images = r.not_images, in.bad = r.bad, in.blurred = r.blurred, in.broken_links = r.broken_links;
+  for (const auto& [from, to] : r.renamed) in.renamed.push_back({from, to});
   for (const InputImage& im : r.images) {
     in.resized += im.resized;
     in.rotated += im.orientation != 1;
@@ -123,31 +144,6 @@ std::vector<std::string> input_names(const InputInfo& in) {
   std::vector<std::string> names;
   for (const InputEntry& e : in.list) names.push_back(e.name);
   return names;
-}
-
-MappingInfo mapping_info(const PoseSummary& s, const fs::path& model) {
-  return {s.images,
-          s.registered,
-          s.dropped,
-          s.models,
-          s.cameras,
-          s.points,
-          s.mean_reprojection_error,
-          s.mean_track_length,
-          s.matcher,
-          model.string()};
-}
-
-// Fewer than half the images registered: a capture problem the user should see before training on it.
-void check_registration(const PoseSummary& s, bool allow_partial) {
-  if (allow_partial || 2 * s.registered >= s.images) return;
-  fail(
-      "COLMAP registered only {} of {} images ({:.0f} %; dropped {}{}): the photos overlap too little or lack "
-      "texture; take more overlapping photos, try --matcher exhaustive, or keep going with the registered ones "
-      "with --allow-partial",
-      s.registered, s.images, 100.0 * s.registered / std::max(1, s.images),
-      fmt::join(s.dropped.begin(), s.dropped.begin() + std::min<size_t>(s.dropped.size(), 5), ", "),
-      s.dropped.size() > 5 ? ", ..." : "");
 }
 
 }  // namespace
@@ -170,7 +166,12 @@ void input_stage(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
         "best)",
         opt.input.string(), r.images.size(), r.images.size() == 1 ? "" : "s",
         r.not_images.empty() ? "" : fmt::format(" ({} other files skipped)", r.not_images.size()));
-  p.set_input_key(hash_key("input|" + info.dump()));
+  // The key: what the stage produced (the resolved source paths, names, sizes) and the bytes of every output, so
+  // that the folder typed another way keeps every later stage, and a photo replaced by another of the same size
+  // reruns them.
+  std::string content;
+  for (const InputImage& im : r.images) content += "|" + im.name + ":" + hash_file_content(work / "input" / im.name);
+  p.set_input_key(hash_key("input|" + info.dump() + content));
   p.stage(
       "input", [&] { return info; }, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
 }
@@ -217,21 +218,41 @@ void pose_stages(Pipeline& p, const PrepareOptions& opt, const StageOptions& so,
     return nlohmann::json(MatchingInfo{matcher});
   });
   p.stage("mapping", [&] {
-    const fs::path best = map_poses(colmap(), work / "input", work, n, po);
-    PoseSummary s = summarize_model(best, names);
-    s.matcher = matcher;
-    int models = 0;
-    for (const auto& e : fs::directory_iterator(work / "sparse")) models += e.is_directory();
-    s.models = models;
-    return nlohmann::json(mapping_info(s, best));
+    return nlohmann::json(map_and_summarize(colmap(), work / "input", work, names, po, "sparse", opt.scene, "default"));
+  });
+  // A sparse capture: COLMAP's wide-baseline settings, the mapper first (cheap), then everything (poses.h).
+  PoseOptions wide = po;
+  wide.wide_baseline = true;
+  auto announce = [&](const MappingInfo& m, const std::string& next) {
+    if (opt.progress)
+      fmt::print(stderr, "colmap registered only {} of {} images{}: retrying with {}\n", m.registered, m.images,
+                 m.retried.empty() ? "" : " so far", next);
+  };
+  p.stage("retry_mapping", [&] {
+    const MappingInfo m = p.info<MappingInfo>("mapping");
+    if (registered_enough(m)) return nlohmann::json(m);
+    announce(m, "COLMAP's wide-baseline mapper options");
+    return nlohmann::json(keep_better(m, map_and_summarize(colmap(), work / "input", work, names, wide, "sparse_wide",
+                                                           opt.scene, "wide-baseline mapper")));
+  });
+  p.stage("retry_features", [&] {
+    const MappingInfo m = p.info<MappingInfo>("retry_mapping");
+    if (registered_enough(m)) return nlohmann::json(m);
+    announce(m, fmt::format("wide-baseline features ({}, affine, domain-size pooling) and guided matching",
+                            wide_features(po.max_features)));
+    const fs::path dir = work / "retry";
+    fs::remove_all(dir);
+    ensure_dir(dir);
+    extract_features(colmap(), work / "input", dir, wide);
+    match_features(colmap(), dir, matcher, n, wide);
+    return nlohmann::json(keep_better(m, map_and_summarize(colmap(), work / "input", dir, names, wide, "sparse",
+                                                           opt.scene, "wide-baseline features")));
   });
   if (p.stopped()) return;
-  const MappingInfo m = p.info<MappingInfo>("mapping");
-  PoseSummary s;
-  s.images = m.images, s.registered = m.registered, s.dropped = m.dropped;
-  check_registration(s, opt.allow_partial);
+  const MappingInfo m = p.info<MappingInfo>("retry_features");
+  check_registration(m, opt.allow_partial);
   p.stage("undistort", [&] {
-    undistort(colmap(), work / "input", m.model, work, opt.scene, po);
+    undistort(colmap(), work / "input", model_folder(m, opt.scene), work, opt.scene, po);
     return nlohmann::json::object();
   });
 }
@@ -314,10 +335,12 @@ nlohmann::json prepare_json(const Pipeline& p, const PrepareOptions& opt) {
   j["input"] = p.info<InputInfo>("input");
   j["input"].erase("list");
   j["poses"] = nlohmann::json::object();
-  if (p.has_info("mapping")) {
-    j["poses"] = p.info<MappingInfo>("mapping");
-    j["poses"].erase("model");
-  }
+  for (const char* stage : {"mapping", "retry_features"})  // the retries' record when they ran
+    if (p.has_info(stage)) {
+      j["poses"] = p.info<MappingInfo>(stage);
+      j["poses"].erase("model_path");
+      j["poses"].erase("model");
+    }
   j["masks"] = nlohmann::json::object();
   if (opt.load_sam && p.has_info("associate")) {
     j["masks"] = p.info<AssociateInfo>("associate");
@@ -344,9 +367,11 @@ nlohmann::json prepare_json(const Pipeline& p, const PrepareOptions& opt) {
 }  // namespace
 
 PrepareReport run_prepare(const PrepareOptions& opt) {
+  if (!check_path(opt.input, "INPUT")) fail("{}: no such folder or video file", opt.input.string());
   check_scene_folder(opt.scene, opt.input);
   const fs::path work = opt.scene / "prepare";
   ensure_dir(work);
+  const SceneLock lock(work);
   Pipeline p(opt);
   input_stage(p, opt, work);
   const InputInfo in = p.info<InputInfo>("input");

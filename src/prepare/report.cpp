@@ -28,6 +28,13 @@ std::string PrepareReport::text() const {
     t += "\n";
     if (!in.value("not_images", nlohmann::json::array()).empty())
       t += fmt::format("             skipped (not images): {}\n", list_some(in["not_images"]));
+    if (!in.value("broken_links", nlohmann::json::array()).empty())
+      t += fmt::format("             skipped (links to nothing): {}\n", list_some(in["broken_links"]));
+    if (const auto renamed = in.value("renamed", nlohmann::json::array()); !renamed.empty()) {
+      nlohmann::json pairs = nlohmann::json::array();
+      for (const auto& r : renamed) pairs.push_back(r[0].dump() + " -> " + r[1].get<std::string>());  // escaped
+      t += fmt::format("             renamed (names COLMAP cannot carry): {}\n", list_some(pairs, 3));
+    }
     if (!in.value("bad", nlohmann::json::array()).empty())
       t += fmt::format("             skipped (unreadable): {}\n", list_some(in["bad"], 3));
     if (!in.value("blurred", nlohmann::json::array()).empty())
@@ -40,6 +47,9 @@ std::string PrepareReport::text() const {
         p.value("registered", 0), p.value("images", 0), p.value("matcher", ""), p.value("cameras", 0),
         p.value("cameras", 0) == 1 ? "" : "s", p.value("points", 0), p.value("mean_reprojection_error_px", 0.0),
         p.value("mean_track_length", 0.0));
+    if (!p.value("retried", nlohmann::json::array()).empty())
+      t += fmt::format("             retried (fewer than half registered): {}; kept: {} settings\n",
+                       list_some(p["retried"]), p.value("settings", ""));
     if (!p.value("dropped", nlohmann::json::array()).empty())
       t += fmt::format("             not registered: {}\n", list_some(p["dropped"]));
   }

@@ -12,4 +12,14 @@ void from_json(const nlohmann::json& j, InputEntry& e) {
   j.at(4).get_to(e.source);
 }
 
+std::string model_record(const std::filesystem::path& model, const std::filesystem::path& scene) {
+  return model.empty() ? "" : model.lexically_relative(scene).string();
+}
+
+std::filesystem::path model_folder(const MappingInfo& m, const std::filesystem::path& scene) {
+  if (!m.model_path.empty()) return scene / m.model_path;
+  if (m.model.empty()) return {};
+  return scene / "prepare" / "sparse" / std::filesystem::path(m.model).filename();
+}
+
 }  // namespace hgs::prepare

@@ -60,9 +60,9 @@ void from_json(const nlohmann::json& j, AssociateStage& s) {
 
 void to_json(nlohmann::json& j, const StageOptions& o) {
   const nlohmann::json none = nlohmann::json::object();
-  j = {{"features", o.features}, {"matching", o.matching}, {"mapping", none},  {"undistort", none},
-       {"sam", o.sam},           {"import", none},         {"depth", o.depth}, {"associate", o.associate},
-       {"clip", o.clip},         {"text", o.text}};
+  j = {{"features", o.features}, {"matching", o.matching},   {"mapping", none}, {"retry_mapping", none},
+       {"retry_features", none}, {"undistort", none},        {"sam", o.sam},    {"import", none},
+       {"depth", o.depth},       {"associate", o.associate}, {"clip", o.clip},  {"text", o.text}};
 }
 
 void from_json(const nlohmann::json& j, StageOptions& o) {
@@ -72,12 +72,18 @@ void from_json(const nlohmann::json& j, StageOptions& o) {
 }
 
 const std::vector<std::pair<std::string, std::vector<std::string>>>& stage_inputs() {
-  static const std::vector<std::pair<std::string, std::vector<std::string>>> s = {
-      {"features", {"input"}},   {"matching", {"features"}},
-      {"mapping", {"matching"}}, {"undistort", {"mapping"}},
-      {"sam", {"undistort"}},    {"import", {"sam"}},
-      {"depth", {"undistort"}},  {"associate", {"import", "depth"}},
-      {"clip", {"undistort"}},   {"text", {}}};
+  static const std::vector<std::pair<std::string, std::vector<std::string>>> s = {{"features", {"input"}},
+                                                                                  {"matching", {"features"}},
+                                                                                  {"mapping", {"matching"}},
+                                                                                  {"retry_mapping", {"mapping"}},
+                                                                                  {"retry_features", {"retry_mapping"}},
+                                                                                  {"undistort", {"retry_features"}},
+                                                                                  {"sam", {"undistort"}},
+                                                                                  {"import", {"sam"}},
+                                                                                  {"depth", {"undistort"}},
+                                                                                  {"associate", {"import", "depth"}},
+                                                                                  {"clip", {"undistort"}},
+                                                                                  {"text", {}}};
   return s;
 }
 

@@ -42,7 +42,8 @@ struct TextStage {
   std::vector<std::string> phrases;  // in order, LERF's canonical ones included
 };
 
-// The mapping, undistort and import stages have no options of their own.
+// The mapping, retry_mapping, retry_features (COLMAP's wide-baseline settings: constants of poses.h), undistort
+// and import stages have no options of their own.
 struct StageOptions {
   FeaturesStage features;
   MatchingStage matching;

@@ -14,6 +14,9 @@ namespace hgs::prepare {
 // 16 hex digits (FNV-1a, 64 bits) of `text`.
 std::string hash_key(const std::string& text);
 
+// 16 hex digits (FNV-1a) of a file's bytes; "" when it cannot be read.
+std::string hash_file_content(const std::filesystem::path& path);
+
 // A file's identity for a stage key: absolute path, size and modification time.
 std::string hash_file_identity(const std::string& path);
 

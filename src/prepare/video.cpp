@@ -148,7 +148,7 @@ json video_record(const json& key, const InputReport& report, const fs::path& ou
 }  // namespace
 
 InputReport import_video(const fs::path& video_in, const fs::path& out_dir_in, const InputOptions& opt) {
-  const fs::path video = fs::absolute(video_in).lexically_normal();
+  const fs::path video = resolved_path(video_in);
   const fs::path out_dir = fs::absolute(out_dir_in).lexically_normal();
   std::error_code ec;
   if (!fs::is_regular_file(video, ec)) fail("{}: not a video file", video.string());

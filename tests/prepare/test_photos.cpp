@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <set>
 
 #include "core/error.h"
 #include "core/fs.h"
@@ -364,6 +365,110 @@ TEST(Photos, NamesThatDifferOnlyInCaseAndBadFoldersFailClearly) {
   EXPECT_FILE_ERROR(import_photos(t / "in" / "a.jpg", t / "out", quiet()), t / "in" / "a.jpg", "not a folder");
   EXPECT_FILE_ERROR(import_photos(t / "in", t / "in", quiet()), t / "in", "may not be the photo folder");
   EXPECT_FALSE(fs::exists(t / "out")) << "nothing is written before the input is known to be usable";
+}
+
+// Issue 60, item 5: a name COLMAP cannot carry (backslash from a Windows-made archive, tab, newline, a trailing
+// space) is written under a safe name, the renaming listed; the source keeps its name and a rerun reuses it.
+TEST(Photos, NamesColmapCannotCarryAreRenamedAndListed) {
+  TempDir t;
+  fs::create_directories(t / "in");
+  const std::vector<std::string> bad = {"a\\b.jpg", "c\td.jpg", "e\nf.jpg", "g.jpg "};
+  for (const std::string& n : bad) write(t / "in" / n, jpeg_bytes(quadrants(16, 16)));
+  write(t / "in" / "plain.jpg", jpeg_bytes(quadrants(16, 16)));
+  InputReport r = import_photos(t / "in", t / "out", quiet());
+  ASSERT_EQ(r.images.size(), 5u);
+  std::set<std::string> names;
+  for (const InputImage& im : r.images) names.insert(im.name);
+  EXPECT_EQ(names, (std::set<std::string>{"a_b.jpg", "c_d.jpg", "e_f.jpg", "g.jpg_", "plain.jpg"}));
+  for (const std::string& n : names) EXPECT_TRUE(fs::exists(t / "out" / n)) << n;
+  ASSERT_EQ(r.renamed.size(), 4u);
+  std::set<std::string> sources;
+  for (const auto& [from, to] : r.renamed) sources.insert(fs::path(from).filename().string());
+  EXPECT_EQ(sources, (std::set<std::string>(bad.begin(), bad.end())));
+  r = import_photos(t / "in", t / "out", quiet());
+  EXPECT_EQ(r.reused, 5);
+  // A safe name that an existing photo already has: refused, naming both.
+  write(t / "in" / "a_b.jpg", jpeg_bytes(quadrants(16, 16)));
+  EXPECT_FILE_ERROR(import_photos(t / "in", t / "out", quiet()), t / "in", "would collide");
+}
+
+// Issue 60, item 11: a link to nothing (dangling, or a loop) is skipped and listed wherever it sorts; the last
+// entry used to fail the whole listing.
+TEST(Photos, LinksToNothingAreSkippedAndListedWhereverTheySort) {
+  TempDir t;
+  fs::create_directories(t / "in");
+  for (int i = 0; i < 3; ++i) write(t / "in" / fmt::format("p{}.jpg", i), jpeg_bytes(quadrants(16, 16)));
+  fs::create_symlink(t / "nowhere.jpg", t / "in" / "a_dangling.jpg");
+  fs::create_symlink(t / "in" / "p1_loop.jpg", t / "in" / "p1_loop.jpg");
+  fs::create_symlink(t / "in" / "z_loop_b.jpg", t / "in" / "z_loop_a.jpg");
+  fs::create_symlink(t / "in" / "z_loop_a.jpg", t / "in" / "z_loop_b.jpg");
+  fs::create_symlink(t / "in" / "p0.jpg", t / "in" / "p3_link.jpg");  // a good link is a photo
+  const InputReport r = import_photos(t / "in", t / "out", quiet());
+  ASSERT_EQ(r.images.size(), 4u);
+  EXPECT_EQ(r.images[3].name, "p3_link.jpg");
+  ASSERT_EQ(r.broken_links.size(), 4u);
+  EXPECT_EQ(fs::path(r.broken_links[0]).filename(), "a_dangling.jpg");
+  EXPECT_EQ(fs::path(r.broken_links[3]).filename(), "z_loop_b.jpg");
+  EXPECT_TRUE(r.not_images.empty());
+}
+
+// Issue 60, item 14: a zero-byte photo (an interrupted copy) is unreadable like a half-copied one: the run stops
+// naming it, or it is skipped and listed with --skip-bad-images; it is not "not an image".
+TEST(Photos, AnEmptyPhotoIsUnreadableLikeATruncatedOne) {
+  TempDir t;
+  fs::create_directories(t / "in");
+  for (int i = 0; i < 3; ++i) write(t / "in" / fmt::format("p{}.jpg", i), jpeg_bytes(quadrants(16, 16)));
+  write(t / "in" / "p1b.JPG", {});
+  write(t / "in" / "empty_notes.txt", {});  // not named like an image: still not an image
+  InputOptions opt = quiet();
+  EXPECT_FILE_ERROR(import_photos(t / "in", t / "out", opt), t / "in" / "p1b.JPG", "empty file (0 bytes");
+  opt.skip_bad = true;
+  const InputReport r = import_photos(t / "in", t / "out", opt);
+  EXPECT_EQ(r.images.size(), 3u);
+  ASSERT_EQ(r.bad.size(), 1u);
+  EXPECT_NE(r.bad[0].find("p1b.JPG: empty file"), std::string::npos) << r.bad[0];
+  ASSERT_EQ(r.not_images.size(), 1u);
+  EXPECT_EQ(fs::path(r.not_images[0]).filename(), "empty_notes.txt");
+}
+
+// A JPEG whose frame header declares w x h (the SOF0 of a small encoded image rewritten): a decompression bomb.
+std::vector<uint8_t> jpeg_declaring(int w, int h) {
+  std::vector<uint8_t> b = encode_jpeg(quadrants(16, 16), 90);
+  for (size_t i = 2; i + 9 < b.size(); ++i)
+    if (b[i] == 0xFF && b[i + 1] == 0xC0) {  // FF C0, length (2), precision (1), height (2), width (2)
+      b[i + 5] = uint8_t(h >> 8), b[i + 6] = uint8_t(h), b[i + 7] = uint8_t(w >> 8), b[i + 8] = uint8_t(w);
+      return b;
+    }
+  ADD_FAILURE() << "no SOF0 in the encoded JPEG";
+  return b;
+}
+
+// Issue 60, item 13: a few KB declaring 16383 x 16383 (1.6 GB decoded) is refused from its header, before
+// anything is allocated, by a limit the user can set; PNG too.
+TEST(Photos, DecompressionBombsAreRefusedFromTheHeaderByASettableLimit) {
+  const std::vector<uint8_t> bomb = jpeg_declaring(16383, 16383);
+  ASSERT_LT(bomb.size(), 2000u);
+  Pixels px;
+  const std::string why = decode_rgb(bomb, px, kDefaultMaxPixels);
+  EXPECT_NE(why.find("16383x16383"), std::string::npos) << why;
+  EXPECT_NE(why.find("--max-pixels"), std::string::npos) << why;
+  EXPECT_TRUE(px.v.empty());
+  const auto png = encode_png_rgb(quadrants(64, 48));
+  EXPECT_NE(decode_rgb(png, px, 64 * 48 - 1).find("64x48"), std::string::npos);
+  EXPECT_EQ(decode_rgb(png, px, 64 * 48), "");
+  EXPECT_EQ(px.width, 64);
+
+  TempDir t;
+  fs::create_directories(t / "in");
+  for (int i = 0; i < 3; ++i) write(t / "in" / fmt::format("p{}.png", i), png);
+  write(t / "in" / "bomb.jpg", bomb);
+  InputOptions opt = quiet(32);
+  EXPECT_FILE_ERROR(import_photos(t / "in", t / "out", opt), t / "in" / "bomb.jpg", "over the limit");
+  opt.max_pixels = 64 * 48 - 1;  // (into a new folder: outputs kept from a run are not decoded again)
+  fs::remove(t / "in" / "bomb.jpg");
+  EXPECT_FILE_ERROR(import_photos(t / "in", t / "out2", opt), t / "in" / "p0.png", "--max-pixels");
+  opt.max_pixels = 64 * 48;  // exactly the limit: every image, one at a time
+  EXPECT_EQ(import_photos(t / "in", t / "out3", opt).images.size(), 3u);
 }
 
 }  // namespace

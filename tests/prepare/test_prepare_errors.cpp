@@ -146,7 +146,8 @@ TEST(PrepareErrors, MixedSizesGetOneCameraPerSize) {
   EXPECT_FALSE(stage_done(out, "matching"));
 }
 
-// 12 real photos and 13 blank ones: fewer than half register; refused with advice, kept with --allow-partial.
+// 12 real photos and 13 blank ones: fewer than half register, also after the wide-baseline retries (real COLMAP);
+// refused with advice, kept with --allow-partial.
 TEST(PrepareErrors, PartialRegistrationNeedsAllowPartial) {
   HGS_REQUIRE_SHARED(gc, "goldcape");
   if (!prepare::find_program("colmap")) GTEST_SKIP() << "colmap is not installed: skipping";
@@ -163,6 +164,8 @@ TEST(PrepareErrors, PartialRegistrationNeedsAllowPartial) {
   RunResult r = run_hgs(args);
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.err.find("registered only"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("(retried: wide-baseline mapper: "), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("; wide-baseline features: "), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("--allow-partial"), std::string::npos) << r.err;
   EXPECT_TRUE(one_line(r.err)) << r.err;
   EXPECT_FALSE(fs::exists(out / "prepare.json"));
