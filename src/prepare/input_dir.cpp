@@ -49,7 +49,7 @@ nlohmann::json read_inputs_record(const fs::path& out_dir) {
 void write_inputs_record(const fs::path& out_dir, const nlohmann::json& record) {
   nlohmann::json j = record;
   j["format"] = kInputsFormat;
-  atomic_write_text(out_dir / kInputsJson, j.dump(1) + "\n");
+  atomic_write_text(out_dir / kInputsJson, j.dump(1, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
 }
 
 void remove_other_files(const fs::path& out_dir, const std::set<std::string>& keep) {

@@ -4,10 +4,12 @@
 #include <algorithm>
 #include <cctype>
 
+#include "core/utf8.h"
+
 namespace hgs::prepare {
 
 std::string colmap_safe_name(const std::string& name) {
-  std::string s = name;
+  std::string s = utf8_or(name, '_');
   for (char& c : s) {
     const auto u = static_cast<unsigned char>(c);
     if (u < 0x20 || u == 0x7F || c == '\\') c = '_';

@@ -171,7 +171,7 @@ void input_stage(Pipeline& p, const PrepareOptions& opt, const fs::path& work) {
   // reruns them.
   std::string content;
   for (const InputImage& im : r.images) content += "|" + im.name + ":" + hash_file_content(work / "input" / im.name);
-  p.set_input_key(hash_key("input|" + info.dump() + content));
+  p.set_input_key(hash_key("input|" + info.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) + content));
   p.stage(
       "input", [&] { return info; }, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
 }
@@ -383,7 +383,7 @@ PrepareReport run_prepare(const PrepareOptions& opt) {
   PrepareReport r;
   r.stages = p.runs();
   r.json = prepare_json(p, opt);
-  atomic_write_text(opt.scene / "prepare.json", r.json.dump(2) + "\n");
+  atomic_write_text(opt.scene / "prepare.json", r.json.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
   return r;
 }
 

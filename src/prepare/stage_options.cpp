@@ -91,7 +91,7 @@ std::map<std::string, std::string> stage_keys(const StageOptions& o, const std::
   const nlohmann::json options = o;
   std::map<std::string, std::string> keys{{"input", input_key}};
   for (const auto& [name, inputs] : stage_inputs()) {
-    std::string text = name + "|" + options.at(name).dump();
+    std::string text = name + "|" + options.at(name).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
     for (const std::string& d : inputs) text += "|" + keys.at(d);
     keys[name] = hash_key(text);
   }

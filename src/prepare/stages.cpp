@@ -82,7 +82,7 @@ const nlohmann::json& StageLog::info(const std::string& stage) const {
 
 void StageLog::save() const {
   ensure_dir(file_.parent_path());
-  atomic_write_text(file_, j_.dump(2) + "\n");
+  atomic_write_text(file_, j_.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
 }
 
 }  // namespace hgs::prepare

@@ -12,6 +12,7 @@
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/image.h"
+#include "core/utf8.h"
 #include "eval/visualize.h"
 #include "viewer/display.h"
 #include "viewer/gate.h"
@@ -31,33 +32,6 @@ void send_json(httplib::Response& res, const json& j, int status = 200) {
   res.status = status;
   // Messages may quote what the client sent: bytes that are not UTF-8 become U+FFFD instead of an exception.
   res.set_content(j.dump(-1, ' ', false, json::error_handler_t::replace), "application/json");
-}
-
-// Strict UTF-8 (no overlong forms, surrogates or code points above U+10FFFF).
-bool valid_utf8(const std::string& s) {
-  const auto* p = reinterpret_cast<const unsigned char*>(s.data());
-  const size_t n = s.size();
-  for (size_t i = 0; i < n;) {
-    const unsigned c = p[i];
-    int len = 0;
-    unsigned cp = 0, min = 0;
-    if (c < 0x80) {
-      ++i;
-      continue;
-    }
-    if ((c & 0xE0) == 0xC0) len = 2, cp = c & 0x1F, min = 0x80;
-    else if ((c & 0xF0) == 0xE0) len = 3, cp = c & 0x0F, min = 0x800;
-    else if ((c & 0xF8) == 0xF0) len = 4, cp = c & 0x07, min = 0x10000;
-    else return false;
-    if (i + len > n) return false;
-    for (int k = 1; k < len; ++k) {
-      if ((p[i + k] & 0xC0) != 0x80) return false;
-      cp = (cp << 6) | (p[i + k] & 0x3F);
-    }
-    if (cp < min || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF)) return false;
-    i += len;
-  }
-  return true;
 }
 
 std::string png_bytes(const Image& img) {  // img: [H, W, 3] in [0, 1]

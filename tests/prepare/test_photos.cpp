@@ -13,6 +13,7 @@
 
 #include "core/error.h"
 #include "core/fs.h"
+#include "core/json_file.h"
 #include "expect_error.h"
 #include "prepare/exif.h"
 #include "prepare/photos.h"
@@ -390,6 +391,26 @@ TEST(Photos, NamesColmapCannotCarryAreRenamedAndListed) {
   // A safe name that an existing photo already has: refused, naming both.
   write(t / "in" / "a_b.jpg", jpeg_bytes(quadrants(16, 16)));
   EXPECT_FILE_ERROR(import_photos(t / "in", t / "out", quiet()), t / "in", "would collide");
+}
+
+// Found by fuzz_prepare_input: a name that is not UTF-8 (an old archive's Latin-1 "caf\xe9.jpg") made writing the
+// stage's record throw a JSON exception, and the run end in "internal error". It is renamed like the others,
+// and the record (which keeps the source path) is written.
+TEST(Photos, NamesThatAreNotUtf8AreRenamedAndTheRecordIsWritten) {
+  TempDir t;
+  fs::create_directories(t / "in");
+  write(t / "in" / "caf\xe9.jpg", jpeg_bytes(quadrants(16, 16)));
+  write(t / "in" / "ok\xc3\xa9.jpg", jpeg_bytes(quadrants(16, 16)));  // valid UTF-8 keeps its name
+  InputReport r = import_photos(t / "in", t / "out", quiet());
+  ASSERT_EQ(r.images.size(), 2u);
+  std::set<std::string> names;
+  for (const InputImage& im : r.images) names.insert(im.name);
+  EXPECT_EQ(names, (std::set<std::string>{"caf_.jpg", "ok\xc3\xa9.jpg"}));
+  ASSERT_EQ(r.renamed.size(), 1u);
+  EXPECT_TRUE(fs::exists(t / "out" / "inputs.json"));
+  EXPECT_NO_THROW(read_json_file(t / "out" / "inputs.json"));
+  r = import_photos(t / "in", t / "out", quiet());
+  EXPECT_EQ(r.images.size(), 2u);
 }
 
 // Issue 60, item 11: a link to nothing (dangling, or a loop) is skipped and listed wherever it sorts; the last
