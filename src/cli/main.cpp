@@ -10,6 +10,7 @@
 #include "clip/model.h"
 #include "core/error.h"
 #include "core/process.h"
+#include "core/threads.h"
 #include "nn/openblas_env.h"
 #include "nn/thread_pool.h"
 
@@ -23,6 +24,25 @@ std::vector<CommandSpec>& registry() {
 }
 
 void set_threads(int threads) { hgs::nn::set_num_threads(threads); }  // OpenMP, the pool and OpenBLAS
+
+CLI::Option* add_threads_option(CLI::App& sub, int& threads, const std::string& what) {
+  CLI::Validator bound(
+      [](std::string& text) -> std::string {
+        long long n = 0;
+        size_t used = 0;
+        try {
+          n = std::stoll(text, &used);
+        } catch (const std::exception&) {
+          used = 0;
+        }
+        if (used == 0 || used != text.size()) return "expected a whole number of threads, got '" + text + "'";
+        if (n < 1 || n > hgs::max_threads()) return "must be " + hgs::threads_range_text() + ", got " + text;
+        return "";
+      },
+      "1.." + std::to_string(hgs::max_threads()));
+  return sub.add_option("--threads", threads, what + ", " + hgs::threads_range_text() + " (default: every CPU)")
+      ->check(bound);
+}
 
 namespace {
 
