@@ -51,6 +51,7 @@ from ._hgs import (  # noqa: E402  (after the environment above)
     View,
     __version__,
     clip,
+    max_threads,
     method_names,
     render,
     sam,
@@ -69,7 +70,7 @@ Model.near_plane = 0.01
 
 __all__ = [
     "Error", "Model", "QueryResult", "QuerySession", "Scene", "StepInfo", "Trainer", "View", "clip", "evaluate",
-    "method_names", "query", "render", "sam", "set_threads", "synth", "train",
+    "max_threads", "method_names", "query", "render", "sam", "set_threads", "synth", "train",
 ]
 
 
@@ -174,7 +175,10 @@ def train(scene, out=None, method="hybrid", iters=30000, callback=None, callback
         scene = _as_scene(scene, int(options.pop("downscale")))
     scene = _as_scene(scene)
     if threads is not None:
-        set_threads(int(threads))
+        try:
+            set_threads(threads)
+        except (Error, TypeError) as e:  # name hgs.train's argument
+            raise type(e)(str(e).replace("set_threads: n", "hgs.train: threads", 1)) from None
     if int(callback_every) < 1:
         raise ValueError(f"callback_every must be >= 1, got {callback_every}")
     if callback is not None and not callable(callback):

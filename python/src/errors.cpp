@@ -4,6 +4,7 @@
 
 #include "common.h"
 #include "core/error.h"
+#include "core/excerpt.h"
 
 namespace hgs::py {
 
@@ -48,7 +49,7 @@ int view_index(const Scene& scene, const pb::handle& view) {
     const std::string name = view.cast<std::string>();
     for (const View& v : scene.views)
       if (v.name == name || v.stem == name) return v.index;
-    fail("{}: no view named '{}'", scene.root.string(), name);
+    fail("{}: no view named '{}'", scene.root.string(), excerpt(name));
   }
   throw pb::type_error("view: expected an index (int) or a name (str)");
 }
