@@ -8,6 +8,7 @@
 #include <pybind11/stl/filesystem.h>
 
 #include <fmt/format.h>
+#include <limits>
 #include <memory>
 #include <string>
 #include <utility>
@@ -50,16 +51,26 @@ std::shared_ptr<T> object_arg(pb::handle o, const char* where, const char* name,
 inline float float_arg(pb::handle o, const char* where, const char* name) {
   if (pb::isinstance<pb::bool_>(o) || pb::isinstance<pb::str>(o) || !PyNumber_Check(o.ptr()))
     wrong_type(where, name, "a number", o);
-  return float(pb::float_(pb::reinterpret_borrow<pb::object>(o)).cast<double>());
+  auto f = pb::reinterpret_steal<pb::object>(PyNumber_Float(o.ptr()));
+  if (!f) {  // e.g. a numpy array of several values
+    PyErr_Clear();
+    wrong_type(where, name, "a number", o);
+  }
+  return float(PyFloat_AsDouble(f.ptr()));
 }
 // A Python int (numpy integers too; not bool).
 inline long long int_arg(pb::handle o, const char* where, const char* name) {
   if (pb::isinstance<pb::bool_>(o) || !PyIndex_Check(o.ptr())) wrong_type(where, name, "an int", o);
   auto i = pb::reinterpret_steal<pb::object>(PyNumber_Index(o.ptr()));
-  if (!i) throw pb::error_already_set();
+  if (!i) {  // e.g. a numpy array of several values
+    PyErr_Clear();
+    wrong_type(where, name, "an int", o);
+  }
   int overflow = 0;
   const long long v = PyLong_AsLongLongAndOverflow(i.ptr(), &overflow);
-  if (overflow != 0) throw pb::value_error(fmt::format("{}: {} is out of range", where, name));
+  // Beyond long long: the largest / smallest, for the caller's range check to refuse with the range.
+  if (overflow != 0)
+    return overflow > 0 ? std::numeric_limits<long long>::max() : std::numeric_limits<long long>::min();
   return v;
 }
 // A dict's key as str.

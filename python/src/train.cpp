@@ -11,6 +11,7 @@
 #include <set>
 #include <thread>
 
+#include <omp.h>
 #include <nlohmann/json.hpp>
 
 #include "clip/model.h"
@@ -77,9 +78,9 @@ class TrainerGuard {
 
   // For calls that change the trainer: the guard, or hgs::Error when it is held.
   Held exclusive(const char* call) {
+    if (owner_ == std::this_thread::get_id())  // checked first: try_lock by the owning thread is undefined
+      fail("Trainer.{}: not allowed inside Trainer.run's on_step (the run steps the trainer itself)", call);
     if (!m_.try_lock()) {
-      if (owner_ == std::this_thread::get_id())
-        fail("Trainer.{}: not allowed inside Trainer.run's on_step (the run steps the trainer itself)", call);
       fail("Trainer.{}: already running in another thread (Trainer.{}); a trainer takes one call at a time", call,
            running_.load() ? running_.load() : "?");
     }
@@ -261,18 +262,12 @@ void bind_train(pb::module_& m) {
   hybrid::register_method();
   // The default thread count, as the hgs command sets it (cli/main.cpp): the CPUs this process may use.
   if (!std::getenv("OMP_NUM_THREADS")) nn::set_num_threads(available_cpus());
+  else if (omp_get_max_threads() > max_threads())  // the import fails with this line (100000 crashed in libgomp)
+    fail("OMP_NUM_THREADS: must be {}, got {}", threads_range_text(), omp_get_max_threads());
   m.def(
       "set_threads",
       [](pb::handle n) {
-        if (!PyIndex_Check(n.ptr()) || pb::isinstance<pb::bool_>(n))  // int, numpy integers
-          throw pb::type_error(fmt::format("set_threads: n must be an int, got {}",
-                                           std::string(pb::str(n.get_type().attr("__name__")))));
-        auto i = pb::reinterpret_steal<pb::object>(PyNumber_Index(n.ptr()));
-        if (!i) throw pb::error_already_set();
-        int overflow = 0;
-        long long v = PyLong_AsLongLongAndOverflow(i.ptr(), &overflow);
-        if (overflow != 0)
-          v = overflow > 0 ? std::numeric_limits<long long>::max() : std::numeric_limits<long long>::min();
+        const long long v = int_arg(n, "set_threads", "n");  // int, numpy integers; TypeError otherwise
         nn::set_num_threads(checked_threads(v, "set_threads: n"));
       },
       pb::arg("n"),

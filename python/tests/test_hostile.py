@@ -148,3 +148,56 @@ def test_wrong_argument_types_name_the_argument(hybrid_model, scene):
     assert msg.startswith("Model.save: near_plane must be a number, got str"), msg
     msg = type_error(lambda: hgs.render(m, scene, 0))
     assert msg.startswith("render: near_plane must be a number, got str"), msg
+
+
+def test_every_call_names_a_wrong_argument(hybrid_model, scene, tmp_path, monkeypatch):
+    # Each argument of each call replaced by wrong types in turn: every TypeError is one line naming the call or
+    # the argument, never pybind11's "incompatible function arguments" list nor "Unable to cast".
+    t = hgs.Trainer(scene, "rgb", 2, {"densify": False})
+    q = hgs.query(hybrid_model, scene, next(iter(scene.text_embeddings)))
+    s = q.session
+    z = np.zeros
+    calls = {
+        "Scene.load": (hgs.Scene.load, [str(tmp_path / "none"), 1]),
+        "Scene.features": (scene.features, [0, True]),
+        "Model.load": (hgs.Model.load, [str(tmp_path / "none.ply")]),
+        "Model.save": (hybrid_model.save, [str(tmp_path / "m.ply")]),
+        "Model.select": (hybrid_model.select, [[1], False]),
+        "Model": (hgs.Model, [z((2, 3), np.float32), z((2, 3), np.float32), z((2, 4), np.float32),
+                              z(2, np.float32), z((2, 1, 3), np.float32), {}]),
+        "render": (hgs.render, [hybrid_model, scene, 0]),
+        "Trainer": (hgs.Trainer, [scene, "rgb", 2, {}, False]),
+        "Trainer.run": (t.run, [2, "", 0, 0, ""]),
+        "Trainer.save_checkpoint": (t.save_checkpoint, [str(tmp_path / "c.ckpt")]),
+        "QuerySession": (hgs.QuerySession, [scene, hybrid_model, "", None]),
+        "QuerySession.ask": (s.ask, ["x", 0.0, 0.1]),
+        "QuerySession.object_opacity": (s.object_opacity, [0, [1]]),
+        "QuerySession.pixel_relevancy": (s.pixel_relevancy, [0, "x", "objects"]),
+        "QuerySession.object_name": (s.object_name, [1]),
+        "QuerySession.evaluate": (s.evaluate, ["instances", "object", "objects"]),
+        "synth": (hgs.synth, [str(tmp_path / "s")]),
+        "set_threads": (hgs.set_threads, [1]),
+        "query": (hgs.query, [hybrid_model, scene, "x"]),
+        "train": (hgs.train, [scene]),
+    }
+    monkeypatch.chdir(tmp_path)  # a str where a path goes is a path: keep what it writes in here
+    paths = {("Model.save", 0), ("Trainer.save_checkpoint", 0), ("synth", 0)}
+    checked = 0
+    for name, (fn, good) in calls.items():
+        for i in range(len(good)):
+            for wrong in (None, 1.5, "x", [1], object(), np.zeros(3)):
+                if (name, i) in paths and isinstance(wrong, str):
+                    continue
+                args = list(good)
+                args[i] = wrong
+                try:
+                    fn(*args)
+                except TypeError as e:
+                    msg = str(e)
+                    checked += 1
+                    assert "\n" not in msg and "incompatible" not in msg and "Unable to cast" not in msg, (name, i, msg)
+                    assert "must be" in msg or "expected" in msg, (name, i, msg)
+                    assert type(wrong).__name__ in msg or "dtype" in msg, (name, i, msg)
+                except (hgs.Error, ValueError, RuntimeError):
+                    pass  # a value the call accepts as a type and refuses as a value (an unknown view name, ...)
+    assert checked > 150

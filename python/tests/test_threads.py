@@ -191,14 +191,55 @@ def test_huge_thread_count_then_render_does_not_crash(hybrid_model, scene_dir, t
 
 
 def test_threads_option_of_the_command_line(hgs_binary, tmp_path):
+    # Every command's --threads, parsed the same way (cli::add_threads_option): 100000 crashed prepare and synth.
     top = hgs.max_threads()
-    for n in ("0", "-3", str(top + 1), "100000", "x"):
-        r = subprocess.run([hgs_binary, "synth", "--out", str(tmp_path / "s"), "--threads", n, "--quiet"],
-                           capture_output=True, text=True)
-        assert r.returncode == 2, (n, r.returncode, r.stderr)
-        lines = r.stderr.strip().splitlines()
-        assert len(lines) == 1 and lines[0].startswith("hgs: error: --threads:"), r.stderr
-        assert "(see `hgs synth --help`)" in lines[0], lines[0]
-        if n != "x":
-            assert f"1..{top}" in lines[0], lines[0]
-        assert not (tmp_path / "s").exists()
+    s, m, o = str(tmp_path / "scene"), str(tmp_path / "model"), str(tmp_path / "out")
+    commands = {"synth": ["--out", o], "prepare": [s, "--out", o, "--until", "input"], "train": [s, "--out", o],
+                "render": [s, m, "--out", o], "query": [s, m, "--text", "x", "--out", o], "eval": [s, m, "--out", o],
+                "view": [s, m], "ablate": [s, "--out", o], "features": [s], "embed-text": ["--text", "x"],
+                "masks generate": [s], "masks click": [s]}
+    for cmd, args in commands.items():
+        for n in ("0", "-3", str(top + 1), "100000", "x"):
+            r = subprocess.run([hgs_binary, *cmd.split(), *args, "--threads", n, "--quiet"], capture_output=True,
+                               text=True)
+            assert r.returncode == 2, (cmd, n, r.returncode, r.stderr)
+            lines = r.stderr.strip().splitlines()
+            assert len(lines) == 1 and lines[0].startswith("hgs: error: --threads:"), (cmd, n, r.stderr)
+            assert f"(see `hgs {cmd} --help`)" in lines[0], lines[0]
+            if n != "x":
+                assert f"must be 1..{top} " in lines[0] and lines[0].count(f"got {n} ") == 1, lines[0]
+            assert not os.path.exists(o)
+
+
+def test_huge_omp_num_threads_is_refused(hgs_binary, tmp_path):
+    # OMP_NUM_THREADS=100000 crashed at the first parallel region, like --threads 100000.
+    env = dict(os.environ, OMP_NUM_THREADS="100000", PYTHONPATH=PY + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    r = subprocess.run([hgs_binary, "synth", "--out", str(tmp_path / "s"), "--quiet"], capture_output=True, text=True,
+                       env=env)
+    assert r.returncode == 2 and r.stderr.startswith("hgs: error: OMP_NUM_THREADS: must be 1.."), r.stderr
+    assert r.stderr.count("\n") == 1 and not (tmp_path / "s").exists()
+    r = subprocess.run([sys.executable, "-c", "import hgs"], capture_output=True, text=True, env=env)
+    assert r.returncode == 1 and "OMP_NUM_THREADS: must be 1.." in r.stderr.strip().splitlines()[-1], r.stderr
+
+
+def test_model_and_scene_shared_by_threads(hybrid_model, scene, tmp_path):
+    # Read-only to every call: render, image, select and save of one model / scene from 4 threads at once give
+    # what they give serially.
+    from concurrent.futures import ThreadPoolExecutor
+    n = len(scene)
+    ref = [hgs.render(hybrid_model, scene, i)["rgb"] for i in range(n)]
+    images = [scene.image(i) for i in range(n)]
+    chosen = [1]
+    sel = hybrid_model.select(chosen).n
+    with ThreadPoolExecutor(4) as ex:
+        rgbs = list(ex.map(lambda i: hgs.render(hybrid_model, scene, i % n)["rgb"], range(3 * n)))
+        imgs = list(ex.map(scene.image, range(n)))
+        sels = list(ex.map(lambda _: hybrid_model.select(chosen).n, range(8)))
+        saved = list(ex.map(lambda k: hybrid_model.save(str(tmp_path / f"m{k}")), range(4)))
+    for i, x in enumerate(rgbs):
+        np.testing.assert_array_equal(x, ref[i % n])
+    for a, b in zip(imgs, images):
+        np.testing.assert_array_equal(a, b)
+    assert sels == [sel] * 8
+    for p in saved:
+        np.testing.assert_array_equal(hgs.Model.load(p).means, hybrid_model.means)

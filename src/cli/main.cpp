@@ -60,6 +60,11 @@ void default_threads() {
 int main(int argc, char** argv) {
   using namespace hgs::cli;
   default_threads();
+  if (omp_get_max_threads() > hgs::max_threads()) {  // OMP_NUM_THREADS=100000 crashed at the first parallel region
+    std::fprintf(stderr, "hgs: error: OMP_NUM_THREADS: must be %s, got %d\n", hgs::threads_range_text().c_str(),
+                 omp_get_max_threads());
+    return 2;
+  }
   CLI::App app{"hgs " HGS_VERSION
                " — Hybrid Gaussians: open-vocabulary 3D segmentation with Gaussian splatting, on the CPU"};
   app.set_version_flag("--version", std::string("hgs ") + HGS_VERSION);
@@ -80,7 +85,10 @@ int main(int argc, char** argv) {
     // One line naming the option and what is allowed, like every other error of hgs (CLI11's own message says
     // which option and range; its second line "Run with --help" is folded into this one).
     std::string where = "hgs";
-    for (const CLI::App* sub : app.get_subcommands()) where += " " + sub->get_name();
+    for (const CLI::App* at = &app; !at->get_subcommands().empty();) {  // nested too: `hgs masks generate`
+      at = at->get_subcommands().front();
+      where += " " + at->get_name();
+    }
     std::fprintf(stderr, "hgs: error: %s (see `%s --help`)\n", e.what(), where.c_str());
     return 2;
   }
