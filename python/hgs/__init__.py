@@ -172,8 +172,10 @@ def train(scene, out=None, method="hybrid", iters=30000, callback=None, callback
     as `hgs train --iters` does. callback(info) is called every `callback_every` images and at the end, with a
     dict: iteration, loss, terms (weighted loss terms), psnr, num_gaussians, ms_per_iter (mean since the last
     call), elapsed_s; when it returns False training stops and the model so far is returned. Ctrl-C
-    (KeyboardInterrupt) stops training the same way at the end of the running step. progress: a progress bar on
-    stderr (terminal or Jupyter). threads: worker threads (hgs.set_threads). options: the training configuration
+    (KeyboardInterrupt) stops training the same way at the end of the running step; the model folder's final
+    files are written as one change, so a second Ctrl-C while they are written lets them finish and then raises.
+    progress: a progress bar on stderr (terminal or Jupyter). threads: worker threads, 1..hgs.max_threads()
+    (hgs.set_threads). options: the training configuration
     by name (seed, sh_degree, densify, white_bg, batch, batch_lr, learning rates, ...) and, for the hybrid method,
     its options (use_of, use_scl, use_bro, lambda_app, lambda_sem, lambda_bro, objects_per_step, ...); see
     docs/python.md. An unknown name raises hgs.Error. With save_every=N (a multiple of the views per step) and

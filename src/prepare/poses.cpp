@@ -75,9 +75,8 @@ void extract_features(const fs::path& colmap, const fs::path& input_dir, const f
                       input_dir.string(), "--image_list_path", list.string(), "--ImageReader.single_camera", "1",
                       "--ImageReader.camera_model", opt.camera_model, "--SiftExtraction.use_gpu", "0",
                       "--SiftExtraction.max_num_features", std::to_string(opt.max_features)},
-                     log_path(work, "features"), counter("Processed file", [&](long i, long) {
-                       bar.update(base + i, dims);
-                     }));
+                     log_path(work, "features"),
+                     counter("Processed file", [&](long i, long) { bar.update(base + i, dims); }));
     done += long(names.size());
   }
   bar.finish(fmt::format("{} images, {} camera{}", total, by_size.size(), by_size.size() > 1 ? "s" : ""));
