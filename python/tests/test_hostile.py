@@ -49,6 +49,17 @@ def test_save_into_a_folder_keeps_its_other_files(hybrid_model, tmp_path):
     assert sorted(os.listdir(tmp_path)) == ["out"]  # no temporary folder left beside it
 
 
+def test_save_into_the_current_folder(hybrid_model, tmp_path, monkeypatch):
+    # The folder is replaced as a whole: the process working in it moves to the new one.
+    out = tmp_path / "out"
+    out.mkdir()
+    monkeypatch.chdir(out)
+    hybrid_model.save(".")
+    hybrid_model.save(".")
+    assert sorted(os.listdir(".")) == ["config.json", "point_cloud.ply"]
+    assert hgs.Model.load(".").n == hybrid_model.n and os.path.samefile(os.getcwd(), out)
+
+
 SAVE_LOOP = r"""
 import sys
 import hgs

@@ -90,9 +90,25 @@ void swap_in(const fs::path& shown, const std::function<void(const fs::path&)>& 
     write(tmp);
     if (existed) ::chmod(tmp.c_str(), mode);  // the folder keeps its permissions
     sync_dir(tmp);
+    // A process working inside the folder (Model.save("."), hgs train --out .) would be left in the old, removed
+    // one: it moves to the same place in the new folder (other processes' shells there need a `cd .`).
+    fs::path inside;
+    if (existed) {
+      std::error_code e1, e2;
+      const fs::path cwd = fs::current_path(e1), real = fs::canonical(dir, e2);
+      const fs::path rel = (e1 || e2) ? fs::path() : cwd.lexically_relative(real);
+      if (!rel.empty() && *rel.begin() != "..") inside = rel;
+    }
+    auto back_inside = [&] {
+      if (inside.empty()) return;
+      int rc = ::chdir((dir / inside).c_str());
+      if (rc != 0) rc = ::chdir(dir.c_str());  // best effort: the folder itself
+      (void)rc;
+    };
     if (!existed) {
       if (::rename(tmp.c_str(), dir.c_str()) != 0) fail("{}: cannot write ({})", shown.string(), errno_text(errno));
     } else if (::renameat2(AT_FDCWD, tmp.c_str(), AT_FDCWD, dir.c_str(), RENAME_EXCHANGE) == 0) {
+      back_inside();
       remove_tree(tmp);  // the old folder, now under the temporary name
     } else {
       if (errno != EINVAL && errno != ENOSYS)
@@ -104,6 +120,7 @@ void swap_in(const fs::path& shown, const std::function<void(const fs::path&)>& 
         ::rename(old.c_str(), dir.c_str());
         fail("{}: cannot replace the folder ({})", shown.string(), errno_text(e));
       }
+      back_inside();
       remove_tree(old);
     }
   } catch (const Error& e) {  // name the files where they were to go, not the temporary folder

@@ -104,3 +104,22 @@ TEST(FolderWhole, RefusesAFileAndOddEntriesWithOneLine) {
   EXPECT_TRUE(fs::exists(tmp / "out" / "pipe"));
   EXPECT_EQ(e2.find('\n'), std::string::npos);
 }
+
+TEST(FolderWhole, ProcessWorkingInsideTheFolderMovesToTheNewOne) {
+  // Model.save(".") or `hgs train --out .`: the process's current folder is the one replaced.
+  test::TempDir tmp;
+  const fs::path out = tmp / "out";
+  fs::create_directories(out / "sub");
+  const fs::path before = fs::current_path();
+  fs::current_path(out / "sub");
+  try {
+    write_folder_whole(fs::path(".."), [](const fs::path& t) { atomic_write_text(t / "new.txt", "n\n"); });
+    EXPECT_TRUE(fs::exists("../new.txt"));  // relative paths still work: we are in the new folder
+    EXPECT_TRUE(fs::equivalent(fs::current_path(), out / "sub"));
+  } catch (...) {
+    fs::current_path(before);
+    throw;
+  }
+  fs::current_path(before);
+  EXPECT_EQ(read_file_text(out / "new.txt"), "n\n");
+}
