@@ -40,9 +40,14 @@ void sync_dir(const fs::path& dir) {
 // Mirrors `from` into the new folder `to`: folders made, files hard-linked (copied where links are refused),
 // symlinks copied as links. `dev`: the file system of the model folder; another one inside it is refused, as are
 // sockets, devices and pipes (removing the old folder afterwards must never reach outside it).
-void mirror(const fs::path& from, const fs::path& to, dev_t dev, const fs::path& shown) {
+void mirror(const fs::path& from, const fs::path& to, dev_t dev, const fs::path& shown, size_t& entries) {
   for (const fs::directory_entry& e : fs::directory_iterator(from)) {
     const fs::path src = e.path(), dst = to / src.filename();
+    if (++entries > kMaxFolderEntries)
+      fail(
+          "{}: holds more than {} files and folders; not replacing it as a whole (write the model into a folder of "
+          "its own)",
+          shown.string(), kMaxFolderEntries);
     struct stat st {};
     if (::lstat(src.c_str(), &st) != 0) fail("{}: cannot read ({})", src.string(), errno_text(errno));
     if (S_ISLNK(st.st_mode)) {
@@ -51,7 +56,7 @@ void mirror(const fs::path& from, const fs::path& to, dev_t dev, const fs::path&
       if (st.st_dev != dev)
         fail("{}: another file system is mounted inside the folder; not replacing it", src.string());
       fs::create_directory(dst, src);
-      mirror(src, dst, dev, shown);
+      mirror(src, dst, dev, shown, entries);
     } else if (S_ISREG(st.st_mode)) {
       if (::link(src.c_str(), dst.c_str()) != 0) {
         std::error_code ec;
@@ -85,7 +90,8 @@ void swap_in(const fs::path& shown, const std::function<void(const fs::path&)>& 
       struct stat st {};
       if (::stat(dir.c_str(), &st) != 0) fail("{}: cannot read ({})", shown.string(), errno_text(errno));
       mode = st.st_mode & 07777;
-      mirror(dir, tmp, st.st_dev, shown);
+      size_t entries = 0;
+      mirror(dir, tmp, st.st_dev, shown, entries);
     }
     write(tmp);
     if (existed) ::chmod(tmp.c_str(), mode);  // the folder keeps its permissions

@@ -8,18 +8,25 @@
 // The swap: renameat2(RENAME_EXCHANGE) exchanges the two folders in one system call, then the old one (now under
 // the temporary name) is removed. File systems without it: the folder is renamed to `.NAME.hgs-old`, the new one
 // renamed in, the old removed; a kill between those two renames leaves the folder missing and both complete copies
-// beside it, and the next write_folder_whole of that folder puts the old one back first.
+// beside it, and the next write_folder_whole of that folder puts the old one back first. The folder is a new one
+// afterwards: this process, if it works inside it, is moved to the same place in the new one; another process
+// working there (a shell in out/) sees the old, removed folder until it changes folder (`cd .`).
 #pragma once
+#include <cstddef>
 #include <filesystem>
 #include <functional>
 
 namespace hgs {
 namespace fs = std::filesystem;
 
+// A model folder holds tens of files (checkpoints included); a folder of more than this many entries is not
+// mirrored and swapped (Model.save into a home folder would relink, and replace, all of it): an hgs::Error.
+inline constexpr size_t kMaxFolderEntries = 10000;
+
 // Calls write(tmp) to write the folder's new files into `tmp` (with core/fs.h's atomic writes), then makes `tmp`
 // the folder `dir` (created when new; a symlink to a folder is followed). If `write` throws, `dir` is unchanged
 // and the temporary folder removed. Refuses (hgs::Error naming the entry) a folder holding anything other than
-// files, folders and symlinks, or another file system mounted inside it.
+// files, folders and symlinks, another file system mounted inside it, or more than kMaxFolderEntries entries.
 void write_folder_whole(const fs::path& dir, const std::function<void(const fs::path& tmp)>& write);
 
 }  // namespace hgs

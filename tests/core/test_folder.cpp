@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <fstream>
 #include <stdexcept>
 
 #include "core/error.h"
@@ -122,4 +123,17 @@ TEST(FolderWhole, ProcessWorkingInsideTheFolderMovesToTheNewOne) {
   }
   fs::current_path(before);
   EXPECT_EQ(read_file_text(out / "new.txt"), "n\n");
+}
+
+TEST(FolderWhole, RefusesToMirrorAHugeFolder) {
+  // Not a model folder (a home folder, say): refused before anything is linked or written.
+  test::TempDir tmp;
+  const fs::path out = tmp / "out";
+  fs::create_directories(out / "many");
+  for (size_t i = 0; i <= kMaxFolderEntries; ++i) std::ofstream(out / "many" / std::to_string(i)).put('x');
+  const std::string e =
+      test::error_of([&] { write_folder_whole(out, [](const fs::path& t) { atomic_write_text(t / "a", "a"); }); });
+  EXPECT_NE(e.find("holds more than 10000 files and folders"), std::string::npos) << e;
+  EXPECT_FALSE(fs::exists(out / "a"));
+  EXPECT_EQ(std::distance(fs::directory_iterator(tmp.path), fs::directory_iterator()), 1);  // no temporary folder
 }
