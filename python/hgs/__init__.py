@@ -41,6 +41,14 @@ except ImportError as e:
         f"hgs needs numpy in this interpreter ({sys.executable}): Debian's python3-numpy (scripts/setup) is for "
         "/usr/bin/python3, the interpreter hgs is built for (docs/python.md)") from e
 
+from . import _argcheck, _hgs  # noqa: E402  (after the environment above)
+
+# Wrong argument types: one line naming the call and the argument, not pybind11's list of signatures (_argcheck.py).
+_argcheck.install(_hgs, [_hgs.Model, _hgs.Scene, _hgs.Trainer, _hgs.QuerySession],
+                  ["render", "synth", "set_threads", "method_names", "max_threads"])
+_argcheck.install(_hgs.clip, [_hgs.clip.Model], [], prefix="clip.")
+_argcheck.install(_hgs.sam, [_hgs.sam.Model], [], prefix="sam.")
+
 from ._hgs import (  # noqa: E402  (after the environment above)
     Error,
     Model,
@@ -51,6 +59,7 @@ from ._hgs import (  # noqa: E402  (after the environment above)
     View,
     __version__,
     clip,
+    max_threads,
     method_names,
     render,
     sam,
@@ -69,7 +78,7 @@ Model.near_plane = 0.01
 
 __all__ = [
     "Error", "Model", "QueryResult", "QuerySession", "Scene", "StepInfo", "Trainer", "View", "clip", "evaluate",
-    "method_names", "query", "render", "sam", "set_threads", "synth", "train",
+    "max_threads", "method_names", "query", "render", "sam", "set_threads", "synth", "train",
 ]
 
 
@@ -135,15 +144,21 @@ def _duration(s):
 
 # ---- training -----------------------------------------------------------------------------------------------
 
-def _as_scene(scene, downscale=1):
+def _as_scene(scene, downscale=1, where="train"):
     if isinstance(scene, Scene):
         return scene
+    if not isinstance(scene, (str, os.PathLike)):
+        raise TypeError(f"{where}: scene must be an hgs.Scene or a scene folder (str or os.PathLike), "
+                        f"got {type(scene).__name__}")
     return Scene.load(os.fspath(scene), downscale)
 
 
-def _as_model(model):
+def _as_model(model, where):
     if isinstance(model, Model):
         return model
+    if not isinstance(model, (str, os.PathLike)):
+        raise TypeError(f"{where}: model must be an hgs.Model or a model PLY / folder (str or os.PathLike), "
+                        f"got {type(model).__name__}")
     return Model.load(os.fspath(model))
 
 
@@ -157,8 +172,10 @@ def train(scene, out=None, method="hybrid", iters=30000, callback=None, callback
     as `hgs train --iters` does. callback(info) is called every `callback_every` images and at the end, with a
     dict: iteration, loss, terms (weighted loss terms), psnr, num_gaussians, ms_per_iter (mean since the last
     call), elapsed_s; when it returns False training stops and the model so far is returned. Ctrl-C
-    (KeyboardInterrupt) stops training the same way at the end of the running step. progress: a progress bar on
-    stderr (terminal or Jupyter). threads: worker threads (hgs.set_threads). options: the training configuration
+    (KeyboardInterrupt) stops training the same way at the end of the running step; the model folder's final
+    files are written as one change, so a second Ctrl-C while they are written lets them finish and then raises.
+    progress: a progress bar on stderr (terminal or Jupyter). threads: worker threads, 1..hgs.max_threads()
+    (hgs.set_threads). options: the training configuration
     by name (seed, sh_degree, densify, white_bg, batch, batch_lr, learning rates, ...) and, for the hybrid method,
     its options (use_of, use_scl, use_bro, lambda_app, lambda_sem, lambda_bro, objects_per_step, ...); see
     docs/python.md. An unknown name raises hgs.Error. With save_every=N (a multiple of the views per step) and
@@ -174,7 +191,10 @@ def train(scene, out=None, method="hybrid", iters=30000, callback=None, callback
         scene = _as_scene(scene, int(options.pop("downscale")))
     scene = _as_scene(scene)
     if threads is not None:
-        set_threads(int(threads))
+        try:
+            set_threads(threads)
+        except (Error, TypeError) as e:  # name hgs.train's argument
+            raise type(e)(str(e).replace("set_threads: n", "hgs.train: threads", 1)) from None
     if int(callback_every) < 1:
         raise ValueError(f"callback_every must be >= 1, got {callback_every}")
     if callback is not None and not callable(callback):
@@ -304,7 +324,9 @@ def query(model, scene, text, views=None, min_relevancy=0.0, mask_threshold=0.5,
     indices / names); masks are rendered when first asked for. Texts are embedded from the scene's
     text_embeddings.json, or by OpenCLIP weights `clip`. A QuerySession given as `session` is reused (several
     queries on one model)."""
-    scene, model = _as_scene(scene), _as_model(model)
+    scene, model = _as_scene(scene, where="query"), _as_model(model, "query")
+    if not isinstance(text, str):
+        raise TypeError(f"query: text must be a str, got {type(text).__name__}")
     if session is None:
         session = QuerySession(scene, model, "" if clip is None else os.fspath(clip))
     if fragment_margin is None:
@@ -326,7 +348,7 @@ def evaluate(model, scene, protocol="instances", mode="both", relevancy="objects
     the scene's gt/queries.json asked instead of the names (instances protocols: "synonyms", "hypernyms",
     "attributes"). fragment_margin: object mode's fragment rule (see query; None = the library's default, 0 = the
     best label alone)."""
-    scene, model = _as_scene(scene), _as_model(model)
+    scene, model = _as_scene(scene, where="evaluate"), _as_model(model, "evaluate")
     session = QuerySession(scene, model, "" if clip is None else os.fspath(clip))
     args = [protocol, mode, relevancy, float(mask_threshold), "" if overlays is None else os.fspath(overlays),
             bool(progress), bool(paper_map), "" if queries is None else str(queries)]

@@ -83,7 +83,10 @@ class Model:
                  sh: npt.NDArray[np.float32], extras: Dict[str, npt.NDArray[np.float32]] = ...) -> None: ...
     @staticmethod
     def load(path: PathLike) -> Model: ...
-    def save(self, path: PathLike) -> str: ...
+    def save(self, path: PathLike) -> str:
+        """Writes path (.ply) or path/point_cloud.ply with a config.json, the folder replaced as a whole (its other
+        files kept): killed at any moment it holds the old model or the new one. hgs.Error naming the array when one
+        holds NaN or infinite values (nothing written)."""
     def copy(self) -> Model: ...  # with the instance's near_plane
     def select(self, objects: Sequence[int], remove: bool = False) -> Model: ...  # with the instance's near_plane
     def __len__(self) -> int: ...
@@ -98,6 +101,10 @@ class StepInfo:
     times: Dict[str, float]
 
 class Trainer:
+    """One call at a time: step / run / finish / load_checkpoint while another thread is in one of them raise
+    hgs.Error ("Trainer.step: already running in another thread (Trainer.run)"); model, iteration and
+    save_checkpoint wait for a running step (refused while run() runs in another thread; from its on_step they go
+    ahead)."""
     iteration: int
     step_views: int
     iters: int
@@ -105,14 +112,20 @@ class Trainer:
     config_json: str
     def __init__(self, scene: Scene, method: str = "hybrid", iters: int = 30000, options: Dict[str, Any] = ...,
                  progress: bool = False) -> None: ...
-    def step(self) -> StepInfo: ...
+    def step(self) -> StepInfo:
+        """One training step of step_views views. hgs.Error once `iters` images are seen ("Trainer.step: the run's
+        N images are done (iters=N)": the schedule ends there; finish() returns the model), and while another
+        thread is in step / run / finish / load_checkpoint of this trainer."""
     def run(self, iters: int, out: str = "", save_every: int = 0, test_every: int = 0, resumed_from: str = "",
-            on_step: Optional[Callable[[StepInfo, int, float], bool]] = None) -> str: ...
+            on_step: Optional[Callable[[StepInfo, int, float], Optional[bool]]] = None) -> str:
+        """The library's training run to `iters` images; on_step(step, iteration, loss_average) after every step,
+        returning False ends it (None goes on). The final files of `out` are written as one change of the folder."""
     def finish(self) -> Model: ...  # with the run's near_plane
     def save_checkpoint(self, path: PathLike) -> None: ...
     def load_checkpoint(self, path: PathLike) -> None: ...
 
 class QuerySession:
+    """Safe to share between threads (a QueryResult too): calls on one session run one at a time."""
     def __init__(self, scene: Scene, model: Model, clip: str = "", near_plane: Optional[float] = None) -> None: ...
     def ask(self, text: str, min_relevancy: float = 0.0, fragment_margin: float = ...) -> List[Dict[str, Any]]: ...
     def object_opacity(self, view: ViewKey, objects: Sequence[int]) -> npt.NDArray[np.float32]: ...
@@ -157,5 +170,9 @@ def synth(out: PathLike, *, preset: str = "tabletop", seed: int = 1, views: int 
           mask_ids: str = "consistent", mask_style: str = "label", surface_masks: bool = True,
           objects_only: bool = False, miss_rate: float = -1.0, small_miss_rate: float = -1.0, merge_rate: float = -1.0,
           split_rate: float = -1.0, depth: bool = False, supersample: int = 2, progress: bool = False) -> str: ...
-def set_threads(n: int) -> None: ...
+def set_threads(n: int) -> None:
+    """Worker threads of OpenMP, the element-wise pool and OpenBLAS: n in 1..max_threads(), else hgs.Error
+    (TypeError for a non-int); the bound every command's --threads shares."""
+def max_threads() -> int:
+    """The most threads set_threads (and --threads) accept: 4x the hardware threads."""
 def method_names() -> List[str]: ...

@@ -7,6 +7,8 @@
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
 
+#include <fmt/format.h>
+#include <limits>
 #include <memory>
 #include <string>
 #include <utility>
@@ -32,11 +34,56 @@ inline pb::array view_array(const pb::dtype& dt, void* data, std::vector<pb::ssi
   return pb::array(dt, std::move(shape), {}, data, owner);
 }
 
+// Arguments taken as Python objects and converted here, so that a wrong type is a one-line TypeError naming the
+// call, the argument and the type expected ("render: scene must be an hgs.Scene, got str") instead of pybind11's
+// "Unable to cast Python instance to C++ type" or its multi-line list of signatures.
+inline std::string type_name(pb::handle o) { return pb::str(o.get_type().attr("__name__")); }
+[[noreturn]] inline void wrong_type(const char* where, const char* name, const char* expected, pb::handle got) {
+  throw pb::type_error(fmt::format("{}: {} must be {}, got {}", where, name, expected, type_name(got)));
+}
+// An instance of a bound class (hgs.Model, hgs.Scene): `expected` names it.
+template <class T>
+std::shared_ptr<T> object_arg(pb::handle o, const char* where, const char* name, const char* expected) {
+  if (!pb::isinstance<T>(o)) wrong_type(where, name, expected, o);
+  return o.cast<std::shared_ptr<T>>();
+}
+// A Python int or float (numpy scalars too; not bool, not str).
+inline float float_arg(pb::handle o, const char* where, const char* name) {
+  if (pb::isinstance<pb::bool_>(o) || pb::isinstance<pb::str>(o) || !PyNumber_Check(o.ptr()))
+    wrong_type(where, name, "a number", o);
+  auto f = pb::reinterpret_steal<pb::object>(PyNumber_Float(o.ptr()));
+  if (!f) {  // e.g. a numpy array of several values
+    PyErr_Clear();
+    wrong_type(where, name, "a number", o);
+  }
+  return float(PyFloat_AsDouble(f.ptr()));
+}
+// A Python int (numpy integers too; not bool).
+inline long long int_arg(pb::handle o, const char* where, const char* name) {
+  if (pb::isinstance<pb::bool_>(o) || !PyIndex_Check(o.ptr())) wrong_type(where, name, "an int", o);
+  auto i = pb::reinterpret_steal<pb::object>(PyNumber_Index(o.ptr()));
+  if (!i) {  // e.g. a numpy array of several values
+    PyErr_Clear();
+    wrong_type(where, name, "an int", o);
+  }
+  int overflow = 0;
+  const long long v = PyLong_AsLongLongAndOverflow(i.ptr(), &overflow);
+  // Beyond long long: the largest / smallest, for the caller's range check to refuse with the range.
+  if (overflow != 0)
+    return overflow > 0 ? std::numeric_limits<long long>::max() : std::numeric_limits<long long>::min();
+  return v;
+}
+// A dict's key as str.
+inline std::string key_arg(pb::handle k, const char* where, const char* name) {
+  if (!pb::isinstance<pb::str>(k)) wrong_type(where, name, "str", k);
+  return k.cast<std::string>();
+}
+
 // The near plane to render a Python model at: `given` when not None, else the model's `near_plane` attribute
-// (Model.load and hgs.train set it from the model's config), else render's default 0.01.
-inline float model_near_plane_of(pb::handle model, pb::handle given) {
-  if (!given.is_none()) return given.cast<float>();
-  if (pb::hasattr(model, "near_plane")) return model.attr("near_plane").cast<float>();
+// (Model.load and hgs.train set it from the model's config), else render's default 0.01. `where` names the call.
+inline float model_near_plane_of(pb::handle model, pb::handle given, const char* where) {
+  if (!given.is_none()) return float_arg(given, where, "near_plane");
+  if (pb::hasattr(model, "near_plane")) return float_arg(model.attr("near_plane"), where, "near_plane");
   return render::kDefaultNearPlane;
 }
 

@@ -4,6 +4,7 @@
 
 #include "common.h"
 #include "core/error.h"
+#include "core/excerpt.h"
 
 namespace hgs::py {
 
@@ -40,7 +41,12 @@ std::vector<float> float32_input(const pb::handle& obj, const std::vector<pb::ss
 int view_index(const Scene& scene, const pb::handle& view) {
   const int n = int(scene.views.size());
   if (PyIndex_Check(view.ptr()) && !pb::isinstance<pb::bool_>(view)) {  // int, numpy integers
-    const long i = pb::int_(pb::reinterpret_borrow<pb::object>(view)).cast<long>();
+    auto index = pb::reinterpret_steal<pb::object>(PyNumber_Index(view.ptr()));
+    if (!index) {  // e.g. a numpy array of several values
+      PyErr_Clear();
+      throw pb::type_error("view: expected an index (int) or a name (str), got " + type_name(view));
+    }
+    const long i = index.cast<long>();
     if (i < -n || i >= n) fail("{}: view {} is out of range (the scene has {} views)", scene.root.string(), i, n);
     return int(i < 0 ? i + n : i);
   }
@@ -48,9 +54,9 @@ int view_index(const Scene& scene, const pb::handle& view) {
     const std::string name = view.cast<std::string>();
     for (const View& v : scene.views)
       if (v.name == name || v.stem == name) return v.index;
-    fail("{}: no view named '{}'", scene.root.string(), name);
+    fail("{}: no view named '{}'", scene.root.string(), excerpt(name));
   }
-  throw pb::type_error("view: expected an index (int) or a name (str)");
+  throw pb::type_error("view: expected an index (int) or a name (str), got " + type_name(view));
 }
 
 }  // namespace hgs::py

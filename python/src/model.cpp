@@ -9,6 +9,7 @@
 
 #include "common.h"
 #include "core/error.h"
+#include "core/folder.h"
 #include "core/fs.h"
 #include "hybrid/fields.h"
 #include "model/near_plane.h"
@@ -62,7 +63,7 @@ ModelPtr from_arrays(pb::handle means, pb::handle log_scales, pb::handle rotatio
     throw pb::value_error(fmt::format("sh: {} coefficients per colour is not (degree + 1)^2 for a degree 0..3", S));
   m->sh_degree = degree;
   for (auto [k, v] : extras) {
-    const std::string name = k.cast<std::string>();
+    const std::string name = key_arg(k, "Model", "extras keys");
     std::vector<pb::ssize_t> es;
     std::vector<float> data = float32_input(v, {m->n, -1}, "extras['" + name + "']", &es);
     ExtraGroup& g = m->add_extra(name, int(es[1]));
@@ -111,7 +112,7 @@ void bind_model(pb::module_& m) {
           "save",
           [](const pb::object& self, const fs::path& path) {
             const GaussianModel& g = self.cast<const GaussianModel&>();
-            const float near_plane = self.attr("near_plane").cast<float>();
+            const float near_plane = float_arg(self.attr("near_plane"), "Model.save", "near_plane");
             fs::path p = path;
             const bool folder = p.extension() != ".ply";
             pb::gil_scoped_release nogil;
@@ -119,18 +120,21 @@ void bind_model(pb::module_& m) {
               write_model_ply(p, g);
               return p.string();
             }
-            ensure_dir(p);
-            write_model_ply(p / "point_cloud.ply", g);
-            // A model folder always has its config.json: the training run's when there is one, else the near plane
-            // this model is rendered at (model/near_plane.h).
-            if (!fs::exists(p / "config.json"))
-              atomic_write_text(p / "config.json", nlohmann::json{{"near_plane", near_plane}}.dump(2) + "\n");
+            // The folder as one change (core/folder.h): killed or interrupted at any moment, it holds the old model
+            // or the new one with its config.json, never a PLY alone. A model folder always has its config.json:
+            // the training run's when there is one, else the near plane this model is rendered at.
+            write_folder_whole(p, [&](const fs::path& tmp) {
+              write_model_ply(tmp / "point_cloud.ply", g);
+              if (!fs::exists(tmp / "config.json"))
+                atomic_write_text(tmp / "config.json", nlohmann::json{{"near_plane", near_plane}}.dump(2) + "\n");
+            });
             return (p / "point_cloud.ply").string();
           },
           pb::arg("path"),
           "Writes the model as a 3DGS PLY (atomically): to `path` when it ends in .ply, else to "
-          "path/point_cloud.ply with a config.json holding its near_plane unless the folder has one; returns the "
-          "file written")
+          "path/point_cloud.ply with a config.json holding its near_plane unless the folder has one, the folder "
+          "replaced as a whole (the other files in it kept); returns the file written. hgs.Error naming the array "
+          "when one holds NaN or infinite values (Model.load would refuse the file), and nothing is written")
       .def(
           "copy",
           [](const pb::object& self) {

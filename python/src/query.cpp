@@ -1,10 +1,16 @@
 // hgs.QuerySession: query::Session on a scene and a model shared with Python (not copied): text -> ranked objects
 // (cosine and LERF relevancy), per-view object opacity and masks, pixel relevancy maps, the protocols of
 // query/evaluate.h as report dicts. hgs.query / hgs.evaluate (python/hgs/__init__.py) build one per call.
+// Thread safety: a session renders through its one renderer and caches text embeddings, so every call takes the
+// session's lock (waiting with the GIL released): calls from several Python threads (QueryResult.mask through a
+// ThreadPoolExecutor) run one after the other, each on all the OpenMP threads. Without it they corrupted the heap.
+#include <mutex>
+
 #include <nlohmann/json.hpp>
 
 #include "common.h"
 #include "core/error.h"
+#include "core/excerpt.h"
 #include "eval/report.h"
 #include "query/evaluate.h"
 #include "query/session.h"
@@ -12,16 +18,29 @@
 namespace hgs::py {
 namespace {
 
-using SessionPtr = std::shared_ptr<query::Session>;
+// The session and the lock every call on it takes.
+struct LockedSession {
+  std::shared_ptr<query::Session> s;
+  std::mutex m;
+};
+using SessionPtr = std::shared_ptr<LockedSession>;
+
+// Runs fn(session) holding its lock, the GIL released (a call waiting for the lock must not hold the GIL: the
+// holder never needs it, but other Python threads do).
+template <class F>
+auto locked(LockedSession& ls, F&& fn) {
+  pb::gil_scoped_release nogil;
+  std::lock_guard<std::mutex> l(ls.m);
+  return fn(*ls.s);
+}
 
 query::Relevancy relevancy_variant(const std::string& r) { return query::parse_relevancy(r); }
 
-pb::list ask(query::Session& s, const std::string& text, float min_relevancy, float fragment_margin) {
-  query::ObjectAnswer a;
-  {
-    pb::gil_scoped_release nogil;
-    a = s.ask(text, {min_relevancy, 0.5f, fragment_margin});
-  }
+pb::list ask(LockedSession& ls, const std::string& text, float min_relevancy, float fragment_margin) {
+  const query::ObjectAnswer a = locked(ls, [&](query::Session& s) {
+    return s.ask(text, {min_relevancy, 0.5f, fragment_margin});
+  });
+  const query::Session& s = *ls.s;  // object_name reads the scene's names only
   pb::list out;
   for (const auto& sc : a.scores) {
     pb::dict d;
@@ -35,34 +54,28 @@ pb::list ask(query::Session& s, const std::string& text, float min_relevancy, fl
   return out;
 }
 
-pb::array object_opacity(query::Session& s, pb::handle view, const std::vector<int>& objects) {
-  const int vi = view_index(s.scene(), view);
-  const View& v = s.scene().views[vi];
-  std::vector<float> a;
-  {
-    pb::gil_scoped_release nogil;
-    a = s.object_opacity(vi, objects);
-  }
+pb::array object_opacity(LockedSession& ls, pb::handle view, const std::vector<int>& objects) {
+  const int vi = view_index(ls.s->scene(), view);  // the scene is read-only
+  const View& v = ls.s->scene().views[vi];
+  std::vector<float> a = locked(ls, [&](query::Session& s) { return s.object_opacity(vi, objects); });
   return take_vector(std::move(a), {v.height, v.width});
 }
 
-pb::array pixel_relevancy(query::Session& s, pb::handle view, const std::string& text, const std::string& variant) {
-  const int vi = view_index(s.scene(), view);
-  const View& v = s.scene().views[vi];
+pb::array pixel_relevancy(LockedSession& ls, pb::handle view, const std::string& text, const std::string& variant) {
+  const int vi = view_index(ls.s->scene(), view);
+  const View& v = ls.s->scene().views[vi];
   const query::Relevancy r = relevancy_variant(variant);
-  std::vector<float> a;
-  {
-    pb::gil_scoped_release nogil;
-    a = s.pixel_relevancy(vi, text, r);
-  }
+  std::vector<float> a = locked(ls, [&](query::Session& s) { return s.pixel_relevancy(vi, text, r); });
   return take_vector(std::move(a), {v.height, v.width});
 }
 
-std::string evaluate(query::Session& s, const std::string& protocol, const std::string& mode,
+std::string evaluate(LockedSession& ls, const std::string& protocol, const std::string& mode,
                      const std::string& relevancy, float mask_threshold, const std::string& overlay_dir, bool progress,
                      bool paper_map, const std::string& queries, float fragment_margin) {
+  const query::Session& s = *ls.s;
   query::parse_protocol(protocol);  // fails with the list of protocols
-  if (mode != "object" && mode != "pixel" && mode != "both") fail("mode must be object, pixel or both, got '{}'", mode);
+  if (mode != "object" && mode != "pixel" && mode != "both")
+    fail("mode must be object, pixel or both, got '{}'", excerpt(mode));
   if (!query::has_protocol_labels(s.scene(), protocol))
     fail("{}: no labels for the {} protocol", s.scene().root.string(), protocol);
   query::EvaluateOptions o;
@@ -77,26 +90,29 @@ std::string evaluate(query::Session& s, const std::string& protocol, const std::
   o.query_set = queries;
   o.fragment_margin = fragment_margin;
   nlohmann::json reports = nlohmann::json::array();
-  {
-    pb::gil_scoped_release nogil;
-    for (const auto& r : query::evaluate_model(s, o)) reports.push_back(eval::report_json(r));
-  }
+  locked(ls, [&](query::Session& session) {
+    for (const auto& r : query::evaluate_model(session, o)) reports.push_back(eval::report_json(r));
+    return 0;
+  });
   return nlohmann::json{{"reports", reports}}.dump();
 }
 
 }  // namespace
 
 void bind_query(pb::module_& m) {
-  pb::class_<query::Session, SessionPtr>(
+  pb::class_<LockedSession, SessionPtr>(
       m, "QuerySession",
-      "A scene and a trained hybrid model ready for text queries (the model must not change while it is used)")
-      .def(pb::init(
-               [](std::shared_ptr<Scene> scene, pb::object model_obj, const std::string& clip, pb::object near_plane) {
-                 auto model = model_obj.cast<std::shared_ptr<GaussianModel>>();
-                 const float near = model_near_plane_of(model_obj, near_plane);
-                 pb::gil_scoped_release nogil;
-                 return std::make_shared<query::Session>(scene, model, clip, "hgs.query", near);
-               }),
+      "A scene and a trained hybrid model ready for text queries (the model must not change while it is used). "
+      "Safe to share between threads: calls on one session run one at a time")
+      .def(pb::init([](pb::object scene_obj, pb::object model_obj, const std::string& clip, pb::object near_plane) {
+             auto scene = object_arg<Scene>(scene_obj, "QuerySession", "scene", "an hgs.Scene");
+             auto model = object_arg<GaussianModel>(model_obj, "QuerySession", "model", "an hgs.Model");
+             const float near = model_near_plane_of(model_obj, near_plane, "QuerySession");
+             pb::gil_scoped_release nogil;
+             auto ls = std::make_shared<LockedSession>();
+             ls->s = std::make_shared<query::Session>(scene, model, clip, "hgs.query", near);
+             return ls;
+           }),
            pb::arg("scene"), pb::arg("model"), pb::arg("clip") = "", pb::arg("near_plane") = pb::none(),
            "Object embeddings of the model; texts are embedded from the scene's text_embeddings.json, or by the "
            "OpenCLIP weights `clip` (.safetensors) when given. Renders cull at near_plane (default: the model's "
@@ -115,7 +131,8 @@ void bind_query(pb::module_& m) {
            "paper; objects-lerf = LERF's relevancy of that map; lerf = the paper's language map, eq. 8 summed over "
            "objects = sum_n f_n alpha T, scored with LERF's relevancy as LangSplat scores its field; foreground = "
            "lerf times the foreground opacity; query/query.h)")
-      .def("object_name", &query::Session::object_name, pb::arg("id"))
+      .def(
+          "object_name", [](const LockedSession& ls, int id) { return ls.s->object_name(id); }, pb::arg("id"))
       .def("evaluate", &evaluate, pb::arg("protocol"), pb::arg("mode") = "both", pb::arg("relevancy") = "objects",
            pb::arg("mask_threshold") = 0.5f, pb::arg("overlay_dir") = "", pb::arg("progress") = false,
            pb::arg("paper_map") = true, pb::arg("queries") = "", pb::arg("fragment_margin") = query::kFragmentMargin,

@@ -66,7 +66,12 @@ pb::dict render_py(const GaussianModel& m, const Scene& s, pb::handle view, bool
   rq.depth = depth, rq.objects = objects, rq.language = language, rq.sh_degree = sh_degree;
   rq.near_plane = checked_near_plane(near_plane, "render: near_plane");
   if (!background.is_none()) {
-    auto b = background.cast<std::vector<float>>();
+    std::vector<float> b;
+    for (pb::handle x : background) {
+      if (pb::isinstance<pb::str>(x) || pb::isinstance<pb::bool_>(x) || !PyNumber_Check(x.ptr()))
+        wrong_type("render", "background", "3 numbers (RGB in [0, 1]) or one", background);
+      b.push_back(float_arg(x, "render", "background"));
+    }
     if (b.size() == 1) b = {b[0], b[0], b[0]};
     if (b.size() != 3) throw pb::value_error("background: expected 3 values (RGB in [0, 1]) or one");
     std::copy_n(b.begin(), 3, rq.background);
@@ -87,7 +92,9 @@ pb::dict render_py(const GaussianModel& m, const Scene& s, pb::handle view, bool
 
 // Python's float sequence for the background: a list, tuple or a number.
 pb::object as_background(pb::object b) {
-  if (b.is_none() || pb::isinstance<pb::sequence>(b)) return b;
+  if (b.is_none() || (pb::isinstance<pb::sequence>(b) && !pb::isinstance<pb::str>(b))) return b;
+  if (pb::isinstance<pb::str>(b) || pb::isinstance<pb::bool_>(b) || !PyNumber_Check(b.ptr()))
+    wrong_type("render", "background", "3 numbers (RGB in [0, 1]) or one", b);
   return pb::make_tuple(b);
 }
 
@@ -96,14 +103,18 @@ pb::object as_background(pb::object b) {
 void bind_render(pb::module_& m) {
   m.def(
       "render",
-      [](pb::object model, const Scene& s, pb::handle view, bool depth, bool objects, bool language,
-         pb::object background, int sh_degree, pb::object near_plane) {
-        return render_py(model.cast<const GaussianModel&>(), s, view, depth, objects, language,
-                         as_background(background), sh_degree, model_near_plane_of(model, near_plane));
+      [](pb::object model, pb::object scene, pb::handle view, bool depth, bool objects, bool language,
+         pb::object background, pb::object sh_degree, pb::object near_plane) {
+        const auto m = object_arg<GaussianModel>(model, "render", "model", "an hgs.Model");
+        const auto s = object_arg<Scene>(scene, "render", "scene", "an hgs.Scene");
+        const long long sh = int_arg(sh_degree, "render", "sh_degree");
+        if (sh < -1 || sh > 3) throw pb::value_error(fmt::format("render: sh_degree must be -1..3, got {}", sh));
+        return render_py(*m, *s, view, depth, objects, language, as_background(background), int(sh),
+                         model_near_plane_of(model, near_plane, "render"));
       },
       pb::arg("model"), pb::arg("scene"), pb::arg("view"), pb::kw_only(), pb::arg("depth") = true,
       pb::arg("objects") = true, pb::arg("language") = false, pb::arg("background") = pb::none(),
-      pb::arg("sh_degree") = -1, pb::arg("near_plane") = pb::none(),
+      pb::arg("sh_degree") = pb::int_(-1), pb::arg("near_plane") = pb::none(),
       "Renders view `view` (index or name) of `scene`. Returns a dict of numpy arrays: rgb float32 [H, W, 3], "
       "alpha [H, W], depth [H, W]; for hybrid models objects [H, W, L] (per-label opacity, column 0 = background) "
       "and, with language=True, language [H, W, D]. background: RGB in [0, 1] (default black); sh_degree: "

@@ -455,7 +455,7 @@ CommandRegistration reg(
            ->capture_default_str();
        sub.add_option("--seed", a->seed, "First training seed")->capture_default_str();
        sub.add_option("--downscale", a->downscale, "Integer image downscale")->check(CLI::Range(1, 64));
-       sub.add_option("--threads", a->threads, "Worker threads (0 = all cores)");
+       add_threads_option(sub, a->threads);
        sub.add_flag("--quiet", a->quiet, "No progress bars or per-run lines");
        return [a] { run_ablate(*a); };
      }});

@@ -73,7 +73,7 @@ CommandRegistration reg(
               "--act", a->act,
               "Activation: auto (config file, else GELU for open_clip / QuickGELU for HF naming), gelu, quick_gelu")
            ->capture_default_str();
-       sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();
+       add_threads_option(sub, a->threads);
        return [a] { run_embed_text(*a); };
      }});
 

@@ -141,7 +141,7 @@ CommandRegistration reg(
        sub.add_option("--clip", a->clip, "OpenCLIP weights to embed the query texts");
        sub.add_option("--downscale", a->downscale, "Integer image downscale (as used for training)")
            ->check(CLI::Range(1, 64));
-       sub.add_option("--threads", a->threads, "Worker threads (0 = all cores)");
+       add_threads_option(sub, a->threads);
        sub.add_flag("--no-png", a->no_png, "Do not write overlay PNGs");
        sub.add_flag("--quiet", a->quiet, "No progress bars");
        return [a] { run_eval(*a); };

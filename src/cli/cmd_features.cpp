@@ -67,7 +67,7 @@ CommandRegistration reg(
                       "float32 sums, faster with AMX / AVX512-BF16 (an approximation: docs/clip.md)")
            ->check(CLI::IsMember({"f32", "bf16"}))
            ->capture_default_str();
-       sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();
+       add_threads_option(sub, a->threads);
        sub.add_flag("--quiet", a->quiet, "No progress bar");
        return [a] { run_features(*a); };
      }});

@@ -117,7 +117,7 @@ MasksSubcommandRegistration reg(
            ->capture_default_str()
            ->check(CLI::Range(1, 64));
        a->model.add_to(sub);
-       sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();
+       add_threads_option(sub, a->threads);
        return [a] { run_click(*a); };
      }});
 

@@ -77,7 +77,7 @@ MasksSubcommandRegistration reg(
            ->check(CLI::Range(1, 64));
        a->model.add_to(sub);
        sub.add_flag("--force", a->force, "Recompute views whose file exists");
-       sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();
+       add_threads_option(sub, a->threads);
        sub.add_flag("--quiet", a->quiet, "No progress bar");
        return [a] { run_generate(*a); };
      }});

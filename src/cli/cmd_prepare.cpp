@@ -178,7 +178,7 @@ CommandRegistration reg(
        std::vector<std::string> until{"input", "poses", "masks", "language"};
        for (auto& [s, g] : prepare::stage_groups()) until.push_back(s);
        sub.add_option("--until", a->o.until, "Stop after this stage or group")->check(CLI::IsMember(until));
-       sub.add_option("--threads", a->threads, "Threads (0 = all cores)")->capture_default_str();
+       add_threads_option(sub, a->threads);
        sub.add_flag("--quiet", a->quiet, "No progress bars");
        return [a] { run_prepare_command(*a); };
      }});

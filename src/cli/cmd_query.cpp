@@ -8,6 +8,7 @@
 
 #include "cli/command.h"
 #include "core/error.h"
+#include "core/excerpt.h"
 #include "core/fs.h"
 #include "core/progress.h"
 #include "eval/run.h"
@@ -40,7 +41,7 @@ std::vector<int> pick_views(const Scene& s, const std::string& view, const std::
   if (!view.empty()) {
     for (auto& v : s.views)
       if (v.name == view || v.stem == view) return {v.index};
-    fail("--view {}: no such view in {}", view, s.root.string());
+    fail("--view {}: no such view in {}", excerpt(view), s.root.string());
   }
   if (split == "test") return s.test_indices();
   if (split == "train") return s.train_indices();
@@ -56,7 +57,7 @@ void run_query(const QueryArgs& a) {
   const double load_s = since(t0);
   const Scene& scene = session.scene();
   std::vector<int> views = pick_views(scene, a.view, a.split);
-  if (views.empty()) fail("--split {}: the scene has no such views", a.split);
+  if (views.empty()) fail("--split {}: the scene has no such views", excerpt(a.split));
   query::QueryOptions qo{a.min_relevancy, a.mask_threshold, a.fragment_margin};
   nlohmann::json result = {{"scene", fs::absolute(a.scene).lexically_normal().string()},
                            {"model", model_ply(a.model).string()},
@@ -157,7 +158,7 @@ CommandRegistration reg(
                       "OpenCLIP weights (.safetensors) to embed the text (else SCENE/text_embeddings.json)");
        sub.add_option("--downscale", a->downscale, "Integer image downscale (as used for training)")
            ->check(CLI::Range(1, 64));
-       sub.add_option("--threads", a->threads, "Worker threads (0 = all cores)");
+       add_threads_option(sub, a->threads);
        sub.add_flag("--quiet", a->quiet, "No progress bar");
        return [a] { run_query(*a); };
      }});

@@ -116,7 +116,7 @@ CommandRegistration reg(
        sub.add_option("--downscale", a->downscale, "Integer image downscale factor")
            ->check(CLI::Range(1, 64))
            ->capture_default_str();
-       sub.add_option("--threads", a->threads, "Worker threads (0 = all cores)")->check(CLI::Range(0, 1024));
+       add_threads_option(sub, a->threads);
        auto* w =
            sub.add_flag("--white-bg", a->white_bg, "White background (default: as in MODEL/config.json, else black)");
        sub.add_flag("--black-bg", a->black_bg, "Black background")->excludes(w);

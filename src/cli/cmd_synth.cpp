@@ -85,7 +85,7 @@ CommandRegistration reg(
        sub.add_option("--supersample", o->supersample, "Samples per pixel per axis for the RGB images")
            ->check(CLI::Range(1, 8))
            ->capture_default_str();
-       sub.add_option("--threads", *threads, "Worker threads (0 = all cores)");
+       add_threads_option(sub, *threads);
        sub.add_flag(
            "--quiet", [o](int64_t n) { o->progress = n == 0; }, "No progress bars");
        return [=] {

@@ -217,7 +217,7 @@ void add_run_options(CLI::App& sub, TrainArgs& a) {
   sub.add_option("--downscale", a.downscale, "Integer image downscale factor")
       ->check(CLI::Range(1, 64))
       ->capture_default_str();
-  sub.add_option("--threads", a.threads, "Worker threads (0 = all cores)")->check(CLI::Range(0, 1024));
+  add_threads_option(sub, a.threads);
   sub.add_option("--seed", a.seed, "Random seed (view order, split sampling)")->capture_default_str();
   sub.add_option("--sh-degree", a.sh_degree, "Maximum SH degree")->check(CLI::Range(0, 3))->capture_default_str();
   sub.add_option(

@@ -55,7 +55,7 @@ CommandRegistration reg(
        sub.add_option("--downscale", a->downscale, "Integer image downscale (as used for training)")
            ->check(CLI::Range(1, 64));
        sub.add_option("--static", a->static_dir, "Front-end folder (default: viewer/ beside the hgs binary)");
-       sub.add_option("--threads", a->threads, "Worker threads for rendering (0 = all cores)");
+       add_threads_option(sub, a->threads, "Worker threads for rendering");
        return [a] { run_view(*a); };
      }});
 

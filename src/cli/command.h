@@ -22,7 +22,12 @@ struct CommandRegistration {
   CommandRegistration(CommandSpec spec) { registry().push_back(std::move(spec)); }
 };
 
-// Applies --threads (0 = all cores) to OpenMP.
+// Applies --threads to OpenMP, the element-wise pool and OpenBLAS (0, the option left out: all cores).
 void set_threads(int threads);
+
+// The --threads option of every command: an integer in 1..max_threads() (core/threads.h, the bound hgs.set_threads
+// shares), checked while parsing, so 0, negatives and 100000 end as one line naming --threads and the range,
+// exit 2. Left out, `threads` keeps its 0: every CPU this process may use.
+CLI::Option* add_threads_option(CLI::App& sub, int& threads, const std::string& what = "Worker threads");
 
 }  // namespace hgs::cli

@@ -10,6 +10,7 @@
 #include "clip/model.h"
 #include "core/error.h"
 #include "core/process.h"
+#include "core/threads.h"
 #include "nn/openblas_env.h"
 #include "nn/thread_pool.h"
 
@@ -23,6 +24,25 @@ std::vector<CommandSpec>& registry() {
 }
 
 void set_threads(int threads) { hgs::nn::set_num_threads(threads); }  // OpenMP, the pool and OpenBLAS
+
+CLI::Option* add_threads_option(CLI::App& sub, int& threads, const std::string& what) {
+  CLI::Validator bound(
+      [](std::string& text) -> std::string {
+        long long n = 0;
+        size_t used = 0;
+        try {
+          n = std::stoll(text, &used);
+        } catch (const std::exception&) {
+          used = 0;
+        }
+        if (used == 0 || used != text.size()) return "expected a whole number of threads, got '" + text + "'";
+        if (n < 1 || n > hgs::max_threads()) return "must be " + hgs::threads_range_text() + ", got " + text;
+        return "";
+      },
+      "1.." + std::to_string(hgs::max_threads()));
+  return sub.add_option("--threads", threads, what + ", " + hgs::threads_range_text() + " (default: every CPU)")
+      ->check(bound);
+}
 
 namespace {
 
@@ -40,6 +60,11 @@ void default_threads() {
 int main(int argc, char** argv) {
   using namespace hgs::cli;
   default_threads();
+  if (omp_get_max_threads() > hgs::max_threads()) {  // OMP_NUM_THREADS=100000 crashed at the first parallel region
+    std::fprintf(stderr, "hgs: error: OMP_NUM_THREADS: must be %s, got %d\n", hgs::threads_range_text().c_str(),
+                 omp_get_max_threads());
+    return 2;
+  }
   CLI::App app{"hgs " HGS_VERSION
                " — Hybrid Gaussians: open-vocabulary 3D segmentation with Gaussian splatting, on the CPU"};
   app.set_version_flag("--version", std::string("hgs ") + HGS_VERSION);
@@ -60,7 +85,10 @@ int main(int argc, char** argv) {
     // One line naming the option and what is allowed, like every other error of hgs (CLI11's own message says
     // which option and range; its second line "Run with --help" is folded into this one).
     std::string where = "hgs";
-    for (const CLI::App* sub : app.get_subcommands()) where += " " + sub->get_name();
+    for (const CLI::App* at = &app; !at->get_subcommands().empty();) {  // nested too: `hgs masks generate`
+      at = at->get_subcommands().front();
+      where += " " + at->get_name();
+    }
     std::fprintf(stderr, "hgs: error: %s (see `%s --help`)\n", e.what(), where.c_str());
     return 2;
   }

@@ -3,10 +3,13 @@
 // row by row, so the property order in the file does not matter.
 #include "model/ply.h"
 
+#include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <functional>
 #include <map>
 #include <sstream>
+#include <utility>
 
 #include "core/error.h"
 #include "core/fs.h"
@@ -103,8 +106,44 @@ int suffix_index(const std::string& s, const std::string& prefix) {
 
 }  // namespace
 
+namespace {
+// The index of the first NaN / infinite value of a[0, n) and how many there are (first = n: none).
+template <class Get>
+std::pair<size_t, size_t> nonfinite_in(size_t n, const Get& get) {
+  size_t first = n, count = 0;
+#pragma omp parallel for reduction(min : first) reduction(+ : count)
+  for (size_t k = 0; k < n; ++k)
+    if (!std::isfinite(get(k))) first = std::min(first, k), ++count;
+  return {first, count};
+}
+
+// read_model_ply refuses a body with NaN or infinite values: refuse them here, before anything is written, naming
+// the array as Python's hgs.Model does (means, log_scales, rotations, opacity_logits, sh, extras['<group>']).
+void check_finite(const std::filesystem::path& path, const GaussianModel& m) {
+  auto check = [&](const std::string& name, size_t n, size_t per_gaussian, const auto& get) {
+    const auto [first, count] = nonfinite_in(n, get);
+    if (count > 0)
+      fail(
+          "{}: not written: {} holds {} NaN or infinite value{} (the first at Gaussian {}); a model file must be "
+          "finite to load",
+          path.string(), name, count, count == 1 ? "" : "s", first / std::max<size_t>(1, per_gaussian));
+  };
+  auto flat = [&](const char* name, const std::vector<float>& v, size_t per) {
+    check(name, v.size(), per, [&](size_t k) { return v[k]; });
+  };
+  flat("means", m.mean, 3);
+  flat("log_scales", m.log_scale, 3);
+  flat("rotations", m.quat, 4);
+  flat("opacity_logits", m.opacity_logit, 1);
+  flat("sh", m.sh, size_t(m.sh_stride()) * 3);
+  for (const ExtraGroup& e : m.extras)
+    check("extras['" + e.name + "']", size_t(m.n) * size_t(e.dim), size_t(e.dim), [&](size_t k) { return e.value(k); });
+}
+}  // namespace
+
 void write_model_ply(const std::filesystem::path& path, const GaussianModel& m) {
   m.validate(path.string());
+  check_finite(path, m);
   for (auto& e : m.extras)
     if (!valid_group_name(e.name))
       fail("{}: extra channel group name '{}' is not writable (use [a-z0-9_], not starting with f_)", path.string(),

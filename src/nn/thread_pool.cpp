@@ -14,6 +14,8 @@
 #include <thread>
 #include <vector>
 
+#include "core/threads.h"
+
 namespace hgs::nn {
 namespace {
 
@@ -121,6 +123,7 @@ void parallel_for(long n, long min_parallel, const std::function<void(long, long
 
 void set_num_threads(int n) {
   if (n <= 0) return;
+  checked_threads(n, "threads");  // the callers check first (cli/command.h, python/src/train.cpp): a last guard
   openblas_set_num_threads(n);
   omp_set_num_threads(n);
 }

@@ -14,7 +14,8 @@ void parallel_for(long n, long min_parallel, const std::function<void(long, long
 // Worker count: omp_get_max_threads() (so --threads applies), at most 64.
 int pool_threads();
 
-// Sets the thread count of OpenBLAS and OpenMP, and with it the pool's (0 = leave the defaults: all cores).
+// Sets the thread count of OpenBLAS and OpenMP, and with it the pool's (0 = leave the defaults: all cores); a
+// count above core/threads.h's max_threads() is an hgs::Error.
 void set_num_threads(int n);
 
 }  // namespace hgs::nn

@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "core/error.h"
+#include "core/excerpt.h"
 
 namespace hgs::query {
 namespace fs = std::filesystem;
@@ -55,7 +56,7 @@ ProtocolSpec parse_protocol(const std::string& name) {
     if (p.name == name) return p;
   std::string list;
   for (const auto& n : protocol_names()) list += (list.empty() ? "" : ", ") + n;
-  fail("unknown protocol '{}' (one of {})", name, list);
+  fail("unknown protocol '{}' (one of {})", excerpt(name), list);
 }
 
 bool has_protocol_labels(const Scene& scene, const std::string& protocol) {

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "core/error.h"
+#include "core/excerpt.h"
 #include "hybrid/fields.h"
 #include "model/render_inputs.h"
 #include "query/relevancy.h"
@@ -107,7 +108,7 @@ const char* relevancy_description(Relevancy v) {
 Relevancy parse_relevancy(const std::string& name) {
   for (auto v : {Relevancy::Objects, Relevancy::ObjectsLerf, Relevancy::Lerf, Relevancy::Foreground})
     if (name == relevancy_name(v)) return v;
-  fail("unknown relevancy '{}' (objects, objects-lerf, lerf or foreground)", name);
+  fail("unknown relevancy '{}' (objects, objects-lerf, lerf or foreground)", excerpt(name));
 }
 
 std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,
@@ -224,7 +225,7 @@ std::vector<std::vector<float>> render_relevancies(render::GaussianRenderer& r, 
 
 std::vector<int> choose_objects(const std::vector<ObjectScore>& scores, float min_relevancy, const std::string& text,
                                 float fragment_margin, const std::vector<LabelBox>* boxes) {
-  if (scores.empty()) fail("the model has no foreground objects to answer \"{}\"", text);
+  if (scores.empty()) fail("the model has no foreground objects to answer \"{}\"", excerpt(text));
   const int best = scores[0].object;
   std::vector<int> chosen = {best};
   // The fragment rule's cosine margin: a fraction of the best label's lead over the median label, so that it means

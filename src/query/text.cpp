@@ -4,6 +4,7 @@
 
 #include "clip/model.h"
 #include "core/error.h"
+#include "core/excerpt.h"
 #include "query/query.h"
 #include "scene/text_embeddings.h"
 
@@ -38,7 +39,7 @@ const std::vector<float>& TextEmbedder::embed(const std::string& phrase) {
   if (it != cache_.end()) return it->second;
   if (!clip_)
     fail("{}: no embedding for \"{}\" (known phrases only without --clip; see `hgs info`)", scene_file_.string(),
-         phrase);
+         excerpt(phrase));
   auto e = clip_->embed_text({phrase});
   return cache_[phrase] = std::move(e);
 }

@@ -5,6 +5,7 @@
 #include <mutex>
 
 #include "core/error.h"
+#include "core/excerpt.h"
 #include "train/train_views.h"
 
 namespace hgs::train {
@@ -52,7 +53,7 @@ std::unique_ptr<Trainer> make_trainer(const Scene& scene, const std::vector<int>
   if (!f.make) {
     std::string known;
     for (const auto& n : method_names()) known += (known.empty() ? "" : ", ") + n;
-    fail("unknown training method '{}' (known: {})", method, known);
+    fail("unknown training method '{}' (known: {})", excerpt(method), known);
   }
   if (idx.empty()) fail("{}: the scene has no training views", scene.root.string());
   std::unique_ptr<Method> m = f.make(scene, idx, cfg, options, progress);

@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 
 #include "core/error.h"
+#include "core/folder.h"
 #include "core/fs.h"
 #include "core/process.h"
 #include "model/ply.h"
@@ -84,13 +85,20 @@ TrainingRun::TrainingRun(Trainer& trainer, const Scene& scene, RunOptions opt, j
   atomic_write_text(opt_.out / "config.json", config.dump(2) + "\n");
 }
 
+namespace {
+// FOLDER/checkpoints/iter_<N>.ckpt (+ FOLDER/point_cloud_iter_<N>.ply); returns the checkpoint's name under `out`.
+std::string write_snapshot(const Trainer& trainer, const fs::path& folder, const fs::path& out, bool with_ply) {
+  const int it = trainer.iteration();
+  ensure_dir(folder / "checkpoints");
+  const std::string name = fmt::format("iter_{}.ckpt", it);
+  trainer.save_checkpoint(folder / "checkpoints" / name);
+  if (with_ply) write_model_ply(folder / fmt::format("point_cloud_iter_{}.ply", it), trainer.model());
+  return (out / "checkpoints" / name).string();
+}
+}  // namespace
+
 std::string TrainingRun::snapshot(bool with_ply) const {
-  const int it = trainer_.iteration();
-  ensure_dir(opt_.out / "checkpoints");
-  const fs::path ckpt = opt_.out / "checkpoints" / fmt::format("iter_{}.ckpt", it);
-  trainer_.save_checkpoint(ckpt);
-  if (with_ply) write_model_ply(opt_.out / fmt::format("point_cloud_iter_{}.ply", it), trainer_.model());
-  return ckpt.string();
+  return write_snapshot(trainer_, opt_.out, opt_.out, with_ply);
 }
 
 // The held-out views' PSNR / SSIM after a step that ended at `it` images seen, with the training time so far
@@ -190,9 +198,13 @@ json TrainingRun::stats() const {
 json TrainingRun::save() const {
   json s = stats();
   if (!opt_.writer || opt_.out.empty()) return s;
-  write_model_ply(opt_.out / "point_cloud.ply", trainer_.model());
-  if (opt_.save_every > 0) snapshot(false);
-  atomic_write_text(opt_.out / "train_stats.json", s.dump(2) + "\n");
+  // The final files as one change of the folder (core/folder.h): a run killed while they are written leaves the
+  // folder as it was (config.json, the checkpoints so far), never point_cloud.ply without train_stats.json.
+  write_folder_whole(opt_.out, [&](const fs::path& tmp) {
+    write_model_ply(tmp / "point_cloud.ply", trainer_.model());
+    if (opt_.save_every > 0) write_snapshot(trainer_, tmp, opt_.out, false);
+    atomic_write_text(tmp / "train_stats.json", s.dump(2) + "\n");
+  });
   return s;
 }
 

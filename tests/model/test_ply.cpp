@@ -3,11 +3,14 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <functional>
+#include <limits>
 #include <random>
 
 #include "core/error.h"
 #include "core/fs.h"
 #include "core/half.h"
+#include "expect_error.h"
 #include "model/ply.h"
 #include "test_util.h"
 
@@ -258,6 +261,39 @@ TEST(Ply, WriteIsAtomicAndRejectsBadGroupName) {
   EXPECT_THROW(write_model_ply(dir / "m.ply", m), Error);
   EXPECT_FALSE(std::filesystem::exists(dir / "m.ply"));
   EXPECT_TRUE(std::filesystem::is_empty(dir.path));
+}
+
+TEST(Ply, NonFiniteValuesAreRefusedAtWriteNamingTheArray) {
+  // read_model_ply refuses them, so a saved file could not be loaded again (issue 60): refused before writing.
+  test::TempDir dir;
+  GaussianModel m = random_model(20, 1, 3);
+  auto& f = m.add_extra("lang", 4, 0.f, true);  // half storage: checked too
+  (void)f;
+  write_model_ply(dir / "ok.ply", m);
+  struct Case {
+    std::function<void(GaussianModel&)> poison;
+    std::string named;
+  };
+  const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
+  const std::vector<Case> cases = {
+      {[&](GaussianModel& g) { g.mean[3 * 7 + 1] = nan; },
+       "means holds 1 NaN or infinite value (the first at Gaussian 7)"},
+      {[&](GaussianModel& g) { g.log_scale[5] = inf; }, "log_scales holds 1"},
+      {[&](GaussianModel& g) { g.quat[4 * 19] = -inf; },
+       "rotations holds 1 NaN or infinite value (the first at Gaussian 19)"},
+      {[&](GaussianModel& g) { g.opacity_logit[2] = g.opacity_logit[3] = nan; },
+       "opacity_logits holds 2 NaN or infinite values (the first at Gaussian 2)"},
+      {[&](GaussianModel& g) { g.sh[12 * 4 * 3 + 5] = nan; },
+       "sh holds 1 NaN or infinite value (the first at Gaussian 12)"},
+      {[&](GaussianModel& g) { g.extras[0].half[4 * 9 + 2] = 0x7C00; },
+       "extras['lang'] holds 1 NaN or infinite value (the first at Gaussian 9)"},
+  };
+  for (const Case& c : cases) {
+    GaussianModel bad = m;
+    c.poison(bad);
+    EXPECT_FILE_ERROR(write_model_ply(dir / "bad.ply", bad), dir / "bad.ply", c.named);
+    EXPECT_FALSE(std::filesystem::exists(dir / "bad.ply"));
+  }
 }
 
 }  // namespace

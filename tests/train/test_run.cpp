@@ -136,5 +136,34 @@ TEST_F(RunTest, RunsThatCannotGoAsAskedFailBeforeWritingAnything) {
   EXPECT_FALSE(fs::exists(out / "done"));
 }
 
+TEST_F(RunTest, FinalFilesAreWrittenWholeOrNotAtAll) {
+  // The end of a run writes point_cloud.ply, the last checkpoint and train_stats.json as one change of the folder
+  // (core/folder.h). A write that fails part way (here train_stats.json, made a folder so it cannot be replaced;
+  // as a full disk or a second Ctrl-C would) leaves the folder as it was: no point_cloud.ply without its stats.
+  const Scene s = scene();
+  auto t = trainer(s, 4);
+  test::TempDir out;
+  RunOptions ro;
+  ro.out = out / "m";
+  ro.save_every = 2;
+  TrainingRun run(*t, s, ro, run_config(*t, s, nullptr, t->model().n));
+  run.train();
+  fs::create_directories(out / "m" / "train_stats.json");
+  const std::string e = test::error_of([&] { run.save(); });
+  EXPECT_NE(e.find("train_stats.json"), std::string::npos) << e;
+  EXPECT_FALSE(fs::exists(out / "m" / "point_cloud.ply"));
+  EXPECT_FALSE(fs::exists(out / "m" / "checkpoints" / "iter_4.ckpt"));
+  EXPECT_TRUE(fs::exists(out / "m" / "checkpoints" / "iter_2.ckpt"));  // what was there is kept
+  EXPECT_TRUE(fs::exists(out / "m" / "config.json"));
+  // Nothing beside the folder either.
+  EXPECT_EQ(std::distance(fs::directory_iterator(out.path), fs::directory_iterator()), 1);
+  fs::remove(out / "m" / "train_stats.json");
+  run.save();
+  EXPECT_TRUE(fs::exists(out / "m" / "point_cloud.ply"));
+  EXPECT_TRUE(fs::exists(out / "m" / "checkpoints" / "iter_4.ckpt"));
+  EXPECT_EQ(read_json(out / "m" / "train_stats.json")["iterations"], 4);
+  EXPECT_TRUE(fs::exists(out / "m" / "checkpoints" / "iter_2.ckpt"));
+}
+
 }  // namespace
 }  // namespace hgs::train
