@@ -2,8 +2,8 @@
 // surrounding white space trimmed and cannot carry a name with a backslash (a Windows-made archive unzipped on
 // Linux gives "dir\photo.jpg"), a control character (tab, newline) or leading / trailing spaces: such a photo is
 // silently left out of mapping. Names that are not UTF-8 (Latin-1 names of an old archive) cannot go into the
-// JSON records of hgs (nor its reports): they are made safe the same way. The input stage writes it under a safe name instead (each such byte becomes '_')
-// and lists the renaming in its report; the source keeps its name.
+// JSON records of hgs (nor its reports): they are made safe the same way. The input stage writes it under a safe name
+// instead (each such byte becomes '_') and lists the renaming in its report; the source keeps its name.
 #pragma once
 #include <filesystem>
 #include <string>

@@ -383,7 +383,8 @@ PrepareReport run_prepare(const PrepareOptions& opt) {
   PrepareReport r;
   r.stages = p.runs();
   r.json = prepare_json(p, opt);
-  atomic_write_text(opt.scene / "prepare.json", r.json.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
+  atomic_write_text(opt.scene / "prepare.json",
+                    r.json.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
   return r;
 }
 

@@ -32,7 +32,9 @@ std::string PrepareReport::text() const {
       t += fmt::format("             skipped (links to nothing): {}\n", list_some(in["broken_links"]));
     if (const auto renamed = in.value("renamed", nlohmann::json::array()); !renamed.empty()) {
       nlohmann::json pairs = nlohmann::json::array();
-      for (const auto& r : renamed) pairs.push_back(r[0].dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) + " -> " + r[1].get<std::string>());  // escaped
+      for (const auto& r : renamed)
+        pairs.push_back(r[0].dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) + " -> " +
+                        r[1].get<std::string>());  // escaped
       t += fmt::format("             renamed (names COLMAP cannot carry): {}\n", list_some(pairs, 3));
     }
     if (!in.value("bad", nlohmann::json::array()).empty())

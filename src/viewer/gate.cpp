@@ -44,9 +44,8 @@ std::string_view header_value(std::string_view head, std::string_view name) {
 }
 
 bool iequals(std::string_view a, std::string_view b) {
-  return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(), [](char x, char y) {
-           return lower(x) == lower(y);
-         });
+  return a.size() == b.size() &&
+         std::equal(a.begin(), a.end(), b.begin(), [](char x, char y) { return lower(x) == lower(y); });
 }
 
 void close_fd(int fd) {
@@ -194,7 +193,8 @@ struct GatedHttpServer::Conn {
 };
 
 GatedHttpServer::GatedHttpServer(GateOptions opt) : opt_(opt) {
-  if (::pipe2(wake_, O_CLOEXEC | O_NONBLOCK) != 0) fail("viewer: cannot create the gate's pipe: {}", std::strerror(errno));
+  if (::pipe2(wake_, O_CLOEXEC | O_NONBLOCK) != 0)
+    fail("viewer: cannot create the gate's pipe: {}", std::strerror(errno));
   workers_ = std::make_unique<httplib::ThreadPool>(size_t(std::max(1, opt_.threads)));
   new_task_queue = [] { return new InlineQueue; };
   gate_ = std::thread([this] { gate_loop(); });
@@ -286,9 +286,9 @@ void GatedHttpServer::gate_loop() {
       }
       const bool idle = c.buf.empty();
       const double limit = c.served == 0 ? opt_.read_timeout_s : opt_.keep_alive_s;
-      const bool late = idle ? seconds_since(c.since) > limit
-                             : (seconds_since(c.first) > opt_.request_timeout_s ||
-                                seconds_since(c.last) > opt_.read_timeout_s);
+      const bool late =
+          idle ? seconds_since(c.since) > limit
+               : (seconds_since(c.first) > opt_.request_timeout_s || seconds_since(c.last) > opt_.read_timeout_s);
       if (drop || late) {
         if (late && !idle) {
           static constexpr std::string_view k408 =

@@ -34,8 +34,8 @@ struct GateOptions {
   int read_timeout_s = 5, write_timeout_s = 5;
   int request_timeout_s = 10;  // a whole request (header and body) must arrive within this after its first byte
   int keep_alive_s = 2, keep_alive_max = 100;
-  size_t max_connections = 512;         // connections waiting in the gate at once
-  size_t max_request_bytes = 96 * 1024;  // buffered per request before a worker takes it anyway (it refuses it)
+  size_t max_connections = 512;           // connections waiting in the gate at once
+  size_t max_request_bytes = 96 * 1024;   // buffered per request before a worker takes it anyway (it refuses it)
   size_t max_pending_bytes = 256u << 20;  // unsent answers held for slow readers, all connections together
 };
 
