@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "core/image.h"
 
 namespace hgs::test {
 namespace fs = std::filesystem;
@@ -48,6 +49,14 @@ std::string error_of(const std::function<void()>& f) {
     return e.what();
   }
   return "";
+}
+
+void texture_png(const fs::path& p, int w, int h, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.f, 1.f);
+  Image img(w, h, 3);
+  for (float& v : img.px) v = u(rng);
+  save_png(p, img);
 }
 
 }  // namespace hgs::test

@@ -31,6 +31,9 @@ std::string error_of(const std::function<void()>& f);
 // Path of ../shared/data/<name>, or empty when absent.
 std::filesystem::path shared_data(const std::string& name);
 
+// A w x h PNG of random texture (seeded), which no compressor shrinks much: a photo for hgs prepare's tests.
+void texture_png(const std::filesystem::path& p, int w, int h, unsigned seed);
+
 }  // namespace hgs::test
 
 #define HGS_REQUIRE_SHARED(var, name)        \

@@ -16,15 +16,6 @@ namespace hgs::test {
 namespace {
 namespace fs = std::filesystem;
 
-// A w x h PNG of random texture (seeded), which no compressor shrinks much.
-void texture_png(const fs::path& p, int w, int h, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> u(0.f, 1.f);
-  Image img(w, h, 3);
-  for (float& v : img.px) v = u(rng);
-  save_png(p, img);
-}
-
 fs::path photos(const TempDir& t, int n, int w = 64, int h = 48) {
   const fs::path dir = t / "photos";
   fs::create_directories(dir);

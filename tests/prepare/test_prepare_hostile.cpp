@@ -37,14 +37,6 @@ using nlohmann::json;
 #define REQUIRE_PYTHON() \
   if (!prepare::find_program("python3")) GTEST_SKIP() << "python3 is absent (the fake colmap needs it): skipping"
 
-void texture_png(const fs::path& p, int w, int h, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> u(0.f, 1.f);
-  Image img(w, h, 3);
-  for (float& v : img.px) v = u(rng);
-  save_png(p, img);
-}
-
 fs::path photos(const TempDir& t, int n) {
   const fs::path dir = t / "photos";
   fs::create_directories(dir);
