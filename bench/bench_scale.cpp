@@ -14,6 +14,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -58,11 +59,14 @@ int run_case(const std::string& method, double pixels, double gaussians, const A
   trainer.step();
   std::vector<double> ms;
   std::vector<train::StepTimes> parts;
+  std::map<std::string, std::vector<double>> method_parts;  // the method's own timers (ms_*), per step
   for (int i = 0; i < a.steps; ++i) {
     const auto t0 = std::chrono::steady_clock::now();
     const train::StepInfo info = trainer.step();
     ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
     parts.push_back(info.times);
+    for (const auto& [k, v] : trainer.method().stats().values)
+      if (k.starts_with("ms_")) method_parts[k].push_back(v);
     if (!std::isfinite(info.total)) {
       std::fprintf(stderr, "bench_scale: the %s step's loss is not finite\n", method.c_str());
       return 1;
@@ -75,6 +79,10 @@ int run_case(const std::string& method, double pixels, double gaussians, const A
     std::sort(v.begin(), v.end());
     part_ms[name] = v[v.size() / 2];
   });
+  for (auto& [k, v] : method_parts) {  // e.g. the object losses' phases: method_ms_app_boxes, ...
+    std::sort(v.begin(), v.end());
+    part_ms["method_" + k] = v[v.size() / 2];
+  }
   std::sort(ms.begin(), ms.end());
   const json j = {{"parts_ms", part_ms},  {"method", method},
                   {"width", W},           {"height", H},
