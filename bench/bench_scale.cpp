@@ -6,7 +6,10 @@
 // own: the model, the optimiser, the renderer's buffers and the two training images. Prints a markdown table
 // (README "Benchmarks"), the parts of the base case's steps (train::StepTimes) and, with --json FILE, the
 // figures as JSON.
-//   build/bench_scale [--steps 4] [--threads 2] [--objects-per-step M] [--json FILE]
+// --fusion-every K rebuilds the hybrid method's observation table every K images (default: HybridConfig's), so
+// that with K = 1 every timed step carries a rebuild, reported in the part `densify` (the method's after-step
+// work): the rebuild's cost per view, as its own part (issue 61, goal 3).
+//   build/bench_scale [--steps 4] [--threads 2] [--objects-per-step M] [--fusion-every K] [--json FILE]
 #include <unistd.h>
 
 #include <algorithm>
@@ -36,6 +39,7 @@ constexpr int kBaseW = 1000, kBaseH = 700, kBaseN = 300000;
 
 struct Args {
   int steps = 4, threads = 2, objects_per_step = hybrid::HybridConfig{}.objects_per_step;
+  int fusion_every = hybrid::HybridConfig{}.fusion_every;
   std::string json_out;
 };
 
@@ -53,6 +57,7 @@ int run_case(const std::string& method, double pixels, double gaussians, const A
   if (method == "hybrid") {
     hybrid::HybridConfig hc;
     hc.objects_per_step = a.objects_per_step;
+    hc.fusion_every = a.fusion_every;
     m = std::make_unique<hybrid::HybridMethod>(hc, s.data, cfg.seed);
   }
   train::Trainer trainer(cfg, std::move(s.model), s.views, 5.f, std::move(m));
@@ -101,8 +106,9 @@ std::string self_path() {
 }
 
 json run_child(const std::string& method, double pixels, double gaussians, const Args& a) {
-  const std::string cmd = fmt::format("'{}' --case {} {} {} --steps {} --threads {} --objects-per-step {}", self_path(),
-                                      method, pixels, gaussians, a.steps, a.threads, a.objects_per_step);
+  const std::string cmd =
+      fmt::format("'{}' --case {} {} {} --steps {} --threads {} --objects-per-step {} --fusion-every {}", self_path(),
+                  method, pixels, gaussians, a.steps, a.threads, a.objects_per_step, a.fusion_every);
   FILE* p = popen(cmd.c_str(), "r");
   if (!p) return nullptr;
   std::string out;
@@ -117,9 +123,11 @@ json run_child(const std::string& method, double pixels, double gaussians, const
 }
 
 int usage(const char* why) {
-  std::fprintf(stderr,
-               "bench_scale: %s\nusage: bench_scale [--steps N] [--threads T] [--objects-per-step M] [--json FILE]\n",
-               why);
+  std::fprintf(
+      stderr,
+      "bench_scale: %s\nusage: bench_scale [--steps N] [--threads T] [--objects-per-step M] [--fusion-every K] "
+      "[--json FILE]\n",
+      why);
   return 2;
 }
 
@@ -137,7 +145,7 @@ int main(int argc, char** argv) {
       std::printf(
           "Training step time and peak memory at 1000x700 / 300k Gaussians and at 0.25x and 4x the pixels\n"
           "and the Gaussians (one child process per case).\n"
-          "usage: bench_scale [--steps N] [--threads T] [--objects-per-step M] [--json FILE]\n");
+          "usage: bench_scale [--steps N] [--threads T] [--objects-per-step M] [--fusion-every K] [--json FILE]\n");
       return 0;
     } else if (k == "--case") {
       if (i + 3 >= argc) return usage("--case needs METHOD PIXELS GAUSSIANS");
@@ -150,6 +158,8 @@ int main(int argc, char** argv) {
       a.threads = std::max(1, std::atoi(v));
     } else if (k == "--objects-per-step" && (v = next())) {
       a.objects_per_step = std::max(0, std::atoi(v));
+    } else if (k == "--fusion-every" && (v = next())) {
+      a.fusion_every = std::max(1, std::atoi(v));
     } else if (k == "--json" && (v = next())) {
       a.json_out = v;
     } else {

@@ -9,20 +9,24 @@
 namespace hgs::hybrid {
 
 void hide_occluded_all(const GaussianModel& m, const std::vector<MaskView>& views, float near_plane,
-                       ObservationTable& table) {
-  render::GaussianRenderer r;
+                       ObservationTable& table, OcclusionScratch* scratch) {
+  OcclusionScratch own;
+  OcclusionScratch& w = scratch ? *scratch : own;
+  render::GaussianRenderer& r = w.renderer;
+  render::RenderOutputs& out = w.out;
+  std::vector<float>& surface = w.surface;
   render::GaussianInputs in = render_inputs(m);
   in.sh_degree = 0;  // colours do not matter here
   render::RenderSettings rs;
   rs.want_depth = true;
-  render::RenderOutputs out;
-  std::vector<float> surface;
   for (size_t u = 0; u < views.size(); ++u) {
     const MaskView& v = views[u];
     const render::Camera cam = render::pinhole_camera(v.width, v.height, v.fx, v.fy, v.cx, v.cy, v.R, v.t, near_plane);
     r.forward(cam, in, rs, out);
     surface.resize(out.alpha.size());
-    for (size_t p = 0; p < surface.size(); ++p) surface[p] = out.alpha[p] > 0.5f ? out.depth[p] / out.alpha[p] : 0.f;
+    const long P = long(surface.size());
+#pragma omp parallel for schedule(static)
+    for (long p = 0; p < P; ++p) surface[p] = out.alpha[p] > 0.5f ? out.depth[p] / out.alpha[p] : 0.f;
     hide_occluded(m.mean.data(), m.n, v, surface.data(), int(u), table);
   }
 }
@@ -57,7 +61,7 @@ void ObjectAssociation::refresh(GaussianModel& m, HybridFields& h, float near_pl
   // The occlusion test applies to both assignments: the single-view one (no-OF ablation) then takes the label of
   // the first view where the centre is visible, so that the no-OF rows differ from the full method by eqs. 4-5
   // alone and Table 3's "OF added" measures fusion, not fusion and the occlusion test together.
-  if (cfg_.occlusion_test) hide_occluded_all(m, *masks_, near_plane, table_);
+  if (cfg_.occlusion_test) hide_occluded_all(m, *masks_, near_plane, table_, &occlusion_);
   if (cfg_.use_of) fuse(m.n, h);
   else single_view_assignment(table_, L_, h.q->data.data());
   update_hard_ids(m.n, h);

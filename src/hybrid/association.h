@@ -10,6 +10,7 @@
 #include "hybrid/config.h"
 #include "hybrid/fields.h"
 #include "hybrid/fusion.h"
+#include "render/renderer.h"
 #include "train/adam.h"
 #include "train/reducer.h"
 
@@ -18,9 +19,15 @@ namespace hgs::hybrid {
 // The occlusion test of Observation Fusion for every view (fusion.h, hide_occluded): renders the model's depth
 // in each view (surface depth = expected depth / alpha where alpha > 0.5) and marks hidden Gaussians' entries of
 // `table` as no observation. Costs one render per training view. near_plane: the training cameras' (a Gaussian
-// nearer to the camera than it is culled in training, so it is no surface here either).
+// nearer to the camera than it is culled in training, so it is no surface here either). `scratch`: the renderer
+// and buffers a caller keeps between rebuilds (none: made for this call).
+struct OcclusionScratch {
+  render::GaussianRenderer renderer;
+  render::RenderOutputs out;
+  std::vector<float> surface;  // [H, W]
+};
 void hide_occluded_all(const GaussianModel& m, const std::vector<MaskView>& views, float near_plane,
-                       ObservationTable& table);
+                       ObservationTable& table, OcclusionScratch* scratch = nullptr);
 
 class ObjectAssociation {
  public:
@@ -58,6 +65,7 @@ class ObjectAssociation {
   const std::vector<MaskView>* masks_;
   int L_;
   ObservationTable table_;
+  OcclusionScratch occlusion_;                               // the depth renders' buffers, kept between rebuilds
   std::vector<float> logits_, dw_, dlogits_, step_dlogits_;  // [U]
   bool step_set_ = false;
   mutable std::vector<float> w_;  // [U] softmax(logits_)
