@@ -54,4 +54,5 @@ for g, d in rows.items():
     print(f"| {g} | {len(d.get('names', []))} | {m.get('names', float('nan')):.2f} | {cell('synonyms')} | "
           f"{cell('hypernyms')} | {cell('attributes')} |")
 PY
+python3 "$(dirname "$0")/revalidate_report.py" "$OUT"
 echo "bench/revalidate.sh: tables in $OUT/ablate_*/ablation.md"
