@@ -54,6 +54,12 @@ class ObjectAssociation {
 
   const std::vector<float>& weights() const;  // [U] softmax of the current logits
   const ObservationTable& table() const { return table_; }
+  // Frees the depth renders' buffers (HybridMethod::release, before densification).
+  void release() {
+    occlusion_.renderer.release();
+    occlusion_.out = {};
+    std::vector<float>().swap(occlusion_.surface);
+  }
   // The last fuse()'s s [N, L] and valid [N] (null before the first, and without OF).
   const float* fused_s() const { return s_.empty() ? nullptr : s_.data(); }
   const uint8_t* fused_valid() const { return valid_.empty() ? nullptr : valid_.data(); }

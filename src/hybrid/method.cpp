@@ -237,6 +237,7 @@ void HybridMethod::after_step(const train::StepEnd& end) {
 void HybridMethod::release() {
   object_losses_.release();
   semantic_.release();
+  assoc_.release();
   for (auto* v : {&dq_, &channels_, &d_channels_, &d_wsum_, &d_dense_}) std::vector<float>().swap(*v);
   groups_ = ObjectGroups{};
 }
