@@ -546,6 +546,9 @@ TEST(HybridTrainer, ObservationFusionOutvotesViewsThatRenameObjects) {
   // after 100 steps, seeds 3 / 5 / 7: objects OF 0.996 / 0.984 / 0.978, no OF 0.024 / 0.181 / 0.070; background
   // OF 0.993 / 0.994 / 0.996, no OF 0.974 / 0.991 / 0.987. Guards Observation Fusion as a multi-view vote: with
   // the single-view assignment in both rows, or a fusion that follows one view, the object assertions fail.
+  // How many Gaussians the occlusion test sends to a true view depends on the trajectory, which moves with the
+  // compiler's rounding: this seed's no-OF objects score 0.18 (321 Gaussians) built with g++ and 0.41 (286) in
+  // the clang-14 ThreadSanitizer build, so the no-OF row is bounded against the OF row, not by a fixed level.
   Tiny t("none", 6, 5);
   std::vector<int> renamed;
   for (size_t j = 0; j < t.train.size(); j += 2) renamed.push_back(t.train[j]);
@@ -562,7 +565,7 @@ TEST(HybridTrainer, ObservationFusionOutvotesViewsThatRenameObjects) {
   }
   ASSERT_GT(acc[1].n_fg, 200);
   EXPECT_GT(acc[1].fg, 0.9);
-  EXPECT_LT(acc[0].fg, 0.25);
+  EXPECT_LT(acc[0].fg, acc[1].fg - 0.5);  // the vote wins on more than half of the objects' Gaussians
   EXPECT_GT(acc[1].bg, acc[0].bg - 0.005);  // the vote costs the background nothing
 }
 
