@@ -33,6 +33,18 @@
 
 #include <nlohmann/json.hpp>
 
+
+// ThreadSanitizer: g++ defines __SANITIZE_THREAD__, clang answers __has_feature(thread_sanitizer).
+#if defined(__SANITIZE_THREAD__)
+#define HGS_TEST_TSAN 1
+#elif defined(__has_feature)
+#if __has_feature(thread_sanitizer)
+#define HGS_TEST_TSAN 1
+#endif
+#endif
+#ifndef HGS_TEST_TSAN
+#define HGS_TEST_TSAN 0
+#endif
 namespace hgs::test {
 namespace {
 namespace fs = std::filesystem;
@@ -178,6 +190,11 @@ TEST_F(ViewerLoad, ConcurrentClientsGetSequentialAnswersAndMemoryStaysFlat) {
   // AddressSanitizer keeps freed blocks in its quarantine (256 MB by default), so RSS grows without a leak; its
   // own leak check at exit covers this build instead.
   std::printf("RSS check skipped under AddressSanitizer (quarantine)\n");
+#elif HGS_TEST_TSAN
+  // ThreadSanitizer maps shadow memory for each new address its allocator hands out and keeps freed blocks in its
+  // own caches (measured: +16 MB over the last 480 requests here); it has no leak check, the ASan build's covers
+  // leaks.
+  std::printf("RSS check skipped under ThreadSanitizer (shadow memory)\n");
 #else
   EXPECT_LT(rss_end - rss_warm.load(), 8.0) << "RSS grew from " << rss_warm.load() << " MB to " << rss_end << " MB";
 #endif
