@@ -138,9 +138,11 @@ struct SoftScene {
       for (int a = 0; a < 3; ++a) m.log_scale[3 * i + a] = std::log(0.2f + 0.05f * u(rng));
       m.opacity_logit[i] = 1.5f * u(rng);
     }
-    ExtraGroup& q = m.add_extra("obj", L);
-    ExtraGroup& f = m.add_extra("lang", D);
-    ExtraGroup& z = m.add_extra("obj_id", 1);
+    m.add_extra("obj", L);
+    m.add_extra("lang", D);
+    m.add_extra("obj_id", 1);
+    // References only after the last add_extra, which may reallocate the groups (found by AddressSanitizer).
+    ExtraGroup &q = *m.find_extra("obj"), &f = *m.find_extra("lang"), &z = *m.find_extra("obj_id");
     for (int i = 0; i < N; ++i) {
       float w[L], sum = 0;
       for (float& x : w) sum += (x = 0.05f + std::abs(u(rng)));
