@@ -565,7 +565,7 @@ TEST(HybridTrainer, ObservationFusionOutvotesViewsThatRenameObjects) {
   }
   ASSERT_GT(acc[1].n_fg, 200);
   EXPECT_GT(acc[1].fg, 0.9);
-  EXPECT_LT(acc[0].fg, acc[1].fg - 0.5);  // the vote wins on more than half of the objects' Gaussians
+  EXPECT_LT(acc[0].fg, acc[1].fg - 0.5);    // the vote wins on more than half of the objects' Gaussians
   EXPECT_GT(acc[1].bg, acc[0].bg - 0.005);  // the vote costs the background nothing
 }
 

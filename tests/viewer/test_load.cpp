@@ -33,7 +33,6 @@
 
 #include <nlohmann/json.hpp>
 
-
 // ThreadSanitizer: g++ defines __SANITIZE_THREAD__, clang answers __has_feature(thread_sanitizer).
 #if defined(__SANITIZE_THREAD__)
 #define HGS_TEST_TSAN 1
