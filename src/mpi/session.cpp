@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/sanitizers.h"
 
 #ifdef HGS_HAVE_MPI
 #define OMPI_SKIP_MPICXX 1  // the C API only: OpenMPI's and MPICH's deprecated C++ bindings need libmpi_cxx
@@ -166,7 +167,7 @@ Session::~Session() {
 
 }  // namespace hgs::mpi
 
-#if defined(__SANITIZE_ADDRESS__)
+#if HGS_SANITIZE_ADDRESS
 // LeakSanitizer's hook (sanitizer/lsan_interface.h): its exit check is skipped in a process that initialised MPI.
 // OpenMPI 4.1 keeps state past MPI_Finalize in plugins it has dlclose()d, so no suppression can name their frames;
 // every process that does not run MPI (single-process training included) keeps the check. Sanitizer builds only.

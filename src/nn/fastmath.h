@@ -9,18 +9,19 @@
 #include <cstdint>
 #include <cstring>
 
+#include "core/sanitizers.h"
+
 // A kernel marked HGS_AVX512_CLONE is compiled twice, for AVX-512 (x86-64-v4) and for the build's baseline
 // (x86-64-v3), and the dynamic loader picks the clone the CPU runs (GCC function multiversioning): the element-wise
 // loops of the transformers run twice as wide where AVX-512 exists, and the binary still runs where it does not.
 // Sanitizer builds get the baseline only: the clone's resolver runs while the dynamic loader relocates, before
 // the sanitizer runtime starts, and its instrumentation crashed there (ThreadSanitizer).
-#if defined(__has_feature)
-#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer) || __has_feature(memory_sanitizer)
+#if HGS_SANITIZE_ADDRESS || HGS_SANITIZE_THREAD
+#define HGS_NO_CLONES 1
+#elif defined(__has_feature)
+#if __has_feature(memory_sanitizer)
 #define HGS_NO_CLONES 1
 #endif
-#endif
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
-#define HGS_NO_CLONES 1
 #endif
 #ifdef HGS_NO_CLONES
 #define HGS_AVX512_CLONE

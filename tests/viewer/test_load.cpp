@@ -9,6 +9,7 @@
 // path-traversal variants are refused with a 4xx.
 // Project headers (Eigen) come before httplib.h: <resolv.h> defines a `_res` macro that breaks Eigen.
 #include "core/fs.h"
+#include "core/sanitizers.h"
 #include "fixture.h"
 #include "query/session.h"
 #include "test_util.h"
@@ -33,17 +34,6 @@
 
 #include <nlohmann/json.hpp>
 
-// ThreadSanitizer: g++ defines __SANITIZE_THREAD__, clang answers __has_feature(thread_sanitizer).
-#if defined(__SANITIZE_THREAD__)
-#define HGS_TEST_TSAN 1
-#elif defined(__has_feature)
-#if __has_feature(thread_sanitizer)
-#define HGS_TEST_TSAN 1
-#endif
-#endif
-#ifndef HGS_TEST_TSAN
-#define HGS_TEST_TSAN 0
-#endif
 namespace hgs::test {
 namespace {
 namespace fs = std::filesystem;
@@ -185,11 +175,11 @@ TEST_F(ViewerLoad, ConcurrentClientsGetSequentialAnswersAndMemoryStaysFlat) {
   EXPECT_EQ(long(lat.size()), total);
   // Flat: what the last three quarters of the run added is small (a leak of even 1 kB per request would show
   // at 10,000 requests; the margin covers allocator arenas settling).
-#if defined(__SANITIZE_ADDRESS__)
+#if HGS_SANITIZE_ADDRESS
   // AddressSanitizer keeps freed blocks in its quarantine (256 MB by default), so RSS grows without a leak; its
   // own leak check at exit covers this build instead.
   std::printf("RSS check skipped under AddressSanitizer (quarantine)\n");
-#elif HGS_TEST_TSAN
+#elif HGS_SANITIZE_THREAD
   // ThreadSanitizer maps shadow memory for each new address its allocator hands out and keeps freed blocks in its
   // own caches (measured: +16 MB over the last 480 requests here); it has no leak check, the ASan build's covers
   // leaks.
