@@ -253,16 +253,19 @@ class QueryResult:
 
     def __init__(self, session, model, scene, text, objects, views, mask_threshold):
         self.session, self.model, self.scene, self.text = session, model, scene, text
-        self.objects = objects  # [{id, name, relevancy, cosine, chosen}], best first
-        self.chosen = [o["id"] for o in objects if o["chosen"]]
+        self.objects = objects  # [{id, name, relevancy, cosine, chosen, anchor}], best first
+        # The anchor first (query.h: choose_objects), then the other chosen objects best first.
+        self.chosen = [o["id"] for o in objects if o["anchor"]] + [o["id"] for o in objects
+                                                                  if o["chosen"] and not o["anchor"]]
         self.views = views  # view indices of `masks`
         self.mask_threshold = mask_threshold
         self._opacity = {}
 
     @property
     def best(self):
-        """The best object: {id, name, relevancy, cosine, chosen}."""
-        return self.objects[0]
+        """The answer's anchor, the first chosen object: {id, name, relevancy, cosine, chosen}. It is the best
+        ranked object unless that one holds no Gaussians of its own (query.h: choose_objects)."""
+        return next(o for o in self.objects if o["anchor"])
 
     def opacity(self, view):
         """Rendered opacity of the chosen objects in a view (index or name), summed: float32 [H, W]."""
@@ -316,11 +319,11 @@ def _view_list(scene, views):
 def query(model, scene, text, views=None, min_relevancy=0.0, mask_threshold=0.5, clip=None, session=None,
           fragment_margin=None):
     """Answers a text query on a trained hybrid model: returns a QueryResult (objects ranked by their embedding's
-    cosine with the text, with their LERF relevancy; the best one chosen, plus every other with relevancy >=
-    min_relevancy when that is > 0, plus the fragments of the best one: labels whose cosine is below its cosine by at
+    cosine with the text, with their LERF relevancy; the best one that holds Gaussians of its own chosen (the
+    anchor), plus every other with relevancy >= min_relevancy when that is > 0, plus the fragments of the anchor: labels whose cosine is below its cosine by at
     most fragment_margin times its lead over the median label and whose Gaussians lie where its Gaussians lie, as
     SAM2 leaves one object under several ids; a rule of hgs, query/fragments.h; None = the library's default, 0 =
-    the best label alone). views: the views of result.masks ("all" = None, "test", "train", or a list of
+    the anchor alone). views: the views of result.masks ("all" = None, "test", "train", or a list of
     indices / names); masks are rendered when first asked for. Texts are embedded from the scene's
     text_embeddings.json, or by OpenCLIP weights `clip`. A QuerySession given as `session` is reused (several
     queries on one model)."""
@@ -347,7 +350,7 @@ def evaluate(model, scene, protocol="instances", mode="both", relevancy="objects
     "pixel-paper-map", right after the "pixel" one. overlays: a folder for overlay PNGs. queries: a query set of
     the scene's gt/queries.json asked instead of the names (instances protocols: "synonyms", "hypernyms",
     "attributes"). fragment_margin: object mode's fragment rule (see query; None = the library's default, 0 = the
-    best label alone)."""
+    anchor alone)."""
     scene, model = _as_scene(scene, where="evaluate"), _as_model(model, "evaluate")
     session = QuerySession(scene, model, "" if clip is None else os.fspath(clip))
     args = [protocol, mode, relevancy, float(mask_threshold), "" if overlays is None else os.fspath(overlays),

@@ -49,6 +49,7 @@ pb::list ask(LockedSession& ls, const std::string& text, float min_relevancy, fl
     d["relevancy"] = sc.relevancy;
     d["cosine"] = sc.cosine;
     d["chosen"] = std::find(a.chosen.begin(), a.chosen.end(), sc.object) != a.chosen.end();
+    d["anchor"] = sc.object == a.chosen.front();  // choose_objects: the first chosen
     out.append(d);
   }
   return out;

@@ -60,6 +60,19 @@ def test_selection_and_export(hybrid_model, scene, tmp_path):
         assert a[mk].mean() > a[~mk].mean()
 
 
+def test_export_by_text_takes_the_answer_of_the_query(hybrid_model, scene, scene_dir, hgs_binary, tmp_path):
+    # `hgs export --text` writes the Gaussians of every object the answer chooses (its anchor and fragments).
+    text = phrase_of_an_object(scene)
+    model_dir = tmp_path / "model"
+    hybrid_model.save(str(model_dir))
+    out = tmp_path / "by_text.ply"
+    p = subprocess.run([hgs_binary, "export", str(model_dir), "--text", text, "--scene", scene_dir, "--out", str(out)],
+                       check=True, capture_output=True, text=True)
+    r = hgs.query(hybrid_model, scene, text)
+    assert f"object {r.chosen[0]} (" in p.stdout
+    np.testing.assert_array_equal(hgs.Model.load(str(out)).means, r.select().means)
+
+
 def test_query_errors(hybrid_model, scene):
     with pytest.raises(hgs.Error, match="no such phrase|not in|text_embeddings"):
         hgs.query(hybrid_model, scene, "a phrase nobody embedded")

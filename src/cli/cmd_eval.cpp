@@ -133,9 +133,9 @@ CommandRegistration reg(
        sub.add_option("--mask-threshold", a->mask_threshold, "Object mode: mask = rendered object opacity > this")
            ->capture_default_str();
        sub.add_option("--fragment-margin", a->fragment_margin,
-                      "Object mode: the answer also takes every label within this cosine of the best one whose "
+                      "Object mode: the answer also takes every label within this cosine of its anchor whose "
                       "Gaussians lie where its Gaussians lie (the fragments SAM2 leaves of one object; a rule of hgs, "
-                      "query/fragments.h); 0 = the best label alone")
+                      "query/fragments.h); 0 = the anchor alone (the best label that holds Gaussians)")
            ->check(CLI::Range(0.0, 2.0))
            ->capture_default_str();
        sub.add_option("--clip", a->clip, "OpenCLIP weights to embed the query texts");

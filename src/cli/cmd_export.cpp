@@ -1,5 +1,6 @@
 // `hgs export MODEL (--text "red mug" [--scene SCENE] | --object ID) [--remove] --out FILE.ply`: writes the
-// Gaussians of the chosen object(s) (hard id z_n), or the scene without them, as a standard 3DGS PLY.
+// Gaussians of the chosen object(s) (hard id z_n), or the scene without them, as a standard 3DGS PLY. With --text,
+// the objects the query's answer chooses (query.h: choose_objects).
 #include <fmt/format.h>
 
 #include "cli/command.h"
@@ -28,10 +29,18 @@ void run_export(const ExportArgs& a) {
     if (a.scene.empty()) fail("--text needs --scene SCENE (for the text embeddings and object names)");
     query::Session s(a.scene, ply, 1, a.clip);
     for (auto& t : a.texts) {
-      auto ans = s.ask(t);
-      objects.push_back(ans.chosen[0]);
-      names += fmt::format("{}\"{}\" -> object {} ({}, relevancy {:.3f})", names.empty() ? "" : "; ", t, ans.chosen[0],
-                           s.object_name(ans.chosen[0]), ans.scores[0].relevancy);
+      // Every object the answer chooses (its anchor and the anchor's fragments), as `hgs query` masks them.
+      const auto ans = s.ask(t);
+      std::string which;
+      for (int k : ans.chosen) {
+        objects.push_back(k);
+        float rel = 0;
+        for (const auto& sc : ans.scores)
+          if (sc.object == k) rel = sc.relevancy;
+        which +=
+            fmt::format("{}object {} ({}, relevancy {:.3f})", which.empty() ? "" : " + ", k, s.object_name(k), rel);
+      }
+      names += fmt::format("{}\"{}\" -> {}", names.empty() ? "" : "; ", t, which);
     }
     model = s.model();
   } else {
@@ -51,7 +60,8 @@ CommandRegistration reg(
        auto a = std::make_shared<ExportArgs>();
        sub.add_option("MODEL", a->model, "Model folder (point_cloud.ply) or PLY file")->required();
        sub.add_option("--out", a->out, "Output PLY")->required();
-       sub.add_option("--text", a->texts, "Select the object that best matches this text (repeatable)");
+       sub.add_option("--text", a->texts,
+                      "Select the objects the answer to this text chooses, as `hgs query` does (repeatable)");
        sub.add_option("--object", a->objects, "Select object id(s) (repeatable)");
        sub.add_option("--scene", a->scene, "Scene folder (text embeddings and names; needed with --text)");
        sub.add_option("--clip", a->clip, "OpenCLIP weights to embed the text");

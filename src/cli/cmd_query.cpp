@@ -120,10 +120,14 @@ void run_query(const QueryArgs& a) {
   bar.finish();
   atomic_write_text(fs::path(a.out) / "result.json", result.dump(2) + "\n");
   for (auto& q : result["queries"]) {
-    if (a.mode == "object" && !q["chosen"].empty())
-      fmt::print("\"{}\" -> object {} ({}), relevancy {:.3f}\n", q["text"].get<std::string>(),
-                 q["chosen"][0]["object"].get<int>(), q["chosen"][0]["name"].get<std::string>(),
-                 q["scores"][0]["relevancy"].get<float>());
+    if (a.mode == "object" && !q["chosen"].empty()) {
+      const int k = q["chosen"][0]["object"].get<int>();  // the anchor (query.h: choose_objects)
+      float rel = 0;
+      for (const auto& sc : q["scores"])
+        if (sc["object"].get<int>() == k) rel = sc["relevancy"].get<float>();
+      fmt::print("\"{}\" -> object {} ({}), relevancy {:.3f}\n", q["text"].get<std::string>(), k,
+                 q["chosen"][0]["name"].get<std::string>(), rel);
+    }
   }
   fmt::print("wrote masks, overlays and heatmaps for {} view(s) to {}/ (result.json)\n", views.size(), a.out);
 }
@@ -149,9 +153,9 @@ CommandRegistration reg(
        sub.add_option("--mask-threshold", a->mask_threshold, "Object mode: mask = rendered object opacity > this")
            ->capture_default_str();
        sub.add_option("--fragment-margin", a->fragment_margin,
-                      "Object mode: also choose every label within this cosine of the best one whose Gaussians lie "
+                      "Object mode: also choose every label within this cosine of the anchor whose Gaussians lie "
                       "where its Gaussians lie (the fragments SAM2 leaves of one object: a re-born track, a part; a "
-                      "rule of hgs, query/fragments.h); 0 = the best label alone")
+                      "rule of hgs, query/fragments.h); 0 = the anchor alone (the best label that holds Gaussians)")
            ->check(CLI::Range(0.0, 2.0))
            ->capture_default_str();
        sub.add_option("--clip", a->clip,

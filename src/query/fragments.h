@@ -7,7 +7,10 @@
 // the best label lies: the boxes of their Gaussians' centres (5th to 95th percentile per axis of the Gaussians
 // whose hard id is the label and whose opacity is above 0.3), each grown by 20 % of its size per side, meet. A
 // second instance of the same class elsewhere in the scene fails (b); a neighbour of another class fails (a).
-// Measured in docs/results.md, "Fragments of one object".
+// The best label here is the anchor (query.h: choose_objects), the best label with a valid box: OF can leave a
+// track's first id without Gaussians (a majority of its views went to the re-born id), and its embedding, pooled
+// from soft probabilities, can still rank first.
+// Measured in docs/results.md, "Fragments of one object" and "Labels without Gaussians".
 #pragma once
 #include <vector>
 

@@ -226,19 +226,28 @@ std::vector<std::vector<float>> render_relevancies(render::GaussianRenderer& r, 
 std::vector<int> choose_objects(const std::vector<ObjectScore>& scores, float min_relevancy, const std::string& text,
                                 float fragment_margin, const std::vector<LabelBox>* boxes) {
   if (scores.empty()) fail("the model has no foreground objects to answer \"{}\"", excerpt(text));
-  const int best = scores[0].object;
+  // The anchor: the best label that holds Gaussians of its own (a valid box). A label that lost its Gaussians to
+  // another id keeps an embedding pooled from its soft probabilities q_{n,k}, and can rank first, but renders
+  // nothing; without boxes, or when no label has one, the best label.
+  auto has_box = [&](int k) { return boxes && size_t(k) < boxes->size() && (*boxes)[k].valid; };
+  size_t a = 0;
+  while (a < scores.size() && !has_box(scores[a].object)) ++a;
+  if (a == scores.size()) a = 0;
+  const int best = scores[a].object;
   std::vector<int> chosen = {best};
-  // The fragment rule's cosine margin: a fraction of the best label's lead over the median label, so that it means
+  // The fragment rule's cosine margin: a fraction of the anchor's lead over the median label, so that it means
   // the same for sharply and for weakly separated embeddings (SCL spreads them; without it they stay close).
   std::vector<float> cosines;
   for (const auto& s : scores) cosines.push_back(s.cosine);
   std::nth_element(cosines.begin(), cosines.begin() + cosines.size() / 2, cosines.end());
-  const float margin = fragment_margin * std::max(0.f, scores[0].cosine - cosines[cosines.size() / 2]);
-  for (size_t i = 1; i < scores.size(); ++i) {
+  const float top = scores[a].cosine;
+  const float margin = fragment_margin * std::max(0.f, top - cosines[cosines.size() / 2]);
+  for (size_t i = 0; i < scores.size(); ++i) {
     const int k = scores[i].object;
+    if (i == a) continue;
     const bool relevant = min_relevancy > 0 && scores[i].relevancy >= min_relevancy;
-    const bool fragment = fragment_margin > 0 && boxes && scores[0].cosine - scores[i].cosine <= margin &&
-                          size_t(std::max(best, k)) < boxes->size() && boxes_meet((*boxes)[best], (*boxes)[k]);
+    const bool fragment = fragment_margin > 0 && has_box(best) && has_box(k) && top - scores[i].cosine <= margin &&
+                          boxes_meet((*boxes)[best], (*boxes)[k]);
     if (relevant || fragment) chosen.push_back(k);
   }
   return chosen;

@@ -45,12 +45,14 @@ using Canonical = std::vector<std::vector<float>>;  // canonical phrase embeddin
 // best cosine first.
 std::vector<ObjectScore> score_objects(const ObjectEmbeddings& oe, const float* text, const Canonical& canon);
 
-// The objects an answer selects from `scores` (best first, as score_objects returns them): the best one always,
+// The objects an answer selects from `scores` (best first, as score_objects returns them): first the anchor,
 // and with min_relevancy > 0 also every other whose LERF relevancy is at least min_relevancy. Fails naming
-// `text` when there is no object to choose.
-// With fragment_margin > 0 and `boxes` ([L], fragments.h), also every label whose cosine is below the best one's by
-// at most fragment_margin times the best one's lead over the median label, and whose box meets the best one's (the
-// fragment rule).
+// `text` when there is no object to choose. The anchor is the best label; given `boxes` ([L], fragments.h), the
+// best label with a valid box (at least 5 opaque Gaussians hold it as their id; a rule of this project: a label
+// that OF left without Gaussians renders nothing), or the best label if none has one.
+// With fragment_margin > 0 and `boxes`, also every label whose cosine is below the anchor's by at most
+// fragment_margin times the anchor's lead over the median label, and whose box meets the anchor's (the fragment
+// rule).
 std::vector<int> choose_objects(const std::vector<ObjectScore>& scores, float min_relevancy, const std::string& text,
                                 float fragment_margin = 0, const std::vector<LabelBox>* boxes = nullptr);
 

@@ -18,10 +18,10 @@
 namespace hgs::query {
 
 struct QueryOptions {
-  float min_relevancy = 0.f;    // > 0: every object at or above it is chosen (at least the best one)
+  float min_relevancy = 0.f;    // > 0: every object at or above it is chosen (at least the anchor, choose_objects)
   float mask_threshold = 0.5f;  // object mode: mask = sum of chosen objects' opacity > threshold
-  // The fragment rule (fragments.h, a rule of this project): labels within this cosine of the best one whose
-  // Gaussians lie where its Gaussians lie join the answer; 0 = the best label alone.
+  // The fragment rule (fragments.h, a rule of this project): labels within this cosine of the anchor (query.h:
+  // choose_objects) whose Gaussians lie where its Gaussians lie join the answer; 0 = the anchor alone.
   float fragment_margin = kFragmentMargin;
 };
 

@@ -123,6 +123,30 @@ TEST(ChooseObjects, FragmentRuleAddsNearbyLabelsThatAnswerNearlyAsWell) {
   EXPECT_FALSE(query::boxes_meet(boxes[1], boxes[3]));
 }
 
+TEST(ChooseObjects, TheAnchorIsTheBestLabelThatHoldsGaussians) {
+  // Label 7 ranks first but lost its Gaussians (no valid box); 2 is the best label with Gaussians, 3 its fragment,
+  // 4 answers as well but lies elsewhere.
+  std::vector<query::LabelBox> boxes(10);
+  auto box = [&](int k, float x0, float x1) { boxes[k] = {{x0, 0, 0}, {x1, 1, 1}, true}; };
+  box(2, 0, 1);
+  box(3, 0.5f, 1.5f);
+  box(4, 5, 6);
+  box(5, 0, 1);
+  box(6, 0, 1);
+  const std::vector<query::ObjectScore> s = {{7, 0.60f, 0.9f}, {2, 0.50f, 0.8f}, {4, 0.49f, 0.6f},
+                                             {3, 0.45f, 0.6f}, {9, 0.12f, 0.5f}, {5, 0.10f, 0.5f},
+                                             {8, 0.10f, 0.5f}, {1, 0.08f, 0.5f}, {6, 0.05f, 0.4f}};
+  // Anchor 2 leads the median of the 9 (0.12) by 0.38: margin 0.25 allows 0.095 below 0.50, so 3 joins; 4 is elsewhere.
+  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.25f, &boxes), (std::vector<int>{2, 3}));
+  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.f, &boxes), (std::vector<int>{2}));  // the anchor alone
+  // min_relevancy still chooses by relevancy, the label without Gaussians included; the anchor stays first.
+  EXPECT_EQ(query::choose_objects(s, 0.85f, "mug", 0.f, &boxes), (std::vector<int>{2, 7}));
+  // Without boxes, or when no label has one, the best label.
+  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.25f, nullptr), (std::vector<int>{7}));
+  const std::vector<query::LabelBox> none(10);
+  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.25f, &none), (std::vector<int>{7}));
+}
+
 TEST(LabelBoxes, PercentilesOfTheOpaqueGaussiansOfEachLabel) {
   // 101 opaque Gaussians of label 1 at x = 0..100, one transparent Gaussian of label 1 far away, 3 of label 2.
   GaussianModel m;
