@@ -137,7 +137,7 @@ class QuerySession:
 
 class QueryResult:
     text: str
-    objects: List[Dict[str, Any]]  # {id, name, relevancy, cosine, chosen}, best first
+    objects: List[Dict[str, Any]]  # {id, name, relevancy, cosine, chosen, anchor}, best first
     chosen: List[int]
     views: List[int]
     mask_threshold: float
