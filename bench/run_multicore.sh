@@ -8,6 +8,7 @@
 set -euo pipefail
 [ $# -ge 1 ] || { echo "usage: bench/run_multicore.sh BENCH_SAM [OLDER_BENCH_SAM ...]" >&2; exit 2; }
 THREADS="${THREADS:-1,2,4,8,16}"
+unset OMP_WAIT_POLICY  # passive waiting made a 16-thread step 4x slower (docs/performance.md): time the default
 echo "== machine"
 echo "nproc $(nproc) (all $(nproc --all)), cgroup cpu.max: $(cat /sys/fs/cgroup/cpu.max 2>/dev/null || echo none)"
 lscpu | grep -E '^(Model name|Thread\(s\) per core|Core\(s\) per socket|Socket\(s\)|NUMA node\(s\)):' || true

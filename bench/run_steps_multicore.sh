@@ -9,6 +9,7 @@
 set -uo pipefail
 [ $# -ge 1 ] || { echo "usage: bench/run_steps_multicore.sh NEW_BUILD_DIR [OLD_BUILD_DIR]" >&2; exit 2; }
 THREADS="${THREADS:-1,2,4,8,16}"
+unset OMP_WAIT_POLICY  # passive waiting made a 16-thread step 4x slower (docs/performance.md): time the default
 O="${OUT:-/tmp/steps_multicore}"
 mkdir -p "$O"
 F='BM_RgbStep|BM_HybridStep/objects_per_step:0/sparse:1'
