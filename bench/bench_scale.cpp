@@ -64,14 +64,14 @@ int run_case(const std::string& method, double pixels, double gaussians, const A
   trainer.step();
   std::vector<double> ms;
   std::vector<train::StepTimes> parts;
-  std::map<std::string, std::vector<double>> method_parts;  // the method's own timers (ms_*), per step
+  std::map<std::string, std::vector<double>> method_parts;  // the method's own timers (ms_*) and task counts, per step
   for (int i = 0; i < a.steps; ++i) {
     const auto t0 = std::chrono::steady_clock::now();
     const train::StepInfo info = trainer.step();
     ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
     parts.push_back(info.times);
     for (const auto& [k, v] : trainer.method().stats().values)
-      if (k.starts_with("ms_")) method_parts[k].push_back(v);
+      if (k.starts_with("ms_") || k.starts_with("tasks_")) method_parts[k].push_back(v);
     if (!std::isfinite(info.total)) {
       std::fprintf(stderr, "bench_scale: the %s step's loss is not finite\n", method.c_str());
       return 1;
@@ -84,15 +84,22 @@ int run_case(const std::string& method, double pixels, double gaussians, const A
     std::sort(v.begin(), v.end());
     part_ms[name] = v[v.size() / 2];
   });
+  json tasks = json::object();         // the object losses' task counts (tasks_app_pieces, ...), medians over the steps
   for (auto& [k, v] : method_parts) {  // e.g. the object losses' phases: method_ms_app_boxes, ...
     std::sort(v.begin(), v.end());
-    part_ms["method_" + k] = v[v.size() / 2];
+    if (k.starts_with("tasks_")) tasks[k.substr(6)] = v[v.size() / 2];
+    else part_ms["method_" + k] = v[v.size() / 2];
   }
   std::sort(ms.begin(), ms.end());
-  const json j = {{"parts_ms", part_ms},  {"method", method},
-                  {"width", W},           {"height", H},
-                  {"gaussians", n},       {"ms_median", ms[ms.size() / 2]},
-                  {"ms_min", ms.front()}, {"peak_rss_mb", peak_rss_mb()}};
+  const json j = {{"parts_ms", part_ms},
+                  {"tasks", tasks},
+                  {"method", method},
+                  {"width", W},
+                  {"height", H},
+                  {"gaussians", n},
+                  {"ms_median", ms[ms.size() / 2]},
+                  {"ms_min", ms.front()},
+                  {"peak_rss_mb", peak_rss_mb()}};
   std::printf("%s\n", j.dump().c_str());
   return 0;
 }
@@ -208,6 +215,20 @@ int main(int argc, char** argv) {
         "|\n|---|---|---|\n");
     for (const auto& [name, v] : base["hybrid"]["parts_ms"].items())
       std::printf("| %s | %.1f | %.1f |\n", name.c_str(), base["rgb"]["parts_ms"].value(name, 0.0), v.get<double>());
+  }
+  // The object losses' phases that are not cut by rows: their task counts at this thread count (the pieces are
+  // cut into bands by the thread count: with --threads 16 on any machine, the count a 16-core run has).
+  std::printf(
+      "\nTasks of the hybrid step's object losses at %d threads (pieces: bands of the scoring tasks; finish: "
+      "one per object for its scalars, then bands of its rows):\n\n| pixels / Gaussians | pieces | finish "
+      "|\n|---|---|---|\n",
+      a.threads);
+  for (const json& c : all) {
+    const json& h = c["hybrid"];
+    if (h.is_null() || !h.contains("tasks")) continue;
+    std::printf("| %dx%d / %dk | %.0f | %.0f |\n", h["width"].get<int>(), h["height"].get<int>(),
+                h["gaussians"].get<int>() / 1000, h["tasks"].value("app_pieces", 0.0),
+                h["tasks"].value("app_finish", 0.0));
   }
   if (!a.json_out.empty()) {
     FILE* f = std::fopen(a.json_out.c_str(), "w");

@@ -254,6 +254,8 @@ train::MethodStats HybridMethod::stats() const {
               {"ms_app_pieces", last_.app_phases.pieces},
               {"ms_app_finish", last_.app_phases.finish},
               {"ms_app_scatter", last_.app_phases.scatter},
+              {"tasks_app_pieces", last_.app_phases.pieces_tasks},
+              {"tasks_app_finish", last_.app_phases.finish_tasks},
               {"ms_buffers", last_.ms_buffers}};
   s.arrays = {{"view_weights", assoc_.weights()}};
   return s;

@@ -14,6 +14,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <chrono>
 #include <cmath>
@@ -471,8 +472,8 @@ void ObjectLosses::base_sums(const PixelBox& r, int W, double* out) const {
 }
 
 // Step 3 for an object: its sums over R (its rows in order), its values (into app_[j], bro_[j]) and scalars
-// from the base pair's sums outside R plus its own inside (a full object: its own alone), and its gradient
-// inside R completed with eq. 14's.
+// from the base pair's sums outside R plus its own inside (a full object: its own alone). complete_rows then adds
+// eq. 14's part to its gradient inside R.
 void ObjectLosses::finish_box(int W, int H, int j) {
   Object& o = obj_[j];
   const size_t HW = size_t(W) * H;
@@ -506,11 +507,19 @@ void ObjectLosses::finish_box(int W, int H, int j) {
     const float proj = pp > 0 ? float(double(gs) * whole(kGp) / pp) : 0.f;
     o.proj = std::isfinite(proj) ? proj : 0.f;
   }
+}
+
+// Eq. 14's part of object j's gradient inside R, rows [r0, r1) of R: own += s u (- a p with the projection).
+// Element by element, so that any cut into rows gives the same bits. (A no-op without eq. 14: unit is empty.)
+void ObjectLosses::complete_rows(int j, int r0, int r1) {
+  Object& o = obj_[j];
+  if (o.unit.empty()) return;
   const float gsf = o.bro_scale, a = o.proj;
+  const size_t w3 = size_t(o.R.width()) * 3, i0 = size_t(r0) * w3, i1 = size_t(r1) * w3;
   if (o.pred.empty()) {
-    for (size_t i = 0; i < o.own.size(); ++i) o.own[i] += gsf * o.unit[i];
+    for (size_t i = i0; i < i1; ++i) o.own[i] += gsf * o.unit[i];
   } else {
-    for (size_t i = 0; i < o.own.size(); ++i) o.own[i] += gsf * o.unit[i] - a * o.pred[i];
+    for (size_t i = i0; i < i1; ++i) o.own[i] += gsf * o.unit[i] - a * o.pred[i];
   }
 }
 
@@ -720,12 +729,20 @@ ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab,
       base_total_[t] = 0;
       for (int y = 0; y < H; ++y) base_total_[t] += base_rows_[size_t(y) * kTerms + t];
     }
-    // Step 3 (a full object's own gradient is then complete over the image: nothing of the base pair outside).
+    // Step 3: each object's scalars (one task per object: its sums in a fixed order), then eq. 14's part of its
+    // gradient, cut into bands of its rows so that a large object is no single task (a full object's own gradient
+    // is then complete over the image: nothing of the base pair outside).
 #pragma omp parallel for schedule(dynamic, 1)
-  for (int j = 0; j < J; ++j) {
-    finish_box(W, H, j);
-    if (obj_[j].full) obj_[j].bro_scale = obj_[j].proj = 0;
-  }
+  for (int j = 0; j < J; ++j) finish_box(W, H, j);
+  constexpr int kCompleteRows = 32;
+  std::vector<std::array<int, 3>> bands;  // (object, first row of R, end row)
+  for (int j = 0; j < J; ++j)
+    for (int r = 0; r < obj_[j].R.height(); r += kCompleteRows)
+      bands.push_back({j, r, std::min(obj_[j].R.height(), r + kCompleteRows)});
+#pragma omp parallel for schedule(dynamic, 1)
+  for (size_t b = 0; b < bands.size(); ++b) complete_rows(bands[b][0], bands[b][1], bands[b][2]);
+  for (Object& o : obj_)
+    if (o.full) o.bro_scale = o.proj = 0;
   const auto t3 = Clock::now();
   grads_ = ObjectGradients{};
   grads_.app_scale = cfg_.lambda_app / J;
@@ -741,7 +758,7 @@ ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab,
     if (bro_on) grads_.base_unit = base_unit_.data();
   }
   if (out.color || out.sum) scatter(H, W, any_box && bro_on, out);
-  times_ = {ms(t0, t1), ms(t1, t2), ms(t2, t3), ms(t3, Clock::now())};
+  times_ = {ms(t0, t1), ms(t1, t2), ms(t2, t3), ms(t3, Clock::now()), int(pieces.size()), J + int(bands.size())};
   ObjectLossValues v;
   for (int j = 0; j < J; ++j) {
     v.app += app_[j];

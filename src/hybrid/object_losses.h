@@ -143,9 +143,12 @@ class ObjectLosses {
     static_cast<const ObjectLosses*>(ctx)->gradient_row(j, y, x0, n, out);
   }
   // Wall time of the last call's phases of the box path, ms (0 on the path without boxes): finding the boxes,
-  // the scoring pieces, the per-object scalars, the scatter of the gradients (bench_hybrid's counters).
+  // the scoring pieces, the per-object scalars, the scatter of the gradients (bench_hybrid's counters); and the
+  // tasks of the two phases that are not simply cut by rows of the image: the pieces (bands of the base pair's and
+  // the objects' tasks) and the finish (one per object for its scalars, then bands of each object's rows).
   struct PhaseTimes {
     double boxes = 0, pieces = 0, finish = 0, scatter = 0;
+    int pieces_tasks = 0, finish_tasks = 0;
   };
   const PhaseTimes& phase_times() const { return times_; }
   void release();
@@ -187,6 +190,7 @@ class ObjectLosses {
   void score_base_bro(Scratch& w, int H, int W, int y0, int y1);
   void score_crop(Scratch& w, const Image& image, const LabelMap& labels, int j, int k, int y0, int y1);
   void finish_box(int W, int H, int j);
+  void complete_rows(int j, int r0, int r1);
   void base_sums(const PixelBox& r, int W, double* out) const;
   void scatter(int H, int W, bool bro_grad, const ObjectGradOut& out) const;
 
