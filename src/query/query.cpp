@@ -261,7 +261,7 @@ std::vector<std::vector<float>> object_class_scores(render::GaussianRenderer& r,
   for (int k = 0; k < oe.num_labels; ++k)
     if (oe.weight[k] > 0) labels.push_back(k);
   // The (channel, class, relevancy) triples that score: every class with its best foreground object (score_objects'
-  // ranking, as Session::ask answers), then every label no class chose (the background, a part split off its
+  // ranking), then every label no class chose (the background, a part split off its
   // whole, a second instance) with the class it is closest to.
   struct Term {
     size_t channel;

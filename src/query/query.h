@@ -97,10 +97,11 @@ std::vector<std::vector<float>> render_relevancies(render::GaussianRenderer& r, 
                                                    const ObjectEmbeddings* oe = nullptr);
 
 // Closed-set classification by objects (3D-OVS object mode, query/evaluate.h): every class c takes its best
-// foreground object k(c) (the highest cosine, as Session::ask answers it), and every label no class took (the
-// background 0, a part SAM split off its whole, a second instance) takes the class c(k) its embedding is closest
-// to; the score of class c at a pixel is the sum over its labels of A_k(p) r_k(c), A_k the label's rendered
-// opacity and r_k(c) the LERF relevancy of e_k for text c. texts[c] is [D]; result [C][H, W].
+// foreground object k(c) (the highest cosine: score_objects' first, even where Session::ask's anchor is a later
+// label because that one holds no Gaussians), and every label no class took (the background 0, a part SAM split
+// off its whole, a second instance, a track's later id) takes the class c(k) its embedding is closest to; the score of
+// class c at a pixel is the sum over its labels of A_k(p) r_k(c), A_k the label's rendered opacity and r_k(c) the LERF
+// relevancy of e_k for text c. texts[c] is [D]; result [C][H, W].
 std::vector<std::vector<float>> object_class_scores(render::GaussianRenderer& r, const GaussianModel& m,
                                                     const render::Camera& cam, const ObjectEmbeddings& oe,
                                                     const std::vector<const float*>& texts, const Canonical& canon);
