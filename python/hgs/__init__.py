@@ -263,8 +263,8 @@ class QueryResult:
 
     @property
     def best(self):
-        """The answer's anchor, the first chosen object: {id, name, relevancy, cosine, chosen}. It is the best
-        ranked object unless that one holds no Gaussians of its own (query.h: choose_objects)."""
+        """The answer's anchor, the first chosen object: {id, name, relevancy, cosine, chosen, anchor}. It is the
+        best ranked object unless that one holds no Gaussians of its own (query.h: choose_objects)."""
         return next(o for o in self.objects if o["anchor"])
 
     def opacity(self, view):
@@ -320,10 +320,10 @@ def query(model, scene, text, views=None, min_relevancy=0.0, mask_threshold=0.5,
           fragment_margin=None):
     """Answers a text query on a trained hybrid model: returns a QueryResult (objects ranked by their embedding's
     cosine with the text, with their LERF relevancy; the best one that holds Gaussians of its own chosen (the
-    anchor), plus every other with relevancy >= min_relevancy when that is > 0, plus the fragments of the anchor: labels whose cosine is below its cosine by at
-    most fragment_margin times its lead over the median label and whose Gaussians lie where its Gaussians lie, as
-    SAM2 leaves one object under several ids; a rule of hgs, query/fragments.h; None = the library's default, 0 =
-    the anchor alone). views: the views of result.masks ("all" = None, "test", "train", or a list of
+    anchor), plus every other with relevancy >= min_relevancy when that is > 0, plus the fragments of the anchor:
+    labels whose cosine is below its cosine by at most fragment_margin times its lead over the median label and
+    whose Gaussians lie where its Gaussians lie, as SAM2 leaves one object under several ids; a rule of hgs,
+    query/fragments.h; None = the library's default, 0 = the anchor alone). views: the views of result.masks ("all" = None, "test", "train", or a list of
     indices / names); masks are rendered when first asked for. Texts are embedded from the scene's
     text_embeddings.json, or by OpenCLIP weights `clip`. A QuerySession given as `session` is reused (several
     queries on one model)."""
