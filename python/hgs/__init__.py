@@ -324,9 +324,9 @@ def query(model, scene, text, views=None, min_relevancy=0.0, mask_threshold=0.5,
     labels whose cosine is below its cosine by at most fragment_margin times its lead over the median label and
     whose Gaussians lie where its Gaussians lie, as SAM2 leaves one object under several ids; a rule of hgs,
     query/fragments.h; None = the library's default, 0 = the anchor alone). views: the views of result.masks
-    ("all" = None, "test", "train", or a list of indices / names); masks are rendered when first asked for. Texts are embedded from the scene's
-    text_embeddings.json, or by OpenCLIP weights `clip`. A QuerySession given as `session` is reused (several
-    queries on one model)."""
+    ("all" = None, "test", "train", or a list of indices / names); masks are rendered when first asked for.
+    Texts are embedded from the scene's text_embeddings.json, or by OpenCLIP weights `clip`. A QuerySession
+    given as `session` is reused (several queries on one model)."""
     scene, model = _as_scene(scene, where="query"), _as_model(model, "query")
     if not isinstance(text, str):
         raise TypeError(f"query: text must be a str, got {type(text).__name__}")
