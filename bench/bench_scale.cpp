@@ -29,6 +29,7 @@
 #include "core/process.h"
 #include "hybrid/method.h"
 #include "train/trainer.h"
+#include "wait_policy.h"
 
 using namespace hgs;
 using nlohmann::json;
@@ -174,11 +175,7 @@ int main(int argc, char** argv) {
     }
   }
   if (!case_method.empty()) return run_case(case_method, case_p, case_g, a);
-  // Passive waiting makes OpenMP threads sleep at every barrier (a 16-thread step 4x slower, docs/performance.md):
-  // the test suite sets it for its children, and a benchmark run from there would time something else.
-  if (const char* w = std::getenv("OMP_WAIT_POLICY");
-      w && (std::strcmp(w, "passive") == 0 || std::strcmp(w, "PASSIVE") == 0))
-    std::fprintf(stderr, "warning: OMP_WAIT_POLICY=passive: timings are not comparable; unset it for benchmarks\n");
+  hgs::bench::omp_wait_policy_checked();  // warns when passive (wait_policy.h)
 
   std::printf("%d threads, median of %d steps after one warm-up, hybrid objects_per_step %d (0 = exact)\n\n", a.threads,
               a.steps, a.objects_per_step);

@@ -7,7 +7,6 @@
 #include <omp.h>
 
 #include <cstdint>
-#include <cstdio>
 #include <cstdlib>
 #include <exception>
 #include <sstream>
@@ -15,6 +14,7 @@
 #include <vector>
 
 #include "render/raster_isa.h"
+#include "wait_policy.h"
 
 namespace hgs::bench {
 
@@ -42,18 +42,9 @@ inline std::string raster_isa_context() {
 }
 inline const bool kRasterIsaContext = (benchmark::AddCustomContext("raster_isa", raster_isa_context()), true);
 
-// OMP_WAIT_POLICY as the run found it, in the run's header, and a warning when it is passive: OpenMP threads then
-// sleep at every barrier, which made a 16-thread step 4x slower (docs/performance.md); the test suite sets it for
-// its child processes, so a benchmark started from such an environment would time something else.
-inline std::string omp_wait_policy_context() {
-  const char* v = std::getenv("OMP_WAIT_POLICY");
-  const std::string s = v && *v ? v : "unset (active spinning, then sleep)";
-  if (v && (std::string(v) == "passive" || std::string(v) == "PASSIVE"))
-    std::fprintf(stderr, "warning: OMP_WAIT_POLICY=passive: timings are not comparable; unset it for benchmarks\n");
-  return s;
-}
+// OMP_WAIT_POLICY in the run's header (wait_policy.h: a warning when it is passive).
 inline const bool kWaitPolicyContext =
-    (benchmark::AddCustomContext("omp_wait_policy", omp_wait_policy_context()), true);
+    (benchmark::AddCustomContext("omp_wait_policy", omp_wait_policy_checked()), true);
 
 // The thread counts to run at: HGS_BENCH_THREADS ("1,2,4,8,16"), default 1 and 2.
 inline std::vector<int64_t> thread_counts() {

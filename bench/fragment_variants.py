@@ -8,64 +8,78 @@ opacity summed > 0.5 (as `hgs eval --protocol instances --mode object` scores; "
 the cosine margin 0.2 (the default), a margin in LERF relevancy (relD) and either (cos0.2|relD). The anchor and
 the box test are the library's (query.h: choose_objects; label boxes replicated here). docs/results.md,
 "Labels without Gaussians"."""
-import json, os, sys
+import os
+import sys
+
 import numpy as np
-from PIL import Image
+
 import hgs
+from fragments import ious, load  # bench/fragments.py: the scene, the renders and the IoU of a set of labels
+
 
 def boxes(m, L):
-    z = np.asarray(m.object_ids).astype(int); op = np.asarray(m.opacities).ravel(); mu = np.asarray(m.means)
+    """The library's label boxes (query/fragments.h): per label with >= 5 Gaussians of opacity > 0.3 as their hard
+    id, the 5th and 95th percentile of their centres per axis."""
+    z = np.asarray(m.object_ids).astype(int)
+    op = np.asarray(m.opacities).ravel()
+    mu = np.asarray(m.means)
     out = {}
     for k in range(L):
-        sel = (z == k) & (op > 0.3)
-        if sel.sum() < 5: continue
-        v = mu[sel]; n = len(v)
-        lo = np.sort(v, axis=0)[(n - 1) * 5 // 100]; hi = np.sort(v, axis=0)[(n - 1) * 95 // 100]
-        out[k] = (lo, hi)
+        v = mu[(z == k) & (op > 0.3)]
+        if len(v) < 5:
+            continue
+        srt = np.sort(v, axis=0)
+        out[k] = (srt[(len(v) - 1) * 5 // 100], srt[(len(v) - 1) * 95 // 100])
     return out
+
 
 def meet(a, b):
     ga, gb = 0.2 * (a[1] - a[0]), 0.2 * (b[1] - b[0])
     return not np.any((a[0] - ga > b[1] + gb) | (b[0] - gb > a[1] + ga))
 
+
 def variants(objs, B):
-    cos = np.array([o["cosine"] for o in objs]); med = np.sort(cos)[len(cos) // 2]
-    a = next((i for i, o in enumerate(objs) if o["id"] in B), 0)
-    A = objs[a]; out = {}
-    def near(o): return A["id"] in B and o["id"] in B and o["id"] != A["id"] and meet(B[A["id"]], B[o["id"]])
+    """The labels each variant chooses: the anchor (the best label with a box) and the labels whose box meets its
+    box and that are within the cosine margin 0.2 (the default), within d in relevancy, or either."""
+    cos = np.array([o["cosine"] for o in objs])
+    med = np.sort(cos)[len(cos) // 2]
+    A = objs[next((i for i, o in enumerate(objs) if o["id"] in B), 0)]
     lead = max(0.0, A["cosine"] - med)
-    out["cos0.2"] = [A["id"]] + [o["id"] for o in objs if near(o) and A["cosine"] - o["cosine"] <= 0.2 * lead]
+
+    def near(o):
+        return A["id"] in B and o["id"] in B and o["id"] != A["id"] and meet(B[A["id"]], B[o["id"]])
+
+    def by_cos(o):
+        return A["cosine"] - o["cosine"] <= 0.2 * lead
+
+    out = {"cos0.2": [A["id"]] + [o["id"] for o in objs if near(o) and by_cos(o)]}
     for d in (0.05, 0.1, 0.2):
-        out[f"rel{d}"] = [A["id"]] + [o["id"] for o in objs if near(o) and A["relevancy"] - o["relevancy"] <= d]
-        out[f"cos0.2|rel{d}"] = [A["id"]] + [o["id"] for o in objs if near(o) and (
-            A["cosine"] - o["cosine"] <= 0.2 * lead or A["relevancy"] - o["relevancy"] <= d)]
+        def by_rel(o):
+            return A["relevancy"] - o["relevancy"] <= d
+        out[f"rel{d}"] = [A["id"]] + [o["id"] for o in objs if near(o) and by_rel(o)]
+        out[f"cos0.2|rel{d}"] = [A["id"]] + [o["id"] for o in objs if near(o) and (by_cos(o) or by_rel(o))]
     return out
 
+
 def main(scene_dir, model_dir):
-    s = hgs.Scene.load(scene_dir); m = hgs.Model.load(model_dir)
-    q = json.load(open(os.path.join(scene_dir, "gt", "queries.json")))["names"]
-    test = [i for i, v in enumerate(s.views) if v.is_test]
-    R, G = {}, {}
-    for i in test:
-        R[i] = hgs.render(m, s, i, objects=True)["objects"]
-        G[i] = np.array(Image.open(os.path.join(scene_dir, "gt", "instances", os.path.splitext(s.views[i].name)[0] + ".png")))
-    L = R[test[0]].shape[2]; B = boxes(m, L); sess = hgs.QuerySession(s, m, "")
+    s, m, queries, test, R, G = load(scene_dir, model_dir)
+    B = boxes(m, R[test[0]].shape[2])
+    session = hgs.QuerySession(s, m, "")
     acc = {}
-    for phrase, k in q.items():
-        objs = sess.ask(phrase, 0.0, 0.2)
-        for name, ch in variants(objs, B).items():
-            for i in test:
-                g = G[i] == k
-                if not g.any(): continue
-                p = R[i][..., ch].sum(-1) > 0.5
-                acc.setdefault(name, []).append((p & g).sum() / (p | g).sum())
+    for phrase, k in queries.items():
+        for name, chosen in variants(session.ask(phrase, 0.0, 0.2), B).items():
+            acc.setdefault(name, []).extend(ious(R, G, test, chosen, k))
     return {n: 100 * np.mean(v) for n, v in acc.items()}
 
+
 if __name__ == "__main__":
+    if len(sys.argv) < 2:
+        sys.exit(__doc__)
     res = {}
     for arg in sys.argv[1:]:
         sc, md = arg.split(":")
-        r = main(sc, md); res[arg] = r
-        print(os.path.basename(sc), md.split("/")[-1], " ".join(f"{n} {v:.2f}" for n, v in r.items()), flush=True)
+        res[arg] = main(sc, md)
+        print(os.path.basename(sc), md.split("/")[-1], " ".join(f"{n} {v:.2f}" for n, v in res[arg].items()),
+              flush=True)
     names = list(next(iter(res.values())))
     print("MEAN", " ".join(f"{n} {np.mean([r[n] for r in res.values()]):.2f}" for n in names))

@@ -19,7 +19,9 @@ from PIL import Image
 import hgs
 
 
-def main(scene_dir, model_dir, qset, margins):
+def load(scene_dir, model_dir, qset="names"):
+    """The scene, the model, the query set {phrase: object id}, the test views, each test view's rendered label
+    opacities A[i] [H, W, L] and ground-truth instance map G[i] [H, W]."""
     s = hgs.Scene.load(scene_dir)
     m = hgs.Model.load(model_dir)
     qfile = os.path.join(scene_dir, "gt", "queries.json")
@@ -27,23 +29,33 @@ def main(scene_dir, model_dir, qset, margins):
         queries = json.load(open(qfile))[qset]
     else:  # a simple-world scene: the names of gt/objects.json
         queries = {n: int(k) for k, n in json.load(open(os.path.join(scene_dir, "gt", "objects.json"))).items()}
-    names = json.load(open(os.path.join(scene_dir, "masks", "objects.json")))
     test = [i for i, v in enumerate(s.views) if v.is_test]
     A, G = {}, {}
     for i in test:
         A[i] = hgs.render(m, s, i, objects=True)["objects"]
         stem = os.path.splitext(s.views[i].name)[0]
         G[i] = np.array(Image.open(os.path.join(scene_dir, "gt", "instances", stem + ".png")))
+    return s, m, queries, test, A, G
+
+
+def ious(A, G, test, chosen, k):
+    """IoU of the chosen labels' summed opacity > 0.5 with object k, in each test view that shows k."""
+    out = []
+    for i in test:
+        g = G[i] == k
+        if g.any():
+            p = A[i][..., chosen].sum(-1) > 0.5
+            out.append((p & g).sum() / (p | g).sum())
+    return out
+
+
+def main(scene_dir, model_dir, qset, margins):
+    s, m, queries, test, A, G = load(scene_dir, model_dir, qset)
+    names = json.load(open(os.path.join(scene_dir, "masks", "objects.json")))
     L = A[test[0]].shape[2]
 
     def iou(chosen, k):
-        out = []
-        for i in test:
-            g = G[i] == k
-            if g.any():
-                p = A[i][..., chosen].sum(-1) > 0.5
-                out.append((p & g).sum() / (p | g).sum())
-        return out
+        return ious(A, G, test, chosen, k)
 
     rows = []
     for phrase, k in sorted(queries.items(), key=lambda x: x[1]):
@@ -61,11 +73,11 @@ def main(scene_dir, model_dir, qset, margins):
           f"its labels together {r[:, 2].mean():.4f}")
     session = hgs.QuerySession(s, m, "")
     for margin in margins:
-        ious = []
+        pairs = []
         for phrase, k in queries.items():
             chosen = [o["id"] for o in session.ask(phrase, 0.0, margin) if o["chosen"]]
-            ious += iou(chosen, k)
-        print(f"fragment margin {margin:.2f}: mean IoU {np.mean(ious):.4f} over {len(ious)} (view, query) pairs")
+            pairs += iou(chosen, k)
+        print(f"fragment margin {margin:.2f}: mean IoU {np.mean(pairs):.4f} over {len(pairs)} (view, query) pairs")
 
 
 if __name__ == "__main__":

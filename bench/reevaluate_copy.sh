@@ -22,11 +22,5 @@ scenes=()
 for s in "$DST"/scenes/"$G"_*; do scenes+=("$s"); done
 "$HGS" ablate "${scenes[@]}" --out "$DST/ablate_$G" --rows "$ROWS" --iters 1500 --seed 3 \
   --protocol instances,3d-ovs --mode both --reevaluate --quiet
-for model in "$DST/ablate_$G"/*/seed3/of1_scl1_bro1; do
-  scene="$DST/scenes/$(basename "$(dirname "$(dirname "$model")")")"
-  for q in names synonyms hypernyms attributes; do
-    "$HGS" eval "$scene" "$model" --protocol instances --mode object --queries "$q" --no-png --quiet \
-      --out "$model/queries_$q.json" >/dev/null
-  done
-done
+"$(dirname "$0")/query_sets.sh" "$HGS" "$DST" "$G"  # the run's queries_*.json were not copied: all asked again
 echo "bench/reevaluate_copy.sh: $DST/ablate_$G (python3 bench/revalidate_report.py $DST)"

@@ -36,14 +36,7 @@ for noise in high medium; do
 done
 # The query sets on every full-method model: object mode, each set against the names (goal: synonyms and hypernyms
 # at 0.9x the names' mIoU or better).
-for model in "$OUT"/ablate_*/*/seed3/of1_scl1_bro1; do
-  [ -f "$model/point_cloud.ply" ] || continue
-  scene="$OUT/scenes/$(basename "$(dirname "$(dirname "$model")")")"
-  for q in names synonyms hypernyms attributes; do
-    [ -f "$model/queries_$q.json" ] || "$HGS" eval "$scene" "$model" --protocol instances --mode object --queries "$q" \
-      --no-png --quiet --out "$model/queries_$q.json" >/dev/null
-  done
-done
+"$(dirname "$0")/query_sets.sh" "$HGS" "$OUT"
 python3 - "$OUT" <<'PY'
 import glob, json, sys
 rows = {}
