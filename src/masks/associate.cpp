@@ -63,6 +63,8 @@ void check_options(const AssociateOptions& opt) {
   if (!(opt.max_area > 0 && opt.max_area <= 1)) fail("--max-area: must be in (0, 1], got {}", opt.max_area);
   if (!(opt.min_affinity > 0 && opt.min_affinity <= 1))
     fail("--min-affinity: must be in (0, 1], got {}", opt.min_affinity);
+  if (!(opt.track_split >= 0 && opt.track_split <= 1))
+    fail("--track-split: must be in [0, 1], got {}", opt.track_split);
 }
 
 // Where the per-view masks are read from and where the associated ones go.
@@ -361,7 +363,8 @@ std::vector<int> keep_liftable(const AssociateOptions& opt, std::vector<Node>& n
   std::vector<int> node_of_kept;
   for (size_t i = 0; i < nodes.size(); ++i) {
     Node& n = nodes[i];
-    if (n.drop.empty() && long(n.points.size()) < opt.min_points)
+    // With tracks, a mask with few points rides its track (cluster.h) instead of being dropped.
+    if (n.drop.empty() && !opt.tracks && long(n.points.size()) < opt.min_points)
       n.drop = fmt::format("unliftable: {} 3D points inside (< --min-points {})", n.points.size(), opt.min_points);
     if (!n.drop.empty()) {
       (n.drop.starts_with("background") ? sum.dropped_background : sum.dropped_few_points)++;
@@ -389,6 +392,8 @@ MaskGraph kept_graph(const AssociateOptions& opt, int num_views, NodeSet& ns, co
   MaskGraph g = build_mask_graph(num_views, kept_view, point_obs);
   g.whole.assign(node_of_kept.size(), 0);
   for (size_t k = 0; k < node_of_kept.size(); ++k) g.whole[k] = ns.nodes[node_of_kept[k]].ids.size() > 1;
+  if (opt.tracks)
+    for (size_t k = 0; k < node_of_kept.size(); ++k) g.track.push_back(ns.nodes[node_of_kept[k]].label);
   return g;
 }
 
@@ -400,6 +405,7 @@ Objects cluster_nodes(const AssociateOptions& opt, int num_views, NodeSet& ns, A
   co.min_affinity = opt.min_affinity;
   co.min_views = opt.min_views;
   co.min_points = opt.min_points;
+  co.track_split = opt.track_split;
   co.part_merge = opt.join_parts ? opt.part_merge : 0;
   const Clustering c = cluster_masks(g, co);
   Objects obj;
@@ -634,6 +640,8 @@ json report_json(const AssociateOptions& opt, const Folders& f, const fs::path& 
             {"part_fraction", opt.part_fraction},
             {"part_merge", opt.part_merge},
             {"whole_pixels", opt.whole_pixels},
+            {"tracks", opt.tracks},
+            {"track_split", opt.track_split},
             {"edge_ramp", opt.edge_ramp},
             {"drop_surfaces", opt.drop_surfaces},
             {"surface_spread", opt.surface_spread},

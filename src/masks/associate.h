@@ -17,6 +17,10 @@
 // masks/objects.json, masks/associate.json (report) and the input kept in masks/per_view/ (or everything in --out-masks
 // DIR). All written into a temporary folder and moved into place at the end.
 //
+// Tracks (optional, AssociateOptions::tracks): with SAM2-style input the ids already link views; the clustering
+// starts from each track's segments (cluster.h) instead of single masks, so a track is kept where 3D says nothing
+// and cut where its points jump to another object (an identity swap, a merge).
+//
 // Depth (optional): with a z-depth map per view (AssociateOptions::depth), every pixel on a grid is lifted too and
 // re-projected into the other views where their depth agrees (depth_tracks.h); those tracks join COLMAP's points.
 #pragma once
@@ -56,7 +60,13 @@ struct AssociateOptions {
   std::function<std::vector<float>(const View&)> depth;
   int depth_stride = 0;           // lift every stride-th pixel; 0 = about 4096 pixels per view
   double depth_tolerance = 0.03;  // relative depth agreement for a lifted point to count as seen by another view
-  bool force = false;             // re-associate an already associated scene (from masks/per_view) / replace out_masks
+  // The input's ids are tracks (SAM2 label maps, `hgs synth`'s masks): consistent across views but wrong in runs.
+  // A mask continues its track's object unless the 3D points measure them apart (neither contains the other:
+  // both average containments below track_split, cluster.h); masks with too few points ride their track instead of
+  // being dropped. false: ids mean nothing across views (SAM's per-view masks).
+  bool tracks = false;
+  double track_split = 0.1;  // chosen on the development seeds (docs/association.md)
+  bool force = false;        // re-associate an already associated scene (from masks/per_view) / replace out_masks
   bool progress = true;
 };
 

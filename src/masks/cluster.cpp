@@ -175,6 +175,32 @@ void merge_by_affinity(const MaskGraph& g, const ClusterOptions& opt, std::vecto
   }
 }
 
+// Tracks: each track's nodes, in view order, join its current segment unless measured apart (cluster.h).
+void follow_tracks(const MaskGraph& g, const ClusterOptions& opt, std::vector<Cluster>& cl) {
+  std::map<int, std::vector<int>> tracks;  // track id -> nodes
+  for (int a = 0; a < int(g.track.size()); ++a)
+    if (g.track[a] >= 0) tracks[g.track[a]].push_back(a);
+  for (auto& [id, nodes] : tracks) {
+    std::stable_sort(nodes.begin(), nodes.end(), [&](int a, int b) { return g.node_view[a] < g.node_view[b]; });
+    int seg = nodes.front();
+    for (size_t i = 1; i < nodes.size(); ++i) {
+      const int n = nodes[i];
+      const Cluster &S = cl[seg], &N = cl[n];
+      double pairs_sn = 0, pairs_ns = 0;  // (segment node visible in n's view), (n visible in a segment view)
+      for (size_t v = 0; v < S.count.size(); ++v)
+        pairs_sn += double(S.visible[v]) * double(N.count[v]), pairs_ns += double(N.visible[v]) * double(S.count[v]);
+      // Apart: neither contains the other. A merge with a neighbour, an eroded mask or a part keeps one of the
+      // two average containments high; another object (an id swap) has both near 0.
+      auto it = S.nbr.find(n);
+      const double c_sn = it == S.nbr.end() || pairs_sn <= 0 ? 0.0 : it->second.first / pairs_sn,
+                   c_ns = it == S.nbr.end() || pairs_ns <= 0 ? 0.0 : it->second.second / pairs_ns;
+      const bool apart = pairs_sn > 0 && pairs_ns > 0 && std::max(c_sn, c_ns) < opt.track_split;
+      if (apart || share_a_view(S, N)) seg = n;
+      else merge(g, cl, seg, n);
+    }
+  }
+}
+
 // What part merging reads: the core points of each node inside each other node.
 struct PartContext {
   const MaskGraph& g;
@@ -284,6 +310,7 @@ Clustering number_objects(const MaskGraph& g, const ClusterOptions& opt, const s
 
 Clustering cluster_masks(const MaskGraph& g, const ClusterOptions& opt) {
   std::vector<Cluster> cl = single_node_clusters(g, opt);
+  if (!g.track.empty()) follow_tracks(g, opt, cl);
   merge_by_affinity(g, opt, cl);
   if (opt.part_merge > 0 && !g.whole.empty()) merge_parts(g, opt, cl);
   return number_objects(g, opt, cl);

@@ -31,7 +31,15 @@
 // pair first, repeated. Two masks of one view
 // end in one object only this way: one is a part of the other's object as other views show. Merged neighbours
 // (label maps without parts) have no whole nodes and never join.
-// Finally clusters seen in fewer than min_views views are dropped.
+// Tracks (optional, MaskGraph::track: the input's ids are SAM2-style tracks, consistent across views but wrong
+// in runs: a swap, a merge or a re-birth lasts many views). Before the merging above, each track's nodes are
+// walked in view order (the capture order) and joined into segments: a node continues its track's current
+// segment unless the 3D points measure them apart: each is visible in the other's views (pairs > 0 both ways) and
+// neither contains the other, i.e. both average containments C(S -> n) and C(n -> S) are below track_split (an
+// id swap). A merge with a neighbour, an eroded mask or a part keeps one of them high and stays. Then the node
+// starts a new segment. Without that evidence (a mask with too few points, an object seen from one side) the track's id
+// is trusted. The segments then merge by affinity like single nodes, so a track re-born under a new id, or the halves
+// of a swap, rejoin their object. Finally clusters seen in fewer than min_views views are dropped.
 #pragma once
 #include <cstdint>
 #include <utility>
@@ -45,6 +53,7 @@ struct MaskGraph {
   std::vector<int64_t> points;              // [N] core 3D points of each node
   std::vector<std::vector<int32_t>> covis;  // [N, V] core points of the node that view v observes (0 at its own view)
   std::vector<char> whole;  // [N] optional: 1 = a whole mask whose parts were folded into it (SAM's whole + parts)
+  std::vector<int> track;   // [N] optional: the node's track id (consistent-id input, e.g. SAM2), -1 = none
   // (a < b) -> (core points of a inside b, core points of b inside a), sorted by (a, b), only pairs sharing a point
   std::vector<std::pair<std::pair<int, int>, std::pair<int64_t, int64_t>>> inter;
 };
@@ -66,8 +75,9 @@ struct ClusterOptions {
   double min_covisible =
       0.25;  // a node is visible in view v when that share of its points (and min_points) is seen there
   int min_points = 3;
-  int min_views = 2;        // clusters seen in fewer views are dropped
-  double part_merge = 0.5;  // a cluster this contained in another's whole masks joins it as a part (0 = never)
+  int min_views = 2;         // clusters seen in fewer views are dropped
+  double part_merge = 0.5;   // a cluster this contained in another's whole masks joins it as a part (0 = never)
+  double track_split = 0.1;  // with MaskGraph::track: both containments below this cut the track (above)
 };
 
 struct Clustering {

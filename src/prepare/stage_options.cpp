@@ -22,8 +22,8 @@ namespace {
                                    const masks::AssociateOptions& assoc) {
   [[maybe_unused]] auto& [a0, a1, a2, a3, a4, a5, a6] = amg;
   [[maybe_unused]] auto& [d0, d1, d2, d3] = dense;
-  [[maybe_unused]] auto& [m0, m1, m2, m3, m4, m5, m6, m7, m8, m9, m10, m11, m12, m13, m14, m15, m16, m17, m18, m19,
-                          m20] = assoc;
+  [[maybe_unused]] auto& [m0, m1, m2, m3, m4, m5, m6, m7, m8, m9, m10, m11, m12, m13, m14, m15, m16, m17, m18, m19, m20,
+                          m21, m22] = assoc;
 }
 
 }  // namespace
@@ -35,8 +35,9 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(DepthStage, iters)
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(ClipStage, model, dense)
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(TextStage, model, phrases)
 
-// The association's parameters: every field of masks::AssociateOptions but scene, out_masks, names, depth, force
-// and progress, which the stage sets itself (names: none).
+// The association's parameters: every field of masks::AssociateOptions but scene, out_masks, names, depth, force,
+// progress, tracks and track_split, which the stage sets itself (names: none; tracks: off, SAM's masks are per
+// view).
 void to_json(nlohmann::json& j, const AssociateStage& s) {
   const masks::AssociateOptions& a = s.associate;
   j = {

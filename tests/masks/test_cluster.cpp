@@ -281,3 +281,76 @@ TEST(ClusterMasks, NearestObjectsAgreeWithTheAffinityOfEachObject) {
     }
   }
 }
+
+// Tracks (MaskGraph::track, SAM2-style ids): the two tracks of A and B swap ids at view 3 and stay swapped.
+TEST(ClusterTracks, AnIdSwapCutsBothTracksAndTheHalvesRejoinTheirObjects) {
+  World w;
+  w.views = 6;
+  std::vector<int> track;
+  for (int v = 0; v < 6; ++v) {
+    w.node(fmt::format("t1_{}", v), v), track.push_back(1);
+    w.node(fmt::format("t2_{}", v), v), track.push_back(2);
+  }
+  w.points(40, {{0, "t1_0"}, {1, "t1_1"}, {2, "t1_2"}, {3, "t2_3"}, {4, "t2_4"}, {5, "t2_5"}});  // A
+  w.points(30, {{0, "t2_0"}, {1, "t2_1"}, {2, "t2_2"}, {3, "t1_3"}, {4, "t1_4"}, {5, "t1_5"}});  // B
+  w.points(60, {{0, ""}, {1, ""}, {2, ""}, {3, ""}, {4, ""}, {5, ""}});
+  MaskGraph g = w.graph();
+  g.track = track;
+  const std::map<std::string, std::set<std::string>> objects{{"0", {"t1_0", "t1_1", "t1_2", "t2_3", "t2_4", "t2_5"}},
+                                                             {"1", {"t2_0", "t2_1", "t2_2", "t1_3", "t1_4", "t1_5"}}};
+  EXPECT_EQ(named(w, cluster_masks(g)), objects);
+  // Never cutting a track (split 0) keeps the swapped ids: each object is then half of A and half of B.
+  ClusterOptions keep;
+  keep.track_split = 0;
+  EXPECT_EQ(named(w, cluster_masks(g, keep)),
+            (std::map<std::string, std::set<std::string>>{{"0", {"t1_0", "t1_1", "t1_2", "t1_3", "t1_4", "t1_5"}},
+                                                          {"1", {"t2_0", "t2_1", "t2_2", "t2_3", "t2_4", "t2_5"}}}));
+}
+
+// Where the points say nothing or little, the track's id is kept; where they measure the masks apart, it is cut.
+TEST(ClusterTracks, AMaskWithoutEvidenceRidesItsTrackAndTheSplitThresholdDecides) {
+  World w;
+  w.views = 5;
+  for (int v = 0; v < 5; ++v) w.node(fmt::format("A{}", v), v);
+  // A is seen from two sides: 10 points in its masks in every view, 40 only in views 0-1 (views 2-3 see them
+  // outside any mask: an occluder), 40 only in views 2-3. A4 holds no point at all (too small to lift).
+  w.points(10, {{0, "A0"}, {1, "A1"}, {2, "A2"}, {3, "A3"}});
+  w.points(40, {{0, "A0"}, {1, "A1"}, {2, ""}, {3, ""}});
+  w.points(40, {{0, ""}, {1, ""}, {2, "A2"}, {3, "A3"}});
+  MaskGraph g = w.graph();
+  // The two sides' masks contain a fifth of each other's points visible to them.
+  EXPECT_NEAR(cluster_affinity(g, {w.id["A0"], w.id["A1"]}, {w.id["A2"], w.id["A3"]}), 0.2, 1e-12);
+  // Without tracks: two objects (0.2 < min_affinity 0.3), and A4, which shares no point, is dropped.
+  EXPECT_EQ(named(w, cluster_masks(g)),
+            (std::map<std::string, std::set<std::string>>{{"0", {"A0", "A1"}}, {"1", {"A2", "A3"}}, {"-", {"A4"}}}));
+  g.track.assign(5, 7);
+  ClusterOptions split;
+  split.track_split = 0.1;  // 0.2 is not "apart": one object, A4 riding along
+  EXPECT_EQ(named(w, cluster_masks(g, split)),
+            (std::map<std::string, std::set<std::string>>{{"0", {"A0", "A1", "A2", "A3", "A4"}}}));
+  split.track_split = 0.3;  // apart: the track is cut at view 2, and A4 stays with the second segment
+  EXPECT_EQ(named(w, cluster_masks(g, split)),
+            (std::map<std::string, std::set<std::string>>{{"0", {"A2", "A3", "A4"}}, {"1", {"A0", "A1"}}}));
+}
+
+// SAM2 merges two touching objects under one id while they touch: the merged masks contain the track's object,
+// so the track is not cut there, even though the merged mask is mostly the other object.
+TEST(ClusterTracks, AMergeWithALargeNeighbourStaysOnItsTrack) {
+  World w;
+  w.views = 6;
+  std::vector<int> track;
+  for (int v = 0; v < 6; ++v) {
+    w.node(fmt::format("A{}", v), v), track.push_back(1);
+    if (v < 3) w.node(fmt::format("B{}", v), v), track.push_back(2);  // B's track is lost while merged into A's
+  }
+  w.points(10, {{0, "A0"}, {1, "A1"}, {2, "A2"}, {3, "A3"}, {4, "A4"}, {5, "A5"}});
+  w.points(400, {{0, "B0"}, {1, "B1"}, {2, "B2"}, {3, "A3"}, {4, "A4"}, {5, "A5"}});  // A3-A5: A and B merged
+  MaskGraph g = w.graph();
+  g.track = track;
+  // From view 3 on, A's masks hold all of A's points (C(S -> n) = 1) but A's points are 10 of their 410.
+  EXPECT_LT(cluster_affinity(g, {w.id["A0"], w.id["A1"], w.id["A2"]}, {w.id["A3"]}), 0.2);
+  Clustering c = cluster_masks(g);
+  EXPECT_EQ(c.cluster[w.id["A3"]], c.cluster[w.id["A0"]]);
+  EXPECT_EQ(c.cluster[w.id["A5"]], c.cluster[w.id["A0"]]);
+  EXPECT_NE(c.cluster[w.id["B0"]], c.cluster[w.id["A0"]]);
+}
