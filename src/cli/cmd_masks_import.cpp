@@ -57,6 +57,11 @@ MasksSubcommandRegistration reg(
            fmt::print(
                "  note: ids are per view (1 + position in each view's list): they do not name the same object across "
                "views\n");
+         else
+           fmt::print(
+               "  note: SAM2's ids are tracks; `hgs masks associate {} --tracks` cuts a track where its 3D points jump "
+               "to another object (an id swap) and joins re-born tracks (docs/association.md)\n",
+               *scene);
          if (!s.missing.empty())
            fmt::print("  {} views have no masks in {} (first: {})\n", s.missing.size(), *dir, s.missing.front());
        };
