@@ -2,6 +2,7 @@
 // it and the mask it falls into there, so every containment is known exactly.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <map>
 #include <random>
@@ -22,9 +23,12 @@ struct World {
   std::map<std::string, int> id;
   std::vector<std::vector<PointObservation>> obs;
 
-  int node(const std::string& name, int view) {
+  std::vector<int> track;  // [N] track id of each node (-1: none); the graph gets them when any is set
+
+  int node(const std::string& name, int view, int track_id = -1) {
     id[name] = int(node_view.size());
     node_view.push_back(view);
+    track.push_back(track_id);
     return id[name];
   }
   // `n` points, each seen in every view of `seen`, inside mask `in[view]` ("" = no mask there).
@@ -35,7 +39,11 @@ struct World {
       obs.push_back(t);
     }
   }
-  MaskGraph graph() const { return build_mask_graph(views, node_view, obs); }
+  MaskGraph graph() const {
+    MaskGraph g = build_mask_graph(views, node_view, obs);
+    if (std::any_of(track.begin(), track.end(), [](int t) { return t >= 0; })) g.track = track;
+    return g;
+  }
 };
 
 // The clusters as sets of node names (dropped nodes under "-").
@@ -286,16 +294,11 @@ TEST(ClusterMasks, NearestObjectsAgreeWithTheAffinityOfEachObject) {
 TEST(ClusterTracks, AnIdSwapCutsBothTracksAndTheHalvesRejoinTheirObjects) {
   World w;
   w.views = 6;
-  std::vector<int> track;
-  for (int v = 0; v < 6; ++v) {
-    w.node(fmt::format("t1_{}", v), v), track.push_back(1);
-    w.node(fmt::format("t2_{}", v), v), track.push_back(2);
-  }
+  for (int v = 0; v < 6; ++v) w.node(fmt::format("t1_{}", v), v, 1), w.node(fmt::format("t2_{}", v), v, 2);
   w.points(40, {{0, "t1_0"}, {1, "t1_1"}, {2, "t1_2"}, {3, "t2_3"}, {4, "t2_4"}, {5, "t2_5"}});  // A
   w.points(30, {{0, "t2_0"}, {1, "t2_1"}, {2, "t2_2"}, {3, "t1_3"}, {4, "t1_4"}, {5, "t1_5"}});  // B
   w.points(60, {{0, ""}, {1, ""}, {2, ""}, {3, ""}, {4, ""}, {5, ""}});
   MaskGraph g = w.graph();
-  g.track = track;
   const std::map<std::string, std::set<std::string>> objects{{"0", {"t1_0", "t1_1", "t1_2", "t2_3", "t2_4", "t2_5"}},
                                                              {"1", {"t2_0", "t2_1", "t2_2", "t1_3", "t1_4", "t1_5"}}};
   EXPECT_EQ(named(w, cluster_masks(g)), objects);
@@ -338,15 +341,13 @@ TEST(ClusterTracks, AMaskWithoutEvidenceRidesItsTrackAndTheSplitThresholdDecides
 TEST(ClusterTracks, AMergeWithALargeNeighbourStaysOnItsTrack) {
   World w;
   w.views = 6;
-  std::vector<int> track;
   for (int v = 0; v < 6; ++v) {
-    w.node(fmt::format("A{}", v), v), track.push_back(1);
-    if (v < 3) w.node(fmt::format("B{}", v), v), track.push_back(2);  // B's track is lost while merged into A's
+    w.node(fmt::format("A{}", v), v, 1);
+    if (v < 3) w.node(fmt::format("B{}", v), v, 2);  // B's track is lost while merged into A's
   }
   w.points(10, {{0, "A0"}, {1, "A1"}, {2, "A2"}, {3, "A3"}, {4, "A4"}, {5, "A5"}});
   w.points(400, {{0, "B0"}, {1, "B1"}, {2, "B2"}, {3, "A3"}, {4, "A4"}, {5, "A5"}});  // A3-A5: A and B merged
   MaskGraph g = w.graph();
-  g.track = track;
   // From view 3 on, A's masks hold all of A's points (C(S -> n) = 1) but A's points are 10 of their 410.
   EXPECT_LT(cluster_affinity(g, {w.id["A0"], w.id["A1"], w.id["A2"]}, {w.id["A3"]}), 0.2);
   Clustering c = cluster_masks(g);
