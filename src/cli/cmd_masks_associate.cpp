@@ -45,7 +45,8 @@ const char* kDescription =
     "--iters 1000 --out M` will do), --depth DIR reads DIR/<stem>.npy z-depth maps [H, W]; every --depth-stride-th\n"
     "pixel is lifted and counts as seen by each other view whose depth agrees within --depth-tolerance.\n"
     "SAM2 tracks (--tracks): the ids are kept along each track in view order, cut where the track's 3D points\n"
-    "jump to another object (an identity swap, a merge), and the pieces clustered like single masks.\n"
+    "jump to another object (an identity swap; a merge with a neighbour stays), and the pieces clustered like\n"
+    "single masks.\n"
     "Example: hgs masks import SCENE --from sam-json SAM_DIR && hgs masks associate SCENE\n"
     "         hgs masks import SCENE --from sam2-png SAM2_DIR && hgs masks associate SCENE --tracks";
 
@@ -111,7 +112,7 @@ MasksSubcommandRegistration reg(
            ->capture_default_str();
        sub.add_flag("--tracks", o->tracks,
                     "The input's ids are tracks (SAM2 label maps, hgs synth): a mask keeps its track's object unless "
-                    "the 3D points measure them apart (an id swap, a merge); masks with few points ride their track");
+                    "the 3D points measure them apart (an id swap); masks with few points ride their track");
        sub.add_option("--track-split", o->track_split,
                       "With --tracks: a mask that neither contains its track's masks so far nor lies inside them (both "
                       "average containments below this) starts a new segment of the track")

@@ -19,7 +19,7 @@
 //
 // Tracks (optional, AssociateOptions::tracks): with SAM2-style input the ids already link views; the clustering
 // starts from each track's segments (cluster.h) instead of single masks, so a track is kept where 3D says nothing
-// and cut where its points jump to another object (an identity swap, a merge).
+// and cut where its points jump to another object (an identity swap).
 //
 // Depth (optional): with a z-depth map per view (AssociateOptions::depth), every pixel on a grid is lifted too and
 // re-projected into the other views where their depth agrees (depth_tracks.h); those tracks join COLMAP's points.

@@ -36,8 +36,8 @@
 // walked in view order (the capture order) and joined into segments: a node continues its track's current
 // segment unless the 3D points measure them apart: each is visible in the other's views (pairs > 0 both ways) and
 // neither contains the other, i.e. both average containments C(S -> n) and C(n -> S) are below track_split (an
-// id swap). A merge with a neighbour, an eroded mask or a part keeps one of them high and stays. Then the node
-// starts a new segment. Without that evidence (a mask with too few points, an object seen from one side) the track's id
+// id swap); the node then starts a new segment. A merge with a neighbour, an eroded mask or a part keeps one of
+// them high and stays. Without that evidence (a mask with too few points, an object seen from one side) the track's id
 // is trusted. The segments then merge by affinity like single nodes, so a track re-born under a new id, or the halves
 // of a swap, rejoin their object. Finally clusters seen in fewer than min_views views are dropped.
 #pragma once
