@@ -143,6 +143,13 @@ InputInfo read_input_info(const AssociateOptions& opt, const fs::path& in) {
   ii.import_info = fs::exists(in / "import.json") ? read_json_file(in / "import.json") : json();
   const std::string import_format = ii.import_info.is_object() ? ii.import_info.value("format", "") : "";
   ii.sam_scores = import_format == "sam-json" || import_format == "sam-png";
+  // --tracks reads an id as one object along the capture; per-view ids (1 + list position) would chain
+  // unrelated masks of neighbouring views wherever the points say nothing.
+  if (opt.tracks && !import_format.empty() && import_format != "sam2-png")
+    fail(
+        "{}: --tracks: these masks were imported --from {}, whose ids are per view, not tracks (associate without "
+        "--tracks)",
+        (in / "import.json").string(), import_format);
   return ii;
 }
 

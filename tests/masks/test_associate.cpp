@@ -209,6 +209,18 @@ TEST(MasksAssociate, BadInputNamesTheFileAndChangesNothing) {
     EXPECT_NE(r.exit_code, 0);
     EXPECT_NE(r.err.find((s / "masks" / "v9.png").string()), std::string::npos) << r.err;
   }
+  {  // --tracks on masks imported from SAM's per-view files: their ids are not tracks
+    const fs::path s = t / "pertracks";
+    make_scene(s);
+    atomic_write_text(s / "masks" / "import.json", R"({"format": "sam-json", "views": {}})");
+    const auto before = snapshot(s / "masks");
+    auto r = test::run_hgs("masks associate " + s.string() + " --tracks --quiet");
+    EXPECT_EQ(r.exit_code, 1) << r.err;
+    EXPECT_NE(r.err.find((s / "masks" / "import.json").string() + ": --tracks"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("sam-json"), std::string::npos) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    expect_same(snapshot(s / "masks"), before);
+  }
 }
 
 namespace {
