@@ -110,13 +110,15 @@ MasksSubcommandRegistration reg(
                       "Spread of an object's 3D points (80th-percentile distance from their median), relative to all "
                       "points', above which it is a surface")
            ->capture_default_str();
-       sub.add_flag("--tracks", o->tracks,
-                    "The input's ids are tracks (SAM2 label maps, hgs synth): a mask keeps its track's object unless "
-                    "the 3D points measure them apart (an id swap); masks with few points ride their track");
+       CLI::Option* tracks = sub.add_flag(
+           "--tracks", o->tracks,
+           "The input's ids are tracks (SAM2 label maps, hgs synth): a mask keeps its track's object unless "
+           "the 3D points measure them apart (an id swap); masks with few points ride their track");
        sub.add_option("--track-split", o->track_split,
                       "With --tracks: a mask that neither contains its track's masks so far nor lies inside them (both "
                       "average containments below this) starts a new segment of the track")
            ->check(CLI::Range(0.0, 1.0))
+           ->needs(tracks)
            ->capture_default_str();
        auto depth_dir = std::make_shared<std::string>(), depth_model = std::make_shared<std::string>();
        sub.add_option(
