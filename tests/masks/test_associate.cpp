@@ -421,4 +421,16 @@ TEST(MasksAssociate, SynthTracksAssociatedKeepMoreMasksOnTheirObject) {
   // measured 0.632 / 0.692 / 0.676: both associations undo swaps the tracks keep
   EXPECT_GT(f_tracks, f_in + 0.02);
   EXPECT_GT(f_plain, f_in + 0.02);
+
+  // The user's path: the same label maps as a SAM2 output folder, imported, then associated with --tracks.
+  const fs::path imported = t / "imported", sam2 = t / "sam2";
+  ASSERT_EQ(test::run_hgs("synth --out " + imported.string() + " " + scene).exit_code, 0);
+  fs::create_directories(sam2);
+  for (auto& st : stems(imported)) fs::copy_file(imported / "masks" / (st + ".png"), sam2 / (st + ".png"));
+  r = test::run_hgs("masks import " + imported.string() + " --from sam2-png " + sam2.string() + " --force --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("--tracks"), std::string::npos) << r.out;  // the import points to it
+  r = test::run_hgs("masks associate " + imported.string() + " --tracks --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(json::parse(read_file_text(imported / "masks" / "associate.json"))["ids"], rep["ids"]);
 }
