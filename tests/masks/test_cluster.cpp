@@ -200,12 +200,14 @@ TEST(ClusterMasks, ThresholdDecides) {
 
 TEST(ClusterMasks, RandomGraphsNeverPutTwoMasksOfOneViewTogetherAndAreDeterministic) {
   std::mt19937 rng(7);
-  for (int trial = 0; trial < 30; ++trial) {
+  for (int trial = 0; trial < 60; ++trial) {
     World w;
     w.views = 6;
     const int per_view = 1 + int(rng() % 5);
+    // Odd trials: random track ids (MaskGraph::track), a track sometimes twice in one view.
     for (int v = 0; v < w.views; ++v)
-      for (int m = 0; m < per_view; ++m) w.node(std::to_string(v) + "_" + std::to_string(m), v);
+      for (int m = 0; m < per_view; ++m)
+        w.node(std::to_string(v) + "_" + std::to_string(m), v, trial % 2 ? int(rng() % (per_view + 1)) - 1 : -1);
     for (int p = 0; p < 300; ++p) {  // each point: random views, random masks (often none)
       std::map<int, std::string> in;
       for (int v = 0; v < w.views; ++v)
