@@ -4,7 +4,7 @@
 Reads OUT/ablate_<preset>_<noise>/ablation.json (every finished run of each group) and prints, as markdown:
 
 1. per group, instances protocol, object mode: each scene's all-off and full mIoU and their mean;
-2. per group and for all groups pooled: full - all off and each component added to the other two (the full row
+2. per group, per noise level pooled over the presets (groups <preset>_<noise>) and for all groups pooled: full - all off and each component added to the other two (the full row
    minus the full row without it), per protocol and mode, with the 95 % interval paired by scene (seeds averaged
    within a scene first; n = scenes; Student's t with n - 1 degrees of freedom), the statistic of `hgs ablate`
    (src/eval/paired_stats.h, `paired_by_scene`);
@@ -89,7 +89,10 @@ def main():
         print(f"| {g} | mean | {statistics.mean(offs) if offs else float('nan'):.2f} | "
               f"{statistics.mean(fulls) if fulls else float('nan'):.2f} | |")
     pooled = {f"{g}/{s}": rows for g, scenes in groups.items() for s, rows in scenes.items()}
-    for title, scenes_of in [(g, groups[g]) for g in groups] + [("all groups pooled", pooled)]:
+    noises = sorted({g.rsplit("_", 1)[-1] for g in groups})
+    by_noise = [(f"{n} noise, presets pooled", {k: v for k, v in pooled.items() if k.split("/")[0].endswith("_" + n)})
+                for n in noises] if len(noises) > 1 else []
+    for title, scenes_of in [(g, groups[g]) for g in groups] + by_noise + [("all groups pooled", pooled)]:
         print(f"\n## {title}: paired differences (mIoU points, 95 % interval paired by scene)\n")
         print("| protocol / mode | full - all off | OF added | SCL added | BRO added |\n|---|---|---|---|---|")
         for k in KEYS:
