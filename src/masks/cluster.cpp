@@ -61,12 +61,23 @@ bool visible_in(const MaskGraph& g, int a, int v, const ClusterOptions& opt) {
   return c > 0 && c >= opt.min_points && double(c) >= opt.min_covisible * double(g.points[a]);
 }
 
-double affinity(const Cluster& x, const Cluster& y, const std::pair<double, double>& s) {
+// The average containments C(X -> Y) = s.first / pairs_xy and C(Y -> X) = s.second / pairs_yx, where pairs_xy
+// counts (a in X, b in Y) with a visible in b's view. `measured`: both directions have pairs.
+struct Containments {
+  double xy = 0, yx = 0;
+  bool measured = false;
+};
+Containments containments(const Cluster& x, const Cluster& y, const std::pair<double, double>& s) {
   double pxy = 0, pyx = 0;
   for (size_t v = 0; v < x.count.size(); ++v)
     pxy += double(x.visible[v]) * double(y.count[v]), pyx += double(y.visible[v]) * double(x.count[v]);
-  if (pxy <= 0 || pyx <= 0) return 0;
-  return std::sqrt((s.first / pxy) * (s.second / pyx));
+  if (pxy <= 0 || pyx <= 0) return {};
+  return {s.first / pxy, s.second / pyx, true};
+}
+
+double affinity(const Cluster& x, const Cluster& y, const std::pair<double, double>& s) {
+  const Containments c = containments(x, y, s);
+  return c.measured ? std::sqrt(c.xy * c.yx) : 0;
 }
 
 bool share_a_view(const Cluster& x, const Cluster& y) {
@@ -186,15 +197,11 @@ void follow_tracks(const MaskGraph& g, const ClusterOptions& opt, std::vector<Cl
     for (size_t i = 1; i < nodes.size(); ++i) {
       const int n = nodes[i];
       const Cluster &S = cl[seg], &N = cl[n];
-      double pairs_sn = 0, pairs_ns = 0;  // (segment node visible in n's view), (n visible in a segment view)
-      for (size_t v = 0; v < S.count.size(); ++v)
-        pairs_sn += double(S.visible[v]) * double(N.count[v]), pairs_ns += double(N.visible[v]) * double(S.count[v]);
       // Apart: neither contains the other. A merge with a neighbour, an eroded mask or a part keeps one of the
       // two average containments high; another object (an id swap) has both near 0.
       auto it = S.nbr.find(n);
-      const double c_sn = it == S.nbr.end() || pairs_sn <= 0 ? 0.0 : it->second.first / pairs_sn,
-                   c_ns = it == S.nbr.end() || pairs_ns <= 0 ? 0.0 : it->second.second / pairs_ns;
-      const bool apart = pairs_sn > 0 && pairs_ns > 0 && std::max(c_sn, c_ns) < opt.track_split;
+      const Containments c = containments(S, N, it == S.nbr.end() ? std::pair<double, double>{0, 0} : it->second);
+      const bool apart = c.measured && std::max(c.xy, c.yx) < opt.track_split;
       if (apart || share_a_view(S, N)) seg = n;
       else merge(g, cl, seg, n);
     }
