@@ -4,8 +4,8 @@
 Reads OUT/ablate_<preset>_<noise>/ablation.json (every finished run of each group) and prints, as markdown:
 
 1. per group, instances protocol, object mode: each scene's all-off and full mIoU and their mean;
-2. per group, per noise level pooled over the presets (groups <preset>_<noise>) and for all groups pooled: full - all off and each component added to the other two (the full row
-   minus the full row without it), per protocol and mode, with the 95 % interval paired by scene (seeds averaged
+2. per group, per noise level pooled over the presets (groups <preset>_<noise>) and for all groups pooled:
+   full - all off and each component added to the other two (the full row minus the full row without it), per protocol and mode, with the 95 % interval paired by scene (seeds averaged
    within a scene first; n = scenes; Student's t with n - 1 degrees of freedom), the statistic of `hgs ablate`
    (src/eval/paired_stats.h, `paired_by_scene`);
 3. per group: the full method's pixel mode (the default rule and the paper's map) against object mode.

@@ -32,13 +32,14 @@ for src in "$RUN"/scenes/{room,tabletop}_"$NOISE"_*; do
     --out "$OUT/${s}_given.json" --no-png --quiet > /dev/null
   lines+=("$s $(miou "$OUT/${s}_given.json") $(miou "$OUT/${s}_model/eval.json")")
 done
-printf '%s\n' "${lines[@]}" | python3 -c '
+printf '%s\n' "${lines[@]}" | PYTHONPATH="$(dirname "$0")" python3 -c '
 import statistics, sys
+from revalidate_report import t95  # one table of Student t quantiles for the bench scripts
 rows = [l.split() for l in sys.stdin if l.strip()]
 print("scene                 as given  --tracks   change")
 for s, a, b in rows:
     print(f"{s:20s} {float(a):9.2f} {float(b):9.2f} {float(b) - float(a):+8.2f}")
 d = [float(b) - float(a) for _, a, b in rows]
 if len(d) > 1:
-    t = {1: 12.71, 2: 4.30, 3: 3.18, 4: 2.78, 5: 2.57, 6: 2.45, 7: 2.36, 8: 2.31, 9: 2.26, 10: 2.23}.get(len(d) - 1, 2.0)
-    print(f"mean change {statistics.mean(d):+.2f} +- {t * statistics.stdev(d) / len(d) ** 0.5:.2f} (95 %, t over {len(d)} scenes)")'
+    h = t95(len(d)) * statistics.stdev(d) / len(d) ** 0.5
+    print(f"mean change {statistics.mean(d):+.2f} +- {h:.2f} (95 %, t over {len(d)} scenes)")'
