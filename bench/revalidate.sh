@@ -8,19 +8,22 @@
 # continues where it stopped), then asks every full-method model the query sets of gt/queries.json and prints
 # their mIoU against the names', and the tables of bench/revalidate_report.py. Choose or tune defaults on `dev`
 # only; `test` reports. About 128 trainings for all rows (`all leave-one-out`: 104): hours on 2 cores.
+# NOISE=medium (or high) runs that noise level's groups only, PRESET=room (or tabletop) that preset's.
 set -euo pipefail
 if [ $# -lt 3 ] || { [ "$3" != dev ] && [ "$3" != test ]; }; then
-  sed -n '2,10p' "$0" | sed 's/^# \{0,1\}//'
+  sed -n '2,11p' "$0" | sed 's/^# \{0,1\}//'
   exit 2
 fi
 HGS="$(realpath "$1")" OUT="$2" SPLIT="$3" ROWS="${4:-all}"
 MEDIUM_ROWS="${5:-$ROWS}"
+case "${NOISE:-high medium}" in high | medium | "high medium") ;; *) echo "revalidate.sh: NOISE must be high or medium, not '$NOISE'" >&2; exit 2 ;; esac
+case "${PRESET:-room tabletop}" in room | tabletop | "room tabletop") ;; *) echo "revalidate.sh: PRESET must be room or tabletop, not '$PRESET'" >&2; exit 2 ;; esac
 # The seeds are fixed here and in docs/ablation.md before any run that reports on them.
 if [ "$SPLIT" = dev ]; then SEEDS=(101 102 103 104); else SEEDS=(7001 7002 7003 7004); fi
 mkdir -p "$OUT/scenes"
 # High noise and rooms first: the goals that are hardest to meet finish first when a run is cut short.
-for noise in high medium; do
-  for preset in room tabletop; do
+for noise in ${NOISE:-high medium}; do
+  for preset in ${PRESET:-room tabletop}; do
     scenes=()
     for seed in "${SEEDS[@]}"; do
       s="$OUT/scenes/${preset}_${noise}_$seed"

@@ -1,11 +1,14 @@
 #!/usr/bin/env python3
 """The re-validation's tables from `bench/revalidate.sh`'s run folder (issue 59, docs/ablation.md).
 
-Reads OUT/ablate_<preset>_<noise>/ablation.json (every finished run of each group) and prints, as markdown:
+Reads every finished run of each group (OUT/ablate_<preset>_<noise>/<scene>/seed<N>/<row>/run.json) and prints, as
+markdown:
 
 1. per group, instances protocol, object mode: each scene's all-off and full mIoU and their mean;
 2. per group, per noise level pooled over the presets (groups <preset>_<noise>) and for all groups pooled:
-   full - all off and each component added to the other two (the full row minus the full row without it), per protocol and mode, with the 95 % interval paired by scene (seeds averaged
+   full - all off and each component added to the other two (the full row minus the full row without it), per
+   protocol and mode, and where the rows with one component were run each component alone (that row minus all
+   off), with the 95 % interval paired by scene (seeds averaged
    within a scene first; n = scenes; Student's t with n - 1 degrees of freedom), the statistic of `hgs ablate`
    (src/eval/paired_stats.h, `paired_by_scene`);
 3. per group: the full method's pixel mode (the default rule and the paper's map) against object mode.
@@ -26,6 +29,7 @@ T95 = [12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.
        2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042]
 FULL, OFF = "of1_scl1_bro1", "of0_scl0_bro0"
 WITHOUT = {"OF": "of0_scl1_bro1", "SCL": "of1_scl0_bro1", "BRO": "of1_scl1_bro0"}
+ALONE = {"OF": "of1_scl0_bro0", "SCL": "of0_scl1_bro0", "BRO": "of0_scl0_bro1"}
 KEYS = ["instances/object", "instances/pixel", "instances/pixel-paper-map", "3d-ovs/object", "3d-ovs/pixel",
         "3d-ovs/pixel-paper-map"]
 NAMES = {"object": "object", "pixel": "pixel (default rule)", "pixel-paper-map": "pixel (the paper's map)"}
@@ -36,14 +40,19 @@ def t95(n):
 
 
 def load(out):
-    """{group: {scene: {row: {key: [mIoU percent per training seed]}}}}"""
+    """{group: {scene: {row: {key: [mIoU percent per training seed]}}}} from every finished run on disk
+    (OUT/ablate_<group>/<scene>/seed<N>/<row>/run.json), so that rows asked in separate `hgs ablate` calls (whose
+    ablation.json covers only the rows of the last call) are all counted."""
     groups = {}
-    for f in sorted(glob.glob(os.path.join(out, "ablate_*", "ablation.json"))):
-        group = os.path.basename(os.path.dirname(f)).replace("ablate_", "")
-        for r in json.load(open(f))["runs"]:
-            scene = os.path.basename(r["scene"])
-            for k, v in r["run"]["results"].items():
-                groups.setdefault(group, {}).setdefault(scene, {}).setdefault(r["row"], {}).setdefault(k, []).append(
+    for f in sorted(glob.glob(os.path.join(out, "ablate_*", "*", "seed*", "*", "run.json"))):
+        row_dir = os.path.dirname(f)
+        seed_dir = os.path.dirname(row_dir)
+        scene_dir = os.path.dirname(seed_dir)
+        group = os.path.basename(os.path.dirname(scene_dir)).replace("ablate_", "")
+        scene, row = os.path.basename(scene_dir), os.path.basename(row_dir)
+        for k, v in json.load(open(f)).get("results", {}).items():
+            if v.get("miou") is not None:
+                groups.setdefault(group, {}).setdefault(scene, {}).setdefault(row, {}).setdefault(k, []).append(
                     100 * v["miou"])
     return groups
 
@@ -74,7 +83,7 @@ def main():
         sys.exit(2)
     groups = load(sys.argv[1])
     if not groups:
-        sys.exit(f"revalidate_report: no ablate_*/ablation.json under {sys.argv[1]}")
+        sys.exit(f"revalidate_report: no ablate_*/<scene>/seed*/<row>/run.json under {sys.argv[1]}")
     print("## Instances, object mode: each scene\n\n| group | scene | all off | full | full - all off |\n|---|---|---|---|---|")
     for g, scenes in groups.items():
         fulls, offs = [], []
@@ -100,6 +109,13 @@ def main():
             row = [cell(diffs(scenes_of, k, FULL, OFF))]
             row += [cell(diffs(scenes_of, k, FULL, WITHOUT[c])) for c in ("OF", "SCL", "BRO")]
             print(f"| {proto}, {NAMES[mode]} | " + " | ".join(row) + " |")
+        if any(r in rows for rows in scenes_of.values() for r in ALONE.values()):
+            print(f"\n## {title}: each component alone - all off (the rows with one component)\n")
+            print("| protocol / mode | OF alone | SCL alone | BRO alone |\n|---|---|---|---|")
+            for k in KEYS:
+                proto, mode = k.split("/", 1)
+                row = [cell(diffs(scenes_of, k, ALONE[c], OFF)) for c in ("OF", "SCL", "BRO")]
+                print(f"| {proto}, {NAMES[mode]} | " + " | ".join(row) + " |")
     print("\n## The full method: pixel mode against object mode (mean over scenes, mIoU)\n")
     print("| group | protocol | object | pixel (default rule) | pixel - object | paper's map | paper's map - default rule |")
     print("|---|---|---|---|---|---|---|")
