@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <limits>
 
 #include "core/error.h"
 #include "core/excerpt.h"
@@ -119,10 +121,27 @@ std::vector<float> render_relevancy(render::GaussianRenderer& r, const GaussianM
 
 namespace {
 
+// Each map's pixels where hole[p] (nothing rendered) take the map's lowest value over the other pixels (0 when
+// every pixel is a hole). hole: [H, W]; maps: T maps of [H, W].
+void fill_holes(const std::vector<uint8_t>& hole, std::vector<std::vector<float>>& maps) {
+  if (std::find(hole.begin(), hole.end(), 1) == hole.end()) return;
+  for (auto& map : maps) {
+    float lowest = std::numeric_limits<float>::infinity();
+    for (size_t p = 0; p < map.size(); ++p)
+      if (!hole[p]) lowest = std::min(lowest, map[p]);
+    if (!std::isfinite(lowest)) lowest = 0.f;
+    for (size_t p = 0; p < map.size(); ++p)
+      if (hole[p]) map[p] = lowest;
+  }
+}
+
 // Relevancy::Objects (the cosines, `lerf` false) and ObjectsLerf. F(p) = sum_k A_k(p) e_k is never formed: its
 // cosine with a unit direction u is sum_k A_k(p) (e_k . u) / |F(p)|, and |F(p)|^2 = A(p)^T G A(p) with G = E E^T
-// [L, L], so a pixel costs O(L^2 + L T) instead of O(L D). A pixel where F = 0 gets the cosines 0 (relevancy 0.5),
-// as lerf_relevancy_map.
+// [L, L], so a pixel costs O(L^2 + L T) instead of O(L D). A pixel where F = 0 (nothing rendered: a hole in the
+// model) has no cosine. With `lerf` it gets the cosines 0 (relevancy 0.5), as lerf_relevancy_map. Without, it gets
+// the lowest score of the view's rendered pixels for that text: a cosine of 0 would lie far below every rendered
+// pixel's where text-image cosines share an offset (CLIP's sit near 0.2), and LangSplat's min-max normalisation
+// (eval/protocols.h) would then stretch one hole into a mask of nearly the whole view.
 std::vector<std::vector<float>> object_map_relevancies(render::GaussianRenderer& r, const GaussianModel& m,
                                                        const render::Camera& cam,
                                                        const std::vector<const float*>& texts, const Canonical& canon,
@@ -155,6 +174,7 @@ std::vector<std::vector<float>> object_map_relevancies(render::GaussianRenderer&
     }
   const size_t HW = size_t(cam.width) * cam.height;
   std::vector<std::vector<float>> maps(T, std::vector<float>(HW));
+  std::vector<uint8_t> hole(HW, 0);  // [H, W] 1 where F = 0
 #pragma omp parallel
   {
     std::vector<double> dots(U), sc(M);
@@ -175,8 +195,10 @@ std::vector<std::vector<float>> object_map_relevancies(render::GaussianRenderer&
       for (int i = 0; i < M; ++i) sc[i] = dots[T + i] * inv;
       for (int t = 0; t < T; ++t)
         maps[t][p] = lerf ? lerf_relevancy_from_cosines(dots[t] * inv, sc.data(), M) : float(dots[t] * inv);
+      if (!lerf && !(n2 > 0)) hole[p] = 1;
     }
   }
+  if (!lerf) fill_holes(hole, maps);
   return maps;
 }
 

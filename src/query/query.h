@@ -67,8 +67,10 @@ std::vector<float> render_object_opacity(render::GaussianRenderer& r, const Gaus
 //               embedding. SCL (eqs. 9-10) trains f only through the objects' pooled means, so the
 //               part of each f_n that differs from its object's mean stays at its random initialisation (per-pixel
 //               noise in the raw map), and only through cosines among the scene's references, so an embedding's
-//               offset from LERF's canonical phrases is free (the reason object ranking uses the cosine too). The
-//               default (docs/ablation.md, "Pixel mode against object mode").
+//               offset from LERF's canonical phrases is free (the reason object ranking uses the cosine too). A
+//               pixel where nothing is rendered (F = 0) scores as the view's lowest rendered pixel, not 0, which
+//               would stretch LangSplat's min-max normalisation (docs/ablation.md, "Test seeds at medium noise").
+//               The default (docs/ablation.md, "Pixel mode against object mode").
 //  ObjectsLerf: LERF's relevancy (the min over the canonical phrases of the pairwise softmax at temperature 10) of
 //               hgs's object-embedding map (not in the paper).
 //  Lerf:        the paper's language map F(p) = sum_n f_n alpha T (eq. 8 summed over the objects k, since

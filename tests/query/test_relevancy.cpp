@@ -10,6 +10,7 @@
 #include <random>
 
 #include "core/error.h"
+#include "eval/protocols.h"
 #include "model/render_inputs.h"
 #include "query/query.h"
 #include "query/relevancy.h"
@@ -173,19 +174,51 @@ TEST(Relevancy, ObjectsVariantsScoreTheObjectConditionedMapByBruteForce) {
   const size_t HW = size_t(s.cam.width) * s.cam.height;
   ASSERT_EQ(rel.size(), HW);
   size_t covered = 0;
+  std::vector<char> hole(HW);
+  float lowest = 1e30f;  // the lowest cosine of a rendered pixel: what Objects gives a pixel where F = 0
   for (size_t p = 0; p < HW; ++p) {
     float F[SoftScene::D] = {};
     for (int k = 0; k < SoftScene::L; ++k)
       for (int d = 0; d < SoftScene::D; ++d) F[d] += A[p * SoftScene::L + k] * oe.e[size_t(k) * SoftScene::D + d];
+    hole[p] = std::all_of(F, F + SoftScene::D, [](float v) { return v == 0.f; });
     ASSERT_NEAR(rel[p], query::lerf_relevancy(F, text, canon, SoftScene::D), 2e-5) << "pixel " << p;
-    ASSERT_NEAR(cos[p], query::cosine(F, text, SoftScene::D), 2e-5) << "pixel " << p;
+    if (!hole[p]) {
+      ASSERT_NEAR(cos[p], query::cosine(F, text, SoftScene::D), 2e-5) << "pixel " << p;
+      lowest = std::min(lowest, query::cosine(F, text, SoftScene::D));
+    }
     covered += A[p * SoftScene::L] + A[p * SoftScene::L + 1] + A[p * SoftScene::L + 2] > 0.1f;
   }
   EXPECT_GT(covered, HW / 4);     // the Gaussians cover much of the image: the comparison is not all ties
-  EXPECT_FLOAT_EQ(rel[0], 0.5f);  // nothing rendered in the corner: a zero map, a tie
-  EXPECT_EQ(cos[0], 0.f);
+  ASSERT_TRUE(hole[0]);           // nothing rendered in the corner
+  EXPECT_FLOAT_EQ(rel[0], 0.5f);  // a zero map, a tie
+  for (size_t p = 0; p < HW; ++p) {
+    if (!hole[p]) continue;
+    ASSERT_NEAR(cos[p], lowest, 2e-5) << "pixel " << p;
+  }
   // Given the embeddings, the same maps.
   EXPECT_EQ(query::render_relevancy(r, s.m, s.cam, text, canon, query::Relevancy::Objects, &oe), cos);
+}
+
+TEST(Relevancy, ObjectsVariantKeepsAHoleFromStretchingLangSplatsNormalisation) {
+  // Text-image cosines share an offset (CLIP's sit near 0.2): here the left blob's object scores 0.6 and the right
+  // blob's 0.8, and the rest of the view renders nothing. Were a hole scored 0, LangSplat's min-max normalisation
+  // would put the left blob at 0.75 of the range and select it with the right one; scored as the lowest rendered
+  // pixel, the left blob is the bottom of the range and only the right blob is selected.
+  TwoBlobs s;
+  render::GaussianRenderer r;
+  const float text[TwoBlobs::D] = {0.6f, 0.8f, 0, 0};
+  const std::vector<float> cos = query::render_relevancy(r, s.m, s.cam, text, canonical());
+  EXPECT_NEAR(cos[s.left()], 0.6f, 1e-4);
+  EXPECT_NEAR(cos[s.right()], 0.8f, 1e-4);
+  EXPECT_NEAR(cos[0], *std::min_element(cos.begin() + 1, cos.end()), 1e-6);  // the corner: a hole
+  EXPECT_GT(cos[0], 0.55f);
+  eval::LerfOptions opt;
+  opt.box = 1;
+  opt.majority = 1;
+  const eval::LerfPost post = eval::lerf_postprocess(cos, s.cam.width, s.cam.height, opt);
+  EXPECT_TRUE(post.mask[size_t(s.right())]);
+  EXPECT_FALSE(post.mask[size_t(s.left())]);
+  EXPECT_FALSE(post.mask[0]);
 }
 
 TEST(Relevancy, ObjectsVariantGivesAnObjectOneEmbeddingWhateverItsGaussiansCarry) {
