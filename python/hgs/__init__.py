@@ -286,7 +286,8 @@ class QueryResult:
     def relevancy(self, view, relevancy="objects"):
         """A pixel score map for the text, float32 [H, W]. relevancy: "objects" (the default: the cosine with
         hgs's object-embedding map sum_k A_k e_k, each object's pooled embedding rendered with its opacity; a rule
-        of this project, not in the paper), "objects-lerf" (LERF's relevancy of that map), "lerf" (the paper's
+        of this project, not in the paper; a pixel where nothing is rendered scores as the view's lowest rendered
+        pixel), "objects-lerf" (LERF's relevancy of that map), "lerf" (the paper's
         language map, eq. 8 summed over objects = sum_n f_n alpha T, scored with LERF's relevancy as LangSplat
         scores its field) or "foreground" (lerf times the rendered foreground opacity)."""
         return self.session.pixel_relevancy(self.scene.index(view), self.text, relevancy)
