@@ -39,18 +39,28 @@ def t95(n):
     return T95[min(n - 1, len(T95)) - 1] if n >= 2 else float("nan")
 
 
+def finished_runs(out):
+    """(path, run) for every finished run on disk, OUT/ablate_<group>/<scene>/seed<N>/<row>/run.json, in path
+    order; a placeholder (a run.json marked "placeholder", which makes `hgs ablate` skip a row) is left out."""
+    for f in sorted(glob.glob(os.path.join(out, "ablate_*", "*", "seed*", "*", "run.json"))):
+        with open(f) as fh:
+            run = json.load(fh)
+        if not run.get("placeholder"):
+            yield f, run
+
+
 def load(out):
     """{group: {scene: {row: {key: [mIoU percent per training seed]}}}} from every finished run on disk
-    (OUT/ablate_<group>/<scene>/seed<N>/<row>/run.json), so that rows asked in separate `hgs ablate` calls (whose
-    ablation.json covers only the rows of the last call) are all counted."""
+    (finished_runs), so that rows asked in separate `hgs ablate` calls (whose ablation.json covers only the rows
+    of the last call) are all counted."""
     groups = {}
-    for f in sorted(glob.glob(os.path.join(out, "ablate_*", "*", "seed*", "*", "run.json"))):
+    for f, run in finished_runs(out):
         row_dir = os.path.dirname(f)
         seed_dir = os.path.dirname(row_dir)
         scene_dir = os.path.dirname(seed_dir)
         group = os.path.basename(os.path.dirname(scene_dir)).replace("ablate_", "")
         scene, row = os.path.basename(scene_dir), os.path.basename(row_dir)
-        for k, v in json.load(open(f)).get("results", {}).items():
+        for k, v in run.get("results", {}).items():
             if v.get("miou") is not None:
                 groups.setdefault(group, {}).setdefault(scene, {}).setdefault(row, {}).setdefault(k, []).append(
                     100 * v["miou"])

@@ -11,20 +11,16 @@ skip them.
     python3 bench/runs_record.py save OUT RECORD.json [NOTE]
     python3 bench/runs_record.py restore RECORD.json OUT
 """
-import glob
 import json
 import os
 import sys
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from revalidate_report import finished_runs  # noqa: E402  (the same run files the report reads)
+
 
 def save(out, record, note=""):
-    runs = {}
-    for f in sorted(glob.glob(os.path.join(out, "ablate_*", "*", "seed*", "*", "run.json"))):
-        with open(f) as fh:
-            run = json.load(fh)
-        if run.get("placeholder"):
-            continue
-        runs[os.path.relpath(f, out)] = run
+    runs = {os.path.relpath(f, out): run for f, run in finished_runs(out)}
     if not runs:
         sys.exit(f"runs_record: no ablate_*/<scene>/seed*/<row>/run.json under {out}")
     tmp = record + ".tmp"

@@ -15,13 +15,13 @@ sys.path.insert(0, os.path.join(HERE, ".."))
 from revalidate_report import t95  # noqa: E402
 
 
-def write_run(out, group, scene, row, miou):
+def write_run(out, group, scene, row, miou, placeholder=False):
     d = os.path.join(out, f"ablate_{group}", scene, "seed3", row)
     os.makedirs(d)
     results = {k: {"acc": 1.0, "miou": miou, "mbiou": miou, "records": 10}
                for k in ("instances/object", "3d-ovs/object")}
     with open(os.path.join(d, "run.json"), "w") as f:
-        json.dump({"iters": 1500, "results": results}, f)
+        json.dump({"iters": 1500, "results": results, **({"placeholder": True} if placeholder else {})}, f)
 
 
 def test_alone_rows_from_separate_calls_are_paired_by_scene():
@@ -33,6 +33,9 @@ def test_alone_rows_from_separate_calls_are_paired_by_scene():
             write_run(out, "room_medium", s, "of0_scl0_bro0", o)
             write_run(out, "room_medium", s, "of1_scl0_bro0", a)
             write_run(out, "room_medium", s, "of1_scl1_bro1", o + 0.1)
+        # A placeholder (a row held back from training) must not count as a scene's figures.
+        write_run(out, "room_medium", "room_medium_9", "of0_scl0_bro0", 0.0)
+        write_run(out, "room_medium", "room_medium_9", "of1_scl1_bro1", 0.0, placeholder=True)
         # A stale ablation.json naming only one row must not hide the others.
         with open(os.path.join(out, "ablate_room_medium", "ablation.json"), "w") as f:
             json.dump({"runs": []}, f)
@@ -42,7 +45,7 @@ def test_alone_rows_from_separate_calls_are_paired_by_scene():
     alone = [line for line in text.splitlines() if line.startswith("| instances, object |") and "(n = 3)" in line]
     assert any(f"+{statistics.mean(d):.2f} ± {h:.2f} (n = 3)" in line for line in alone), text
     assert "each component alone - all off" in text
-    full_minus_off = f"+10.00 ± 0.00 **clear of 0** (n = 3)"
+    full_minus_off = "+10.00 ± 0.00 **clear of 0** (n = 3)"
     assert full_minus_off in text, text
 
 
