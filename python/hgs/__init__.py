@@ -318,13 +318,15 @@ def _view_list(scene, views):
 
 
 def query(model, scene, text, views=None, min_relevancy=0.0, mask_threshold=0.5, clip=None, session=None,
-          fragment_margin=None):
+          fragment_margin=None, anchor_support=0.0):
     """Answers a text query on a trained hybrid model: returns a QueryResult (objects ranked by their embedding's
     cosine with the text, with their LERF relevancy; the best one that holds Gaussians of its own chosen (the
     anchor), plus every other with relevancy >= min_relevancy when that is > 0, plus the fragments of the anchor:
     labels whose cosine is below its cosine by at most fragment_margin times its lead over the median label and
     whose Gaussians lie where its Gaussians lie, as SAM2 leaves one object under several ids; a rule of hgs,
-    query/fragments.h; None = the library's default, 0 = the anchor alone). views: the views of result.masks
+    query/fragments.h; None = the library's default, 0 = the anchor alone). anchor_support > 0: the anchor must
+    render at least that fraction of the pixels its mask id covers in the training views' masks (a rule of hgs,
+    off by default; needs the scene's masks). views: the views of result.masks
     ("all" = None, "test", "train", or a list of indices / names); masks are rendered when first asked for.
     Texts are embedded from the scene's text_embeddings.json, or by OpenCLIP weights `clip`. A QuerySession
     given as `session` is reused (several queries on one model)."""
@@ -333,15 +335,15 @@ def query(model, scene, text, views=None, min_relevancy=0.0, mask_threshold=0.5,
         raise TypeError(f"query: text must be a str, got {type(text).__name__}")
     if session is None:
         session = QuerySession(scene, model, "" if clip is None else os.fspath(clip))
-    if fragment_margin is None:
-        objects = session.ask(text, float(min_relevancy))
-    else:
-        objects = session.ask(text, float(min_relevancy), float(fragment_margin))
+    kw = {"anchor_support": float(anchor_support)}
+    if fragment_margin is not None:
+        kw["fragment_margin"] = float(fragment_margin)
+    objects = session.ask(text, float(min_relevancy), **kw)
     return QueryResult(session, model, scene, text, objects, _view_list(scene, views), float(mask_threshold))
 
 
 def evaluate(model, scene, protocol="instances", mode="both", relevancy="objects", mask_threshold=0.5, clip=None,
-             overlays=None, progress=False, paper_map=True, queries=None, fragment_margin=None):
+             overlays=None, progress=False, paper_map=True, queries=None, fragment_margin=None, anchor_support=0.0):
     """Evaluates a trained hybrid model with a benchmark protocol (lerf-ovs, 3d-ovs or instances, or a variant:
     3d-ovs-labelled, lerf-ovs-scaled, instances-scaled; see `hgs eval --help`) in object mode, pixel mode or both,
     as `hgs eval` does; returns the report as a dict {"reports": [...]} (report.json's layout: per mode the
@@ -351,12 +353,13 @@ def evaluate(model, scene, protocol="instances", mode="both", relevancy="objects
     "pixel-paper-map", right after the "pixel" one. overlays: a folder for overlay PNGs. queries: a query set of
     the scene's gt/queries.json asked instead of the names (instances protocols: "synonyms", "hypernyms",
     "attributes"). fragment_margin: object mode's fragment rule (see query; None = the library's default, 0 = the
-    anchor alone)."""
+    anchor alone). anchor_support: object mode's anchor support (see query; 0 = off)."""
     scene, model = _as_scene(scene, where="evaluate"), _as_model(model, "evaluate")
     session = QuerySession(scene, model, "" if clip is None else os.fspath(clip))
     args = [protocol, mode, relevancy, float(mask_threshold), "" if overlays is None else os.fspath(overlays),
             bool(progress), bool(paper_map), "" if queries is None else str(queries)]
+    kw = {"anchor_support": float(anchor_support)}
     if fragment_margin is not None:
-        args.append(float(fragment_margin))
-    text = session.evaluate(*args)
+        kw["fragment_margin"] = float(fragment_margin)
+    text = session.evaluate(*args, **kw)
     return json.loads(text)

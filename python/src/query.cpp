@@ -36,9 +36,17 @@ auto locked(LockedSession& ls, F&& fn) {
 
 query::Relevancy relevancy_variant(const std::string& r) { return query::parse_relevancy(r); }
 
-pb::list ask(LockedSession& ls, const std::string& text, float min_relevancy, float fragment_margin) {
+// The anchor's support is a fraction (query::QueryOptions::anchor_support); `where` names the call in the error.
+float checked_support(float r, const char* where) {
+  if (!(r >= 0.f && r <= 1.f)) fail("{}: anchor_support must be in [0, 1], got {}", where, r);
+  return r;
+}
+
+pb::list ask(LockedSession& ls, const std::string& text, float min_relevancy, float fragment_margin,
+             float anchor_support) {
+  const float support = checked_support(anchor_support, "QuerySession.ask");
   const query::ObjectAnswer a = locked(ls, [&](query::Session& s) {
-    return s.ask(text, {min_relevancy, 0.5f, fragment_margin});
+    return s.ask(text, {min_relevancy, 0.5f, fragment_margin, support});
   });
   const query::Session& s = *ls.s;  // object_name reads the scene's names only
   pb::list out;
@@ -72,7 +80,7 @@ pb::array pixel_relevancy(LockedSession& ls, pb::handle view, const std::string&
 
 std::string evaluate(LockedSession& ls, const std::string& protocol, const std::string& mode,
                      const std::string& relevancy, float mask_threshold, const std::string& overlay_dir, bool progress,
-                     bool paper_map, const std::string& queries, float fragment_margin) {
+                     bool paper_map, const std::string& queries, float fragment_margin, float anchor_support) {
   const query::Session& s = *ls.s;
   query::parse_protocol(protocol);  // fails with the list of protocols
   if (mode != "object" && mode != "pixel" && mode != "both")
@@ -90,6 +98,7 @@ std::string evaluate(LockedSession& ls, const std::string& protocol, const std::
   o.progress = progress;
   o.query_set = queries;
   o.fragment_margin = fragment_margin;
+  o.anchor_support = checked_support(anchor_support, "QuerySession.evaluate");
   nlohmann::json reports = nlohmann::json::array();
   locked(ls, [&](query::Session& session) {
     for (const auto& r : query::evaluate_model(session, o)) reports.push_back(eval::report_json(r));
@@ -119,11 +128,13 @@ void bind_query(pb::module_& m) {
            "OpenCLIP weights `clip` (.safetensors) when given. Renders cull at near_plane (default: the model's "
            "near_plane attribute, set by Model.load and hgs.train, else 0.01)")
       .def("ask", &ask, pb::arg("text"), pb::arg("min_relevancy") = 0.f,
-           pb::arg("fragment_margin") = query::kFragmentMargin,
+           pb::arg("fragment_margin") = query::kFragmentMargin, pb::arg("anchor_support") = 0.f,
            "Every object ranked for `text`, best first: dicts with id, name, relevancy, cosine, chosen (the best "
            "one, plus every other with relevancy >= min_relevancy when it is > 0, plus the fragment rule's labels: "
            "within fragment_margin of the best cosine and where its Gaussians lie; a rule of hgs, "
-           "query/fragments.h; 0 = off)")
+           "query/fragments.h; 0 = off) and anchor (the first chosen). anchor_support > 0: the anchor must render at "
+           "least that fraction of the pixels its mask id covers in the training views' masks (a rule of hgs, off "
+           "by default; query/session.h)")
       .def("object_opacity", &object_opacity, pb::arg("view"), pb::arg("objects"),
            "Rendered opacity of the objects in a view, summed: float32 [H, W]")
       .def("pixel_relevancy", &pixel_relevancy, pb::arg("view"), pb::arg("text"), pb::arg("relevancy") = "objects",
@@ -137,10 +148,12 @@ void bind_query(pb::module_& m) {
       .def("evaluate", &evaluate, pb::arg("protocol"), pb::arg("mode") = "both", pb::arg("relevancy") = "objects",
            pb::arg("mask_threshold") = 0.5f, pb::arg("overlay_dir") = "", pb::arg("progress") = false,
            pb::arg("paper_map") = true, pb::arg("queries") = "", pb::arg("fragment_margin") = query::kFragmentMargin,
+           pb::arg("anchor_support") = 0.f,
            "Runs a benchmark protocol (lerf-ovs, 3d-ovs, instances) and returns {\"reports\": [...]} as JSON text; "
            "pixel mode with a relevancy other than lerf adds the paper's language map as mode pixel-paper-map "
            "(paper_map=False: not); queries: a query set of gt/queries.json for the instances protocols (synonyms, "
-           "hypernyms, attributes; empty = the names); fragment_margin: object mode's fragment rule (0 = off)");
+           "hypernyms, attributes; empty = the names); fragment_margin: object mode's fragment rule (0 = off); "
+           "anchor_support: object mode's anchor support (as ask; 0 = off)");
 }
 
 }  // namespace hgs::py

@@ -137,3 +137,17 @@ def test_fragment_margin_and_query_sets(hybrid_model, scene):
     # The tiny scene is of the simple world: it has no query sets, and asking for one names the file.
     with pytest.raises(hgs.Error, match="queries.json"):
         hgs.evaluate(hybrid_model, scene, protocol="instances", mode="object", queries="synonyms")
+
+
+def test_anchor_support(hybrid_model, scene):
+    # The option reaches the C++ rule (query/session.h): on a model whose labels all render their objects the anchor
+    # is the same with and without it; out of [0, 1] it is a one-line error naming the argument.
+    name = phrase_of_an_object(scene)
+    off = hgs.query(hybrid_model, scene, name, fragment_margin=0)
+    on = hgs.query(hybrid_model, scene, name, fragment_margin=0, anchor_support=0.01)
+    assert off.chosen == on.chosen
+    report = hgs.evaluate(hybrid_model, scene, protocol="instances", mode="object", anchor_support=0.01)
+    assert report["reports"][0]["mode"] == "object"
+    for bad in (-0.1, 1.5, float("nan")):
+        with pytest.raises(hgs.Error, match="anchor_support must be in"):
+            hgs.query(hybrid_model, scene, name, anchor_support=bad)

@@ -22,7 +22,7 @@ namespace fs = std::filesystem;
 struct EvalArgs {
   std::string scene, model, protocol = "instances", out, clip, relevancy = "objects", mode = "both", queries;
   int downscale = 1, threads = 0;
-  float mask_threshold = 0.5f, fragment_margin = query::kFragmentMargin;
+  float mask_threshold = 0.5f, fragment_margin = query::kFragmentMargin, anchor_support = 0.f;
   bool no_png = false, quiet = false, no_paper_map = false;
 };
 
@@ -80,6 +80,7 @@ void run_eval(const EvalArgs& a) {
   opt.mask_threshold = a.mask_threshold;
   opt.query_set = a.queries;
   opt.fragment_margin = a.fragment_margin;
+  opt.anchor_support = a.anchor_support;
   if (!a.no_png) opt.overlay_dir = dir / "overlays";
   opt.progress = !a.quiet;
   std::vector<eval::EvalReport> reports = query::evaluate_model(s, opt);
@@ -137,6 +138,12 @@ CommandRegistration reg(
                       "Gaussians lie where its Gaussians lie (the fragments SAM2 leaves of one object; a rule of hgs, "
                       "query/fragments.h); 0 = the anchor alone (the best label that holds Gaussians)")
            ->check(CLI::Range(0.0, 2.0))
+           ->capture_default_str();
+       sub.add_option("--anchor-support", a->anchor_support,
+                      "Object mode: the answer's anchor must render, over the training views, at least this fraction "
+                      "of the pixels its mask id covers in their masks (a rule of hgs, off by default: a label left "
+                      "on a few hidden Gaussians then cannot answer; query/session.h); 0 = off")
+           ->check(CLI::Range(0.0, 1.0))
            ->capture_default_str();
        sub.add_option("--clip", a->clip, "OpenCLIP weights to embed the query texts");
        sub.add_option("--downscale", a->downscale, "Integer image downscale (as used for training)")

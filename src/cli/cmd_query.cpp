@@ -23,7 +23,7 @@ struct QueryArgs {
   std::string scene, model, out, view, split = "test", mode = "object", clip;
   std::vector<std::string> texts;
   int downscale = 1, threads = 0;
-  float min_relevancy = 0, mask_threshold = 0.5f, fragment_margin = query::kFragmentMargin;
+  float min_relevancy = 0, mask_threshold = 0.5f, fragment_margin = query::kFragmentMargin, anchor_support = 0;
   bool quiet = false;
 };
 
@@ -58,7 +58,7 @@ void run_query(const QueryArgs& a) {
   const Scene& scene = session.scene();
   std::vector<int> views = pick_views(scene, a.view, a.split);
   if (views.empty()) fail("--split {}: the scene has no such views", excerpt(a.split));
-  query::QueryOptions qo{a.min_relevancy, a.mask_threshold, a.fragment_margin};
+  query::QueryOptions qo{a.min_relevancy, a.mask_threshold, a.fragment_margin, a.anchor_support};
   nlohmann::json result = {{"scene", fs::absolute(a.scene).lexically_normal().string()},
                            {"model", model_ply(a.model).string()},
                            {"mode", a.mode},
@@ -157,6 +157,12 @@ CommandRegistration reg(
                       "where its Gaussians lie (the fragments SAM2 leaves of one object: a re-born track, a part; a "
                       "rule of hgs, query/fragments.h); 0 = the anchor alone (the best label that holds Gaussians)")
            ->check(CLI::Range(0.0, 2.0))
+           ->capture_default_str();
+       sub.add_option("--anchor-support", a->anchor_support,
+                      "Object mode: the anchor must render, over the training views, at least this fraction of the "
+                      "pixels its mask id covers in their masks (a rule of hgs, off by default; query/session.h); "
+                      "0 = off")
+           ->check(CLI::Range(0.0, 1.0))
            ->capture_default_str();
        sub.add_option("--clip", a->clip,
                       "OpenCLIP weights (.safetensors) to embed the text (else SCENE/text_embeddings.json)");

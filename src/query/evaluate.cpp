@@ -78,7 +78,11 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
   query::Relevancy rel = o.relevancy;  // the pixel report being run
   auto png_dir = [&](const char* mode) { return o.overlay_dir.empty() ? fs::path() : o.overlay_dir / mode; };
   auto object_fn = [&](int view, const std::string& q, std::vector<float>* heat) {
-    return s.answer_mask(view, q, o.mask_threshold, heat, o.fragment_margin);
+    query::QueryOptions qo;
+    qo.mask_threshold = o.mask_threshold;
+    qo.fragment_margin = o.fragment_margin;
+    qo.anchor_support = o.anchor_support;
+    return s.answer_mask(view, q, qo, heat);
   };
   auto pixel_fn = [&](int view, const std::string& q) { return s.pixel_relevancy(view, q, rel); };
   auto pixel_mask_fn = [&](int view, const std::string& q, std::vector<float>* heat) {

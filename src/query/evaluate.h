@@ -55,6 +55,7 @@ struct EvaluateOptions {
   bool paper_map = true;
   float mask_threshold = 0.5f;              // object mode
   float fragment_margin = kFragmentMargin;  // object mode: the fragment rule (query/fragments.h)
+  float anchor_support = 0.f;               // object mode: query::QueryOptions::anchor_support (0 = off)
   std::filesystem::path overlay_dir;        // PNGs under <overlay_dir>/<mode>/ (empty: none)
   bool progress = true;
   std::string query_set;  // instances: a query set of gt/queries.json (eval::RunOptions::query_set); empty = names

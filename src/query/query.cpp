@@ -246,14 +246,22 @@ std::vector<std::vector<float>> render_relevancies(render::GaussianRenderer& r, 
 }
 
 std::vector<int> choose_objects(const std::vector<ObjectScore>& scores, float min_relevancy, const std::string& text,
-                                float fragment_margin, const std::vector<LabelBox>* boxes) {
+                                float fragment_margin, const std::vector<LabelBox>* boxes,
+                                const std::vector<uint8_t>* anchorable) {
   if (scores.empty()) fail("the model has no foreground objects to answer \"{}\"", excerpt(text));
   // The anchor: the best label that holds Gaussians of its own (a valid box). A label that lost its Gaussians to
   // another id keeps an embedding pooled from its soft probabilities q_{n,k}, and can rank first, but renders
   // nothing; without boxes, or when no label has one, the best label.
+  // With `anchorable`, first the best label that also renders what its mask id covered (session.h:
+  // QueryOptions::anchor_support).
   auto has_box = [&](int k) { return boxes && size_t(k) < boxes->size() && (*boxes)[k].valid; };
+  auto may_anchor = [&](int k) { return !anchorable || (size_t(k) < anchorable->size() && (*anchorable)[k]); };
   size_t a = 0;
-  while (a < scores.size() && !has_box(scores[a].object)) ++a;
+  while (a < scores.size() && !(has_box(scores[a].object) && may_anchor(scores[a].object))) ++a;
+  if (a == scores.size()) {
+    a = 0;
+    while (a < scores.size() && !has_box(scores[a].object)) ++a;
+  }
   if (a == scores.size()) a = 0;
   const int best = scores[a].object;
   std::vector<int> chosen = {best};

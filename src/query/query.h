@@ -15,6 +15,7 @@
 // scores its field.
 // 3D selection: the Gaussians whose hard id z_n is one of the chosen objects (or all others, for removal).
 #pragma once
+#include <cstdint>
 #include <map>
 #include <string>
 #include <vector>
@@ -52,9 +53,11 @@ std::vector<ObjectScore> score_objects(const ObjectEmbeddings& oe, const float* 
 // that OF left without Gaussians renders nothing), or the best label if none has one.
 // With fragment_margin > 0 and `boxes`, also every label whose cosine is below the anchor's by at most
 // fragment_margin times the anchor's lead over the median label, and whose box meets the anchor's (the fragment
-// rule).
+// rule). Given `anchorable` ([L], 1 = may anchor; session.h: QueryOptions::anchor_support), the anchor is the best
+// label with a valid box that is also anchorable, falling back to the rule above when none is.
 std::vector<int> choose_objects(const std::vector<ObjectScore>& scores, float min_relevancy, const std::string& text,
-                                float fragment_margin = 0, const std::vector<LabelBox>* boxes = nullptr);
+                                float fragment_margin = 0, const std::vector<LabelBox>* boxes = nullptr,
+                                const std::vector<uint8_t>* anchorable = nullptr);
 
 // Opacity render of objects `ks` (channel j = A_{ks[j]}). Returns [H, W, J].
 std::vector<float> render_object_opacity(render::GaussianRenderer& r, const GaussianModel& m, const render::Camera& cam,

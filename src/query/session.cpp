@@ -1,5 +1,7 @@
 #include "query/session.h"
 
+#include <algorithm>
+
 #include "core/error.h"
 #include "model/near_plane.h"
 #include "model/ply.h"
@@ -47,8 +49,47 @@ ObjectAnswer Session::ask(const std::string& text, const QueryOptions& opt) {
   a.text = text;
   const auto& e = text_.embed(text);
   a.scores = score_objects(oe_, e.data(), text_.canonical());
-  a.chosen = choose_objects(a.scores, opt.min_relevancy, text, opt.fragment_margin, &boxes_);
+  std::vector<uint8_t> anchorable;
+  if (opt.anchor_support > 0) {
+    const std::vector<double>&masks = mask_area(), &rendered = rendered_area(opt.mask_threshold);
+    anchorable.resize(oe_.num_labels);
+    for (int k = 0; k < oe_.num_labels; ++k) anchorable[k] = rendered[k] >= opt.anchor_support * masks[k];
+  }
+  a.chosen = choose_objects(a.scores, opt.min_relevancy, text, opt.fragment_margin, &boxes_,
+                            anchorable.empty() ? nullptr : &anchorable);
   return a;
+}
+
+const std::vector<double>& Session::mask_area() {
+  if (!mask_area_.empty()) return mask_area_;
+  if (!scene_->has_masks())
+    fail("{}: the anchor's support (--anchor-support) needs the scene's masks/", scene_->root.string());
+  std::vector<double> area(oe_.num_labels, 0.0);
+  for (int v : scene_->train_indices()) {
+    const auto m = scene_->load_mask(v);
+    if (!m) continue;
+    for (const uint16_t id : m->v)
+      if (id < area.size()) area[id] += 1;
+  }
+  return mask_area_ = std::move(area);
+}
+
+const std::vector<double>& Session::rendered_area(float threshold) {
+  if (!rendered_area_.empty() && rendered_threshold_ == threshold) return rendered_area_;
+  const int L = oe_.num_labels;
+  std::vector<double> area(L, 0.0);
+  // Every label's opacity in each training view, in groups of 16 channels (a bounded buffer at any size).
+  for (int v : scene_->train_indices())
+    for (int k0 = 1; k0 < L; k0 += 16) {
+      std::vector<int> ks;
+      for (int k = k0; k < std::min(L, k0 + 16); ++k) ks.push_back(k);
+      const std::vector<float> A = render_object_opacity(renderer_, *model_, camera(v), ks);
+      const size_t J = ks.size(), HW = A.size() / J;
+      for (size_t p = 0; p < HW; ++p)
+        for (size_t j = 0; j < J; ++j) area[ks[j]] += A[p * J + j] > threshold;
+    }
+  rendered_threshold_ = threshold;
+  return rendered_area_ = std::move(area);
 }
 
 std::vector<float> Session::object_opacity(int view, const std::vector<int>& objects) {
@@ -70,11 +111,9 @@ eval::Mask Session::object_mask(int view, const std::vector<int>& objects, float
   return m;
 }
 
-eval::Mask Session::answer_mask(int view, const std::string& text, float threshold, std::vector<float>* opacity,
-                                float fragment_margin) {
-  QueryOptions o;
-  o.fragment_margin = fragment_margin;
-  return object_mask(view, ask(text, o).chosen, threshold, opacity);
+eval::Mask Session::answer_mask(int view, const std::string& text, const QueryOptions& opt,
+                                std::vector<float>* opacity) {
+  return object_mask(view, ask(text, opt).chosen, opt.mask_threshold, opacity);
 }
 
 std::vector<float> Session::pixel_relevancy(int view, const std::string& text, Relevancy variant) {

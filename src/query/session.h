@@ -23,6 +23,12 @@ struct QueryOptions {
   // The fragment rule (fragments.h, a rule of this project): labels within this cosine of the anchor (query.h:
   // choose_objects) whose Gaussians lie where its Gaussians lie join the answer; 0 = the anchor alone.
   float fragment_margin = kFragmentMargin;
+  // > 0: the anchor (query.h: choose_objects) must render, over the training views, at least this fraction of the
+  // pixels its mask id covers in those views' masks (rendered opacity > mask_threshold). A rule of this project,
+  // off by default: a label that OF left on a few Gaussians hidden under a surface, or on almost none of the
+  // object it labelled, can outrank the object's visible label and answer with nothing (docs/ablation.md, "OF
+  // alone on tabletop 7003"). Needs the scene's masks/; counted once per session and mask_threshold.
+  float anchor_support = 0.f;
 };
 
 struct ObjectAnswer {
@@ -56,10 +62,14 @@ class Session {
   // Mask of the chosen objects: their summed opacity > threshold; `opacity` (optional) receives that sum.
   eval::Mask object_mask(int view, const std::vector<int>& objects, float threshold,
                          std::vector<float>* opacity = nullptr);
-  // Object-level answer in one view: the labels chosen for `text` (ask, with the fragment rule's margin), their
-  // mask and (optionally) their opacity.
-  eval::Mask answer_mask(int view, const std::string& text, float threshold, std::vector<float>* opacity = nullptr,
-                         float fragment_margin = kFragmentMargin);
+  // Object-level answer in one view: the labels chosen for `text` (ask with `opt`), their mask (opacity >
+  // opt.mask_threshold) and (optionally) their opacity.
+  eval::Mask answer_mask(int view, const std::string& text, const QueryOptions& opt,
+                         std::vector<float>* opacity = nullptr);
+  // Per label [L]: pixels its id covers in the training views' masks, and pixels where its rendered opacity is
+  // above `threshold` in those views (QueryOptions::anchor_support; counted on first use, then kept).
+  const std::vector<double>& mask_area();
+  const std::vector<double>& rendered_area(float threshold);
   // Relevancy of a rendered language map (query.h, Relevancy): [H, W].
   std::vector<float> pixel_relevancy(int view, const std::string& text, Relevancy variant = Relevancy::Objects);
   // The same for several texts from one render of the view's language map: [T][H, W].
@@ -71,7 +81,9 @@ class Session {
   std::shared_ptr<const GaussianModel> model_;
   TextEmbedder text_;
   ObjectEmbeddings oe_;
-  std::vector<LabelBox> boxes_;  // [L] for the fragment rule (fragments.h)
+  std::vector<LabelBox> boxes_;                    // [L] for the fragment rule (fragments.h)
+  std::vector<double> mask_area_, rendered_area_;  // [L] each, empty until counted
+  float rendered_threshold_ = -1.f;                // the threshold rendered_area_ was counted at
   render::GaussianRenderer renderer_;
   float near_plane_ = render::kDefaultNearPlane;
 

@@ -34,9 +34,7 @@ eval::MeanRow train_and_evaluate(const std::filesystem::path& scene_dir, const S
   query::Session s(scene_dir, ply, 1, "");
   eval::RunOptions opt;
   opt.progress = false;
-  auto fn = [&](int view, const std::string& q, std::vector<float>* heat) {
-    return s.answer_mask(view, q, 0.5f, heat);
-  };
+  auto fn = [&](int view, const std::string& q, std::vector<float>* heat) { return s.answer_mask(view, q, {}, heat); };
   return eval::scene_mean(eval::run_instances(s.scene(), fn, opt));
 }
 

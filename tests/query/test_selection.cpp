@@ -145,6 +145,13 @@ TEST(ChooseObjects, TheAnchorIsTheBestLabelThatHoldsGaussians) {
   EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.25f, nullptr), (std::vector<int>{7}));
   const std::vector<query::LabelBox> none(10);
   EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.25f, &none), (std::vector<int>{7}));
+  // With `anchorable` (the anchor's support, session.h): 2 renders too little of its mask, so 4 anchors, alone
+  // (3 is near 2, not near 4); when no label with a box is anchorable, the rule without it.
+  std::vector<uint8_t> ok(10, 1);
+  ok[2] = 0;
+  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.25f, &boxes, &ok), (std::vector<int>{4}));
+  const std::vector<uint8_t> nobody(10, 0);
+  EXPECT_EQ(query::choose_objects(s, 0.f, "mug", 0.25f, &boxes, &nobody), (std::vector<int>{2, 3}));
 }
 
 TEST(LabelBoxes, PercentilesOfTheOpaqueGaussiansOfEachLabel) {
