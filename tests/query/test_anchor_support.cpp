@@ -36,15 +36,20 @@ bool in_view(const View& v, const Eigen::Vector3f& p) {
   return x > -v.width && y > -v.height && x < 2 * v.width && y < 2 * v.height;  // with a margin of one image
 }
 
+// A simple-world scene written to `dir` by `hgs synth` with `args`.
+void synth(const fs::path& dir, const std::string& args) {
+  const auto r =
+      test::run_hgs("synth --world simple --out '" + dir.string() + "' " + args + " --supersample 1 --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+}
+
 }  // namespace
 
 TEST(AnchorSupport, AHiddenLabelCannotAnchorTheAnswerWhenTheOptionAsks) {
   test::TempDir tmp;
   const fs::path dir = tmp / "scene";
-  auto r = test::run_hgs("synth --world simple --out '" + dir.string() +
-                         "' --views 12 --width 96 --height 72 --objects 3 --points 3000 --noise low --feature-dim 32 "
-                         "--supersample 1 --seed 4 --quiet");
-  ASSERT_EQ(r.exit_code, 0) << r.err;
+  ASSERT_NO_FATAL_FAILURE(
+      synth(dir, "--views 12 --width 96 --height 72 --objects 3 --points 3000 --noise low --feature-dim 32 --seed 4"));
   auto scene = std::make_shared<Scene>(load_scene(dir));
   const Scene& s = *scene;
   const int K = s.num_objects(), L = K + 2, hidden = 2, visible = K + 1;  // label K+1: in no mask
@@ -136,10 +141,7 @@ TEST(AnchorSupport, AHiddenLabelCannotAnchorTheAnswerWhenTheOptionAsks) {
 TEST(AnchorSupport, WithoutMasksItIsAClearError) {
   test::TempDir tmp;
   const fs::path dir = tmp / "scene";
-  auto r = test::run_hgs("synth --world simple --out '" + dir.string() +
-                         "' --views 8 --width 64 --height 48 --objects 2 --points 1000 --feature-dim 16 "
-                         "--supersample 1 --quiet");
-  ASSERT_EQ(r.exit_code, 0) << r.err;
+  ASSERT_NO_FATAL_FAILURE(synth(dir, "--views 8 --width 64 --height 48 --objects 2 --points 1000 --feature-dim 16"));
   fs::remove_all(dir / "masks");
   auto scene = std::make_shared<Scene>(load_scene(dir));
   GaussianModel m = init_from_points(scene->points, scene->point_colors, 0);
