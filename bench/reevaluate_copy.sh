@@ -6,8 +6,10 @@
 #   bench/reevaluate_copy.sh HGS RUN_OUT NEW_OUT GROUP [ROWS]     # GROUP e.g. room_high; ROWS as the run's (all)
 #   (ROWS may list --rows values, e.g. single,ends: each is evaluated again, every row the run holds must be in one)
 #   python3 bench/revalidate_report.py NEW_OUT                   # the tables, as for the run
+# QUERY_ARGS="--anchor-support 0.1" passes query options to both the ablation's evaluation and the query sets.
 set -euo pipefail
-if [ $# -lt 4 ]; then sed -n '2,8p' "$0" | sed 's/^# \{0,1\}//'; exit 2; fi
+if [ $# -lt 4 ]; then sed -n '2,9p' "$0" | sed 's/^# \{0,1\}//'; exit 2; fi
+read -r -a query_args <<<"${QUERY_ARGS:-}"
 HGS="$(realpath "$1")" SRC="$(realpath "$2")" DST="$3" G="$4" ROWS="${5:-all}"
 [ -x "$HGS" ] || { echo "reevaluate_copy.sh: $1 is not an executable" >&2; exit 2; }
 [ -d "$SRC/ablate_$G" ] || { echo "reevaluate_copy.sh: no $SRC/ablate_$G (a group of bench/revalidate.sh)" >&2; exit 2; }
@@ -24,7 +26,8 @@ for s in "$DST"/scenes/"$G"_*; do scenes+=("$s"); done
 IFS=, read -r -a row_sets <<<"$ROWS"
 for rows in "${row_sets[@]}"; do
   "$HGS" ablate "${scenes[@]}" --out "$DST/ablate_$G" --rows "$rows" --iters 1500 --seed 3 \
-    --protocol instances,3d-ovs --mode both --reevaluate --quiet
+    --protocol instances,3d-ovs --mode both --reevaluate --quiet "${query_args[@]}"
 done
-"$(dirname "$0")/query_sets.sh" "$HGS" "$DST" "$G"  # the run's queries_*.json were not copied: all asked again
+# The run's queries_*.json were not copied: all asked again.
+QUERY_ARGS="${QUERY_ARGS:-}" "$(dirname "$0")/query_sets.sh" "$HGS" "$DST" "$G"
 echo "bench/reevaluate_copy.sh: $DST/ablate_$G (python3 bench/revalidate_report.py $DST)"

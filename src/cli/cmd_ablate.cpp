@@ -43,6 +43,7 @@ struct AblateArgs {
   std::vector<std::string> scenes;
   std::string out, rows = "all", protocol = "auto", mode = "object", relevancy = "objects", scl_background = "auto";
   int iters = 3000, downscale = 1, threads = 0, seeds = 1, objects_per_step = 0;
+  float anchor_support = 0.f;  // object mode: query::QueryOptions::anchor_support (0 = off)
   uint64_t seed = 0;
   bool eq15_row = false, reevaluate = false, quiet = false, no_paper_map = false;
 };
@@ -116,10 +117,13 @@ void evaluate_run(const AblateArgs& a, const std::string& scene_path, const std:
     eo.pixel = a.mode != "object";
     eo.relevancy = query::parse_relevancy(a.relevancy);
     eo.paper_map = !a.no_paper_map;
+    eo.anchor_support = a.anchor_support;
     eo.progress = false;
     for (auto& r : query::evaluate_model(s, eo)) reports.push_back(std::move(r));
   }
   eval::write_reports(dir / "report.json", dir / "report.md", reports);
+  if (a.anchor_support > 0) run["anchor_support"] = a.anchor_support;
+  else run.erase("anchor_support");
   run["results"] = json::object();
   for (const auto& r : reports) {
     const eval::MeanRow m = eval::scene_mean(r);
@@ -318,6 +322,7 @@ std::string write_summary(const AblateArgs& a, size_t num_scenes, const std::vec
                   {"paper_map", !a.no_paper_map},
                   {"scl_background", a.scl_background},
                   {"objects_per_step", a.objects_per_step},
+                  {"anchor_support", a.anchor_support},
                   {"summary", row_summaries(rows, t)},
                   {"paired", paired_json},
                   {"runs", t.runs}};
@@ -336,7 +341,8 @@ std::optional<json> reusable_run(const AblateArgs& a, const std::string& scene_p
   try {
     json p = json::parse(read_file_text(prev));
     const bool same = p.at("iters").get<int>() == a.iters && p.value("objects_per_step", 0) == a.objects_per_step;
-    bool ok = same;
+    // Figures evaluated with another anchor support are not these (--reevaluate evaluates them again).
+    bool ok = same && p.value("anchor_support", 0.f) == a.anchor_support;
     for (const auto& proto : protocols)
       for (const char* m : {"object", "pixel"})
         if ((a.mode == "both" || a.mode == m) && !p.at("results").contains(proto + "/" + m)) ok = false;
@@ -444,6 +450,12 @@ CommandRegistration reg(
        sub.add_flag("--no-paper-map", a->no_paper_map,
                     "Pixel mode with a --relevancy other than lerf: do not also evaluate the paper's language map "
                     "(by default under <protocol>/pixel-paper-map, with its own tables)");
+       sub.add_option("--anchor-support", a->anchor_support,
+                      "Object mode: the answer's anchor must render this fraction of its mask id's pixels in the "
+                      "training views (as `hgs eval --anchor-support`; a rule of hgs, off by default); runs on disk "
+                      "evaluated with another value are not reused (with --reevaluate, evaluated again)")
+           ->check(CLI::Range(0.0, 1.0))
+           ->capture_default_str();
        sub.add_option("--scl-background", a->scl_background, "As `hgs train --scl-background` (every row)")
            ->check(CLI::IsMember({"auto", "on", "off"}))
            ->capture_default_str();

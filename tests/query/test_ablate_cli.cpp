@@ -128,6 +128,24 @@ TEST(AblateCli, RowsSeedsProtocolsModesAndResume) {
       ASSERT_TRUE(res.contains(key)) << key;
     EXPECT_EQ(res["instances-scaled/object"], res["instances/object"]);
   }
+  // --anchor-support: the kept models evaluated with it say so in run.json, and are reused only with the same value.
+  const std::string support =
+      "ablate " + s + " --out " + out + " --iters 30 --rows ends --seeds 2 --protocol instances";
+  r = test::run_hgs(support + " --anchor-support 0.01 --reevaluate --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const auto& run : nlohmann::json::parse(read_file_text(tmp / "a" / "ablation.json"))["runs"])
+    EXPECT_FLOAT_EQ(run["run"].value("anchor_support", 0.f), 0.01f);
+  auto count = [](const std::string& out, const std::string& what) {
+    size_t n = 0;
+    for (size_t p = out.find(what); p != std::string::npos; p = out.find(what, p + 1)) ++n;
+    return n;
+  };
+  r = test::run_hgs(support + " --anchor-support 0.01");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(count(r.out, "(reused)"), 4u) << r.out;
+  r = test::run_hgs(support + " --anchor-support 0.02");  // other figures: trained and evaluated again
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(count(r.out, "(reused)"), 0u) << r.out;
   // --rows single: the three rows with one component on, nothing else (with leave-one-out, the 8 rows).
   r = test::run_hgs("ablate " + s + " --out " + (tmp / "single").string() +
                     " --iters 5 --rows single --protocol instances --quiet");
