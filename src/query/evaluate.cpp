@@ -1,6 +1,7 @@
 #include "query/evaluate.h"
 
 #include <algorithm>
+#include <cmath>
 
 #include "core/error.h"
 #include "core/excerpt.h"
@@ -136,6 +137,9 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
     }
     reports.back().mode = "object";
     reports.back().protocol = spec.name;
+    // The anchor's rule when it is not the default's (3D-OVS classifies every label and uses no anchor).
+    if (o.anchor_support > 0 && spec.labels != "3d-ovs")
+      reports.back().extra["anchor_support"] = std::round(double(o.anchor_support) * 1e6) / 1e6;
   };
   if (spec.labels == "instances") {
     if (o.object) run_object();

@@ -135,6 +135,10 @@ TEST(AblateCli, RowsSeedsProtocolsModesAndResume) {
   ASSERT_EQ(r.exit_code, 0) << r.err;
   for (const auto& run : nlohmann::json::parse(read_file_text(tmp / "a" / "ablation.json"))["runs"])
     EXPECT_FLOAT_EQ(run["run"].value("anchor_support", 0.f), 0.01f);
+  // Each run's report names it beside its object-mode figures.
+  const auto rep = nlohmann::json::parse(read_file_text(tmp / "a" / "s" / "seed0" / "of0_scl0_bro0" / "report.json"));
+  EXPECT_EQ(rep["reports"][0]["mode"], "object");
+  EXPECT_EQ(rep["reports"][0]["extra"].value("anchor_support", 0.0), 0.01);
   auto count = [](const std::string& out, const std::string& what) {
     size_t n = 0;
     for (size_t p = out.find(what); p != std::string::npos; p = out.find(what, p + 1)) ++n;
