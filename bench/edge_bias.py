@@ -18,9 +18,11 @@ import os
 import sys
 
 import numpy as np
-from PIL import Image
 
-import hgs
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from fragments import truth  # noqa: E402  (the scene's ground-truth instance maps)
+
+import hgs  # noqa: E402
 
 
 def boundary(g):
@@ -28,11 +30,6 @@ def boundary(g):
     p = np.pad(g, 1)
     inner = p[1:-1, 1:-1] & p[:-2, 1:-1] & p[2:, 1:-1] & p[1:-1, :-2] & p[1:-1, 2:]
     return g & ~inner
-
-
-def truth(scene_dir, s, i):
-    stem = os.path.splitext(s.views[i].name)[0]
-    return np.array(Image.open(os.path.join(scene_dir, "gt", "instances", stem + ".png")))
 
 
 def main(scene_dir, models):
@@ -59,6 +56,7 @@ def main(scene_dir, models):
     mask_off = {k: diff[k] / perim[k] if perim[k] else float("nan") for k in objects}
     rows = {k: [mask_off[k]] for k in objects}
     names = {k: p for p, k in queries.items()}
+    gt = {i: truth(scene_dir, s, i) for i in test}
     for model_dir in models:
         m = hgs.Model.load(model_dir)
         session = hgs.QuerySession(s, m, "")
@@ -67,10 +65,10 @@ def main(scene_dir, models):
             d = p_ = 0.0
             ious = []
             for i in test:
-                g = truth(scene_dir, s, i) == k
+                g = gt[i] == k
                 if not g.any():
                     continue
-                a = sum(np.asarray(session.object_opacity(i, [c])) for c in chosen) > 0.5
+                a = np.asarray(session.object_opacity(i, chosen)) > 0.5  # the chosen labels' opacity, summed
                 d += float(a.sum()) - float(g.sum())
                 p_ += float(boundary(g).sum())
                 ious.append((a & g).sum() / max(1, (a | g).sum()))

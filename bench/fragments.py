@@ -19,6 +19,12 @@ from PIL import Image
 import hgs
 
 
+def truth(scene_dir, s, i):
+    """The ground-truth instance map of view i of scene s (loaded from scene_dir): [H, W] object ids."""
+    stem = os.path.splitext(s.views[i].name)[0]
+    return np.array(Image.open(os.path.join(scene_dir, "gt", "instances", stem + ".png")))
+
+
 def load(scene_dir, model_dir, qset="names"):
     """The scene, the model, the query set {phrase: object id}, the test views, each test view's rendered label
     opacities A[i] [H, W, L] and ground-truth instance map G[i] [H, W]."""
@@ -33,8 +39,7 @@ def load(scene_dir, model_dir, qset="names"):
     A, G = {}, {}
     for i in test:
         A[i] = hgs.render(m, s, i, objects=True)["objects"]
-        stem = os.path.splitext(s.views[i].name)[0]
-        G[i] = np.array(Image.open(os.path.join(scene_dir, "gt", "instances", stem + ".png")))
+        G[i] = truth(scene_dir, s, i)
     return s, m, queries, test, A, G
 
 

@@ -15,7 +15,8 @@ import sys
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from edge_bias import boundary, truth  # noqa: E402
+from edge_bias import boundary  # noqa: E402
+from fragments import truth  # noqa: E402
 
 import hgs  # noqa: E402
 
@@ -43,6 +44,8 @@ def main(scene_dir, model_a, model_b):
     queries = json.load(open(os.path.join(scene_dir, "gt", "queries.json")))["names"]
     test = [i for i, v in enumerate(s.views) if v.is_test]
     sessions = [hgs.QuerySession(s, hgs.Model.load(m), "") for m in (model_a, model_b)]
+    gt = {i: truth(scene_dir, s, i) for i in test}
+    masks = {i: np.asarray(s.mask(i)) for i in test}
     regions = ["on the outer boundary", "at a seam", "where the mask says 0"]
     n = {"object": 0, "lost": 0, "gained": 0}
     n.update({r: 0 for r in regions})
@@ -50,11 +53,11 @@ def main(scene_dir, model_a, model_b):
     for name, k in queries.items():
         chosen = [[o["id"] for o in se.ask(name) if o["chosen"]] for se in sessions]
         for i in test:
-            g = truth(scene_dir, s, i) == k
+            g = gt[i] == k
             if not g.any():
                 continue
-            a, b = (sum(np.asarray(se.object_opacity(i, [c])) for c in ch) > 0.5 for se, ch in zip(sessions, chosen))
-            m = np.asarray(s.mask(i))
+            a, b = (np.asarray(se.object_opacity(i, ch)) > 0.5 for se, ch in zip(sessions, chosen))
+            m = masks[i]
             lost = g & a & ~b
             n["object"] += g.sum()
             n["lost"] += lost.sum()

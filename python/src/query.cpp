@@ -93,12 +93,12 @@ std::string evaluate(LockedSession& ls, const std::string& protocol, const std::
   o.pixel = mode != "object";
   o.relevancy = relevancy_variant(relevancy);
   o.paper_map = paper_map;
-  o.mask_threshold = mask_threshold;
+  o.object_query.mask_threshold = mask_threshold;
   o.overlay_dir = overlay_dir;
   o.progress = progress;
   o.query_set = queries;
-  o.fragment_margin = fragment_margin;
-  o.anchor_support = checked_support(anchor_support, "QuerySession.evaluate");
+  o.object_query.fragment_margin = fragment_margin;
+  o.object_query.anchor_support = checked_support(anchor_support, "QuerySession.evaluate");
   nlohmann::json reports = nlohmann::json::array();
   locked(ls, [&](query::Session& session) {
     for (const auto& r : query::evaluate_model(session, o)) reports.push_back(eval::report_json(r));

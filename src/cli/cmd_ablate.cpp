@@ -117,7 +117,7 @@ void evaluate_run(const AblateArgs& a, const std::string& scene_path, const std:
     eo.pixel = a.mode != "object";
     eo.relevancy = query::parse_relevancy(a.relevancy);
     eo.paper_map = !a.no_paper_map;
-    eo.anchor_support = a.anchor_support;
+    eo.object_query.anchor_support = a.anchor_support;
     eo.progress = false;
     for (auto& r : query::evaluate_model(s, eo)) reports.push_back(std::move(r));
   }

@@ -77,10 +77,10 @@ void run_eval(const EvalArgs& a) {
   opt.pixel = a.mode != "object";
   opt.relevancy = query::parse_relevancy(a.relevancy);
   opt.paper_map = !a.no_paper_map;
-  opt.mask_threshold = a.mask_threshold;
+  opt.object_query.mask_threshold = a.mask_threshold;
+  opt.object_query.fragment_margin = a.fragment_margin;
+  opt.object_query.anchor_support = a.anchor_support;
   opt.query_set = a.queries;
-  opt.fragment_margin = a.fragment_margin;
-  opt.anchor_support = a.anchor_support;
   if (!a.no_png) opt.overlay_dir = dir / "overlays";
   opt.progress = !a.quiet;
   std::vector<eval::EvalReport> reports = query::evaluate_model(s, opt);

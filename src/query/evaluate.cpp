@@ -79,11 +79,7 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
   query::Relevancy rel = o.relevancy;  // the pixel report being run
   auto png_dir = [&](const char* mode) { return o.overlay_dir.empty() ? fs::path() : o.overlay_dir / mode; };
   auto object_fn = [&](int view, const std::string& q, std::vector<float>* heat) {
-    query::QueryOptions qo;
-    qo.mask_threshold = o.mask_threshold;
-    qo.fragment_margin = o.fragment_margin;
-    qo.anchor_support = o.anchor_support;
-    return s.answer_mask(view, q, qo, heat);
+    return s.answer_mask(view, q, o.object_query, heat);
   };
   auto pixel_fn = [&](int view, const std::string& q) { return s.pixel_relevancy(view, q, rel); };
   auto pixel_mask_fn = [&](int view, const std::string& q, std::vector<float>* heat) {
@@ -138,8 +134,8 @@ std::vector<eval::EvalReport> evaluate_model(query::Session& s, const EvaluateOp
     reports.back().mode = "object";
     reports.back().protocol = spec.name;
     // The anchor's rule when it is not the default's (3D-OVS classifies every label and uses no anchor).
-    if (o.anchor_support > 0 && spec.labels != "3d-ovs")
-      reports.back().extra["anchor_support"] = std::round(double(o.anchor_support) * 1e6) / 1e6;
+    if (o.object_query.anchor_support > 0 && spec.labels != "3d-ovs")
+      reports.back().extra["anchor_support"] = std::round(double(o.object_query.anchor_support) * 1e6) / 1e6;
   };
   if (spec.labels == "instances") {
     if (o.object) run_object();

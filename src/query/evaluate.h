@@ -53,10 +53,9 @@ struct EvaluateOptions {
   // Pixel mode with a relevancy other than Lerf: also the paper's map (Relevancy::Lerf) as a second pixel report,
   // mode "pixel-paper-map", right after the first (overlays under <overlay_dir>/pixel-paper-map/).
   bool paper_map = true;
-  float mask_threshold = 0.5f;              // object mode
-  float fragment_margin = kFragmentMargin;  // object mode: the fragment rule (query/fragments.h)
-  float anchor_support = 0.f;               // object mode: query::QueryOptions::anchor_support (0 = off)
-  std::filesystem::path overlay_dir;        // PNGs under <overlay_dir>/<mode>/ (empty: none)
+  // Object mode: how an answer's labels are chosen and masked (mask threshold, fragment rule, anchor support).
+  QueryOptions object_query;
+  std::filesystem::path overlay_dir;  // PNGs under <overlay_dir>/<mode>/ (empty: none)
   bool progress = true;
   std::string query_set;  // instances: a query set of gt/queries.json (eval::RunOptions::query_set); empty = names
 };

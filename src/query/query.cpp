@@ -256,12 +256,13 @@ std::vector<int> choose_objects(const std::vector<ObjectScore>& scores, float mi
   // QueryOptions::anchor_support).
   auto has_box = [&](int k) { return boxes && size_t(k) < boxes->size() && (*boxes)[k].valid; };
   auto may_anchor = [&](int k) { return !anchorable || (size_t(k) < anchorable->size() && (*anchorable)[k]); };
-  size_t a = 0;
-  while (a < scores.size() && !(has_box(scores[a].object) && may_anchor(scores[a].object))) ++a;
-  if (a == scores.size()) {
-    a = 0;
-    while (a < scores.size() && !has_box(scores[a].object)) ++a;
-  }
+  auto first = [&](auto&& ok) {  // the best label that passes `ok`, or scores.size()
+    size_t i = 0;
+    while (i < scores.size() && !ok(scores[i].object)) ++i;
+    return i;
+  };
+  size_t a = first([&](int k) { return has_box(k) && may_anchor(k); });
+  if (a == scores.size()) a = first(has_box);
   if (a == scores.size()) a = 0;
   const int best = scores[a].object;
   std::vector<int> chosen = {best};
