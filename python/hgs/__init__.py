@@ -326,8 +326,9 @@ def query(model, scene, text, views=None, min_relevancy=0.0, mask_threshold=0.5,
     whose Gaussians lie where its Gaussians lie, as SAM2 leaves one object under several ids; a rule of hgs,
     query/fragments.h; None = the library's default, 0 = the anchor alone). anchor_support > 0: the anchor must
     render at least that fraction of the pixels its mask id covers in the training views' masks (a rule of hgs,
-    off by default; needs the scene's masks). views: the views of result.masks
-    ("all" = None, "test", "train", or a list of indices / names); masks are rendered when first asked for.
+    off by default; 0.25 was chosen on the development seeds, docs/ablation.md; needs the scene's masks). views:
+    the views of result.masks ("all" = None, "test", "train", or a list of indices / names); masks are rendered
+    when first asked for.
     Texts are embedded from the scene's text_embeddings.json, or by OpenCLIP weights `clip`. A QuerySession
     given as `session` is reused (several queries on one model)."""
     scene, model = _as_scene(scene, where="query"), _as_model(model, "query")

@@ -142,7 +142,8 @@ CommandRegistration reg(
        sub.add_option("--anchor-support", a->anchor_support,
                       "Object mode: the answer's anchor must render, over the training views, at least this fraction "
                       "of the pixels its mask id covers in their masks (a rule of hgs, off by default: a label left "
-                      "on a few hidden Gaussians then cannot answer; query/session.h); 0 = off")
+                      "on a few hidden Gaussians then cannot answer; query/session.h); 0 = off; 0.25 was chosen on the "
+                      "development seeds for the rows with one component (docs/ablation.md)")
            ->check(CLI::Range(0.0, 1.0))
            ->capture_default_str();
        sub.add_option("--clip", a->clip, "OpenCLIP weights to embed the query texts");
