@@ -16,7 +16,7 @@ import subprocess
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from revalidate_report import finished_runs, t95  # noqa: E402  (the same run files and statistic)
+from revalidate_report import cell, finished_runs  # noqa: E402  (the same run files and statistic)
 
 
 def evaluate(hgs, scene, model, r, out):
@@ -58,9 +58,7 @@ def main(hgs, out, rs):
             cells = [f"{sum(v[0] for v in scenes.values()) / n:.2f}"]
             for j in range(1, len(rs)):
                 d = [v[j] - v[0] for v in scenes.values()]
-                mean = sum(d) / n
-                half = t95(n) * (sum((x - mean) ** 2 for x in d) / (n - 1) / n) ** 0.5 if n > 1 else float("nan")
-                cells.append(f"{sum(v[j] for v in scenes.values()) / n:.2f} ({mean:+.2f} ± {half:.2f})")
+                cells.append(f"{sum(v[j] for v in scenes.values()) / n:.2f}, {cell(d)}")
                 falls += [(group, s, row, rs[j], v[j] - v[0]) for s, v in scenes.items() if v[j] - v[0] < -0.5]
             print(f"| {row} | {n} | " + " | ".join(cells) + " |")
     print("\nfalls of more than 0.5:" + ("" if falls else " none"))
