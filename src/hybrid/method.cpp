@@ -101,6 +101,7 @@ void HybridMethod::prepare(const train::ViewStep& v, const train::PrepareIO& io)
     io.channels.group_ptr = groups_.ptr.data();
     io.channels.group_id = groups_.id.data();
     io.channels.group_val = groups_.val.data();
+    io.channels.group_planes = true;  // one plane per object: the object losses read its pixels contiguously
   } else {
     object_channels(n, L, layout_, objects_.data(), q, io.projected.colors, channels_.data());
   }
@@ -133,7 +134,7 @@ void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
     // buffer); their sum goes to the base colour's gradient, overwritten by the object losses. The S others (the
     // no-SCL ablation's cosine loss adds to them) need zeros; the base opacity's gradient is never read (the
     // renderer reads the first sl.grad_channels()).
-    renders = ObjectRenders::sparse(io.out.extra.data(), sl.total(), sl.base_opacity(), io.out.groups.data(), J);
+    renders = ObjectRenders::sparse(io.out.extra.data(), sl.total(), sl.base_opacity(), io.out.groups.data(), J, HW);
     d_dense_.resize(size_t(HW) * sl.total());
     if (layout_.S > 0) parallel_fill(d_dense_, 0.f);
     gout = {nullptr, 0, d_dense_.data() + sl.base_color(), sl.total()};

@@ -19,8 +19,9 @@
 // remainder is given to one of them. (The opacity channels carry no gradient: BRO's band is a constant.)
 //
 // Layouts. Dense channels [N, 4 + S] (SparseLayout): base colour 0..2, the S others 3..3+S, b_n at 3 + S; the first
-// 3 + S carry gradient. Groups [E, 4]: (delta c, delta). Renders come back as dense [H, W, 4 + S] and groups
-// [H, W, 4 J], which the object losses read as base + group (ObjectRenders::sparse, object_losses.h); the
+// 3 + S carry gradient. Groups [E, 4]: (delta c, delta). Renders come back as dense [H, W, 4 + S] and groups as
+// one plane per object [J, H, W, 4] (render::ChannelsT::group_planes), which the object losses read as base +
+// group (ObjectRenders::sparse, object_losses.h), each object's crop in place; the
 // objects' colour gradients go back as the renderer's group gradients, which it reads on demand from the losses'
 // sparse form (ObjectLosses::group_rows), and their sum is the base colour's.
 #pragma once

@@ -97,14 +97,15 @@ ObjectRenders ObjectRenders::interleaved(const float* extra, const ObjectLayout&
   return r;
 }
 
-ObjectRenders ObjectRenders::sparse(const float* dense, int dense_stride, int base_opacity, const float* groups,
-                                    int J) {
+ObjectRenders ObjectRenders::sparse(const float* dense, int dense_stride, int base_opacity, const float* groups, int J,
+                                    long planes) {
   ObjectRenders r;
+  const long first = planes > 0 ? 4 * planes : 4;  // from group j to group j + 1
   for (int j = 0; j < J; ++j) {
-    r.color.push_back(groups + 4 * j);
-    r.opacity.push_back(groups + 4 * j + 3);
+    r.color.push_back(groups + first * j);
+    r.opacity.push_back(groups + first * j + 3);
   }
-  r.stride = 4L * J;
+  r.stride = planes > 0 ? 4L : 4L * J;
   r.base_color = dense;
   r.base_opacity = dense + base_opacity;
   r.base_stride = dense_stride;
@@ -221,9 +222,11 @@ ObjectLossValues ObjectLosses::full_path(const Image& image, const LabelMap& lab
   return v;
 }
 
-// Step 1: each object's box D_k (rows of differing columns, then their hull), R_k and Q_k; the objects' renders to
-// planes_ [J, H, W, 4] (the crops then read contiguous rows) and the base render to base_pred_ [H, W, 3] and
-// base_opac_ [H, W], all in this one pass over the renders.
+// Step 1: each object's box D_k (rows of differing columns, then their hull), R_k and Q_k, and the base render to
+// base_pred_ [H, W, 3] and base_opac_ [H, W], in this one pass over the renders. Where the renders interleave the
+// objects per pixel, the objects' renders are also copied to planes_ [J, H, W, 4], so that the crops read
+// contiguous rows; renders with one plane per object (ObjectRenders::sparse with planes, the training step's) are
+// read in place (a copy of 4 J floats a pixel spared).
 void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders, const std::vector<int>& objs) {
   const int W = lab.width, H = lab.height, J = static_cast<int>(objs.size());
   const size_t HW = size_t(W) * H;
@@ -234,10 +237,12 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders,
   mask_hi_.resize(size_t(J) * H);
   base_pred_.resize(HW * 3);
   base_opac_.resize(HW);
-  planes_.resize(size_t(J) * HW * 4);
-  // Pixel by pixel (the groups' rows read once, in order), each object's value stored to its plane; the loop is
-  // compiled for each kind of render (complete values or base + difference).
-  auto scan = [&]<bool kDeltas>() {
+  copied_ = renders.stride != 4;  // (stride 4: each object's pixels are contiguous already)
+  if (copied_) planes_.resize(size_t(J) * HW * 4);
+  else std::vector<float>().swap(planes_);
+  // Pixel by pixel (the groups' rows read once, in order), each object's value stored to its plane (copied_); the
+  // loop is compiled for each kind of render (complete values or base + difference) and for the copy or none.
+  auto scan = [&]<bool kDeltas, bool kCopy>() {
     const long S = renders.stride;
 #pragma omp parallel for schedule(static)
     for (int y = 0; y < H; ++y) {
@@ -259,12 +264,9 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders,
           const float o = renders.opacity[j][p * S];
           const float v[4] = {kDeltas ? b[0] + col[0] : col[0], kDeltas ? b[1] + col[1] : col[1],
                               kDeltas ? b[2] + col[2] : col[2], kDeltas ? b[3] + o : o};
-          float* pl = &planes_[(size_t(j) * HW + p) * 4];
           uint32_t diff = 0;
-          for (int c = 0; c < 4; ++c) {
-            pl[c] = v[c];
-            diff |= bits(v[c]) ^ bits(b[c]);
-          }
+          for (int c = 0; c < 4; ++c) diff |= bits(v[c]) ^ bits(b[c]);
+          if constexpr (kCopy) std::copy_n(v, 4, &planes_[(size_t(j) * HW + p) * 4]);
           const bool label = l == objs[j];
           if (diff || label) {
             lo[size_t(j) * H] = std::min(lo[size_t(j) * H], x);
@@ -278,8 +280,10 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders,
       }
     }
   };
-  if (renders.deltas) scan.template operator()<true>();
-  else scan.template operator()<false>();
+  if (renders.deltas && copied_) scan.template operator()<true, true>();
+  else if (renders.deltas) scan.template operator()<true, false>();
+  else if (copied_) scan.template operator()<false, true>();
+  else scan.template operator()<false, false>();
   const int dep = dep_ = opt_.dilation >= 0 ? opt_.dilation : dependency_radius(cfg_);
   obj_.resize(J);
   // The hull of rows' column ranges [lo, hi] (hi < 0: none in the row).
@@ -394,18 +398,31 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
   w.gt.resize(qn * 3);
   w.mask.resize(qn);
   w.opac.resize(qn);
-  for (int yy = 0; yy < qh; ++yy)
-    for (int xx = 0; xx < qw; ++xx) {
-      const size_t p = size_t(yy + Q.y0) * W + (xx + Q.x0), q = size_t(yy) * qw + xx;
-      const float* e = &planes_[(size_t(j) * W * H + p) * 4];
-      const float m = lab.v[p] == k ? 1.f : 0.f;
-      w.mask[q] = m;
-      w.opac[q] = e[3];
-      for (int c = 0; c < 3; ++c) {
-        w.pred[q * 3 + c] = e[c];
-        w.gt[q * 3 + c] = image.px[p * 3 + c] * m;
+  // The object's values from its plane (planes_, or the renders' own with base + difference: the sums find_boxes
+  // compared).
+  // col, op: the object's colour and opacity at pixel p at 4 p; bc, bo: the base render's at p * BS.
+  auto crop = [&]<bool kDeltas>(const float* col, const float* op, const float* bc, const float* bo, long BS) {
+    for (int yy = 0; yy < qh; ++yy)
+      for (int xx = 0; xx < qw; ++xx) {
+        const size_t p = size_t(yy + Q.y0) * W + (xx + Q.x0), q = size_t(yy) * qw + xx;
+        const float m = lab.v[p] == k ? 1.f : 0.f;
+        w.mask[q] = m;
+        w.opac[q] = kDeltas ? bo[p * BS] + op[p * 4] : op[p * 4];
+        for (int c = 0; c < 3; ++c) {
+          w.pred[q * 3 + c] = kDeltas ? bc[p * BS + c] + col[p * 4 + c] : col[p * 4 + c];
+          w.gt[q * 3 + c] = image.px[p * 3 + c] * m;
+        }
       }
-    }
+  };
+  if (copied_) {
+    const float* e = &planes_[size_t(j) * W * H * 4];
+    crop.template operator()<false>(e, e + 3, nullptr, nullptr, 0);
+  } else if (renders_.deltas) {
+    crop.template operator()<true>(renders_.color[j], renders_.opacity[j], renders_.base_color, renders_.base_opacity,
+                                   renders_.base_stride);
+  } else {
+    crop.template operator()<false>(renders_.color[j], renders_.opacity[j], nullptr, nullptr, 0);
+  }
   // Eq. 6: SSIM on the crop with the image's normaliser; L1 and the map summed over each row of R.
   w.sgrad.resize(qn * 3);
   w.smap.resize(qn * 3);
@@ -666,6 +683,7 @@ ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab,
   const auto t0 = Clock::now();
   app_.assign(J, 0.0);
   bro_.assign(J, 0.0);
+  renders_ = renders;  // the crops read the objects' values from it when find_boxes copies none
   find_boxes(lab, renders, objs);
   const auto t1 = Clock::now();
   bool any_box = false;

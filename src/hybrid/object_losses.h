@@ -107,8 +107,10 @@ struct ObjectRenders {
   }
   static ObjectRenders interleaved(const float* extra, const ObjectLayout& lay);  // extra [H, W, lay.total()]
   // dense [H, W, dense_stride]: the base colour at 0..2, its opacity at base_opacity; groups [H, W, 4 J]: object
-  // j's difference (colour, opacity) at 4 j.
-  static ObjectRenders sparse(const float* dense, int dense_stride, int base_opacity, const float* groups, int J);
+  // j's difference (colour, opacity) at 4 j; or, given planes = H W, groups [J, H, W, 4] (the renderer's
+  // ChannelsT::group_planes).
+  static ObjectRenders sparse(const float* dense, int dense_stride, int base_opacity, const float* groups, int J,
+                              long planes = 0);
 };
 
 // Where the losses write the objects' colour gradients: object j's at color + p * stride + 3 j (color null:
@@ -208,6 +210,8 @@ class ObjectLosses {
   std::vector<float> base_pred_, base_app_, base_unit_;  // [H, W, 3]
   std::vector<float> base_opac_, zeros_;                 // [H, W], [H, W, 3]
   std::vector<float> planes_;                            // [J, H, W, 4] the objects' renders (colour, opacity)
+  bool copied_ = false;                                  // planes_ holds them (the renders interleave the objects)
+  ObjectRenders renders_;                                // the current call's renders (box path)
   std::vector<double> base_terms_;                       // [H, W, kTerms]
   std::vector<double> base_rows_;                        // [H, kTerms] their sums over each row
   double base_total_[kTerms] = {};                       // their sums over the image (the rows in order)

@@ -90,7 +90,8 @@ struct RasterOutputs {
   T* final_T = nullptr;      // [H, W] saved for backward
   int32_t* last = nullptr;   // [H, W] saved for backward: tile-local index + 1 of the last accumulated Gaussian
   T* weight_sums = nullptr;  // [N, J] sum_p M_j(p) alpha_n(p) T_n(p) (when num_weights > 0)
-  T* groups = nullptr;       // [H, W, G * GW] (when num_groups > 0)
+  T* groups = nullptr;       // [H, W, G * GW] (when num_groups > 0), or [G, H, W, GW] when group_planes
+  bool group_planes = false;
 };
 
 // The most gradient channels a group may have when its gradients are computed on demand (d_group_rows).

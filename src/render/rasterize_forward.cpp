@@ -5,7 +5,8 @@
 // opacity exp(power)), skipped below kAlphaMin, the pixel stops (without accumulating) when T (1 - alpha) <
 // kTransmittanceMin, else w = alpha T is accumulated into colour / depth / pixel-weight sums. Extra channels and
 // sparse groups are added in the walk (the folded path) or summed afterwards from each batch's recorded visits
-// (composite_extras, composite_groups: many channels), in the same order either way. Saves
+// (composite_extras, composite_groups: many channels), in the same order either way; the groups are written
+// interleaved per pixel or as one plane per group (RasterOutputs::group_planes). Saves
 // final T and the last contributor per pixel for backward; per-pair weight sums are reduced per Gaussian in a fixed
 // order.
 #include "render/raster_isa.h"
@@ -291,8 +292,17 @@ inline __attribute__((always_inline)) void write_forward_batches(const RasterInp
       if (kDepth) out.depth[p] = st[bD][l];
       if (kX != kNoChannels)
         for (int c = 0; c < C; ++c) out.extra[p * C + c] = st[kBatchFixed + c][l];
-      if (kX != kNoChannels)
+      if (kX != kNoChannels && !out.group_planes)
         for (int c = 0; c < GT; ++c) out.groups[p * GT + c] = st[GO + c][l];
+    }
+    if (kX != kNoChannels && out.group_planes && GT > 0) {  // group g's plane: the batch's pixels contiguous
+      const int GW = in.group_width;
+      const size_t P = size_t(W) * bins.height, p0 = size_t(py) * W + px0;
+      for (int g = 0; g < in.num_groups; ++g) {
+        T* o = out.groups + (size_t(g) * P + p0) * GW;
+        for (int l = 0; l < nvalid; ++l)
+          for (int i = 0; i < GW; ++i) o[size_t(l) * GW + i] = st[GO + g * GW + i][l];
+      }
     }
   }
 }

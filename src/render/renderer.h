@@ -112,6 +112,9 @@ struct ChannelsT {
   const int* group_ptr = nullptr;  // [N + 1]
   const int* group_id = nullptr;   // [E] in [0, G)
   const T* group_val = nullptr;    // [E, GW]
+  // RenderOutputs::groups as planes [G, H, W, GW] instead of [H, W, G * GW]: a reader of one group's pixels (the
+  // object losses' crops, object_losses.h) then reads contiguous memory, with no copy of its own.
+  bool group_planes = false;
 };
 using Channels = ChannelsT<float>;
 
@@ -132,7 +135,7 @@ struct RenderOutputsT {
   std::vector<T> depth;        // [H, W] (empty when !want_depth)
   std::vector<T> extra;        // [H, W, C] (empty when C = 0)
   std::vector<T> weight_sums;  // [N, J] when pixel weights were given (else empty)
-  std::vector<T> groups;       // [H, W, G * GW] when channel groups were given (else empty)
+  std::vector<T> groups;       // [H, W, G * GW] (or [G, H, W, GW]: group_planes) when channel groups were given
   int num_visible = 0;         // Gaussians that passed culling
 };
 using RenderOutputs = RenderOutputsT<float>;

@@ -65,6 +65,7 @@ void RendererT<T>::composite(const ChannelsT<T>& ch, const RenderSettings& s, Re
   set_groups(ch, ri);
   RasterOutputs<T> ro;
   ro.groups = GT > 0 ? out.groups.data() : nullptr;
+  ro.group_planes = ch.group_planes;
   ro.weight_sums = J > 0 ? out.weight_sums.data() : nullptr;
   ro.rgb = out.rgb.data();
   ro.alpha = out.alpha.data();

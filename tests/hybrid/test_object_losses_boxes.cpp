@@ -322,6 +322,51 @@ TEST(ObjectLossesBoxes, SparseRendersAndCompactGradientsAreTheInterleavedOnesBit
     }
 }
 
+TEST(ObjectLossesBoxes, ObjectPlanesAreTheInterleavedGroupsBitwise) {
+  // The groups as one plane per object ([J, H, W, 4], the renderer's ChannelsT::group_planes, which the crops read
+  // in place instead of copying the objects out) give the values, the gradients and the sum of the interleaved
+  // groups bit for bit, with boxes and over whole images, BRO on and off, and a background scored whole.
+  Case c = synthetic(13);
+  const int C = c.lay.total(), J = c.lay.J, CD = 6;
+  const long HW = long(c.W) * c.H;
+  std::vector<float> dense(size_t(HW) * CD, std::nanf("")), groups(size_t(HW) * 4 * J), planes(groups.size());
+  for (long p = 0; p < HW; ++p) {
+    const float* e = &c.extra[size_t(p) * C];
+    float* d = &dense[size_t(p) * CD];
+    for (int k = 0; k < 3; ++k) d[k] = e[c.lay.base_color() + k];
+    d[5] = e[c.lay.base_opacity()];
+    for (int j = 0; j < J; ++j)
+      for (int k = 0; k < 4; ++k) {
+        const float g = e[k < 3 ? c.lay.color(j) + k : c.lay.opacity(j)] - d[k < 3 ? k : 5];
+        groups[(size_t(p) * J + j) * 4 + k] = g;
+        planes[(size_t(j) * HW + p) * 4 + k] = g;
+      }
+  }
+  const ObjectRenders inter = ObjectRenders::sparse(dense.data(), CD, 5, groups.data(), J);
+  const ObjectRenders planar = ObjectRenders::sparse(dense.data(), CD, 5, planes.data(), J, HW);
+  for (double frac : {0.8, 0.05})  // (0.05: objects whose crop is large are scored over the whole image)
+    for (bool bro : {true, false})
+      for (bool boxes : {true, false}) {
+        HybridConfig cfg;
+        cfg.use_bro = bro;
+        ObjectLosses a(cfg, {.boxes = boxes, .max_box_fraction = frac}),
+            b(cfg, {.boxes = boxes, .max_box_fraction = frac});
+        std::vector<float> ga(size_t(HW) * 3 * J, std::nanf("")), gb(ga.size(), std::nanf("")), sa(size_t(HW) * 3),
+            sb(sa.size());
+        const ObjectLossValues va = a(c.image, c.lab, inter, c.objs, {ga.data(), 3L * J, sa.data(), 3});
+        const ObjectLossValues vb = b(c.image, c.lab, planar, c.objs, {gb.data(), 3L * J, sb.data(), 3});
+        const std::string tag = std::string(bro ? "BRO" : "no BRO") + (boxes ? ", boxes" : ", whole images") +
+                                ", fraction " + std::to_string(frac);
+        EXPECT_EQ(va.app, vb.app) << tag;
+        EXPECT_EQ(va.bro, vb.bro) << tag;
+        EXPECT_GT(va.app, 0) << tag;
+        for (size_t i = 0; i < ga.size(); ++i)
+          ASSERT_EQ(std::bit_cast<uint32_t>(ga[i]), std::bit_cast<uint32_t>(gb[i])) << tag << ", value " << i;
+        for (size_t i = 0; i < sa.size(); ++i)
+          ASSERT_EQ(std::bit_cast<uint32_t>(sa[i]), std::bit_cast<uint32_t>(sb[i])) << tag << ", sum " << i;
+      }
+}
+
 TEST(ObjectLossesBoxes, GradientsOverwriteTheColourChannelsAndLeaveOtherChannels) {
   // The colour channels of d_extra are written whatever they held (the bits of a zeroed buffer's), the others
   // (opacities, base) are not touched, and color_sum holds the colour gradients summed over the objects in order;

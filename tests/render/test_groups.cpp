@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstring>
 #include <random>
 #include <tuple>
 
@@ -294,6 +295,45 @@ void compare_channel_paths() {
                             {&a.pg.group_val, &b.pg.group_val, "group values"}})
     EXPECT_TRUE(bitwise_equal(*x, *y)) << what << ": max difference " << max_abs_diff(*x, *y);
 }
+
+// The groups as planes (ChannelsT::group_planes: [G, H, W, GW]) hold the bits of the interleaved output
+// [H, W, G * GW], on both channel paths, at a width that leaves partial batches; the other outputs are unchanged.
+template <class T>
+void compare_group_planes() {
+  Scene s = random_scene(700, 69, 50, 31, 0.9, 4);
+  const Groups gr(s.n, 37);
+  const std::vector<T> val = conv<T>(gr.val), ex = conv<T>(s.extra);
+  const size_t P = size_t(s.cam.width) * s.cam.height;
+  for (ChannelPath path : {ChannelPath::kVisitLists, ChannelPath::kFolded}) {
+    set_raster_channel_path(path);
+    RenderOutputsT<T> out[2];
+    for (bool planes : {false, true}) {
+      RendererT<T> ren;
+      std::vector<std::vector<T>> store;
+      ren.preprocess(s.cam, s.inputs<T>(store));
+      ChannelsT<T> ch = gr.channels(val.data());
+      ch.extra = ex.data();
+      ch.num_extra = 4;
+      ch.group_planes = planes;
+      ren.composite(ch, s.settings, out[planes]);
+    }
+    set_raster_channel_path(ChannelPath::kAuto);
+    const char* what = path == ChannelPath::kFolded ? "folded" : "visit lists";
+    ASSERT_EQ(out[1].groups.size(), P * kG * kGW) << what;
+    for (size_t p = 0; p < P; ++p)
+      for (int g = 0; g < kG; ++g)
+        for (int i = 0; i < kGW; ++i)
+          ASSERT_EQ(0, std::memcmp(&out[1].groups[(g * P + p) * kGW + i], &out[0].groups[(p * kG + g) * kGW + i],
+                                   sizeof(T)))
+              << what << ": group " << g << ", channel " << i << ", pixel " << p;
+    EXPECT_GT(max_abs(out[1].groups), 0.1) << what;
+    EXPECT_TRUE(bitwise_equal(out[0].rgb, out[1].rgb)) << what;
+    EXPECT_TRUE(bitwise_equal(out[0].extra, out[1].extra)) << what;
+  }
+}
+
+TEST(RenderGroups, PlanesHoldTheInterleavedGroupsBitwiseFloat) { compare_group_planes<float>(); }
+TEST(RenderGroups, PlanesHoldTheInterleavedGroupsBitwiseDouble) { compare_group_planes<double>(); }
 
 TEST(RenderGroups, FoldedAndVisitListPathsAreBitwiseEqualFloat) { compare_channel_paths<float>(); }
 TEST(RenderGroups, FoldedAndVisitListPathsAreBitwiseEqualDouble) { compare_channel_paths<double>(); }
