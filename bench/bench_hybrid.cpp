@@ -316,8 +316,8 @@ void BM_ObjectLosses(benchmark::State& st) {
   channels.extra = ch.data();
   channels.num_extra = lay.total();
   r.composite(channels, rs, out);
-  // The renders as training reads them (the base render's channels and each object's difference from them) and
-  // the gradients as it writes them (the objects' colours [H, W, 3 J] and their sum [H, W, 3]).
+  // The renders as training reads them (the base render's channels and each object's difference from them, one
+  // plane per object) and the gradients as it writes them (the objects' colours [H, W, 3 J] and their sum [H, W, 3]).
   const long HW = long(kW) * kH;
   const int C = lay.total();
   std::vector<float> dense(size_t(HW) * 4), groups(size_t(HW) * 4 * L);
@@ -326,9 +326,9 @@ void BM_ObjectLosses(benchmark::State& st) {
     for (int c = 0; c < 4; ++c) dense[size_t(p) * 4 + c] = e[c < 3 ? lay.base_color() + c : lay.base_opacity()];
     for (int j = 0; j < L; ++j)
       for (int c = 0; c < 4; ++c)
-        groups[(size_t(p) * L + j) * 4 + c] = e[c < 3 ? lay.color(j) + c : lay.opacity(j)] - dense[size_t(p) * 4 + c];
+        groups[(size_t(j) * HW + p) * 4 + c] = e[c < 3 ? lay.color(j) + c : lay.opacity(j)] - dense[size_t(p) * 4 + c];
   }
-  const hybrid::ObjectRenders renders = hybrid::ObjectRenders::sparse(dense.data(), 4, 3, groups.data(), L);
+  const hybrid::ObjectRenders renders = hybrid::ObjectRenders::sparse(dense.data(), 4, 3, groups.data(), L, HW);
   hybrid::ObjectLosses losses(hybrid::HybridConfig{}, {.boxes = st.range(0) != 0});
   std::vector<float> d(size_t(HW) * 3 * L), sum(size_t(HW) * 3);
   for (auto _ : st)
