@@ -2,9 +2,10 @@
 # The training steps' scaling with threads on a machine with more cores (docs/performance.md "Measured on 16
 # cores"): the machine's facts, then bench_hybrid's RGB and exact hybrid steps (with their per-part counters) at
 # each thread count of THREADS (default 1,2,4,8,16) for each build folder given, alternating (a second round in
-# the opposite order at the counts above 2), then bench_scale at the most threads for each. JSON and text under
-# OUT (default /tmp/steps_multicore); `bench/amdahl.py OUT/<tag>.json --threads 4 16` prints projection and
-# measurement side by side.
+# the opposite order at the counts above 2), then bench_scale at the most threads for each, then (first build) the
+# one-thread step alone and as one copy per core at once (bench/shared_report.py) and bench/project_threads.py's
+# projection. JSON and text under OUT (default /tmp/steps_multicore); `bench/amdahl.py OUT/<tag>.json --threads 4
+# 16` prints projection and measurement side by side.
 #   bench/run_steps_multicore.sh NEW_BUILD_DIR [OLD_BUILD_DIR]
 set -uo pipefail
 [ $# -ge 1 ] || { echo "usage: bench/run_steps_multicore.sh NEW_BUILD_DIR [OLD_BUILD_DIR]" >&2; exit 2; }
@@ -32,3 +33,19 @@ for i in "${!dirs[@]}"; do
   "${dirs[$i]}/bench_scale" --steps 3 --threads "${THREADS##*,}" --json "$O/scale_${tags[$i]}.json" 2>&1 |
     sed "s/^/${tags[$i]} /" | tee "$O/scale_${tags[$i]}.txt"
 done
+# What the cores share (memory bandwidth, the L3, the clock under load): the one-thread 1000x700 / 300k step of the
+# first build alone, then as many copies at once as the most threads, one per core. Each copy does the work of the
+# one alone, so a part that slows beside its neighbours is bound by what they share, not by its tasks; what its
+# tasks allow at that thread count is bench/project_threads.py's projection (from one thread, run here too).
+NT="${THREADS##*,}"
+for m in rgb hybrid; do
+  "$1/bench_scale" --case "$m" 1 1 --steps 3 --threads 1 | grep '^{' >"$O/shared_${m}_alone.json"
+  for ((c = 0; c < NT; c++)); do
+    taskset -c "$c" "$1/bench_scale" --case "$m" 1 1 --steps 3 --threads 1 | grep '^{' >"$O/shared_${m}_copy$c.json" &
+  done
+  wait
+done
+if command -v python3 >/dev/null; then
+  python3 "$(dirname "$0")/shared_report.py" "$O" | tee "$O/shared.txt"
+  python3 "$(dirname "$0")/project_threads.py" --build "$1" --threads "$NT" --min-ms 2 | tee "$O/projection.txt"
+fi
