@@ -1,0 +1,85 @@
+#!/usr/bin/env python3
+"""Bytes a training step moves past a core's private cache, per function: the part of the 16-thread picture that
+bench/project_threads.py cannot see (docs/performance.md).
+
+Runs `bench_scale --case METHOD SCALE SCALE --steps N --threads 1` under valgrind's callgrind with its cache
+simulation (D1 48 KiB, LL 2 MiB: a core's own caches, so an LL miss is a line fetched from the shared L3 or memory)
+collecting inside `Trainer::step()` only, for the RGB and the hybrid step; prints each function's misses times 64
+bytes per step, RGB and hybrid side by side, and the hybrid's extra. The step count includes bench_scale's warm-up
+steps (one per view of its scene, 2): their first touches are in the figures. The simulated CPU is valgrind's (no
+AVX-512: the AVX2 rasterizer runs), and the cache is simulated, not measured. About 10 minutes at SCALE 0.25 on one
+core.
+
+  bench/ll_traffic.py --build build --scale 0.25
+"""
+import argparse
+import os
+import re
+import subprocess
+import sys
+import tempfile
+from collections import Counter
+
+VIEWS = 2  # bench_scale's scene (bench/bench_hybrid_scene.h kViews): its warm-up steps
+
+
+def run(binary, method, scale, steps, out):
+    cmd = ['valgrind', '--tool=callgrind', '--cache-sim=yes', '--I1=32768,8,64', '--D1=49152,12,64',
+           '--LL=2097152,16,64', '--collect-atstart=no', '--toggle-collect=hgs::train::Trainer::step()',
+           f'--callgrind-out-file={out}', binary, '--case', method, str(scale), str(scale), '--steps', str(steps),
+           '--threads', '1']
+    res = subprocess.run(cmd, capture_output=True, text=True)
+    if res.returncode != 0 or not os.path.exists(out):
+        sys.exit(f'll_traffic: {" ".join(cmd)} failed: {res.stderr.strip()[-400:]}')
+
+
+def per_function(out, steps):
+    """{function: MB per step} from callgrind_annotate's inclusive-free (self) LL misses."""
+    text = subprocess.run(['callgrind_annotate', '--show=DLmr,DLmw', '--sort=DLmr,DLmw', '--threshold=100', out],
+                          capture_output=True, text=True, check=True).stdout
+    mb = Counter()
+    for line in text.splitlines():
+        m = re.match(r'^\s*([\d,]+)\s+(?:\([^)]*\)\s+)?([\d,]+)\s+(?:\([^)]*\)\s+)?(\S.*)$', line)
+        if not m or 'PROGRAM TOTALS' in line:
+            continue
+        name = re.sub(r'^(\?\?\?|[^:]*\.(S|c|cc|h)):', '', m.group(3).strip())
+        name = name.replace('(anonymous namespace)::', '').replace('avx2::', '').replace('avx512::', '')
+        name = re.sub(r'\s*\[[^]]*\]\s*$', '', name)  # the file (or clone) suffix
+        name = re.sub(r'\((?!\)).*', '', name)  # the argument list
+        name = re.sub(r'^(void|float|int|auto|bool) ', '', name)
+        name = re.sub(r'(forward_tile|backward_tile)<.*>', r'\1', name)
+        mb[name] += (int(m.group(1).replace(',', '')) + int(m.group(2).replace(',', ''))) * 64 / steps / 1e6
+    return mb
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap.add_argument('--build', default='build')
+    ap.add_argument('--scale', type=float, default=0.25, help="bench_scale's pixel and Gaussian scale")
+    ap.add_argument('--steps', type=int, default=2, help='timed steps (after one warm-up step per view)')
+    ap.add_argument('--top', type=int, default=30)
+    a = ap.parse_args()
+    binary = os.path.join(a.build, 'bench_scale')
+    if not os.path.exists(binary):
+        sys.exit(f'll_traffic: {binary} not found (build the benchmarks: scripts/build)')
+    for tool in ('valgrind', 'callgrind_annotate'):
+        if subprocess.run(['sh', '-c', f'command -v {tool}'], capture_output=True).returncode != 0:
+            sys.exit(f'll_traffic: {tool} not found (Debian package valgrind)')
+    steps = a.steps + VIEWS
+    with tempfile.TemporaryDirectory() as tmp:
+        res = {}
+        for method in ('rgb', 'hybrid'):
+            out = os.path.join(tmp, method + '.out')
+            run(binary, method, a.scale, a.steps, out)
+            res[method] = per_function(out, steps)
+    h, r = res['hybrid'], res['rgb']
+    print(f'bench_scale at {a.scale}x pixels and Gaussians, one thread: MB per step past a 2 MiB private cache '
+          f'(callgrind LL misses x 64 B, {steps} steps)')
+    print(f"{'function':60s} {'hybrid':>8} {'RGB':>8} {'extra':>8}")
+    for k in sorted(set(h) | set(r), key=lambda k: -(h.get(k, 0) - r.get(k, 0)))[:a.top]:
+        print(f'{k[:60]:60s} {h.get(k, 0):8.1f} {r.get(k, 0):8.1f} {h.get(k, 0) - r.get(k, 0):8.1f}')
+    print(f"{'total':60s} {sum(h.values()):8.1f} {sum(r.values()):8.1f} {sum(h.values()) - sum(r.values()):8.1f}")
+
+
+if __name__ == '__main__':
+    main()
