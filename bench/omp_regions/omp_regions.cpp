@@ -1,6 +1,7 @@
 // LD_PRELOAD library for bench/project_threads.py: what a run on one thread says about T threads, region by
-// region. It wraps libgomp's entry points (GCC's OpenMP: GOMP_parallel for every parallel region, the dynamic
-// loops' start / next calls, GOMP_single_start and GOMP_barrier) and records, per region (keyed by its outlined
+// region. It wraps libgomp's entry points (GCC's OpenMP: GOMP_parallel for every parallel region and
+// GOMP_parallel_loop_nonmonotonic_dynamic for a combined `parallel for schedule(dynamic)`, the dynamic loops'
+// start / next calls, GOMP_single_start and GOMP_barrier) and records, per region (keyed by its outlined
 // function), the calls, the wall time, the time in `single` blocks (serial inside the region) and the duration of
 // every chunk its dynamic loops hand out. At each loop's end it simulates how schedule(dynamic) would hand the
 // same chunks, in the same order, to T = 2, 4, 8, 16, 32 threads (each to the thread that frees first) and keeps
@@ -86,6 +87,38 @@ int plan_threads() {
   return plan;
 }
 
+// One parallel region (outlined function fn) run by `call` (the runtime's entry point with its arguments).
+template <class Call>
+void region(void (*fn)(void*), Call call) {
+  if (depth > 0) {
+    call();
+    return;
+  }
+  int i = 0;
+  while (i < num_regions && regions[i].fn != reinterpret_cast<void*>(fn)) ++i;
+  if (i == num_regions && num_regions < kMaxRegions) regions[num_regions++].fn = reinterpret_cast<void*>(fn);
+  if (i >= kMaxRegions) {
+    call();
+    return;
+  }
+  const int outer = current;
+  current = i;
+  chunk_start = -1;
+  const double t0 = now();
+  if (last_region >= 0) regions[last_region].after += t0 - last_end;
+  ++depth;
+  call();
+  --depth;
+  close_loop();
+  last_end = now();
+  if (single_start >= 0) regions[i].single += last_end - single_start;  // a single block ending the region (no
+  single_start = -1;                                                    // barrier call of its own)
+  last_region = i;
+  regions[i].seconds += last_end - t0;
+  regions[i].calls += 1;
+  current = outer;
+}
+
 }  // namespace
 
 extern "C" {
@@ -93,30 +126,16 @@ extern "C" {
 void GOMP_parallel(void (*fn)(void*), void* data, unsigned threads, unsigned flags) {
   static auto next = real<void (*)(void (*)(void*), void*, unsigned, unsigned)>("GOMP_parallel");
   if (plan_threads() > 0) threads = 1;  // run on one thread what was cut for plan_threads()
-  if (depth > 0) {
-    next(fn, data, threads, flags);
-    return;
-  }
-  int i = 0;
-  while (i < num_regions && regions[i].fn != reinterpret_cast<void*>(fn)) ++i;
-  if (i == num_regions && num_regions < kMaxRegions) regions[num_regions++].fn = reinterpret_cast<void*>(fn);
-  if (i >= kMaxRegions) {
-    next(fn, data, threads, flags);
-    return;
-  }
-  const int outer = current;
-  current = i;
-  const double t0 = now();
-  if (last_region >= 0) regions[last_region].after += t0 - last_end;
-  ++depth;
-  next(fn, data, threads, flags);
-  --depth;
-  close_loop();
-  last_end = now();
-  last_region = i;
-  regions[i].seconds += last_end - t0;
-  regions[i].calls += 1;
-  current = outer;
+  region(fn, [&] { next(fn, data, threads, flags); });
+}
+
+// `parallel for schedule(dynamic)` as one construct: the region and its loop (its chunks come from the _next calls).
+void GOMP_parallel_loop_nonmonotonic_dynamic(void (*fn)(void*), void* data, unsigned threads, long start, long end,
+                                             long incr, long chunk, unsigned flags) {
+  static auto next = real<void (*)(void (*)(void*), void*, unsigned, long, long, long, long, unsigned)>(
+      "GOMP_parallel_loop_nonmonotonic_dynamic");
+  if (plan_threads() > 0) threads = 1;
+  region(fn, [&] { next(fn, data, threads, start, end, incr, chunk, flags); });
 }
 
 bool GOMP_loop_nonmonotonic_dynamic_start(long s, long e, long inc, long ch, long* is, long* ie) {
