@@ -119,6 +119,24 @@ void region(void (*fn)(void*), Call call) {
   current = outer;
 }
 
+// A dynamic loop's start (it closes the previous loop) and its next chunk (which ends the one before), around the
+// runtime's own calls.
+template <class F, class... A>
+bool loop_start(F next, A... args) {
+  close_loop();
+  const bool r = next(args...);
+  chunk_start = r ? now() : -1;
+  return r;
+}
+
+template <class F, class... A>
+bool loop_next(F next, A... args) {
+  if (chunk_start >= 0 && num_chunks < kMaxChunks) chunk[num_chunks++] = now() - chunk_start;
+  const bool r = next(args...);
+  chunk_start = r ? now() : -1;
+  return r;
+}
+
 }  // namespace
 
 extern "C" {
@@ -140,35 +158,23 @@ void GOMP_parallel_loop_nonmonotonic_dynamic(void (*fn)(void*), void* data, unsi
 
 bool GOMP_loop_nonmonotonic_dynamic_start(long s, long e, long inc, long ch, long* is, long* ie) {
   static auto next = real<bool (*)(long, long, long, long, long*, long*)>("GOMP_loop_nonmonotonic_dynamic_start");
-  close_loop();
-  const bool r = next(s, e, inc, ch, is, ie);
-  chunk_start = r ? now() : -1;
-  return r;
+  return loop_start(next, s, e, inc, ch, is, ie);
 }
 
 bool GOMP_loop_nonmonotonic_dynamic_next(long* is, long* ie) {
   static auto next = real<bool (*)(long*, long*)>("GOMP_loop_nonmonotonic_dynamic_next");
-  if (chunk_start >= 0 && num_chunks < kMaxChunks) chunk[num_chunks++] = now() - chunk_start;
-  const bool r = next(is, ie);
-  chunk_start = r ? now() : -1;
-  return r;
+  return loop_next(next, is, ie);
 }
 
 using ull = unsigned long long;
 bool GOMP_loop_ull_nonmonotonic_dynamic_start(bool up, ull s, ull e, ull inc, ull ch, ull* is, ull* ie) {
   static auto next = real<bool (*)(bool, ull, ull, ull, ull, ull*, ull*)>("GOMP_loop_ull_nonmonotonic_dynamic_start");
-  close_loop();
-  const bool r = next(up, s, e, inc, ch, is, ie);
-  chunk_start = r ? now() : -1;
-  return r;
+  return loop_start(next, up, s, e, inc, ch, is, ie);
 }
 
 bool GOMP_loop_ull_nonmonotonic_dynamic_next(ull* is, ull* ie) {
   static auto next = real<bool (*)(ull*, ull*)>("GOMP_loop_ull_nonmonotonic_dynamic_next");
-  if (chunk_start >= 0 && num_chunks < kMaxChunks) chunk[num_chunks++] = now() - chunk_start;
-  const bool r = next(is, ie);
-  chunk_start = r ? now() : -1;
-  return r;
+  return loop_next(next, is, ie);
 }
 
 bool GOMP_single_start() {

@@ -398,9 +398,8 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
   w.gt.resize(qn * 3);
   w.mask.resize(qn);
   w.opac.resize(qn);
-  // The object's values from its plane (planes_, or the renders' own with base + difference: the sums find_boxes
-  // compared).
-  // col, op: the object's colour and opacity at pixel p at 4 p; bc, bo: the base render's at p * BS.
+  // The object's values from its plane: planes_, or the renders' own plane plus the base render (the sums
+  // find_boxes compared). col, op: its colour and opacity at pixel p at 4 p; bc, bo: the base render's at p * BS.
   auto crop = [&]<bool kDeltas>(const float* col, const float* op, const float* bc, const float* bo, long BS) {
     for (int yy = 0; yy < qh; ++yy)
       for (int xx = 0; xx < qw; ++xx) {

@@ -213,6 +213,20 @@ struct GroupRowsFromBuffer {
   }
 };
 
+// Preprocesses the scene and composites the groups with the scene's 4 dense channels (the hybrid method's base
+// render) into out.
+template <class T>
+void composite_groups_and_base(RendererT<T>& ren, Scene& s, const Groups& gr, const std::vector<T>& val,
+                               const std::vector<T>& ex, bool planes, RenderOutputsT<T>& out) {
+  std::vector<std::vector<T>> store;
+  ren.preprocess(s.cam, s.inputs<T>(store));
+  ChannelsT<T> ch = gr.channels(val.data());
+  ch.extra = ex.data();
+  ch.num_extra = 4;
+  ch.group_planes = planes;
+  ren.composite(ch, s.settings, out);
+}
+
 // The two channel paths of the kernels (rasterize.h: visit lists after the walk, or folded into it) sum the same
 // terms in the same order: bitwise-equal renders and gradients, with 4 dense channels (the hybrid method's base
 // render, the last forward-only), groups of 0 to 3 entries and hard pixel-weight maps, float and double, on a
@@ -239,12 +253,7 @@ void compare_channel_paths() {
     set_raster_channel_path(path);
     Run r;
     RendererT<T> ren;
-    std::vector<std::vector<T>> store;
-    ren.preprocess(s.cam, s.inputs<T>(store));
-    ChannelsT<T> ch = gr.channels(val.data());
-    ch.extra = ex.data();
-    ch.num_extra = 4;
-    ren.composite(ch, s.settings, r.out);
+    composite_groups_and_base(ren, s, gr, val, ex, false, r.out);
     OutputGradsT<T> d;
     d.rgb = wr.data();
     d.alpha = wa.data();
@@ -309,13 +318,7 @@ void compare_group_planes() {
     RenderOutputsT<T> out[2];
     for (bool planes : {false, true}) {
       RendererT<T> ren;
-      std::vector<std::vector<T>> store;
-      ren.preprocess(s.cam, s.inputs<T>(store));
-      ChannelsT<T> ch = gr.channels(val.data());
-      ch.extra = ex.data();
-      ch.num_extra = 4;
-      ch.group_planes = planes;
-      ren.composite(ch, s.settings, out[planes]);
+      composite_groups_and_base(ren, s, gr, val, ex, planes, out[planes]);
     }
     set_raster_channel_path(ChannelPath::kAuto);
     const char* what = path == ChannelPath::kFolded ? "folded" : "visit lists";
