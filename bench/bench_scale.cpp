@@ -22,7 +22,6 @@
 #include <string>
 #include <vector>
 
-#include <dlfcn.h>
 #include <fmt/format.h>
 #include <omp.h>
 #include <nlohmann/json.hpp>
