@@ -14,6 +14,8 @@
 // on one thread (their num_threads is forced to 1). Other callers see the real value: per-thread partial sums sized
 // by it must match the threads that run.
 //
+// For one-thread runs only (its tables are plain globals, not shared safely between threads).
+//
 // Written by hand: no Debian package times OpenMP regions of GCC's runtime (OMPT, the standard interface, is
 // LLVM's libomp only). Output at exit to HGS_REGIONS_OUT.<pid>, one line per region:
 //   offset calls seconds single_seconds dynamic_seconds chunks makespan_T2 .. makespan_T32 after_seconds symbol
