@@ -20,15 +20,15 @@ def main(lib, demo):
     assert len(rows) == 2, rows  # two regions, in the order they first ran
     first, second = rows
     ms = lambda x: float(x) * 1e3
-    slack = 40  # ms a loaded machine may add to the sleeps
+    late = 25  # ms a loaded machine may add to one sleep
     # offset calls seconds single dynamic chunks makespan_T2 T4 T8 T16 T32 after symbol
     assert first[1] == "1" and first[5] == "4", first
-    assert 60 <= ms(first[4]) <= 60 + slack, first  # the four chunks
-    assert 30 <= ms(first[6]) <= 30 + slack, first  # 2 threads: 30 | 10 + 10 + 10
-    assert 30 <= ms(first[7]) <= 30 + slack, first  # 4 threads: the longest chunk
+    assert 60 <= ms(first[4]) <= 60 + 4 * late, first  # the four chunks
+    assert 30 <= ms(first[6]) <= 30 + 3 * late, first  # 2 threads: 30 | 10 + 10 + 10
+    assert 30 <= ms(first[7]) <= 30 + late, first  # 4 threads: the longest chunk
     assert ms(first[6]) < ms(first[4]) - 20, first  # the simulation did hand chunks to two threads
-    assert 8 <= ms(first[11]) <= 8 + slack, first  # the serial gap after it
-    assert second[5] == "0" and 5 <= ms(second[3]) <= 5 + slack, second  # no dynamic loop; the single block
+    assert 8 <= ms(first[11]) <= 8 + late, first  # the serial gap after it
+    assert second[5] == "0" and 5 <= ms(second[3]) <= 5 + late, second  # no dynamic loop; the single block
     print("ok")
 
 
