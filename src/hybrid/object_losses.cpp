@@ -237,10 +237,10 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders,
   mask_hi_.resize(size_t(J) * H);
   base_pred_.resize(HW * 3);
   base_opac_.resize(HW);
-  copied_ = renders.stride != 4;  // (stride 4: each object's pixels are contiguous already)
-  if (copied_) planes_.resize(size_t(J) * HW * 4);
+  const bool copied = renders.stride != 4;  // (stride 4: each object's pixels are contiguous already)
+  if (copied) planes_.resize(size_t(J) * HW * 4);
   else std::vector<float>().swap(planes_);
-  // Pixel by pixel (the groups' rows read once, in order), each object's value stored to its plane (copied_); the
+  // Pixel by pixel (the groups' rows read once, in order), each object's value stored to its plane (copied); the
   // loop is compiled for each kind of render (complete values or base + difference) and for the copy or none.
   auto scan = [&]<bool kDeltas, bool kCopy>() {
     const long S = renders.stride;
@@ -280,10 +280,19 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders,
       }
     }
   };
-  if (renders.deltas && copied_) scan.template operator()<true, true>();
+  if (renders.deltas && copied) scan.template operator()<true, true>();
   else if (renders.deltas) scan.template operator()<true, false>();
-  else if (copied_) scan.template operator()<false, true>();
+  else if (copied) scan.template operator()<false, true>();
   else scan.template operator()<false, false>();
+  renders_ = renders;  // what the crops read: the renders themselves, or the copy as complete values
+  if (copied) {
+    for (int j = 0; j < J; ++j) {
+      renders_.color[j] = &planes_[size_t(j) * HW * 4];
+      renders_.opacity[j] = renders_.color[j] + 3;
+    }
+    renders_.stride = 4;
+    renders_.deltas = false;
+  }
   const int dep = dep_ = opt_.dilation >= 0 ? opt_.dilation : dependency_radius(cfg_);
   obj_.resize(J);
   // The hull of rows' column ranges [lo, hi] (hi < 0: none in the row).
@@ -398,30 +407,20 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
   w.gt.resize(qn * 3);
   w.mask.resize(qn);
   w.opac.resize(qn);
-  // The object's values from its plane: planes_, or the renders' own plane plus the base render (the sums
-  // find_boxes compared). col, op: its colour and opacity at pixel p at 4 p; bc, bo: the base render's at p * BS.
-  auto crop = [&]<bool kDeltas>(const float* col, const float* op, const float* bc, const float* bo, long BS) {
-    for (int yy = 0; yy < qh; ++yy)
-      for (int xx = 0; xx < qw; ++xx) {
-        const size_t p = size_t(yy + Q.y0) * W + (xx + Q.x0), q = size_t(yy) * qw + xx;
-        const float m = lab.v[p] == k ? 1.f : 0.f;
-        w.mask[q] = m;
-        w.opac[q] = kDeltas ? bo[p * BS] + op[p * 4] : op[p * 4];
-        for (int c = 0; c < 3; ++c) {
-          w.pred[q * 3 + c] = kDeltas ? bc[p * BS + c] + col[p * 4 + c] : col[p * 4 + c];
-          w.gt[q * 3 + c] = image.px[p * 3 + c] * m;
-        }
+  // The object's values from its plane (renders_: the renderer's, with base + difference the sums find_boxes
+  // compared, or planes_).
+  for (int yy = 0; yy < qh; ++yy)
+    for (int xx = 0; xx < qw; ++xx) {
+      const long p = long(yy + Q.y0) * W + (xx + Q.x0);
+      const size_t q = size_t(yy) * qw + xx;
+      const float m = lab.v[p] == k ? 1.f : 0.f;
+      w.mask[q] = m;
+      w.opac[q] = renders_.opacity_at(j, p);
+      for (int c = 0; c < 3; ++c) {
+        w.pred[q * 3 + c] = renders_.color_at(j, p, c);
+        w.gt[q * 3 + c] = image.px[p * 3 + c] * m;
       }
-  };
-  if (copied_) {
-    const float* e = &planes_[size_t(j) * W * H * 4];
-    crop.template operator()<false>(e, e + 3, nullptr, nullptr, 0);
-  } else if (renders_.deltas) {
-    crop.template operator()<true>(renders_.color[j], renders_.opacity[j], renders_.base_color, renders_.base_opacity,
-                                   renders_.base_stride);
-  } else {
-    crop.template operator()<false>(renders_.color[j], renders_.opacity[j], nullptr, nullptr, 0);
-  }
+    }
   // Eq. 6: SSIM on the crop with the image's normaliser; L1 and the map summed over each row of R.
   w.sgrad.resize(qn * 3);
   w.smap.resize(qn * 3);
@@ -682,7 +681,6 @@ ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab,
   const auto t0 = Clock::now();
   app_.assign(J, 0.0);
   bro_.assign(J, 0.0);
-  renders_ = renders;  // the crops read the objects' values from it when find_boxes copies none
   find_boxes(lab, renders, objs);
   const auto t1 = Clock::now();
   bool any_box = false;

@@ -210,12 +210,12 @@ class ObjectLosses {
   std::vector<float> base_pred_, base_app_, base_unit_;  // [H, W, 3]
   std::vector<float> base_opac_, zeros_;                 // [H, W], [H, W, 3]
   std::vector<float> planes_;                            // [J, H, W, 4] the objects' renders (colour, opacity)
-  bool copied_ = false;                                  // planes_ holds them (the renders interleave the objects)
-  ObjectRenders renders_;                                // the current call's renders (box path)
-  std::vector<double> base_terms_;                       // [H, W, kTerms]
-  std::vector<double> base_rows_;                        // [H, kTerms] their sums over each row
-  double base_total_[kTerms] = {};                       // their sums over the image (the rows in order)
-  int dep_ = 0;                                          // the dependency radius in use
+  // The box path's renders as the crops read them: the call's, or planes_ (find_boxes).
+  ObjectRenders renders_;
+  std::vector<double> base_terms_;  // [H, W, kTerms]
+  std::vector<double> base_rows_;   // [H, kTerms] their sums over each row
+  double base_total_[kTerms] = {};  // their sums over the image (the rows in order)
+  int dep_ = 0;                     // the dependency radius in use
   ObjectGradients grads_;
   PhaseTimes times_;
 };
