@@ -20,6 +20,9 @@ import sys
 import tempfile
 from collections import Counter
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from project_threads import short_name  # noqa: E402  (the same names in both tables)
+
 VIEWS = 2  # bench_scale's scene (bench/bench_hybrid_scene.h kViews): its warm-up steps
 
 
@@ -42,12 +45,7 @@ def per_function(out, steps):
         m = re.match(r'^\s*([\d,]+)\s+(?:\([^)]*\)\s+)?([\d,]+)\s+(?:\([^)]*\)\s+)?(\S.*)$', line)
         if not m or 'PROGRAM TOTALS' in line:
             continue
-        name = re.sub(r'^(\?\?\?|[^:]*\.(S|c|cc|h)):', '', m.group(3).strip())
-        name = name.replace('(anonymous namespace)::', '').replace('avx2::', '').replace('avx512::', '')
-        name = re.sub(r'\s*\[[^]]*\]\s*$', '', name)  # the file (or clone) suffix
-        name = re.sub(r'\((?!\)).*', '', name)  # the argument list
-        name = re.sub(r'^(void|float|int|auto|bool) ', '', name)
-        name = re.sub(r'(forward_tile|backward_tile)<.*>', r'\1', name)
+        name = short_name(re.sub(r'^(\?\?\?|[^:]*\.(S|c|cc|h)):', '', m.group(3).strip()))  # without the file
         mb[name] += (int(m.group(1).replace(',', '')) + int(m.group(2).replace(',', ''))) * 64 / steps / 1e6
     return mb
 

@@ -74,15 +74,22 @@ def run(binary, lib, case, steps, threads, ranges, out_prefix):
     return js[-1], regions
 
 
+def short_name(name):
+    """A demangled function name without its return type, argument list, clone suffix, anonymous namespaces, the
+    rasterizer's ISA namespace and the tile kernels' template arguments (bench/ll_traffic.py uses it too)."""
+    name = name.replace('(anonymous namespace)::', '').replace('avx2::', '').replace('avx512::', '')
+    name = re.sub(r'\s*\[[^]]*\]\s*$', '', name)  # a clone (or file) suffix
+    name = re.sub(r'\((?!\)).*', '', name)  # the argument list (not operator()'s)
+    name = re.sub(r'^(void|float|int|auto|bool) ', '', name)
+    return re.sub(r'(forward_tile|backward_tile)<.*>', r'\1', name)
+
+
 def names(binary, offsets):
     if not offsets:
         return {}
     out = subprocess.run(['addr2line', '-f', '-C', '-e', binary] + offsets, capture_output=True, text=True).stdout
     lines = out.splitlines()
-    def short(name):  # without the argument list, the clone suffix and anonymous namespaces
-        name = name.replace('(anonymous namespace)::', '')
-        return re.sub(r'\(.*', '', name)
-    return {o: short(lines[2 * i]) if 2 * i < len(lines) else o for i, o in enumerate(offsets)}
+    return {o: short_name(lines[2 * i]) if 2 * i < len(lines) else o for i, o in enumerate(offsets)}
 
 
 def main():

@@ -30,8 +30,8 @@ def main():
         sys.exit('usage: bench/shared_report.py OUT')
     out = sys.argv[1]
     for method in ('rgb', 'hybrid'):
-        alone = load(os.path.join(out, f'shared_{method}_alone.json')) if os.path.exists(
-            os.path.join(out, f'shared_{method}_alone.json')) else None
+        alone_path = os.path.join(out, f'shared_{method}_alone.json')
+        alone = load(alone_path) if os.path.exists(alone_path) else None
         copies = [c for c in (load(p) for p in sorted(glob.glob(os.path.join(out, f'shared_{method}_copy*.json')))) if c]
         if not alone or not copies:
             print(f'{method}: no results in {out}')
