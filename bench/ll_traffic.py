@@ -56,6 +56,8 @@ def main():
     ap.add_argument('--scale', type=float, default=0.25, help="bench_scale's pixel and Gaussian scale")
     ap.add_argument('--steps', type=int, default=2, help='timed steps (after one warm-up step per view)')
     ap.add_argument('--top', type=int, default=30)
+    ap.add_argument('--methods', default='rgb,hybrid', help='the steps to simulate (rgb,hybrid; one alone halves '
+                    'the time, its columns of the other are then 0)')
     a = ap.parse_args()
     binary = os.path.join(a.build, 'bench_scale')
     if not os.path.exists(binary):
@@ -65,8 +67,10 @@ def main():
             sys.exit(f'll_traffic: {tool} not found (Debian package valgrind)')
     steps = a.steps + VIEWS
     with tempfile.TemporaryDirectory() as tmp:
-        res = {}
-        for method in ('rgb', 'hybrid'):
+        res = {'rgb': {}, 'hybrid': {}}
+        for method in a.methods.split(','):
+            if method not in res:
+                sys.exit(f'll_traffic: --methods: {method!r} is not rgb or hybrid')
             out = os.path.join(tmp, method + '.out')
             run(binary, method, a.scale, a.steps, out)
             res[method] = per_function(out, steps)

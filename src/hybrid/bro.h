@@ -33,6 +33,7 @@
 // resolution. Measured in docs/results.md (without the rule: the full row falls below the no-BRO row).
 #pragma once
 #include <cstddef>
+#include <functional>
 #include <vector>
 
 namespace hgs::hybrid {
@@ -42,8 +43,8 @@ namespace hgs::hybrid {
 void dilate(const float* in, int H, int W, int s, float* out);
 void erode(const float* in, int H, int W, int s, float* out);
 
-// B = clip(D(A) - E(A) + D(M) - E(M), 0, 1). A, M, B: [H, W]; `tmp` scratch (4 H W floats).
-void boundary_band(const float* A, const float* M, int H, int W, int s, float* B, std::vector<float>& tmp);
+// B = clip(D(A) - E(A) + D(M) - E(M), 0, 1). A, M, B: [H, W] (BandRows below, row by row).
+void boundary_band(const float* A, const float* M, int H, int W, int s, float* B);
 
 // Eq. 14 for images with C channels. pred, gt: [H, W, C] (channel stride `cstride` >= C, channels at
 // offset 0 of each pixel block), B: [H, W]. grad (may be null) receives scale * dL/dpred added into
@@ -60,6 +61,40 @@ T bro_loss(const T* pred, const T* gt, int cstride, int C, const float* B, int H
 // gradient is unit / (C sum wsum + eps). pred, gt: [H, W, C]; B: [H, W].
 template <class T>
 void bro_parts(const T* pred, const T* gt, int C, const float* B, int H, int W, double* wsum, double* num, T* unit);
+
+// boundary_band row by row, for passes that stream an image (object_losses.cpp): B's rows on demand, the same
+// values bitwise. After reset, row(y) for y increasing (from any first row) reads A's and M's rows through the
+// callbacks (each row once, in increasing order, up to y + s - 1 - s/2) and keeps the horizontal filters of the
+// last s rows; the row it returns [W] stays valid until the row two after it is asked for.
+class BandRows {
+ public:
+  using Row = std::function<const float*(int)>;
+  void reset(int H, int W, int s);
+  const float* row(int y, const Row& A, const Row& M);
+
+ private:
+  int H_ = 0, W_ = 0, s_ = 1, next_ = -1;  // next_: the next row to filter horizontally (-1: none yet)
+  std::vector<float> ring_;                // [s, 4, W]: A's row max and min, M's row max and min
+  std::vector<float> out_;                 // [2, W]: B's rows, by parity
+  std::vector<float> tmp_;                 // [4, W]: the vertical filters of a row
+};
+
+// bro_parts row by row: each call takes row y's pairs (with row y + 1 and within the row) and writes row y's
+// values of wsum, num [W] and unit [W C], the same bits as bro_parts; row y's unit also takes the y pairs of the
+// previous call's row (y - 1), so after reset the first call's row lacks them, as an image's first row does.
+template <class T>
+class BroRows {
+ public:
+  void reset(int W, int C);
+  // p0, q0: rows y of pred and gt [W C]; b0: row y of B [W]; p1, q1, b1: row y + 1's (null: y is the last row).
+  void row(const T* p0, const T* q0, const float* b0, const T* p1, const T* q1, const float* b1, double* wsum,
+           double* num, T* unit);
+
+ private:
+  int W_ = 0, C_ = 0;
+  bool first_ = true;
+  std::vector<T> wx_, wy_, ax_, ay_, gx_, gy_, carry_;  // [W C] each; carry_: the previous row's y pairs
+};
 
 // sum_d ||W^d||_1 of eq. 14 for the band B [H, W] (at most about 2 H W).
 double band_weight_total(const float* B, int H, int W);

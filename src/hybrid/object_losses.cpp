@@ -1,10 +1,11 @@
 // Eqs. 6 and 14 for the J objects of one view. Without boxes (or without the base render): every object over the
 // whole image, one object per task. With boxes (the exactness argument is in object_losses.h):
-//   1. one pass over the interleaved render finds each object's box D_k of pixels that differ from the base
-//      render (or carry its label) and copies every object's render and the base render to planar images;
+//   1. one pass over the renders finds each object's box D_k of pixels that differ from the base render (or
+//      carry its label) and copies the base render (and interleaved objects' renders) to planar images;
 //   2. tasks: the base pair's eq. 6 and eq. 14 over the image, each small object's terms on its crop Q_k (kept
 //      inside R_k), each large object over the whole image; every task cut into bands of rows (each cropped with
-//      dep rows above and below) that run as pieces, largest first, each writing its rows' terms and row sums;
+//      dep rows above and below) that run as pieces, largest first, each writing its rows' terms and row sums,
+//      each one pass down its rows (SSIM's, the band's and eq. 14's rows streamed);
 //   3. per object, its sums (rows in order) and the global scalars (means, eq. 14's band total and scale, the
 //      projection coefficient) from the base pair's sums outside R_k plus the object's inside it, and its
 //      gradient inside R_k completed;
@@ -76,7 +77,7 @@ std::vector<int> sample_objects(const std::vector<int>& present, int m, std::mt1
 }
 
 void ObjectLosses::release() {
-  for (auto* v : {&pred_, &grad_, &opac_, &base_pred_, &base_app_, &base_unit_, &base_opac_, &zeros_, &planes_})
+  for (auto* v : {&pred_, &grad_, &opac_, &base_pred_, &base_app_, &base_unit_, &base_opac_, &planes_})
     std::vector<float>().swap(*v);
   std::vector<double>().swap(base_terms_);
   std::vector<Object>().swap(obj_);
@@ -153,7 +154,7 @@ void ObjectLosses::score_full(Scratch& w, const Image& image, const LabelMap& la
   for (size_t i = 0; i < HW * 3; ++i) grad[i] *= s_app;
   if (!(cfg_.use_bro && cfg_.lambda_bro > 0)) return;
   // B is built from the rendered opacity but treated as a constant: no gradient through the morphology.
-  boundary_band(opac, w.mask.data(), H, W, cfg_.bro_kernel, w.band.data(), w.morph);
+  boundary_band(opac, w.mask.data(), H, W, cfg_.bro_kernel, w.band.data());
   const double band_total = band_weight_total(w.band.data(), H, W);
   const float f = cfg_.bro_image_norm ? float(band_total / (2.0 * HW)) : 1.f;
   const float s_bro = f * cfg_.lambda_bro / J;
@@ -319,27 +320,22 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders,
 }
 
 // The base pair's eq. 6 over image rows [y0, y1): base_app_ [H, W, 3] its gradient there (without s_app), the L1
-// and SSIM-map terms per pixel and their row sums.
+// and SSIM-map terms per pixel and their row sums. SSIM's rows streamed (train::ssim_rows_streamed) and used as
+// they come.
 void ObjectLosses::score_base_app(Scratch& w, int H, int W, int y0, int y1) {
-  const PixelBox Q = PixelBox{0, y0, W, y1}.grown(dep_, W, H);  // the band's crop: full rows
-  const int q0 = Q.y0, q1 = Q.y1;
-  const size_t L = size_t(W) * 3, qn = size_t(q1 - q0) * L;
-  w.sgrad.resize(qn);
-  w.smap.resize(qn);
+  const size_t L = size_t(W) * 3;
   const double n = double(H) * L;
-  train::ssim_map_rows(&base_pred_[q0 * L], static_cast<const float*>(nullptr), q1 - q0, W, 3, y0 - q0, y1 - q0,
-                       w.sgrad.data(), w.smap.data(), n, w.ssim);  // against zeros, the band's rows
   const float lam = cfg_.lambda_dssim, a = (1 - lam) / float(n), b = -lam;
-  for (int y = y0; y < y1; ++y) {
+  const auto sink = [&](int y, const float* sg, const float* sm) {
     double l1_row = 0, ssim_row = 0;
     for (int x = 0; x < W; ++x) {
-      const size_t p = size_t(y) * W + x, q = size_t(y - q0) * W + x;
+      const size_t p = size_t(y) * W + x;
       double l1 = 0, ss = 0;
       for (int c = 0; c < 3; ++c) {
         const float d = base_pred_[p * 3 + c] - 0.f;
         l1 += std::abs(d);
-        ss += w.smap[q * 3 + c];
-        base_app_[p * 3 + c] = app_grad(d, a, b, w.sgrad[q * 3 + c], 1.f);
+        ss += sm[size_t(x) * 3 + c];
+        base_app_[p * 3 + c] = app_grad(d, a, b, sg[size_t(x) * 3 + c], 1.f);
       }
       base_terms_[p * kTerms + kL1] = l1;
       base_terms_[p * kTerms + kSsim] = ss;
@@ -348,37 +344,45 @@ void ObjectLosses::score_base_app(Scratch& w, int H, int W, int y0, int y1) {
     }
     base_rows_[size_t(y) * kTerms + kL1] = l1_row;
     base_rows_[size_t(y) * kTerms + kSsim] = ssim_row;
-  }
+  };
+  train::ssim_rows_streamed<float>([&](int r) { return &base_pred_[r * L]; }, {}, H, W, 3, y0, y1, n, w.ssim, sink);
 }
 
 // The base pair's eq. 14 over image rows [y0, y1) (band from the base opacity, mask 0): base_unit_ [H, W, 3]
-// there, the band weight, numerator and dot-product terms per pixel and their row sums.
+// there, the band weight, numerator and dot-product terms per pixel and their row sums. The band's and eq. 14's
+// rows streamed (BandRows, BroRows) from the row above the first (its y pairs reach row y0).
 void ObjectLosses::score_base_bro(Scratch& w, int H, int W, int y0, int y1) {
-  const PixelBox Q = PixelBox{0, y0, W, y1}.grown(dep_, W, H);  // the band's crop: full rows
-  const int q0 = Q.y0, q1 = Q.y1;
-  const int qh = q1 - q0;
-  const size_t qn = size_t(qh) * W;
-  w.band.resize(qn);
-  w.wsum.resize(qn);
-  w.num.resize(qn);
-  w.bgrad.resize(qn * 3);
-  boundary_band(&base_opac_[size_t(q0) * W], zeros_.data(), qh, W, cfg_.bro_kernel, w.band.data(), w.morph);
-  bro_parts(&base_pred_[size_t(q0) * W * 3], zeros_.data(), 3, w.band.data(), qh, W, w.wsum.data(), w.num.data(),
-            w.bgrad.data());
-  for (int y = y0; y < y1; ++y) {
+  const size_t L = size_t(W) * 3;
+  w.zero.assign(L, 0.f);  // the mask's and the target's rows
+  w.urow.resize(L);
+  w.wrow.resize(W);
+  w.nrow.resize(W);
+  w.band_rows.reset(H, W, cfg_.bro_kernel);
+  w.bro_rows.reset(W, 3);
+  const float* zero = w.zero.data();
+  const BandRows::Row A = [&](int r) { return &base_opac_[size_t(r) * W]; }, M = [&](int) { return zero; };
+  const int first = std::max(0, y0 - 1);
+  const float* band = w.band_rows.row(first, A, M);
+  for (int y = first; y < y1; ++y) {
+    const bool next = y + 1 < H;
+    const float* band_next = next ? w.band_rows.row(y + 1, A, M) : nullptr;
+    w.bro_rows.row(&base_pred_[y * L], zero, band, next ? &base_pred_[(y + 1) * L] : nullptr, next ? zero : nullptr,
+                   band_next, w.wrow.data(), w.nrow.data(), w.urow.data());
+    band = band_next;
+    if (y < y0) continue;  // the row above: its y pairs only
     double row[kTerms] = {};
     for (int x = 0; x < W; ++x) {
-      const size_t p = size_t(y) * W + x, q = size_t(y - q0) * W + x;
+      const size_t p = size_t(y) * W + x;
       double gp = 0, pp = 0;
       for (int c = 0; c < 3; ++c) {
-        const float u = w.bgrad[q * 3 + c], pr = base_pred_[p * 3 + c];
+        const float u = w.urow[size_t(x) * 3 + c], pr = base_pred_[p * 3 + c];
         base_unit_[p * 3 + c] = u;
         gp += double(u) * double(pr);
         pp += double(pr) * double(pr);
       }
       double* t = &base_terms_[p * kTerms];
-      t[kWsum] = w.wsum[q];
-      t[kNum] = w.num[q];
+      t[kWsum] = w.wrow[x];
+      t[kNum] = w.nrow[x];
       t[kGp] = gp;
       t[kPp] = pp;
       for (int k : {kWsum, kNum, kGp, kPp}) row[k] += t[k];
@@ -390,6 +394,10 @@ void ObjectLosses::score_base_bro(Scratch& w, int H, int W, int y0, int y1) {
 // Step 2 for rows [y0, y1) of object j's box R (all of them for a small object, a band of the image for a large
 // one): its crop Q = those rows of R grown by dep_, eq. 6 and eq. 14's parts there, kept inside R: own = eq. 6's
 // gradient, unit = eq. 14's unscaled gradient, pred the render, rows[] the per-pixel terms summed over each row.
+// One pass down the crop: its rows are read from the renders into a ring as the passes first ask for them, SSIM's
+// rows (train::ssim_rows_streamed) come out in order, and each R row's eq. 6 terms, band row (BandRows) and eq.
+// 14's parts (BroRows) are made as its SSIM row comes; nothing larger than a few rows of the crop is written
+// besides R's outputs.
 void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& lab, int j, int k, int y0, int y1) {
   Object& o = obj_[j];
   const int W = image.width, H = image.height, J = static_cast<int>(obj_.size());
@@ -398,41 +406,56 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
   const PixelBox Q = R.grown(dep_, W, H);
   const int qw = Q.width(), qh = Q.height(), rw = R.width(), rh = R.height();
   const int rx = R.x0 - Q.x0, ry = R.y0 - Q.y0;  // R inside the crop
-  const size_t qn = size_t(qw) * qh;
   const bool bro_on = cfg_.use_bro && cfg_.lambda_bro > 0;
   const size_t out0 = size_t(y0 - o.R.y0) * rw;  // the band's first pixel in o's arrays
-  if (qn == 0) return;
-  // The crop: pred, gt = I * M_k [qh, qw, 3]; mask, opac [qh, qw].
-  w.pred.resize(qn * 3);
-  w.gt.resize(qn * 3);
-  w.mask.resize(qn);
-  w.opac.resize(qn);
-  // The object's values from its plane (renders_: the renderer's, with base + difference the sums find_boxes
-  // compared, or planes_).
-  for (int yy = 0; yy < qh; ++yy)
+  if (size_t(qw) * qh == 0) return;
+  // The crop's rows, each [8 qw]: pred and gt = I * M_k [qw, 3], mask, opac [qw], in a ring of `ring` rows,
+  // filled in order as first asked for. The passes ask for rows at most 10 (SSIM), 3 + s/2 (the band of the
+  // row above R's first) or 2 + s/2 (the band's lookahead) before the latest filled: 16 + s rows hold them.
+  const int ring = 16 + cfg_.bro_kernel;
+  const size_t rf = size_t(qw) * 8;
+  w.crop.resize(size_t(ring) * rf);
+  int filled = -1;
+  auto fill = [&](int r) {  // the object's values from its plane (renders_: base + difference, or planes_)
+    float* d = &w.crop[size_t(r % ring) * rf];
     for (int xx = 0; xx < qw; ++xx) {
-      const long p = long(yy + Q.y0) * W + (xx + Q.x0);
-      const size_t q = size_t(yy) * qw + xx;
+      const long p = long(r + Q.y0) * W + (xx + Q.x0);
       const float m = lab.v[p] == k ? 1.f : 0.f;
-      w.mask[q] = m;
-      w.opac[q] = renders_.opacity_at(j, p);
+      d[6 * qw + xx] = m;
+      d[7 * qw + xx] = opacity_of(j, p);
       for (int c = 0; c < 3; ++c) {
-        w.pred[q * 3 + c] = renders_.color_at(j, p, c);
-        w.gt[q * 3 + c] = image.px[p * 3 + c] * m;
+        d[xx * 3 + c] = color_of(j, p, c);
+        d[3 * qw + xx * 3 + c] = image.px[p * 3 + c] * m;
       }
     }
-  // Eq. 6: SSIM on the crop with the image's normaliser; L1 and the map summed over each row of R.
-  w.sgrad.resize(qn * 3);
-  w.smap.resize(qn * 3);
-  // (The target is 0 outside the mask's box: y's passes run there only.)
-  const train::SsimSupport ys{o.M.x0 - Q.x0, o.M.y0 - Q.y0, o.M.x1 - Q.x0, o.M.y1 - Q.y0};
-  train::ssim_map_rows(w.pred.data(), w.gt.data(), qh, qw, 3, ry, ry + rh, w.sgrad.data(), w.smap.data(), double(n),
-                       w.ssim, o.M.empty() ? train::SsimSupport{0, 0, 0, 0} : ys, rx, rx + rw);  // R
+  };
+  auto at = [&](int r) {
+    for (; filled < r; ++filled) fill(filled + 1);
+    if (r <= filled - ring) throw Error("object losses: crop row " + std::to_string(r) + " left the ring");
+    return &w.crop[size_t(r % ring) * rf];
+  };
+  // Eq. 14's rows (the band from the object's opacity and mask) from the row above R's first (its y pairs).
+  w.urow.resize(size_t(qw) * 3);
+  w.wrow.resize(qw);
+  w.nrow.resize(qw);
+  const BandRows::Row opac = [&](int r) { return at(r) + 7 * qw; }, mask = [&](int r) { return at(r) + 6 * qw; };
+  const float* band = nullptr;
+  auto bro_row = [&](int y) {  // band row y in `band` before, row y + 1 after
+    const bool next = y + 1 < qh;
+    const float* band_next = next ? w.band_rows.row(y + 1, opac, mask) : nullptr;
+    const float* pr = at(y);
+    const float* pn = next ? at(y + 1) : nullptr;
+    w.bro_rows.row(pr, pr + 3 * qw, band, pn, next ? pn + 3 * qw : nullptr, band_next, w.wrow.data(), w.nrow.data(),
+                   w.urow.data());
+    band = band_next;
+  };
   const float lam = cfg_.lambda_dssim, a = (1 - lam) / float(n), b = -lam, s_app = cfg_.lambda_app / J;
-  for (int yy = 0; yy < rh; ++yy) {
-    const size_t q0 = (size_t(yy + ry) * qw + rx) * 3;
-    const float *pr = &w.pred[q0], *gt = &w.gt[q0], *sg = &w.sgrad[q0], *sm = &w.smap[q0];
-    float* own = &o.own[(out0 + size_t(yy) * rw) * 3];
+  const auto sink = [&](int yy, const float* sg, const float* sm) {
+    const float* cr = at(yy);
+    const size_t i0 = size_t(rx) * 3;
+    const float *pr = cr + i0, *gt = cr + 3 * qw + i0;
+    sg += i0, sm += i0;
+    float* own = &o.own[(out0 + size_t(yy - ry) * rw) * 3];
     double l1 = 0, ss = 0;
 #pragma omp simd reduction(+ : l1, ss)
     for (int i = 0; i < rw * 3; ++i) {
@@ -441,39 +464,41 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
       ss += sm[i];
       own[i] = app_grad(d, a, b, sg[i], s_app);
     }
-    double* row = &o.rows[(size_t(y0 - o.R.y0) + yy) * kTerms];
+    double* row = &o.rows[(size_t(y0 - o.R.y0) + (yy - ry)) * kTerms];
     row[kL1] = l1;
     row[kSsim] = ss;
-  }
-  if (!bro_on) return;
-  // Eq. 14's parts on the crop (the band from the object's opacity and mask), kept inside R.
-  w.band.resize(qn);
-  w.wsum.resize(qn);
-  w.num.resize(qn);
-  w.bgrad.resize(qn * 3);
-  boundary_band(w.opac.data(), w.mask.data(), qh, qw, cfg_.bro_kernel, w.band.data(), w.morph);
-  bro_parts(w.pred.data(), w.gt.data(), 3, w.band.data(), qh, qw, w.wsum.data(), w.num.data(), w.bgrad.data());
-  for (int yy = 0; yy < rh; ++yy) {
-    const size_t q0 = size_t(yy + ry) * qw + rx, o0 = (out0 + size_t(yy) * rw) * 3;
+    if (!bro_on) return;
+    if (yy == ry) {
+      w.band_rows.reset(qh, qw, cfg_.bro_kernel);
+      w.bro_rows.reset(qw, 3);
+      band = w.band_rows.row(std::max(0, ry - 1), opac, mask);
+      if (ry > 0) bro_row(ry - 1);
+    }
+    bro_row(yy);
     double ws = 0, num = 0, gp = 0, pp = 0;
     for (int xx = 0; xx < rw; ++xx) {
-      ws += w.wsum[q0 + xx];
-      num += w.num[q0 + xx];
+      ws += w.wrow[rx + xx];
+      num += w.nrow[rx + xx];
     }
-    const float *u = &w.bgrad[q0 * 3], *pr = &w.pred[q0 * 3];
+    const float* u = &w.urow[i0];
 #pragma omp simd reduction(+ : gp, pp)
     for (int i = 0; i < rw * 3; ++i) {
       gp += double(u[i]) * double(pr[i]);
       pp += double(pr[i]) * double(pr[i]);
     }
-    std::copy_n(u, rw * 3, &o.unit[o0]);
-    if (!o.pred.empty()) std::copy_n(pr, rw * 3, &o.pred[o0]);
-    double* row = &o.rows[(size_t(y0 - o.R.y0) + yy) * kTerms];
+    std::copy_n(u, rw * 3, &o.unit[(out0 + size_t(yy - ry) * rw) * 3]);
+    if (!o.pred.empty()) std::copy_n(pr, rw * 3, &o.pred[(out0 + size_t(yy - ry) * rw) * 3]);
     row[kWsum] = ws;
     row[kNum] = num;
     row[kGp] = gp;
     row[kPp] = pp;
-  }
+  };
+  // Eq. 6: SSIM on the crop with the image's normaliser (the target is 0 outside the mask's box: y's passes run
+  // there only), R's columns.
+  const train::SsimSupport ys{o.M.x0 - Q.x0, o.M.y0 - Q.y0, o.M.x1 - Q.x0, o.M.y1 - Q.y0};
+  train::ssim_rows_streamed<float>([&](int r) { return at(r); }, [&](int r) { return at(r) + 3 * qw; }, qh, qw, 3, ry,
+                                   ry + rh, double(n), w.ssim, sink, o.M.empty() ? train::SsimSupport{0, 0, 0, 0} : ys,
+                                   rx, rx + rw);
 }
 
 // The base pair's per-pixel terms summed over r. out [kTerms]
@@ -686,7 +711,6 @@ ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab,
   bool any_box = false;
   for (const Object& o : obj_) any_box |= !o.full;
   if (any_box) {
-    if (zeros_.size() != HW * 3) zeros_.assign(HW * 3, 0.f);
     base_terms_.resize(HW * kTerms);
     base_rows_.assign(size_t(H) * kTerms, 0.0);
     base_app_.resize(HW * 3);

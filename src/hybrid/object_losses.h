@@ -1,14 +1,17 @@
 // The object-conditioned losses of one view: eq. 6 (appearance, (1 - lambda) L1 + lambda (1 - SSIM) of each
 // object render I_k against I * M_k) and eq. 14 (BRO on the band of eq. 13, with the scale rule and the
 // scale-invariant gradient of bro.h), for the J objects present in the view's mask. The object renders come from
-// one rasterization, interleaved per pixel (ObjectRenders below: the dense object channels of object_channels.h,
-// or the base channels and groups of object_groups.h); the box path's first pass lays each object's render out
-// as its own plane, so that an object's crop reads contiguous rows. Each object's losses run single-threaded in
-// one thread's scratch (no parallel-region overhead per convolution, each object's images stay in one core's
-// cache), and the gradients go back interleaved per pixel (ObjectGradOut) or stay in sparse form for the renderer
-// to read on demand (gradient_row). Loss values are summed in object order (deterministic, independent of the
-// thread count). SSIM on a crop computes only the columns its outputs need and runs the target's passes only on
-// and near the mask's box (train::ssim_map_rows), bitwise the full passes.
+// one rasterization (ObjectRenders below: the dense object channels of object_channels.h, or the base channels
+// and groups of object_groups.h, interleaved per pixel or one plane per object); where the objects are
+// interleaved, the box path's first pass lays each object's render out as its own plane, so that an object's crop
+// reads contiguous rows. Each object's losses run single-threaded in one thread's scratch (no parallel-region
+// overhead per convolution), and the gradients go back interleaved per pixel (ObjectGradOut) or stay in sparse
+// form for the renderer to read on demand (gradient_row). Loss values are summed in object order (deterministic,
+// independent of the thread count). A crop is scored in one pass down its rows (score_crop): SSIM's rows come
+// out of train::ssim_rows_streamed in order, computed only for the columns its outputs need and with the
+// target's passes only on and near the mask's box (bitwise the full passes), and eq. 14's band and parts follow
+// row by row (BandRows, BroRows), so that nothing but a few rows of the crop and the outputs is written: the
+// passes stay in a core's own cache instead of streaming crop-sized buffers through the shared one.
 //
 // Boxes (ObjectLossOptions::boxes, with the layout's base render). Every term of both losses is a sum over
 // pixels p (L1 and the SSIM map over pixels, eq. 14's numerator and band weights over the forward differences,
@@ -41,6 +44,7 @@
 
 #include "core/image.h"
 #include "core/scratch_vector.h"
+#include "hybrid/bro.h"
 #include "hybrid/config.h"
 #include "hybrid/object_channels.h"
 #include "train/loss.h"
@@ -161,12 +165,15 @@ class ObjectLosses {
     train::PhotometricLoss loss;
     train::SsimWorkspace<float> ssim;
     // (ScratchVector: every use writes these before it reads them; their growth is not zeroed.)
-    ScratchVector<float> gt, pred;          // [H, W, 3] (of the crop in the box path)
-    ScratchVector<float> mask, band, opac;  // [H, W]
-    std::vector<float> morph;               // boundary_band's scratch
-    ScratchVector<float> bgrad;             // [H, W, 3] BRO's gradient before its scale component is removed
-    ScratchVector<float> sgrad, smap;       // [H, W, 3] SSIM's gradient and map
-    ScratchVector<double> wsum, num;        // [H, W] eq. 14 per pixel (bro_parts)
+    ScratchVector<float> gt, mask, band;  // [H, W, 3], [H, W], [H, W] (path without boxes)
+    ScratchVector<float> bgrad;           // [H, W, 3] BRO's gradient before its scale component is removed
+    // Box path, one pass down a crop or band (score_crop):
+    ScratchVector<float> crop;         // [ring, 8 W] the crop's rows: colour, target [W, 3], mask, opacity [W]
+    std::vector<float> zero;           // [W, 3] zeros: the base pair's mask and target rows
+    ScratchVector<float> urow;         // [W, 3] a row of eq. 14's unscaled gradient
+    ScratchVector<double> wrow, nrow;  // [W] a row of eq. 14's band weights and numerators (bro_parts)
+    BandRows band_rows;
+    BroRows<float> bro_rows;
   };
   // The per-pixel terms of the box path: L1, SSIM map, eq. 14's band weight and numerator, <g, p>, <p, p>.
   enum Term { kL1, kSsim, kWsum, kNum, kGp, kPp, kTerms };
@@ -208,10 +215,21 @@ class ObjectLosses {
   std::vector<int> row_lo_, row_hi_;                     // [J, H] each row's differing columns
   std::vector<int> mask_lo_, mask_hi_;                   // [J, H] each row's columns of the object's label
   std::vector<float> base_pred_, base_app_, base_unit_;  // [H, W, 3]
-  std::vector<float> base_opac_, zeros_;                 // [H, W], [H, W, 3]
+  std::vector<float> base_opac_;                         // [H, W]
   std::vector<float> planes_;                            // [J, H, W, 4] the objects' renders (colour, opacity)
   // The box path's renders as the crops read them: the call's, or planes_ (find_boxes).
   ObjectRenders renders_;
+  // Object j's colour channel c and opacity at pixel p from renders_, a difference added to the base render's
+  // planar copy (base_pred_, base_opac_: the floats of the renders' base channels, so the sums color_at makes,
+  // read contiguously instead of at the base's stride).
+  float color_of(int j, long p, int c) const {
+    const float v = renders_.color[j][p * renders_.stride + c];
+    return renders_.deltas ? base_pred_[p * 3 + c] + v : v;
+  }
+  float opacity_of(int j, long p) const {
+    const float v = renders_.opacity[j][p * renders_.stride];
+    return renders_.deltas ? base_opac_[p] + v : v;
+  }
   std::vector<double> base_terms_;  // [H, W, kTerms]
   std::vector<double> base_rows_;   // [H, kTerms] their sums over each row
   double base_total_[kTerms] = {};  // their sums over the image (the rows in order)

@@ -10,6 +10,8 @@
 // ssim_map also stores the map and takes g = 1/count from the caller (a crop scored as part of a larger image);
 // with y null (an all-zero y) the passes of mu_y, E[yy], E[xy] and of d_exy are skipped (their values are 0), and
 // with a support given (ssim_map_rows' `ys`: where y may be non-zero) they run only on and near it.
+// ssim_rows_streamed runs the same passes as one line-buffer pipeline from x and y to the gradient rows: the
+// coefficients in a ring of 11 rows, each gradient row handed out as soon as its 11 coefficient rows exist.
 #include "train/ssim.h"
 
 #include <omp.h>
@@ -189,18 +191,20 @@ struct Plan {
 
 // SSIM of output rows [y0, y1) as a line-buffer pipeline, so every intermediate row stays in cache:
 //   product rows (x, y, xx, yy, xy) -> horizontal pass -> ring P (11 rows)
-//   moment row m (vertical pass over P rows m-5..m+5) -> map (summed into row_sum[m]) and, when `coeff` is
-//   given, the three backward coefficients -> horizontal pass -> coeff rows m ([H, 3, L], shared by the bands).
-// Product rows are computed for [y0 - 5, y1 + 5) (clipped), so a band needs nothing from its neighbours; every
-// value is computed with the same arithmetic whatever the banding.
-// Every pass computes only the values of a row the plan `sp` names: the moments, the map and the coefficients
-// 5 pixels around the output columns, the coefficients' horizontal pass at the output columns; y's passes (its
-// product rows, its three moments, the coefficient of E[xy]) only where they can be non-zero, everywhere else
-// those values are 0, as the full passes over y's zeros give them. row_sum[m] sums the map over [e0, e1).
-// kMap: the map's values are also stored in `map` [H, L]. `g` is the gradient's normaliser 1 / count.
-template <typename T, bool kMap>
-void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, const Plan& sp, T* coeff, double* row_sum,
-               T g, T* map, ScratchVector<T>& buf) {
+//   moment row m (vertical pass over P rows m-5..m+5) -> map (summed into row_sum[m]) and, with a gradient,
+//   the three backward coefficients -> horizontal pass -> coefficient row m -> out.done(m).
+// `out` says where row m's map and coefficients go (ArrayRows: the image's [H, L] and [H, 3, L], shared by the
+// bands; StreamRows: a ring of 11 rows, each gradient row made as soon as its coefficient rows are complete).
+// x and y are read by row (xrow(r), yrow(r)). Product rows are computed for [y0 - 5, y1 + 5) (clipped), so a band needs
+// nothing from its neighbours; every value is computed with the same arithmetic whatever the banding. Every pass
+// computes only the values of a row the plan `sp` names: the moments, the map and the coefficients 5 pixels around the
+// output columns, the coefficients' horizontal pass at the output columns; y's passes (its product rows, its three
+// moments, the coefficient of E[xy]) only where they can be non-zero, everywhere else those values are 0, as the full
+// passes over y's zeros give them. row_sum[m] sums the map over [e0, e1). kMap: the map's values are also stored
+// (out.map_row). `g` is the gradient's normaliser 1 / count.
+template <typename T, bool kMap, class XRow, class YRow, class Out>
+void ssim_band(const XRow& xrow, const YRow& yrow, int H, int W, int C, int y0, int y1, const Plan& sp, Out& out,
+               double* row_sum, T g, ScratchVector<T>& buf) {
   const int L = W * C;
   const T C1 = T(0.01 * 0.01), C2 = T(0.03 * 0.03);
   buf.resize(size_t(kWin) * 5 * L + size_t(8) * L);
@@ -215,7 +219,7 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, cons
   bool y_moments = false;                                       // mom[1, 3, 4] hold values in [a0, a1)
   for (int m = y0; m < y1; ++m) {
     for (; next_p <= std::min(H - 1, m + kHalf); ++next_p) {
-      const T* xr = x + size_t(next_p) * L;
+      const T* xr = xrow(next_p);
       T *pxx = tmp, *pyy = tmp + L, *pxy = tmp + 2 * L;
       const int f0 = std::max(0, e0 - kHalf * C), f1 = std::min(L, e1 + kHalf * C);  // what outputs [e0, e1) read
 #pragma omp simd
@@ -223,7 +227,7 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, cons
       conv_row_range(xr, prow(next_p, 0), W, C, e0, e1);
       conv_row_range(pxx, prow(next_p, 2), W, C, e0, e1);
       if (sp.rows(next_p, 0)) {  // the outputs [a0, a1), which read the products 5 pixels further
-        const T* yr = y + size_t(next_p) * L;
+        const T* yr = yrow(next_p);
         const int c0 = std::max(0, a0 - kHalf * C), c1 = std::min(L, a1 + kHalf * C);
 #pragma omp simd
         for (int j = c0; j < c1; ++j) {
@@ -245,7 +249,8 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, cons
       for (int k : {1, 3, 4}) std::fill(mom[k] + a0, mom[k] + a1, T(0));
       y_moments = false;
     }
-    T* mrow = kMap ? map + size_t(m) * L : nullptr;
+    T* mrow = kMap ? out.map_row(m) : nullptr;
+    T* coeff = out.coeff_row(m);
     if (!coeff) {
       double total = 0;
 #pragma omp simd reduction(+ : total)
@@ -258,9 +263,7 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, cons
       row_sum[m] = total;
       continue;
     }
-    T* dmu = coeff + (size_t(m) * 3 + 0) * L;
-    T* dxx = coeff + (size_t(m) * 3 + 1) * L;
-    T* dxy = coeff + (size_t(m) * 3 + 2) * L;
+    T *dmu = coeff, *dxx = coeff + L, *dxy = coeff + 2 * size_t(L);
     double total = 0;
 #pragma omp simd reduction(+ : total)
     for (int j = e0; j < e1; ++j) {
@@ -286,39 +289,70 @@ void ssim_band(const T* x, const T* y, int H, int W, int C, int y0, int y1, cons
       std::copy(dxy + a0, dxy + a1, tmp + a0);
       conv_row_range(tmp, dxy, W, C, sp.b0, sp.b1);
     }
+    out.done(m);
   }
 }
 
-// Gradient rows [y0, y1): the vertical pass over the horizontally filtered coefficient rows y-5..y+5 (every
-// band's rows complete: called after all bands ran ssim_band), then dL/dx = v_mu + 2 x v_xx + y v_xy, the last
-// term inside y's support only (y is 0 elsewhere).
-template <typename T>
-void ssim_grad_band(const T* x, const T* y, int H, int L, int y0, int y1, const Plan& sp, const T* coeff, T* grad_x,
-                    ScratchVector<T>& buf) {
-  buf.resize(std::max(buf.size(), size_t(3) * L));
-  T* v[3] = {buf.data(), buf.data() + L, buf.data() + 2 * size_t(L)};
+// Gradient row yy: the vertical pass over the horizontally filtered coefficient rows yy-5..yy+5 (coeff_row(r):
+// row r's three [L] rows, complete), then dL/dx = v_mu + 2 x v_xx + y v_xy, the last term inside y's support only
+// (y is 0 elsewhere). xr, yr: rows yy of x and y (yr read only inside the support); v: three [L] scratch rows.
+template <typename T, class CoeffRow>
+void ssim_grad_row(const T* xr, const T* yr, int H, int L, int yy, const Plan& sp, const CoeffRow& coeff_row, T* gr,
+                   T* const* v) {
   const int b0 = sp.b0, b1 = sp.b1, g0 = sp.g0, g1 = sp.g1;
-  for (int yy = y0; yy < y1; ++yy) {
-    const bool with_y = sp.rows(yy, 0);
-    for (int k = 0; k < 2; ++k)
-      conv_col<T>([&](int r) { return coeff + (size_t(r) * 3 + k) * L + g0; }, yy, H, g1 - g0, v[k] + g0);
-    if (with_y) conv_col<T>([&](int r) { return coeff + (size_t(r) * 3 + 2) * L + b0; }, yy, H, b1 - b0, v[2] + b0);
-    const T* xr = x + size_t(yy) * L;
-    T* gr = grad_x + size_t(yy) * L;
-    auto with_y_term = [&](int j0, int j1) {
-      const T* yr = y + size_t(yy) * L;
+  const bool with_y = sp.rows(yy, 0);
+  for (int k = 0; k < 2; ++k)
+    conv_col<T>([&](int r) { return coeff_row(r) + size_t(k) * L + g0; }, yy, H, g1 - g0, v[k] + g0);
+  if (with_y) conv_col<T>([&](int r) { return coeff_row(r) + 2 * size_t(L) + b0; }, yy, H, b1 - b0, v[2] + b0);
+  auto with_y_term = [&](int j0, int j1) {
 #pragma omp simd
-      for (int j = j0; j < j1; ++j) gr[j] = v[0][j] + 2 * xr[j] * v[1][j] + yr[j] * v[2][j];
-    };
-    if (with_y && b0 == g0 && b1 == g1) {  // y anywhere in the row's outputs
-      with_y_term(g0, g1);
-      continue;
-    }
-#pragma omp simd
-    for (int j = g0; j < g1; ++j) gr[j] = v[0][j] + 2 * xr[j] * v[1][j];
-    if (with_y) with_y_term(b0, b1);
+    for (int j = j0; j < j1; ++j) gr[j] = v[0][j] + 2 * xr[j] * v[1][j] + yr[j] * v[2][j];
+  };
+  if (with_y && b0 == g0 && b1 == g1) {  // y anywhere in the row's outputs
+    with_y_term(g0, g1);
+    return;
   }
+#pragma omp simd
+  for (int j = g0; j < g1; ++j) gr[j] = v[0][j] + 2 * xr[j] * v[1][j];
+  if (with_y) with_y_term(b0, b1);
 }
+
+// Where ssim_band puts row m's map (kMap) and coefficients, and what follows once they are complete.
+// The whole image's: map [H, L], coeff [H, 3, L] (null: no gradient).
+template <typename T>
+struct ArrayRows {
+  T *map, *coeff;
+  int L;
+  T* map_row(int m) const { return map + size_t(m) * L; }
+  T* coeff_row(int m) const { return coeff ? coeff + size_t(m) * 3 * L : nullptr; }
+  void done(int) const {}
+};
+
+// Streamed (ssim_rows_streamed): the map and coefficients of the last 11 rows in a ring; once row m's are
+// complete, gradient row m - 5 (which reads coefficient rows m - 10 .. m) is computed and handed to the sink with
+// its map row.
+template <typename T, class XRow, class YRow, class Sink>
+struct StreamRows {
+  const XRow& xrow;
+  const YRow& yrow;
+  const Sink& sink;
+  const Plan& sp;
+  int H, L, y0, y1;
+  T* ring;  // [11][4][L]: map, then the three coefficient rows
+  T* v[3];  // [L] each: the gradient's vertical passes
+  T* grad;  // [L] the gradient row
+  T* map_row(int m) const { return ring + size_t(m % kWin) * 4 * L; }
+  T* coeff_row(int m) const { return map_row(m) + L; }
+  void emit(int yy) const {
+    ssim_grad_row(
+        xrow(yy), sp.rows(yy, 0) ? yrow(yy) : nullptr, H, L, yy, sp,
+        [&](int r) { return static_cast<const T*>(coeff_row(r)); }, grad, v);
+    sink(yy, static_cast<const T*>(grad), static_cast<const T*>(map_row(yy)));
+  }
+  void done(int m) const {
+    if (m - kHalf >= y0 && m - kHalf < y1) emit(m - kHalf);
+  }
+};
 
 }  // namespace
 
@@ -348,19 +382,28 @@ T ssim_map(const T* x, const T* y, int H, int W, int C, T* grad_x, T* map, doubl
   T* coeff = grad_x ? ws.coeff.data() : nullptr;
   const T g = T(1) / T(count);
   const Plan sp(SsimSupport{}, y != nullptr, H, W, C);
+  const auto xrow = [&](int r) { return x + size_t(r) * L; };
+  const auto yrow = [&](int r) { return y + size_t(r) * L; };
+  ArrayRows<T> out{map, coeff, L};
 #pragma omp parallel num_threads(bands) if (bands > 1)
   {
 #pragma omp for schedule(static, 1)
     for (int b = 0; b < bands; ++b) {
       const int y0 = int(long(H) * b / bands), y1 = int(long(H) * (b + 1) / bands);
-      if (map) ssim_band<T, true>(x, y, H, W, C, y0, y1, sp, coeff, ws.row_sum.data(), g, map, ws.band[b]);
-      else ssim_band<T, false>(x, y, H, W, C, y0, y1, sp, coeff, ws.row_sum.data(), g, map, ws.band[b]);
+      if (map) ssim_band<T, true>(xrow, yrow, H, W, C, y0, y1, sp, out, ws.row_sum.data(), g, ws.band[b]);
+      else ssim_band<T, false>(xrow, yrow, H, W, C, y0, y1, sp, out, ws.row_sum.data(), g, ws.band[b]);
     }
     if (grad_x) {
 #pragma omp for schedule(static, 1)
-      for (int b = 0; b < bands; ++b)
-        ssim_grad_band(x, y, H, L, int(long(H) * b / bands), int(long(H) * (b + 1) / bands), sp, coeff, grad_x,
-                       ws.band[b]);
+      for (int b = 0; b < bands; ++b) {
+        ScratchVector<T>& buf = ws.band[b];
+        buf.resize(std::max(buf.size(), size_t(3) * L));
+        T* v[3] = {buf.data(), buf.data() + L, buf.data() + 2 * size_t(L)};
+        for (int r = int(long(H) * b / bands); r < int(long(H) * (b + 1) / bands); ++r)
+          ssim_grad_row(
+              xrow(r), y ? yrow(r) : nullptr, H, L, r, sp, [&](int m) { return out.coeff_row(m); },
+              grad_x + size_t(r) * L, v);
+      }
     }
   }
   double total = 0;
@@ -369,19 +412,38 @@ T ssim_map(const T* x, const T* y, int H, int W, int C, T* grad_x, T* map, doubl
 }
 
 template <typename T>
-void ssim_map_rows(const T* x, const T* y, int H, int W, int C, int y0, int y1, T* grad_x, T* map, double count,
-                   SsimWorkspace<T>& ws, SsimSupport ys, int x0, int x1) {
+void ssim_rows_streamed(const SsimRow<T>& xrow, const SsimRow<T>& yrow, int H, int W, int C, int y0, int y1,
+                        double count, SsimWorkspace<T>& ws, const SsimSink<T>& sink, SsimSupport ys, int x0, int x1) {
   y0 = std::max(0, y0);
   y1 = std::min(H, y1);
   if (y0 >= y1) return;
   const int L = W * C, m0 = std::max(0, y0 - kHalf), m1 = std::min(H, y1 + kHalf);
   ws.row_sum.assign(size_t(H), 0.0);
   if (ws.band.empty()) ws.band.resize(1);
-  ws.coeff.resize(size_t(H) * 3 * L);  // rows [m0, m1) written
+  ws.coeff.resize(size_t(kWin) * 4 * L + 4 * size_t(L));  // the ring, v, the gradient row
+  T* ring = ws.coeff.data();
+  T* rest = ring + size_t(kWin) * 4 * L;
   const T g = T(1) / T(count);
-  const Plan sp(ys, y != nullptr, H, W, C, x0, x1);
-  ssim_band<T, true>(x, y, H, W, C, m0, m1, sp, ws.coeff.data(), ws.row_sum.data(), g, map, ws.band[0]);
-  ssim_grad_band(x, y, H, L, y0, y1, sp, ws.coeff.data(), grad_x, ws.band[0]);
+  const Plan sp(ys, static_cast<bool>(yrow), H, W, C, x0, x1);
+  StreamRows<T, SsimRow<T>, SsimRow<T>, SsimSink<T>> out{
+      xrow, yrow, sink, sp, H, L, y0, y1, ring, {rest, rest + L, rest + 2 * size_t(L)}, rest + 3 * size_t(L)};
+  ssim_band<T, true>(xrow, yrow, H, W, C, m0, m1, sp, out, ws.row_sum.data(), g, ws.band[0]);
+  for (int yy = std::max(y0, m1 - kHalf); yy < y1; ++yy) out.emit(yy);  // the rows within 5 of the image's end
+}
+
+template <typename T>
+void ssim_map_rows(const T* x, const T* y, int H, int W, int C, int y0, int y1, T* grad_x, T* map, double count,
+                   SsimWorkspace<T>& ws, SsimSupport ys, int x0, int x1) {
+  const Plan sp(ys, y != nullptr, H, W, C, x0, x1);  // (for the columns the sink's rows hold)
+  const size_t L = size_t(W) * C;
+  ssim_rows_streamed<T>([&](int r) { return x + size_t(r) * L; },
+                        y ? SsimRow<T>([&](int r) { return y + size_t(r) * L; }) : SsimRow<T>(), H, W, C, y0, y1, count,
+                        ws,
+                        [&](int r, const T* gr, const T* mr) {
+                          std::copy(gr + sp.g0, gr + sp.g1, grad_x + r * L + sp.g0);
+                          std::copy(mr + sp.e0, mr + sp.e1, map + r * L + sp.e0);
+                        },
+                        ys, x0, x1);
 }
 
 template float ssim<float>(const float*, const float*, int, int, int, float*, SsimWorkspace<float>&);
@@ -393,6 +455,11 @@ template void ssim_map_rows<float>(const float*, const float*, int, int, int, in
                                    SsimWorkspace<float>&, SsimSupport, int, int);
 template void ssim_map_rows<double>(const double*, const double*, int, int, int, int, int, double*, double*, double,
                                     SsimWorkspace<double>&, SsimSupport, int, int);
+template void ssim_rows_streamed<float>(const SsimRow<float>&, const SsimRow<float>&, int, int, int, int, int, double,
+                                        SsimWorkspace<float>&, const SsimSink<float>&, SsimSupport, int, int);
+template void ssim_rows_streamed<double>(const SsimRow<double>&, const SsimRow<double>&, int, int, int, int, int,
+                                         double, SsimWorkspace<double>&, const SsimSink<double>&, SsimSupport, int,
+                                         int);
 template double ssim<double>(const double*, const double*, int, int, int, double*, SsimWorkspace<double>&);
 template const float* ssim_window<float>();
 template const double* ssim_window<double>();

@@ -440,8 +440,7 @@ TEST(Bro, BandOnHandMadeMask) {
   std::vector<float> M(H * W, 0.f), A(H * W, 0.f), B(H * W);
   for (int y = 3; y < 6; ++y)
     for (int x = 3; x < 6; ++x) M[y * W + x] = 1;
-  std::vector<float> tmp;
-  boundary_band(A.data(), M.data(), H, W, 3, B.data(), tmp);
+  boundary_band(A.data(), M.data(), H, W, 3, B.data());
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
       bool in5 = x >= 2 && x <= 6 && y >= 2 && y <= 6, centre = x == 4 && y == 4;
@@ -449,7 +448,7 @@ TEST(Bro, BandOnHandMadeMask) {
     }
   // A predicted opacity adds its own band, clipped at 1.
   A[0] = 0.5f;
-  boundary_band(A.data(), M.data(), H, W, 3, B.data(), tmp);
+  boundary_band(A.data(), M.data(), H, W, 3, B.data());
   EXPECT_FLOAT_EQ(B[0], 0.5f);
   EXPECT_FLOAT_EQ(B[1 * W + 1], 0.5f);
   EXPECT_FLOAT_EQ(B[2 * W + 2], 1.f);
@@ -510,6 +509,93 @@ TEST(Bro, FiltersMatchBruteForce) {
         EXPECT_EQ(d[y * W + x], mx) << s << " " << x << "," << y;
         EXPECT_EQ(e[y * W + x], mn) << s << " " << x << "," << y;
       }
+  }
+}
+
+// The band row by row (BandRows, what the object losses' crops stream) against a brute-force band: from any
+// first row (a crop's rows start anywhere), each row of A and M read once and in order, at most s - 1 - s/2 rows
+// ahead of the row asked for, and a returned row still valid after the next one is asked for.
+TEST(Bro, BandRowsFromAnyRowMatchBruteForce) {
+  std::mt19937 rng(21);
+  const int H = 13, W = 10;
+  std::vector<float> A(H * W), M(H * W);
+  for (auto& v : A) v = float(rng() % 100) / 100.f;
+  for (auto& v : M) v = rng() % 3 == 0 ? 1.f : 0.f;
+  for (int s : {1, 2, 3, 5, 8, 21}) {
+    const int r = s / 2, r2 = s - 1 - r;
+    std::vector<float> ref(H * W), full(H * W);
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        float amx = -1, amn = 2, mmx = -1, mmn = 2;
+        for (int yy = std::max(0, y - r); yy <= std::min(H - 1, y + r2); ++yy)
+          for (int xx = std::max(0, x - r); xx <= std::min(W - 1, x + r2); ++xx) {
+            amx = std::max(amx, A[yy * W + xx]), amn = std::min(amn, A[yy * W + xx]);
+            mmx = std::max(mmx, M[yy * W + xx]), mmn = std::min(mmn, M[yy * W + xx]);
+          }
+        ref[y * W + x] = std::clamp(amx - amn + mmx - mmn, 0.f, 1.f);
+      }
+    boundary_band(A.data(), M.data(), H, W, s, full.data());
+    for (int i = 0; i < H * W; ++i) ASSERT_EQ(full[i], ref[i]) << "kernel " << s << " value " << i;
+    for (int first : {0, 1, 4, H - 1}) {
+      BandRows rows;
+      rows.reset(H, W, s);
+      int last_a = -1, last_m = -1, asked = first;
+      const BandRows::Row a = [&](int y) {
+        EXPECT_EQ(y, last_a < 0 ? std::max(0, first - r) : last_a + 1);
+        EXPECT_LE(y, asked + r2);
+        last_a = y;
+        return &A[y * W];
+      };
+      const BandRows::Row m = [&](int y) {
+        EXPECT_EQ(y, last_m < 0 ? std::max(0, first - r) : last_m + 1);
+        last_m = y;
+        return &M[y * W];
+      };
+      const float* prev = nullptr;
+      for (int y = first; y < H; ++y) {
+        asked = y;
+        const float* b = rows.row(y, a, m);
+        for (int x = 0; x < W; ++x)
+          ASSERT_EQ(b[x], ref[y * W + x]) << "kernel " << s << " from " << first << " row " << y;
+        if (prev)
+          for (int x = 0; x < W; ++x) ASSERT_EQ(prev[x], ref[(y - 1) * W + x]) << "kernel " << s << " row " << y - 1;
+        prev = b;
+      }
+    }
+  }
+}
+
+// BroRows from a middle row (a crop's R starts below the crop's top; the first call's row lacks the pairs with
+// the row above it): every later row bitwise bro_parts' on the whole image.
+TEST(Bro, BroRowsFromAMiddleRowAreBroPartsBitwise) {
+  std::mt19937 rng(23);
+  std::uniform_real_distribution<float> U(0, 1);
+  const int H = 9, W = 8;
+  for (int C : {3, 1, 2}) {
+    const int L = W * C;
+    std::vector<float> x(H * L), y(H * L), B(H * W), unit(H * L);
+    for (auto& v : x) v = U(rng);
+    for (auto& v : y) v = U(rng) < 0.5f ? 0.f : U(rng);
+    for (auto& v : B) v = U(rng) < 0.3f ? 0.f : U(rng);
+    std::vector<double> wsum(H * W), num(H * W);
+    bro_parts(x.data(), y.data(), C, B.data(), H, W, wsum.data(), num.data(), unit.data());
+    for (int first : {1, 3, H - 2, H - 1}) {
+      BroRows<float> rows;
+      rows.reset(W, C);
+      std::vector<float> u(L, -7.f);
+      std::vector<double> ws(W), nm(W);
+      for (int r = first; r < H; ++r) {
+        const bool next = r + 1 < H;
+        rows.row(&x[r * L], &y[r * L], &B[r * W], next ? &x[(r + 1) * L] : nullptr, next ? &y[(r + 1) * L] : nullptr,
+                 next ? &B[(r + 1) * W] : nullptr, ws.data(), nm.data(), u.data());
+        for (int i = 0; i < W; ++i) {
+          ASSERT_EQ(ws[i], wsum[r * W + i]) << "C " << C << " from " << first << " row " << r;
+          ASSERT_EQ(nm[i], num[r * W + i]) << "C " << C << " from " << first << " row " << r;
+        }
+        if (r == first) continue;  // (its unit lacks the pairs with the row above)
+        for (int i = 0; i < L; ++i) ASSERT_EQ(u[i], unit[r * L + i]) << "C " << C << " from " << first << " row " << r;
+      }
+    }
   }
 }
 
@@ -592,8 +678,7 @@ TEST(Bro, PlainGradientFadesAnObjectWhoseMaskEdgeIsMisaligned) {
         gt[(y * W + x) * C + c] = in_mask ? 0.8 : 0.0;
       }
     }
-  std::vector<float> tmp;
-  boundary_band(A.data(), M.data(), H, W, 5, B.data(), tmp);
+  boundary_band(A.data(), M.data(), H, W, 5, B.data());
   std::vector<double> g(pred.size(), 0.0);
   bro_loss(pred.data(), gt.data(), C, C, B.data(), H, W, 1e-6, g.data(), 1.0);
   double gp = 0;

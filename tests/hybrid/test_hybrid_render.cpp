@@ -113,13 +113,13 @@ TEST(HybridRender, ObjectConditionedLossToViewLogitsAndColours) {
     r.forward(sc.cam, in, rs, out);
     if (bands.empty()) {
       bands.resize(size_t(J) * HW);
-      std::vector<float> A(HW), M(HW), tmp;
+      std::vector<float> A(HW), M(HW);
       for (int j = 0; j < J; ++j) {
         for (int p = 0; p < HW; ++p) {
           A[p] = float(out.extra[p * C + lay.opacity(j)]);
           M[p] = sc.labels.v[p] == objs[j];
         }
-        boundary_band(A.data(), M.data(), sc.H, sc.W, 5, &bands[size_t(j) * HW], tmp);
+        boundary_band(A.data(), M.data(), sc.H, sc.W, 5, &bands[size_t(j) * HW]);
       }
     }
     std::vector<double> d_extra(size_t(HW) * C, 0.0), pred(HW * 3), gtm(HW * 3), g(HW * 3), gs(HW * 3);

@@ -667,6 +667,52 @@ TEST(ObjectLossesBoxes, SsimOnPartOfARowAndTheTargetsSupportIsTheFullPassesBitwi
   }
 }
 
+// train::ssim_rows_streamed, as score_crop uses it with a ring of crop rows: rows of x and y first asked for in
+// increasing order, one after the other, none asked for more than 10 rows before the latest; the sink's rows
+// y0 .. y1 - 1 in order, each bitwise ssim_map's (gradient on the output columns, map 5 columns further).
+TEST(ObjectLossesBoxes, SsimStreamedAsksForRowsInOrderAndHandsOutSsimMapsRows) {
+  const int W = 23, H = 40, C = 3, n = W * H * C, L = W * C;
+  std::mt19937 rng(13);
+  std::uniform_real_distribution<float> U(0, 1);
+  std::vector<float> x(n), y(n), g(n), map(n);
+  for (auto& v : x) v = U(rng);
+  for (auto& v : y) v = U(rng);
+  train::SsimWorkspace<float> ws, wsr;
+  train::ssim_map(x.data(), y.data(), H, W, C, g.data(), map.data(), 2.0 * n, ws);
+  for (auto [y0, y1] : {std::pair{0, H}, std::pair{12, 27}, std::pair{30, H}, std::pair{0, 3}, std::pair{19, 20}})
+    for (auto [x0, x1] : {std::pair{0, W}, std::pair{6, 15}}) {
+      const std::string what = "rows " + std::to_string(y0) + "-" + std::to_string(y1) + " columns " +
+                               std::to_string(x0) + "-" + std::to_string(x1);
+      int latest = -1, next_sink = y0;
+      auto asked = [&](int r) {
+        if (r > latest) {
+          EXPECT_EQ(r, latest < 0 ? std::max(0, y0 - 10) : latest + 1) << what;
+          latest = r;
+        }
+        EXPECT_GE(r, latest - 10) << what;
+        EXPECT_LT(r, std::min(H, y1 + 10)) << what;
+      };
+      train::ssim_rows_streamed<float>(
+          [&](int r) {
+            asked(r);
+            return &x[size_t(r) * L];
+          },
+          [&](int r) {
+            asked(r);
+            return &y[size_t(r) * L];
+          },
+          H, W, C, y0, y1, 2.0 * n, wsr,
+          [&](int r, const float* gr, const float* mr) {
+            ASSERT_EQ(r, next_sink++) << what;
+            for (int j = x0 * C; j < x1 * C; ++j) ASSERT_EQ(gr[j], g[size_t(r) * L + j]) << what << " row " << r;
+            for (int j = std::max(0, x0 - 5) * C; j < std::min(W, x1 + 5) * C; ++j)
+              ASSERT_EQ(mr[j], map[size_t(r) * L + j]) << what << " row " << r;
+          },
+          {}, x0, x1);
+      EXPECT_EQ(next_sink, y1) << what;
+    }
+}
+
 TEST(ObjectLossesBoxes, BroPartsOnThinImagesAndReusedBuffers) {
   // bro_parts on images one pixel wide or high, two wide, and 1 x 1, with C = 3 and 1, writing into a buffer full
   // of earlier values (every value is overwritten): its terms and gradient are eq. 14's (bro_loss with every

@@ -85,7 +85,7 @@ int main(int argc, char** argv) try {
     r.forward(cam, in, rs, out);
     int W = v.width, H = v.height;
     size_t HW = size_t(W) * H;
-    std::vector<float> pred(HW * 3), gtk(HW * 3), A(HW), M(HW), B(HW), tmp;
+    std::vector<float> pred(HW * 3), gtk(HW * 3), A(HW), M(HW), B(HW);
     for (int j = 0; j < J; ++j) {
       int k = present[j];
       cnt[k] += 1;
@@ -100,7 +100,7 @@ int main(int argc, char** argv) try {
           A[p] = s * out.extra[p * C + 3 * J + j];
         }
         app[k * S + si] += pl(pred.data(), gtk.data(), H, W, nullptr).total;
-        hybrid::boundary_band(A.data(), M.data(), H, W, kernel, B.data(), tmp);
+        hybrid::boundary_band(A.data(), M.data(), H, W, kernel, B.data());
         bro[k * S + si] += hybrid::bro_loss<float>(pred.data(), gtk.data(), 3, 3, B.data(), H, W, 1e-6f, nullptr, 1.f);
       }
     }
