@@ -174,6 +174,7 @@ class ObjectLosses {
     ScratchVector<double> wrow, nrow;  // [W] a row of eq. 14's band weights and numerators (bro_parts)
     BandRows band_rows;
     BroRows<float> bro_rows;
+    bool ring_overrun = false;  // score_crop read a crop row that had left its ring (a bug; box_path fails)
   };
   // The per-pixel terms of the box path: L1, SSIM map, eq. 14's band weight and numerator, <g, p>, <p, p>.
   enum Term { kL1, kSsim, kWsum, kNum, kGp, kPp, kTerms };

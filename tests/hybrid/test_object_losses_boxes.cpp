@@ -679,8 +679,9 @@ TEST(ObjectLossesBoxes, SsimStreamedAsksForRowsInOrderAndHandsOutSsimMapsRows) {
   for (auto& v : y) v = U(rng);
   train::SsimWorkspace<float> ws, wsr;
   train::ssim_map(x.data(), y.data(), H, W, C, g.data(), map.data(), 2.0 * n, ws);
-  for (auto [y0, y1] : {std::pair{0, H}, std::pair{12, 27}, std::pair{30, H}, std::pair{0, 3}, std::pair{19, 20}})
-    for (auto [x0, x1] : {std::pair{0, W}, std::pair{6, 15}}) {
+  for (const auto& rows : {std::pair{0, H}, std::pair{12, 27}, std::pair{30, H}, std::pair{0, 3}, std::pair{19, 20}})
+    for (const auto& cols : {std::pair{0, W}, std::pair{6, 15}}) {
+      const int y0 = rows.first, y1 = rows.second, x0 = cols.first, x1 = cols.second;  // (captured below)
       const std::string what = "rows " + std::to_string(y0) + "-" + std::to_string(y1) + " columns " +
                                std::to_string(x0) + "-" + std::to_string(x1);
       int latest = -1, next_sink = y0;
