@@ -8,9 +8,11 @@ collecting inside `Trainer::step()` only, for the RGB and the hybrid step; print
 bytes per step, RGB and hybrid side by side, and the hybrid's extra. The step count includes bench_scale's warm-up
 steps (one per view of its scene, 2): their first touches are in the figures. The simulated CPU is valgrind's (no
 AVX-512: the AVX2 rasterizer runs), and the cache is simulated, not measured. About 10 minutes at SCALE 0.25 on one
-core.
+core. With --plan-threads T the code that cuts its work by the thread count (the object losses' bands, SSIM's
+bands) cuts it as for T threads while one thread runs (bench/omp_regions, as project_threads.py does): the pieces a
+16-thread step moves are smaller than one thread's.
 
-  bench/ll_traffic.py --build build --scale 0.25
+  bench/ll_traffic.py --build build --scale 0.25 [--plan-threads 16] [--methods hybrid]
 """
 import argparse
 import os
@@ -21,17 +23,22 @@ import tempfile
 from collections import Counter
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from project_threads import short_name  # noqa: E402  (the same names in both tables)
+from project_threads import plan_ranges, short_name  # noqa: E402  (the same names in both tables)
 
 VIEWS = 2  # bench_scale's scene (bench/bench_hybrid_scene.h kViews): its warm-up steps
 
 
-def run(binary, method, scale, steps, out):
+def run(binary, method, scale, steps, out, plan_threads=0):
+    env = dict(os.environ)
+    if plan_threads > 0:  # the work cut as for T threads (bench/omp_regions, as project_threads.py does)
+        env.update(LD_PRELOAD=os.path.join(os.path.dirname(binary), 'libhgs_omp_regions.so'),
+                   HGS_PLAN_THREADS=str(plan_threads), HGS_PLAN_RANGES=plan_ranges(binary),
+                   HGS_REGIONS_OUT=out + '.regions')
     cmd = ['valgrind', '--tool=callgrind', '--cache-sim=yes', '--I1=32768,8,64', '--D1=49152,12,64',
            '--LL=2097152,16,64', '--collect-atstart=no', '--toggle-collect=hgs::train::Trainer::step()',
            f'--callgrind-out-file={out}', binary, '--case', method, str(scale), str(scale), '--steps', str(steps),
            '--threads', '1']
-    res = subprocess.run(cmd, capture_output=True, text=True)
+    res = subprocess.run(cmd, capture_output=True, text=True, env=env)
     if res.returncode != 0 or not os.path.exists(out):
         sys.exit(f'll_traffic: {" ".join(cmd)} failed: {res.stderr.strip()[-400:]}')
 
@@ -56,6 +63,9 @@ def main():
     ap.add_argument('--scale', type=float, default=0.25, help="bench_scale's pixel and Gaussian scale")
     ap.add_argument('--steps', type=int, default=2, help='timed steps (after one warm-up step per view)')
     ap.add_argument('--top', type=int, default=30)
+    ap.add_argument('--plan-threads', type=int, default=0, help='cut the work that follows the thread count (the '
+                    "object losses' bands, SSIM's bands) as for T threads while one runs (needs "
+                    'libhgs_omp_regions.so beside bench_scale); 0: as for one')
     ap.add_argument('--methods', default='rgb,hybrid', help='the steps to simulate (rgb,hybrid; one alone halves '
                     'the time, its columns of the other are then 0)')
     a = ap.parse_args()
@@ -72,10 +82,13 @@ def main():
             if method not in res:
                 sys.exit(f'll_traffic: --methods: {method!r} is not rgb or hybrid')
             out = os.path.join(tmp, method + '.out')
-            run(binary, method, a.scale, a.steps, out)
+            if a.plan_threads > 0 and not os.path.exists(os.path.join(a.build, 'libhgs_omp_regions.so')):
+                sys.exit(f'll_traffic: --plan-threads needs {a.build}/libhgs_omp_regions.so (built with the benchmarks)')
+            run(binary, method, a.scale, a.steps, out, a.plan_threads)
             res[method] = per_function(out, steps)
     h, r = res['hybrid'], res['rgb']
-    print(f'bench_scale at {a.scale}x pixels and Gaussians, one thread: MB per step past a 2 MiB private cache '
+    cut = f', work cut as for {a.plan_threads} threads' if a.plan_threads > 0 else ''
+    print(f'bench_scale at {a.scale}x pixels and Gaussians, one thread{cut}: MB per step past a 2 MiB private cache '
           f'(callgrind LL misses x 64 B, {steps} steps)')
     print(f"{'function':60s} {'hybrid':>8} {'RGB':>8} {'extra':>8}")
     for k in sorted(set(h) | set(r), key=lambda k: -(h.get(k, 0) - r.get(k, 0)))[:a.top]:
