@@ -75,15 +75,16 @@ def main():
     for tool in ('valgrind', 'callgrind_annotate'):
         if subprocess.run(['sh', '-c', f'command -v {tool}'], capture_output=True).returncode != 0:
             sys.exit(f'll_traffic: {tool} not found (Debian package valgrind)')
+    for method in a.methods.split(','):
+        if method not in ('rgb', 'hybrid'):
+            sys.exit(f'll_traffic: --methods: {method!r} is not rgb or hybrid')
+    if a.plan_threads > 0 and not os.path.exists(os.path.join(a.build, 'libhgs_omp_regions.so')):
+        sys.exit(f'll_traffic: --plan-threads needs {a.build}/libhgs_omp_regions.so (built with the benchmarks)')
     steps = a.steps + VIEWS
     with tempfile.TemporaryDirectory() as tmp:
         res = {'rgb': {}, 'hybrid': {}}
         for method in a.methods.split(','):
-            if method not in res:
-                sys.exit(f'll_traffic: --methods: {method!r} is not rgb or hybrid')
             out = os.path.join(tmp, method + '.out')
-            if a.plan_threads > 0 and not os.path.exists(os.path.join(a.build, 'libhgs_omp_regions.so')):
-                sys.exit(f'll_traffic: --plan-threads needs {a.build}/libhgs_omp_regions.so (built with the benchmarks)')
             run(binary, method, a.scale, a.steps, out, a.plan_threads)
             res[method] = per_function(out, steps)
     h, r = res['hybrid'], res['rgb']
