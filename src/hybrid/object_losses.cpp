@@ -94,7 +94,7 @@ ObjectRenders ObjectRenders::interleaved(const float* extra, const ObjectLayout&
     r.base_color = extra + lay.base_color();
     r.base_opacity = extra + lay.base_opacity();
   }
-  r.stride = r.base_stride = lay.total();
+  r.stride = r.base_stride = r.base_opacity_stride = lay.total();
   return r;
 }
 
@@ -109,7 +109,7 @@ ObjectRenders ObjectRenders::sparse(const float* dense, int dense_stride, int ba
   r.stride = planes > 0 ? 4L : 4L * J;
   r.base_color = dense;
   r.base_opacity = dense + base_opacity;
-  r.base_stride = dense_stride;
+  r.base_stride = r.base_opacity_stride = dense_stride;
   r.deltas = true;
   return r;
 }
@@ -231,7 +231,7 @@ ObjectLossValues ObjectLosses::full_path(const Image& image, const LabelMap& lab
 void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders, const std::vector<int>& objs) {
   const int W = lab.width, H = lab.height, J = static_cast<int>(objs.size());
   const size_t HW = size_t(W) * H;
-  const long BS = renders.base_stride;
+  const long BS = renders.base_stride, BO = renders.base_opacity_stride;
   row_lo_.resize(size_t(J) * H);
   row_hi_.resize(size_t(J) * H);
   mask_lo_.resize(size_t(J) * H);
@@ -256,7 +256,7 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders,
       for (int x = 0; x < W; ++x) {
         const long p = long(y) * W + x;
         const float b[4] = {renders.base_color[p * BS], renders.base_color[p * BS + 1], renders.base_color[p * BS + 2],
-                            renders.base_opacity[p * BS]};
+                            renders.base_opacity[p * BO]};
         for (int c = 0; c < 3; ++c) base_pred_[p * 3 + c] = b[c];
         base_opac_[p] = b[3];
         const int l = lab.v[p];
@@ -286,6 +286,10 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders,
   else if (copied) scan.template operator()<false, true>();
   else scan.template operator()<false, false>();
   renders_ = renders;  // what the crops read: the renders themselves, or the copy as complete values
+  renders_.base_color = base_pred_.data();
+  renders_.base_stride = 3;
+  renders_.base_opacity = base_opac_.data();
+  renders_.base_opacity_stride = 1;
   if (copied) {
     for (int j = 0; j < J; ++j) {
       renders_.color[j] = &planes_[size_t(j) * HW * 4];
@@ -426,9 +430,9 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
       const long p = long(r + Q.y0) * W + (xx + Q.x0);
       const float m = lab.v[p] == k ? 1.f : 0.f;
       d[6 * qw + xx] = m;
-      d[7 * qw + xx] = opacity_of(j, p);
+      d[7 * qw + xx] = renders_.opacity_at(j, p);
       for (int c = 0; c < 3; ++c) {
-        d[xx * 3 + c] = color_of(j, p, c);
+        d[xx * 3 + c] = renders_.color_at(j, p, c);
         d[3 * qw + xx * 3 + c] = image.px[p * 3 + c] * m;
       }
     }

@@ -94,11 +94,11 @@ struct ObjectGradients {
 // opacity at opacity[j][p * stride]), or as the sparse path renders them (object_groups.h): the base render's
 // dense channels and, interleaved likewise, each object's group, its difference from the base render (deltas):
 // object j's value is then base + difference, the sum the dense layout's channel holds (the same floats). The base
-// render is at base_color + p * base_stride and base_opacity[p * base_stride] (null without it).
+// render is at base_color + p * base_stride and base_opacity[p * base_opacity_stride] (null without it).
 struct ObjectRenders {
   std::vector<const float*> color, opacity;  // [J]
   const float *base_color = nullptr, *base_opacity = nullptr;
-  long stride = 0, base_stride = 0;
+  long stride = 0, base_stride = 0, base_opacity_stride = 0;
   bool deltas = false;
   int J() const { return static_cast<int>(color.size()); }
   float color_at(int j, long p, int c) const {
@@ -107,7 +107,7 @@ struct ObjectRenders {
   }
   float opacity_at(int j, long p) const {
     const float v = opacity[j][p * stride];
-    return deltas ? base_opacity[p * base_stride] + v : v;
+    return deltas ? base_opacity[p * base_opacity_stride] + v : v;
   }
   static ObjectRenders interleaved(const float* extra, const ObjectLayout& lay);  // extra [H, W, lay.total()]
   // dense [H, W, dense_stride]: the base colour at 0..2, its opacity at base_opacity; groups [H, W, 4 J]: object
@@ -218,19 +218,9 @@ class ObjectLosses {
   std::vector<float> base_pred_, base_app_, base_unit_;  // [H, W, 3]
   std::vector<float> base_opac_;                         // [H, W]
   std::vector<float> planes_;                            // [J, H, W, 4] the objects' renders (colour, opacity)
-  // The box path's renders as the crops read them: the call's, or planes_ (find_boxes).
+  // The box path's renders as the crops read them (find_boxes): the call's objects, or planes_; the base render
+  // as its planar copy base_pred_, base_opac_ (the same floats, read contiguously).
   ObjectRenders renders_;
-  // Object j's colour channel c and opacity at pixel p from renders_, a difference added to the base render's
-  // planar copy (base_pred_, base_opac_: the floats of the renders' base channels, so the sums color_at makes,
-  // read contiguously instead of at the base's stride).
-  float color_of(int j, long p, int c) const {
-    const float v = renders_.color[j][p * renders_.stride + c];
-    return renders_.deltas ? base_pred_[p * 3 + c] + v : v;
-  }
-  float opacity_of(int j, long p) const {
-    const float v = renders_.opacity[j][p * renders_.stride];
-    return renders_.deltas ? base_opac_[p] + v : v;
-  }
   std::vector<double> base_terms_;  // [H, W, kTerms]
   std::vector<double> base_rows_;   // [H, kTerms] their sums over each row
   double base_total_[kTerms] = {};  // their sums over the image (the rows in order)
