@@ -52,7 +52,7 @@ void ssim_map_rows(const T* x, const T* y, int H, int W, int C, int y0, int y1, 
 // (the products' and moments' rows, the map and the coefficients of the last 11 rows, the gradient row) in
 // buffers of a few rows, so that a pass over a large image moves x, y and what the sink keeps, nothing else.
 // x and y by row: xrow(r), yrow(r) [W C] for the rows [y0 - 10, y1 + 10) (clipped), first asked for in increasing
-// order, each at most 10 rows after the latest asked for (so a ring of 11 rows or more can hold them); yrow empty
+// order, none more than 10 rows before the latest asked for (so a ring of 11 rows or more can hold them); yrow empty
 // for an all-zero y. sink(r, grad, map) for r = y0 .. y1 - 1 in order: grad's values [x0 C, x1 C) and map's
 // [max(0, x0 - 5) C, min(W, x1 + 5) C) are row r's, each indexed by its place in the row (valid during the call).
 template <typename T>
