@@ -12,22 +12,27 @@ void hide_occluded_all(const GaussianModel& m, const std::vector<MaskView>& view
                        ObservationTable& table, OcclusionScratch* scratch) {
   OcclusionScratch own;
   OcclusionScratch& w = scratch ? *scratch : own;
-  render::GaussianRenderer& r = w.renderer;
-  render::RenderOutputs& out = w.out;
-  std::vector<float>& surface = w.surface;
   render::GaussianInputs in = render_inputs(m);
   in.sh_degree = 0;  // colours do not matter here
-  render::RenderSettings rs;
-  rs.want_depth = true;
   for (size_t u = 0; u < views.size(); ++u) {
     const MaskView& v = views[u];
     const render::Camera cam = render::pinhole_camera(v.width, v.height, v.fx, v.fy, v.cx, v.cy, v.R, v.t, near_plane);
-    r.forward(cam, in, rs, out);
-    surface.resize(out.alpha.size());
-    const long P = long(surface.size());
+    w.renderer.preprocess(cam, in);
+    const size_t P = size_t(v.width) * v.height;
+    w.chosen.assign(P, 0);
+    occlusion_pixels(m.mean.data(), m.n, v, int(u), table, w.chosen.data());
+    render::tile_pixels(v.width, v.height, w.chosen.data(), w.pixels);
+    const long M = long(w.pixels.pixel.size());
+    w.alpha.resize(size_t(M));
+    w.depth.resize(size_t(M));
+    w.renderer.depth_at(w.pixels, w.alpha.data(), w.depth.data());
+    w.surface.resize(P);
+    float* surface = w.surface.data();
+    const int* pix = w.pixels.pixel.data();
+    const float *alpha = w.alpha.data(), *depth = w.depth.data();
 #pragma omp parallel for schedule(static)
-    for (long p = 0; p < P; ++p) surface[p] = out.alpha[p] > 0.5f ? out.depth[p] / out.alpha[p] : 0.f;
-    hide_occluded(m.mean.data(), m.n, v, surface.data(), int(u), table);
+    for (long i = 0; i < M; ++i) surface[pix[i]] = alpha[i] > 0.5f ? depth[i] / alpha[i] : 0.f;
+    hide_occluded(m.mean.data(), m.n, v, surface, int(u), table);
   }
 }
 

@@ -10,21 +10,34 @@
 #include "hybrid/config.h"
 #include "hybrid/fields.h"
 #include "hybrid/fusion.h"
+#include "render/rasterize.h"
 #include "render/renderer.h"
 #include "train/adam.h"
 #include "train/reducer.h"
 
 namespace hgs::hybrid {
 
-// The occlusion test of Observation Fusion for every view (fusion.h, hide_occluded): renders the model's depth
-// in each view (surface depth = expected depth / alpha where alpha > 0.5) and marks hidden Gaussians' entries of
-// `table` as no observation. Costs one render per training view. near_plane: the training cameras' (a Gaussian
-// nearer to the camera than it is culled in training, so it is no surface here either). `scratch`: the renderer
-// and buffers a caller keeps between rebuilds (none: made for this call).
+// The occlusion test of Observation Fusion for every view (fusion.h, hide_occluded): the model's depth in each
+// view (surface depth = expected depth / alpha where alpha > 0.5) at the pixels the test reads only (the
+// observed Gaussians' centres, occlusion_pixels; render::RendererT::depth_at: the same bits as a whole render
+// there), and the hidden Gaussians' entries of `table` marked as no observation. Costs one projection and binning
+// per training view, and compositing at those pixels. near_plane: the training cameras' (a Gaussian nearer to the
+// camera than it is culled in training, so it is no surface here either). `scratch`: the renderer and buffers a
+// caller keeps between rebuilds (none: made for this call).
 struct OcclusionScratch {
   render::GaussianRenderer renderer;
-  render::RenderOutputs out;
-  std::vector<float> surface;  // [H, W]
+  render::TilePixels pixels;
+  std::vector<uint8_t> chosen;      // [H, W] the pixels the test reads
+  std::vector<float> alpha, depth;  // [M] at those pixels
+  std::vector<float> surface;       // [H, W], written and read at those pixels only
+  void release() {                  // frees every buffer (move-assigned empties: `= {}` would keep the capacity)
+    renderer.release();
+    pixels = render::TilePixels();
+    chosen = std::vector<uint8_t>();
+    alpha = std::vector<float>();
+    depth = std::vector<float>();
+    surface = std::vector<float>();
+  }
 };
 void hide_occluded_all(const GaussianModel& m, const std::vector<MaskView>& views, float near_plane,
                        ObservationTable& table, OcclusionScratch* scratch = nullptr);
@@ -55,11 +68,7 @@ class ObjectAssociation {
   const std::vector<float>& weights() const;  // [U] softmax of the current logits
   const ObservationTable& table() const { return table_; }
   // Frees the depth renders' buffers (HybridMethod::release, before densification).
-  void release() {
-    occlusion_.renderer.release();
-    occlusion_.out = {};
-    std::vector<float>().swap(occlusion_.surface);
-  }
+  void release() { occlusion_.release(); }
   // The last fuse()'s s [N, L] and valid [N] (null before the first, and without OF).
   const float* fused_s() const { return s_.empty() ? nullptr : s_.data(); }
   const uint8_t* fused_valid() const { return valid_.empty() ? nullptr : valid_.data(); }

@@ -1,5 +1,6 @@
 #include "hybrid/fusion.h"
 
+#include <atomic>
 #include <cmath>
 
 #include "core/error.h"
@@ -61,6 +62,19 @@ void hide_occluded(const float* means, int n, const MaskView& v, const float* su
     if (l == kNoObservation || !project_centre(v, means + 3 * i, 0.0, z, ix, iy)) continue;  // observed: z >= near
     const float d = surface_depth[size_t(iy) * v.width + ix];
     if (d > 0 && z > d * (1 + kOcclusionTolerance)) l = kNoObservation;
+  }
+}
+
+void occlusion_pixels(const float* means, int n, const MaskView& v, int u, const ObservationTable& table,
+                      uint8_t* chosen) {
+  const int U = table.num_views;
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i) {
+    double z;
+    int ix, iy;
+    // hide_occluded's condition, so it reads no pixel left out here
+    if (table.label[size_t(i) * U + u] == kNoObservation || !project_centre(v, means + 3 * i, 0.0, z, ix, iy)) continue;
+    std::atomic_ref<uint8_t>(chosen[size_t(iy) * v.width + ix]).store(1, std::memory_order_relaxed);  // shared pixels
   }
 }
 

@@ -81,9 +81,13 @@ struct ObservationTable {
 void observe(const float* means, int n, const std::vector<MaskView>& views, ObservationTable& table,
              double near_plane = render::kDefaultNearPlane);
 // Marks view u's observations of Gaussians hidden behind the surface as none. surface_depth [H, W] (0 = no
-// surface: no test there).
+// surface: no test there), read only at the pixels occlusion_pixels() chooses.
 void hide_occluded(const float* means, int n, const MaskView& view, const float* surface_depth, int u,
                    ObservationTable& table);
+// The pixels hide_occluded() will read for view u: chosen [H, W] is set to 1 at each observed Gaussian's pixel
+// (the caller zeroes it first), so the surface depth is needed there only (render::RendererT::depth_at).
+void occlusion_pixels(const float* means, int n, const MaskView& view, int u, const ObservationTable& table,
+                      uint8_t* chosen);
 
 template <class T>
 void softmax(const T* x, int n, T* y) {

@@ -1,5 +1,5 @@
 // Run-time choice between the AVX2 and AVX-512 compilations of the rasterizer kernels (raster_isa.h), and the
-// public rasterize_forward / rasterize_backward that dispatch to them.
+// public rasterize_forward / rasterize_backward / rasterize_depth_at that dispatch to them.
 #include "render/raster_isa.h"
 
 #include <atomic>
@@ -91,6 +91,13 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
   else avx2::rasterize_backward(in, bins, ws, final_T, last, g);
 }
 
+template <class T>
+void rasterize_depth_at(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws, const TilePixels& px,
+                        T* alpha, T* depth) {
+  if (raster_isa() == RasterIsa::kAvx512) avx512::rasterize_depth_at(in, bins, ws, px, alpha, depth);
+  else avx2::rasterize_depth_at(in, bins, ws, px, alpha, depth);
+}
+
 template void rasterize_forward<float>(const RasterInputs<float>&, const Binning&, RasterWorkspace<float>&,
                                        const RasterOutputs<float>&);
 template void rasterize_forward<double>(const RasterInputs<double>&, const Binning&, RasterWorkspace<double>&,
@@ -99,5 +106,10 @@ template void rasterize_backward<float>(const RasterInputs<float>&, const Binnin
                                         const float*, const int32_t*, const RasterGrads<float>&);
 template void rasterize_backward<double>(const RasterInputs<double>&, const Binning&, RasterWorkspace<double>&,
                                          const double*, const int32_t*, const RasterGrads<double>&);
+
+template void rasterize_depth_at<float>(const RasterInputs<float>&, const Binning&, RasterWorkspace<float>&,
+                                        const TilePixels&, float*, float*);
+template void rasterize_depth_at<double>(const RasterInputs<double>&, const Binning&, RasterWorkspace<double>&,
+                                         const TilePixels&, double*, double*);
 
 }  // namespace hgs::render

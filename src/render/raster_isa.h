@@ -31,7 +31,7 @@ RasterIsa parse_raster_isa(const std::string& name);  // "avx2" / "avx512"; fail
 // naming the variable when the value is unknown or the CPU lacks it.
 RasterIsa raster_isa_from_env(const char* value);
 
-// The two compilations (called through rasterize_forward / rasterize_backward).
+// The two compilations (called through rasterize_forward / rasterize_backward / rasterize_depth_at).
 namespace avx2 {
 template <class T>
 void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws,
@@ -39,6 +39,9 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
 template <class T>
 void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws, const T* final_T,
                         const int32_t* last, const RasterGrads<T>& g);
+template <class T>
+void rasterize_depth_at(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws, const TilePixels& px,
+                        T* alpha, T* depth);
 }  // namespace avx2
 namespace avx512 {
 template <class T>
@@ -47,6 +50,9 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
 template <class T>
 void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws, const T* final_T,
                         const int32_t* last, const RasterGrads<T>& g);
+template <class T>
+void rasterize_depth_at(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws, const TilePixels& px,
+                        T* alpha, T* depth);
 }  // namespace avx512
 
 }  // namespace hgs::render

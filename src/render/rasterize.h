@@ -94,6 +94,17 @@ struct RasterOutputs {
   bool group_planes = false;
 };
 
+// Chosen pixels grouped by tile, for rasterize_depth_at: tile t's are pixel[start[t], start[t + 1]), each
+// y * W + x inside the tile, each once (in any order). tile_pixels() builds it from a per-pixel choice.
+struct TilePixels {
+  std::vector<int> start;  // [tiles + 1]
+  std::vector<int> pixel;  // [M]
+};
+// chosen [H, W] (non-zero = chosen) -> px, each tile's pixels by 8x8 quadrant (top left, top right, bottom left,
+// bottom right), row-major inside one, so that a pack of 8 lies in one half of the tile's batch columns and a
+// Gaussian whose mask misses that half skips it (parallel over tile rows).
+void tile_pixels(int width, int height, const uint8_t* chosen, TilePixels& px);
+
 // The most gradient channels a group may have when its gradients are computed on demand (d_group_rows).
 constexpr int kMaxGroupGradWidth = 8;
 
@@ -147,11 +158,13 @@ class RasterScratch {
 template <class T>
 struct RasterWorkspace {
   struct PerThread {
-    RasterScratch vk;      // per-batch visit lists of a tile: Gaussian index (int) [visits]
-    RasterScratch vw;      // ... and its weight (forward) or extra-channel dot (backward), packs [visits]
-    RasterScratch wacc;    // forward weight-sum accumulators, packs [n, J]
-    RasterScratch fold;    // folded channels of the tile's Gaussians, T [n, 4]
-    RasterScratch dw;      // backward d(weight_sums) of the tile's Gaussians, T [n, J]
+    RasterScratch vk;    // per-batch visit lists of a tile: Gaussian index (int) [visits] (rasterize_depth_at: the
+                         // tile's batch masks, uint32 [n])
+    RasterScratch vw;    // ... and its weight (forward) or extra-channel dot (backward), packs [visits]
+    RasterScratch wacc;  // forward weight-sum accumulators, packs [n, J]
+    RasterScratch
+        fold;          // folded channels of the tile's Gaussians, T [n, 4] (rasterize_depth_at: its records, T [n, 16])
+    RasterScratch dw;  // backward d(weight_sums) of the tile's Gaussians, T [n, J]
     RasterScratch bstate;  // per-batch state, packs [batches, 7 + C + J]
     RasterScratch blast;   // per-batch active / last-contributor masks [2, batches]
     RasterScratch groups;  // the tile's channel groups: their list (int) [G], then flags (uint8) [G]
@@ -177,6 +190,14 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
                         const int32_t* last,  // [H, W] from forward
                         const RasterGrads<T>& g);
 
+// Alpha (1 - final T) and expected depth (the depth channel) at the chosen pixels only, alpha [M] and depth [M] in
+// px's order: bitwise what rasterize_forward writes to out.alpha and out.depth there (rasterize_pixels.cpp), at a
+// cost that grows with the chosen pixels instead of the image. in.depth is required; colours, extra channels,
+// groups and pixel weights are not read.
+template <class T>
+void rasterize_depth_at(const RasterInputs<T>& in, const Binning& bins, RasterWorkspace<T>& ws, const TilePixels& px,
+                        T* alpha, T* depth);
+
 extern template void rasterize_forward<float>(const RasterInputs<float>&, const Binning&, RasterWorkspace<float>&,
                                               const RasterOutputs<float>&);
 extern template void rasterize_forward<double>(const RasterInputs<double>&, const Binning&, RasterWorkspace<double>&,
@@ -185,5 +206,10 @@ extern template void rasterize_backward<float>(const RasterInputs<float>&, const
                                                const float*, const int32_t*, const RasterGrads<float>&);
 extern template void rasterize_backward<double>(const RasterInputs<double>&, const Binning&, RasterWorkspace<double>&,
                                                 const double*, const int32_t*, const RasterGrads<double>&);
+
+extern template void rasterize_depth_at<float>(const RasterInputs<float>&, const Binning&, RasterWorkspace<float>&,
+                                               const TilePixels&, float*, float*);
+extern template void rasterize_depth_at<double>(const RasterInputs<double>&, const Binning&, RasterWorkspace<double>&,
+                                                const TilePixels&, double*, double*);
 
 }  // namespace hgs::render

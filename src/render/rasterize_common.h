@@ -7,6 +7,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <type_traits>
 #include <utility>
@@ -37,6 +38,39 @@ inline int32_t record_int(const T& slot) {
   int32_t v;
   std::memcpy(&v, &slot, sizeof v);
   return v;
+}
+
+// Every Gaussian's 16-scalar record, records [N, 16], from the inputs and the binning's Mahalanobis radii (the
+// forward kernels build them once per call, in index order).
+template <class T>
+void build_records(const RasterInputs<T>& in, const Binning& bins, T* records) {
+#pragma omp parallel for schedule(static)
+  for (int g = 0; g < in.n; ++g) {
+    T* r = records + size_t(g) * kRecord;
+    r[kMx] = in.mean2d[2 * g];
+    r[kMy] = in.mean2d[2 * g + 1];
+    const T a = in.conic[3 * g], b = in.conic[3 * g + 1], c = in.conic[3 * g + 2];
+    r[kHa] = T(0.5) * a;
+    r[kB] = b;
+    r[kHc] = T(0.5) * c;
+    r[kA] = a;
+    r[kC] = c;
+    r[kOp] = in.opacity[g];
+    r[kCr] = in.color[3 * g];
+    r[kCg] = in.color[3 * g + 1];
+    r[kCb] = in.color[3 * g + 2];
+    r[kZ] = in.depth ? in.depth[g] : T(0);
+    const double m = bins.mahal[g];
+    r[kMahal] = T(m);
+    const double det = double(a) * double(c) - double(b) * double(b);
+    r[kEy] = m > 0 && det > 0 ? T(std::sqrt(m * double(a) / det) + 1e-3) : T(-1);
+    if (in.num_groups > 0 && in.group_ptr) {
+      set_record_int(r[kE0], in.group_ptr[g]);
+      set_record_int(r[kNe], in.group_ptr[g + 1] - in.group_ptr[g]);
+    } else {
+      r[kE0] = r[kNe] = 0;
+    }
+  }
 }
 
 // The folded channels of a tile's Gaussians, copied once per tile into per-thread scratch: x [n, kFoldMaxChannels]

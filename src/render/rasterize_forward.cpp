@@ -22,50 +22,11 @@
 #pragma GCC diagnostic ignored "-Wpsabi"
 
 #include "render/raster_isa_begin.h"
+#include "render/rasterize_masks.h"  // inside the region: its kernels take the region's instruction sets
 
 namespace hgs::render::HGS_RASTER_NS {
 using namespace detail;
 namespace {
-
-template <class T>
-void build_records(const RasterInputs<T>& in, const Binning& bins, T* records) {
-#pragma omp parallel for schedule(static)
-  for (int g = 0; g < in.n; ++g) {
-    T* r = records + size_t(g) * kRecord;
-    r[kMx] = in.mean2d[2 * g];
-    r[kMy] = in.mean2d[2 * g + 1];
-    const T a = in.conic[3 * g], b = in.conic[3 * g + 1], c = in.conic[3 * g + 2];
-    r[kHa] = T(0.5) * a;
-    r[kB] = b;
-    r[kHc] = T(0.5) * c;
-    r[kA] = a;
-    r[kC] = c;
-    r[kOp] = in.opacity[g];
-    r[kCr] = in.color[3 * g];
-    r[kCg] = in.color[3 * g + 1];
-    r[kCb] = in.color[3 * g + 2];
-    r[kZ] = in.depth ? in.depth[g] : T(0);
-    const double m = bins.mahal[g];
-    r[kMahal] = T(m);
-    const double det = double(a) * double(c) - double(b) * double(b);
-    r[kEy] = m > 0 && det > 0 ? T(std::sqrt(m * double(a) / det) + 1e-3) : T(-1);
-    if (in.num_groups > 0 && in.group_ptr) {
-      set_record_int(r[kE0], in.group_ptr[g]);
-      set_record_int(r[kNe], in.group_ptr[g + 1] - in.group_ptr[g]);
-    } else {
-      r[kE0] = r[kNe] = 0;
-    }
-  }
-}
-
-// Spreads the low 16 bits of x to the even bit positions.
-inline uint32_t spread_bits(uint32_t x) {
-  x = (x | (x << 8)) & 0x00FF00FFu;
-  x = (x | (x << 4)) & 0x0F0F0F0Fu;
-  x = (x | (x << 2)) & 0x33333333u;
-  x = (x | (x << 1)) & 0x55555555u;
-  return x;
-}
 
 // Extra channels of one batch, forward: dst[c] = sum_v w_v extra_{g_v}[c] over the batch's visits in walk order
 // (g_v the Gaussian's index, ex [N, XS] the input rows). The walk itself would read-modify-write every channel
@@ -87,67 +48,6 @@ void composite_extras(const int* vk, const simd::Pack<T>* vw, int cnt, const T* 
 template <class T>
 void composite_groups(const int* vk, const simd::Pack<T>* vw, int cnt, const RasterInputs<T>& in, simd::Pack<T>* dst) {
   for (int v = 0; v < cnt; ++v) add_group_values(in, in.group_ptr[vk[v]], in.group_ptr[vk[v] + 1], vw[v], dst);
-}
-
-// Batch masks of a tile, masks [n]: bit (row * 2 + half) is set when the Gaussian can reach the 8-pixel batch
-// (half a row) with alpha >= 1/255. For each of the 16 pixel rows the exact x-interval where d^T conic d <= m
-// (the alpha >= 1/255 region, with margin; binning.h) is computed in double, kMaskRows rows per vector (8 in the
-// AVX-512 compilation, 4 otherwise: the same operations on every row, so the same masks).
-#if defined(HGS_RASTER_AVX512) && defined(__GNUC__) && !defined(__clang__)
-constexpr int kMaskRows = 8;
-#else
-constexpr int kMaskRows = 4;
-#endif
-template <class T>
-void build_masks(const Binning& bins, int tile, const TileData<T>& td, uint32_t* masks) {
-  constexpr int RV = kMaskRows, NQ = kTileSize / RV;
-  typedef double vd __attribute__((vector_size(8 * RV)));
-  typedef int64_t vl __attribute__((vector_size(8 * RV)));
-  const int n = td.n;
-  const int tx0 = (tile % bins.tiles_x) * kTileSize, ty0 = (tile / bins.tiles_x) * kTileSize;
-  vd rowc[NQ];  // pixel-centre y of the tile rows
-  for (int q = 0; q < NQ; ++q)
-    for (int l = 0; l < RV; ++l) rowc[q][l] = ty0 + RV * q + l + 0.5;
-  const double bx0[2] = {double(tx0), double(tx0 + kLanes)};
-  const double bx1[2] = {double(tx0 + kLanes - 1), double(tx0 + 2 * kLanes - 1)};
-  for (int k = 0; k < n; ++k) {
-    const T* r = td.rec + size_t(k) * kRecord;
-    const double ey = double(r[kEy]);
-    const double u = double(r[kMx]), v = double(r[kMy]);
-    masks[k] = 0;
-    if (ey < 0 || v + ey - 0.5 < ty0 || v - ey - 0.5 > ty0 + kTileSize - 1) continue;
-    const double a = double(r[kA]), b = double(r[kB]), c = double(r[kC]);
-    const double m = double(r[kMahal]), ndet = b * b - a * c, am = a * m, ia = 1.0 / a;
-    uint32_t hit[2] = {0, 0};
-    for (int q = 0; q < NQ; ++q) {
-      const vd dy = v - rowc[q];
-      const vd disc = dy * dy * ndet + am;
-      const vl valid = disc >= 0.0;
-      vd dc = valid ? disc : vd{};
-      vd sq;
-#if defined(HGS_RASTER_AVX512) && defined(__GNUC__) && !defined(__clang__)
-      sq = (vd)_mm512_maskz_sqrt_pd(__mmask8(0xFF), (__m512d)dc);  // maskz: GCC 12 warns on _mm512_sqrt_pd
-#elif defined(__AVX__)
-      sq = (vd)_mm256_sqrt_pd((__m256d)dc);
-#else
-      for (int l = 0; l < RV; ++l) sq[l] = std::sqrt(dc[l]);
-#endif
-      // pixel x (centre x + 0.5) with dx = u - x - 0.5 in [(-b dy - sq) / a, (-b dy + sq) / a]
-      const vd xl = u - (sq - b * dy) * ia - (0.5 + 1e-3);
-      const vd xr = u + (sq + b * dy) * ia - (0.5 - 1e-3);
-      for (int h = 0; h < kBatchesPerRow; ++h) {
-        const vl hm = valid & (xl <= bx1[h]) & (xr >= bx0[h]);
-#if defined(HGS_RASTER_AVX512) && defined(__GNUC__) && !defined(__clang__)
-        hit[h] |= uint32_t(_mm512_movepi64_mask((__m512i)hm)) << (RV * q);
-#elif defined(__AVX__)
-        hit[h] |= uint32_t(_mm256_movemask_pd((__m256d)hm)) << (RV * q);
-#else
-        for (int l = 0; l < RV; ++l) hit[h] |= uint32_t(hm[l] & 1) << (RV * q + l);
-#endif
-      }
-    }
-    masks[k] = spread_bits(hit[0]) | (spread_bits(hit[1]) << 1);
-  }
 }
 
 // A tile's forward batch state in per-thread scratch: per batch BS packs [T, R, G, B, D, E[C], MW[J], GR[G * GW]]

@@ -6,8 +6,10 @@
 //                     written once for one Gaussian or a pack of 8 (project_pack.h: float runs 8 per vector)
 //   sh.{h,cpp}        spherical-harmonics colour per view direction (degree 0..3), clamped at 0 as in 3DGS
 //   binning.{h,cpp}   16x16 tile binning, per-tile front-to-back depth order
-//   rasterize.h, rasterize_{forward,backward}.cpp (shared: rasterize_common.h)
+//   rasterize.h, rasterize_{forward,backward}.cpp (shared: rasterize_common.h, rasterize_masks.h)
 //                     per-pixel front-to-back alpha compositing of RGB, alpha, depth and C extra channels
+//   rasterize_pixels.cpp, tile_pixels.cpp
+//                     the forward's alpha and depth at chosen pixels only (depth_at; the occlusion test)
 //   raster_isa.{h,cpp} the AVX2 or the AVX-512 compilation of the rasterizer kernels, chosen at run time
 //   simd.h            8-lane packs (GCC vector extensions) and the fast exp used by the rasterizer
 // GaussianRenderer (= RendererT<float>) ties them together in two phases and keeps every buffer between calls
@@ -211,6 +213,8 @@ struct ProjectedView {
   const T* campos = nullptr;   // [3] camera centre in world space (-R^T t), origin of the SH view directions
 };
 
+struct TilePixels;  // rasterize.h
+
 // The whole pipeline for scalar T (float and double are instantiated in renderer*.cpp).
 template <class T>
 class RendererT {
@@ -228,6 +232,12 @@ class RendererT {
   // preprocess(). ch.extra and s.pixel_weights must stay alive and unchanged until composite_backward(). May be
   // called again (other channels or settings) after one preprocess(); backward differentiates the last call.
   void composite(const ChannelsT<T>& ch, const RenderSettings& s, RenderOutputsT<T>& out);
+  // Alpha and expected depth at chosen pixels only, from the last preprocess(): bitwise RenderOutputs::alpha and
+  // ::depth of composite() with want_depth at those pixels, at a cost that grows with the pixels chosen instead of
+  // the image (the occlusion test reads the surface depth at the Gaussians' centres only). px: tile_pixels() of
+  // this camera's image (rasterize.h); alpha [M], depth [M] in px's order. Not differentiable: a later
+  // composite_backward() needs a composite() first.
+  void depth_at(const TilePixels& px, T* alpha, T* depth);
   // Gradients of the last composite() w.r.t. the projected quantities, for the given output gradients.
   void composite_backward(const OutputGradsT<T>& dout, ProjectedGradsT<T>& pgrads);
   // Chains projected-space gradients (from composite_backward(), possibly added to) through SH, the sigmoid and

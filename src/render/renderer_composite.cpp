@@ -1,5 +1,6 @@
 // RendererT phase 2 and its backward: per-tile alpha compositing of RGB, alpha, depth, the extra channels and the
-// pixel-weighted sums of the last preprocess(); backward gives the gradients w.r.t. the projected quantities.
+// pixel-weighted sums of the last preprocess(); backward gives the gradients w.r.t. the projected quantities;
+// depth_at, alpha and depth at chosen pixels only.
 #include "core/error.h"
 #include "render/renderer_state.h"
 
@@ -79,6 +80,26 @@ void RendererT<T>::composite(const ChannelsT<T>& ch, const RenderSettings& s, Re
 }
 
 template <class T>
+void RendererT<T>::depth_at(const TilePixels& px, T* alpha, T* depth) {
+  State& st = *st_;
+  st.has_composite = false;  // the records backward reuses are rebuilt here
+  if (!st.has_preprocess) fail("render: depth_at() called without a successful preprocess()");
+  const int tiles = st.bins.num_tiles;
+  if (px.start.size() != size_t(tiles) + 1 || px.start.back() != int(px.pixel.size()))
+    fail("render: depth_at() was given pixels for {} tiles, the image has {}", int(px.start.size()) - 1, tiles);
+  RasterInputs<T> ri;
+  ri.width = st.W;
+  ri.height = st.H;
+  ri.n = st.g.n;
+  ri.mean2d = st.mean2d.data();
+  ri.conic = st.conic.data();
+  ri.opacity = st.opacity.data();
+  ri.color = st.color_ptr;
+  ri.depth = st.depth.data();
+  rasterize_depth_at(ri, st.bins, st.ws, px, alpha, depth);
+}
+
+template <class T>
 void RendererT<T>::composite_backward(const OutputGradsT<T>& dout, ProjectedGradsT<T>& pg) {
   State& st = *st_;
   if (!st.has_composite) fail("render: backward called without a successful composite()");
@@ -145,6 +166,8 @@ void RendererT<T>::composite_backward(const OutputGradsT<T>& dout, ProjectedGrad
 
 template void RendererT<float>::composite(const ChannelsT<float>&, const RenderSettings&, RenderOutputsT<float>&);
 template void RendererT<double>::composite(const ChannelsT<double>&, const RenderSettings&, RenderOutputsT<double>&);
+template void RendererT<float>::depth_at(const TilePixels&, float*, float*);
+template void RendererT<double>::depth_at(const TilePixels&, double*, double*);
 template void RendererT<float>::composite_backward(const OutputGradsT<float>&, ProjectedGradsT<float>&);
 template void RendererT<double>::composite_backward(const OutputGradsT<double>&, ProjectedGradsT<double>&);
 

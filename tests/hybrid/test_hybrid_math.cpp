@@ -14,6 +14,8 @@
 #include "hybrid/fusion.h"
 #include "hybrid/object_channels.h"
 #include "hybrid/scl.h"
+#include "model/render_inputs.h"
+#include "render/camera_from_view.h"
 #include "render/renderer.h"
 
 using namespace hgs;
@@ -333,6 +335,70 @@ TEST(ObservationFusion, TheTrainingNearPlaneInObservationsAndOcclusion) {
   EXPECT_EQ(tab.label[0], kNoObservation);
   observe(m.mean.data(), m.n, views, tab, 0.0999999);
   EXPECT_EQ(tab.label[0], 1);
+}
+
+// The occlusion test composites the depth at the pixels it reads only (render::RendererT::depth_at). Against the
+// test as it was, a whole depth render per view and the surface at every pixel: the same table, for a few
+// thousand Gaussians in three views of odd sizes (partial tiles). The kept scratch starts with a surface that
+// would hide everything, so a pixel the test reads but did not composite would show.
+TEST(ObservationFusion, OcclusionAtTheTestedPixelsIsTheWholeRendersTest) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> U(0, 1);
+  const int n = 4000;
+  GaussianModel m;
+  m.sh_degree = 0;
+  m.resize(n);
+  for (int i = 0; i < n; ++i) {
+    m.mean[3 * i] = 2.4f * U(rng) - 1.2f;
+    m.mean[3 * i + 1] = 1.8f * U(rng) - 0.9f;
+    m.mean[3 * i + 2] = 1.5f + 3.f * U(rng);
+    for (int k = 0; k < 3; ++k) m.log_scale[3 * i + k] = std::log(0.01f + 0.06f * U(rng));
+    m.quat[4 * i] = 1.f;
+    m.quat[4 * i + 1] = U(rng) - 0.5f;
+    m.opacity_logit[i] = 6.f * U(rng) - 2.f;
+  }
+  std::vector<MaskView> views;
+  for (auto [w, h] : {std::pair{101, 67}, std::pair{64, 48}, std::pair{37, 53}}) {
+    MaskView v;
+    v.width = w;
+    v.height = h;
+    v.fx = v.fy = 0.9 * w;
+    v.cx = 0.5 * w;
+    v.cy = 0.5 * h;
+    v.t[0] = 0.1 * views.size();
+    v.labels = LabelMap(w, h, uint16_t(views.size() + 1));
+    views.push_back(std::move(v));
+  }
+  ObservationTable want;
+  observe(m.mean.data(), n, views, want);
+  ObservationTable got = want;
+  render::GaussianInputs in = render_inputs(m);
+  render::GaussianRenderer r;
+  render::RenderOutputs out;
+  for (size_t u = 0; u < views.size(); ++u) {
+    const MaskView& v = views[u];
+    r.forward(render::pinhole_camera(v.width, v.height, v.fx, v.fy, v.cx, v.cy, v.R, v.t), in, render::RenderSettings{},
+              out);
+    std::vector<float> surface(out.alpha.size());
+    for (size_t p = 0; p < surface.size(); ++p) surface[p] = out.alpha[p] > 0.5f ? out.depth[p] / out.alpha[p] : 0.f;
+    hide_occluded(m.mean.data(), n, v, surface.data(), int(u), want);
+  }
+  OcclusionScratch scratch;
+  scratch.surface.assign(size_t(101) * 67, 1e-3f);  // in front of every centre
+  hide_occluded_all(m, views, render::kDefaultNearPlane, got, &scratch);
+  EXPECT_EQ(got.label, want.label);
+  const ObservationTable before = [&] {
+    ObservationTable t;
+    observe(m.mean.data(), n, views, t);
+    return t;
+  }();
+  long hidden = 0, kept = 0;
+  for (size_t e = 0; e < want.label.size(); ++e) {
+    hidden += before.label[e] != kNoObservation && want.label[e] == kNoObservation;
+    kept += want.label[e] != kNoObservation;
+  }
+  EXPECT_GT(hidden, 100);  // the test hides many entries and keeps many
+  EXPECT_GT(kept, 100);
 }
 
 TEST(ObjectChannels, GradientToQAndColour) {
