@@ -158,13 +158,11 @@ class RasterScratch {
 template <class T>
 struct RasterWorkspace {
   struct PerThread {
-    RasterScratch vk;    // per-batch visit lists of a tile: Gaussian index (int) [visits] (rasterize_depth_at: the
-                         // tile's batch masks, uint32 [n])
-    RasterScratch vw;    // ... and its weight (forward) or extra-channel dot (backward), packs [visits]
-    RasterScratch wacc;  // forward weight-sum accumulators, packs [n, J]
-    RasterScratch
-        fold;          // folded channels of the tile's Gaussians, T [n, 4] (rasterize_depth_at: its records, T [n, 16])
-    RasterScratch dw;  // backward d(weight_sums) of the tile's Gaussians, T [n, J]
+    RasterScratch vk;      // per-batch visit lists of a tile: Gaussian index (int) [visits]
+    RasterScratch vw;      // ... and its weight (forward) or extra-channel dot (backward), packs [visits]
+    RasterScratch wacc;    // forward weight-sum accumulators, packs [n, J]
+    RasterScratch fold;    // folded channels of the tile's Gaussians, T [n, 4]
+    RasterScratch dw;      // backward d(weight_sums) of the tile's Gaussians, T [n, J]
     RasterScratch bstate;  // per-batch state, packs [batches, 7 + C + J]
     RasterScratch blast;   // per-batch active / last-contributor masks [2, batches]
     RasterScratch groups;  // the tile's channel groups: their list (int) [G], then flags (uint8) [G]

@@ -17,10 +17,11 @@ inline uint32_t spread_bits(uint32_t x) {
   return x;
 }
 
-// Batch masks of a tile, masks [n] (build_masks; batch_mask for one Gaussian): bit (row * 2 + half) is set when the Gaussian can reach the 8-pixel batch
-// (half a row) with alpha >= 1/255. For each of the 16 pixel rows the exact x-interval where d^T conic d <= m
-// (the alpha >= 1/255 region, with margin; binning.h) is computed in double, kMaskRows rows per vector (8 in the
-// AVX-512 compilation, 4 otherwise: the same operations on every row, so the same masks).
+// Batch masks of a tile, masks [n] (build_masks; batch_mask for one Gaussian): bit (row * 2 + half) is set when
+// the Gaussian can reach the 8-pixel batch (half a row) with alpha >= 1/255. For each of the 16 pixel rows the
+// exact x-interval where d^T conic d <= m (the alpha >= 1/255 region, with margin; binning.h) is computed in
+// double, kMaskRows rows per vector (8 in the AVX-512 compilation, 4 otherwise: the same operations on every row,
+// so the same masks).
 #if defined(HGS_RASTER_AVX512) && defined(__GNUC__) && !defined(__clang__)
 constexpr int kMaskRows = 8;
 #else
