@@ -17,6 +17,7 @@
 
 #include "core/error.h"
 #include "hybrid/association.h"
+#include "hybrid/data.h"
 #include "hybrid/fusion.h"
 #include "model/near_plane.h"
 #include "model/ply.h"
@@ -80,17 +81,7 @@ int run(int argc, char** argv) {
   size_t pixels = 0;
   for (const View& sv : scene.views) {
     if (sv.is_test || int(views.size()) >= max_views) continue;
-    hybrid::MaskView v;
-    v.width = sv.width;
-    v.height = sv.height;
-    v.fx = sv.fx;
-    v.fy = sv.fy;
-    v.cx = sv.cx;
-    v.cy = sv.cy;
-    for (int i = 0; i < 3; ++i) {
-      for (int j = 0; j < 3; ++j) v.R[3 * i + j] = sv.R(i, j);
-      v.t[i] = sv.t(i);
-    }
+    hybrid::MaskView v = hybrid::mask_view_geometry(sv);
     v.labels = LabelMap(sv.width, sv.height, 1);
     pixels += size_t(sv.width) * sv.height;
     views.push_back(std::move(v));

@@ -18,6 +18,21 @@ std::vector<int> scl_classes(const std::vector<int>& fg, float background_area, 
   return out;
 }
 
+MaskView mask_view_geometry(const View& v) {
+  MaskView mv;
+  mv.width = v.width;
+  mv.height = v.height;
+  mv.fx = v.fx;
+  mv.fy = v.fy;
+  mv.cx = v.cx;
+  mv.cy = v.cy;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) mv.R[3 * r + c] = v.R(r, c);
+    mv.t[r] = v.t[r];
+  }
+  return mv;
+}
+
 HybridData load_hybrid_data(const Scene& scene, const std::vector<int>& idx, const HybridConfig& cfg, bool progress) {
   HybridData d;
   const int K = scene.num_objects();
@@ -43,16 +58,7 @@ HybridData load_hybrid_data(const Scene& scene, const std::vector<int>& idx, con
   parallel_for_progress("load masks+features", long(idx.size()), progress, [&](long j) {
     const View& v = scene.views[idx[j]];
     MaskView& mv = d.masks[j];
-    mv.width = v.width;
-    mv.height = v.height;
-    mv.fx = v.fx;
-    mv.fy = v.fy;
-    mv.cx = v.cx;
-    mv.cy = v.cy;
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 3; ++c) mv.R[3 * r + c] = v.R(r, c);
-      mv.t[r] = v.t[r];
-    }
+    mv = mask_view_geometry(v);
     mv.labels = *scene.load_mask(idx[j]);
     const std::vector<uint8_t> gaps_unobserved = gap_pixels(mv.labels, cfg.gaps);  // empty: gaps are background
     if (auto conf = scene.load_confidence(idx[j])) {

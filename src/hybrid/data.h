@@ -32,6 +32,9 @@ struct HybridData {
 std::vector<int> scl_classes(const std::vector<int>& fg, float background_area, const std::string& rule,
                              int min_pixels);
 
+// A MaskView with v's image size, intrinsics and pose (no labels yet).
+MaskView mask_view_geometry(const View& v);
+
 // Loads masks (+ confidences, thresholded at tau1) and features of the given views. Fails with a clear
 // message when masks or features are missing (the hybrid method needs both).
 HybridData load_hybrid_data(const Scene& scene, const std::vector<int>& view_indices, const HybridConfig& cfg,

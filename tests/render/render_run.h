@@ -1,15 +1,38 @@
 // Test helpers shared by the render tests that compare whole renders: a forward + backward of a Scene with
-// random upstream gradients, and bitwise equality of two arrays.
+// random upstream gradients, bitwise equality of two arrays, and running a check on each compilation of the
+// rasterizer kernels.
 #pragma once
+#include <gtest/gtest.h>
+
 #include <cstring>
 #include <random>
 #include <vector>
 
 #include "fd_check.h"
+#include "render/raster_isa.h"
 #include "render/renderer.h"
 #include "render_ref.h"
 
 namespace hgs::render::test {
+
+// Restores the process-wide rasterizer ISA choice when a test ends.
+struct IsaGuard {
+  RasterIsa saved = raster_isa();
+  ~IsaGuard() { set_raster_isa(saved); }
+};
+
+// f() on each compilation of the kernels this CPU runs (AVX2 always, AVX-512 where supported), the choice
+// restored afterwards.
+template <class F>
+void on_each_isa(F&& f) {
+  IsaGuard guard;
+  for (RasterIsa isa : {RasterIsa::kAvx2, RasterIsa::kAvx512}) {
+    if (!raster_isa_supported(isa)) continue;
+    SCOPED_TRACE(raster_isa_name(isa));
+    set_raster_isa(isa);
+    f();
+  }
+}
 
 // True when a and b hold the same bits. (memcmp of empty vectors would pass null pointers: undefined, UBSan
 // reports it.)

@@ -15,12 +15,6 @@
 namespace hgs::render::test {
 namespace {
 
-// Restores the process-wide choice when a test ends.
-struct IsaGuard {
-  RasterIsa saved = raster_isa();
-  ~IsaGuard() { set_raster_isa(saved); }
-};
-
 template <class T>
 struct Result {
   RenderOutputsT<T> out;

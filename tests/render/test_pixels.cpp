@@ -12,14 +12,10 @@
 #include "render/rasterize.h"
 #include "render/renderer.h"
 #include "render_ref.h"
+#include "render_run.h"
 
 namespace hgs::render::test {
 namespace {
-
-struct IsaGuard {
-  RasterIsa saved = raster_isa();
-  ~IsaGuard() { set_raster_isa(saved); }
-};
 
 template <class T>
 bool same_bits(T a, T b) {
@@ -77,29 +73,15 @@ void check_scene(const Scene& s, uint32_t seed) {
   EXPECT_GT(deep, 0) << "no chosen pixel reached the transmittance cut-off region";
 }
 
-std::vector<RasterIsa> isas() {
-  std::vector<RasterIsa> v{RasterIsa::kAvx2};
-  if (raster_isa_supported(RasterIsa::kAvx512)) v.push_back(RasterIsa::kAvx512);
-  return v;
-}
-
 TEST(DepthAt, FloatIsCompositeBitwiseAtEveryChoice) {
-  IsaGuard guard;
-  for (RasterIsa isa : isas()) {
-    SCOPED_TRACE(raster_isa_name(isa));
-    set_raster_isa(isa);
+  on_each_isa([] {
     check_scene<float>(random_scene(3000, 160, 120, 71, 0.99), 1);
     check_scene<float>(random_scene(800, 69, 48, 62, 0.9), 2);  // partial tiles and batches at the borders
-  }
+  });
 }
 
 TEST(DepthAt, DoubleIsCompositeBitwiseAtEveryChoice) {
-  IsaGuard guard;
-  for (RasterIsa isa : isas()) {
-    SCOPED_TRACE(raster_isa_name(isa));
-    set_raster_isa(isa);
-    check_scene<double>(random_scene(1500, 69, 48, 64, 0.99), 3);
-  }
+  on_each_isa([] { check_scene<double>(random_scene(1500, 69, 48, 64, 0.99), 3); });
 }
 
 TEST(DepthAt, FailsWithoutPreprocessOrWithAnotherImagesPixels) {
