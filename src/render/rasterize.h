@@ -35,7 +35,9 @@
 // fixed order, so results are bitwise deterministic for any thread count and schedule. Parallel over tiles with
 // OpenMP (dynamic schedule); all scratch lives in RasterWorkspace (no allocation once warm).
 // Everything is templated on the scalar (float in production, double in the tests). Kernels:
-// rasterize_forward.cpp and rasterize_backward.cpp (shared internals in rasterize_common.h).
+// rasterize_forward.cpp and rasterize_backward.cpp (shared internals in rasterize_common.h, the batch masks in
+// rasterize_masks.h); rasterize_pixels.cpp, the forward's alpha and depth at chosen pixels only
+// (rasterize_depth_at).
 #pragma once
 #include <cstdint>
 #include <vector>
