@@ -2,9 +2,9 @@
 # The training steps' scaling with threads on a machine with more cores (docs/performance.md "Measured on 16
 # cores"): the machine's facts, then bench_hybrid's RGB and exact hybrid steps (with their per-part counters) at
 # each thread count of THREADS (default 1,2,4,8,16) for each build folder given, alternating (a second round in
-# the opposite order at the counts above 2), then bench_scale at the most threads for each, then (first build) the
-# one-thread step alone and as one copy per core at once (bench/shared_report.py) and bench/project_threads.py's
-# projection. JSON and text under OUT (default /tmp/steps_multicore); `bench/amdahl.py OUT/<tag>.json --threads 4
+# the opposite order at the counts above 2), then bench_scale at the most threads for each (also with a table
+# rebuild in every step: issue 61's goal 3), then (first build) the one-thread step alone and as one copy per
+# core at once (bench/shared_report.py) and bench/project_threads.py's projection. JSON and text under OUT (default /tmp/steps_multicore); `bench/amdahl.py OUT/<tag>.json --threads 4
 # 16` prints projection and measurement side by side.
 #   bench/run_steps_multicore.sh NEW_BUILD_DIR [OLD_BUILD_DIR]
 set -uo pipefail
@@ -32,6 +32,16 @@ fi
 for i in "${!dirs[@]}"; do
   "${dirs[$i]}/bench_scale" --steps 3 --threads "${THREADS##*,}" --json "$O/scale_${tags[$i]}.json" 2>&1 |
     sed "s/^/${tags[$i]} /" | tee "$O/scale_${tags[$i]}.txt"
+done
+# Issue 61's goal 3 (the observation-table rebuild): the 1000x700 / 300k hybrid step with a rebuild in every step
+# (--fusion-every 1; the part densify, 2 views) for each build. A capture's 42 training views every 100 steps add
+# 42 / 2 / 100 of that part to the mean step; printed as the mean / median step it makes.
+for i in "${!dirs[@]}"; do
+  "${dirs[$i]}/bench_scale" --case hybrid 1 1 --steps 3 --threads "${THREADS##*,}" --fusion-every 1 | grep '^{' |
+    tee "$O/rebuild_${tags[$i]}.json" | python3 -c 'import json, sys
+j = json.loads(sys.stdin.read()); r = j["parts_ms"]["densify"]; step = j["ms_median"] - r
+print("%s rebuild %.1f ms per view; 42 views every 100 steps: mean / median step %.3f" % (sys.argv[1], r / 2,
+      (step + r / 2 * 42 / 100) / step))' "${tags[$i]}" | tee -a "$O/rebuild.txt"
 done
 # What the cores share (memory bandwidth, the L3, the clock under load): the one-thread 1000x700 / 300k step of the
 # first build alone, then as many copies at once as the most threads, one per core. Each copy does the work of the
