@@ -18,6 +18,22 @@ void set_groups(const ChannelsT<T>& ch, RasterInputs<T>& ri) {
   ri.group_val = ch.group_val;
 }
 
+// The projected quantities of the last preprocess() (st: RendererT's State) as the rasterizer's inputs, with the
+// depth channel or without; each phase adds its channels and settings.
+template <class T, class State>
+RasterInputs<T> projected_inputs(const State& st, bool want_depth) {
+  RasterInputs<T> ri;
+  ri.width = st.W;
+  ri.height = st.H;
+  ri.n = st.g.n;
+  ri.mean2d = st.mean2d.data();
+  ri.conic = st.conic.data();
+  ri.opacity = st.opacity.data();
+  ri.color = st.color_ptr;
+  ri.depth = want_depth ? st.depth.data() : nullptr;
+  return ri;
+}
+
 }  // namespace
 
 template <class T>
@@ -49,15 +65,7 @@ void RendererT<T>::composite(const ChannelsT<T>& ch, const RenderSettings& s, Re
   else out.groups.clear();
   st.final_T.resize(P);
   st.last.resize(P);
-  RasterInputs<T> ri;
-  ri.width = W;
-  ri.height = H;
-  ri.n = n;
-  ri.mean2d = st.mean2d.data();
-  ri.conic = st.conic.data();
-  ri.opacity = st.opacity.data();
-  ri.color = st.color_ptr;
-  ri.depth = s.want_depth ? st.depth.data() : nullptr;
+  RasterInputs<T> ri = projected_inputs<T>(st, s.want_depth);
   ri.extra = C > 0 ? ch.extra : nullptr;
   ri.num_extra = C;
   for (int k = 0; k < 3; ++k) ri.background[k] = s.background[k];
@@ -87,16 +95,7 @@ void RendererT<T>::depth_at(const TilePixels& px, T* alpha, T* depth) {
   const int tiles = st.bins.num_tiles;
   if (px.start.size() != size_t(tiles) + 1 || px.start.back() != int(px.pixel.size()))
     fail("render: depth_at() was given pixels for {} tiles, the image has {}", int(px.start.size()) - 1, tiles);
-  RasterInputs<T> ri;
-  ri.width = st.W;
-  ri.height = st.H;
-  ri.n = st.g.n;
-  ri.mean2d = st.mean2d.data();
-  ri.conic = st.conic.data();
-  ri.opacity = st.opacity.data();
-  ri.color = st.color_ptr;
-  ri.depth = st.depth.data();
-  rasterize_depth_at(ri, st.bins, st.ws, px, alpha, depth);
+  rasterize_depth_at(projected_inputs<T>(st, true), st.bins, st.ws, px, alpha, depth);
 }
 
 template <class T>
@@ -124,15 +123,7 @@ void RendererT<T>::composite_backward(const OutputGradsT<T>& dout, ProjectedGrad
   if (groups) pg.group_val.resize(size_t(st.ch.group_ptr[n]) * GW);
   else pg.group_val.clear();
 
-  RasterInputs<T> ri;
-  ri.width = st.W;
-  ri.height = st.H;
-  ri.n = n;
-  ri.mean2d = st.mean2d.data();
-  ri.conic = st.conic.data();
-  ri.opacity = st.opacity.data();
-  ri.color = st.color_ptr;
-  ri.depth = want_depth ? st.depth.data() : nullptr;
+  RasterInputs<T> ri = projected_inputs<T>(st, want_depth);
   ri.extra = C > 0 ? st.ch.extra : nullptr;
   ri.num_extra = dout.extra ? Cg : 0;
   ri.extra_stride = C;
