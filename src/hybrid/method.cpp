@@ -8,6 +8,7 @@
 #include "core/half.h"
 #include "core/parallel.h"
 #include "hybrid/object_groups.h"
+#include "render/binning.h"
 
 namespace hgs::hybrid {
 
@@ -101,7 +102,8 @@ void HybridMethod::prepare(const train::ViewStep& v, const train::PrepareIO& io)
     io.channels.group_ptr = groups_.ptr.data();
     io.channels.group_id = groups_.id.data();
     io.channels.group_val = groups_.val.data();
-    io.channels.group_planes = true;  // one plane per object: the object losses read its pixels contiguously
+    io.channels.group_planes = true;      // one plane per object: the object losses read its pixels contiguously
+    io.channels.group_live_tiles = true;  // and only in the tiles where the object has Gaussians (the rest +0)
   } else {
     object_channels(n, L, layout_, objects_.data(), q, io.projected.colors, channels_.data());
   }
@@ -134,7 +136,8 @@ void HybridMethod::losses(const train::ViewStep& v, const train::LossIO& io) {
     // buffer); their sum goes to the base colour's gradient, overwritten by the object losses. The S others (the
     // no-SCL ablation's cosine loss adds to them) need zeros; the base opacity's gradient is never read (the
     // renderer reads the first sl.grad_channels()).
-    renders = ObjectRenders::sparse(io.out.extra.data(), sl.total(), sl.base_opacity(), io.out.groups.data(), J, HW);
+    renders = ObjectRenders::sparse(io.out.extra.data(), sl.total(), sl.base_opacity(), io.out.groups.data(), J, HW)
+                  .with_live_tiles(io.out.group_live.data(), render::kTileSize, W, H);
     d_dense_.resize(size_t(HW) * sl.total());
     if (layout_.S > 0) parallel_fill(d_dense_, 0.f);
     gout = {nullptr, 0, d_dense_.data() + sl.base_color(), sl.total()};

@@ -114,6 +114,14 @@ ObjectRenders ObjectRenders::sparse(const float* dense, int dense_stride, int ba
   return r;
 }
 
+ObjectRenders& ObjectRenders::with_live_tiles(const uint8_t* flags, int tile_size, int width, int height) {
+  live = flags;
+  tile = tile_size;
+  tiles_x = (width + tile_size - 1) / tile_size;
+  tiles = long(tiles_x) * ((height + tile_size - 1) / tile_size);
+  return *this;
+}
+
 ObjectLossValues ObjectLosses::operator()(const Image& image, const LabelMap& lab, const float* extra,
                                           const ObjectLayout& lay, const std::vector<int>& objs, float* d_extra,
                                           float* color_sum) {
@@ -183,8 +191,9 @@ ObjectLossValues ObjectLosses::full_path(const Image& image, const LabelMap& lab
 #pragma omp parallel for schedule(static)
   for (long p = 0; p < long(HW); ++p) {
     for (int j = 0; j < J; ++j) {
-      for (int c = 0; c < 3; ++c) pred_[(size_t(j) * HW + p) * 3 + c] = renders.color_at(j, p, c);
-      opac_[size_t(j) * HW + p] = renders.opacity_at(j, p);
+      const bool in = renders.in_memory(j, int(p % W), int(p / W));
+      for (int c = 0; c < 3; ++c) pred_[(size_t(j) * HW + p) * 3 + c] = renders.color_at(j, p, c, in);
+      opac_[size_t(j) * HW + p] = renders.opacity_at(j, p, in);
     }
   }
 #pragma omp parallel for schedule(dynamic, 1)
@@ -243,6 +252,7 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders,
   else std::vector<float>().swap(planes_);
   // Pixel by pixel (the groups' rows read once, in order), each object's value stored to its plane (copied); the
   // loop is compiled for each kind of render (complete values or base + difference) and for the copy or none.
+  std::vector<ScratchVector<uint8_t>> in_row(size_t(std::max(1, omp_get_max_threads())));
   auto scan = [&]<bool kDeltas, bool kCopy>() {
     const long S = renders.stride;
 #pragma omp parallel for schedule(static)
@@ -253,6 +263,9 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders,
       int* mhi = &mask_hi_[size_t(y)];
       for (int j = 0; j < J; ++j)
         lo[size_t(j) * H] = mlo[size_t(j) * H] = W, hi[size_t(j) * H] = mhi[size_t(j) * H] = -1;
+      ScratchVector<uint8_t>& in = in_row[omp_get_thread_num()];  // [J] whether each object's values are in memory
+      in.resize(J);
+      int run = 0;
       for (int x = 0; x < W; ++x) {
         const long p = long(y) * W + x;
         const float b[4] = {renders.base_color[p * BS], renders.base_color[p * BS + 1], renders.base_color[p * BS + 2],
@@ -260,14 +273,29 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders,
         for (int c = 0; c < 3; ++c) base_pred_[p * 3 + c] = b[c];
         base_opac_[p] = b[3];
         const int l = lab.v[p];
+        if (x == run) {  // a new run of columns whose objects' values are in memory or +0 alike
+          run = renders.run_end(x, W);
+          for (int j = 0; j < J; ++j) in[j] = renders.in_memory(j, x, y);
+        }
+        float v0[4];  // an object's value where its memory holds +0 or is not written, and how it differs
+        uint32_t diff0 = 0;
+        for (int c = 0; c < 4; ++c) {
+          v0[c] = kDeltas ? b[c] + 0.f : 0.f;
+          diff0 |= bits(v0[c]) ^ bits(b[c]);
+        }
         for (int j = 0; j < J; ++j) {
-          const float* col = renders.color[j] + p * S;
-          const float o = renders.opacity[j][p * S];
-          const float v[4] = {kDeltas ? b[0] + col[0] : col[0], kDeltas ? b[1] + col[1] : col[1],
-                              kDeltas ? b[2] + col[2] : col[2], kDeltas ? b[3] + o : o};
-          uint32_t diff = 0;
-          for (int c = 0; c < 4; ++c) diff |= bits(v[c]) ^ bits(b[c]);
-          if constexpr (kCopy) std::copy_n(v, 4, &planes_[(size_t(j) * HW + p) * 4]);
+          uint32_t diff = diff0;
+          if (in[j]) {
+            const float* col = renders.color[j] + p * S;
+            const float o = renders.opacity[j][p * S];
+            const float v[4] = {kDeltas ? b[0] + col[0] : col[0], kDeltas ? b[1] + col[1] : col[1],
+                                kDeltas ? b[2] + col[2] : col[2], kDeltas ? b[3] + o : o};
+            diff = 0;
+            for (int c = 0; c < 4; ++c) diff |= bits(v[c]) ^ bits(b[c]);
+            if constexpr (kCopy) std::copy_n(v, 4, &planes_[(size_t(j) * HW + p) * 4]);
+          } else if constexpr (kCopy) {
+            std::copy_n(v0, 4, &planes_[(size_t(j) * HW + p) * 4]);
+          }
           const bool label = l == objs[j];
           if (diff || label) {
             lo[size_t(j) * H] = std::min(lo[size_t(j) * H], x);
@@ -297,6 +325,7 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders,
     }
     renders_.stride = 4;
     renders_.deltas = false;
+    renders_.live = nullptr;  // (the copies hold the +0 values)
   }
   const int dep = dep_ = opt_.dilation >= 0 ? opt_.dilation : dependency_radius(cfg_);
   obj_.resize(J);
@@ -426,15 +455,24 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
   int filled = -1;
   auto fill = [&](int r) {  // the object's values from its plane (renders_: base + difference, or planes_)
     float* d = &w.crop[size_t(r % ring) * rf];
-    for (int xx = 0; xx < qw; ++xx) {
-      const long p = long(r + Q.y0) * W + (xx + Q.x0);
-      const float m = lab.v[p] == k ? 1.f : 0.f;
-      d[6 * qw + xx] = m;
-      d[7 * qw + xx] = renders_.opacity_at(j, p);
-      for (int c = 0; c < 3; ++c) {
-        d[xx * 3 + c] = renders_.color_at(j, p, c);
-        d[3 * qw + xx * 3 + c] = image.px[p * 3 + c] * m;
+    const int y = r + Q.y0;
+    auto columns = [&]<bool kIn>(int xx0, int xx1) {
+      for (int xx = xx0; xx < xx1; ++xx) {
+        const long p = long(y) * W + (xx + Q.x0);
+        const float m = lab.v[p] == k ? 1.f : 0.f;
+        d[6 * qw + xx] = m;
+        d[7 * qw + xx] = renders_.opacity_at(j, p, kIn);
+        for (int c = 0; c < 3; ++c) {
+          d[xx * 3 + c] = renders_.color_at(j, p, c, kIn);
+          d[3 * qw + xx * 3 + c] = image.px[p * 3 + c] * m;
+        }
       }
+    };
+    for (int xx0 = 0; xx0 < qw;) {  // runs of columns whose values are in memory or +0 alike
+      const int xx1 = renders_.run_end(xx0 + Q.x0, Q.x1) - Q.x0;
+      if (renders_.in_memory(j, xx0 + Q.x0, y)) columns.template operator()<true>(xx0, xx1);
+      else columns.template operator()<false>(xx0, xx1);
+      xx0 = xx1;
     }
   };
   auto at = [&](int r) {

@@ -39,6 +39,8 @@
 // each; one band at one thread), the pieces run largest first on a dynamic schedule, and every sum is kept per
 // row and added in row order: values and gradients are bitwise the same for any banding, so at any thread count.
 #pragma once
+#include <algorithm>
+#include <cstdint>
 #include <random>
 #include <vector>
 
@@ -100,13 +102,23 @@ struct ObjectRenders {
   const float *base_color = nullptr, *base_opacity = nullptr;
   long stride = 0, base_stride = 0, base_opacity_stride = 0;
   bool deltas = false;
+  // Tiles of tile x tile pixels where the renderer left an object's plane unwritten (planes with
+  // render::ChannelsT::group_live_tiles): object j's value in color[j] / opacity[j] is +0 at (x, y) when
+  // live[j * tiles + (y / tile) * tiles_x + x / tile] is 0, whatever its memory holds. Null: all are in memory.
+  const uint8_t* live = nullptr;  // [J, tiles]
+  int tile = 1, tiles_x = 0;
+  long tiles = 0;
   int J() const { return static_cast<int>(color.size()); }
-  float color_at(int j, long p, int c) const {
-    const float v = color[j][p * stride + c];
+  // Whether object j's values at (x, y) are in memory, and the end of the run of columns from x that share it.
+  bool in_memory(int j, int x, int y) const { return !live || live[j * tiles + long(y / tile) * tiles_x + x / tile]; }
+  int run_end(int x, int width) const { return live ? std::min(width, (x / tile + 1) * tile) : width; }
+  // Object j's colour channel c and opacity at pixel p; in = in_memory(j, x, y) (else its value there is +0).
+  float color_at(int j, long p, int c, bool in = true) const {
+    const float v = in ? color[j][p * stride + c] : 0.f;
     return deltas ? base_color[p * base_stride + c] + v : v;
   }
-  float opacity_at(int j, long p) const {
-    const float v = opacity[j][p * stride];
+  float opacity_at(int j, long p, bool in = true) const {
+    const float v = in ? opacity[j][p * stride] : 0.f;
     return deltas ? base_opacity[p * base_opacity_stride] + v : v;
   }
   static ObjectRenders interleaved(const float* extra, const ObjectLayout& lay);  // extra [H, W, lay.total()]
@@ -115,6 +127,8 @@ struct ObjectRenders {
   // ChannelsT::group_planes).
   static ObjectRenders sparse(const float* dense, int dense_stride, int base_opacity, const float* groups, int J,
                               long planes = 0);
+  // The renderer's flags of written tiles (live above; [J, tiles] for a width x height image).
+  ObjectRenders& with_live_tiles(const uint8_t* flags, int tile_size, int width, int height);
 };
 
 // Where the losses write the objects' colour gradients: object j's at color + p * stride + 3 j (color null:

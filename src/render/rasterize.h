@@ -94,6 +94,10 @@ struct RasterOutputs {
   T* weight_sums = nullptr;  // [N, J] sum_p M_j(p) alpha_n(p) T_n(p) (when num_weights > 0)
   T* groups = nullptr;       // [H, W, G * GW] (when num_groups > 0), or [G, H, W, GW] when group_planes
   bool group_planes = false;
+  // With group_planes, optional: group_live[g * tiles + t] = 1 where a Gaussian of tile t has an entry in group g
+  // and its plane was written there; 0 where no Gaussian adds to it, its values are +0 and its memory is left
+  // unwritten (a reader substitutes the zeros). [G, tiles]
+  uint8_t* group_live = nullptr;
 };
 
 // Chosen pixels grouped by tile, for rasterize_depth_at: tile t's are pixel[start[t], start[t + 1]), each

@@ -109,8 +109,9 @@ bool load_records(const Binning& bins, const T* records, T* tile_records, bool g
 // The channel groups a tile's Gaussians have entries in (from their records' kE0 / kNe), ascending: list [G] gets
 // them, the count is returned (used [G] is scratch). No Gaussian of the tile reads another group's upstream
 // gradient, so backward loads these groups' only. (The hybrid method's object groups: a tile sees one or two of
-// the view's objects, and each pixel's row holds the gradients of all of them.) Forward keeps every group: its
-// output is dense, and writing the others' zeros apart from the state is slower than the plain copy.
+// the view's objects, and each pixel's row holds the gradients of all of them.) Forward writes every group's
+// zeros (writing them apart from the state is slower than the plain copy) unless its output flags the tiles it
+// wrote (RasterOutputs::group_live): then these groups' planes only.
 template <class T>
 int tile_groups(const RasterInputs<T>& in, const TileData<T>& td, uint8_t* used, int* list) {
   const int G = in.num_groups;

@@ -6,7 +6,8 @@
 // kTransmittanceMin, else w = alpha T is accumulated into colour / depth / pixel-weight sums. Extra channels and
 // sparse groups are added in the walk (the folded path) or summed afterwards from each batch's recorded visits
 // (composite_extras, composite_groups: many channels), in the same order either way; the groups are written
-// interleaved per pixel or as one plane per group (RasterOutputs::group_planes). Saves
+// interleaved per pixel or as one plane per group (RasterOutputs::group_planes; optionally only in the tiles where
+// the group has Gaussians, flagged in group_live, the others +0 and left unwritten). Saves
 // final T and the last contributor per pixel for backward; per-pair weight sums are reduced per Gaussian in a fixed
 // order.
 #include "render/raster_isa.h"
@@ -160,10 +161,12 @@ inline __attribute__((always_inline)) void forward_gaussian(const RasterInputs<T
 
 // Writes the tile's pixels out (batches all_batches): the visit-list path's extra channels and groups summed
 // first, then colour over the background, alpha, final T, last contributor, depth, extra and group channels.
+// With group planes, the planes of groups [0, ng) of glist only (glist null: every group).
 template <class T, bool kDepth, int kX>
 inline __attribute__((always_inline)) void write_forward_batches(const RasterInputs<T>& in, const Binning& bins,
                                                                  int tx0, int ty0, uint32_t all_batches,
                                                                  const ForwardBatches<T>& b, const ForwardVisits<T>& vl,
+                                                                 const int* glist, int ng,
                                                                  const RasterOutputs<T>& out) {
   using P = simd::Pack<T>;
   const int W = bins.width, C = b.C, GT = b.BS - b.GO, GO = b.GO;
@@ -198,7 +201,8 @@ inline __attribute__((always_inline)) void write_forward_batches(const RasterInp
     if (kX != kNoChannels && out.group_planes && GT > 0) {  // group g's plane: the batch's pixels contiguous
       const int GW = in.group_width;
       const size_t P = size_t(W) * bins.height, p0 = size_t(py) * W + px0;
-      for (int g = 0; g < in.num_groups; ++g) {
+      for (int q = 0; q < ng; ++q) {
+        const int g = glist ? glist[q] : q;
         T* o = out.groups + (size_t(g) * P + p0) * GW;
         for (int l = 0; l < nvalid; ++l)
           for (int i = 0; i < GW; ++i) o[size_t(l) * GW + i] = st[GO + g * GW + i][l];
@@ -269,7 +273,18 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
     const int gi = kX == kVisitLists ? bins.tile_gauss[s + k] : 0;
     forward_gaussian<T, kDepth, kX>(in, rc, k, gi, fg, b, jmask, tx0, ty0, mb, alive, wa, vl);
   }
-  write_forward_batches<T, kDepth, kX>(in, bins, tx0, ty0, all_batches, b, vl, out);
+  // Planes written only where their group has Gaussians (out.group_live): the others' values here are +0, the
+  // state they were never added to.
+  int ng = in.num_groups;
+  int* glist = nullptr;
+  if (kX != kNoChannels && out.group_live && GT > 0) {
+    glist = w.groups.template get<int>(size_t(2) * in.num_groups);  // the list, then the flags
+    uint8_t* used = reinterpret_cast<uint8_t*>(glist + in.num_groups);
+    if (any_g) ng = tile_groups(in, td, used, glist);
+    else ng = 0, std::memset(used, 0, size_t(in.num_groups));
+    for (int g = 0; g < in.num_groups; ++g) out.group_live[size_t(g) * bins.num_tiles + tile] = used[g];
+  }
+  write_forward_batches<T, kDepth, kX>(in, bins, tx0, ty0, all_batches, b, vl, glist, ng, out);
   if (J > 0 && any_g) store_pair_weights(bins, tile, n, kend, J, masks, all_batches, wacc, pair_w);
 }
 

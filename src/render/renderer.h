@@ -117,6 +117,11 @@ struct ChannelsT {
   // RenderOutputs::groups as planes [G, H, W, GW] instead of [H, W, G * GW]: a reader of one group's pixels (the
   // object losses' crops, object_losses.h) then reads contiguous memory, with no copy of its own.
   bool group_planes = false;
+  // With group_planes: write a group's plane only in the tiles where some Gaussian has an entry in the group, and
+  // flag them in RenderOutputs::group_live. Elsewhere the plane's values are +0 (nothing adds to them) but its
+  // memory is not written: a reader that honours the flags is spared writing and reading the zeros (the hybrid
+  // method's objects each cover a part of the image).
+  bool group_live_tiles = false;
 };
 using Channels = ChannelsT<float>;
 
@@ -138,7 +143,10 @@ struct RenderOutputsT {
   std::vector<T> extra;        // [H, W, C] (empty when C = 0)
   std::vector<T> weight_sums;  // [N, J] when pixel weights were given (else empty)
   std::vector<T> groups;       // [H, W, G * GW] (or [G, H, W, GW]: group_planes) when channel groups were given
-  int num_visible = 0;         // Gaussians that passed culling
+  // [G, tiles_y, tiles_x] of kTileSize-pixel tiles, with group_live_tiles (else empty): 1 where group g's plane was
+  // written, 0 where its values are +0 and groups holds whatever was there before.
+  std::vector<uint8_t> group_live;
+  int num_visible = 0;  // Gaussians that passed culling
 };
 using RenderOutputs = RenderOutputsT<float>;
 

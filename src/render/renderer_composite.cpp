@@ -49,6 +49,7 @@ void RendererT<T>::composite(const ChannelsT<T>& ch, const RenderSettings& s, Re
   if (ch.num_groups < 0 || ch.group_width < 0 ||
       (GT > 0 && (!ch.group_ptr || (ch.group_ptr[n] > 0 && (!ch.group_id || !ch.group_val)))))
     fail("render: {} channel groups of width {} without their entry arrays", ch.num_groups, ch.group_width);
+  if (ch.group_live_tiles && !ch.group_planes) fail("render: group_live_tiles needs group_planes");
   st.ch = ch;
   st.s = s;
 
@@ -63,6 +64,9 @@ void RendererT<T>::composite(const ChannelsT<T>& ch, const RenderSettings& s, Re
   else out.weight_sums.clear();
   if (GT > 0) out.groups.resize(P * GT);
   else out.groups.clear();
+  const bool live = GT > 0 && ch.group_live_tiles;
+  if (live) out.group_live.resize(size_t(ch.num_groups) * st.bins.num_tiles);
+  else out.group_live.clear();
   st.final_T.resize(P);
   st.last.resize(P);
   RasterInputs<T> ri = projected_inputs<T>(st, s.want_depth);
@@ -75,6 +79,7 @@ void RendererT<T>::composite(const ChannelsT<T>& ch, const RenderSettings& s, Re
   RasterOutputs<T> ro;
   ro.groups = GT > 0 ? out.groups.data() : nullptr;
   ro.group_planes = ch.group_planes;
+  ro.group_live = live ? out.group_live.data() : nullptr;
   ro.weight_sums = J > 0 ? out.weight_sums.data() : nullptr;
   ro.rgb = out.rgb.data();
   ro.alpha = out.alpha.data();

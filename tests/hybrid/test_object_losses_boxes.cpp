@@ -325,7 +325,8 @@ TEST(ObjectLossesBoxes, SparseRendersAndCompactGradientsAreTheInterleavedOnesBit
 TEST(ObjectLossesBoxes, ObjectPlanesAreTheInterleavedGroupsBitwise) {
   // The groups as one plane per object ([J, H, W, 4], the renderer's ChannelsT::group_planes, which the crops read
   // in place instead of copying the objects out) give the values, the gradients and the sum of the interleaved
-  // groups bit for bit, with boxes and over whole images, BRO on and off, and a background scored whole.
+  // groups bit for bit, with boxes and over whole images, BRO on and off, and a background scored whole; and so
+  // do planes written only in flagged tiles (ObjectRenders::live, the renderer's group_live_tiles).
   Case c = synthetic(13);
   const int C = c.lay.total(), J = c.lay.J, CD = 6;
   const long HW = long(c.W) * c.H;
@@ -344,6 +345,31 @@ TEST(ObjectLossesBoxes, ObjectPlanesAreTheInterleavedGroupsBitwise) {
   }
   const ObjectRenders inter = ObjectRenders::sparse(dense.data(), CD, 5, groups.data(), J);
   const ObjectRenders planar = ObjectRenders::sparse(dense.data(), CD, 5, planes.data(), J, HW);
+  // The planes as the renderer leaves them with group_live_tiles: only the flagged tiles written (6 x 6 pixels
+  // here, so tiles cut boxes, crops and bands), the others' memory NaN. Flagged: every tile where the object's
+  // difference has a bit set, and every 5th of the others (the renderer flags where the object has Gaussians).
+  constexpr int kTile = 6;
+  const int tx = (c.W + kTile - 1) / kTile, tiles = tx * ((c.H + kTile - 1) / kTile);
+  std::vector<uint8_t> live(size_t(J) * tiles, 0);
+  for (int j = 0; j < J; ++j)
+    for (long p = 0; p < HW; ++p)
+      for (int k = 0; k < 4; ++k)
+        if (std::bit_cast<uint32_t>(planes[(size_t(j) * HW + p) * 4 + k]) != 0)
+          live[size_t(j) * tiles + (p / c.W / kTile) * tx + p % c.W / kTile] = 1;
+  std::vector<float> unwritten = planes;
+  int zero_tiles = 0;
+  for (int j = 0; j < J; ++j)
+    for (int t = 0; t < tiles; ++t) {
+      uint8_t& f = live[size_t(j) * tiles + t];
+      if (!f && ++zero_tiles % 5 == 0) f = 1;
+    }
+  for (int j = 0; j < J; ++j)
+    for (long p = 0; p < HW; ++p)
+      if (!live[size_t(j) * tiles + (p / c.W / kTile) * tx + p % c.W / kTile])
+        std::fill_n(&unwritten[(size_t(j) * HW + p) * 4], 4, std::nanf(""));
+  ASSERT_GT(zero_tiles, 10);
+  const ObjectRenders flagged =
+      ObjectRenders::sparse(dense.data(), CD, 5, unwritten.data(), J, HW).with_live_tiles(live.data(), kTile, c.W, c.H);
   for (double frac : {0.8, 0.05})  // (0.05: objects whose crop is large are scored over the whole image)
     for (bool bro : {true, false})
       for (bool boxes : {true, false}) {
@@ -354,16 +380,19 @@ TEST(ObjectLossesBoxes, ObjectPlanesAreTheInterleavedGroupsBitwise) {
         std::vector<float> ga(size_t(HW) * 3 * J, std::nanf("")), gb(ga.size(), std::nanf("")), sa(size_t(HW) * 3),
             sb(sa.size());
         const ObjectLossValues va = a(c.image, c.lab, inter, c.objs, {ga.data(), 3L * J, sa.data(), 3});
-        const ObjectLossValues vb = b(c.image, c.lab, planar, c.objs, {gb.data(), 3L * J, sb.data(), 3});
-        const std::string tag = std::string(bro ? "BRO" : "no BRO") + (boxes ? ", boxes" : ", whole images") +
-                                ", fraction " + std::to_string(frac);
-        EXPECT_EQ(va.app, vb.app) << tag;
-        EXPECT_EQ(va.bro, vb.bro) << tag;
-        EXPECT_GT(va.app, 0) << tag;
-        for (size_t i = 0; i < ga.size(); ++i)
-          ASSERT_EQ(std::bit_cast<uint32_t>(ga[i]), std::bit_cast<uint32_t>(gb[i])) << tag << ", value " << i;
-        for (size_t i = 0; i < sa.size(); ++i)
-          ASSERT_EQ(std::bit_cast<uint32_t>(sa[i]), std::bit_cast<uint32_t>(sb[i])) << tag << ", sum " << i;
+        for (const ObjectRenders* r : {&planar, &flagged}) {
+          std::fill(gb.begin(), gb.end(), std::nanf(""));
+          const ObjectLossValues vb = b(c.image, c.lab, *r, c.objs, {gb.data(), 3L * J, sb.data(), 3});
+          const std::string tag = std::string(bro ? "BRO" : "no BRO") + (boxes ? ", boxes" : ", whole images") +
+                                  ", fraction " + std::to_string(frac) + (r == &flagged ? ", flagged tiles" : "");
+          EXPECT_EQ(va.app, vb.app) << tag;
+          EXPECT_EQ(va.bro, vb.bro) << tag;
+          EXPECT_GT(va.app, 0) << tag;
+          for (size_t i = 0; i < ga.size(); ++i)
+            ASSERT_EQ(std::bit_cast<uint32_t>(ga[i]), std::bit_cast<uint32_t>(gb[i])) << tag << ", value " << i;
+          for (size_t i = 0; i < sa.size(); ++i)
+            ASSERT_EQ(std::bit_cast<uint32_t>(sa[i]), std::bit_cast<uint32_t>(sb[i])) << tag << ", sum " << i;
+        }
       }
 }
 

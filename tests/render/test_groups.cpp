@@ -9,10 +9,13 @@
 
 #include <algorithm>
 #include <atomic>
+#include <bit>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <random>
 #include <tuple>
+#include <type_traits>
 
 #include "fd_check.h"
 #include "render/raster_isa.h"
@@ -335,8 +338,79 @@ void compare_group_planes() {
   }
 }
 
+// Planes written only where their group has Gaussians (ChannelsT::group_live_tiles): in a tile flagged in
+// group_live the plane holds the interleaved output's bits; in one not flagged the interleaved output is +0 and
+// the plane's memory (poisoned with NaN before) is not written. Groups that some tiles lack: group 0 holds
+// every 16th Gaussian, group 1 every 40th (from the second), group 2 the first three, groups 3 and 4 none.
+template <class T>
+bool is_plus_zero(T v) {
+  return std::bit_cast<std::conditional_t<sizeof(T) == 4, uint32_t, uint64_t>>(v) == 0;
+}
+
+template <class T>
+void compare_live_tiles() {
+  Scene s = random_scene(400, 131, 90, 43, 0.9, 4);
+  Groups gr(0, 1);
+  std::mt19937 rng(5);
+  std::normal_distribution<double> N01(0, 1);
+  for (int i = 0; i < s.n; ++i) {
+    if (i % 16 == 0) gr.id.push_back(0);
+    if (i % 40 == 1) gr.id.push_back(1);
+    if (i < 3) gr.id.push_back(2);
+    gr.ptr.push_back(int(gr.id.size()));
+  }
+  for (size_t e = 0; e < gr.id.size() * kGW; ++e) gr.val.push_back(N01(rng));
+  const std::vector<T> val = conv<T>(gr.val), ex = conv<T>(s.extra);
+  const int W = s.cam.width, H = s.cam.height, tx = (W + kTileSize - 1) / kTileSize;
+  const int tiles = tx * ((H + kTileSize - 1) / kTileSize);
+  const size_t P = size_t(W) * H;
+  for (ChannelPath path : {ChannelPath::kVisitLists, ChannelPath::kFolded}) {
+    set_raster_channel_path(path);
+    RenderOutputsT<T> ref, out;
+    RendererT<T> ren;
+    composite_groups_and_base(ren, s, gr, val, ex, false, ref);
+    out.groups.assign(P * kG * kGW, std::numeric_limits<T>::quiet_NaN());
+    std::vector<std::vector<T>> store;
+    ren.preprocess(s.cam, s.inputs<T>(store));
+    ChannelsT<T> ch = gr.channels(val.data());
+    ch.extra = ex.data();
+    ch.num_extra = 4;
+    ch.group_planes = ch.group_live_tiles = true;
+    ren.composite(ch, s.settings, out);
+    set_raster_channel_path(ChannelPath::kAuto);
+    const char* what = path == ChannelPath::kFolded ? "folded" : "visit lists";
+    ASSERT_EQ(out.group_live.size(), size_t(kG) * tiles) << what;
+    int flagged[kG] = {};
+    for (int g = 0; g < kG; ++g)
+      for (size_t p = 0; p < P; ++p) {
+        const int x = int(p % W), y = int(p / W), t = (y / kTileSize) * tx + x / kTileSize;
+        const bool live = out.group_live[size_t(g) * tiles + t];
+        if (x % kTileSize == 0 && y % kTileSize == 0) flagged[g] += live;
+        for (int i = 0; i < kGW; ++i) {
+          const T r = ref.groups[(p * kG + g) * kGW + i], o = out.groups[(g * P + p) * kGW + i];
+          if (live) ASSERT_EQ(0, std::memcmp(&r, &o, sizeof(T))) << what << ": group " << g << ", pixel " << p;
+          else
+            ASSERT_TRUE(is_plus_zero(r) && std::isnan(o))
+                << what << ": group " << g << ", pixel " << p << " not flagged holds " << r << ", plane " << o;
+        }
+      }
+    for (int g : {0, 1})
+      EXPECT_TRUE(flagged[g] > 0 && flagged[g] < tiles) << what << ": group " << g << " " << flagged[g];
+    EXPECT_TRUE(flagged[2] > 0 && flagged[2] < tiles / 2) << what << ": " << flagged[2];
+    EXPECT_EQ(flagged[3] + flagged[4], 0) << what;
+    EXPECT_TRUE(bitwise_equal(ref.rgb, out.rgb)) << what;
+    EXPECT_TRUE(bitwise_equal(ref.extra, out.extra)) << what;
+  }
+}
+
 TEST(RenderGroups, PlanesHoldTheInterleavedGroupsBitwiseFloat) { compare_group_planes<float>(); }
 TEST(RenderGroups, PlanesHoldTheInterleavedGroupsBitwiseDouble) { compare_group_planes<double>(); }
+TEST(RenderGroups, LiveTilesHoldThePlanesBitsAndTheOthersAreZeroAndUnwrittenFloat) {
+  on_each_isa([] { compare_live_tiles<float>(); });
+}
+TEST(RenderGroups, LiveTilesHoldThePlanesBitsAndTheOthersAreZeroAndUnwrittenDouble) {
+  on_each_isa([] { compare_live_tiles<double>(); });
+}
 
 TEST(RenderGroups, FoldedAndVisitListPathsAreBitwiseEqualFloat) { compare_channel_paths<float>(); }
 TEST(RenderGroups, FoldedAndVisitListPathsAreBitwiseEqualDouble) { compare_channel_paths<double>(); }
