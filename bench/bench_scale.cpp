@@ -45,6 +45,14 @@ struct Args {
   std::string json_out;
 };
 
+// One timed step, in a call of its own so that bench/ll_traffic.py can count inside the timed steps only (callgrind's
+// --toggle-collect=hgs::bench::timed_step*), not the warm-up steps' first touches of their buffers.
+}  // namespace
+namespace hgs::bench {
+__attribute__((noinline)) train::StepInfo timed_step(train::Trainer& trainer) { return trainer.step(); }
+}  // namespace hgs::bench
+namespace {
+
 // One case in this process: one warm-up step per view (the trainer visits every view once per shuffled round, so
 // every view's buffers have their size before the timing), then `steps` timed steps. Prints one JSON line.
 int run_case(const std::string& method, double pixels, double gaussians, const Args& a) {
@@ -74,7 +82,7 @@ int run_case(const std::string& method, double pixels, double gaussians, const A
   std::map<std::string, std::vector<double>> method_parts;  // the method's own timers (ms_*) and task counts, per step
   for (int i = 0; i < a.steps; ++i) {
     const auto t0 = std::chrono::steady_clock::now();
-    const train::StepInfo info = trainer.step();
+    const train::StepInfo info = bench::timed_step(trainer);
     ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
     parts.push_back(info.times);
     for (const auto& [k, v] : trainer.method().stats().values)

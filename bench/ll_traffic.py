@@ -4,9 +4,12 @@ bench/project_threads.py cannot see (docs/performance.md).
 
 Runs `bench_scale --case METHOD SCALE SCALE --steps N --threads 1` under valgrind's callgrind with its cache
 simulation (D1 48 KiB, LL 2 MiB: a core's own caches, so an LL miss is a line fetched from the shared L3 or memory)
-collecting inside `Trainer::step()` only, for the RGB and the hybrid step; prints each function's misses times 64
-bytes per step, RGB and hybrid side by side, and the hybrid's extra. The step count includes bench_scale's warm-up
-steps (one per view of its scene, 2): their first touches are in the figures. The simulated CPU is valgrind's (no
+collecting inside bench_scale's timed steps only (`hgs::bench::timed_step`, the steady state its medians time; with
+--with-warmup inside every `Trainer::step()`, its warm-up steps, one per view of its scene, included: their first
+touches of the buffers, zero-filled by the allocator and the page faults, are then in the figures, as they were
+before 2026-12-06), for the RGB and the hybrid step; prints each function's misses times 64 bytes per step, RGB and
+hybrid side by side, and the hybrid's extra. A bench_scale without `timed_step` (a build before it) is run as with
+--with-warmup, and the header says so. The simulated CPU is valgrind's (no
 AVX-512: the AVX2 rasterizer runs), and the cache is simulated, not measured. About 10 minutes at SCALE 0.25 on one
 core. With --plan-threads T the code that cuts its work by the thread count (the object losses' bands, SSIM's
 bands) cuts it as for T threads while one thread runs (bench/omp_regions, as project_threads.py does): the pieces a
@@ -28,14 +31,14 @@ from project_threads import plan_ranges, short_name  # noqa: E402  (the same nam
 VIEWS = 2  # bench_scale's scene (bench/bench_hybrid_scene.h kViews): its warm-up steps
 
 
-def run(binary, method, scale, steps, out, plan_threads=0):
+def run(binary, method, scale, steps, out, plan_threads=0, toggle='hgs::bench::timed_step*'):
     env = dict(os.environ)
     if plan_threads > 0:  # the work cut as for T threads (bench/omp_regions, as project_threads.py does)
         env.update(LD_PRELOAD=os.path.join(os.path.dirname(binary), 'libhgs_omp_regions.so'),
                    HGS_PLAN_THREADS=str(plan_threads), HGS_PLAN_RANGES=plan_ranges(binary),
                    HGS_REGIONS_OUT=out + '.regions')
     cmd = ['valgrind', '--tool=callgrind', '--cache-sim=yes', '--I1=32768,8,64', '--D1=49152,12,64',
-           '--LL=2097152,16,64', '--collect-atstart=no', '--toggle-collect=hgs::train::Trainer::step()',
+           '--LL=2097152,16,64', '--collect-atstart=no', f'--toggle-collect={toggle}',
            f'--callgrind-out-file={out}', binary, '--case', method, str(scale), str(scale), '--steps', str(steps),
            '--threads', '1']
     res = subprocess.run(cmd, capture_output=True, text=True, env=env)
@@ -68,6 +71,8 @@ def main():
                     'libhgs_omp_regions.so beside bench_scale); 0: as for one')
     ap.add_argument('--methods', default='rgb,hybrid', help='the steps to simulate (rgb,hybrid; one alone halves '
                     'the time, its columns of the other are then 0)')
+    ap.add_argument('--with-warmup', action='store_true', help="count bench_scale's warm-up steps too (their first "
+                    'touches of the buffers)')
     a = ap.parse_args()
     binary = os.path.join(a.build, 'bench_scale')
     if not os.path.exists(binary):
@@ -80,17 +85,22 @@ def main():
             sys.exit(f'll_traffic: --methods: {method!r} is not rgb or hybrid')
     if a.plan_threads > 0 and not os.path.exists(os.path.join(a.build, 'libhgs_omp_regions.so')):
         sys.exit(f'll_traffic: --plan-threads needs {a.build}/libhgs_omp_regions.so (built with the benchmarks)')
-    steps = a.steps + VIEWS
+    has_timed = b'timed_step' in subprocess.run(['nm', '-C', binary], capture_output=True).stdout
+    warm = a.with_warmup or not has_timed
+    steps = a.steps + VIEWS if warm else a.steps
+    toggle = 'hgs::train::Trainer::step()' if warm else 'hgs::bench::timed_step*'
     with tempfile.TemporaryDirectory() as tmp:
         res = {'rgb': {}, 'hybrid': {}}
         for method in a.methods.split(','):
             out = os.path.join(tmp, method + '.out')
-            run(binary, method, a.scale, a.steps, out, a.plan_threads)
+            run(binary, method, a.scale, a.steps, out, a.plan_threads, toggle)
             res[method] = per_function(out, steps)
     h, r = res['hybrid'], res['rgb']
     cut = f', work cut as for {a.plan_threads} threads' if a.plan_threads > 0 else ''
+    which = (f'{steps} steps, the {VIEWS} warm-up steps included' + ('' if a.with_warmup else
+             ' (this bench_scale has no timed_step)')) if warm else f'{steps} timed steps'
     print(f'bench_scale at {a.scale}x pixels and Gaussians, one thread{cut}: MB per step past a 2 MiB private cache '
-          f'(callgrind LL misses x 64 B, {steps} steps)')
+          f'(callgrind LL misses x 64 B, {which})')
     print(f"{'function':60s} {'hybrid':>8} {'RGB':>8} {'extra':>8}")
     for k in sorted(set(h) | set(r), key=lambda k: -(h.get(k, 0) - r.get(k, 0)))[:a.top]:
         print(f'{k[:60]:60s} {h.get(k, 0):8.1f} {r.get(k, 0):8.1f} {h.get(k, 0) - r.get(k, 0):8.1f}')

@@ -14,9 +14,11 @@
 #include <cstring>
 #include <limits>
 #include <random>
+#include <string>
 #include <tuple>
 #include <type_traits>
 
+#include "core/error.h"
 #include "fd_check.h"
 #include "render/raster_isa.h"
 #include "render/renderer.h"
@@ -410,6 +412,24 @@ TEST(RenderGroups, LiveTilesHoldThePlanesBitsAndTheOthersAreZeroAndUnwrittenFloa
 }
 TEST(RenderGroups, LiveTilesHoldThePlanesBitsAndTheOthersAreZeroAndUnwrittenDouble) {
   on_each_isa([] { compare_live_tiles<double>(); });
+}
+
+TEST(RenderGroups, LiveTilesWithoutPlanesAreAnError) {
+  Scene s = random_scene(50, 40, 30, 3, 0.9, 0);
+  const Groups gr(s.n, 5);
+  const std::vector<float> val = conv<float>(gr.val);
+  std::vector<std::vector<float>> store;
+  RendererT<float> ren;
+  ren.preprocess(s.cam, s.inputs<float>(store));
+  ChannelsT<float> ch = gr.channels(val.data());
+  ch.group_live_tiles = true;  // without group_planes
+  RenderOutputsT<float> out;
+  try {
+    ren.composite(ch, s.settings, out);
+    ADD_FAILURE() << "no error";
+  } catch (const hgs::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("group_live_tiles needs group_planes"), std::string::npos) << e.what();
+  }
 }
 
 TEST(RenderGroups, FoldedAndVisitListPathsAreBitwiseEqualFloat) { compare_channel_paths<float>(); }
