@@ -109,9 +109,10 @@ struct ObjectRenders {
   int tile = 1, tiles_x = 0;
   long tiles = 0;
   int J() const { return static_cast<int>(color.size()); }
-  // Whether object j's values at (x, y) are in memory, and the end of the run of columns from x that share it.
+  // Whether object j's values at (x, y) are in memory, and the end of the run of columns from x that share it
+  // (x's tile's last column + 1, at most end).
   bool in_memory(int j, int x, int y) const { return !live || live[j * tiles + long(y / tile) * tiles_x + x / tile]; }
-  int run_end(int x, int width) const { return live ? std::min(width, (x / tile + 1) * tile) : width; }
+  int run_end(int x, int end) const { return live ? std::min(end, (x / tile + 1) * tile) : end; }
   // Object j's colour channel c and opacity at pixel p; in = in_memory(j, x, y) (else its value there is +0).
   float color_at(int j, long p, int c, bool in = true) const {
     const float v = in ? color[j][p * stride + c] : 0.f;
