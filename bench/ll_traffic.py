@@ -31,7 +31,7 @@ from project_threads import plan_ranges, short_name  # noqa: E402  (the same nam
 VIEWS = 2  # bench_scale's scene (bench/bench_hybrid_scene.h kViews): its warm-up steps
 
 
-def run(binary, method, scale, steps, out, plan_threads=0, toggle='hgs::bench::timed_step*'):
+def run(binary, method, scale, steps, out, plan_threads, toggle):
     env = dict(os.environ)
     if plan_threads > 0:  # the work cut as for T threads (bench/omp_regions, as project_threads.py does)
         env.update(LD_PRELOAD=os.path.join(os.path.dirname(binary), 'libhgs_omp_regions.so'),

@@ -443,10 +443,11 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
   // The groups the tile's Gaussians have entries in: only their upstream gradients are loaded (no Gaussian of
   // the tile reads another group's).
   int ng = 0;
-  int* glist = nullptr;
+  const int* glist = nullptr;
   if (kX != kNoChannels && GT > 0) {
-    glist = w.groups.template get<int>(size_t(2) * in.num_groups);  // the list, then the flags
-    ng = tile_groups(in, td, reinterpret_cast<uint8_t*>(glist + in.num_groups), glist);
+    const TileGroupList tg = tile_group_list(in, td, w.groups);
+    glist = tg.list;
+    ng = tg.count;
   }
   int kmax[kBatches];
   uint32_t jmask[kBatches];  // pixel-weight maps present in each batch (for_batch_maps)

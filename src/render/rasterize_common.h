@@ -127,6 +127,19 @@ int tile_groups(const RasterInputs<T>& in, const TileData<T>& td, uint8_t* used,
   return m;
 }
 
+// tile_groups in a thread's scratch (w.groups: the list [G] ints, then the flags [G] bytes).
+struct TileGroupList {
+  const int* list;      // [count] the tile's groups, ascending
+  const uint8_t* used;  // [G] 1 for the groups in the list
+  int count;
+};
+template <class T>
+TileGroupList tile_group_list(const RasterInputs<T>& in, const TileData<T>& td, RasterScratch& scratch) {
+  int* list = scratch.template get<int>(size_t(2) * in.num_groups);
+  uint8_t* used = reinterpret_cast<uint8_t*>(list + in.num_groups);
+  return {list, used, tile_groups(in, td, used, list)};
+}
+
 // Per-batch visit lists of a tile in the thread's scratch (w.vk, w.vw): offsets [33] into one flat
 // array sized by the bits `batches` of the masks of Gaussians [0, n) (an upper bound on the visits of every
 // batch). Returns the visit arrays: Gaussian indices and packs.

@@ -276,13 +276,12 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   // Planes written only where their group has Gaussians (out.group_live): the others' values here are +0, the
   // state they were never added to.
   int ng = in.num_groups;
-  int* glist = nullptr;
-  if (kX != kNoChannels && out.group_live && GT > 0) {
-    glist = w.groups.template get<int>(size_t(2) * in.num_groups);  // the list, then the flags
-    uint8_t* used = reinterpret_cast<uint8_t*>(glist + in.num_groups);
-    if (any_g) ng = tile_groups(in, td, used, glist);
-    else ng = 0, std::memset(used, 0, size_t(in.num_groups));
-    for (int g = 0; g < in.num_groups; ++g) out.group_live[size_t(g) * bins.num_tiles + tile] = used[g];
+  const int* glist = nullptr;
+  if (kX != kNoChannels && out.group_live && GT > 0) {  // (an empty tile has td.n = 0: no groups)
+    const TileGroupList tg = tile_group_list(in, td, w.groups);
+    glist = tg.list;
+    ng = tg.count;
+    for (int g = 0; g < in.num_groups; ++g) out.group_live[size_t(g) * bins.num_tiles + tile] = tg.used[g];
   }
   write_forward_batches<T, kDepth, kX>(in, bins, tx0, ty0, all_batches, b, vl, glist, ng, out);
   if (J > 0 && any_g) store_pair_weights(bins, tile, n, kend, J, masks, all_batches, wacc, pair_w);
