@@ -219,16 +219,17 @@ struct GroupRowsFromBuffer {
 };
 
 // Preprocesses the scene and composites the groups with the scene's 4 dense channels (the hybrid method's base
-// render) into out.
+// render) into out (planes: ChannelsT::group_planes; live_tiles: group_live_tiles).
 template <class T>
 void composite_groups_and_base(RendererT<T>& ren, Scene& s, const Groups& gr, const std::vector<T>& val,
-                               const std::vector<T>& ex, bool planes, RenderOutputsT<T>& out) {
+                               const std::vector<T>& ex, bool planes, RenderOutputsT<T>& out, bool live_tiles = false) {
   std::vector<std::vector<T>> store;
   ren.preprocess(s.cam, s.inputs<T>(store));
   ChannelsT<T> ch = gr.channels(val.data());
   ch.extra = ex.data();
   ch.num_extra = 4;
   ch.group_planes = planes;
+  ch.group_live_tiles = live_tiles;
   ren.composite(ch, s.settings, out);
 }
 
@@ -372,13 +373,7 @@ void compare_live_tiles() {
     RendererT<T> ren;
     composite_groups_and_base(ren, s, gr, val, ex, false, ref);
     out.groups.assign(P * kG * kGW, std::numeric_limits<T>::quiet_NaN());
-    std::vector<std::vector<T>> store;
-    ren.preprocess(s.cam, s.inputs<T>(store));
-    ChannelsT<T> ch = gr.channels(val.data());
-    ch.extra = ex.data();
-    ch.num_extra = 4;
-    ch.group_planes = ch.group_live_tiles = true;
-    ren.composite(ch, s.settings, out);
+    composite_groups_and_base(ren, s, gr, val, ex, true, out, true);
     set_raster_channel_path(ChannelPath::kAuto);
     const char* what = path == ChannelPath::kFolded ? "folded" : "visit lists";
     ASSERT_EQ(out.group_live.size(), size_t(kG) * tiles) << what;
