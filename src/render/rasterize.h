@@ -167,7 +167,6 @@ struct RasterWorkspace {
     RasterScratch vk;      // per-batch visit lists of a tile: Gaussian index (int) [visits]
     RasterScratch vw;      // ... and its weight (forward) or extra-channel dot (backward), packs [visits]
     RasterScratch wacc;    // forward weight-sum accumulators, packs [n, J]
-    RasterScratch fold;    // folded channels of the tile's Gaussians, T [n, 4]
     RasterScratch dw;      // backward d(weight_sums) of the tile's Gaussians, T [n, J]
     RasterScratch bstate;  // per-batch state, packs [batches, 7 + C + J]
     RasterScratch blast;   // per-batch active / last-contributor masks [2, batches]
@@ -176,6 +175,8 @@ struct RasterWorkspace {
   std::vector<PerThread> threads;
   std::vector<T> records;          // [N, 16] per-Gaussian records built by forward, reused by backward
   std::vector<T> tile_records;     // [P, 16] records in tile order (forward gathers, backward reuses)
+  std::vector<T> chan_records;     // [N, 16] the folded walks' channel records (forward builds, backward reuses)
+  int chan_n = -1;                 // the Gaussians chan_records holds (-1: the last forward did not fold)
   std::vector<uint32_t> masks;     // [P] per (tile, Gaussian) entry: bit b = listed in batch b
   std::vector<T> pair_grad;        // [P, F]
   std::vector<T> pair_w;           // [P, J] forward weight sums per pair

@@ -389,16 +389,17 @@ inline __attribute__((always_inline)) void store_pair_grads(const RasterInputs<T
 // contributor, kmax [kBatches]), its gradient sums in registers, stored once for the pair (o, og: its slots).
 template <class T, bool kDepth, int kX>
 inline __attribute__((always_inline)) void backward_gaussian(const RasterInputs<T>& in, const T* rc, int k, int gi,
-                                                             const T* fx, const BackwardBatches<T>& b, const int* kmax,
+                                                             const T* cr, const BackwardBatches<T>& b, const int* kmax,
                                                              const uint32_t* jmask, const T* dw, int tx0, int ty0,
                                                              uint32_t mb, const int* voff, int* vcur,
                                                              const simd::Pack<T>* vdot, T* o, T* og) {
   using P = simd::Pack<T>;
   const int C = b.C, GWg = b.GWg, GT = b.BS - b.GO;
   PairSums<T> a{};
-  // Folded channels: the Gaussian's extra row and group entries; their gradient sums (ae, ag) on the stack.
+  // Folded channels: the Gaussian's extra row and group entries (its channel record cr); their gradient sums
+  // (ae, ag) on the stack.
   FoldedGaussian<T, 3> fg;
-  load_folded<T, 3>(in, rc, fx, kX == kFolded ? C : 0, kX == kFolded && GT > 0, GWg, fg);
+  load_folded<T, 3>(rc, cr, kX == kFolded ? C : 0, kX == kFolded && GT > 0, GWg, fg);
   P ae[kFoldMaxChannels], ag[kFoldMaxEntries * kFoldMaxWidth];
   if constexpr (kX == kFolded) {
     for (int c = 0; c < C; ++c) ae[c] = P{};
@@ -422,11 +423,12 @@ inline __attribute__((always_inline)) void backward_gaussian(const RasterInputs<
 // sums stay in registers and are stored once per (tile, Gaussian) pair.
 template <class T, bool kDepth, int kX>
 void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typename RasterWorkspace<T>::PerThread& w,
-                   const T* final_T, const int32_t* last, const RasterGrads<T>& g, const T* records, T* tile_records,
-                   const uint32_t* ws_masks, T* pair_grad, const size_t* pair_gslot, T* pair_group) {
+                   const T* final_T, const int32_t* last, const RasterGrads<T>& g, const T* records, const T* chan,
+                   T* tile_records, const uint32_t* ws_masks, T* pair_grad, const size_t* pair_gslot, T* pair_group) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
   const int C = in.num_extra, XS = in.extra_stride > 0 ? in.extra_stride : C, F = kNumGrads + C;
+  const int* gauss = bins.tile_gauss.data() + bins.tile_start[tile];                    // [n] the tile's Gaussians
   const int GWg = g.group_grads() ? in.group_grad_width : 0, GT = in.num_groups * GWg;  // group gradient channels
   const auto [tx0, ty0] = tile_origin(bins, tile);
   TileData<T> td;
@@ -445,7 +447,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
   int ng = 0;
   const int* glist = nullptr;
   if (kX != kNoChannels && GT > 0) {
-    const TileGroupList tg = tile_group_list(in, td, w.groups);
+    const TileGroupList tg = tile_group_list(in, td, gauss, kX == kFolded ? chan : nullptr, w.groups);
     glist = tg.list;
     ng = tg.count;
   }
@@ -459,17 +461,12 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
   int voff[kBatches + 1], vcur[kBatches];
   P* vdot = nullptr;
   if (kX == kVisitLists) vdot = backward_visit_dots(in, bins, tile, n, w, masks, live, kmax, b, voff, vcur);
-  T* fx = nullptr;  // folded extra channels in tile order [n, 4]
-  if (kX == kFolded && C > 0) {
-    fx = w.fold.template get<T>(size_t(n) * kFoldMaxChannels);
-    gather_tile_channels(bins, tile, in.extra, C, XS, fx);
-  }
   for (int k = n - 1; k >= 0; --k) {
     T* o = pair_grad + size_t(bins.tile_pair[s + k]) * F;
     T* og = kX != kNoChannels && GT > 0 ? pair_group + pair_gslot[s + k] : nullptr;
-    const T* xk = fx ? fx + size_t(k) * kFoldMaxChannels : nullptr;
-    const int gi = kX == kVisitLists && GT > 0 ? bins.tile_gauss[s + k] : 0;
-    backward_gaussian<T, kDepth, kX>(in, td.rec + size_t(k) * kRecord, k, gi, xk, b, kmax, jmask,
+    const T* cr = kX == kFolded ? chan + size_t(gauss[k]) * kChanRecord : nullptr;
+    const int gi = kX == kVisitLists && GT > 0 ? gauss[k] : 0;
+    backward_gaussian<T, kDepth, kX>(in, td.rec + size_t(k) * kRecord, k, gi, cr, b, kmax, jmask,
                                      J > 0 ? DW + size_t(k) * J : nullptr, tx0, ty0, masks[k] & live, voff, vcur, vdot,
                                      o, og);
   }
@@ -562,6 +559,12 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
   T* pg = ws.pair_grad.data();
   const uint32_t* MK = ws.masks.data();
   const T* R = ws.records.data();
+  if (x == kFolded && ws.chan_n != in.n) {  // forward did not fold (another call's inputs): build them here
+    ws.chan_records.resize(std::max(ws.chan_records.size(), size_t(in.n) * kChanRecord));
+    build_chan_records(in, C, XS, in.num_groups > 0 && in.group_width > 0 && in.group_ptr, ws.chan_records.data());
+    ws.chan_n = in.n;
+  }
+  const T* CR = x == kFolded ? ws.chan_records.data() : nullptr;
   T* TR = ws.tile_records.data();
 #pragma omp parallel
   {
@@ -569,15 +572,15 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
 #pragma omp for schedule(dynamic, 1)
     for (int t = 0; t < bins.num_tiles; ++t) {
       if (dep && x == kVisitLists)
-        backward_tile<T, true, kVisitLists>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GSL, PGR);
+        backward_tile<T, true, kVisitLists>(in, bins, t, w, final_T, last, g, R, CR, TR, MK, pg, GSL, PGR);
       else if (dep && x == kFolded)
-        backward_tile<T, true, kFolded>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GSL, PGR);
-      else if (dep) backward_tile<T, true, kNoChannels>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GSL, PGR);
+        backward_tile<T, true, kFolded>(in, bins, t, w, final_T, last, g, R, CR, TR, MK, pg, GSL, PGR);
+      else if (dep) backward_tile<T, true, kNoChannels>(in, bins, t, w, final_T, last, g, R, CR, TR, MK, pg, GSL, PGR);
       else if (x == kVisitLists)
-        backward_tile<T, false, kVisitLists>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GSL, PGR);
+        backward_tile<T, false, kVisitLists>(in, bins, t, w, final_T, last, g, R, CR, TR, MK, pg, GSL, PGR);
       else if (x == kFolded)
-        backward_tile<T, false, kFolded>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GSL, PGR);
-      else backward_tile<T, false, kNoChannels>(in, bins, t, w, final_T, last, g, R, TR, MK, pg, GSL, PGR);
+        backward_tile<T, false, kFolded>(in, bins, t, w, final_T, last, g, R, CR, TR, MK, pg, GSL, PGR);
+      else backward_tile<T, false, kNoChannels>(in, bins, t, w, final_T, last, g, R, CR, TR, MK, pg, GSL, PGR);
     }
     // reduce pair slots per Gaussian in a fixed order
 #pragma omp for schedule(static)

@@ -73,14 +73,24 @@ void build_records(const RasterInputs<T>& in, const Binning& bins, T* records) {
   }
 }
 
-// The folded channels of a tile's Gaussians, copied once per tile into per-thread scratch: x [n, kFoldMaxChannels]
-// (the first C values of each Gaussian's row of ex [N, XS]), read by the walk in tile order.
+// Channel records (ChannelPath kFolded): per Gaussian 16 scalars (one cache line for float) built by forward in
+// index order beside the records and reused by backward, chan [N, 16]: the first C <= 4 extra values (kCx), and
+// when the Gaussian has exactly one group entry its group id (kCid, int bits; -1 otherwise) and the entry's first
+// min(4, group width) values (kCv). A walk reads one line per (tile, Gaussian) pair for what were three scattered
+// reads (the extra row, group_id and group_val: in the hybrid step's tiles, a cache miss each).
+enum ChanField { kCx = 0, kCv = 4, kCid = 8, kChanRecord = 16 };
 template <class T>
-void gather_tile_channels(const Binning& bins, int tile, const T* ex, int C, int XS, T* x) {
-  const int s = bins.tile_start[tile], n = bins.tile_start[tile + 1] - s;
-  for (int k = 0; k < n; ++k) {
-    const T* e = ex + size_t(bins.tile_gauss[s + k]) * XS;
-    for (int c = 0; c < C; ++c) x[size_t(k) * 4 + c] = e[c];  // C <= 4: no memcpy call per Gaussian
+void build_chan_records(const RasterInputs<T>& in, int C, int XS, bool groups, T* chan) {
+  const int GV = std::min(in.group_width, 4);
+#pragma omp parallel for schedule(static)
+  for (int g = 0; g < in.n; ++g) {
+    T* r = chan + size_t(g) * kChanRecord;
+    for (int c = 0; c < kChanRecord; ++c) r[c] = T(0);
+    for (int c = 0; c < C; ++c) r[kCx + c] = in.extra[size_t(g) * XS + c];
+    const bool one = groups && in.group_ptr[g + 1] - in.group_ptr[g] == 1;
+    set_record_int(r[kCid], one ? in.group_id[in.group_ptr[g]] : -1);
+    if (one)
+      for (int i = 0; i < GV; ++i) r[kCv + i] = in.group_val[size_t(in.group_ptr[g]) * in.group_width + i];
   }
 }
 
@@ -113,12 +123,17 @@ bool load_records(const Binning& bins, const T* records, T* tile_records, bool g
 // zeros (writing them apart from the state is slower than the plain copy) unless its output flags the tiles it
 // wrote (RasterOutputs::group_live): then these groups' planes only.
 template <class T>
-int tile_groups(const RasterInputs<T>& in, const TileData<T>& td, uint8_t* used, int* list) {
+int tile_groups(const RasterInputs<T>& in, const TileData<T>& td, const int* gauss, const T* chan, uint8_t* used,
+                int* list) {
   const int G = in.num_groups;
   std::memset(used, 0, size_t(G));
   for (int k = 0; k < td.n; ++k) {
     const T* r = td.rec + size_t(k) * kRecord;
     const int e0 = record_int(r[kE0]), e1 = e0 + record_int(r[kNe]);
+    if (chan && e1 - e0 == 1) {  // the id in the Gaussian's channel record, the line its walk reads
+      used[record_int(chan[size_t(gauss[k]) * kChanRecord + kCid])] = 1;
+      continue;
+    }
     for (int e = e0; e < e1; ++e) used[in.group_id[e]] = 1;
   }
   int m = 0;
@@ -127,17 +142,19 @@ int tile_groups(const RasterInputs<T>& in, const TileData<T>& td, uint8_t* used,
   return m;
 }
 
-// tile_groups in a thread's scratch (w.groups: the list [G] ints, then the flags [G] bytes).
+// tile_groups in a thread's scratch (w.groups: the list [G] ints, then the flags [G] bytes); gauss [n] the tile's
+// Gaussians (bins.tile_gauss from the tile's start), chan their channel records or null.
 struct TileGroupList {
   const int* list;      // [count] the tile's groups, ascending
   const uint8_t* used;  // [G] 1 for the groups in the list
   int count;
 };
 template <class T>
-TileGroupList tile_group_list(const RasterInputs<T>& in, const TileData<T>& td, RasterScratch& scratch) {
+TileGroupList tile_group_list(const RasterInputs<T>& in, const TileData<T>& td, const int* gauss, const T* chan,
+                              RasterScratch& scratch) {
   int* list = scratch.template get<int>(size_t(2) * in.num_groups);
   uint8_t* used = reinterpret_cast<uint8_t*>(list + in.num_groups);
-  return {list, used, tile_groups(in, td, used, list)};
+  return {list, used, tile_groups(in, td, gauss, chan, used, list)};
 }
 
 // Per-batch visit lists of a tile in the thread's scratch (w.vk, w.vw): offsets [33] into one flat
@@ -251,11 +268,11 @@ inline __attribute__((always_inline)) GaussianAtBatch<T> eval_gaussian(const T* 
   return e;
 }
 
-// A Gaussian's folded channels (ChannelPath kFolded), held for its visits: its extra row x [C] (from the tile's
-// gathered channels) and its group entries [e0, e0 + ne) (from its record, when `groups`). The common case of a
-// single entry whose batch slot is NV packs wide (the hybrid method's object groups: 4 values forward, 3
-// gradient channels backward; slot_width is the call's) also holds the slot's offset and the entry's first NV
-// values, so its visits need no lookups (the same sums as the general path).
+// A Gaussian's folded channels (ChannelPath kFolded), held for its visits: its extra row x [C] and its group
+// entries [e0, e0 + ne) (from its record, when `groups`). The common case of a single entry whose batch slot is NV
+// packs wide (the hybrid method's object groups: 4 values forward, 3 gradient channels backward; slot_width is the
+// call's) also holds the slot's offset and the entry's first NV values, so its visits need no lookups (the same
+// sums as the general path). Both come from the Gaussian's channel record (build_chan_records).
 template <class T, int NV>
 struct FoldedGaussian {
   T x[kFoldMaxChannels];
@@ -264,18 +281,21 @@ struct FoldedGaussian {
   size_t slot;  // id_e0 * NV, when `one`
   T v[NV];      // val_e0[0, NV), when `one`
 };
-// Fills f in place (no copy of the record per Gaussian); C = 0 and groups = false give the empty record of the
-// paths that do not fold.
+// Fills f in place (no copy of the record per Gaussian) from the record rc and the channel record cr; C = 0 and
+// groups = false (cr unread, may be null) give the empty record of the paths that do not fold.
 template <class T, int NV>
-inline __attribute__((always_inline)) void load_folded(const RasterInputs<T>& in, const T* rc, const T* x, int C,
-                                                       bool groups, int slot_width, FoldedGaussian<T, NV>& f) {
-  for (int c = 0; c < C; ++c) f.x[c] = x[c];
+inline __attribute__((always_inline)) void load_folded(const T* rc, const T* cr, int C, bool groups, int slot_width,
+                                                       FoldedGaussian<T, NV>& f) {
+  static_assert(NV <= 4 && kCv - kCx == kFoldMaxChannels, "a channel record holds 4 extra and 4 group values");
+  // All kFoldMaxChannels values (the record's zero padding past C is never used): a fixed-size copy, where a loop
+  // to C became a memcpy call per (tile, Gaussian) pair.
+  if (C > 0)
+    for (int c = 0; c < kFoldMaxChannels; ++c) f.x[c] = cr[kCx + c];
   f.e0 = groups ? record_int(rc[kE0]) : 0;
   f.ne = groups ? record_int(rc[kNe]) : 0;
   f.one = f.ne == 1 && slot_width == NV;
-  f.slot = f.one ? size_t(in.group_id[f.e0]) * NV : 0;
-  const T* gv = f.one ? in.group_val + size_t(f.e0) * in.group_width : nullptr;
-  for (int i = 0; i < NV; ++i) f.v[i] = f.one ? gv[i] : T(0);
+  f.slot = f.one ? size_t(record_int(cr[kCid])) * NV : 0;
+  for (int i = 0; i < NV; ++i) f.v[i] = f.one ? cr[kCv + i] : T(0);
 }
 
 template <class T>

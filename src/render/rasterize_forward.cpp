@@ -231,12 +231,12 @@ void store_pair_weights(const Binning& bins, int tile, int n, int kend, int J, c
 // when all its pixels hit the transmittance cut-off, the tile ends when no batch is left.
 template <class T, bool kDepth, int kX>
 void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typename RasterWorkspace<T>::PerThread& w,
-                  const T* records, T* tile_records, uint32_t* ws_masks, T* pair_w, const RasterOutputs<T>& out) {
+                  const T* records, const T* chan, T* tile_records, uint32_t* ws_masks, T* pair_w,
+                  const RasterOutputs<T>& out) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
   const int C = in.num_extra, J = in.num_weights;
   const int GT = in.num_groups * in.group_width;  // group channels, after the pixel-weight maps in the state
-  const int XS = in.extra_stride > 0 ? in.extra_stride : C;
   const auto [tx0, ty0] = tile_origin(bins, tile);
   TileData<T> td;
   const bool any_g = load_records(bins, records, tile_records, true, tile, td);
@@ -254,11 +254,6 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   int voff[kBatches + 1], vcnt[kBatches] = {};
   ForwardVisits<T> vl{voff, vcnt, nullptr, nullptr};
   if (kX == kVisitLists && n > 0) std::tie(vl.vk, vl.vw) = size_visit_lists<P>(w, masks, n, all_batches, voff);
-  T* fx = nullptr;  // folded extra channels in tile order [n, 4]
-  if (kX == kFolded && C > 0 && n > 0) {
-    fx = w.fold.template get<T>(size_t(n) * kFoldMaxChannels);
-    gather_tile_channels(bins, tile, in.extra, C, XS, fx);
-  }
   int kend = 0;  // Gaussians [kend, n) were never reached (all batches terminated)
   for (int k = 0; k < n && alive; ++k) {
     kend = k + 1;
@@ -268,8 +263,8 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
     if (!mb) continue;
     const T* rc = td.rec + size_t(k) * kRecord;
     FoldedGaussian<T, 4> fg;
-    load_folded<T, 4>(in, rc, kX == kFolded && C > 0 ? fx + size_t(k) * kFoldMaxChannels : nullptr,
-                      kX == kFolded ? C : 0, kX == kFolded && GT > 0, in.group_width, fg);
+    const T* cr = kX == kFolded ? chan + size_t(bins.tile_gauss[s + k]) * kChanRecord : nullptr;
+    load_folded<T, 4>(rc, cr, kX == kFolded ? C : 0, kX == kFolded && GT > 0, in.group_width, fg);
     const int gi = kX == kVisitLists ? bins.tile_gauss[s + k] : 0;
     forward_gaussian<T, kDepth, kX>(in, rc, k, gi, fg, b, jmask, tx0, ty0, mb, alive, wa, vl);
   }
@@ -278,7 +273,8 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   int ng = in.num_groups;
   const int* glist = nullptr;
   if (kX != kNoChannels && out.group_live && GT > 0) {  // (an empty tile has td.n = 0: no groups)
-    const TileGroupList tg = tile_group_list(in, td, w.groups);
+    const TileGroupList tg =
+        tile_group_list(in, td, bins.tile_gauss.data() + s, kX == kFolded ? chan : nullptr, w.groups);
     glist = tg.list;
     ng = tg.count;
     for (int g = 0; g < in.num_groups; ++g) out.group_live[size_t(g) * bins.num_tiles + tile] = tg.used[g];
@@ -303,6 +299,15 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
   if (ws.tile_records.size() < size_t(bins.num_pairs) * kRecord)
     ws.tile_records.resize(size_t(bins.num_pairs) * kRecord);
   T* TR = ws.tile_records.data();
+  const T* CR = nullptr;  // the folded walk's channel records, reused by backward
+  ws.chan_n = -1;
+  if (x == kFolded) {
+    const int C = in.num_extra, XS = in.extra_stride > 0 ? in.extra_stride : C;
+    if (ws.chan_records.size() < size_t(in.n) * kChanRecord) ws.chan_records.resize(size_t(in.n) * kChanRecord);
+    build_chan_records(in, C, XS, in.num_groups > 0 && in.group_width > 0 && in.group_ptr, ws.chan_records.data());
+    ws.chan_n = in.n;
+    CR = ws.chan_records.data();
+  }
   const int J = in.num_weights;
   if (J > 0 && ws.pair_w.size() < size_t(bins.num_pairs) * J) ws.pair_w.resize(size_t(bins.num_pairs) * J);
   T* PW = ws.pair_w.data();
@@ -311,12 +316,12 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
     auto& w = ws.threads[omp_get_thread_num()];
 #pragma omp for schedule(dynamic, 1)
     for (int t = 0; t < bins.num_tiles; ++t) {
-      if (dep && x == kVisitLists) forward_tile<T, true, kVisitLists>(in, bins, t, w, R, TR, MK, PW, out);
-      else if (dep && x == kFolded) forward_tile<T, true, kFolded>(in, bins, t, w, R, TR, MK, PW, out);
-      else if (dep) forward_tile<T, true, kNoChannels>(in, bins, t, w, R, TR, MK, PW, out);
-      else if (x == kVisitLists) forward_tile<T, false, kVisitLists>(in, bins, t, w, R, TR, MK, PW, out);
-      else if (x == kFolded) forward_tile<T, false, kFolded>(in, bins, t, w, R, TR, MK, PW, out);
-      else forward_tile<T, false, kNoChannels>(in, bins, t, w, R, TR, MK, PW, out);
+      if (dep && x == kVisitLists) forward_tile<T, true, kVisitLists>(in, bins, t, w, R, CR, TR, MK, PW, out);
+      else if (dep && x == kFolded) forward_tile<T, true, kFolded>(in, bins, t, w, R, CR, TR, MK, PW, out);
+      else if (dep) forward_tile<T, true, kNoChannels>(in, bins, t, w, R, CR, TR, MK, PW, out);
+      else if (x == kVisitLists) forward_tile<T, false, kVisitLists>(in, bins, t, w, R, CR, TR, MK, PW, out);
+      else if (x == kFolded) forward_tile<T, false, kFolded>(in, bins, t, w, R, CR, TR, MK, PW, out);
+      else forward_tile<T, false, kNoChannels>(in, bins, t, w, R, CR, TR, MK, PW, out);
     }
     if (J > 0) {
 #pragma omp for schedule(static)

@@ -237,7 +237,8 @@ void composite_groups_and_base(RendererT<T>& ren, Scene& s, const Groups& gr, co
 // terms in the same order: bitwise-equal renders and gradients, with 4 dense channels (the hybrid method's base
 // render, the last forward-only), groups of 0 to 3 entries and hard pixel-weight maps, float and double, on a
 // width that leaves partial batches. The upstream group gradients read from a buffer or computed on demand
-// (group_rows) give the same bits on both paths.
+// (group_rows) give the same bits on both paths, and so does a folded backward after a forward that did not fold
+// (which builds no channel records: the backward builds them).
 template <class T>
 void compare_channel_paths() {
   Scene s = random_scene(700, 69, 50, 23, 0.9, 4);
@@ -255,7 +256,7 @@ void compare_channel_paths() {
   };
   std::atomic<long> calls{0};
   const GroupRowsFromBuffer<T> source{wg.data(), s.cam.width, &calls};
-  auto run = [&](ChannelPath path, bool on_demand) {
+  auto run = [&](ChannelPath path, bool on_demand, ChannelPath backward_path) {
     set_raster_channel_path(path);
     Run r;
     RendererT<T> ren;
@@ -275,15 +276,17 @@ void compare_channel_paths() {
       d.group_stride = kGW;
     }
     d.group_grad_channels = kGWg;
+    set_raster_channel_path(backward_path);
     ren.composite_backward(d, r.pg);
     set_raster_channel_path(ChannelPath::kAuto);
     return r;
   };
-  const Run a = run(ChannelPath::kVisitLists, false), b = run(ChannelPath::kFolded, false);
+  const ChannelPath lists = ChannelPath::kVisitLists, folded = ChannelPath::kFolded;
+  const Run a = run(lists, false, lists), b = run(folded, false, folded);
   EXPECT_EQ(calls.load(), 0);
   for (bool on_demand : {false, true}) {
-    const Run c = run(ChannelPath::kVisitLists, on_demand), e = run(ChannelPath::kFolded, on_demand);
-    for (const Run* r : {&c, &e})
+    const Run c = run(lists, on_demand, lists), e = run(folded, on_demand, folded), f = run(lists, on_demand, folded);
+    for (const Run* r : {&c, &e, &f})
       for (auto [x, y, what] : {std::tuple{&a.pg.mean2d, &r->pg.mean2d, "mean2d"},
                                 {&a.pg.conic, &r->pg.conic, "conic"},
                                 {&a.pg.opacity, &r->pg.opacity, "opacity"},
