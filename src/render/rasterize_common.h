@@ -79,6 +79,16 @@ void build_records(const RasterInputs<T>& in, const Binning& bins, T* records) {
 // min(4, group width) values (kCv). A walk reads one line per (tile, Gaussian) pair for what were three scattered
 // reads (the extra row, group_id and group_val: in the hybrid step's tiles, a cache miss each).
 enum ChanField { kCx = 0, kCv = 4, kCid = 8, kChanRecord = 16 };
+// The forward walk fetches the channel record of the Gaussian kChanAhead places further in its order while it works
+// on one (its line is a cache miss: a tile's Gaussians are in depth order, not index order; perf put a quarter of
+// forward_tile's time on that load). The backward's tile_group_list pass touches the records first, and a
+// prefetch in its walk measured neutral (docs/performance.md, session seven).
+constexpr int kChanAhead = 8;
+template <class T>
+inline void prefetch_chan_record(const T* chan, int gaussian) {
+  const char* p = reinterpret_cast<const char*>(chan + size_t(gaussian) * kChanRecord);
+  for (size_t b = 0; b < sizeof(T) * kChanRecord; b += 64) __builtin_prefetch(p + b);
+}
 template <class T>
 void build_chan_records(const RasterInputs<T>& in, int C, int XS, bool groups, T* chan) {
   const int GV = std::min(in.group_width, 4);

@@ -257,6 +257,7 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   int kend = 0;  // Gaussians [kend, n) were never reached (all batches terminated)
   for (int k = 0; k < n && alive; ++k) {
     kend = k + 1;
+    if (kX == kFolded && k + kChanAhead < n) prefetch_chan_record(chan, bins.tile_gauss[s + k + kChanAhead]);
     const uint32_t mb = masks[k] & alive;
     P* wa = J > 0 ? wacc + size_t(k) * J : nullptr;
     for (int jj = 0; jj < J; ++jj) wa[jj] = P{};
