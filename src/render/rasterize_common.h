@@ -1,8 +1,9 @@
 // Internals shared by the tile rasterizer's forward (rasterize_forward.cpp) and backward
 // (rasterize_backward.cpp) kernels: the pixel batches of a tile, the 16-scalar Gaussian record layout, the copy
 // of a tile's records into scratch, the evaluation of a Gaussian at a batch of pixels (written once for both),
-// a Gaussian's folded channels, per-batch visit lists, pixel-weight map and channel-chunk iteration. The
-// algorithm and the cut-offs (kAlphaMax, kAlphaMin, kTransmittanceMin) are described in rasterize.h.
+// a Gaussian's folded channels and their per-Gaussian channel record, per-batch visit lists, pixel-weight map and
+// channel-chunk iteration. The algorithm and the cut-offs (kAlphaMax, kAlphaMin, kTransmittanceMin) are described
+// in rasterize.h.
 #pragma once
 #include <omp.h>
 
