@@ -559,12 +559,8 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
   T* pg = ws.pair_grad.data();
   const uint32_t* MK = ws.masks.data();
   const T* R = ws.records.data();
-  if (x == kFolded && ws.chan_n != in.n) {  // forward did not fold (another call's inputs): build them here
-    ws.chan_records.resize(std::max(ws.chan_records.size(), size_t(in.n) * kChanRecord));
-    build_chan_records(in, C, XS, in.num_groups > 0 && in.group_width > 0 && in.group_ptr, ws.chan_records.data());
-    ws.chan_n = in.n;
-  }
-  const T* CR = x == kFolded ? ws.chan_records.data() : nullptr;
+  // Forward's channel records; built here when forward did not fold (another call's settings).
+  const T* CR = x != kFolded ? nullptr : ws.chan_n == in.n ? ws.chan_records.data() : fill_chan_records(in, ws);
   T* TR = ws.tile_records.data();
 #pragma omp parallel
   {

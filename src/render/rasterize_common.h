@@ -105,6 +105,17 @@ void build_chan_records(const RasterInputs<T>& in, int C, int XS, bool groups, T
   }
 }
 
+// Builds the channel records of in (its C = num_extra values, rows of stride extra_stride, and its groups) into
+// ws.chan_records and marks them as in's (ws.chan_n). Returns them.
+template <class T>
+const T* fill_chan_records(const RasterInputs<T>& in, RasterWorkspace<T>& ws) {
+  const int C = in.num_extra, XS = in.extra_stride > 0 ? in.extra_stride : C;
+  if (ws.chan_records.size() < size_t(in.n) * kChanRecord) ws.chan_records.resize(size_t(in.n) * kChanRecord);
+  build_chan_records(in, C, XS, in.num_groups > 0 && in.group_width > 0 && in.group_ptr, ws.chan_records.data());
+  ws.chan_n = in.n;
+  return ws.chan_records.data();
+}
+
 template <class T>
 struct TileData {
   int n = 0;

@@ -241,6 +241,7 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   TileData<T> td;
   const bool any_g = load_records(bins, records, tile_records, true, tile, td);
   const int n = any_g ? td.n : 0, s = bins.tile_start[tile];
+  const int* gauss = bins.tile_gauss.data() + s;  // [n] the tile's Gaussians
   uint32_t* masks = ws_masks + s;
   if (any_g) build_masks(bins, tile, td, masks);
   ForwardBatches<T> b{nullptr, nullptr, nullptr, C, J, kBatchFixed + C + J + GT, kBatchFixed + C + J};
@@ -257,16 +258,16 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   int kend = 0;  // Gaussians [kend, n) were never reached (all batches terminated)
   for (int k = 0; k < n && alive; ++k) {
     kend = k + 1;
-    if (kX == kFolded && k + kChanAhead < n) prefetch_chan_record(chan, bins.tile_gauss[s + k + kChanAhead]);
+    if (kX == kFolded && k + kChanAhead < n) prefetch_chan_record(chan, gauss[k + kChanAhead]);
     const uint32_t mb = masks[k] & alive;
     P* wa = J > 0 ? wacc + size_t(k) * J : nullptr;
     for (int jj = 0; jj < J; ++jj) wa[jj] = P{};
     if (!mb) continue;
     const T* rc = td.rec + size_t(k) * kRecord;
     FoldedGaussian<T, 4> fg;
-    const T* cr = kX == kFolded ? chan + size_t(bins.tile_gauss[s + k]) * kChanRecord : nullptr;
+    const T* cr = kX == kFolded ? chan + size_t(gauss[k]) * kChanRecord : nullptr;
     load_folded<T, 4>(rc, cr, kX == kFolded ? C : 0, kX == kFolded && GT > 0, in.group_width, fg);
-    const int gi = kX == kVisitLists ? bins.tile_gauss[s + k] : 0;
+    const int gi = kX == kVisitLists ? gauss[k] : 0;
     forward_gaussian<T, kDepth, kX>(in, rc, k, gi, fg, b, jmask, tx0, ty0, mb, alive, wa, vl);
   }
   // Planes written only where their group has Gaussians (out.group_live): the others' values here are +0, the
@@ -274,8 +275,7 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   int ng = in.num_groups;
   const int* glist = nullptr;
   if (kX != kNoChannels && out.group_live && GT > 0) {  // (an empty tile has td.n = 0: no groups)
-    const TileGroupList tg =
-        tile_group_list(in, td, bins.tile_gauss.data() + s, kX == kFolded ? chan : nullptr, w.groups);
+    const TileGroupList tg = tile_group_list(in, td, gauss, kX == kFolded ? chan : nullptr, w.groups);
     glist = tg.list;
     ng = tg.count;
     for (int g = 0; g < in.num_groups; ++g) out.group_live[size_t(g) * bins.num_tiles + tile] = tg.used[g];
@@ -300,15 +300,8 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
   if (ws.tile_records.size() < size_t(bins.num_pairs) * kRecord)
     ws.tile_records.resize(size_t(bins.num_pairs) * kRecord);
   T* TR = ws.tile_records.data();
-  const T* CR = nullptr;  // the folded walk's channel records, reused by backward
   ws.chan_n = -1;
-  if (x == kFolded) {
-    const int C = in.num_extra, XS = in.extra_stride > 0 ? in.extra_stride : C;
-    if (ws.chan_records.size() < size_t(in.n) * kChanRecord) ws.chan_records.resize(size_t(in.n) * kChanRecord);
-    build_chan_records(in, C, XS, in.num_groups > 0 && in.group_width > 0 && in.group_ptr, ws.chan_records.data());
-    ws.chan_n = in.n;
-    CR = ws.chan_records.data();
-  }
+  const T* CR = x == kFolded ? fill_chan_records(in, ws) : nullptr;  // the folded walk's, reused by backward
   const int J = in.num_weights;
   if (J > 0 && ws.pair_w.size() < size_t(bins.num_pairs) * J) ws.pair_w.resize(size_t(bins.num_pairs) * J);
   T* PW = ws.pair_w.data();
