@@ -4,8 +4,8 @@
 Runs `bench_scale --case METHOD PIXELS GAUSSIANS --steps N --threads 1` under the LD_PRELOAD library
 bench/omp_regions (built as <build>/libhgs_omp_regions.so with the benchmarks), whose tables bench_scale resets
 after its warm-up step, so that they hold the N timed steps. The code that cuts its work by the thread count (the
-object losses' bands, SSIM's bands) is made to cut it as for T threads while it runs on one (HGS_PLAN_THREADS, the
-functions' address ranges from nm). Per region (an OpenMP parallel region, named by the function it is in):
+object losses' bands, SSIM's bands, the tile walks' runs of tiles) is made to cut it as for T threads while it runs
+on one (HGS_PLAN_THREADS, the functions' address ranges from nm). Per region (an OpenMP parallel region, named by the function it is in):
 
   ms/step   its wall time per step on one thread
   single    the part of it in `omp single` blocks (serial at any T)
@@ -20,7 +20,11 @@ schedule. What it cannot see: memory bandwidth and shared caches, the clock unde
 assumed fork/join, and static loops' imbalance (their split is taken as perfect). Where a measured T-thread step is
 far slower than this projection, the difference is in that second list.
 
-  bench/project_threads.py --build build --threads 16 --case hybrid 1 1
+With --measure it also runs the step on T threads (the library's wall-time mode, HGS_REGIONS_WALL=1) and lists
+each region's measured time beside its projection, the regions that lose most first: on a machine with T cores,
+where the T-thread step's shortfall is.
+
+  bench/project_threads.py --build build --threads 16 --case hybrid 1 1 [--measure]
 """
 import argparse
 import json
@@ -33,6 +37,9 @@ from glob import glob
 
 SIMS = [2, 4, 8, 16, 32]  # the thread counts omp_regions simulates (its kSimThreads)
 PLANNED = [r'hgs::hybrid::ObjectLosses::box_path\(', r'hgs::train::ssim_map<float>\(']
+# The tile walks' run of tiles per chunk (render::detail::tile_run), in each rasterizer compilation.
+PLANNED += [rf'hgs::render::{isa}::rasterize_{f}<float>\(' for isa in ('avx2', 'avx512')
+            for f in ('forward', 'backward', 'depth_at')]
 
 
 def plan_ranges(binary):
@@ -52,12 +59,16 @@ def plan_ranges(binary):
     return ','.join(ranges)
 
 
-def run(binary, lib, case, steps, threads, ranges, out_prefix):
-    """bench_scale's JSON line and the regions' totals over the timed steps, {offset: {...}}."""
-    env = dict(os.environ, LD_PRELOAD=lib, HGS_REGIONS_OUT=out_prefix, HGS_PLAN_THREADS=str(threads),
-               HGS_PLAN_RANGES=ranges)
+def run(binary, lib, case, steps, threads, ranges, out_prefix, measure=False):
+    """bench_scale's JSON line and the regions' totals over the timed steps, {offset: {...}}: on one thread with the
+    work cut as for `threads`, or (measure) on `threads` threads, the regions' wall times alone."""
+    env = dict(os.environ, LD_PRELOAD=lib, HGS_REGIONS_OUT=out_prefix)
+    if measure:
+        env['HGS_REGIONS_WALL'] = '1'
+    else:
+        env.update(HGS_PLAN_THREADS=str(threads), HGS_PLAN_RANGES=ranges)
     env.pop('OMP_WAIT_POLICY', None)
-    cmd = [binary, '--case', *case, '--steps', str(steps), '--threads', '1']
+    cmd = [binary, '--case', *case, '--steps', str(steps), '--threads', str(threads if measure else 1)]
     res = subprocess.run(cmd, env=env, capture_output=True, text=True)
     if res.returncode != 0:
         sys.exit(f'project_threads: {" ".join(cmd)} failed ({res.returncode}): {res.stderr.strip()[-300:]}')
@@ -100,6 +111,9 @@ def main():
     ap.add_argument('--steps', type=int, default=4, help='timed steps (after one warm-up)')
     ap.add_argument('--overhead-us', type=float, default=5.0, help='fork/join per region at T threads (assumed)')
     ap.add_argument('--min-ms', type=float, default=0.3, help='list regions above this many ms per step')
+    ap.add_argument('--measure', action='store_true',
+                    help='also run the step on --threads threads and put each region\'s measured wall time beside '
+                    'its projection (on a machine with that many cores)')
     a = ap.parse_args()
     binary = os.path.join(a.build, 'bench_scale')
     lib = os.path.abspath(os.path.join(a.build, 'libhgs_omp_regions.so'))
@@ -110,6 +124,10 @@ def main():
     k = SIMS.index(a.threads)
     with tempfile.TemporaryDirectory() as tmp:
         result, regions = run(binary, lib, a.case, a.steps, a.threads, ranges, os.path.join(tmp, 'r'))
+    measured = None
+    if a.measure:
+        with tempfile.TemporaryDirectory() as tmp:
+            measured = run(binary, lib, a.case, a.steps, a.threads, ranges, os.path.join(tmp, 'm'), measure=True)
     steps = a.steps
     rows = []
     for off, b in regions.items():
@@ -148,6 +166,40 @@ def main():
         print(f"projected at {t:2d} threads: {p:7.1f} ms ({step / p:4.1f}x)")
     print(f"(fork/join assumed {a.overhead_us:g} us per region; memory bandwidth, shared caches and the clock under "
           f"load are not in it)")
+    if measured:
+        report_measured(a, rows, nm, measured, step, outside, binary)
+
+
+def report_measured(a, rows, nm, measured, step, outside, binary):
+    """Each region's wall time measured on T threads beside its one-thread time and its projection: where the
+    measured step falls short of the projection, the regions that lose the most say where."""
+    T, k, steps = a.threads, SIMS.index(a.threads), a.steps
+    result, regions = measured
+    meas = {off: dict(ms=b['s'] / steps * 1e3, calls=b['calls'] / steps, after=b['after'] / steps * 1e3)
+            for off, b in regions.items() if b['calls'] > 0}
+    print(f"\nmeasured on {T} threads (bench_scale --threads {T}, the regions' wall times; median step "
+          f"{result['ms_median']:.1f} ms), regions by their loss against the projection:")
+    print(f"{'ms/step':>8} {f'proj@{T}':>8} {f'meas@{T}':>8} {'x':>6} {'lost':>7}  region")
+    known = {r['off'] for r in rows}
+    table = []
+    for r in rows:
+        m = meas.get(r['off'])
+        if m:
+            table.append((m['ms'] - r['proj'][k], r['ms'], r['proj'][k], m['ms'], nm.get(r['off'], r['off'])))
+    extra = [o for o in meas if o not in known]
+    extra_names = names(binary, extra)
+    for o in extra:  # regions the one-thread run did not start
+        table.append((meas[o]['ms'], 0.0, 0.0, meas[o]['ms'], extra_names.get(o, o) + ' (not on one thread)'))
+    table.sort(key=lambda t: -t[0])
+    for lost, one, proj, m, name in table:
+        if max(one, m) >= a.min_ms:
+            x = f"{one / m:6.1f}" if m > 0 and one > 0 else f"{'-':>6}"
+            print(f"{one:8.2f} {proj:8.2f} {m:8.2f} {x} {lost:7.2f}  {name}")
+    inside = sum(m['ms'] for m in meas.values())
+    between = sum(m['after'] for m in meas.values())
+    p = outside + sum(r['proj'][k] for r in rows)
+    print(f"measured step on {T} threads: {inside + between:.1f} ms ({inside:.1f} in regions, {between:.1f} between "
+          f"them), {step / (inside + between):.1f}x the one-thread step; projected {p:.1f} ms")
 
 
 if __name__ == '__main__':

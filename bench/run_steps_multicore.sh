@@ -4,7 +4,8 @@
 # each thread count of THREADS (default 1,2,4,8,16) for each build folder given, alternating (a second round in
 # the opposite order at the counts above 2), then bench_scale at the most threads for each (also with a table
 # rebuild in every step: issue 61's goal 3), then (first build) the one-thread step alone and as one copy per
-# core at once (bench/shared_report.py) and bench/project_threads.py's projection. JSON and text under OUT
+# core at once (bench/shared_report.py) and bench/project_threads.py's projection with each region's time measured
+# at the most threads beside it (--measure: which regions fall short of what their tasks allow). JSON and text under OUT
 # (default /tmp/steps_multicore); `bench/amdahl.py OUT/<tag>.json --threads 4 16` prints projection and
 # measurement side by side.
 #   bench/run_steps_multicore.sh NEW_BUILD_DIR [OLD_BUILD_DIR]
@@ -58,5 +59,6 @@ for m in rgb hybrid; do
 done
 if command -v python3 >/dev/null; then
   python3 "$(dirname "$0")/shared_report.py" "$O" | tee "$O/shared.txt"
-  python3 "$(dirname "$0")/project_threads.py" --build "$1" --threads "$NT" --min-ms 2 | tee "$O/projection.txt"
+  python3 "$(dirname "$0")/project_threads.py" --build "$1" --threads "$NT" --min-ms 2 --measure |
+    tee "$O/projection.txt"
 fi

@@ -14,7 +14,11 @@
 // on one thread (their num_threads is forced to 1). Other callers see the real value: per-thread partial sums sized
 // by it must match the threads that run.
 //
-// For one-thread runs only (its tables are plain globals, not shared safely between threads).
+// For one-thread runs only (its tables are plain globals, not shared safely between threads), except with
+// HGS_REGIONS_WALL=1: then it records the regions' wall times and the gaps between them alone, at any thread count
+// (what project_threads.py --measure compares with the projection). The team's threads then pass through every
+// wrapper (dynamic loops, single, barrier) untouched, and so does a region started inside another (a nested one,
+// omp_get_level() > 0), so that only the thread outside every region writes the tables.
 //
 // Written by hand: no Debian package times OpenMP regions of GCC's runtime (OMPT, the standard interface, is
 // LLVM's libomp only). Output at exit to HGS_REGIONS_OUT.<pid>, one line per region:
@@ -89,9 +93,23 @@ int plan_threads() {
   return plan;
 }
 
+bool wall_only() {
+  static int wall = -1;
+  if (wall < 0) {
+    const char* e = getenv("HGS_REGIONS_WALL");
+    wall = e && e[0] == '1';
+  }
+  return wall;
+}
+
 // One parallel region (outlined function fn) run by `call` (the runtime's entry point with its arguments).
 template <class Call>
 void region(void (*fn)(void*), Call call) {
+  static auto level = real<int (*)()>("omp_get_level");
+  if (wall_only() && level() > 0) {  // started inside a region, by a thread of its team
+    call();
+    return;
+  }
   if (depth > 0) {
     call();
     return;
@@ -125,6 +143,7 @@ void region(void (*fn)(void*), Call call) {
 // runtime's own calls.
 template <class F, class... A>
 bool loop_start(F next, A... args) {
+  if (wall_only()) return next(args...);
   close_loop();
   const bool r = next(args...);
   chunk_start = r ? now() : -1;
@@ -133,6 +152,7 @@ bool loop_start(F next, A... args) {
 
 template <class F, class... A>
 bool loop_next(F next, A... args) {
+  if (wall_only()) return next(args...);
   if (chunk_start >= 0 && num_chunks < kMaxChunks) chunk[num_chunks++] = now() - chunk_start;
   const bool r = next(args...);
   chunk_start = r ? now() : -1;
@@ -182,19 +202,22 @@ bool GOMP_loop_ull_nonmonotonic_dynamic_next(ull* is, ull* ie) {
 bool GOMP_single_start() {
   static auto next = real<bool (*)()>("GOMP_single_start");
   const bool r = next();
-  if (r) single_start = now();
+  if (r && !wall_only()) single_start = now();
   return r;
 }
 
 void GOMP_barrier() {
   static auto next = real<void (*)()>("GOMP_barrier");
-  if (single_start >= 0 && current >= 0) regions[current].single += now() - single_start;
-  single_start = -1;
+  if (!wall_only()) {
+    if (single_start >= 0 && current >= 0) regions[current].single += now() - single_start;
+    single_start = -1;
+  }
   next();
 }
 
 int omp_get_max_threads() {
   static auto next = real<int (*)()>("omp_get_max_threads");
+  if (wall_only()) return next();  // called from any thread: no planning, no shared state
   static unsigned long lo[16], hi[16];
   static int ranges = -1;
   if (ranges < 0) {

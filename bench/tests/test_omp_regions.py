@@ -1,7 +1,7 @@
 """bench/omp_regions (the LD_PRELOAD library of bench/project_threads.py) on a program of known regions
 (bench/omp_regions/regions_demo.cpp): the chunks of a dynamic loop, their makespan handed to 2 and 4 threads, the
 serial gap after a region and a `single` block's time, within the sleeps' tolerance (a sleep never ends early; a
-busy machine may end it late). Usage: test_omp_regions.py LIBRARY DEMO."""
+busy machine may end it late); and its wall-time mode (HGS_REGIONS_WALL=1) at two threads. Usage: test_omp_regions.py LIBRARY DEMO."""
 import glob
 import os
 import subprocess
@@ -29,6 +29,22 @@ def main(lib, demo):
     assert ms(first[6]) < ms(first[4]) - 20, first  # the simulation did hand chunks to two threads
     assert 8 <= ms(first[11]) <= 8 + late, first  # the serial gap after it
     assert second[5] == "0" and 5 <= ms(second[3]) <= 5 + late, second  # no dynamic loop; the single block
+    # Wall times at two threads (HGS_REGIONS_WALL=1): the regions' own, no chunks or single blocks recorded, the
+    # nested regions started by the team's threads not recorded at all.
+    with tempfile.TemporaryDirectory() as tmp:
+        prefix = os.path.join(tmp, "regions")
+        env = dict(os.environ, LD_PRELOAD=os.path.abspath(lib), HGS_REGIONS_OUT=prefix, OMP_NUM_THREADS="2",
+                   HGS_REGIONS_WALL="1")
+        subprocess.run([os.path.abspath(demo)], env=env, check=True)
+        files = glob.glob(prefix + ".*")
+        assert len(files) == 1, files
+        rows = [line.split() for line in open(files[0])]
+    assert len(rows) == 2, rows
+    first, second = rows
+    assert first[1] == "1" and first[5] == "0" and ms(first[4]) == 0, first
+    assert 30 <= ms(first[2]) < 58, first  # 30 | 10 + 10 + 10 on two threads, not the 60 of one
+    assert 8 <= ms(first[11]) <= 8 + late, first
+    assert 5 <= ms(second[2]) <= 5 + late and ms(second[3]) == 0, second
     print("ok")
 
 

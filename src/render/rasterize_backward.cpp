@@ -562,10 +562,11 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
   // Forward's channel records; built here when forward did not fold (another call's settings).
   const T* CR = x != kFolded ? nullptr : ws.chan_n == in.n ? ws.chan_records.data() : fill_chan_records(in, ws);
   T* TR = ws.tile_records.data();
+  const int run = tile_run(bins.num_tiles);
 #pragma omp parallel
   {
     auto& w = ws.threads[omp_get_thread_num()];
-#pragma omp for schedule(dynamic, 1)
+#pragma omp for schedule(dynamic, run)
     for (int t = 0; t < bins.num_tiles; ++t) {
       if (dep && x == kVisitLists)
         backward_tile<T, true, kVisitLists>(in, bins, t, w, final_T, last, g, R, CR, TR, MK, pg, GSL, PGR);

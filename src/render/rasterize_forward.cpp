@@ -305,10 +305,11 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
   const int J = in.num_weights;
   if (J > 0 && ws.pair_w.size() < size_t(bins.num_pairs) * J) ws.pair_w.resize(size_t(bins.num_pairs) * J);
   T* PW = ws.pair_w.data();
+  const int run = tile_run(bins.num_tiles);
 #pragma omp parallel
   {
     auto& w = ws.threads[omp_get_thread_num()];
-#pragma omp for schedule(dynamic, 1)
+#pragma omp for schedule(dynamic, run)
     for (int t = 0; t < bins.num_tiles; ++t) {
       if (dep && x == kVisitLists) forward_tile<T, true, kVisitLists>(in, bins, t, w, R, CR, TR, MK, PW, out);
       else if (dep && x == kFolded) forward_tile<T, true, kFolded>(in, bins, t, w, R, CR, TR, MK, PW, out);

@@ -141,7 +141,8 @@ void rasterize_depth_at(const RasterInputs<T>& in, const Binning& bins, RasterWo
   if (ws.records.size() < size_t(in.n) * kRecord) ws.records.resize(size_t(in.n) * kRecord);
   build_records(in, bins, ws.records.data());
   const T* R = ws.records.data();
-#pragma omp parallel for schedule(dynamic, 1)
+  const int run = tile_run(bins.num_tiles);
+#pragma omp parallel for schedule(dynamic, run)
   for (int t = 0; t < bins.num_tiles; ++t) depth_tile<T>(bins, px, t, R, alpha, depth);
 }
 
