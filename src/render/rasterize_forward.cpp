@@ -231,7 +231,7 @@ void store_pair_weights(const Binning& bins, int tile, int n, int kend, int J, c
 // when all its pixels hit the transmittance cut-off, the tile ends when no batch is left.
 template <class T, bool kDepth, int kX>
 void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typename RasterWorkspace<T>::PerThread& w,
-                  const T* records, const T* chan, T* tile_records, uint32_t* ws_masks, T* pair_w,
+                  const T* records, const T* chan, T* tile_records, uint32_t* ws_masks, T* pair_w, uint8_t* live_row,
                   const RasterOutputs<T>& out) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
@@ -278,7 +278,7 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
     const TileGroupList tg = tile_group_list(in, td, gauss, kX == kFolded ? chan : nullptr, w.groups);
     glist = tg.list;
     ng = tg.count;
-    for (int g = 0; g < in.num_groups; ++g) out.group_live[size_t(g) * bins.num_tiles + tile] = tg.used[g];
+    std::memcpy(live_row, tg.used, size_t(in.num_groups));  // the tile's own line (out.group_live after the walks)
   }
   write_forward_batches<T, kDepth, kX>(in, bins, tx0, ty0, all_batches, b, vl, glist, ng, out);
   if (J > 0 && any_g) store_pair_weights(bins, tile, n, kend, J, masks, all_batches, wacc, pair_w);
@@ -302,6 +302,12 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
   T* TR = ws.tile_records.data();
   ws.chan_n = -1;
   const T* CR = x == kFolded ? fill_chan_records(in, ws) : nullptr;  // the folded walk's, reused by backward
+  // The live flags, written per tile into a line of its own and gathered into out.group_live [G, tiles] after the
+  // walks: written in place, the threads' neighbouring tiles wrote the same G cache lines.
+  const int G = in.num_groups, LS = (G + 63) / 64 * 64;
+  const bool live = out.group_live && G > 0 && in.group_width > 0 && x != kNoChannels;
+  if (live && ws.live_rows.size() < size_t(bins.num_tiles) * LS) ws.live_rows.resize(size_t(bins.num_tiles) * LS);
+  uint8_t* LR = ws.live_rows.data();
   const int J = in.num_weights;
   if (J > 0 && ws.pair_w.size() < size_t(bins.num_pairs) * J) ws.pair_w.resize(size_t(bins.num_pairs) * J);
   T* PW = ws.pair_w.data();
@@ -311,12 +317,19 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
     auto& w = ws.threads[omp_get_thread_num()];
 #pragma omp for schedule(dynamic, run)
     for (int t = 0; t < bins.num_tiles; ++t) {
-      if (dep && x == kVisitLists) forward_tile<T, true, kVisitLists>(in, bins, t, w, R, CR, TR, MK, PW, out);
-      else if (dep && x == kFolded) forward_tile<T, true, kFolded>(in, bins, t, w, R, CR, TR, MK, PW, out);
-      else if (dep) forward_tile<T, true, kNoChannels>(in, bins, t, w, R, CR, TR, MK, PW, out);
-      else if (x == kVisitLists) forward_tile<T, false, kVisitLists>(in, bins, t, w, R, CR, TR, MK, PW, out);
-      else if (x == kFolded) forward_tile<T, false, kFolded>(in, bins, t, w, R, CR, TR, MK, PW, out);
-      else forward_tile<T, false, kNoChannels>(in, bins, t, w, R, CR, TR, MK, PW, out);
+      uint8_t* lr = live ? LR + size_t(t) * LS : nullptr;
+      if (dep && x == kVisitLists) forward_tile<T, true, kVisitLists>(in, bins, t, w, R, CR, TR, MK, PW, lr, out);
+      else if (dep && x == kFolded) forward_tile<T, true, kFolded>(in, bins, t, w, R, CR, TR, MK, PW, lr, out);
+      else if (dep) forward_tile<T, true, kNoChannels>(in, bins, t, w, R, CR, TR, MK, PW, lr, out);
+      else if (x == kVisitLists) forward_tile<T, false, kVisitLists>(in, bins, t, w, R, CR, TR, MK, PW, lr, out);
+      else if (x == kFolded) forward_tile<T, false, kFolded>(in, bins, t, w, R, CR, TR, MK, PW, lr, out);
+      else forward_tile<T, false, kNoChannels>(in, bins, t, w, R, CR, TR, MK, PW, lr, out);
+    }
+    if (live) {
+#pragma omp for schedule(static)
+      for (int g = 0; g < G; ++g)
+        for (int t = 0; t < bins.num_tiles; ++t)
+          out.group_live[size_t(g) * bins.num_tiles + t] = LR[size_t(t) * LS + g];
     }
     if (J > 0) {
 #pragma omp for schedule(static)

@@ -10,7 +10,9 @@
 #include <gtest/gtest.h>
 #include <omp.h>
 
+#include <cstdint>
 #include <cstring>
+#include <type_traits>
 
 #include "core/error.h"
 #include "fd_check.h"
@@ -450,21 +452,23 @@ TEST(RenderDeterminism, BitwiseEqualAcrossRunsAndThreadCounts) {
   Scene s = random_scene(3000, 160, 120, 71, 0.9, 3);
   const int saved = omp_get_max_threads();
   RendererT<float> r;
-  RenderOutputsT<float> o1, o2, o3;
-  GaussianGradsT<float> g1, g2, g3;
-  omp_set_num_threads(2);
+  RenderOutputsT<float> o1, o2, o3, o4;
+  GaussianGradsT<float> g1, g2, g3, g4;
+  omp_set_num_threads(2);  // 80 tiles: runs of 2 tiles per chunk (detail::tile_run)
   render_with_random_grads(s, r, o1, g1, 1);
   render_with_random_grads(s, r, o2, g2, 1);
-  omp_set_num_threads(1);
+  omp_set_num_threads(1);  // runs of 4
   render_with_random_grads(s, r, o3, g3, 1);
+  omp_set_num_threads(5);  // one tile per chunk
+  render_with_random_grads(s, r, o4, g4, 1);
   omp_set_num_threads(saved);
-  for (const auto* o : {&o2, &o3}) {
+  for (const auto* o : {&o2, &o3, &o4}) {
     EXPECT_TRUE(bitwise_equal(o1.rgb, o->rgb));
     EXPECT_TRUE(bitwise_equal(o1.alpha, o->alpha));
     EXPECT_TRUE(bitwise_equal(o1.depth, o->depth));
     EXPECT_TRUE(bitwise_equal(o1.extra, o->extra));
   }
-  for (const auto* g : {&g2, &g3}) {
+  for (const auto* g : {&g2, &g3, &g4}) {
     EXPECT_TRUE(bitwise_equal(g1.mean, g->mean));
     EXPECT_TRUE(bitwise_equal(g1.log_scale, g->log_scale));
     EXPECT_TRUE(bitwise_equal(g1.quat, g->quat));
@@ -476,6 +480,22 @@ TEST(RenderDeterminism, BitwiseEqualAcrossRunsAndThreadCounts) {
   double gsum = 0;
   for (float v : g1.mean) gsum += std::abs(v);
   EXPECT_GT(gsum, 0);
+}
+
+// The per-Gaussian and per-pair records start on a cache line (LineVector), so that each 16-float record is one
+// line: with operator new's 16-byte alignment each straddled two, which cost the two-thread walks 7-10 %.
+TEST(RasterWorkspace, RecordsFillWholeCacheLines) {
+  static_assert(std::is_same_v<decltype(RasterWorkspace<float>::records), LineVector<float>>);
+  static_assert(std::is_same_v<decltype(RasterWorkspace<float>::tile_records), LineVector<float>>);
+  static_assert(std::is_same_v<decltype(RasterWorkspace<float>::chan_records), LineVector<float>>);
+  LineVector<float> v;
+  LineVector<double> d;
+  for (size_t n : {1, 3, 17, 1000, 123457}) {
+    v.resize(n);
+    d.resize(n);
+    EXPECT_EQ(reinterpret_cast<uintptr_t>(v.data()) % 64, 0u) << n;
+    EXPECT_EQ(reinterpret_cast<uintptr_t>(d.data()) % 64, 0u) << n;
+  }
 }
 
 }  // namespace
