@@ -5,7 +5,8 @@ Runs `bench_scale --case METHOD PIXELS GAUSSIANS --steps N --threads 1` under th
 bench/omp_regions (built as <build>/libhgs_omp_regions.so with the benchmarks), whose tables bench_scale resets
 after its warm-up step, so that they hold the N timed steps. The code that cuts its work by the thread count (the
 object losses' bands, SSIM's bands, the tile walks' runs of tiles) is made to cut it as for T threads while it runs
-on one (HGS_PLAN_THREADS, the functions' address ranges from nm). Per region (an OpenMP parallel region, named by the function it is in):
+on one (HGS_PLAN_THREADS, the functions' address ranges from nm). Per region (an OpenMP parallel region, named by
+the function it is in):
 
   ms/step   its wall time per step on one thread
   single    the part of it in `omp single` blocks (serial at any T)

@@ -5,8 +5,8 @@
 # the opposite order at the counts above 2), then bench_scale at the most threads for each (also with a table
 # rebuild in every step: issue 61's goal 3), then (first build) the one-thread step alone and as one copy per
 # core at once (bench/shared_report.py) and bench/project_threads.py's projection with each region's time measured
-# at the most threads beside it (--measure: which regions fall short of what their tasks allow). JSON and text under OUT
-# (default /tmp/steps_multicore); `bench/amdahl.py OUT/<tag>.json --threads 4 16` prints projection and
+# at the most threads beside it (--measure: which regions fall short of what their tasks allow). JSON and text
+# under OUT (default /tmp/steps_multicore); `bench/amdahl.py OUT/<tag>.json --threads 4 16` prints projection and
 # measurement side by side.
 #   bench/run_steps_multicore.sh NEW_BUILD_DIR [OLD_BUILD_DIR]
 set -uo pipefail

@@ -1,7 +1,8 @@
 """bench/omp_regions (the LD_PRELOAD library of bench/project_threads.py) on a program of known regions
 (bench/omp_regions/regions_demo.cpp): the chunks of a dynamic loop, their makespan handed to 2 and 4 threads, the
 serial gap after a region and a `single` block's time, within the sleeps' tolerance (a sleep never ends early; a
-busy machine may end it late); and its wall-time mode (HGS_REGIONS_WALL=1) at two threads. Usage: test_omp_regions.py LIBRARY DEMO."""
+busy machine may end it late); and its wall-time mode (HGS_REGIONS_WALL=1) at two threads.
+Usage: test_omp_regions.py LIBRARY DEMO."""
 import glob
 import os
 import subprocess

@@ -205,7 +205,7 @@ struct RasterWorkspace {
   std::vector<T> pair_w;           // [P, J] forward weight sums per pair
   std::vector<size_t> group_off;   // [N + 1] backward: start of each Gaussian's group-gradient pair slots
   std::vector<size_t> pair_gslot;  // [P] backward: the group-gradient slot of each pair, in tile order
-  std::vector<uint8_t> live_rows;  // [tiles, 64 m] forward: each tile's group_live flags, a cache line per tile
+  LineVector<uint8_t> live_rows;   // [tiles, 64 m] forward: each tile's group_live flags, a cache line per tile
   std::vector<T> pair_group;       // [sum_i pairs_i * entries_i * GWg] group gradients per pair
 };
 

@@ -488,6 +488,7 @@ TEST(RasterWorkspace, RecordsFillWholeCacheLines) {
   static_assert(std::is_same_v<decltype(RasterWorkspace<float>::records), LineVector<float>>);
   static_assert(std::is_same_v<decltype(RasterWorkspace<float>::tile_records), LineVector<float>>);
   static_assert(std::is_same_v<decltype(RasterWorkspace<float>::chan_records), LineVector<float>>);
+  static_assert(std::is_same_v<decltype(RasterWorkspace<float>::live_rows), LineVector<uint8_t>>);
   LineVector<float> v;
   LineVector<double> d;
   for (size_t n : {1, 3, 17, 1000, 123457}) {
