@@ -228,7 +228,8 @@ void store_pair_weights(const Binning& bins, int tile, int n, int kend, int J, c
 
 // Forward of one tile, Gaussian-major: the tile's Gaussians are walked front to back; each updates the batches
 // its mask names that still have a live pixel (per-batch accumulators in per-thread scratch); a batch drops out
-// when all its pixels hit the transmittance cut-off, the tile ends when no batch is left.
+// when all its pixels hit the transmittance cut-off, the tile ends when no batch is left. live_row [G]: where the
+// tile's group_live flags go (null: planes written everywhere, no flags).
 template <class T, bool kDepth, int kX>
 void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typename RasterWorkspace<T>::PerThread& w,
                   const T* records, const T* chan, T* tile_records, uint32_t* ws_masks, T* pair_w, uint8_t* live_row,
@@ -274,7 +275,7 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   // state they were never added to.
   int ng = in.num_groups;
   const int* glist = nullptr;
-  if (kX != kNoChannels && out.group_live && GT > 0) {  // (an empty tile has td.n = 0: no groups)
+  if (kX != kNoChannels && live_row) {  // out.group_live with groups (an empty tile has td.n = 0: no groups)
     const TileGroupList tg = tile_group_list(in, td, gauss, kX == kFolded ? chan : nullptr, w.groups);
     glist = tg.list;
     ng = tg.count;
