@@ -1,6 +1,7 @@
 // Eqs. 6 and 14 for the J objects of one view. Without boxes (or without the base render): every object over the
 // whole image, one object per task. With boxes (the exactness argument is in object_losses.h):
-//   1. one pass over the renders finds each object's box D_k of pixels that differ from the base render (or
+//   1. one pass over the renders (object_boxes.cpp) finds each object's box D_k of pixels that differ from the base
+//   render (or
 //      carry its label) and copies the base render (and interleaved objects' renders) to planar images;
 //   2. tasks: the base pair's eq. 6 and eq. 14 over the image, each small object's terms on its crop Q_k (kept
 //      inside R_k), each large object over the whole image; every task cut into bands of rows (each cropped with
@@ -16,7 +17,6 @@
 
 #include <algorithm>
 #include <array>
-#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -28,13 +28,6 @@
 
 namespace hgs::hybrid {
 namespace {
-
-constexpr int kSsimRadius = 5;  // the SSIM window is 11 x 11
-
-// dep of object_losses.h: the SSIM gradient reads radius 10, eq. 14's differences its band's radius plus one.
-int dependency_radius(const HybridConfig& cfg) { return std::max(2 * kSsimRadius, cfg.bro_kernel / 2 + 1); }
-
-inline uint32_t bits(float v) { return std::bit_cast<uint32_t>(v); }
 
 // Object j's gradient at a value outside its box, from the base pair's there (object_losses.h): g + (gs u - pj p)
 // with g = s_app times eq. 6's base gradient, + 0 so that a -0 is stored as +0. The one definition the scatter,
@@ -230,126 +223,6 @@ ObjectLossValues ObjectLosses::full_path(const Image& image, const LabelMap& lab
   }
   if (J) v.app /= J, v.bro /= J;
   return v;
-}
-
-// Step 1: each object's box D_k (rows of differing columns, then their hull), R_k and Q_k, and the base render to
-// base_pred_ [H, W, 3] and base_opac_ [H, W], in this one pass over the renders. Where the renders interleave the
-// objects per pixel, the objects' renders are also copied to planes_ [J, H, W, 4], so that the crops read
-// contiguous rows; renders with one plane per object (ObjectRenders::sparse with planes, the training step's) are
-// read in place (a copy of 4 J floats a pixel spared).
-void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders, const std::vector<int>& objs) {
-  const int W = lab.width, H = lab.height, J = static_cast<int>(objs.size());
-  const size_t HW = size_t(W) * H;
-  const long BS = renders.base_stride, BO = renders.base_opacity_stride;
-  row_lo_.resize(size_t(J) * H);
-  row_hi_.resize(size_t(J) * H);
-  mask_lo_.resize(size_t(J) * H);
-  mask_hi_.resize(size_t(J) * H);
-  base_pred_.resize(HW * 3);
-  base_opac_.resize(HW);
-  const bool copied = renders.stride != 4;  // (stride 4: each object's pixels are contiguous already)
-  if (copied) planes_.resize(size_t(J) * HW * 4);
-  else std::vector<float>().swap(planes_);
-  // Pixel by pixel (the groups' rows read once, in order), each object's value stored to its plane (copied); the
-  // loop is compiled for each kind of render (complete values or base + difference) and for the copy or none.
-  std::vector<ScratchVector<uint8_t>> in_row(size_t(std::max(1, omp_get_max_threads())));
-  auto scan = [&]<bool kDeltas, bool kCopy>() {
-    const long S = renders.stride;
-#pragma omp parallel for schedule(static)
-    for (int y = 0; y < H; ++y) {
-      int* lo = &row_lo_[size_t(y)];
-      int* hi = &row_hi_[size_t(y)];
-      int* mlo = &mask_lo_[size_t(y)];
-      int* mhi = &mask_hi_[size_t(y)];
-      for (int j = 0; j < J; ++j)
-        lo[size_t(j) * H] = mlo[size_t(j) * H] = W, hi[size_t(j) * H] = mhi[size_t(j) * H] = -1;
-      ScratchVector<uint8_t>& in = in_row[omp_get_thread_num()];  // [J] whether each object's values are in memory
-      in.resize(J);
-      int run = 0;
-      for (int x = 0; x < W; ++x) {
-        const long p = long(y) * W + x;
-        const float b[4] = {renders.base_color[p * BS], renders.base_color[p * BS + 1], renders.base_color[p * BS + 2],
-                            renders.base_opacity[p * BO]};
-        for (int c = 0; c < 3; ++c) base_pred_[p * 3 + c] = b[c];
-        base_opac_[p] = b[3];
-        const int l = lab.v[p];
-        if (x == run) {  // a new run of columns whose objects' values are in memory or +0 alike
-          run = renders.run_end(x, W);
-          for (int j = 0; j < J; ++j) in[j] = renders.in_memory(j, x, y);
-        }
-        float v0[4];  // an object's value where its memory holds +0 or is not written, and how it differs
-        uint32_t diff0 = 0;
-        for (int c = 0; c < 4; ++c) {
-          v0[c] = kDeltas ? b[c] + 0.f : 0.f;
-          diff0 |= bits(v0[c]) ^ bits(b[c]);
-        }
-        for (int j = 0; j < J; ++j) {
-          uint32_t diff = diff0;
-          if (in[j]) {
-            const float* col = renders.color[j] + p * S;
-            const float o = renders.opacity[j][p * S];
-            const float v[4] = {kDeltas ? b[0] + col[0] : col[0], kDeltas ? b[1] + col[1] : col[1],
-                                kDeltas ? b[2] + col[2] : col[2], kDeltas ? b[3] + o : o};
-            diff = 0;
-            for (int c = 0; c < 4; ++c) diff |= bits(v[c]) ^ bits(b[c]);
-            if constexpr (kCopy) std::copy_n(v, 4, &planes_[(size_t(j) * HW + p) * 4]);
-          } else if constexpr (kCopy) {
-            std::copy_n(v0, 4, &planes_[(size_t(j) * HW + p) * 4]);
-          }
-          const bool label = l == objs[j];
-          if (diff || label) {
-            lo[size_t(j) * H] = std::min(lo[size_t(j) * H], x);
-            hi[size_t(j) * H] = x;
-          }
-          if (label) {
-            mlo[size_t(j) * H] = std::min(mlo[size_t(j) * H], x);
-            mhi[size_t(j) * H] = x;
-          }
-        }
-      }
-    }
-  };
-  if (renders.deltas && copied) scan.template operator()<true, true>();
-  else if (renders.deltas) scan.template operator()<true, false>();
-  else if (copied) scan.template operator()<false, true>();
-  else scan.template operator()<false, false>();
-  renders_ = renders;  // what the crops read: the renders themselves, or the copy as complete values
-  renders_.base_color = base_pred_.data();
-  renders_.base_stride = 3;
-  renders_.base_opacity = base_opac_.data();
-  renders_.base_opacity_stride = 1;
-  if (copied) {
-    for (int j = 0; j < J; ++j) {
-      renders_.color[j] = &planes_[size_t(j) * HW * 4];
-      renders_.opacity[j] = renders_.color[j] + 3;
-    }
-    renders_.stride = 4;
-    renders_.deltas = false;
-    renders_.live = nullptr;  // (the copies hold the +0 values)
-  }
-  const int dep = dep_ = opt_.dilation >= 0 ? opt_.dilation : dependency_radius(cfg_);
-  obj_.resize(J);
-  // The hull of rows' column ranges [lo, hi] (hi < 0: none in the row).
-  auto hull = [&](const std::vector<int>& lo, const std::vector<int>& hi, int j) {
-    PixelBox b{W, H, 0, 0};
-    for (int y = 0; y < H; ++y) {
-      if (hi[size_t(j) * H + y] < 0) continue;
-      b.x0 = std::min(b.x0, lo[size_t(j) * H + y]);
-      b.x1 = std::max(b.x1, hi[size_t(j) * H + y] + 1);
-      b.y0 = std::min(b.y0, y);
-      b.y1 = y + 1;
-    }
-    return b;
-  };
-  for (int j = 0; j < J; ++j) {
-    const PixelBox D = hull(row_lo_, row_hi_, j);
-    Object& o = obj_[j];
-    o.M = hull(mask_lo_, mask_hi_, j);
-    o.R = D.grown(dep, W, H);
-    o.Q = o.R.grown(dep, W, H);
-    o.full = double(o.Q.area()) > opt_.max_box_fraction * double(HW);
-    if (o.full) o.R = o.Q = PixelBox{0, 0, W, H};
-  }
 }
 
 // The base pair's eq. 6 over image rows [y0, y1): base_app_ [H, W, 3] its gradient there (without s_app), the L1

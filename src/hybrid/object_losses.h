@@ -230,6 +230,8 @@ class ObjectLosses {
   std::vector<Object> obj_;                              // [J]
   std::vector<int> row_lo_, row_hi_;                     // [J, H] each row's differing columns
   std::vector<int> mask_lo_, mask_hi_;                   // [J, H] each row's columns of the object's label
+  std::vector<int> label_obj_;                           // [65536] label -> its first object j (-1 between calls)
+  std::vector<int> obj_next_;                            // [J] the next object with the same label (-1: none)
   std::vector<float> base_pred_, base_app_, base_unit_;  // [H, W, 3]
   std::vector<float> base_opac_;                         // [H, W]
   std::vector<float> planes_;                            // [J, H, W, 4] the objects' renders (colour, opacity)
