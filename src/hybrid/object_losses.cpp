@@ -348,9 +348,10 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
       xx0 = xx1;
     }
   };
+  bool overrun = false;  // (a local: the thread's Scratch is written once, at the end)
   auto at = [&](int r) {
     for (; filled < r; ++filled) fill(filled + 1);
-    w.ring_overrun |= r <= filled - ring;
+    overrun |= r <= filled - ring;
     return &w.crop[size_t(r % ring) * rf];
   };
   // Eq. 14's rows (the band from the object's opacity and mask) from the row above R's first (its y pairs).
@@ -418,6 +419,7 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
   train::ssim_rows_streamed<float>([&](int r) { return at(r); }, [&](int r) { return at(r) + 3 * qw; }, qh, qw, 3, ry,
                                    ry + rh, double(n), w.ssim, sink, o.M.empty() ? train::SsimSupport{0, 0, 0, 0} : ys,
                                    rx, rx + rw);
+  w.ring_overrun |= overrun;
 }
 
 // The base pair's per-pixel terms summed over r. out [kTerms]

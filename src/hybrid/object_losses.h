@@ -175,7 +175,9 @@ class ObjectLosses {
   void release();
 
  private:
-  struct Scratch {  // per-thread buffers of the losses of one object
+  // Per-thread buffers of the losses of one object, each in cache lines of its own (its row rings' state is written
+  // on every row; a neighbour's fields in the same line would bounce between the two cores).
+  struct alignas(64) Scratch {
     explicit Scratch(float lambda_dssim) : loss(lambda_dssim) {}
     train::PhotometricLoss loss;
     train::SsimWorkspace<float> ssim;

@@ -66,15 +66,14 @@ TEST(ObjectBoxes, BoxesAreTheHullOfTheDifferingAndLabelledPixels) {
   auto delta = [&](int j, int x0, int y0, int x1, int y1, bool absorbed) {
     for (int y = y0; y < y1; ++y)
       for (int x = x0; x < x1; ++x)
-        for (int c = 0; c < 4; ++c)
-          planes[(size_t(j) * HW + size_t(y) * W + x) * 4 + c] = absorbed ? 1e-12f : U(rng);
+        for (int c = 0; c < 4; ++c) planes[(size_t(j) * HW + size_t(y) * W + x) * 4 + c] = absorbed ? 1e-12f : U(rng);
   };
   delta(0, 5, 5, 14, 12, false);
-  delta(0, 16, 5, 22, 8, true);   // written but the same bits: not in the box
+  delta(0, 16, 5, 22, 8, true);  // written but the same bits: not in the box
   delta(1, 25, 10, 38, 15, false);
   delta(2, 0, 22, 2, 30, false);    // the left border, rows 22-29
   delta(2, 50, 25, 53, 26, false);  // and the right border in row 25
-  delta(3, 10, 30, 12, 37, true);  // only absorbed differences: the box is its label's pixels
+  delta(3, 10, 30, 12, 37, true);   // only absorbed differences: the box is its label's pixels
   // object 4: nothing; object 5: a difference at the top-right corner besides its label at the bottom-right
   delta(5, 52, 0, 53, 1, false);
   // Flags as the renderer's group_live_tiles: every tile with a set bit, and every 4th other tile; memory of the
@@ -97,68 +96,68 @@ TEST(ObjectBoxes, BoxesAreTheHullOfTheDifferingAndLabelledPixels) {
   // Twice: the base as drawn, then with -0 in one colour channel at (20, 20): every object's value there, base +
   // difference or an unwritten +0, is +0 (-0 + +0 = +0), so it differs from the base in every object's render.
   for (bool negative_zero : {false, true}) {
-  std::vector<float> base = base0;
-  if (negative_zero) base[(size_t(20) * W + 20) * 4 + 1] = -0.f;
-  // The complete values interleaved per pixel (ObjectLayout with the base), for the path that copies them out.
-  const ObjectLayout lay{J, 0, true};
-  std::vector<float> extra(size_t(HW) * lay.total());
-  for (long p = 0; p < HW; ++p) {
-    float* e = &extra[size_t(p) * lay.total()];
-    const float* b = &base[size_t(p) * 4];
-    for (int c = 0; c < 3; ++c) e[lay.base_color() + c] = b[c];
-    e[lay.base_opacity()] = b[3];
-    for (int j = 0; j < J; ++j) {
-      const float* d = &planes[(j * HW + p) * 4];
-      for (int c = 0; c < 3; ++c) e[lay.color(j) + c] = b[c] + d[c];
-      e[lay.opacity(j)] = b[3] + d[3];
-    }
-  }
-  // Expected, pixel by pixel: object j's value base + difference (+0 where unwritten) against the base's bits, and
-  // its label.
-  std::vector<PixelBox> want(J);
-  for (int j = 0; j < J; ++j) {
-    PixelBox b{W, H, 0, 0};
-    for (int y = 0; y < H; ++y)
-      for (int x = 0; x < W; ++x) {
-        const long p = long(y) * W + x;
-        bool hit = lab.v[p] == objs[j];
-        for (int c = 0; c < 4; ++c) {
-          const float d = live[size_t(j) * tiles + tile_of(p)] ? planes[(j * HW + p) * 4 + c] : 0.f;
-          hit |= bits(base[size_t(p) * 4 + c] + d) != bits(base[size_t(p) * 4 + c]);
-        }
-        if (hit) b = {std::min(b.x0, x), std::min(b.y0, y), std::max(b.x1, x + 1), std::max(b.y1, y + 1)};
+    std::vector<float> base = base0;
+    if (negative_zero) base[(size_t(20) * W + 20) * 4 + 1] = -0.f;
+    // The complete values interleaved per pixel (ObjectLayout with the base), for the path that copies them out.
+    const ObjectLayout lay{J, 0, true};
+    std::vector<float> extra(size_t(HW) * lay.total());
+    for (long p = 0; p < HW; ++p) {
+      float* e = &extra[size_t(p) * lay.total()];
+      const float* b = &base[size_t(p) * 4];
+      for (int c = 0; c < 3; ++c) e[lay.base_color() + c] = b[c];
+      e[lay.base_opacity()] = b[3];
+      for (int j = 0; j < J; ++j) {
+        const float* d = &planes[(j * HW + p) * 4];
+        for (int c = 0; c < 3; ++c) e[lay.color(j) + c] = b[c] + d[c];
+        e[lay.opacity(j)] = b[3] + d[3];
       }
-    want[j] = b.empty() ? PixelBox{} : b;
-  }
-  // The cases the fixture must hold.
-  if (!negative_zero) {
-    EXPECT_EQ(str(want[0]), str(PixelBox{3, 4, 14, 12}));   // label and difference; the absorbed ones not
-    EXPECT_EQ(str(want[1]), str(PixelBox{25, 2, 38, 20}));  // label 4 and its difference
-    EXPECT_EQ(str(want[2]), str(PixelBox{0, 2, W, 30}));    // label 4 (rows 2-19), differences at both borders
-    EXPECT_EQ(str(want[3]), str(PixelBox{17, 1, 46, 34}));  // its two label pixels (differences absorbed)
-    EXPECT_TRUE(want[4].empty());
-    EXPECT_EQ(str(want[5]), str(PixelBox{52, 0, 53, 37}));  // a corner difference and the opposite corner's label
-  } else {
-    EXPECT_EQ(str(want[1]), str(PixelBox{20, 2, 38, 21}));
-    EXPECT_EQ(str(want[4]), str(PixelBox{20, 20, 21, 21}));
-  }
-  const ObjectRenders flagged = ObjectRenders::sparse(base.data(), 4, 3, unwritten.data(), J, HW)
-                                    .with_live_tiles(live.data(), kTile, W, H);
-  const ObjectRenders planar = ObjectRenders::sparse(base.data(), 4, 3, planes.data(), J, HW);
-  const ObjectRenders inter = ObjectRenders::interleaved(extra.data(), lay);
-  const int threads = omp_get_max_threads();
-  for (int t : {1, 3}) {
-    omp_set_num_threads(t);
-    for (const auto& [name, r] : {std::pair{"flagged planes", &flagged}, std::pair{"planes", &planar},
-                                  std::pair{"interleaved", &inter}}) {
-      ObjectLosses losses(HybridConfig{}, {.max_box_fraction = 2.0, .dilation = 0});
-      losses(image, lab, *r, objs, {});
-      const std::vector<PixelBox>& got = losses.gradients().box;
-      ASSERT_EQ(int(got.size()), J);
-      for (int j = 0; j < J; ++j)
-        EXPECT_EQ(str(got[j]), str(want[j])) << name << ", object " << j << ", " << t << " threads";
     }
-  }
-  omp_set_num_threads(threads);
+    // Expected, pixel by pixel: object j's value base + difference (+0 where unwritten) against the base's bits, and
+    // its label.
+    std::vector<PixelBox> want(J);
+    for (int j = 0; j < J; ++j) {
+      PixelBox b{W, H, 0, 0};
+      for (int y = 0; y < H; ++y)
+        for (int x = 0; x < W; ++x) {
+          const long p = long(y) * W + x;
+          bool hit = lab.v[p] == objs[j];
+          for (int c = 0; c < 4; ++c) {
+            const float d = live[size_t(j) * tiles + tile_of(p)] ? planes[(j * HW + p) * 4 + c] : 0.f;
+            hit |= bits(base[size_t(p) * 4 + c] + d) != bits(base[size_t(p) * 4 + c]);
+          }
+          if (hit) b = {std::min(b.x0, x), std::min(b.y0, y), std::max(b.x1, x + 1), std::max(b.y1, y + 1)};
+        }
+      want[j] = b.empty() ? PixelBox{} : b;
+    }
+    // The cases the fixture must hold.
+    if (!negative_zero) {
+      EXPECT_EQ(str(want[0]), str(PixelBox{3, 4, 14, 12}));   // label and difference; the absorbed ones not
+      EXPECT_EQ(str(want[1]), str(PixelBox{25, 2, 38, 20}));  // label 4 and its difference
+      EXPECT_EQ(str(want[2]), str(PixelBox{0, 2, W, 30}));    // label 4 (rows 2-19), differences at both borders
+      EXPECT_EQ(str(want[3]), str(PixelBox{17, 1, 46, 34}));  // its two label pixels (differences absorbed)
+      EXPECT_TRUE(want[4].empty());
+      EXPECT_EQ(str(want[5]), str(PixelBox{52, 0, 53, 37}));  // a corner difference and the opposite corner's label
+    } else {
+      EXPECT_EQ(str(want[1]), str(PixelBox{20, 2, 38, 21}));
+      EXPECT_EQ(str(want[4]), str(PixelBox{20, 20, 21, 21}));
+    }
+    const ObjectRenders flagged =
+        ObjectRenders::sparse(base.data(), 4, 3, unwritten.data(), J, HW).with_live_tiles(live.data(), kTile, W, H);
+    const ObjectRenders planar = ObjectRenders::sparse(base.data(), 4, 3, planes.data(), J, HW);
+    const ObjectRenders inter = ObjectRenders::interleaved(extra.data(), lay);
+    const int threads = omp_get_max_threads();
+    for (int t : {1, 3}) {
+      omp_set_num_threads(t);
+      for (const auto& [name, r] :
+           {std::pair{"flagged planes", &flagged}, std::pair{"planes", &planar}, std::pair{"interleaved", &inter}}) {
+        ObjectLosses losses(HybridConfig{}, {.max_box_fraction = 2.0, .dilation = 0});
+        losses(image, lab, *r, objs, {});
+        const std::vector<PixelBox>& got = losses.gradients().box;
+        ASSERT_EQ(int(got.size()), J);
+        for (int j = 0; j < J; ++j)
+          EXPECT_EQ(str(got[j]), str(want[j])) << name << ", object " << j << ", " << t << " threads";
+      }
+    }
+    omp_set_num_threads(threads);
   }
 }
