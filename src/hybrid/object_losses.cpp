@@ -73,6 +73,7 @@ void ObjectLosses::release() {
   for (auto* v : {&pred_, &grad_, &opac_, &base_pred_, &base_app_, &base_unit_, &base_opac_, &planes_})
     std::vector<float>().swap(*v);
   std::vector<double>().swap(base_terms_);
+  std::vector<int>().swap(label_obj_);  // (all -1 between calls: find_boxes fills it again when empty)
   std::vector<Object>().swap(obj_);
   grads_ = ObjectGradients{};
 }

@@ -5,7 +5,7 @@
 // planes without flags, and on the objects' complete values interleaved per pixel; with -0 in the base (an
 // unwritten +0 then differs from it), differences too small to change the base's bits, an object with the same
 // label as another, labels of no object, an object label no pixel can carry, and objects absent from whole rows
-// or the whole image; at 1 and 3 threads.
+// or the whole image; at 1 and 3 threads, and again after release().
 #include <gtest/gtest.h>
 #include <omp.h>
 
@@ -156,6 +156,10 @@ TEST(ObjectBoxes, BoxesAreTheHullOfTheDifferingAndLabelledPixels) {
         ASSERT_EQ(int(got.size()), J);
         for (int j = 0; j < J; ++j)
           EXPECT_EQ(str(got[j]), str(want[j])) << name << ", object " << j << ", " << t << " threads";
+        losses.release();  // its buffers freed, the label lookup too: the next call builds them again
+        losses(image, lab, *r, objs, {});
+        for (int j = 0; j < J; ++j)
+          EXPECT_EQ(str(losses.gradients().box[j]), str(want[j])) << name << ", after release(), object " << j;
       }
     }
     omp_set_num_threads(threads);
