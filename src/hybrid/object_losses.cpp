@@ -592,40 +592,28 @@ void ObjectLosses::scatter(int H, int W, bool bro_grad, const ObjectGradOut& out
   else run.template operator()<true, false>();
 }
 
-// The pixels in three runs of contiguous values: before R's columns, inside them (its own), after; each value the
-// same expression as before, in loops the compiler vectorises (the renderer asks for a batch row of every group of
-// a tile, so this runs once per batch and group).
 void ObjectLosses::gradient_row(int j, int y, int x0, int n, float* out) const {
   const PixelBox& R = grads_.box[j];
   const bool rows = y >= R.y0 && y < R.y1;
-  const int end = x0 + n, a = rows ? std::clamp(R.x0, x0, end) : end, b = rows ? std::clamp(R.x1, a, end) : end;
   const float s_app = grads_.app_scale, gs = grads_.bro_scale[j], pj = grads_.proj[j];
-  auto outside = [&](int xa, int xb) {
-    float* o = out + size_t(xa - x0) * 3;
-    const int m = (xb - xa) * 3;
+  for (int l = 0; l < n; ++l) {
+    const int x = x0 + l;
+    float* o = out + 3 * l;
+    if (rows && x >= R.x0 && x < R.x1) {  // its own
+      const float* v = grads_.own[j] + (size_t(y - R.y0) * R.width() + (x - R.x0)) * 3;
+      for (int c = 0; c < 3; ++c) o[c] = v[c] + 0.f;
+      continue;
+    }
     if (!grads_.base_app) {  // (every box is the whole image then)
-      std::fill_n(o, m, 0.f);
-      return;
+      for (int c = 0; c < 3; ++c) o[c] = 0.f;
+      continue;
     }
-    const size_t i0 = (size_t(y) * width_ + xa) * 3;
-    const float* ba = grads_.base_app + i0;
-    if (grads_.base_unit) {
-      const float *u = grads_.base_unit + i0, *p = grads_.base_pred + i0;
-#pragma omp simd
-      for (int i = 0; i < m; ++i) o[i] = outside_grad(base_app_scaled(s_app, ba[i]), gs, u[i], pj, p[i]);
-    } else {
-#pragma omp simd
-      for (int i = 0; i < m; ++i) o[i] = base_app_scaled(s_app, ba[i]) + 0.f;
+    const size_t i = (size_t(y) * width_ + x) * 3;
+    for (int c = 0; c < 3; ++c) {
+      const float g = base_app_scaled(s_app, grads_.base_app[i + c]);
+      o[c] = grads_.base_unit ? outside_grad(g, gs, grads_.base_unit[i + c], pj, grads_.base_pred[i + c]) : g + 0.f;
     }
-  };
-  outside(x0, a);
-  if (b > a) {  // its own
-    const float* v = grads_.own[j] + (size_t(y - R.y0) * R.width() + (a - R.x0)) * 3;
-    float* o = out + size_t(a - x0) * 3;
-#pragma omp simd
-    for (int i = 0; i < (b - a) * 3; ++i) o[i] = v[i] + 0.f;
   }
-  outside(b, end);
 }
 
 ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab, const ObjectRenders& renders,
