@@ -40,6 +40,7 @@
 // rasterize_masks.h); rasterize_pixels.cpp, the forward's alpha and depth at chosen pixels only
 // (rasterize_depth_at).
 #pragma once
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <new>
@@ -205,8 +206,9 @@ struct RasterWorkspace {
   std::vector<T> pair_w;           // [P, J] forward weight sums per pair
   std::vector<size_t> group_off;   // [N + 1] backward: start of each Gaussian's group-gradient pair slots
   std::vector<size_t> pair_gslot;  // [P] backward: the group-gradient slot of each pair, in tile order
-  LineVector<uint8_t> live_rows;   // [tiles, 64 m] forward: each tile's group_live flags, a cache line per tile
-  std::vector<T> pair_group;       // [sum_i pairs_i * entries_i * GWg] group gradients per pair
+  std::vector<std::array<size_t, 2>> slot_rule;  // [N] backward: each Gaussian's pair -> slot rule (group_slots)
+  LineVector<uint8_t> live_rows;  // [tiles, 64 m] forward: each tile's group_live flags, a cache line per tile
+  std::vector<T> pair_group;      // [sum_i pairs_i * entries_i * GWg] group gradients per pair
 };
 
 template <class T>

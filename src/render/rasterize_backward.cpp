@@ -14,6 +14,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <array>
 #include <cstring>
 #include <tuple>
 
@@ -488,13 +489,22 @@ int group_slots(const RasterInputs<T>& in, const Binning& bins, int GWg, RasterW
 #pragma omp parallel for schedule(static) reduction(max : max_entries)
   for (int i = 0; i < in.n; ++i) max_entries = std::max(max_entries, in.group_ptr[i + 1] - in.group_ptr[i]);
   if (ws.pair_gslot.size() < size_t(bins.num_pairs)) ws.pair_gslot.resize(size_t(bins.num_pairs));
-  size_t* slot = ws.pair_gslot.data();
+  // Each Gaussian's rule in one line-friendly pair (slot of its pair p = base + p * width, with base = its first
+  // slot - its first pair * width, modulo 2^64), so that the pass over the pairs in tile order reads one random
+  // 16 bytes per pair instead of group_off, pair_offset and group_ptr (three lines).
+  if (ws.slot_rule.size() < size_t(in.n)) ws.slot_rule.resize(size_t(in.n));
+  std::array<size_t, 2>* rule = ws.slot_rule.data();
   const size_t* GOF = ws.group_off.data();
 #pragma omp parallel for schedule(static)
+  for (int i = 0; i < in.n; ++i) {
+    const size_t width = size_t(in.group_ptr[i + 1] - in.group_ptr[i]) * GWg;
+    rule[i] = {GOF[i] - size_t(bins.pair_offset[i]) * width, width};
+  }
+  size_t* slot = ws.pair_gslot.data();
+#pragma omp parallel for schedule(static)
   for (int t = 0; t < bins.num_pairs; ++t) {
-    const int gi = bins.tile_gauss[t];
-    slot[t] = GOF[gi] +
-              size_t(bins.tile_pair[t] - bins.pair_offset[gi]) * size_t(in.group_ptr[gi + 1] - in.group_ptr[gi]) * GWg;
+    const std::array<size_t, 2> r = rule[bins.tile_gauss[t]];
+    slot[t] = r[0] + size_t(bins.tile_pair[t]) * r[1];
   }
   return max_entries;
 }

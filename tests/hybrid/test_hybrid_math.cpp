@@ -623,8 +623,9 @@ TEST(Bro, BandRowsFromAnyRowMatchBruteForce) {
         const float* b = rows.row(y, a, m);
         for (int x = 0; x < W; ++x)
           ASSERT_EQ(b[x], ref[y * W + x]) << "kernel " << s << " from " << first << " row " << y;
-        if (prev)
+        if (prev) {
           for (int x = 0; x < W; ++x) ASSERT_EQ(prev[x], ref[(y - 1) * W + x]) << "kernel " << s << " row " << y - 1;
+        }
         prev = b;
       }
     }
