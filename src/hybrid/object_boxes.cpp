@@ -8,9 +8,10 @@
 //   3. per object, its first and last differing column, scanned in from the row's two ends: a scan stops at its
 //      first hit and steps over a run the object did not write in one test, so an object present near the ends
 //      costs a few pixels and one absent from the row a test per run plus its written tiles (the pass tested
-//      every object at every pixel before: a tenth of the 320x240 step's object losses). Where the renders
-//      interleave the objects per pixel, each object's row is copied to its plane (planes_ [J, H, W, 4], so that
-//      the crops read contiguous rows) and tested in that same pass.
+//      every object at every pixel before: a tenth of the 320x240 step's object losses). Where no tile is flagged
+//      the row is tested pixel by pixel, every object at each (its streams read once, in order: faster there than
+//      object by object); interleaved objects are also copied to their planes in that pass (planes_ [J, H, W, 4],
+//      so that the crops read contiguous rows).
 // The boxes are the hull of the rows' [first, last] ranges (min / max of the same columns the pixel-by-pixel pass
 // took, so the same boxes).
 #include <omp.h>
@@ -54,14 +55,15 @@ void ObjectLosses::find_boxes(const LabelMap& lab, const ObjectRenders& renders,
   const bool copied = renders.stride != 4;  // (stride 4: each object's pixels are contiguous already)
   if (copied) planes_.resize(size_t(J) * HW * 4);
   else std::vector<float>().swap(planes_);
-  // label -> its objects: label_obj_[label] the first, obj_next_[j] the next with the same label (-1: none).
+  std::vector<ScratchVector<ColumnRun>> run_rows(size_t(std::max(1, omp_get_max_threads())));
+  std::vector<ScratchVector<uint8_t>> in_rows(run_rows.size());
+  // label -> its objects: label_obj_[label] the first, obj_next_[j] the next with the same label (-1: none). Set
+  // after every allocation above, and reset to all -1 below the scan, which throws nothing.
   if (label_obj_.empty()) label_obj_.assign(size_t(UINT16_MAX) + 1, -1);
   obj_next_.assign(J, -1);
   auto label_of = [&](int j) { return objs[j] >= 0 && objs[j] <= UINT16_MAX ? objs[j] : -1; };
   for (int j = J - 1; j >= 0; --j)
     if (label_of(j) >= 0) obj_next_[j] = std::exchange(label_obj_[label_of(j)], j);
-  std::vector<ScratchVector<ColumnRun>> run_rows(size_t(std::max(1, omp_get_max_threads())));
-  std::vector<ScratchVector<uint8_t>> in_rows(run_rows.size());
   // The scan, compiled for each kind of render (complete values or base + difference) and for the copy or none.
   auto scan = [&]<bool kDeltas, bool kCopy>() {
 #pragma omp parallel for schedule(static)
