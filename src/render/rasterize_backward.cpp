@@ -479,27 +479,42 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
 // of one Gaussian (the folded backward's bound).
 template <class T>
 int group_slots(const RasterInputs<T>& in, const Binning& bins, int GWg, RasterWorkspace<T>& ws) {
-  ws.group_off.resize(size_t(in.n) + 1);
-  ws.group_off[0] = 0;
-  for (int i = 0; i < in.n; ++i)
-    ws.group_off[i + 1] = ws.group_off[i] + size_t(bins.pair_offset[i + 1] - bins.pair_offset[i]) *
-                                                size_t(in.group_ptr[i + 1] - in.group_ptr[i]) * GWg;
-  if (ws.pair_group.size() < ws.group_off[in.n]) ws.pair_group.resize(ws.group_off[in.n]);
-  int max_entries = 0;
-#pragma omp parallel for schedule(static) reduction(max : max_entries)
-  for (int i = 0; i < in.n; ++i) max_entries = std::max(max_entries, in.group_ptr[i + 1] - in.group_ptr[i]);
-  if (ws.pair_gslot.size() < size_t(bins.num_pairs)) ws.pair_gslot.resize(size_t(bins.num_pairs));
-  // Each Gaussian's rule in one line-friendly pair (slot of its pair p = base + p * width, with base = its first
-  // slot - its first pair * width, modulo 2^64), so that the pass over the pairs in tile order reads one random
-  // 16 bytes per pair instead of group_off, pair_offset and group_ptr (three lines).
-  if (ws.slot_rule.size() < size_t(in.n)) ws.slot_rule.resize(size_t(in.n));
+  const int n = in.n;
+  ws.group_off.resize(size_t(n) + 1);
+  if (ws.slot_rule.size() < size_t(n)) ws.slot_rule.resize(size_t(n));
+  size_t* GOF = ws.group_off.data();
+  // Each Gaussian's rule in 16 bytes (slot of its pair p = base + p * width, with base = its first slot - its first
+  // pair * width, modulo 2^64), so that the pass over the pairs in tile order reads one random 16 bytes per pair
+  // instead of group_off, pair_offset and group_ptr (three lines).
   std::array<size_t, 2>* rule = ws.slot_rule.data();
-  const size_t* GOF = ws.group_off.data();
-#pragma omp parallel for schedule(static)
-  for (int i = 0; i < in.n; ++i) {
-    const size_t width = size_t(in.group_ptr[i + 1] - in.group_ptr[i]) * GWg;
-    rule[i] = {GOF[i] - size_t(bins.pair_offset[i]) * width, width};
+  auto width = [&](int i) { return size_t(in.group_ptr[i + 1] - in.group_ptr[i]) * GWg; };
+  auto slots = [&](int i) { return size_t(bins.pair_offset[i + 1] - bins.pair_offset[i]) * width(i); };
+  // group_off, the running sum of the Gaussians' slots, in one block of Gaussians per thread: each block's total,
+  // the totals' running sum, then each block's own (integer sums: the values of a serial pass; it was one, a
+  // serial stretch of the step at 16 threads). With it each Gaussian's rule and the most entries.
+  std::vector<size_t> block(size_t(std::max(1, omp_get_max_threads())) + 1, 0);
+  int max_entries = 0;
+#pragma omp parallel reduction(max : max_entries)
+  {
+    const int t = omp_get_thread_num(), nt = omp_get_num_threads();
+    const int i0 = int(long(n) * t / nt), i1 = int(long(n) * (t + 1) / nt);
+    size_t sum = 0;
+    for (int i = i0; i < i1; ++i) sum += slots(i);
+    block[size_t(t) + 1] = sum;
+#pragma omp barrier
+#pragma omp single
+    for (int b = 1; b <= nt; ++b) block[b] += block[b - 1];
+    size_t off = block[t];
+    for (int i = i0; i < i1; ++i) {
+      GOF[i] = off;
+      rule[i] = {off - size_t(bins.pair_offset[i]) * width(i), width(i)};
+      max_entries = std::max(max_entries, in.group_ptr[i + 1] - in.group_ptr[i]);
+      off += slots(i);
+    }
+    if (t == nt - 1) GOF[n] = off;
   }
+  if (ws.pair_group.size() < GOF[n]) ws.pair_group.resize(GOF[n]);
+  if (ws.pair_gslot.size() < size_t(bins.num_pairs)) ws.pair_gslot.resize(size_t(bins.num_pairs));
   size_t* slot = ws.pair_gslot.data();
 #pragma omp parallel for schedule(static)
   for (int t = 0; t < bins.num_pairs; ++t) {
