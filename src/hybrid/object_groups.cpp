@@ -4,6 +4,8 @@
 
 #include <omp.h>
 
+#include "core/parallel.h"
+
 namespace hgs::hybrid {
 
 namespace {
@@ -39,8 +41,8 @@ void build_object_groups(int n, int L, int J, const SparseLayout& sl, const int*
     }
     g.count[i] = cnt;
   }
-  g.ptr[0] = 0;
-  for (int i = 0; i < n; ++i) g.ptr[i + 1] = g.ptr[i] + g.count[i];
+  parallel_offsets(
+      n, g.ptr.data(), [&](int i) { return g.count[i]; }, [](int, int) {});
   const size_t E = size_t(g.ptr[n]);
   g.id.resize(E);
   g.val.resize(E * ObjectGroups::kWidth);

@@ -18,6 +18,7 @@
 #include <cstring>
 #include <tuple>
 
+#include "core/parallel.h"
 #include "render/rasterize_common.h"
 
 #pragma GCC diagnostic ignored "-Wpsabi"
@@ -489,30 +490,13 @@ int group_slots(const RasterInputs<T>& in, const Binning& bins, int GWg, RasterW
   std::array<size_t, 2>* rule = ws.slot_rule.data();
   auto width = [&](int i) { return size_t(in.group_ptr[i + 1] - in.group_ptr[i]) * GWg; };
   auto slots = [&](int i) { return size_t(bins.pair_offset[i + 1] - bins.pair_offset[i]) * width(i); };
-  // group_off, the running sum of the Gaussians' slots, in one block of Gaussians per thread: each block's total,
-  // the totals' running sum, then each block's own (integer sums: the values of a serial pass; it was one, a
-  // serial stretch of the step at 16 threads). With it each Gaussian's rule and the most entries.
-  std::vector<size_t> block(size_t(std::max(1, omp_get_max_threads())) + 1, 0);
+  // group_off, the running sum of the Gaussians' slots, on the threads (it was a serial pass), and the rules.
+  parallel_offsets(n, GOF, slots, [&](int i, size_t off) {
+    rule[i] = {off - size_t(bins.pair_offset[i]) * width(i), width(i)};
+  });
   int max_entries = 0;
-#pragma omp parallel reduction(max : max_entries)
-  {
-    const int t = omp_get_thread_num(), nt = omp_get_num_threads();
-    const int i0 = int(long(n) * t / nt), i1 = int(long(n) * (t + 1) / nt);
-    size_t sum = 0;
-    for (int i = i0; i < i1; ++i) sum += slots(i);
-    block[size_t(t) + 1] = sum;
-#pragma omp barrier
-#pragma omp single
-    for (int b = 1; b <= nt; ++b) block[b] += block[b - 1];
-    size_t off = block[t];
-    for (int i = i0; i < i1; ++i) {
-      GOF[i] = off;
-      rule[i] = {off - size_t(bins.pair_offset[i]) * width(i), width(i)};
-      max_entries = std::max(max_entries, in.group_ptr[i + 1] - in.group_ptr[i]);
-      off += slots(i);
-    }
-    if (t == nt - 1) GOF[n] = off;
-  }
+#pragma omp parallel for schedule(static) reduction(max : max_entries)
+  for (int i = 0; i < n; ++i) max_entries = std::max(max_entries, in.group_ptr[i + 1] - in.group_ptr[i]);
   if (ws.pair_group.size() < GOF[n]) ws.pair_group.resize(GOF[n]);
   if (ws.pair_gslot.size() < size_t(bins.num_pairs)) ws.pair_gslot.resize(size_t(bins.num_pairs));
   size_t* slot = ws.pair_gslot.data();
