@@ -1,5 +1,6 @@
-// Parallel loops over independent items (views, files) with a progress bar. Exceptions cannot cross an
-// OpenMP region, so the first error of any item is kept and rethrown after the loop as an hgs::Error.
+// Parallel loops over independent items (views, files) with a progress bar (exceptions cannot cross an OpenMP
+// region, so the first error of any item is kept and rethrown after the loop as an hgs::Error), a parallel fill,
+// and a running sum of per-item counts on the threads.
 #pragma once
 #include <omp.h>
 
