@@ -92,6 +92,12 @@ class Adam {
 
 constexpr int kMaxRowUpdateDim = 4096;
 
+// Whether the row updates with bfloat16 moments run 16 columns per instruction (AVX-512) or 8 (AVX2); the default
+// is AVX-512 where the CPU has it. The same bits either way (tests compare them). set_adam_avx512(true) on a CPU
+// without AVX-512 changes nothing and returns false.
+bool set_adam_avx512(bool on);
+bool adam_avx512();
+
 template <class X, class RowGrad>
 void Adam::update_rows(AdamParam& p, X* value, int n, RowGrad&& row_grad) const {
   check_rows(p, n);

@@ -4,7 +4,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstring>
 #include <random>
+#include <type_traits>
 
 #include "core/error.h"
 #include "core/half.h"
@@ -207,6 +210,78 @@ TEST(Adam, Bf16SecondMomentDecaysUnderStochasticRounding) {
   for (int c = 0; c < d; ++c) mean += bf16_to_float(p.v16[c]) / d;
   EXPECT_NEAR(mean, std::pow(0.999, 1000), 0.02);
   EXPECT_EQ(float_to_bf16(1.f + 1e-3f), float_to_bf16(1.f));  // what round-to-nearest would do
+}
+
+// The bfloat16-moment row rule one element at a time, written out from adam.h and core/half.h: the reference the
+// 16- and 8-column loops are held to, bit for bit. x: the row's values (float or half), t: the update's step.
+template <class X>
+void bf16_row_reference(const AdamParam& p, X* x, long row, const float* g, uint16_t* m, uint16_t* v, long t, float b1,
+                        float b2) {
+  const float step = p.lr[0] / float(1.0 - std::pow(double(b1), double(t)));
+  const float inv_sqrt_bc2 = float(1.0 / std::sqrt(1.0 - std::pow(double(b2), double(t))));
+  const size_t o = size_t(row) * p.dim;
+  const uint32_t base = uint32_t(o) * 0x9E3779B9u ^ uint32_t(t) * 0x7FEB352Du;
+  for (int c = 0; c < p.dim; ++c) {
+    const float gc = g[c];
+    const float mi = std::fma(b1, bf16_to_float(m[o + c]), (1 - b1) * gc);
+    const float vi = std::fma(b2, bf16_to_float(v[o + c]), (1 - b2) * (gc * gc));
+    const uint32_t r = hash32(base + uint32_t(c) * 0x9E3779B9u);
+    m[o + c] = float_to_bf16_stochastic(mi, r);
+    v[o + c] = float_to_bf16_stochastic(vi, r >> 16);
+    const float den = std::fma(std::sqrt(vi), inv_sqrt_bc2, p.eps);
+    if constexpr (std::is_same_v<X, float>) {
+      x[o + c] = x[o + c] - (step * mi) / den;
+    } else {
+      const float nx = half_to_float(x[o + c]) - (step * mi) / den;
+      x[o + c] = float_to_half_stochastic(nx, (r * 0x9E3779B1u) >> 19);
+    }
+  }
+}
+
+template <class X>
+void check_bf16_rows(bool avx512) {
+  // 3 rows of 53 columns: three blocks of 16 (the AVX-512 loop), of which the AVX2 loop takes the same blocks in
+  // halves, and a tail of 5 (scalar); gradients from 1e-6 to 10, zeros, and values in float or half.
+  const int n = 3, d = 53;
+  Adam a;
+  AdamParam& p = a.add("x", d, n, 2e-3f, true);
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<float> u(-1.f, 1.f);
+  std::vector<X> x(size_t(n) * d);
+  for (auto& e : x) {
+    if constexpr (std::is_same_v<X, float>) e = u(rng);
+    else e = float_to_half(u(rng));
+  }
+  std::vector<X> xr = x;
+  std::vector<uint16_t> mr = p.m16, vr = p.v16;
+  std::vector<float> g(d);
+  for (long t = 1; t <= 40; ++t)
+    for (long row = 0; row < n; ++row) {
+      for (int c = 0; c < d; ++c) g[c] = (c + row + t) % 7 == 0 ? 0.f : u(rng) * std::pow(10.f, float(c % 8) - 6);
+      // update_row advances the parameter's step: rows take turns, so the row's update is step p.step + 1.
+      const long ts = p.step + 1;
+      a.update_row(p, x.data(), row, g.data());
+      bf16_row_reference(p, xr.data(), row, g.data(), mr.data(), vr.data(), ts, a.beta1, a.beta2);
+    }
+  for (size_t k = 0; k < x.size(); ++k) {
+    ASSERT_EQ(p.m16[k], mr[k]) << (avx512 ? "avx512" : "avx2") << " m, element " << k;
+    ASSERT_EQ(p.v16[k], vr[k]) << (avx512 ? "avx512" : "avx2") << " v, element " << k;
+    ASSERT_EQ(std::memcmp(&x[k], &xr[k], sizeof(X)), 0) << (avx512 ? "avx512" : "avx2") << " x, element " << k;
+  }
+}
+
+TEST(Adam, Bf16RowLoopsGiveTheElementRulesBits) {
+  // The 16-column (AVX-512) and 8-column (AVX2) loops against the rule written out per element.
+  const bool had = adam_avx512();
+  for (bool wide : {false, true}) {
+    if (!set_adam_avx512(wide)) {
+      std::printf("[  NOTE    ] no AVX-512 on this CPU: the 16-column loop is not checked\n");
+      continue;
+    }
+    check_bf16_rows<float>(wide);
+    check_bf16_rows<uint16_t>(wide);
+  }
+  set_adam_avx512(had);
 }
 
 TEST(Adam, Bf16GatherAndReset) {
