@@ -304,33 +304,36 @@ bool adam_avx512() { return adam_avx512_flag().load(std::memory_order_relaxed); 
 template <class X>
 void Adam::update_row(AdamParam& p, X* value, long row, const float* g) const {
   check_rows(p, int(p.rows()));
-  p.nonfinite += row_kernel(p, value, row, g, ++p.step);
+  p.nonfinite += row_kernel(p, value, row, g, row_step(p, ++p.step));
+}
+
+Adam::RowStep Adam::row_step(const AdamParam& p, long ts) const {
+  const double t = double(std::max(1L, ts));
+  return {ts, p.lr[0] * lr_scale / float(1.0 - std::pow(double(beta1), t)),
+          float(1.0 / std::sqrt(1.0 - std::pow(double(beta2), t)))};
 }
 
 template <class X>
-int Adam::row_kernel(AdamParam& p, X* value, long row, const float* g, long ts) const {
+int Adam::row_kernel(AdamParam& p, X* value, long row, const float* g, const RowStep& s) const {
   const int d = p.dim;
   int bad = 0;
 #pragma omp simd reduction(+ : bad)
   for (int c = 0; c < d; ++c) bad += nonfinite_bit(g[c]);
-  const double t = double(std::max(1L, ts));
-  const float step = p.lr[0] * lr_scale / float(1.0 - std::pow(double(beta1), t));
-  const float inv_sqrt_bc2 = float(1.0 / std::sqrt(1.0 - std::pow(double(beta2), t)));
   const size_t o = size_t(row) * d;
-  const uint32_t base = uint32_t(o) * 0x9E3779B9u ^ uint32_t(ts) * 0x7FEB352Du;
+  const uint32_t base = uint32_t(o) * 0x9E3779B9u ^ uint32_t(s.t) * 0x7FEB352Du;
   if (p.bf16)
-    adam_row(p, value + o, g, nullptr, nullptr, p.m16.data() + o, p.v16.data() + o, beta1, beta2, p.eps, step,
-             inv_sqrt_bc2, base);
+    adam_row(p, value + o, g, nullptr, nullptr, p.m16.data() + o, p.v16.data() + o, beta1, beta2, p.eps, s.step,
+             s.inv_sqrt_bc2, base);
   else
-    adam_row(p, value + o, g, p.m.data() + o, p.v.data() + o, nullptr, nullptr, beta1, beta2, p.eps, step, inv_sqrt_bc2,
-             base);
+    adam_row(p, value + o, g, p.m.data() + o, p.v.data() + o, nullptr, nullptr, beta1, beta2, p.eps, s.step,
+             s.inv_sqrt_bc2, base);
   return bad;
 }
 
 template void Adam::update_row<float>(AdamParam&, float*, long, const float*) const;
 template void Adam::update_row<uint16_t>(AdamParam&, uint16_t*, long, const float*) const;
-template int Adam::row_kernel<float>(AdamParam&, float*, long, const float*, long) const;
-template int Adam::row_kernel<uint16_t>(AdamParam&, uint16_t*, long, const float*, long) const;
+template int Adam::row_kernel<float>(AdamParam&, float*, long, const float*, const RowStep&) const;
+template int Adam::row_kernel<uint16_t>(AdamParam&, uint16_t*, long, const float*, const RowStep&) const;
 
 void Adam::gather(const std::vector<int>& src, const std::vector<char>& fresh) {
   for (auto& p : params) {

@@ -73,10 +73,16 @@ class Adam {
   // One step that updates a single row (g [dim] is its gradient; advances p.step). X = float or uint16_t.
   template <class X>
   void update_row(AdamParam& p, X* value, long row, const float* g) const;
-  // The per-row kernel at step t (does not advance p.step). Returns the number of non-finite values in g (the
+  // A row update's factors at step t: lr / (1 - b1^t), 1 / sqrt(1 - b2^t) (the same for every row of a step).
+  struct RowStep {
+    long t;
+    float step, inv_sqrt_bc2;
+  };
+  RowStep row_step(const AdamParam& p, long t) const;
+  // The per-row kernel at step s.t (does not advance p.step). Returns the number of non-finite values in g (the
   // caller adds them to p.nonfinite).
   template <class X>
-  int row_kernel(AdamParam& p, X* value, long row, const float* g, long t) const;
+  int row_kernel(AdamParam& p, X* value, long row, const float* g, const RowStep& s) const;
   // Row i of every per-Gaussian moment array becomes old row src[i], or zeros when fresh[i] (fresh may be
   // empty = none). Array parameters are left alone.
   void gather(const std::vector<int>& src, const std::vector<char>& fresh);
@@ -101,14 +107,14 @@ bool adam_avx512();
 template <class X, class RowGrad>
 void Adam::update_rows(AdamParam& p, X* value, int n, RowGrad&& row_grad) const {
   check_rows(p, n);
-  const long t = ++p.step;
+  const RowStep s = row_step(p, ++p.step);
   long bad = 0;
 #pragma omp parallel reduction(+ : bad)
   {
     alignas(64) float g[kMaxRowUpdateDim];
 #pragma omp for schedule(dynamic, 64)
     for (long i = 0; i < n; ++i)
-      if (row_grad(i, g)) bad += row_kernel(p, value, i, g, t);
+      if (row_grad(i, g)) bad += row_kernel(p, value, i, g, s);
   }
   p.nonfinite += bad;
 }
