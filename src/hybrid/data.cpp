@@ -75,11 +75,12 @@ HybridData load_hybrid_data(const Scene& scene, const std::vector<int>& idx, con
     std::vector<float> grid = *scene.load_feature_grid(idx[j], gh, gw, D);  // read once, used twice below
     if (D != d.dim)
       fail("{}: feature dimension {} differs from the first view's {}", v.feature_path->string(), D, d.dim);
-    const std::vector<float> feat =
-        (gh == v.height && gw == v.width) ? grid : upsample_bilinear(grid.data(), gh, gw, D, v.height, v.width);
     hv.zref.assign(size_t(d.num_labels) * D, 0.f);
     hv.area.assign(d.num_labels, 0.f);
-    pool_reference(feat.data(), mv.labels, D, d.num_labels, hv.zref.data(), hv.area.data());
+    if (gh == v.height && gw == v.width)
+      pool_reference(grid.data(), mv.labels, D, d.num_labels, hv.zref.data(), hv.area.data());
+    else  // the grid upsampled to the view one pixel at a time (no [H, W, D] map)
+      pool_reference_upsampled(grid.data(), gh, gw, mv.labels, D, d.num_labels, hv.zref.data(), hv.area.data());
     for (int l = 0; l < d.num_labels; ++l) {
       if (hv.area[l] > 0) hv.present.push_back(l);
       if (l > 0 && hv.area[l] >= cfg.min_mask_pixels) hv.fg.push_back(l);

@@ -307,24 +307,9 @@ int Scene::num_objects() const {
 
 std::vector<float> upsample_bilinear(const float* src, int h, int w, int d, int H, int W) {
   std::vector<float> out(size_t(H) * W * d);
-  const float sy = float(h) / H, sx = float(w) / W;
-  for (int y = 0; y < H; ++y) {
-    float fy = std::clamp((y + 0.5f) * sy - 0.5f, 0.f, float(h - 1));
-    int y0 = static_cast<int>(fy), y1 = std::min(y0 + 1, h - 1);
-    float ay = fy - y0;
-    for (int x = 0; x < W; ++x) {
-      float fx = std::clamp((x + 0.5f) * sx - 0.5f, 0.f, float(w - 1));
-      int x0 = static_cast<int>(fx), x1 = std::min(x0 + 1, w - 1);
-      float ax = fx - x0;
-      const float* p00 = src + (size_t(y0) * w + x0) * d;
-      const float* p01 = src + (size_t(y0) * w + x1) * d;
-      const float* p10 = src + (size_t(y1) * w + x0) * d;
-      const float* p11 = src + (size_t(y1) * w + x1) * d;
-      float w00 = (1 - ay) * (1 - ax), w01 = (1 - ay) * ax, w10 = ay * (1 - ax), w11 = ay * ax;
-      float* o = out.data() + (size_t(y) * W + x) * d;
-      for (int c = 0; c < d; ++c) o[c] = w00 * p00[c] + w01 * p01[c] + w10 * p10[c] + w11 * p11[c];
-    }
-  }
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x)
+      bilinear_sample(bilinear_tap(src, h, w, d, H, W, x, y), d, out.data() + (size_t(y) * W + x) * d);
   return out;
 }
 

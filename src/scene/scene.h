@@ -3,6 +3,8 @@
 // that every listed file exists; pixels are loaded per view on demand.
 #pragma once
 #include <Eigen/Core>
+#include <algorithm>
+#include <cstddef>
 #include <filesystem>
 #include <map>
 #include <optional>
@@ -75,5 +77,33 @@ float scene_extent(const Scene& scene, const std::vector<int>& views = {});
 
 // Bilinear resampling of a [h, w, D] grid to [H, W, D], aligning pixel centres (align_corners = false).
 std::vector<float> upsample_bilinear(const float* src, int h, int w, int d, int H, int W);
+
+// One pixel of upsample_bilinear without the [H, W, D] output: the grid rows of the four corners and their
+// weights (bilinear_tap), and the pixel's D values from them (bilinear_sample), the same operations, so the same
+// bits. For passes that reduce the upsampled map as they go (hybrid/assign.h: pool_reference_upsampled).
+struct BilinearTap {
+  const float *p00, *p01, *p10, *p11;
+  float w00, w01, w10, w11;
+};
+inline BilinearTap bilinear_tap(const float* src, int h, int w, int d, int H, int W, int x, int y) {
+  const float sy = float(h) / H, sx = float(w) / W;
+  const float fy = std::clamp((y + 0.5f) * sy - 0.5f, 0.f, float(h - 1));
+  const int y0 = static_cast<int>(fy), y1 = std::min(y0 + 1, h - 1);
+  const float ay = fy - y0;
+  const float fx = std::clamp((x + 0.5f) * sx - 0.5f, 0.f, float(w - 1));
+  const int x0 = static_cast<int>(fx), x1 = std::min(x0 + 1, w - 1);
+  const float ax = fx - x0;
+  return {src + (size_t(y0) * w + x0) * d,
+          src + (size_t(y0) * w + x1) * d,
+          src + (size_t(y1) * w + x0) * d,
+          src + (size_t(y1) * w + x1) * d,
+          (1 - ay) * (1 - ax),
+          (1 - ay) * ax,
+          ay * (1 - ax),
+          ay * ax};
+}
+inline void bilinear_sample(const BilinearTap& t, int d, float* out) {  // out [d]
+  for (int c = 0; c < d; ++c) out[c] = t.w00 * t.p00[c] + t.w01 * t.p01[c] + t.w10 * t.p10[c] + t.w11 * t.p11[c];
+}
 
 }  // namespace hgs

@@ -2,16 +2,20 @@
 // out by hand in the comments (never by calling the function under test): the confidence filter of eq. 2
 // (apply_confidence, confident_pixels), the no-OF ablation's single-view hard association
 // (single_view_assignment) and the mask pooling of the reference features (pool_reference, eq. 9 reference
-// side).
+// side; its upsampling form against pool_reference of the upsampled map).
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <limits>
+#include <random>
+#include <string>
 #include <vector>
 
 #include "core/error.h"
 #include "hybrid/assign.h"
 #include "hybrid/fusion.h"
+#include "scene/scene.h"
 
 using namespace hgs;
 using namespace hgs::hybrid;
@@ -111,6 +115,37 @@ TEST(PoolReference, SumsFeaturesPerLabelThenNormalisesAndAbsentLabelsAreZero) {
   const double want[8] = {3 / s34, 5 / s34, 1 / s5, 2 / s5, 0, 0, -1, 0};
   for (int i = 0; i < 8; ++i) EXPECT_NEAR(z[i], want[i], 1e-6) << "z[" << i / 2 << "][" << i % 2 << "]";
   EXPECT_EQ(area, (std::vector<float>{2, 2, 0, 1}));  // pixel counts; label 7's pixel is counted nowhere
+}
+
+TEST(PoolReference, UpsampledOnePixelAtATimeGivesThePoolOfTheUpsampledMap) {
+  // pool_reference_upsampled (no [H, W, D] map) against pool_reference of upsample_bilinear's map, bit for bit:
+  // grids smaller than the image by non-integer factors, a one-cell-high grid, a grid larger than the image
+  // (downsampling), labels >= L (skipped) and an absent label; random features and labels.
+  struct Case {
+    int gh, gw, H, W, D, L;
+  };
+  const Case cases[] = {{28, 37, 240, 320, 40, 6}, {1, 5, 7, 11, 3, 3}, {9, 13, 5, 6, 17, 4}, {7, 7, 7, 7, 8, 2}};
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(-1.f, 1.f);
+  for (const Case& c : cases) {
+    std::vector<float> grid(size_t(c.gh) * c.gw * c.D);
+    for (float& x : grid) x = u(rng);
+    LabelMap labels(c.W, c.H);
+    // Label L - 1 never drawn (absent); L + 1 drawn (>= L: skipped by both).
+    for (uint16_t& l : labels.v) l = uint16_t(std::uniform_int_distribution<int>(0, c.L + 1)(rng));
+    for (uint16_t& l : labels.v)
+      if (l == c.L - 1) l = 0;
+    const std::vector<float> map = upsample_bilinear(grid.data(), c.gh, c.gw, c.D, c.H, c.W);
+    std::vector<float> z0(size_t(c.L) * c.D), a0(c.L), z1(z0.size(), 7.f), a1(c.L, 7.f);
+    pool_reference(map.data(), labels, c.D, c.L, z0.data(), a0.data());
+    pool_reference_upsampled(grid.data(), c.gh, c.gw, labels, c.D, c.L, z1.data(), a1.data());
+    const std::string at =
+        std::to_string(c.gh) + "x" + std::to_string(c.gw) + " -> " + std::to_string(c.H) + "x" + std::to_string(c.W);
+    EXPECT_EQ(a1, a0) << at;
+    ASSERT_EQ(std::memcmp(z1.data(), z0.data(), z0.size() * sizeof(float)), 0) << at;
+    EXPECT_EQ(a0[c.L - 1], 0.f) << at;
+    EXPECT_GT(a0[0], 0.f) << at;
+  }
 }
 
 TEST(PoolReference, ZeroSumGivesAZeroRowButKeepsTheArea) {
