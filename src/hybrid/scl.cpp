@@ -74,31 +74,8 @@ T info_nce(const T* p, int D, const T* refs, int R, int positive, T tau2, T* dp,
 
 template <class T>
 T cosine_loss(const T* S, int stride, const T* R, size_t P, int D, T* grad, T scale) {
-  double loss = 0;
-  const T g = scale / T(P);
-#pragma omp parallel for reduction(+ : loss) schedule(static)
-  for (size_t p = 0; p < P; ++p) {
-    const T* s = S + p * stride;
-    const T* r = R + p * D;
-    double ss = 0, rr = 0, sr = 0;
-    for (int d = 0; d < D; ++d) {
-      ss += double(s[d]) * s[d];
-      rr += double(r[d]) * r[d];
-      sr += double(s[d]) * r[d];
-    }
-    if (ss <= 1e-30 || rr <= 1e-30) {
-      loss += 1;
-      continue;
-    }
-    const double ns = std::sqrt(ss), nr = std::sqrt(rr), c = sr / (ns * nr);
-    loss += 1 - c;
-    if (grad) {
-      T* gp = grad + p * stride;
-      // d(1 - cos)/dS = -(R / (|S| |R|) - cos S / |S|^2)
-      for (int d = 0; d < D; ++d) gp[d] += T(-double(g) * (r[d] / (ns * nr) - c * s[d] / ss));
-    }
-  }
-  return T(loss / double(P));
+  return cosine_loss_rows(
+      S, stride, [R, D](size_t p, T*) { return R + p * D; }, P, D, grad, scale);
 }
 
 template float cosine_loss<float>(const float*, int, const float*, size_t, int, float*, float);

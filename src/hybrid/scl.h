@@ -16,6 +16,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -132,6 +133,42 @@ T info_nce(const T* p, int D, const T* refs, int R, int positive, T tau2, T* dp,
 // grad (may be null) receives scale * dL/dS added into [P, stride].
 template <class T>
 T cosine_loss(const T* S, int stride, const T* R, size_t P, int D, T* grad, T scale);
+
+// cosine_loss with R produced one pixel at a time: ref(p, buf) returns R(p) [D], filling buf [D] (a thread's
+// scratch) or pointing elsewhere; no [P, D] map is needed (the no-SCL ablation samples its feature grid per
+// pixel). cosine_loss is this with ref = the rows of R: the same operations, the same bits.
+template <class T, class RefRow>
+T cosine_loss_rows(const T* S, int stride, RefRow&& ref, size_t P, int D, T* grad, T scale) {
+  double loss = 0;
+  const T g = scale / T(P);
+#pragma omp parallel reduction(+ : loss)
+  {
+    std::vector<T> buf(static_cast<size_t>(D));
+#pragma omp for schedule(static)
+    for (size_t p = 0; p < P; ++p) {
+      const T* s = S + p * stride;
+      const T* r = ref(p, buf.data());
+      double ss = 0, rr = 0, sr = 0;
+      for (int d = 0; d < D; ++d) {
+        ss += double(s[d]) * s[d];
+        rr += double(r[d]) * r[d];
+        sr += double(s[d]) * r[d];
+      }
+      if (ss <= 1e-30 || rr <= 1e-30) {
+        loss += 1;
+        continue;
+      }
+      const double ns = std::sqrt(ss), nr = std::sqrt(rr), c = sr / (ns * nr);
+      loss += 1 - c;
+      if (grad) {
+        T* gp = grad + p * stride;
+        // d(1 - cos)/dS = -(R / (|S| |R|) - cos S / |S|^2)
+        for (int d = 0; d < D; ++d) gp[d] += T(-double(g) * (r[d] / (ns * nr) - c * s[d] / ss));
+      }
+    }
+  }
+  return T(loss / double(P));
+}
 
 // L2-normalise v [D] in place; returns the norm before.
 template <class T>

@@ -129,9 +129,15 @@ SemanticValues SemanticPass::contrastive(int u, int n, HybridFields& h, const fl
 SemanticValues SemanticPass::cosine(int u, int W, int H, const float* extra, int C, int o, float* d_extra) {
   // Full-scene semantic learning: mean over pixels of 1 - cos(S(p), S_ref(p)), S = sum_n f_n alpha T.
   const HybridView& hv = data_->views[u];
-  sref_ = upsample_bilinear(hv.patch_features.data(), hv.ph, hv.pw, D_, H, W);
+  // S_ref(p): the view's feature grid upsampled to the image one pixel at a time (no [H, W, D] map per step).
+  const float* grid = hv.patch_features.data();
+  const int gh = hv.ph, gw = hv.pw, D = D_;
+  auto ref = [=](size_t p, float* buf) {
+    bilinear_pixel(grid, gh, gw, D, H, W, p, buf);
+    return static_cast<const float*>(buf);
+  };
   SemanticValues out;
-  out.loss = cosine_loss(&extra[o], C, sref_.data(), size_t(W) * H, D_, &d_extra[o], cfg_.lambda_sem);
+  out.loss = cosine_loss_rows(&extra[o], C, ref, size_t(W) * H, D_, &d_extra[o], cfg_.lambda_sem);
   return out;
 }
 

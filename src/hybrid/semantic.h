@@ -71,7 +71,6 @@ class SemanticPass {
   std::vector<float> pixel_w_;     // [H, W, Jf]
   std::vector<float> P_, dP_, G_;  // [Jf, D] predictions, their gradient, dP / (m + eps)
   std::vector<float> refs_;        // [R, D] InfoNCE candidates of one anchor
-  std::vector<float> sref_;        // [H, W, D] (no-SCL ablation)
   // One view's f gradient in factored form: df_n = sum_j q_{n,objs[j]} a_{n,j} G_j.
   struct FactoredView {
     std::vector<int> objs;  // [Jf]

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <functional>
 #include <random>
 
@@ -17,6 +18,7 @@
 #include "model/render_inputs.h"
 #include "render/camera_from_view.h"
 #include "render/renderer.h"
+#include "scene/scene.h"
 
 using namespace hgs;
 using namespace hgs::hybrid;
@@ -692,6 +694,42 @@ TEST(Scl, NoSclCosineLossGradient) {
   // Parallel vectors give zero loss.
   std::vector<double> A = {1, 2, 3}, B = {2, 4, 6};
   EXPECT_NEAR(cosine_loss(A.data(), 3, B.data(), 1, 3, (double*)nullptr, 1.0), 0.0, 1e-12);
+}
+
+TEST(Scl, NoSclCosineLossOnTheGridSampledPerPixelIsTheLossOnTheUpsampledMap) {
+  // The no-SCL ablation samples S_ref from the feature grid one pixel at a time (cosine_loss_rows with scene.h's
+  // bilinear_tap / bilinear_sample): loss and gradient bit for bit those of cosine_loss on upsample_bilinear's
+  // map, at 1 and 3 threads; a pixel with zero features counts 1 and takes no gradient in both.
+  std::mt19937 rng(8);
+  std::uniform_real_distribution<float> u(-1.f, 1.f);
+  const int gh = 5, gw = 7, H = 13, W = 17, D = 11, stride = 14;
+  const size_t P = size_t(H) * W;
+  std::vector<float> grid(size_t(gh) * gw * D), S(P * stride);
+  for (float& x : grid) x = u(rng);
+  for (float& x : S) x = u(rng);
+  for (int d = 0; d < D; ++d) S[40 * stride + d] = 0.f;
+  const std::vector<float> map = upsample_bilinear(grid.data(), gh, gw, D, H, W);
+  auto ref = [&](size_t p, float* buf) {  // as SemanticPass::cosine samples it
+    bilinear_pixel(grid.data(), gh, gw, D, H, W, p, buf);
+    return static_cast<const float*>(buf);
+  };
+  std::vector<float> px(D);
+  for (size_t p = 0; p < P; ++p) {
+    bilinear_pixel(grid.data(), gh, gw, D, H, W, p, px.data());
+    ASSERT_EQ(std::memcmp(px.data(), &map[p * D], D * sizeof(float)), 0) << "pixel " << p;
+  }
+  const int before = omp_get_max_threads();
+  for (int threads : {1, 3}) {
+    omp_set_num_threads(threads);
+    std::vector<float> g0(P * stride, 0.5f), g1 = g0;
+    const float l0 = cosine_loss(S.data(), stride, map.data(), P, D, g0.data(), 0.7f);
+    const float l1 = cosine_loss_rows(S.data(), stride, ref, P, D, g1.data(), 0.7f);
+    EXPECT_NEAR(l1, l0, 1e-6f * l0) << threads << " threads";  // the threads' partial sums meet in any order
+    EXPECT_GT(l0, 0.f);
+    EXPECT_EQ(g1, g0) << threads << " threads";
+    for (int d = 0; d < stride; ++d) EXPECT_EQ(g1[40 * stride + d], 0.5f);
+  }
+  omp_set_num_threads(before);
 }
 
 TEST(Bro, ScaleInvariantGradientIsTheGradientAtAFixedNorm) {
