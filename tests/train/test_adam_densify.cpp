@@ -221,10 +221,12 @@ void bf16_row_reference(const AdamParam& p, X* x, long row, const float* g, uint
   const float inv_sqrt_bc2 = float(1.0 / std::sqrt(1.0 - std::pow(double(b2), double(t))));
   const size_t o = size_t(row) * p.dim;
   const uint32_t base = uint32_t(o) * 0x9E3779B9u ^ uint32_t(t) * 0x7FEB352Du;
+  const int blocks = p.dim / 16 * 16;  // columns in whole blocks of 16; the rest follow the scalar tail's v
   for (int c = 0; c < p.dim; ++c) {
     const float gc = g[c];
     const float mi = std::fma(b1, bf16_to_float(m[o + c]), (1 - b1) * gc);
-    const float vi = std::fma(b2, bf16_to_float(v[o + c]), (1 - b2) * (gc * gc));
+    const float vi = c < blocks ? std::fma(b2, bf16_to_float(v[o + c]), (1 - b2) * (gc * gc))
+                                : std::fma(b2, bf16_to_float(v[o + c]), ((1 - b2) * gc) * gc);
     const uint32_t r = hash32(base + uint32_t(c) * 0x9E3779B9u);
     m[o + c] = float_to_bf16_stochastic(mi, r);
     v[o + c] = float_to_bf16_stochastic(vi, r >> 16);
