@@ -138,8 +138,9 @@ inline void store_x8(uint16_t* x, __m256 v, __m256i r) {
 #if defined(__GNUC__) && !defined(__clang__) && defined(__AVX2__)
 #define HGS_ADAM_AVX512 1
 // The bfloat16-moment loop below, 16 columns per instruction with AVX-512 (chosen at run time when the CPU has
-// it): the same operations lane for lane as the 8-wide loop and the scalar tail (the lane seeds, the hash, the
-// roundings), so the same bits; only whole blocks of 16 columns. Returns the first column it did not update.
+// it): the same operations lane for lane as the 8-wide loop (the lane seeds, the hash, the roundings), so the same
+// bits; only whole blocks of 16 columns. Returns the first column it did not update. (Its helpers are the 8-wide
+// ones at twice the width: the intrinsics differ by type, so they are written out twice.)
 #pragma GCC push_options
 #pragma GCC target("avx512f,avx512bw,avx512vl,avx512dq")
 // GCC 12's AVX-512 conversion intrinsics start from a self-initialised "undefined" vector, which
