@@ -139,31 +139,53 @@ T cosine_loss(const T* S, int stride, const T* R, size_t P, int D, T* grad, T sc
 // pixel). cosine_loss is this with ref = the rows of R: the same operations, the same bits.
 template <class T, class RefRow>
 T cosine_loss_rows(const T* S, int stride, RefRow&& ref, size_t P, int D, T* grad, T scale) {
+  // Four pixels at a time: their twelve sums are independent chains (one pixel's three would wait on the adder's
+  // latency), each still summed over d in order, so every pixel's values are those of a pixel-by-pixel loop.
+  constexpr int kPix = 4;
   double loss = 0;
   const T g = scale / T(P);
+  const size_t groups = (P + kPix - 1) / kPix;
 #pragma omp parallel reduction(+ : loss)
   {
-    std::vector<T> buf(static_cast<size_t>(D));
+    std::vector<T> buf(static_cast<size_t>(kPix) * D);
 #pragma omp for schedule(static)
-    for (size_t p = 0; p < P; ++p) {
-      const T* s = S + p * stride;
-      const T* r = ref(p, buf.data());
-      double ss = 0, rr = 0, sr = 0;
-      for (int d = 0; d < D; ++d) {
-        ss += double(s[d]) * s[d];
-        rr += double(r[d]) * r[d];
-        sr += double(s[d]) * r[d];
+    for (size_t q = 0; q < groups; ++q) {
+      const size_t p0 = q * kPix;
+      const int np = int(std::min<size_t>(kPix, P - p0));
+      const T* s[kPix];
+      const T* r[kPix];
+      double ss[kPix] = {}, rr[kPix] = {}, sr[kPix] = {};
+      for (int k = 0; k < np; ++k) {
+        s[k] = S + (p0 + k) * stride;
+        r[k] = ref(p0 + k, buf.data() + size_t(k) * D);
       }
-      if (ss <= 1e-30 || rr <= 1e-30) {
-        loss += 1;
-        continue;
+      if (np == kPix) {
+        for (int d = 0; d < D; ++d)
+          for (int k = 0; k < kPix; ++k) {
+            ss[k] += double(s[k][d]) * s[k][d];
+            rr[k] += double(r[k][d]) * r[k][d];
+            sr[k] += double(s[k][d]) * r[k][d];
+          }
+      } else {
+        for (int k = 0; k < np; ++k)
+          for (int d = 0; d < D; ++d) {
+            ss[k] += double(s[k][d]) * s[k][d];
+            rr[k] += double(r[k][d]) * r[k][d];
+            sr[k] += double(s[k][d]) * r[k][d];
+          }
       }
-      const double ns = std::sqrt(ss), nr = std::sqrt(rr), c = sr / (ns * nr);
-      loss += 1 - c;
-      if (grad) {
-        T* gp = grad + p * stride;
-        // d(1 - cos)/dS = -(R / (|S| |R|) - cos S / |S|^2)
-        for (int d = 0; d < D; ++d) gp[d] += T(-double(g) * (r[d] / (ns * nr) - c * s[d] / ss));
+      for (int k = 0; k < np; ++k) {
+        if (ss[k] <= 1e-30 || rr[k] <= 1e-30) {
+          loss += 1;
+          continue;
+        }
+        const double ns = std::sqrt(ss[k]), nr = std::sqrt(rr[k]), c = sr[k] / (ns * nr);
+        loss += 1 - c;
+        if (grad) {
+          T* gp = grad + (p0 + k) * stride;
+          // d(1 - cos)/dS = -(R / (|S| |R|) - cos S / |S|^2)
+          for (int d = 0; d < D; ++d) gp[d] += T(-double(g) * (r[k][d] / (ns * nr) - c * s[k][d] / ss[k]));
+        }
       }
     }
   }

@@ -698,8 +698,8 @@ TEST(Scl, NoSclCosineLossGradient) {
 
 TEST(Scl, NoSclCosineLossOnTheGridSampledPerPixelIsTheLossOnTheUpsampledMap) {
   // The no-SCL ablation samples S_ref from the feature grid one pixel at a time (cosine_loss_rows with scene.h's
-  // bilinear_tap / bilinear_sample): loss and gradient bit for bit those of cosine_loss on upsample_bilinear's
-  // map, at 1 and 3 threads; a pixel with zero features counts 1 and takes no gradient in both.
+  // bilinear_pixel): gradient bit for bit that of cosine_loss on upsample_bilinear's map and of the loss written
+  // out pixel by pixel, at 1 and 3 threads; a pixel with zero features counts 1 and takes no gradient.
   std::mt19937 rng(8);
   std::uniform_real_distribution<float> u(-1.f, 1.f);
   const int gh = 5, gw = 7, H = 13, W = 17, D = 11, stride = 14;
@@ -718,14 +718,54 @@ TEST(Scl, NoSclCosineLossOnTheGridSampledPerPixelIsTheLossOnTheUpsampledMap) {
     bilinear_pixel(grid.data(), gh, gw, D, H, W, p, px.data());
     ASSERT_EQ(std::memcmp(px.data(), &map[p * D], D * sizeof(float)), 0) << "pixel " << p;
   }
+  // The loss written out one pixel at a time (the loops take four pixels together: P = 221 leaves one over).
+  std::vector<float> gref(P * stride, 0.5f);
+  double lref = 0;
+  for (size_t p = 0; p < P; ++p) {
+    const float *s = &S[p * stride], *r = &map[p * D];
+    double ss = 0, rr = 0, sr = 0;
+    for (int d = 0; d < D; ++d) {
+      ss += double(s[d]) * s[d];
+      rr += double(r[d]) * r[d];
+      sr += double(s[d]) * r[d];
+    }
+    if (ss <= 1e-30 || rr <= 1e-30) {
+      lref += 1;
+      continue;
+    }
+    const double ns = std::sqrt(ss), nr = std::sqrt(rr), c = sr / (ns * nr);
+    lref += 1 - c;
+    for (int d = 0; d < D; ++d)
+      gref[p * stride + d] += float(-double(0.7f / float(P)) * (r[d] / (ns * nr) - c * s[d] / ss));
+  }
+  // In double the gradient shows any change of the sums' order (in float it mostly rounds away).
+  std::vector<double> Sd(S.begin(), S.end()), Rd(map.begin(), map.end()), gdref(P * stride, 0.25);
+  for (size_t p = 0; p < P; ++p) {
+    const double *s = &Sd[p * stride], *r = &Rd[p * D];
+    double ss = 0, rr = 0, sr = 0;
+    for (int d = 0; d < D; ++d) {
+      ss += s[d] * s[d];
+      rr += r[d] * r[d];
+      sr += s[d] * r[d];
+    }
+    if (ss <= 1e-30 || rr <= 1e-30) continue;
+    const double ns = std::sqrt(ss), nr = std::sqrt(rr), c = sr / (ns * nr);
+    for (int d = 0; d < D; ++d) gdref[p * stride + d] += -(0.7 / double(P)) * (r[d] / (ns * nr) - c * s[d] / ss);
+  }
   const int before = omp_get_max_threads();
   for (int threads : {1, 3}) {
     omp_set_num_threads(threads);
+    std::vector<double> gd(P * stride, 0.25);
+    cosine_loss(Sd.data(), stride, Rd.data(), P, D, gd.data(), 0.7);
+    EXPECT_EQ(gd, gdref) << threads << " threads, double";
     std::vector<float> g0(P * stride, 0.5f), g1 = g0;
     const float l0 = cosine_loss(S.data(), stride, map.data(), P, D, g0.data(), 0.7f);
     const float l1 = cosine_loss_rows(S.data(), stride, ref, P, D, g1.data(), 0.7f);
-    EXPECT_NEAR(l1, l0, 1e-6f * l0) << threads << " threads";  // the threads' partial sums meet in any order
+    // The threads' partial sums meet in any order: the loss to 1e-6.
+    EXPECT_NEAR(l1, l0, 1e-6f * l0) << threads << " threads";
+    EXPECT_NEAR(l0, float(lref / double(P)), 1e-6f * l0) << threads << " threads";
     EXPECT_GT(l0, 0.f);
+    EXPECT_EQ(g0, gref) << threads << " threads";
     EXPECT_EQ(g1, g0) << threads << " threads";
     for (int d = 0; d < stride; ++d) EXPECT_EQ(g1[40 * stride + d], 0.5f);
   }
