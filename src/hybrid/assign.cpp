@@ -1,9 +1,9 @@
 #include "hybrid/assign.h"
 
-#include "scene/scene.h"
-
 #include <algorithm>
 #include <cmath>
+
+#include "scene/scene.h"
 
 namespace hgs::hybrid {
 
@@ -23,8 +23,21 @@ void single_view_assignment(const ObservationTable& tab, int L, float* q) {
 
 namespace {
 
-// z [L, D] from the sums acc [L, D] (each label's sum normalised to unit length; 0 for an absent label).
-void normalise_sums(const std::vector<double>& acc, int D, int L, float* z) {
+// Eq. 9's pooling with each pixel's features from row(p, buf) (a pointer to its D values; buf [D] is scratch):
+// per label the sum over its pixels in pixel order (double), normalised to unit length (0 for an absent label).
+template <class Row>
+void pool_rows(const LabelMap& labels, int D, int L, Row&& row, float* z, float* area) {
+  std::fill(area, area + L, 0.f);
+  std::vector<double> acc(size_t(L) * D, 0.0);
+  std::vector<float> buf(static_cast<size_t>(D));
+  for (size_t p = 0; p < labels.v.size(); ++p) {
+    const int l = labels.v[p];
+    if (l >= L) continue;
+    area[l] += 1;
+    const float* f = row(p, buf.data());
+    double* a = &acc[size_t(l) * D];
+    for (int d = 0; d < D; ++d) a[d] += f[d];
+  }
   for (int l = 0; l < L; ++l) {
     double s = 0;
     for (int d = 0; d < D; ++d) s += acc[size_t(l) * D + d] * acc[size_t(l) * D + d];
@@ -36,35 +49,20 @@ void normalise_sums(const std::vector<double>& acc, int D, int L, float* z) {
 }  // namespace
 
 void pool_reference(const float* features, const LabelMap& labels, int D, int L, float* z, float* area) {
-  std::fill(area, area + L, 0.f);
-  std::vector<double> acc(size_t(L) * D, 0.0);
-  for (size_t p = 0; p < labels.v.size(); ++p) {
-    const int l = labels.v[p];
-    if (l >= L) continue;
-    area[l] += 1;
-    const float* f = features + p * D;
-    double* a = &acc[size_t(l) * D];
-    for (int d = 0; d < D; ++d) a[d] += f[d];
-  }
-  normalise_sums(acc, D, L, z);
+  pool_rows(
+      labels, D, L, [&](size_t p, float*) { return features + p * D; }, z, area);
 }
 
 void pool_reference_upsampled(const float* grid, int gh, int gw, const LabelMap& labels, int D, int L, float* z,
                               float* area) {
-  std::fill(area, area + L, 0.f);
-  std::vector<double> acc(size_t(L) * D, 0.0);
-  std::vector<float> f(static_cast<size_t>(D));
   const int H = labels.height, W = labels.width;
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      const int l = labels.v[size_t(y) * W + x];
-      if (l >= L) continue;
-      area[l] += 1;
-      bilinear_sample(bilinear_tap(grid, gh, gw, D, H, W, x, y), D, f.data());
-      double* a = &acc[size_t(l) * D];
-      for (int d = 0; d < D; ++d) a[d] += f[d];
-    }
-  normalise_sums(acc, D, L, z);
+  pool_rows(
+      labels, D, L,
+      [&](size_t p, float* buf) {
+        bilinear_pixel(grid, gh, gw, D, H, W, p, buf);
+        return static_cast<const float*>(buf);
+      },
+      z, area);
 }
 
 }  // namespace hgs::hybrid

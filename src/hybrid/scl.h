@@ -19,6 +19,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <type_traits>
 #include <vector>
 
 namespace hgs::hybrid {
@@ -159,21 +160,16 @@ T cosine_loss_rows(const T* S, int stride, RefRow&& ref, size_t P, int D, T* gra
         s[k] = S + (p0 + k) * stride;
         r[k] = ref(p0 + k, buf.data() + size_t(k) * D);
       }
-      if (np == kPix) {
+      auto sums = [&](auto count) {  // count: kPix as a constant (the sums stay in registers), or the rest
         for (int d = 0; d < D; ++d)
-          for (int k = 0; k < kPix; ++k) {
+          for (int k = 0; k < int(count); ++k) {
             ss[k] += double(s[k][d]) * s[k][d];
             rr[k] += double(r[k][d]) * r[k][d];
             sr[k] += double(s[k][d]) * r[k][d];
           }
-      } else {
-        for (int k = 0; k < np; ++k)
-          for (int d = 0; d < D; ++d) {
-            ss[k] += double(s[k][d]) * s[k][d];
-            rr[k] += double(r[k][d]) * r[k][d];
-            sr[k] += double(s[k][d]) * r[k][d];
-          }
-      }
+      };
+      if (np == kPix) sums(std::integral_constant<int, kPix>{});
+      else sums(np);
       for (int k = 0; k < np; ++k) {
         if (ss[k] <= 1e-30 || rr[k] <= 1e-30) {
           loss += 1;
