@@ -1,15 +1,19 @@
-// One hybrid training step (paper eq. 15: photometric + object-conditioned appearance + SCL + BRO, with
-// Observation Fusion and Adam on q's view logits and on f) against one plain RGB step on the same scene, so the
-// ratio asked of the hybrid method (<= 2x the RGB step) is read off one run. Scene: bench_hybrid_scene.h at
-// 320x240 (30k Gaussians, SH degree 3, K = 8 objects + background present in each view, D = 512).
-// Densification off; the observation table is rebuilt every R = 100 steps as in training. The hybrid step runs
-// exact (objects_per_step 0) and with the objects-per-step approximation (4 and 2 of the 9 present objects;
-// hybrid/config.h). Every timing runs at each thread count of HGS_BENCH_THREADS (bench_threads.h; default 1, 2).
-// Both steps report the mean time of each part of the step as counters (ms_forward, ms_method_loss, ...; the
-// hybrid step also ms_method_loss_objects / _semantic). Also times the parts of a hybrid step separately
+// One hybrid training step against one plain RGB step on the same scene, so the ratio asked of the hybrid method
+// (<= 2x the RGB step) is read off one run. Scene: bench_hybrid_scene.h at 320x240 (30k Gaussians, SH degree 3,
+// K = 8 objects + background present in each view, D = 512). Two hybrid steps:
+// - BM_HybridStep: the object terms (paper eq. 15 without its semantic term: photometric + object-conditioned
+//   appearance + BRO, with Observation Fusion and Adam on q's view logits). The scene's data has no SCL classes,
+//   so the language term does not run. Exact (objects_per_step 0) and with the objects-per-step approximation (4
+//   and 2 of the 9 present objects; hybrid/config.h), dense and sparse object channels.
+// - BM_FullStep: the whole of eq. 15 as `hgs train` runs it (bench::with_scl: every view's SCL classes set, so
+//   also SCL's pixel-weight channels, the pooled predictions and Adam on f, D = 512), default config.
+// Densification off; the observation table is rebuilt every R = 100 steps as in training. Every timing runs at
+// each thread count of HGS_BENCH_THREADS (bench_threads.h; default 1, 2).
+// The steps report the mean time of each part of the step as counters (ms_forward, ms_method_loss, ...; the
+// hybrid steps also ms_method_loss_objects / _semantic). Also times the parts of a hybrid step separately
 // (fusion, object channels, SCL pooling, the object losses with and without boxes) for profiling, and measures
-// the peak memory of a 300k-Gaussian hybrid step (BM_HybridStepMemory300k, run alone; bench_scale has the
-// full-resolution cases).
+// the peak memory of a 300k-Gaussian hybrid step (BM_HybridStepMemory300k, object terms only, run alone;
+// bench_scale has the full-resolution cases).
 //   build/bench_hybrid --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
 #include <benchmark/benchmark.h>
 
@@ -91,16 +95,11 @@ void BM_RgbStep(benchmark::State& st) {
   parts.report(st);
 }
 
-// Args: HybridConfig::objects_per_step (0 = every present object, the exact eqs. 6 and 14) and
-// HybridConfig::sparse_objects (0 = dense object channels, 1 = base render + sparse channel groups; both exact).
-void BM_HybridStep(benchmark::State& st) {
-  const bench::OmpThreads threads(st, 2);
+// The hybrid step on data d with config hc, with its parts (the method's own timers beside train::StepTimes').
+void hybrid_step(benchmark::State& st, const hybrid::HybridConfig& hc, const hybrid::HybridData& d) {
   auto& s = setup();
-  hybrid::HybridConfig hc;
-  hc.objects_per_step = static_cast<int>(st.range(0));
-  hc.sparse_objects = st.range(1) != 0;
   train::Trainer trainer(bench_config(), s.model, s.views, 5.f,
-                         std::make_unique<hybrid::HybridMethod>(hc, s.data, bench_config().seed));
+                         std::make_unique<hybrid::HybridMethod>(hc, d, bench_config().seed));
   for (int i = 0; i < 3; ++i) trainer.step();
   double loss = 0;
   PartTimes parts;
@@ -117,6 +116,26 @@ void BM_HybridStep(benchmark::State& st) {
   st.counters["loss"] = loss;
   if (!std::isfinite(loss)) st.SkipWithError("the hybrid step's loss is not finite");  // timing NaNs is no figure
   parts.report(st);
+}
+
+// The hybrid method's object terms (the scene's data has no SCL classes: no language term).
+// Args: HybridConfig::objects_per_step (0 = every present object, the exact eqs. 6 and 14) and
+// HybridConfig::sparse_objects (0 = dense object channels, 1 = base render + sparse channel groups; both exact).
+void BM_HybridStep(benchmark::State& st) {
+  const bench::OmpThreads threads(st, 2);
+  hybrid::HybridConfig hc;
+  hc.objects_per_step = static_cast<int>(st.range(0));
+  hc.sparse_objects = st.range(1) != 0;
+  hybrid_step(st, hc, setup().data);
+}
+
+// The full method as `hgs train` runs it and the paper times it: the object terms and the language term (SCL,
+// eqs. 9-10, D = 512: the pixel-weight channels, the pooled predictions, f's row updates), default config.
+void BM_FullStep(benchmark::State& st) {
+  const bench::OmpThreads threads(st, 0);
+  const hybrid::HybridConfig hc;
+  static const hybrid::HybridData data = bench::with_scl(setup().data, hc);
+  hybrid_step(st, hc, data);
 }
 
 // Memory: the same step with 300k Gaussians (scales / 10^(1/3) so the box is covered alike), D = 512, with
@@ -359,6 +378,7 @@ BENCHMARK(BM_HybridStep)
     ->ArgsProduct({{0, 4, 2}, {0, 1}, bench::thread_counts()})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
+BENCHMARK(BM_FullStep)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_HybridStepMemory300k)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
 BENCHMARK(BM_Fuse)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_FuseViews)

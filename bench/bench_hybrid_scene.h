@@ -2,7 +2,11 @@
 // two cameras 0.2 apart at W x H (fx = fy = 300 W / 320, so the field of view does not change with the size);
 // K = 8 objects laid out as a 4 x 2 grid of mask cells inside a border of W / 20 pixels, D = 512 random unit
 // reference features per object. The training images are renders of the model; the model handed to training
-// has its DC colours perturbed by N(0, 0.3), so gradients are real.
+// has its DC colours perturbed by N(0, 0.3), so gradients are real. The scene's data has no SCL classes, so the
+// hybrid step on it runs the object terms only (eqs. 6 and 14, association, fusion); with_scl() gives the same
+// data with every view's SCL classes set as load_hybrid_data sets them, so that the step also runs the paper's
+// language term (eqs. 9-10: the pixel-weight channels, the pooled predictions and f's row updates, D = 512): the
+// full method, the one the paper times.
 #pragma once
 #include <random>
 #include <string>
@@ -77,5 +81,13 @@ struct HybridScene {
       for (int c = 0; c < 3; ++c) model.sh[size_t(i) * 48 + c] += P(rng);
   }
 };
+
+// The data with each view's SCL classes set from its foreground labels and background area as
+// load_hybrid_data does (config.h's scl_background and min_mask_pixels): the full method's language term runs.
+inline hybrid::HybridData with_scl(hybrid::HybridData d, const hybrid::HybridConfig& cfg = {}) {
+  for (hybrid::HybridView& hv : d.views)
+    hv.scl = hybrid::scl_classes(hv.fg, hv.area[0], cfg.scl_background, cfg.min_mask_pixels);
+  return d;
+}
 
 }  // namespace hgs::bench

@@ -1,15 +1,19 @@
-// Cost at real-capture scale: one RGB and one hybrid training step at 1000x700 pixels with 300k Gaussians (a
-// LERF scene at full resolution), and how it grows with the pixels and with the Gaussians (0.25x, 1x and 4x of
-// each), with the peak resident memory of each case. Scene: bench_hybrid_scene.h at W x H with n Gaussians
-// (scales / cbrt(n / 30k), so the box is covered alike), two views, K = 8 objects, D = 512, densification off.
-// Every case runs in a child process (this program re-runs itself with --case), so each peak RSS is that case's
-// own: the model, the optimiser, the renderer's buffers and the two training images. Prints a markdown table
-// (README "Benchmarks"), the parts of the base case's steps (train::StepTimes) and, with --json FILE, the
+// Cost at real-capture scale: one training step of each method at 1000x700 pixels with 300k Gaussians (a LERF
+// scene at full resolution), and how it grows with the pixels and with the Gaussians (0.25x, 1x and 4x of each),
+// with the peak resident memory of each case. Methods: `rgb` (plain 3DGS), `hybrid` (the hybrid method's object
+// terms only: eqs. 6 and 14, association, fusion; the scene's data has no SCL classes, so no language term) and
+// `full` (the same with every view's SCL classes set as load_hybrid_data sets them: also the language term,
+// eqs. 9-10, D = 512, as `hgs train` runs it and as the paper times it). Scene: bench_hybrid_scene.h at W x H
+// with n Gaussians (scales / cbrt(n / 30k), so the box is covered alike), two views, K = 8 objects, densification
+// off. Every case runs in a child process (this program re-runs itself with --case), so each peak RSS is that
+// case's own: the model, the optimiser, the renderer's buffers and the two training images. Prints a markdown
+// table (README "Benchmarks"), the parts of the base case's steps (train::StepTimes) and, with --json FILE, the
 // figures as JSON.
 // --fusion-every K rebuilds the hybrid method's observation table every K images (default: HybridConfig's), so
 // that with K = 1 every timed step carries a rebuild, reported in the part `densify` (the method's after-step
 // work): the rebuild's cost per view, as its own part (issue 61, goal 3).
 //   build/bench_scale [--steps 4] [--threads 2] [--objects-per-step M] [--fusion-every K] [--json FILE]
+//   build/bench_scale --case rgb|hybrid|full PIXELS GAUSSIANS [options]   (one case, one JSON line)
 #include <dlfcn.h>
 #include <unistd.h>
 
@@ -65,11 +69,14 @@ int run_case(const std::string& method, double pixels, double gaussians, const A
   cfg.sh_increase_every = 0;  // full SH degree 3 from the first step
   cfg.iters = 1000000;
   std::unique_ptr<train::Method> m;
-  if (method == "hybrid") {
+  if (method == "hybrid" || method == "full") {
     hybrid::HybridConfig hc;
     hc.objects_per_step = a.objects_per_step;
     hc.fusion_every = a.fusion_every;
-    m = std::make_unique<hybrid::HybridMethod>(hc, s.data, cfg.seed);
+    m = std::make_unique<hybrid::HybridMethod>(hc, method == "full" ? bench::with_scl(s.data, hc) : s.data, cfg.seed);
+  } else if (method != "rgb") {
+    std::fprintf(stderr, "bench_scale: unknown method '%s' (rgb, hybrid, full)\n", method.c_str());
+    return 2;
   }
   const size_t num_views = s.views.size();
   train::Trainer trainer(cfg, std::move(s.model), s.views, 5.f, std::move(m));
@@ -166,7 +173,9 @@ int main(int argc, char** argv) {
     if (k == "--help" || k == "-h") {
       std::printf(
           "Training step time and peak memory at 1000x700 / 300k Gaussians and at 0.25x and 4x the pixels\n"
-          "and the Gaussians (one child process per case).\n"
+          "and the Gaussians (one child process per case): rgb (plain 3DGS), hybrid (the object terms only),\n"
+          "full (the object terms and the language term, SCL with D = 512, as hgs train runs the method).\n"
+          "  --case METHOD PIXELS GAUSSIANS   one case (rgb, hybrid or full), one JSON line\n"
           "usage: bench_scale [--steps N] [--threads T] [--objects-per-step M] [--fusion-every K] [--json FILE]\n");
       return 0;
     } else if (k == "--case") {
@@ -195,12 +204,17 @@ int main(int argc, char** argv) {
       "%d threads, median of %d steps after one warm-up step per view, hybrid objects_per_step %d (0 = exact)\n\n",
       a.threads, a.steps, a.objects_per_step);
   std::printf(
-      "| pixels | Gaussians | RGB ms/step | hybrid ms/step | hybrid / RGB | RGB peak RSS MB | hybrid peak RSS MB |\n");
-  std::printf("|---|---|---|---|---|---|---|\n");
+      "hybrid: the object terms only (no SCL classes in the scene's data); full: the object terms and the language\n"
+      "term (SCL, D = 512), the method as hgs train runs it\n\n");
+  std::printf(
+      "| pixels | Gaussians | RGB ms/step | hybrid ms/step | full ms/step | hybrid / RGB | full / RGB | RGB peak RSS MB "
+      "| hybrid peak RSS MB | full peak RSS MB |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|\n");
   json all = json::array();
   const double cases[][2] = {{1, 1}, {0.25, 1}, {4, 1}, {1, 0.25}, {1, 4}};
   for (const auto& c : cases) {
-    const json r = run_child("rgb", c[0], c[1], a), h = run_child("hybrid", c[0], c[1], a);
+    const json r = run_child("rgb", c[0], c[1], a), h = run_child("hybrid", c[0], c[1], a),
+               f = run_child("full", c[0], c[1], a);
     auto ms = [](const json& j) {
       return j.is_null() ? std::string("failed") : fmt::format("{:.0f}", j["ms_median"].get<double>());
     };
@@ -211,22 +225,26 @@ int main(int argc, char** argv) {
     const std::string px =
         any.is_null() ? "?" : fmt::format("{}x{} ({}x)", any["width"].get<int>(), any["height"].get<int>(), c[0]);
     const std::string ng = any.is_null() ? "?" : fmt::format("{}k ({}x)", any["gaussians"].get<int>() / 1000, c[1]);
-    const std::string ratio = r.is_null() || h.is_null()
-                                  ? "-"
-                                  : fmt::format("{:.2f}x", h["ms_median"].get<double>() / r["ms_median"].get<double>());
-    std::printf("| %s | %s | %s | %s | %s | %s | %s |\n", px.c_str(), ng.c_str(), ms(r).c_str(), ms(h).c_str(),
-                ratio.c_str(), mb(r).c_str(), mb(h).c_str());
+    auto ratio = [&](const json& j) {
+      return r.is_null() || j.is_null()
+                 ? std::string("-")
+                 : fmt::format("{:.2f}x", j["ms_median"].get<double>() / r["ms_median"].get<double>());
+    };
+    std::printf("| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n", px.c_str(), ng.c_str(), ms(r).c_str(),
+                ms(h).c_str(), ms(f).c_str(), ratio(h).c_str(), ratio(f).c_str(), mb(r).c_str(), mb(h).c_str(),
+                mb(f).c_str());
     std::fflush(stdout);
-    all.push_back({{"pixels", c[0]}, {"gaussians", c[1]}, {"rgb", r}, {"hybrid", h}});
+    all.push_back({{"pixels", c[0]}, {"gaussians", c[1]}, {"rgb", r}, {"hybrid", h}, {"full", f}});
   }
   // Where the time of the base case goes (medians of each part; they need not add up to the step's median).
   const json& base = all[0];
-  if (!base["rgb"].is_null() && !base["hybrid"].is_null()) {
+  if (!base["rgb"].is_null() && !base["hybrid"].is_null() && !base["full"].is_null()) {
     std::printf(
-        "\nParts of the 1000x700 / 300k steps, ms (median over the steps):\n\n| part | RGB | hybrid "
-        "|\n|---|---|---|\n");
-    for (const auto& [name, v] : base["hybrid"]["parts_ms"].items())
-      std::printf("| %s | %.1f | %.1f |\n", name.c_str(), base["rgb"]["parts_ms"].value(name, 0.0), v.get<double>());
+        "\nParts of the 1000x700 / 300k steps, ms (median over the steps):\n\n| part | RGB | hybrid | full "
+        "|\n|---|---|---|---|\n");
+    for (const auto& [name, v] : base["full"]["parts_ms"].items())
+      std::printf("| %s | %.1f | %.1f | %.1f |\n", name.c_str(), base["rgb"]["parts_ms"].value(name, 0.0),
+                  base["hybrid"]["parts_ms"].value(name, 0.0), v.get<double>());
   }
   // The object losses' phases that are not cut by rows: their task counts at this thread count (the pieces are
   // cut into bands by the thread count: with --threads 16 on any machine, the count a 16-core run has).
