@@ -88,25 +88,28 @@ SemanticValues SemanticPass::contrastive(int u, int n, HybridFields& h, const fl
   // for update(), in factored form: every view of the step sees the same f.
   G_.resize(size_t(Jf) * D_);
   pooled_row_factors(Jf, D_, dP_.data(), mass.data(), 1e-6f, G_.data());
-#pragma omp parallel for schedule(static)
-  for (long i = 0; i < n; ++i) {
-    alignas(64) float buf[train::kMaxRowUpdateDim];
-    pooled_backward_row<float>(i, D_, L_, Jf, q, lang_row(i, buf), a, classes_.data(), G_.data(), dq, da);
-  }
   FactoredView& fv = views_.emplace_back();
   fv.objs = classes_;
   fv.G = G_;
-  // The Gaussians the view's masks touched (a row of a not all 0), in index order: each thread collects its
-  // static chunk, the chunks joined in thread order (the same rows whatever the thread count).
+  // The same pass collects the Gaussians the view's masks touched (a row of a not all 0), in index order: each
+  // thread its static chunk, the chunks joined in thread order (the same rows whatever the thread count). A row
+  // of a all 0 has no dq term and da 0 (pooled_backward_row's values), so its f_n is not read: at real-capture
+  // scale most Gaussians are outside the view's masks.
   std::vector<std::vector<int>> touched(size_t(std::max(1, omp_get_max_threads())));
 #pragma omp parallel
   {
     std::vector<int>& mine = touched[omp_get_thread_num()];
     mine.clear();
+    alignas(64) float buf[train::kMaxRowUpdateDim];
 #pragma omp for schedule(static)
     for (long i = 0; i < n; ++i) {
       const float* ai = a + size_t(i) * Jf;
-      if (std::any_of(ai, ai + Jf, [](float x) { return x != 0.f; })) mine.push_back(int(i));
+      if (std::none_of(ai, ai + Jf, [](float x) { return x != 0.f; })) {
+        if (da) std::fill(da + size_t(i) * Jf, da + size_t(i + 1) * Jf, 0.f);
+        continue;
+      }
+      mine.push_back(int(i));
+      pooled_backward_row<float>(i, D_, L_, Jf, q, lang_row(i, buf), a, classes_.data(), G_.data(), dq, da);
     }
   }
   size_t rows = 0;
@@ -241,14 +244,26 @@ void SemanticPass::update(int n, HybridFields& h, train::Adam& optim, float scal
     return;
   }
   if (views_.empty()) return;  // no anchors in any view of the step: f keeps its values and its step count
-  // Where each view's rows are (-1 = not in that view's masks).
-  std::vector<std::vector<int>> pos(views_.size(), std::vector<int>(n, -1));
-  for (size_t k = 0; k < views_.size(); ++k)
-    for (size_t r = 0; r < views_[k].rows.size(); ++r) {
-      const int i = views_[k].rows[r];
-      if (i < 0 || i >= n) fail("hybrid: a semantic gradient row {} is outside the {} Gaussians", i, n);
-      pos[k][i] = int(r);
+  // Where each view's rows are (-1 = not in that view's masks), on the threads (a view's rows are distinct).
+  std::vector<ScratchVector<int>> pos(views_.size());
+  for (size_t k = 0; k < views_.size(); ++k) {
+    pos[k].resize(size_t(n));
+    const ScratchVector<int>& rows = views_[k].rows;
+    int* where = pos[k].data();
+    long outside = -1;  // a row outside the model, if any
+#pragma omp parallel
+    {
+#pragma omp for schedule(static)
+      for (long i = 0; i < n; ++i) where[i] = -1;
+#pragma omp for schedule(static) reduction(max : outside)
+      for (long r = 0; r < long(rows.size()); ++r) {
+        const int i = rows[r];
+        if (i < 0 || i >= n) outside = std::max(outside, long(r));
+        else where[i] = int(r);
+      }
     }
+    if (outside >= 0) fail("hybrid: a semantic gradient row {} is outside the {} Gaussians", rows[outside], n);
+  }
   const float* q = h.q->data.data();
   const int L = L_;
   auto rows = [&](long i, float* g) {

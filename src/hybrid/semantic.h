@@ -13,6 +13,7 @@
 #include <random>
 #include <vector>
 
+#include "core/scratch_vector.h"
 #include "hybrid/config.h"
 #include "hybrid/data.h"
 #include "hybrid/fields.h"
@@ -75,8 +76,10 @@ class SemanticPass {
   struct FactoredView {
     std::vector<int> objs;  // [Jf]
     std::vector<float> G;   // [Jf, D]
-    std::vector<int> rows;  // Gaussians with a non-zero a
-    std::vector<float> a;   // [rows, Jf]
+    // (ScratchVector: every element is written before it is read; a zeroing resize was a serial pass over
+    // rows x (Jf + 1) values in every step, 0.8 ms at 300k Gaussians.)
+    ScratchVector<int> rows;  // Gaussians with a non-zero a
+    ScratchVector<float> a;   // [rows, Jf]
   };
   std::vector<FactoredView> views_;  // the step's (after reduce: every rank's, in global order)
   std::vector<float> fgrad_;         // [N, D] no-SCL ablation: the step's channel-gradient sum
