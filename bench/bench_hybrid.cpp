@@ -234,10 +234,12 @@ void BM_RenderObjects(benchmark::State& st) {
   auto& s = setup();
   // 0: RGB only; 1: 4 dense channels per label + the SCL pixel weights; 2: the sparse layout (4 base channels,
   // one group of 4 per Gaussian, object_groups.h) + the pixel weights; 3: the pixel weights alone; 4: the 4 base
-  // channels alone; 5: the groups alone.
+  // channels alone; 5: the groups alone; 6: the pixel weights alone without their gradient (the default training
+  // step's SCL: the weight sums are forward-only unless HybridConfig::sem_geometry). Modes 1-3 pass the sums'
+  // gradient.
   const int mode = static_cast<int>(st.range(0));
   const int L = kK + 1, C = mode == 1 ? 4 * L : (mode == 2 || mode == 4) ? 4 : 0;
-  const int J = (mode >= 1 && mode <= 3) ? kK : 0, G = (mode == 2 || mode == 5) ? L : 0;
+  const int J = ((mode >= 1 && mode <= 3) || mode == 6) ? kK : 0, G = (mode == 2 || mode == 5) ? L : 0;
   render::GaussianRenderer r;
   render::RenderOutputs out;
   render::GaussianGrads g;
@@ -269,7 +271,7 @@ void BM_RenderObjects(benchmark::State& st) {
   dout.rgb = d_rgb.data();
   dout.extra = C ? d_extra.data() : nullptr;
   dout.extra_grad_channels = mode == 1 ? 3 * L : C == 4 ? 3 : -1;  // the opacities are forward-only
-  dout.weight_sums = J ? d_ws.data() : nullptr;
+  dout.weight_sums = J && mode != 6 ? d_ws.data() : nullptr;
   if (G) {
     dout.groups = d_groups.data();
     dout.group_row = 3 * G;
@@ -364,7 +366,7 @@ BENCHMARK(BM_ObjectLosses)
     ->UseRealTime();
 BENCHMARK(BM_RenderObjects)
     ->ArgNames({"objects", "threads"})
-    ->ArgsProduct({{0, 1, 2, 3, 4, 5}, bench::thread_counts()})
+    ->ArgsProduct({{0, 1, 2, 3, 4, 5, 6}, bench::thread_counts()})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 BENCHMARK(BM_ObjectSsim)

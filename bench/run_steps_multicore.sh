@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
 # The training steps' scaling with threads on a machine with more cores (docs/performance.md "Measured on 16
-# cores"): the machine's facts, then bench_hybrid's RGB and exact hybrid steps (with their per-part counters) at
-# each thread count of THREADS (default 1,2,4,8,16) for each build folder given, alternating (a second round in
+# cores"): the machine's facts, then bench_hybrid's RGB step, exact hybrid step (the object terms) and full step
+# (with SCL's language term; builds before 9b62f8e lack it), with their per-part counters, at each thread count of
+# THREADS (default 1,2,4,8,16) for each build folder given, alternating (a second round in
 # the opposite order at the counts above 2), then bench_scale at the most threads for each (also with a table
 # rebuild in every step: issue 61's goal 3), then (first build) the one-thread step alone and as one copy per
 # core at once (bench/shared_report.py) and bench/project_threads.py's projection with each region's time measured
-# at the most threads beside it (--measure: which regions fall short of what their tasks allow). JSON and text
+# at the most threads beside it (--measure: which regions fall short of what their tasks allow), for the hybrid
+# step and the full step. JSON and text
 # under OUT (default /tmp/steps_multicore); `bench/amdahl.py OUT/<tag>.json --threads 4 16` prints projection and
 # measurement side by side.
 #   bench/run_steps_multicore.sh NEW_BUILD_DIR [OLD_BUILD_DIR]
@@ -15,7 +17,7 @@ THREADS="${THREADS:-1,2,4,8,16}"
 unset OMP_WAIT_POLICY  # passive waiting made a 16-thread step 4x slower (docs/performance.md): time the default
 O="${OUT:-/tmp/steps_multicore}"
 mkdir -p "$O"
-F='BM_RgbStep|BM_HybridStep/objects_per_step:0/sparse:1'
+F='BM_RgbStep|BM_HybridStep/objects_per_step:0/sparse:1|BM_FullStep'
 echo "== machine"
 echo "nproc $(nproc), cgroup cpu.max: $(cat /sys/fs/cgroup/cpu.max 2>/dev/null || echo none)"
 lscpu | grep -E '^(Model name|Thread\(s\) per core|Core\(s\) per socket|Socket\(s\)|L3)' || true
@@ -61,4 +63,6 @@ if command -v python3 >/dev/null; then
   python3 "$(dirname "$0")/shared_report.py" "$O" | tee "$O/shared.txt"
   python3 "$(dirname "$0")/project_threads.py" --build "$1" --threads "$NT" --min-ms 2 --measure |
     tee "$O/projection.txt"
+  python3 "$(dirname "$0")/project_threads.py" --build "$1" --threads "$NT" --min-ms 2 --measure --case full 1 1 |
+    tee "$O/projection_full.txt"
 fi

@@ -93,8 +93,8 @@ SemanticValues SemanticPass::contrastive(int u, int n, HybridFields& h, const fl
   fv.G = G_;
   // The same pass collects the Gaussians the view's masks touched (a row of a not all 0), in index order: each
   // thread its static chunk, the chunks joined in thread order (the same rows whatever the thread count). A row
-  // of a all 0 has no dq term and da 0 (pooled_backward_row's values), so its f_n is not read: at real-capture
-  // scale most Gaussians are outside the view's masks.
+  // of a all 0 has no dq term and da 0 (pooled_backward_row's values), so its f_n is not read (a view's masks
+  // need not cover every Gaussian it renders).
   std::vector<std::vector<int>> touched(size_t(std::max(1, omp_get_max_threads())));
 #pragma omp parallel
   {

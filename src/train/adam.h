@@ -112,9 +112,10 @@ void Adam::update_rows(AdamParam& p, X* value, int n, RowGrad&& row_grad) const 
 #pragma omp parallel reduction(+ : bad)
   {
     alignas(64) float g[kMaxRowUpdateDim];
-    // Chunks of 16 rows: the rows with a gradient cluster by index, so 64-row chunks left 16 threads one chunk
-    // each near the end (bench/project_threads.py, 320x240 / 30k: 11.9x); a chunk of 16 rows of D = 512 is still
-    // tens of microseconds of work against the schedule's fraction of one.
+    // Chunks of 16 rows: the rows with a gradient cluster by index, so with chunks of 64 the last heavy chunks
+    // kept a few threads busy while the rest waited (bench/project_threads.py, the full step at 320x240 / 30k on
+    // 16 threads: 11.9x, with 16 rows 15.5x). 16 rows of D = 512 are still microseconds of work, far above what
+    // the dynamic schedule costs per chunk.
 #pragma omp for schedule(dynamic, 16)
     for (long i = 0; i < n; ++i)
       if (row_grad(i, g)) bad += row_kernel(p, value, i, g, s);
