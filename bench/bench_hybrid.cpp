@@ -252,7 +252,7 @@ void BM_RenderObjects(benchmark::State& st) {
   for (int i = 0; i < kN; ++i) gid[i] = i % L;
   const LabelMap& lab = s.data.masks[0].labels;
   for (size_t p = 0; p < lab.v.size(); ++p)
-    for (int j = 0; j < J; ++j) pw[p * J + j] = lab.v[p] == j + 1;
+    for (int j = 0; j < J; ++j) pw[size_t(j) * lab.v.size() + p] = lab.v[p] == j + 1;  // planar [J, H, W]
   render::Channels ch;
   ch.extra = extra.data();
   ch.num_extra = C;

@@ -40,10 +40,16 @@ const float* SemanticPass::pixel_weights(int u) {
   const int Jf = static_cast<int>(classes_.size());
   if (Jf == 0) return nullptr;
   const LabelMap& lab = data_->masks[u].labels;
-  pixel_w_.resize(lab.v.size() * Jf);
-#pragma omp parallel for schedule(static)
-  for (size_t p = 0; p < lab.v.size(); ++p)
-    for (int j = 0; j < Jf; ++j) pixel_w_[p * Jf + j] = lab.v[p] == classes_[j] ? 1.f : 0.f;
+  const size_t P = lab.v.size();
+  pixel_w_.resize(P * Jf);  // planar [Jf, H, W], as the renderer reads the maps
+  const uint16_t* l = lab.v.data();
+#pragma omp parallel
+  for (int j = 0; j < Jf; ++j) {
+    const int c = classes_[j];
+    float* m = &pixel_w_[size_t(j) * P];
+#pragma omp for schedule(static) nowait
+    for (size_t p = 0; p < P; ++p) m[p] = l[p] == c ? 1.f : 0.f;
+  }
   return pixel_w_.data();
 }
 

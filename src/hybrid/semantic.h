@@ -44,7 +44,7 @@ class SemanticPass {
 
   SemanticPass(const HybridConfig& cfg, const HybridData* data);
   void set_config(const HybridConfig& cfg) { cfg_ = cfg; }
-  // SCL anchors of view u (empty when SCL is off or lambda_sem = 0) and their pixel-weight maps [H, W, Jf].
+  // SCL anchors of view u (empty when SCL is off or lambda_sem = 0) and their pixel-weight maps [Jf, H, W].
   const std::vector<int>& anchors_of(int u);
   const float* pixel_weights(int u);
   // SCL. weight_sums [N, Jf]; adds lambda_sem * d/dq to dq [N, L]; da [N, Jf] (null = no gradient to the
@@ -69,7 +69,7 @@ class SemanticPass {
   int L_, D_;
   std::vector<std::vector<int>> views_with_;  // [L] training views whose SCL objects include l
   std::vector<int> classes_;
-  std::vector<float> pixel_w_;     // [H, W, Jf]
+  std::vector<float> pixel_w_;     // [Jf, H, W]
   std::vector<float> P_, dP_, G_;  // [Jf, D] predictions, their gradient, dP / (m + eps)
   std::vector<float> refs_;        // [R, D] InfoNCE candidates of one anchor
   // One view's f gradient in factored form: df_n = sum_j q_{n,objs[j]} a_{n,j} G_j.

@@ -74,7 +74,7 @@ struct RasterInputs {
   int extra_stride = 0;        // XS >= C: row stride of extra, d_extra and the extra gradient (0 = C); backward
                                // writes zero gradients for channels [C, XS)
   T background[3] = {0, 0, 0};
-  const float* pixel_weights = nullptr;  // [H, W, J] optional per-pixel weight maps M_j
+  const float* pixel_weights = nullptr;  // [J, H, W] optional per-pixel weight maps M_j (planar)
   int num_weights = 0;                   // J
   // Sparse channel groups: Gaussian i adds group_val[e] (GW values) to group group_id[e] for e in
   // [group_ptr[i], group_ptr[i + 1]); the other groups get nothing from it. Output [H, W, G * GW].

@@ -145,9 +145,9 @@ struct PairSums {
 // px0 + nvalid)), for the tile's groups glist [ng] only; jmask gets the maps present in the batch.
 template <class T, int kX>
 inline __attribute__((always_inline)) void load_batch_channels(const RasterInputs<T>& in, const RasterGrads<T>& g,
-                                                               int W, int py, int px0, int nvalid, const int* glist,
-                                                               int ng, simd::Pack<T>* st, const BackwardBatches<T>& b,
-                                                               uint32_t& jmask) {
+                                                               int W, int H, int py, int px0, int nvalid,
+                                                               const int* glist, int ng, simd::Pack<T>* st,
+                                                               const BackwardBatches<T>& b, uint32_t& jmask) {
   const int C = b.C, J = b.J, GWg = b.GWg, GO = b.GO;
   for (int c = 0; c < C + J; ++c) st[kBatchFixed + c] = simd::Pack<T>{};
   for (int u = 0; u < ng; ++u)
@@ -163,10 +163,11 @@ inline __attribute__((always_inline)) void load_batch_channels(const RasterInput
         for (int i = 0; i < GWg; ++i) st[GO + gi * GWg + i][l] = dg[size_t(gi) * g.d_group_stride + i];
       }
     }
-    for (int jj = 0; jj < J; ++jj) {
-      st[kBatchFixed + C + jj][l] = T(in.pixel_weights[p * J + jj]);
-      jmask |= map_bit(jj, st[kBatchFixed + C + jj][l] != T(0));
-    }
+  }
+  for (int jj = 0; jj < J; ++jj) {
+    const simd::Pack<T> m = load_weight_map<T>(in.pixel_weights, W, H, jj, py, px0, nvalid);
+    st[kBatchFixed + C + jj] = m;
+    jmask |= map_bit(jj, simd::any(m != simd::Pack<T>{}));
   }
   if (kX != kNoChannels && ng > 0 && g.d_group_rows) {  // the batch's row of each of the tile's groups, on demand
     T row[kLanes * kMaxGroupGradWidth];
@@ -212,7 +213,7 @@ inline __attribute__((always_inline)) bool start_backward_batch(const RasterInpu
   }
   if (kmax == 0) return false;
   P* st = b.st + size_t(bt) * b.BS;
-  load_batch_channels<T, kX>(in, g, W, py, px0, nvalid, glist, ng, st, b, jmask);
+  load_batch_channels<T, kX>(in, g, W, bins.height, py, px0, nvalid, glist, ng, st, b, jmask);
   const T bg0 = in.background[0], bg1 = in.background[1], bg2 = in.background[2];
   st[bT] = Tf;
   st[bS] = P{};

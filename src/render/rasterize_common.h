@@ -196,6 +196,23 @@ std::pair<int*, P*> size_visit_lists(PerThread& w, const uint32_t* masks, int n,
 // Pixel-weight maps of a batch: bit j of `present` is set when map j is non-zero at one of its pixels
 // (map_bit), and f(j) runs for those maps only (for every map when there are more than 32).
 inline uint32_t map_bit(int j, bool nonzero) { return nonzero && j < 32 ? 1u << j : 0u; }
+
+// Map j of the planar pixel-weight maps [J, H, W] at the batch's pixels [px0, px0 + nvalid) of row py, as a pack
+// (lanes past nvalid 0): one load for a whole batch of float maps.
+template <class T>
+inline __attribute__((always_inline)) simd::Pack<T> load_weight_map(const float* maps, int W, int H, int j, int py,
+                                                                    int px0, int nvalid) {
+  const float* src = maps + (size_t(j) * H + py) * W + px0;
+  simd::Pack<T> v{};
+  if constexpr (std::is_same_v<T, float>) {
+    if (nvalid == kLanes) {
+      std::memcpy(&v, src, sizeof(v));
+      return v;
+    }
+  }
+  for (int l = 0; l < nvalid; ++l) v[l] = T(src[l]);
+  return v;
+}
 template <class F>
 inline __attribute__((always_inline)) void for_batch_maps(uint32_t present, int J, F&& f) {
   if (J > 32) {

@@ -129,7 +129,8 @@ using Channels = ChannelsT<float>;
 struct RenderSettings {
   float background[3] = {0, 0, 0};
   bool want_depth = true;
-  // Optional per-pixel weight maps M_j [H, W, J]: composite then also returns per-Gaussian sums
+  // Optional per-pixel weight maps M_j [J, H, W] (planar: map j's rows, one after another; a batch of pixels is
+  // one load per map): composite then also returns per-Gaussian sums
   // weight_sums[n, j] = sum_p M_j(p) alpha_n(p) T_n(p), differentiable through OutputGrads::weight_sums.
   const float* pixel_weights = nullptr;
   int num_pixel_weights = 0;  // J

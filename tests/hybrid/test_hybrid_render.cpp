@@ -176,10 +176,10 @@ TEST(HybridRender, PoolingIdentityMatchesDirectSemanticRender) {
   const int objs[2] = {1, 2};
   std::vector<float> M(size_t(HW) * 2);
   std::vector<double> mass = {0, 0};
-  for (int p = 0; p < HW; ++p)
+  for (int p = 0; p < HW; ++p)  // planar [2, H, W]
     for (int j = 0; j < 2; ++j) {
-      M[p * 2 + j] = sc.labels.v[p] == objs[j];
-      mass[j] += M[p * 2 + j];
+      M[size_t(j) * HW + p] = sc.labels.v[p] == objs[j];
+      mass[j] += M[size_t(j) * HW + p];
     }
   // Identity side: a from the rasterizer's pixel-weighted sums.
   render::RendererT<double> r;
@@ -207,7 +207,7 @@ TEST(HybridRender, PoolingIdentityMatchesDirectSemanticRender) {
     r2.forward(sc.cam, in2, rs2, o2);
     for (int d = 0; d < D; ++d) {
       double acc = 0;
-      for (int p = 0; p < HW; ++p) acc += M[p * 2 + j] * o2.extra[p * D + d];
+      for (int p = 0; p < HW; ++p) acc += M[size_t(j) * HW + p] * o2.extra[p * D + d];
       const double direct = acc / (mass[j] + 1e-6);
       EXPECT_NEAR(P[j * D + d], direct, 1e-12 + 1e-10 * std::abs(direct)) << "object " << objs[j] << " dim " << d;
     }
@@ -230,10 +230,10 @@ TEST(HybridRender, SemanticContrastiveToOpacityFAndQ) {
   const int objs[2] = {1, 2};
   std::vector<float> M(size_t(HW) * 2);
   std::vector<double> mass = {0, 0};
-  for (int p = 0; p < HW; ++p)
+  for (int p = 0; p < HW; ++p)  // planar [2, H, W]
     for (int j = 0; j < 2; ++j) {
-      M[p * 2 + j] = sc.labels.v[p] == objs[j];
-      mass[j] += M[p * 2 + j];
+      M[size_t(j) * HW + p] = sc.labels.v[p] == objs[j];
+      mass[j] += M[size_t(j) * HW + p];
     }
   auto run = [&](std::vector<double>* dop, std::vector<double>* df, std::vector<double>* dq) {
     render::RendererT<double> r;

@@ -22,7 +22,7 @@ struct Scene {
   std::vector<double> mean, log_scale, quat, opacity_logit, sh, colors, extra;
   bool use_colors = false;
   RenderSettings settings;
-  std::vector<float> pixel_weights;  // [H, W, J] optional weight maps
+  std::vector<float> pixel_weights;  // [J, H, W] optional weight maps (planar, as the renderer reads them)
   int num_weights = 0;
 
   // Random soft weight maps; the settings point into this scene (keep it alive and unmoved while rendering).
@@ -44,7 +44,7 @@ struct Scene {
     for (int y = 0; y < cam.height; ++y)
       for (int x = 0; x < cam.width; ++x) {
         const int label = (x / stripe + y / 16) % (J + 1);
-        if (label > 0) pixel_weights[(size_t(y) * cam.width + x) * J + label - 1] = 1.f;
+        if (label > 0) pixel_weights[(size_t(label - 1) * cam.height + y) * cam.width + x] = 1.f;
       }
     settings.pixel_weights = pixel_weights.data();
     settings.num_pixel_weights = J;
@@ -301,7 +301,8 @@ inline RefImage ref_composite(const Scene& s, const std::vector<RefProjected>& P
             for (int c = 0; c < 3; ++c) acc[c] += w * g.color[c];
             dep += w * g.depth;
             for (int c = 0; c < C; ++c) ex[c] += w * s.extra[size_t(i) * C + c];
-            for (int j = 0; j < J; ++j) img.weight_sums[size_t(i) * J + j] += w * s.pixel_weights[p * J + j];
+            for (int j = 0; j < J; ++j)
+              img.weight_sums[size_t(i) * J + j] += w * s.pixel_weights[size_t(j) * s.cam.width * s.cam.height + p];
             T *= 1 - a;
           }
         }
