@@ -193,10 +193,6 @@ std::pair<int*, P*> size_visit_lists(PerThread& w, const uint32_t* masks, int n,
   return {w.vk.template get<int>(nv), w.vw.template get<P>(nv)};
 }
 
-// Pixel-weight maps of a batch: bit j of `present` is set when map j is non-zero at one of its pixels
-// (map_bit), and f(j) runs for those maps only (for every map when there are more than 32).
-inline uint32_t map_bit(int j, bool nonzero) { return nonzero && j < 32 ? 1u << j : 0u; }
-
 // Map j of the planar pixel-weight maps [J, H, W] at the batch's pixels [px0, px0 + nvalid) of row py, as a pack
 // (lanes past nvalid 0): one load for a whole batch of float maps.
 template <class T>
@@ -213,6 +209,10 @@ inline __attribute__((always_inline)) simd::Pack<T> load_weight_map(const float*
   for (int l = 0; l < nvalid; ++l) v[l] = T(src[l]);
   return v;
 }
+
+// Pixel-weight maps of a batch: bit j of `present` is set when map j is non-zero at one of its pixels
+// (map_bit), and f(j) runs for those maps only (for every map when there are more than 32).
+inline uint32_t map_bit(int j, bool nonzero) { return nonzero && j < 32 ? 1u << j : 0u; }
 template <class F>
 inline __attribute__((always_inline)) void for_batch_maps(uint32_t present, int J, F&& f) {
   if (J > 32) {
