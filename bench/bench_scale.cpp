@@ -207,9 +207,8 @@ int main(int argc, char** argv) {
       "hybrid: the object terms only (no SCL classes in the scene's data); full: the object terms and the language\n"
       "term (SCL, D = 512), the method as hgs train runs it\n\n");
   std::printf(
-      "| pixels | Gaussians | RGB ms/step | hybrid ms/step | full ms/step | hybrid / RGB | full / RGB | RGB peak RSS "
-      "MB "
-      "| hybrid peak RSS MB | full peak RSS MB |\n");
+      "| pixels | Gaussians | RGB ms/step | hybrid ms/step | full ms/step | hybrid / RGB | full / RGB "
+      "| RGB peak RSS MB | hybrid peak RSS MB | full peak RSS MB |\n");
   std::printf("|---|---|---|---|---|---|---|---|---|---|\n");
   json all = json::array();
   const double cases[][2] = {{1, 1}, {0.25, 1}, {4, 1}, {1, 0.25}, {1, 4}};
