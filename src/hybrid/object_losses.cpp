@@ -230,7 +230,7 @@ ObjectLossValues ObjectLosses::full_path(const Image& image, const LabelMap& lab
 // and SSIM-map terms per pixel and their row sums. SSIM's rows streamed (train::ssim_rows_streamed) and used as
 // they come.
 void ObjectLosses::score_base_app(Scratch& w, int H, int W, int y0, int y1) {
-  const size_t L = size_t(W) * 3;
+  const size_t L = size_t(W) * 3, HW = size_t(W) * H;
   const double n = double(H) * L;
   const float lam = cfg_.lambda_dssim, a = (1 - lam) / float(n), b = -lam;
   const auto sink = [&](int y, const float* sg, const float* sm) {
@@ -244,8 +244,8 @@ void ObjectLosses::score_base_app(Scratch& w, int H, int W, int y0, int y1) {
         ss += sm[size_t(x) * 3 + c];
         base_app_[p * 3 + c] = app_grad(d, a, b, sg[size_t(x) * 3 + c], 1.f);
       }
-      base_terms_[p * kTerms + kL1] = l1;
-      base_terms_[p * kTerms + kSsim] = ss;
+      base_terms_[kL1 * HW + p] = l1;
+      base_terms_[kSsim * HW + p] = ss;
       l1_row += l1;
       ssim_row += ss;
     }
@@ -259,7 +259,7 @@ void ObjectLosses::score_base_app(Scratch& w, int H, int W, int y0, int y1) {
 // there, the band weight, numerator and dot-product terms per pixel and their row sums. The band's and eq. 14's
 // rows streamed (BandRows, BroRows) from the row above the first (its y pairs reach row y0).
 void ObjectLosses::score_base_bro(Scratch& w, int H, int W, int y0, int y1) {
-  const size_t L = size_t(W) * 3;
+  const size_t L = size_t(W) * 3, HW = size_t(W) * H;
   w.zero.assign(L, 0.f);  // the mask's and the target's rows
   w.urow.resize(L);
   w.wrow.resize(W);
@@ -287,12 +287,11 @@ void ObjectLosses::score_base_bro(Scratch& w, int H, int W, int y0, int y1) {
         gp += double(u) * double(pr);
         pp += double(pr) * double(pr);
       }
-      double* t = &base_terms_[p * kTerms];
-      t[kWsum] = w.wrow[x];
-      t[kNum] = w.nrow[x];
-      t[kGp] = gp;
-      t[kPp] = pp;
-      for (int k : {kWsum, kNum, kGp, kPp}) row[k] += t[k];
+      const double t[kTerms] = {0, 0, w.wrow[x], w.nrow[x], gp, pp};
+      for (int k : {kWsum, kNum, kGp, kPp}) {
+        base_terms_[k * HW + p] = t[k];
+        row[k] += t[k];
+      }
     }
     for (int k : {kWsum, kNum, kGp, kPp}) base_rows_[size_t(y) * kTerms + k] = row[k];
   }
@@ -424,18 +423,19 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
 }
 
 // The base pair's per-pixel terms summed over r. out [kTerms]
-void ObjectLosses::base_sums(const PixelBox& r, int W, double* out) const {
-  std::fill(out, out + kTerms, 0.0);
+// Term t of the base pair summed over box r, one running sum in raster order (one task per object and term: the
+// plane of t alone is read).
+double ObjectLosses::base_sum(const PixelBox& r, int W, int H, int t) const {
+  const double* plane = &base_terms_[size_t(t) * W * H];
+  double s = 0;
   for (int y = r.y0; y < r.y1 && !r.empty(); ++y)
-    for (int x = r.x0; x < r.x1; ++x) {
-      const double* t = &base_terms_[(size_t(y) * W + x) * kTerms];
-      for (int k = 0; k < kTerms; ++k) out[k] += t[k];
-    }
+    for (int x = r.x0; x < r.x1; ++x) s += plane[size_t(y) * W + x];
+  return s;
 }
 
 // Step 3 for an object: its sums over R (its rows in order), its values (into app_[j], bro_[j]) and scalars
-// from the base pair's sums outside R plus its own inside (a full object: its own alone). complete_rows then adds
-// eq. 14's part to its gradient inside R.
+// from the base pair's sums outside R (o.base_in, base_sum's) plus its own inside (a full object: its own alone).
+// complete_rows then adds eq. 14's part to its gradient inside R.
 void ObjectLosses::finish_box(int W, int H, int j) {
   Object& o = obj_[j];
   const size_t HW = size_t(W) * H;
@@ -444,10 +444,8 @@ void ObjectLosses::finish_box(int W, int H, int j) {
   double in[kTerms] = {};  // its terms summed over R, the rows in order
   for (size_t r = 0; r < o.rows.size(); r += kTerms)
     for (int t = 0; t < kTerms; ++t) in[t] += o.rows[r + t];
-  double base_in[kTerms] = {};
-  if (!o.full) base_sums(o.R, W, base_in);
   auto whole = [&](int t) {  // the object's sum over the image
-    return o.full ? in[t] : base_total_[t] - base_in[t] + in[t];
+    return o.full ? in[t] : base_total_[t] - o.base_in[t] + in[t];
   };
   const float lam = cfg_.lambda_dssim;
   const float l1 = float(whole(kL1) / n), ss = float(whole(kSsim) / n);
@@ -693,9 +691,24 @@ ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab,
       base_total_[t] = 0;
       for (int y = 0; y < H; ++y) base_total_[t] += base_rows_[size_t(y) * kTerms + t];
     }
-    // Step 3: each object's scalars (one task per object: its sums in a fixed order), then eq. 14's part of its
-    // gradient, cut into bands of its rows so that a large object is no single task (a full object's own gradient
-    // is then complete over the image: nothing of the base pair outside).
+  // Step 3: the base pair's terms over each box (one task per object and term, each one running sum in a fixed
+  // order; eq. 14's terms only with eq. 14), each object's scalars (one task per object), then eq. 14's part of
+  // its gradient, cut into bands of its rows so that a large object is no single task (a full object's own
+  // gradient is then complete over the image: nothing of the base pair outside).
+  std::vector<std::array<int, 2>> sums;  // (object, term)
+  for (int j = 0; j < J; ++j) {
+    std::fill(obj_[j].base_in, obj_[j].base_in + kTerms, 0.0);
+    if (obj_[j].full || obj_[j].R.empty()) continue;
+    for (int t = 0; t < (bro_on ? int(kTerms) : int(kWsum)); ++t) sums.push_back({j, t});
+  }
+  std::stable_sort(sums.begin(), sums.end(), [&](const auto& a, const auto& b) {  // the largest boxes first
+    return obj_[a[0]].R.area() > obj_[b[0]].R.area();
+  });
+#pragma omp parallel for schedule(dynamic, 1)
+  for (size_t i = 0; i < sums.size(); ++i) {
+    const auto [j, t] = sums[i];
+    obj_[j].base_in[t] = base_sum(obj_[j].R, W, H, t);
+  }
 #pragma omp parallel for schedule(dynamic, 1)
   for (int j = 0; j < J; ++j) finish_box(W, H, j);
   constexpr int kCompleteRows = 32;
@@ -722,7 +735,8 @@ ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab,
     if (bro_on) grads_.base_unit = base_unit_.data();
   }
   if (out.color || out.sum) scatter(H, W, any_box && bro_on, out);
-  times_ = {ms(t0, t1), ms(t1, t2), ms(t2, t3), ms(t3, Clock::now()), int(pieces.size()), J + int(bands.size())};
+  const int finish_tasks = int(sums.size()) + J + int(bands.size());
+  times_ = {ms(t0, t1), ms(t1, t2), ms(t2, t3), ms(t3, Clock::now()), int(pieces.size()), finish_tasks};
   ObjectLossValues v;
   for (int j = 0; j < J; ++j) {
     v.app += app_[j];

@@ -195,14 +195,15 @@ class ObjectLosses {
   };
   // The per-pixel terms of the box path: L1, SSIM map, eq. 14's band weight and numerator, <g, p>, <p, p>.
   enum Term { kL1, kSsim, kWsum, kNum, kGp, kPp, kTerms };
-  struct Object {               // one object of the box path
-    PixelBox R, Q;              // scored box and crop (image coordinates)
-    PixelBox M;                 // the box of its mask's pixels (its target I M_k is 0 outside)
-    bool full = false;          // scored over the whole image (R = Q = the image)
-    ScratchVector<float> own;   // [R h, R w, 3] its gradient inside R (every value written by the pieces)
-    ScratchVector<float> unit;  // [R h, R w, 3] eq. 14's unscaled gradient inside R (bro_parts)
-    ScratchVector<float> pred;  // [R h, R w, 3] the object's render inside R (for the projection)
-    std::vector<double> rows;   // [R h, kTerms] its per-pixel terms summed over each row of R
+  struct Object {                 // one object of the box path
+    PixelBox R, Q;                // scored box and crop (image coordinates)
+    PixelBox M;                   // the box of its mask's pixels (its target I M_k is 0 outside)
+    bool full = false;            // scored over the whole image (R = Q = the image)
+    ScratchVector<float> own;     // [R h, R w, 3] its gradient inside R (every value written by the pieces)
+    ScratchVector<float> unit;    // [R h, R w, 3] eq. 14's unscaled gradient inside R (bro_parts)
+    ScratchVector<float> pred;    // [R h, R w, 3] the object's render inside R (for the projection)
+    std::vector<double> rows;     // [R h, kTerms] its per-pixel terms summed over each row of R
+    double base_in[kTerms] = {};  // the base pair's terms summed over R (raster order; boxes only)
     float bro_scale = 0, proj = 0;
   };
 
@@ -218,7 +219,7 @@ class ObjectLosses {
   void score_crop(Scratch& w, const Image& image, const LabelMap& labels, int j, int k, int y0, int y1);
   void finish_box(int W, int H, int j);
   void complete_rows(int j, int r0, int r1);
-  void base_sums(const PixelBox& r, int W, double* out) const;
+  double base_sum(const PixelBox& r, int W, int H, int t) const;
   void scatter(int H, int W, bool bro_grad, const ObjectGradOut& out) const;
 
   HybridConfig cfg_;
@@ -240,7 +241,7 @@ class ObjectLosses {
   // The box path's renders as the crops read them (find_boxes): the call's objects, or planes_; the base render
   // as its planar copy base_pred_, base_opac_ (the same floats, read contiguously).
   ObjectRenders renders_;
-  std::vector<double> base_terms_;  // [H, W, kTerms]
+  std::vector<double> base_terms_;  // [kTerms, H, W] planar: a box's sum of one term reads that plane alone
   std::vector<double> base_rows_;   // [H, kTerms] their sums over each row
   double base_total_[kTerms] = {};  // their sums over the image (the rows in order)
   int dep_ = 0;                     // the dependency radius in use
