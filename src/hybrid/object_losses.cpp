@@ -423,14 +423,19 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
 }
 
 // The base pair's per-pixel terms summed over r. out [kTerms]
-// Term t of the base pair summed over box r, one running sum in raster order (one task per object and term: the
-// plane of t alone is read).
-double ObjectLosses::base_sum(const PixelBox& r, int W, int H, int t) const {
-  const double* plane = &base_terms_[size_t(t) * W * H];
-  double s = 0;
+// Terms [kT0, kT1) of the base pair summed over box r into out [kTerms], each one running sum in raster order
+// (the planes of those terms alone are read; the terms' sums are independent chains: one term per task left each
+// task waiting on its adder, 1.6x the time of all six together).
+template <int kT0, int kT1>
+void ObjectLosses::base_sums(const PixelBox& r, int W, int H, double* out) const {
+  const size_t HW = size_t(W) * H;
+  double s[kT1 - kT0] = {};
   for (int y = r.y0; y < r.y1 && !r.empty(); ++y)
-    for (int x = r.x0; x < r.x1; ++x) s += plane[size_t(y) * W + x];
-  return s;
+    for (int x = r.x0; x < r.x1; ++x) {
+      const size_t p = size_t(y) * W + x;
+      for (int t = kT0; t < kT1; ++t) s[t - kT0] += base_terms_[t * HW + p];
+    }
+  for (int t = kT0; t < kT1; ++t) out[t] = s[t - kT0];
 }
 
 // Step 3 for an object: its sums over R (its rows in order), its values (into app_[j], bro_[j]) and scalars
@@ -691,23 +696,25 @@ ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab,
       base_total_[t] = 0;
       for (int y = 0; y < H; ++y) base_total_[t] += base_rows_[size_t(y) * kTerms + t];
     }
-  // Step 3: the base pair's terms over each box (one task per object and term, each one running sum in a fixed
-  // order; eq. 14's terms only with eq. 14), each object's scalars (one task per object), then eq. 14's part of
-  // its gradient, cut into bands of its rows so that a large object is no single task (a full object's own
-  // gradient is then complete over the image: nothing of the base pair outside).
-  std::vector<std::array<int, 2>> sums;  // (object, term)
+  // Step 3: the base pair's terms over each box (one task per object for eq. 6's two terms and one for eq.
+  // 14's four, each term one running sum in a fixed order), each object's scalars (one task per object), then
+  // eq. 14's part of its gradient, cut into bands of its rows so that a large object is no single task (a full
+  // object's own gradient is then complete over the image: nothing of the base pair outside).
+  std::vector<std::array<int, 2>> sums;  // (object, 0: eq. 6's terms / 1: eq. 14's)
   for (int j = 0; j < J; ++j) {
     std::fill(obj_[j].base_in, obj_[j].base_in + kTerms, 0.0);
     if (obj_[j].full || obj_[j].R.empty()) continue;
-    for (int t = 0; t < (bro_on ? int(kTerms) : int(kWsum)); ++t) sums.push_back({j, t});
+    sums.push_back({j, 0});
+    if (bro_on) sums.push_back({j, 1});
   }
   std::stable_sort(sums.begin(), sums.end(), [&](const auto& a, const auto& b) {  // the largest boxes first
     return obj_[a[0]].R.area() > obj_[b[0]].R.area();
   });
 #pragma omp parallel for schedule(dynamic, 1)
   for (size_t i = 0; i < sums.size(); ++i) {
-    const auto [j, t] = sums[i];
-    obj_[j].base_in[t] = base_sum(obj_[j].R, W, H, t);
+    const auto [j, g] = sums[i];
+    if (g == 0) base_sums<kL1, kWsum>(obj_[j].R, W, H, obj_[j].base_in);
+    else base_sums<kWsum, kTerms>(obj_[j].R, W, H, obj_[j].base_in);
   }
 #pragma omp parallel for schedule(dynamic, 1)
   for (int j = 0; j < J; ++j) finish_box(W, H, j);

@@ -219,7 +219,8 @@ class ObjectLosses {
   void score_crop(Scratch& w, const Image& image, const LabelMap& labels, int j, int k, int y0, int y1);
   void finish_box(int W, int H, int j);
   void complete_rows(int j, int r0, int r1);
-  double base_sum(const PixelBox& r, int W, int H, int t) const;
+  template <int kT0, int kT1>
+  void base_sums(const PixelBox& r, int W, int H, double* out) const;
   void scatter(int H, int W, bool bro_grad, const ObjectGradOut& out) const;
 
   HybridConfig cfg_;
