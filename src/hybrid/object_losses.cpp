@@ -422,7 +422,6 @@ void ObjectLosses::score_crop(Scratch& w, const Image& image, const LabelMap& la
   w.ring_overrun |= overrun;
 }
 
-// The base pair's per-pixel terms summed over r. out [kTerms]
 // Terms [kT0, kT1) of the base pair summed over box r into out [kTerms], each one running sum in raster order
 // (the planes of those terms alone are read; the terms' sums are independent chains: one term per task left each
 // task waiting on its adder, 1.6x the time of all six together).
@@ -439,7 +438,7 @@ void ObjectLosses::base_sums(const PixelBox& r, int W, int H, double* out) const
 }
 
 // Step 3 for an object: its sums over R (its rows in order), its values (into app_[j], bro_[j]) and scalars
-// from the base pair's sums outside R (o.base_in, base_sum's) plus its own inside (a full object: its own alone).
+// from the base pair's sums outside R (o.base_in, from base_sums) plus its own inside (a full object: its own alone).
 // complete_rows then adds eq. 14's part to its gradient inside R.
 void ObjectLosses::finish_box(int W, int H, int j) {
   Object& o = obj_[j];

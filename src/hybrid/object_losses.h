@@ -242,7 +242,7 @@ class ObjectLosses {
   // The box path's renders as the crops read them (find_boxes): the call's objects, or planes_; the base render
   // as its planar copy base_pred_, base_opac_ (the same floats, read contiguously).
   ObjectRenders renders_;
-  std::vector<double> base_terms_;  // [kTerms, H, W] planar: a box's sum of one term reads that plane alone
+  std::vector<double> base_terms_;  // [kTerms, H, W] planar: a task's box sums read their terms' planes alone
   std::vector<double> base_rows_;   // [H, kTerms] their sums over each row
   double base_total_[kTerms] = {};  // their sums over the image (the rows in order)
   int dep_ = 0;                     // the dependency radius in use
