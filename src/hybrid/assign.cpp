@@ -57,12 +57,7 @@ void pool_reference_upsampled(const float* grid, int gh, int gw, const LabelMap&
                               float* area) {
   const int H = labels.height, W = labels.width;
   pool_rows(
-      labels, D, L,
-      [&](size_t p, float* buf) {
-        bilinear_pixel(grid, gh, gw, D, H, W, p, buf);
-        return static_cast<const float*>(buf);
-      },
-      z, area);
+      labels, D, L, [&](size_t p, float* buf) { return bilinear_pixel(grid, gh, gw, D, H, W, p, buf); }, z, area);
 }
 
 }  // namespace hgs::hybrid

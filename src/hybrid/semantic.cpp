@@ -141,10 +141,7 @@ SemanticValues SemanticPass::cosine(int u, int W, int H, const float* extra, int
   // S_ref(p): the view's feature grid upsampled to the image one pixel at a time (no [H, W, D] map per step).
   const float* grid = hv.patch_features.data();
   const int gh = hv.ph, gw = hv.pw, D = D_;
-  auto ref = [=](size_t p, float* buf) {
-    bilinear_pixel(grid, gh, gw, D, H, W, p, buf);
-    return static_cast<const float*>(buf);
-  };
+  auto ref = [=](size_t p, float* buf) { return bilinear_pixel(grid, gh, gw, D, H, W, p, buf); };
   SemanticValues out;
   out.loss = cosine_loss_rows(&extra[o], C, ref, size_t(W) * H, D_, &d_extra[o], cfg_.lambda_sem);
   return out;

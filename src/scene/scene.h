@@ -105,9 +105,10 @@ inline BilinearTap bilinear_tap(const float* src, int h, int w, int d, int H, in
 inline void bilinear_sample(const BilinearTap& t, int d, float* out) {  // out [d]
   for (int c = 0; c < d; ++c) out[c] = t.w00 * t.p00[c] + t.w01 * t.p01[c] + t.w10 * t.p10[c] + t.w11 * t.p11[c];
 }
-// Pixel p (its row-major index in the H x W image) of upsample_bilinear's map: out [d].
-inline void bilinear_pixel(const float* src, int h, int w, int d, int H, int W, size_t p, float* out) {
+// Pixel p (its row-major index in the H x W image) of upsample_bilinear's map: out [d], returned.
+inline const float* bilinear_pixel(const float* src, int h, int w, int d, int H, int W, size_t p, float* out) {
   bilinear_sample(bilinear_tap(src, h, w, d, H, W, int(p % size_t(W)), int(p / size_t(W))), d, out);
+  return out;
 }
 
 }  // namespace hgs

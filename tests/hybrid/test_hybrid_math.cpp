@@ -710,8 +710,7 @@ TEST(Scl, NoSclCosineLossOnTheGridSampledPerPixelIsTheLossOnTheUpsampledMap) {
   for (int d = 0; d < D; ++d) S[40 * stride + d] = 0.f;
   const std::vector<float> map = upsample_bilinear(grid.data(), gh, gw, D, H, W);
   auto ref = [&](size_t p, float* buf) {  // as SemanticPass::cosine samples it
-    bilinear_pixel(grid.data(), gh, gw, D, H, W, p, buf);
-    return static_cast<const float*>(buf);
+    return bilinear_pixel(grid.data(), gh, gw, D, H, W, p, buf);
   };
   std::vector<float> px(D);
   for (size_t p = 0; p < P; ++p) {
