@@ -231,6 +231,16 @@ void fuse_backward(const ObservationTable& tab, const T* w, const FusionParams& 
 #pragma omp for schedule(static)
     for (int blk = 0; blk < blocks; ++blk) {
       const int n0 = blk * B, nb = std::min(B, N - n0);
+      // The Gaussians that pass a gradient: valid (elsewhere q is a constant) and with some dq != 0. A row of dq
+      // all +-0 (a Gaussian this step did not render, or no loss reached) makes every term below +-0, and adding
+      // +-0 to a sum that starts at +0 leaves it as it was (such a sum is never -0): skipped, the same bits.
+      bool live[B] = {}, any = false;
+      for (int b = 0; b < nb; ++b) {
+        const T* d = dq + size_t(n0 + b) * L;
+        live[b] = valid[n0 + b] && std::any_of(d, d + L, [](T x) { return x != T(0); });
+        any |= live[b];
+      }
+      if (!any) continue;
       const uint16_t* rows = &tab.label[size_t(n0) * U];
       V den{};  // in view order, as fuse() sums it
       for (int u = 0; u < U; ++u) {
@@ -238,14 +248,12 @@ void fuse_backward(const ObservationTable& tab, const T* w, const FusionParams& 
         FB::labels(rows, U, u, nb, lb);
         den += lb != I(kNoObservation) ? V{} + w[u] : V{};
       }
-      bool any = false;
       T inv_b[B] = {};
       for (int b = 0; b < nb; ++b) {
         const size_t n = size_t(n0 + b);
         T* g = &gv[size_t(b) * (L + 2)];
+        if (!live[b]) continue;
         std::fill(g, g + L + 2, T(0));
-        if (!valid[n]) continue;  // q is a constant there: no gradient
-        any = true;
         softmax_backward(q + n * L, dq + n * L, L, ds.data());
         const T inv = T(1) / (den[b] + T(p.eps));
         // ds/ds_logit scale 1/T; d s_k / d w_u = V_u ([label_u = k] - s_k) / (den + eps)
@@ -262,10 +270,9 @@ void fuse_backward(const ObservationTable& tab, const T* w, const FusionParams& 
         g[L] = -sum_ds_s;
         inv_b[b] = inv;
       }
-      if (!any) continue;
       // Gaussian by Gaussian (the order of the per-Gaussian loop), its views independent of each other.
       for (int b = 0; b < nb; ++b) {
-        if (!valid[n0 + b]) continue;
+        if (!live[b]) continue;
         const T* g = &gv[size_t(b) * (L + 2)];
         const T inv = inv_b[b];
         const uint16_t* lab = rows + size_t(b) * U;

@@ -146,8 +146,8 @@ void fuse_backward_reference(const ObservationTable& tab, const float* w, const 
 TEST(ObservationFusion, BlockedFusionIsThePerGaussianLoopBitwise) {
   // fuse() sums eq. 4 for 8 Gaussians at once, branch-free, and fuse_backward() likewise (fusion.h): on one
   // thread both give the per-Gaussian loops' values bit for bit, for a Gaussian count that is not a multiple of
-  // 8, labels past the last one (counted only in the normaliser), Gaussians without any observation, and a
-  // label count above kFuseBlockLabels (the per-Gaussian path).
+  // 8, labels past the last one (counted only in the normaliser), Gaussians without any observation, rows of dq
+  // all zero, and a label count above kFuseBlockLabels (the per-Gaussian path).
   std::mt19937 rng(4);
   for (int L : {2, 9, 40, kFuseBlockLabels + 5}) {
     SCOPED_TRACE(L);
@@ -165,6 +165,10 @@ TEST(ObservationFusion, BlockedFusionIsThePerGaussianLoopBitwise) {
     std::vector<float> w(U), dq(size_t(N) * L), dw(U), dw_ref(U);
     for (auto& x : w) x = R(rng) / U;
     for (auto& x : dq) x = R(rng) - 0.5f;
+    // Rows of dq all zero, as for the Gaussians a step does not render (fuse_backward skips them): every third
+    // Gaussian, a whole block of 8 (16..23), and rows of -0; the reference adds their terms.
+    for (int n = 0; n < N; ++n)
+      if (n % 3 == 0 || (n >= 16 && n < 24) || n % 5 == 1) std::fill_n(&dq[size_t(n) * L], L, n % 5 == 1 ? -0.f : 0.f);
     const FusionParams p{L, 0.1, 1e-6, 0.5};
     std::vector<float> q(size_t(N) * L, 0.3f), s(q.size()), q_ref = q, s_ref(q.size());
     std::vector<uint8_t> valid(N), valid_ref(N);

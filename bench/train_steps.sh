@@ -1,0 +1,54 @@
+#!/usr/bin/env bash
+# The training step as `hgs train` runs it on a synthetic capture, for one or more builds side by side
+# (docs/performance.md, "Issue 61, session twelve"). bench_hybrid and bench_scale time the step on a box of random
+# Gaussians seen by two cameras with clean grid masks: most Gaussians are hidden, q is one-hot, and the object
+# channels and f's row updates have a fraction of the work they have on a capture. This script times the real
+# thing: `hgs synth` makes the scene once (cached in OUT; the room preset at 1000x700 with 300k points is the
+# paper's LERF scale, the default tabletop 320x240 / 30k is bench_hybrid's size), then each build trains it for
+# ITERS iterations without densification (the Gaussian count stays fixed), builds alternating, REPS rounds, and
+# the script prints each run's median ms / iteration and mean ms per part from train_stats.json. Iteration 100's
+# observation-table rebuild is in the mean, not in the median.
+#   bench/train_steps.sh OUT HGS [HGS2 ...]
+#   env: SIZE=paper|small (default small), METHOD=full|rgb|both (default both), ITERS (120), REPS (2), THREADS (2)
+set -uo pipefail
+[ $# -ge 2 ] || { echo "usage: bench/train_steps.sh OUT HGS_BINARY [HGS_BINARY ...]" >&2; exit 2; }
+O="$1"
+shift
+SIZE="${SIZE:-small}" METHOD="${METHOD:-both}" ITERS="${ITERS:-120}" REPS="${REPS:-2}" THREADS="${THREADS:-2}"
+for b in "$@"; do [ -x "$b" ] || { echo "$b: not an executable" >&2; exit 2; }; done
+case "$SIZE" in
+  paper) synth=(--preset room --width 1000 --height 700 --points 300000) ;;
+  small) synth=() ;;
+  *) echo "SIZE must be paper or small, not '$SIZE'" >&2; exit 2 ;;
+esac
+case "$METHOD" in
+  both) methods=(rgb full) ;;
+  rgb | full) methods=("$METHOD") ;;
+  *) echo "METHOD must be full, rgb or both, not '$METHOD'" >&2; exit 2 ;;
+esac
+mkdir -p "$O"
+S="$O/scene_$SIZE"
+[ -f "$S/sparse/0/points3D.bin" ] || "$1" synth --out "$S" "${synth[@]}" --quiet || exit 1
+echo "machine: $(lscpu | sed -n 's/^Model name: *//p'), nproc $(nproc); scene $S; $ITERS iterations, $THREADS thread(s)"
+unset OMP_WAIT_POLICY # passive waiting slows the steps (docs/performance.md): time the default
+for rep in $(seq 1 "$REPS"); do
+  for m in "${methods[@]}"; do
+    i=0
+    for H in "$@"; do
+      i=$((i + 1))
+      run="$O/run_${SIZE}_${m}_b${i}"
+      rm -rf "$run"
+      opt=()
+      [ "$m" = rgb ] && opt=(--method rgb)
+      "$H" train "$S" --out "$run" --iters "$ITERS" --threads "$THREADS" --no-densify --seed 0 --quiet "${opt[@]}" \
+        >"$run.log" 2>&1 || { echo "$H: training failed, see $run.log" >&2; continue; }
+      python3 - "$run/train_stats.json" "$rep" "$m" "$H" <<'EOF'
+import json, sys
+d = json.load(open(sys.argv[1]))
+parts = ", ".join(f"{k} {v:.1f}" for k, v in d["mean_ms_per_part"].items() if v >= 0.05)
+print(f"round {sys.argv[2]}, {sys.argv[3]}, {sys.argv[4]}: median {d['median_ms_per_iter']:.1f} ms, "
+      f"mean {d['mean_ms_per_iter']:.1f}; parts (mean ms): {parts}; peak RSS {d['peak_rss_mb']:.0f} MB")
+EOF
+    done
+  done
+done
