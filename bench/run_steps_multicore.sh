@@ -7,7 +7,9 @@
 # rebuild in every step: issue 61's goal 3), then (first build) the one-thread step alone and as one copy per
 # core at once (bench/shared_report.py) and bench/project_threads.py's projection with each region's time measured
 # at the most threads beside it (--measure: which regions fall short of what their tasks allow), for the hybrid
-# step and the full step. JSON and text
+# step and the full step; last, the step as `hgs train` runs it on a synthetic capture at the paper's scale
+# (bench/train_steps.sh: RGB and the full method, each build, at the most threads; the box scene above
+# understates the method's step, docs/performance.md "Issue 61, session twelve"). JSON and text
 # under OUT (default /tmp/steps_multicore); `bench/amdahl.py OUT/<tag>.json --threads 4 16` prints projection and
 # measurement side by side.
 #   bench/run_steps_multicore.sh NEW_BUILD_DIR [OLD_BUILD_DIR]
@@ -66,3 +68,8 @@ if command -v python3 >/dev/null; then
   python3 "$(dirname "$0")/project_threads.py" --build "$1" --threads "$NT" --min-ms 2 --measure --case full 1 1 |
     tee "$O/projection_full.txt"
 fi
+# The real step (bench/train_steps.sh): the room at 1000x700 with 300k points, 60 iterations, each build's hgs.
+train_builds=()
+for d in "${dirs[@]}"; do train_builds+=("$d/hgs"); done
+SIZE=paper METHOD=both ITERS=60 REPS=1 THREADS="$NT" "$(dirname "$0")/train_steps.sh" "$O/train" "${train_builds[@]}" |
+  tee "$O/train_steps.txt"

@@ -4,11 +4,12 @@
 // per pixel S = sum_{j>i} w_j <value_j, dL/dout> gives dL/dalpha_i = T_i <value_i, g> - (S + T_final (<bg, g_rgb>
 // - g_alpha)) / (1 - alpha_i); no gradient flows through the kAlphaMax clamp, and pixels below kAlphaMin are
 // skipped as in forward. Extra channels and groups: folded into the walk (each visit's dot and the Gaussian's
-// gradient sums on the stack), or, with many channels, dots precomputed per visit (extra_dots, group_dots) and
-// the channel gradients summed per Gaussian afterwards (extra_grads, group_grads); the same sums in the same
-// order, with the walk's fused multiply-adds pinned (simd::fmadd) so that both paths round alike. Per-(tile,
-// Gaussian) slots are reduced per Gaussian in a fixed
-// order, so the result is bitwise deterministic for any thread count.
+// gradient sums on the stack; a Gaussian with more group entries than kFoldMaxEntries records its visits and sums
+// its group gradients afterwards, group_grads), or, with many channels, dots precomputed per visit (extra_dots,
+// group_dots) and the channel gradients summed per Gaussian afterwards (extra_grads, group_grads); the same sums
+// in the same order, with the walk's fused multiply-adds pinned (simd::fmadd) so that both paths round alike.
+// Per-(tile, Gaussian) slots are reduced per Gaussian in a fixed order, so the result is bitwise deterministic for
+// any thread count.
 #include "render/raster_isa.h"
 
 #include <omp.h>
@@ -289,13 +290,15 @@ inline __attribute__((always_inline)) simd::Pack<T> visit_dot(const RasterInputs
 }
 
 // The folded path's channel gradients of one visit (masked weight wm): ae [C] and ag [ne, GWg] get
-// extra_grads' / group_grads' terms.
-template <class T>
+// extra_grads' / group_grads' terms (kEntries false: the extra channels only; a Gaussian with more entries than
+// ag holds takes its group gradients from its visit list, store_pair_grads).
+template <class T, bool kEntries>
 inline __attribute__((always_inline)) void add_folded_grads(const RasterInputs<T>& in, const FoldedGaussian<T, 3>& fg,
                                                             const simd::Pack<T>* st, const BackwardBatches<T>& b,
                                                             simd::Pack<T> wm, simd::Pack<T>* ae, simd::Pack<T>* ag) {
   const int GWg = b.GWg;
   for (int c = 0; c < b.C; ++c) ae[c] += wm * st[kBatchFixed + c];
+  if (!kEntries) return;
   if (fg.one) {
     const simd::Pack<T>* gs = st + b.GO + fg.slot;
     for (int i = 0; i < 3; ++i) ag[i] += wm * gs[i];
@@ -310,9 +313,10 @@ inline __attribute__((always_inline)) void add_folded_grads(const RasterInputs<T
 // Gaussian k at batch bt, back to front: pixels before their last contributor (inr) with alpha >= kAlphaMin
 // rebuild T_i = T_{i+1} / (1 - alpha), take dL/dalpha = T_i <value, g> - (S + Tbg) / (1 - alpha) and add
 // w <value, g> to S; the pair's sums get the colour / depth / channel gradients (w g) and, where alpha is below
-// the kAlphaMax clamp, the opacity, mean and conic gradients through dL/dpower. The visit-list path records the
-// visit (batch, masked weight) in kvb / kvw for extra_grads / group_grads.
-template <class T, bool kDepth, int kX>
+// the kAlphaMax clamp, the opacity, mean and conic gradients through dL/dpower. With kList (the visit-list path,
+// and the folded one for a Gaussian with more than kFoldMaxEntries entries) the visit (batch, masked weight) is
+// recorded in kvb / kvw for extra_grads / group_grads.
+template <class T, bool kDepth, int kX, bool kList>
 inline __attribute__((always_inline)) void backward_visit(const RasterInputs<T>& in, const T* rc, int k, int bt,
                                                           const FoldedGaussian<T, 3>& fg, const BackwardBatches<T>& b,
                                                           uint32_t jm, const T* dw, int tx0, int ty0,
@@ -339,7 +343,7 @@ inline __attribute__((always_inline)) void backward_visit(const RasterInputs<T>&
   a.g += wm * gg;
   a.bl += wm * gb;
   if (kDepth) a.z += wm * st[bD];
-  if constexpr (kX == kVisitLists) {
+  if constexpr (kList) {
     kvb[nkv] = bt;
     kvw[nkv++] = wm;
   }
@@ -352,7 +356,7 @@ inline __attribute__((always_inline)) void backward_visit(const RasterInputs<T>&
   a.a += pdx * ev.dx;
   a.b += pdx * ev.dy;
   a.c += pw * (ev.dy * ev.dy);
-  if constexpr (kX == kFolded) add_folded_grads(in, fg, st, b, wm, ae, ag);
+  if constexpr (kX == kFolded) add_folded_grads<T, !kList>(in, fg, st, b, wm, ae, ag);
 }
 
 // Stores one pair's results: o [kNumGrads + C] (dpower/dmx = -(a dx + b dy), dpower/da = -dx^2 / 2, dpower/db =
@@ -383,7 +387,9 @@ inline __attribute__((always_inline)) void store_pair_grads(const RasterInputs<T
     if constexpr (kX == kVisitLists) {
       group_grads<T>(kvb, kvw, nkv, b.st + b.GO, b.BS, in, gi, og);
     } else if constexpr (kX == kFolded) {
-      for (int i = 0; i < ne * GWg; ++i) og[i] = simd::hsum<T>(ag[i]);
+      if (ne > kFoldMaxEntries) group_grads<T>(kvb, kvw, nkv, b.st + b.GO, b.BS, in, gi, og);
+      else
+        for (int i = 0; i < ne * GWg; ++i) og[i] = simd::hsum<T>(ag[i]);
     }
   }
 }
@@ -406,18 +412,23 @@ inline __attribute__((always_inline)) void backward_gaussian(const RasterInputs<
   P ae[kFoldMaxChannels], ag[kFoldMaxEntries * kFoldMaxWidth];
   if constexpr (kX == kFolded) {
     for (int c = 0; c < C; ++c) ae[c] = P{};
-    for (int i = 0; i < fg.ne * GWg; ++i) ag[i] = P{};
+    if (fg.ne <= kFoldMaxEntries)
+      for (int i = 0; i < fg.ne * GWg; ++i) ag[i] = P{};
   }
-  int kvb[kBatches];  // the visit-list path: this Gaussian's visits with a contribution, batch and masked weight
+  int kvb[kBatches];  // visit lists (and a folded Gaussian with many entries): its visits, batch and masked weight
   P kvw[kBatches];
   int nkv = 0;
-  while (mb) {
-    const int bt = __builtin_ctz(mb);
-    mb &= mb - 1;
-    if (k >= kmax[bt]) continue;
-    const P* vd = kX == kVisitLists ? vdot + voff[bt] + --vcur[bt] : nullptr;  // this visit's (lists walked back)
-    backward_visit<T, kDepth, kX>(in, rc, k, bt, fg, b, jmask[bt], dw, tx0, ty0, vd, a, ae, ag, kvb, kvw, nkv);
-  }
+  auto walk = [&]<bool kList>() {
+    while (mb) {
+      const int bt = __builtin_ctz(mb);
+      mb &= mb - 1;
+      if (k >= kmax[bt]) continue;
+      const P* vd = kX == kVisitLists ? vdot + voff[bt] + --vcur[bt] : nullptr;  // this visit's (lists walked back)
+      backward_visit<T, kDepth, kX, kList>(in, rc, k, bt, fg, b, jmask[bt], dw, tx0, ty0, vd, a, ae, ag, kvb, kvw, nkv);
+    }
+  };
+  if (kX == kFolded && fg.ne > kFoldMaxEntries) walk.template operator()<true>();  // rare: its own visit list
+  else walk.template operator()<kX == kVisitLists>();
   store_pair_grads<T, kDepth, kX>(in, a, ae, ag, fg.ne, kvb, kvw, nkv, b, gi, o, og);
 }
 
@@ -468,7 +479,7 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
     T* o = pair_grad + size_t(bins.tile_pair[s + k]) * F;
     T* og = kX != kNoChannels && GT > 0 ? pair_group + pair_gslot[s + k] : nullptr;
     const T* cr = kX == kFolded ? chan + size_t(gauss[k]) * kChanRecord : nullptr;
-    const int gi = kX == kVisitLists && GT > 0 ? gauss[k] : 0;
+    const int gi = kX != kNoChannels && GT > 0 ? gauss[k] : 0;
     backward_gaussian<T, kDepth, kX>(in, td.rec + size_t(k) * kRecord, k, gi, cr, b, kmax, jmask,
                                      J > 0 ? DW + size_t(k) * J : nullptr, tx0, ty0, masks[k] & live, voff, vcur, vdot,
                                      o, og);
@@ -477,10 +488,9 @@ void backward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typ
 
 // The group-gradient slots (groups with GWg gradient channels): each Gaussian's, one slot of entries x GWg per
 // pair, Gaussian-major (ws.group_off [n + 1] their offsets in ws.pair_group), and each pair's slot in tile order
-// (ws.pair_gslot [pairs]: the walks write them without looking up its Gaussian). Returns the most group entries
-// of one Gaussian (the folded backward's bound).
+// (ws.pair_gslot [pairs]: the walks write them without looking up its Gaussian).
 template <class T>
-int group_slots(const RasterInputs<T>& in, const Binning& bins, int GWg, RasterWorkspace<T>& ws) {
+void group_slots(const RasterInputs<T>& in, const Binning& bins, int GWg, RasterWorkspace<T>& ws) {
   const int n = in.n;
   ws.group_off.resize(size_t(n) + 1);
   if (ws.slot_rule.size() < size_t(n)) ws.slot_rule.resize(size_t(n));
@@ -495,9 +505,6 @@ int group_slots(const RasterInputs<T>& in, const Binning& bins, int GWg, RasterW
   parallel_offsets(n, GOF, slots, [&](int i, size_t off) {
     rule[i] = {off - size_t(bins.pair_offset[i]) * width(i), width(i)};
   });
-  int max_entries = 0;
-#pragma omp parallel for schedule(static) reduction(max : max_entries)
-  for (int i = 0; i < n; ++i) max_entries = std::max(max_entries, in.group_ptr[i + 1] - in.group_ptr[i]);
   if (ws.pair_group.size() < GOF[n]) ws.pair_group.resize(GOF[n]);
   if (ws.pair_gslot.size() < size_t(bins.num_pairs)) ws.pair_gslot.resize(size_t(bins.num_pairs));
   size_t* slot = ws.pair_gslot.data();
@@ -506,7 +513,6 @@ int group_slots(const RasterInputs<T>& in, const Binning& bins, int GWg, RasterW
     const std::array<size_t, 2> r = rule[bins.tile_gauss[t]];
     slot[t] = r[0] + size_t(bins.tile_pair[t]) * r[1];
   }
-  return max_entries;
 }
 
 // Gaussian i's gradients: the sums of its pair slots in pair order (pg [pairs, F], F = kNumGrads + C; its group
@@ -561,8 +567,8 @@ void rasterize_backward(const RasterInputs<T>& in, const Binning& bins, RasterWo
   const bool groups = in.num_groups > 0 && GWg > 0;
   const bool ext = (C > 0 && g.d_extra != nullptr) || groups;
   if (ws.pair_grad.size() < size_t(bins.num_pairs) * F) ws.pair_grad.resize(size_t(bins.num_pairs) * F);
-  const int max_entries = groups ? group_slots(in, bins, GWg, ws) : 0;
-  const int x = ext ? channel_path(in, C, groups ? in.num_groups * GWg : 0, max_entries, GWg) : kNoChannels;
+  if (groups) group_slots(in, bins, GWg, ws);
+  const int x = ext ? channel_path(in, C, groups ? in.num_groups * GWg : 0, GWg) : kNoChannels;
   const size_t* GOF = groups ? ws.group_off.data() : nullptr;
   const size_t* GSL = groups ? ws.pair_gslot.data() : nullptr;
   T* PGR = groups ? ws.pair_group.data() : nullptr;

@@ -245,15 +245,15 @@ inline __attribute__((always_inline)) void weighted_rows(const P* vw, int cnt, R
 
 // How a call's extra channels and groups are composited and differentiated (rasterize.h): not at all, from
 // per-batch visit lists after the walk, or folded into the walk's own visit loop. ChannelPath::kAuto folds at
-// most kFoldMaxChannels dense channels with groups of at most kFoldMaxEntries entries per Gaussian (`max_entries`,
-// checked by backward, whose fold keeps each entry's gradient sums on the stack) and group gradients of width at
-// most kFoldMaxWidth; kFolded folds where allowed, kVisitLists never folds.
+// most kFoldMaxChannels dense channels and group gradients of width at most kFoldMaxWidth, with any number of
+// entries per Gaussian (the folded backward keeps the gradient sums of up to kFoldMaxEntries entries on the stack
+// and takes a Gaussian with more from its own visit list); kFolded folds where allowed, kVisitLists never folds.
 enum ChannelPathKernel { kNoChannels = 0, kVisitLists = 1, kFolded = 2 };
 constexpr int kFoldMaxChannels = 4, kFoldMaxEntries = 4, kFoldMaxWidth = 4;
 template <class T>
-int channel_path(const RasterInputs<T>& in, int C, int GT, int max_entries, int grad_width) {
+int channel_path(const RasterInputs<T>& in, int C, int GT, int grad_width) {
   if (C <= 0 && GT <= 0) return kNoChannels;
-  const bool foldable = C <= kFoldMaxChannels && max_entries <= kFoldMaxEntries && grad_width <= kFoldMaxWidth;
+  const bool foldable = C <= kFoldMaxChannels && grad_width <= kFoldMaxWidth;
   return in.channel_path == ChannelPath::kVisitLists || !foldable ? kVisitLists : kFolded;
 }
 
@@ -328,8 +328,7 @@ inline __attribute__((always_inline)) void load_folded(const T* rc, const T* cr,
   static_assert(NV <= 4 && kCv - kCx == kFoldMaxChannels, "a channel record holds 4 extra and 4 group values");
   // All kFoldMaxChannels values (the record's zero padding past C is never used): a fixed-size copy, where a loop
   // to C became a memcpy call per (tile, Gaussian) pair.
-  if (C > 0)
-    for (int c = 0; c < kFoldMaxChannels; ++c) f.x[c] = cr[kCx + c];
+  for (int c = 0; c < kFoldMaxChannels; ++c) f.x[c] = C > 0 ? cr[kCx + c] : T(0);
   f.e0 = groups ? record_int(rc[kE0]) : 0;
   f.ne = groups ? record_int(rc[kNe]) : 0;
   f.one = f.ne == 1 && slot_width == NV;

@@ -292,7 +292,7 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
                        const RasterOutputs<T>& out) {
   ensure_threads(ws);
   const bool dep = in.depth != nullptr;
-  const int x = channel_path(in, in.num_extra, in.num_groups * in.group_width, 0, 0);
+  const int x = channel_path(in, in.num_extra, in.num_groups * in.group_width, 0);
   if (ws.masks.size() < size_t(bins.num_pairs)) ws.masks.resize(size_t(bins.num_pairs));
   uint32_t* MK = ws.masks.data();
   if (ws.records.size() < size_t(in.n) * kRecord) ws.records.resize(size_t(in.n) * kRecord);

@@ -36,9 +36,10 @@ constexpr int kG = 5, kGW = 4, kGWg = 3;  // groups, channels per group, channel
 struct Groups {
   std::vector<int> ptr{0}, id;
   std::vector<double> val;
-  explicit Groups(int n, uint32_t seed) {
+  // 0 to max_entries entries per Gaussian.
+  explicit Groups(int n, uint32_t seed, int max_entries = 3) {
     std::mt19937 rng(seed);
-    std::uniform_int_distribution<int> cnt(0, 3);
+    std::uniform_int_distribution<int> cnt(0, max_entries);
     std::normal_distribution<double> N01(0, 1);
     for (int i = 0; i < n; ++i) {
       std::vector<int> g(kG);
@@ -238,12 +239,18 @@ void composite_groups_and_base(RendererT<T>& ren, Scene& s, const Groups& gr, co
 // render, the last forward-only), groups of 0 to 3 entries and hard pixel-weight maps, float and double, on a
 // width that leaves partial batches. The upstream group gradients read from a buffer or computed on demand
 // (group_rows) give the same bits on both paths, and so does a folded backward after a forward that did not fold
-// (which builds no channel records: the backward builds them).
+// (which builds no channel records: the backward builds them). max_entries above kFoldMaxEntries (4): the folded
+// backward sums those Gaussians' group gradients from their visit lists instead of on the stack.
 template <class T>
-void compare_channel_paths() {
+void compare_channel_paths(int max_entries = 3) {
   Scene s = random_scene(700, 69, 50, 23, 0.9, 4);
   s.add_label_weights(3, 6);
-  const Groups gr(s.n, 29);
+  const Groups gr(s.n, 29, max_entries);
+  if (max_entries > 4) {  // some Gaussians have more entries than the fold keeps on the stack
+    int most = 0;
+    for (int i = 0; i < s.n; ++i) most = std::max(most, gr.ptr[i + 1] - gr.ptr[i]);
+    ASSERT_GT(most, 4);
+  }
   const std::vector<T> val = conv<T>(gr.val), ex = conv<T>(s.extra);
   const size_t P = size_t(s.cam.width) * s.cam.height;
   std::mt19937 rng(7);
@@ -432,6 +439,10 @@ TEST(RenderGroups, LiveTilesWithoutPlanesAreAnError) {
 
 TEST(RenderGroups, FoldedAndVisitListPathsAreBitwiseEqualFloat) { compare_channel_paths<float>(); }
 TEST(RenderGroups, FoldedAndVisitListPathsAreBitwiseEqualDouble) { compare_channel_paths<double>(); }
+TEST(RenderGroups, FoldedBackwardOfGaussiansWithManyEntriesIsBitwiseTheVisitLists) {
+  compare_channel_paths<float>(kG);
+  compare_channel_paths<double>(kG);
+}
 
 }  // namespace
 }  // namespace hgs::render::test
