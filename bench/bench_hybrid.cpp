@@ -5,8 +5,10 @@
 //   appearance + BRO, with Observation Fusion and Adam on q's view logits). The scene's data has no SCL classes,
 //   so the language term does not run. Exact (objects_per_step 0) and with the objects-per-step approximation (4
 //   and 2 of the 9 present objects; hybrid/config.h), dense and sparse object channels.
-// - BM_FullStep: the whole of eq. 15 as `hgs train` runs it (bench::with_scl: every view's SCL classes set, so
-//   also SCL's pixel-weight channels, the pooled predictions and Adam on f, D = 512), default config.
+// - BM_FullStep: the whole of eq. 15 with `hgs train`'s default config (bench::with_scl: every view's SCL classes
+//   set, so also SCL's pixel-weight channels, the pooled predictions and Adam on f, D = 512). On this box the
+//   associations are one-hot and every Gaussian has one object entry, so the method does less work than on a
+//   capture (docs/performance.md, session twelve): bench/train_steps.sh times `hgs train` on a synthetic capture.
 // Densification off; the observation table is rebuilt every R = 100 steps as in training. Every timing runs at
 // each thread count of HGS_BENCH_THREADS (bench_threads.h; default 1, 2).
 // The steps report the mean time of each part of the step as counters (ms_forward, ms_method_loss, ...; the

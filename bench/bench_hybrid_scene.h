@@ -6,7 +6,10 @@
 // hybrid step on it runs the object terms only (eqs. 6 and 14, association, fusion); with_scl() gives the same
 // data with every view's SCL classes set as load_hybrid_data sets them, so that the step also runs the paper's
 // language term (eqs. 9-10: the pixel-weight channels, the pooled predictions and f's row updates, D = 512): the
-// full method, the one the paper times.
+// full method, the one the paper times. The box's state is easier than a capture's: most Gaussians are hidden and
+// keep a one-hot association, the clean grid masks give each Gaussian one object entry, and the observation table
+// has 2 views, so q-weighted work (f's row updates, the object groups, the fusion) is a fraction of what `hgs
+// train` does on a capture (docs/performance.md, session twelve; bench/train_steps.sh times that).
 #pragma once
 #include <random>
 #include <string>
