@@ -114,9 +114,11 @@ void HybridMethod::prepare(const train::ViewStep& v, const train::PrepareIO& io)
   }
   io.channels.extra = channels_.data();
   io.channels.num_extra = C;
-  // Pixel weights M_k of the SCL anchors: the rasterizer returns a_{n,k} = sum_p M_k(p) alpha_n T_n.
+  // Pixel weights M_k of the SCL anchors, the hard masks of their labels in the view's label image: the
+  // rasterizer returns a_{n,k} = sum_p M_k(p) alpha_n T_n.
   if (!anchors.empty()) {
-    io.settings.pixel_weights = semantic_.pixel_weights(u);
+    io.settings.pixel_labels = data_.masks[u].labels.v.data();
+    io.settings.pixel_label_ids = anchors.data();
     io.settings.num_pixel_weights = static_cast<int>(anchors.size());
   }
 }

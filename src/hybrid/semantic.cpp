@@ -32,25 +32,10 @@ std::vector<SclAnchor> draw_scl_anchors(const std::vector<int>& classes_u,
 }
 
 const std::vector<int>& SemanticPass::anchors_of(int u) {
-  classes_ = (cfg_.use_scl && cfg_.lambda_sem > 0) ? data_->views[u].scl : std::vector<int>{};
-  return classes_;
-}
-
-const float* SemanticPass::pixel_weights(int u) {
-  const int Jf = static_cast<int>(classes_.size());
-  if (Jf == 0) return nullptr;
-  const LabelMap& lab = data_->masks[u].labels;
-  const size_t P = lab.v.size();
-  pixel_w_.resize(P * Jf);  // planar [Jf, H, W], as the renderer reads the maps
-  const uint16_t* l = lab.v.data();
-#pragma omp parallel
-  for (int j = 0; j < Jf; ++j) {
-    const int c = classes_[j];
-    float* m = &pixel_w_[size_t(j) * P];
-#pragma omp for schedule(static) nowait
-    for (size_t p = 0; p < P; ++p) m[p] = l[p] == c ? 1.f : 0.f;
-  }
-  return pixel_w_.data();
+  static const std::vector<int> none;
+  const std::vector<int>& a = (cfg_.use_scl && cfg_.lambda_sem > 0) ? data_->views[u].scl : none;
+  classes_ = a;
+  return a;  // the data's own list: the renderer reads it until the view's backward (RenderSettings)
 }
 
 SemanticValues SemanticPass::contrastive(int u, int n, HybridFields& h, const float* a, float* dq, float* da,

@@ -44,9 +44,10 @@ class SemanticPass {
 
   SemanticPass(const HybridConfig& cfg, const HybridData* data);
   void set_config(const HybridConfig& cfg) { cfg_ = cfg; }
-  // SCL anchors of view u (empty when SCL is off or lambda_sem = 0) and their pixel-weight maps [Jf, H, W].
+  // SCL anchors of view u (empty when SCL is off or lambda_sem = 0): their labels, whose hard masks
+  // M_j(p) = [label(p) = anchors[j]] in the view's label image (data's masks[u].labels) are the renderer's
+  // pixel-weight maps (RenderSettings::pixel_labels). The list is the data's own (valid while the data is).
   const std::vector<int>& anchors_of(int u);
-  const float* pixel_weights(int u);
   // SCL. weight_sums [N, Jf]; adds lambda_sem * d/dq to dq [N, L]; da [N, Jf] (null = no gradient to the
   // pooled weights); keeps the view's factored f gradient for update() (first = the step's first view).
   SemanticValues contrastive(int u, int n, HybridFields& h, const float* weight_sums, float* dq, float* da,
@@ -61,7 +62,7 @@ class SemanticPass {
   void reduce(train::Reducer& r);
   // f's row-sparse Adam step with the step's gradient x scale (1 / G); nothing when no view had one.
   void update(int n, HybridFields& h, train::Adam& optim, float scale);
-  void release() { std::vector<float>().swap(pixel_w_); }
+  void release() { std::vector<float>().swap(fgrad_); }  // per-step buffers (before densification)
 
  private:
   HybridConfig cfg_;
@@ -69,7 +70,6 @@ class SemanticPass {
   int L_, D_;
   std::vector<std::vector<int>> views_with_;  // [L] training views whose SCL objects include l
   std::vector<int> classes_;
-  std::vector<float> pixel_w_;     // [Jf, H, W]
   std::vector<float> P_, dP_, G_;  // [Jf, D] predictions, their gradient, dP / (m + eps)
   std::vector<float> refs_;        // [R, D] InfoNCE candidates of one anchor
   // One view's f gradient in factored form: df_n = sum_j q_{n,objs[j]} a_{n,j} G_j.

@@ -28,8 +28,9 @@
 // visits, its channel gradients sum_visits w * dL/dextra the same way ("visit lists"). A few (C <= 4, e.g. the
 // hybrid method's base render) and the groups are folded into the walks: each visit adds w * value to the
 // batch's channel state and, backward, the value's dot with the batch's gradient to <value, g> and w * g to the
-// Gaussian's gradient sums (on the stack), with no lists to write and read back. Both paths sum the same terms
-// in the same order: bitwise-equal results (test_groups.cpp). Pixel-weight maps are visited only where they are
+// Gaussian's gradient sums (on the stack; a Gaussian with more than 4 group entries keeps a list of its own
+// visits instead and sums its group gradients from it), with no lists to write and read back. Both paths sum the same
+// terms in the same order: bitwise-equal results (test_groups.cpp). Pixel-weight maps are visited only where they are
 // non-zero in a batch (with hard object masks, one map per batch).
 // Gradients of a (tile, Gaussian) pair are stored in that pair's slot and the slots are reduced per Gaussian in a
 // fixed order, so results are bitwise deterministic for any thread count and schedule. Parallel over tiles with
@@ -76,6 +77,10 @@ struct RasterInputs {
   T background[3] = {0, 0, 0};
   const float* pixel_weights = nullptr;  // [J, H, W] optional per-pixel weight maps M_j (planar)
   int num_weights = 0;                   // J
+  // Or the maps as one label image: M_j(p) = 1 where pixel_labels[p] == label_ids[j], else 0 (used instead of
+  // pixel_weights when set).
+  const uint16_t* pixel_labels = nullptr;  // [H, W]
+  const int* label_ids = nullptr;          // [J]
   // Sparse channel groups: Gaussian i adds group_val[e] (GW values) to group group_id[e] for e in
   // [group_ptr[i], group_ptr[i + 1]); the other groups get nothing from it. Output [H, W, G * GW].
   int num_groups = 0;              // G

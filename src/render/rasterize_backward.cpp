@@ -165,11 +165,7 @@ inline __attribute__((always_inline)) void load_batch_channels(const RasterInput
       }
     }
   }
-  for (int jj = 0; jj < J; ++jj) {
-    const simd::Pack<T> m = load_weight_map<T>(in.pixel_weights, W, H, jj, py, px0, nvalid);
-    st[kBatchFixed + C + jj] = m;
-    jmask |= map_bit(jj, simd::any(m != simd::Pack<T>{}));
-  }
+  if (J > 0) jmask |= load_batch_maps(in, J, W, H, py, px0, nvalid, st + kBatchFixed + C);
   if (kX != kNoChannels && ng > 0 && g.d_group_rows) {  // the batch's row of each of the tile's groups, on demand
     T row[kLanes * kMaxGroupGradWidth];
     for (int u = 0; u < ng; ++u) {

@@ -274,6 +274,34 @@ inline __attribute__((always_inline)) void add_group_values(const RasterInputs<T
 template <class T>
 using MaskLane = std::remove_reference_t<decltype(simd::Mask<T>{}[0])>;
 
+// The batch's J pixel-weight maps (the batch's pixels [px0, px0 + nvalid) of row py) into dst [J] packs, lanes past
+// nvalid 0, and the maps present (map_bit) returned: from the float maps, or, given a label image
+// (in.pixel_labels [H, W]), M_j = 1 where the label is in.label_ids[j] and 0 elsewhere: the float maps' values
+// for hard masks without their J floats per pixel (one 16-byte load per batch instead of J 32-byte ones).
+template <class T>
+inline __attribute__((always_inline)) uint32_t load_batch_maps(const RasterInputs<T>& in, int J, int W, int H, int py,
+                                                               int px0, int nvalid, simd::Pack<T>* dst) {
+  using P = simd::Pack<T>;
+  uint32_t present = 0;
+  if (!in.pixel_labels) {
+    for (int jj = 0; jj < J; ++jj) {
+      dst[jj] = load_weight_map<T>(in.pixel_weights, W, H, jj, py, px0, nvalid);
+      present |= map_bit(jj, simd::any(dst[jj] != P{}));
+    }
+    return present;
+  }
+  using I = MaskLane<T>;
+  simd::Mask<T> lab{};
+  const uint16_t* src = in.pixel_labels + size_t(py) * W + px0;
+  for (int l = 0; l < kLanes; ++l) lab[l] = l < nvalid ? I(src[l]) : I(-1);  // -1: no label id matches
+  for (int jj = 0; jj < J; ++jj) {
+    const simd::Mask<T> hit = lab == I(in.label_ids[jj]);
+    dst[jj] = hit ? simd::splat(T(1)) : P{};
+    present |= map_bit(jj, simd::any(hit));
+  }
+  return present;
+}
+
 // The first pixel of a tile (x, y).
 inline std::pair<int, int> tile_origin(const Binning& bins, int tile) {
   return {(tile % bins.tiles_x) * kTileSize, (tile / bins.tiles_x) * kTileSize};

@@ -93,11 +93,7 @@ inline __attribute__((always_inline)) uint32_t start_forward_batches(const Raste
     P* st = b.st + size_t(bt) * b.BS;
     st[bT] = simd::splat(T(1));
     for (int f = bR; f < b.BS; ++f) st[f] = P{};
-    for (int jj = 0; jj < J; ++jj) {
-      const P m = load_weight_map<T>(in.pixel_weights, W, H, jj, py, px0, nvalid);
-      st[kBatchFixed + C + jj] = m;
-      jmask[bt] |= map_bit(jj, simd::any(m != P{}));
-    }
+    if (J > 0) jmask[bt] = load_batch_maps(in, J, W, H, py, px0, nvalid, st + kBatchFixed + C);
     b.act[bt] = lane_i < MaskLane<T>(nvalid);
     b.last[bt] = M{};
   }

@@ -134,6 +134,10 @@ struct RenderSettings {
   // weight_sums[n, j] = sum_p M_j(p) alpha_n(p) T_n(p), differentiable through OutputGrads::weight_sums.
   const float* pixel_weights = nullptr;
   int num_pixel_weights = 0;  // J
+  // Hard maps as one label image instead: M_j(p) = 1 where pixel_labels[p] == pixel_label_ids[j], else 0 (the
+  // same sums as the float maps of those values, without J floats per pixel). Set these or pixel_weights.
+  const uint16_t* pixel_labels = nullptr;  // [H, W]
+  const int* pixel_label_ids = nullptr;    // [J], each >= 0
 };
 
 template <class T>
@@ -238,8 +242,9 @@ class RendererT {
   // g.extra / g.num_extra are not read. Bad input (camera, degrees, missing arrays) throws hgs::Error.
   void preprocess(const Camera& cam, const GaussianInputsT<T>& g);
   // Phase 2: composites RGB, alpha, depth, the extra channels and the pixel-weighted sums of the last
-  // preprocess(). ch.extra and s.pixel_weights must stay alive and unchanged until composite_backward(). May be
-  // called again (other channels or settings) after one preprocess(); backward differentiates the last call.
+  // preprocess(). ch.extra and s.pixel_weights (or s.pixel_labels and their ids) must stay alive and unchanged
+  // until composite_backward(). May be called again (other channels or settings) after one preprocess(); backward
+  // differentiates the last call.
   void composite(const ChannelsT<T>& ch, const RenderSettings& s, RenderOutputsT<T>& out);
   // Alpha and expected depth at chosen pixels only, from the last preprocess(): bitwise RenderOutputs::alpha and
   // ::depth of composite() with want_depth at those pixels, at a cost that grows with the pixels chosen instead of

@@ -42,8 +42,13 @@ void RendererT<T>::composite(const ChannelsT<T>& ch, const RenderSettings& s, Re
   st.has_composite = false;
   if (!st.has_preprocess) fail("render: composite() called without a successful preprocess()");
   const int n = st.g.n, H = st.H, W = st.W, C = ch.num_extra, J = s.num_pixel_weights;
-  if (J < 0 || (J > 0 && !s.pixel_weights))
-    fail("render: num_pixel_weights is {} but no pixel_weights array was given", J);
+  if (J < 0 || (J > 0 && !s.pixel_weights && !(s.pixel_labels && s.pixel_label_ids)))
+    fail("render: num_pixel_weights is {} but neither pixel_weights nor pixel_labels with their ids was given", J);
+  if (J > 0 && s.pixel_weights && s.pixel_labels)
+    fail("render: both pixel_weights and pixel_labels were given; set one");
+  for (int j = 0; j < J && s.pixel_labels; ++j)
+    if (s.pixel_label_ids[j] < 0 || s.pixel_label_ids[j] > 0xFFFF)
+      fail("render: pixel_label_ids[{}] is {}, not a 16-bit label", j, s.pixel_label_ids[j]);
   if (C < 0 || (C > 0 && n > 0 && !ch.extra)) fail("render: num_extra is {} but no extra array was given", C);
   const int GT = ch.num_groups * ch.group_width;
   if (ch.num_groups < 0 || ch.group_width < 0 ||
@@ -74,6 +79,8 @@ void RendererT<T>::composite(const ChannelsT<T>& ch, const RenderSettings& s, Re
   ri.num_extra = C;
   for (int k = 0; k < 3; ++k) ri.background[k] = s.background[k];
   ri.pixel_weights = J > 0 ? s.pixel_weights : nullptr;
+  ri.pixel_labels = J > 0 ? s.pixel_labels : nullptr;
+  ri.label_ids = J > 0 ? s.pixel_label_ids : nullptr;
   ri.num_weights = J;
   set_groups(ch, ri);
   RasterOutputs<T> ro;
@@ -134,6 +141,8 @@ void RendererT<T>::composite_backward(const OutputGradsT<T>& dout, ProjectedGrad
   ri.extra_stride = C;
   for (int k = 0; k < 3; ++k) ri.background[k] = st.s.background[k];
   ri.pixel_weights = st.s.num_pixel_weights > 0 ? st.s.pixel_weights : nullptr;
+  ri.pixel_labels = st.s.num_pixel_weights > 0 ? st.s.pixel_labels : nullptr;
+  ri.label_ids = st.s.num_pixel_weights > 0 ? st.s.pixel_label_ids : nullptr;
   ri.num_weights = st.s.num_pixel_weights;
   set_groups(st.ch, ri);
   RasterGrads<T> rg;

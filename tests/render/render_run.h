@@ -4,6 +4,8 @@
 #pragma once
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <random>
 #include <vector>
@@ -39,6 +41,21 @@ void on_each_isa(F&& f) {
 template <class T>
 bool bitwise_equal(const std::vector<T>& a, const std::vector<T>& b) {
   return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
+}
+
+// The largest |a[i] - b[i]| (a and b expected the same size) and the largest |a[i]|.
+template <class T>
+double max_abs_diff(const std::vector<T>& a, const std::vector<T>& b) {
+  EXPECT_EQ(a.size(), b.size());
+  double m = 0;
+  for (size_t i = 0; i < std::min(a.size(), b.size()); ++i) m = std::max(m, std::abs(double(a[i]) - double(b[i])));
+  return m;
+}
+template <class T>
+double max_abs(const std::vector<T>& a) {
+  double m = 0;
+  for (T v : a) m = std::max(m, std::abs(double(v)));
+  return m;
 }
 
 // Renders s with r into out, then runs the backward of random upstream gradients (from seed) on rgb, alpha,

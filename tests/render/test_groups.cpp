@@ -78,21 +78,6 @@ std::vector<T> conv(const std::vector<double>& v) {
   return std::vector<T>(v.begin(), v.end());
 }
 
-template <class T>
-double max_abs_diff(const std::vector<T>& a, const std::vector<T>& b) {
-  EXPECT_EQ(a.size(), b.size());
-  double m = 0;
-  for (size_t i = 0; i < std::min(a.size(), b.size()); ++i) m = std::max(m, std::abs(double(a[i]) - double(b[i])));
-  return m;
-}
-
-template <class T>
-double max_abs(const std::vector<T>& a) {
-  double m = 0;
-  for (T v : a) m = std::max(m, std::abs(double(v)));
-  return m;
-}
-
 // Renders the scene once with the groups and once with the equivalent dense channels, backward with the same
 // upstream gradients (the groups' read from a strided layout, or a contiguous one as the hybrid method's), and
 // compares. The 69-pixel-wide variant has batches past the image edge.
