@@ -47,8 +47,7 @@ Run<T> render(const Scene& s, const RenderSettings& set, int J) {
     for (double v : hgs::test::random_weights(n, rng)) w.push_back(T(v));
     return w;
   };
-  const std::vector<T> wr = weights(r.out.rgb.size()), wa = weights(r.out.alpha.size()),
-                       ww = weights(size_t(s.n) * J);
+  const std::vector<T> wr = weights(r.out.rgb.size()), wa = weights(r.out.alpha.size()), ww = weights(size_t(s.n) * J);
   OutputGradsT<T> d;
   d.rgb = wr.data();
   d.alpha = wa.data();
