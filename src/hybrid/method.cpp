@@ -117,7 +117,11 @@ void HybridMethod::prepare(const train::ViewStep& v, const train::PrepareIO& io)
   // Pixel weights M_k of the SCL anchors, the hard masks of their labels in the view's label image: the
   // rasterizer returns a_{n,k} = sum_p M_k(p) alpha_n T_n.
   if (!anchors.empty()) {
-    io.settings.pixel_labels = data_.masks[u].labels.v.data();
+    const LabelMap& lab = data_.masks[u].labels;
+    if (lab.width != v.view.cam.width || lab.height != v.view.cam.height)
+      fail("hybrid: view '{}' has a {}x{} mask for a {}x{} image", v.view.name, lab.width, lab.height, v.view.cam.width,
+           v.view.cam.height);
+    io.settings.pixel_labels = lab.v.data();
     io.settings.pixel_label_ids = anchors.data();
     io.settings.num_pixel_weights = static_cast<int>(anchors.size());
   }
