@@ -18,6 +18,18 @@ void set_groups(const ChannelsT<T>& ch, RasterInputs<T>& ri) {
   ri.group_val = ch.group_val;
 }
 
+// The compositing settings the rasterizer reads, the same in composite() and composite_backward(): the
+// background and the pixel-weight maps (float maps or a label image with its ids).
+template <class T>
+void set_settings(const RenderSettings& s, RasterInputs<T>& ri) {
+  for (int k = 0; k < 3; ++k) ri.background[k] = s.background[k];
+  const int J = s.num_pixel_weights;
+  ri.pixel_weights = J > 0 ? s.pixel_weights : nullptr;
+  ri.pixel_labels = J > 0 ? s.pixel_labels : nullptr;
+  ri.label_ids = J > 0 ? s.pixel_label_ids : nullptr;
+  ri.num_weights = J;
+}
+
 // The projected quantities of the last preprocess() (st: RendererT's State) as the rasterizer's inputs, with the
 // depth channel or without; each phase adds its channels and settings.
 template <class T, class State>
@@ -77,11 +89,7 @@ void RendererT<T>::composite(const ChannelsT<T>& ch, const RenderSettings& s, Re
   RasterInputs<T> ri = projected_inputs<T>(st, s.want_depth);
   ri.extra = C > 0 ? ch.extra : nullptr;
   ri.num_extra = C;
-  for (int k = 0; k < 3; ++k) ri.background[k] = s.background[k];
-  ri.pixel_weights = J > 0 ? s.pixel_weights : nullptr;
-  ri.pixel_labels = J > 0 ? s.pixel_labels : nullptr;
-  ri.label_ids = J > 0 ? s.pixel_label_ids : nullptr;
-  ri.num_weights = J;
+  set_settings(s, ri);
   set_groups(ch, ri);
   RasterOutputs<T> ro;
   ro.groups = GT > 0 ? out.groups.data() : nullptr;
@@ -139,11 +147,7 @@ void RendererT<T>::composite_backward(const OutputGradsT<T>& dout, ProjectedGrad
   ri.extra = C > 0 ? st.ch.extra : nullptr;
   ri.num_extra = dout.extra ? Cg : 0;
   ri.extra_stride = C;
-  for (int k = 0; k < 3; ++k) ri.background[k] = st.s.background[k];
-  ri.pixel_weights = st.s.num_pixel_weights > 0 ? st.s.pixel_weights : nullptr;
-  ri.pixel_labels = st.s.num_pixel_weights > 0 ? st.s.pixel_labels : nullptr;
-  ri.label_ids = st.s.num_pixel_weights > 0 ? st.s.pixel_label_ids : nullptr;
-  ri.num_weights = st.s.num_pixel_weights;
+  set_settings(st.s, ri);
   set_groups(st.ch, ri);
   RasterGrads<T> rg;
   if (groups && (dout.groups || dout.group_rows) && dout.group_grad_channels > 0) {
