@@ -53,7 +53,7 @@ void ObjectAssociation::fuse(int n, HybridFields& h) {
   valid_.resize(n);
   softmax(logits_.data(), int(logits_.size()), w_.data());
   FusionParams p{L_, cfg_.temperature, cfg_.fusion_eps, cfg_.background_vote};
-  hybrid::fuse(table_, w_.data(), p, h.q->data.data(), s_.data(), valid_.data());
+  hybrid::fuse(table_, w_.data(), p, h.q->data.data(), s_.data(), valid_.data(), h.z->data.data());
 }
 
 const std::vector<float>& ObjectAssociation::weights() const {
@@ -67,9 +67,12 @@ void ObjectAssociation::refresh(GaussianModel& m, HybridFields& h, float near_pl
   // the first view where the centre is visible, so that the no-OF rows differ from the full method by eqs. 4-5
   // alone and Table 3's "OF added" measures fusion, not fusion and the occlusion test together.
   if (cfg_.occlusion_test) hide_occluded_all(m, *masks_, near_plane, table_, &occlusion_);
-  if (cfg_.use_of) fuse(m.n, h);
-  else single_view_assignment(table_, L_, h.q->data.data());
-  update_hard_ids(m.n, h);
+  if (cfg_.use_of) {
+    fuse(m.n, h);  // q and z
+  } else {
+    single_view_assignment(table_, L_, h.q->data.data());
+    update_hard_ids(m.n, h);
+  }
 }
 
 void ObjectAssociation::update_hard_ids(int n, HybridFields& h) const {

@@ -54,7 +54,7 @@ class ObjectAssociation {
   // Rebuilds the observation table from the current centres, then q (fused or single-view) and z. near_plane:
   // the training cameras' (no observation nearer than it; the occlusion test's depth renders at it).
   void refresh(GaussianModel& m, HybridFields& h, float near_plane);
-  // q = softmax(s(w) / T) from the current table and logits (OF only).
+  // q = softmax(s(w) / T) from the current table and logits, and z = argmax q (OF only).
   void fuse(int n, HybridFields& h);
   // z = argmax q.
   void update_hard_ids(int n, HybridFields& h) const;

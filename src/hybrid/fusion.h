@@ -113,20 +113,49 @@ struct FusionParams {
   double background_vote = 1.0;  // weight of a background observation in eq. 4's numerator (1 = the paper)
 };
 
-// Eq. 5 for one Gaussian from its unnormalised sums acc [L] (strided by `stride`) and den: s_n [L], q_n [L],
-// valid. lg [L] scratch.
+// softmax() bitwise, for a row whose entries are mostly +-0 (eq. 5's logits of the labels no view observed):
+// exp(0 - m) is computed once and reused (0 - m and -0 - m differ only when m = 0, and exp(+-0) = 1 alike).
 template <class T>
-void fuse_finish(const T* acc, int stride, T den, const FusionParams& p, T* sn, T* qn, uint8_t& valid, T* lg) {
+void softmax_zeros_once(const T* x, int n, T* y) {
+  T m = x[0];
+  for (int i = 1; i < n; ++i) m = std::max(m, x[i]);
+  T s = 0, e0 = T(-1);  // exp(0 - m) once known (an exp is never negative)
+  for (int i = 0; i < n; ++i) {
+    T e;
+    if (x[i] == T(0)) {
+      if (e0 < T(0)) e0 = std::exp(x[i] - m);
+      e = e0;
+    } else {
+      e = std::exp(x[i] - m);
+    }
+    s += (y[i] = e);
+  }
+  for (int i = 0; i < n; ++i) y[i] /= s;
+}
+
+// z = argmax_k q_k (the first maximum) of one row q [L].
+template <class T>
+uint16_t hard_id(const T* q, int num_labels) {
+  return static_cast<uint16_t>(std::max_element(q, q + num_labels) - q);
+}
+
+// Eq. 5 for one Gaussian from its unnormalised sums acc [L] (strided by `stride`) and den: s_n [L], q_n [L],
+// valid, and z_n = argmax q_n when z is not null (of the row kept when no view is valid). lg [L] scratch.
+template <class T>
+void fuse_finish(const T* acc, int stride, T den, const FusionParams& p, T* sn, T* qn, uint8_t& valid, T* lg,
+                 float* z) {
   const int L = p.num_labels;
   for (int k = 0; k < L; ++k) sn[k] = acc[size_t(k) * stride];
   valid = den > 0;
-  if (!valid) return;
-  const T inv = T(1) / (den + T(p.eps));
-  for (int k = 0; k < L; ++k) {
-    sn[k] *= inv;
-    lg[k] = sn[k] / T(p.temperature);
+  if (valid) {
+    const T inv = T(1) / (den + T(p.eps));
+    for (int k = 0; k < L; ++k) {
+      sn[k] *= inv;
+      lg[k] = sn[k] / T(p.temperature);
+    }
+    softmax_zeros_once(lg, L, qn);
   }
-  softmax(lg, L, qn);
+  if (z) *z = float(hard_id(qn, L));
 }
 
 // Blocks of 8 Gaussians, one per vector lane, for fuse() and fuse_backward(): V holds one value of each, VI their
@@ -145,14 +174,17 @@ struct FuseBlock {
 };
 
 // w [U] (already softmax-normalised), q [N, K+1] in/out (kept where no view is valid), s [N, K+1] out,
-// valid [N] out (1 if some view observed the Gaussian).
+// valid [N] out (1 if some view observed the Gaussian), z [N] out when not null: argmax q (hard_ids' values, as
+// float: the model's hard-id group).
 // Up to kFuseBlockLabels labels, the sums of eq. 4 run over blocks of 8 Gaussians, one per lane, each label's sum
-// in registers: every view adds its weight (or 0) to every label's sum. A Gaussian's sums then run in view
-// order with zeros in between, so they are those of the per-Gaussian loop bitwise, without its unpredictable
-// branches and its read-modify-writes of one label's sum view after view (a chain of store-to-load latencies).
+// in registers: every view adds its weight (or 0) to the sum of every label that some view of the block observed
+// (a Gaussian sees a few of the labels; the others' sums stay +0). A Gaussian's sums then run in view order with
+// zeros in between, so they are those of the per-Gaussian loop bitwise, without its unpredictable branches and its
+// read-modify-writes of one label's sum view after view (a chain of store-to-load latencies).
 constexpr int kFuseBlockLabels = 96;
 template <class T>
-void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, T* s, uint8_t* valid) {
+void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, T* s, uint8_t* valid,
+          float* z = nullptr) {
   const int L = p.num_labels, U = tab.num_views, N = tab.n;
   const T bv = T(p.background_vote);
   if (L <= kFuseBlockLabels) {
@@ -160,30 +192,40 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
     using I = typename FB::I;
     using V = typename FB::V;  // 8 Gaussians' sums of one label
     constexpr int B = FB::B;
+    constexpr int kWords = (kFuseBlockLabels + 63) / 64;
     const int blocks = (N + B - 1) / B;
 #pragma omp parallel
     {
       V acc[kFuseBlockLabels];  // (a vector type loses its attribute as a template argument: no std::vector)
+      int ks[kFuseBlockLabels];  // the labels some view of the block observed, ascending
       std::vector<T> lg(L), col(size_t(L) * B);
 #pragma omp for schedule(static)
       for (int blk = 0; blk < blocks; ++blk) {
         const int n0 = blk * B, nb = std::min(B, N - n0);
-        for (int k = 0; k < L; ++k) acc[k] = V{};
-        V den{};
         const uint16_t* rows = &tab.label[size_t(n0) * U];
+        uint64_t seen[kWords] = {};
+        for (size_t e = 0; e < size_t(nb) * U; ++e)
+          if (rows[e] < L) seen[rows[e] >> 6] |= uint64_t(1) << (rows[e] & 63);
+        int nk = 0;
+        for (int k = 0; k < L; ++k)
+          if (seen[k >> 6] >> (k & 63) & 1) ks[nk++] = k;
+        const int k0 = nk > 0 && ks[0] == 0;  // the background (its own vote weight) first, when observed
+        for (int i = 0; i < nk; ++i) acc[i] = V{};
+        V den{};
         for (int u = 0; u < U; ++u) {
           typename FB::VI lb;
           FB::labels(rows, U, u, nb, lb);
           const V wu = V{} + w[u], w0 = V{} + bv * w[u];
           den += lb != I(kNoObservation) ? wu : V{};
-          acc[0] += lb == I(0) ? w0 : V{};
-          for (int k = 1; k < L; ++k) acc[k] += lb == I(k) ? wu : V{};
+          if (k0) acc[0] += lb == I(0) ? w0 : V{};
+          for (int i = k0; i < nk; ++i) acc[i] += lb == I(ks[i]) ? wu : V{};
         }
-        for (int k = 0; k < L; ++k)
-          for (int b = 0; b < B; ++b) col[size_t(k) * B + b] = acc[k][b];
+        std::fill(col.begin(), col.end(), T(0));
+        for (int i = 0; i < nk; ++i)
+          for (int b = 0; b < B; ++b) col[size_t(ks[i]) * B + b] = acc[i][b];
         for (int b = 0; b < nb; ++b) {
           const size_t n = size_t(n0 + b);
-          fuse_finish(&col[b], B, den[b], p, s + n * L, q + n * L, valid[n], lg.data());
+          fuse_finish(&col[b], B, den[b], p, s + n * L, q + n * L, valid[n], lg.data(), z ? z + n : nullptr);
         }
       }
     }
@@ -202,7 +244,8 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
         den += w[u];
         if (lab[u] < L) acc[lab[u]] += lab[u] == 0 ? bv * w[u] : w[u];
       }
-      fuse_finish(acc.data(), 1, den, p, s + size_t(n) * L, q + size_t(n) * L, valid[n], lg.data());
+      fuse_finish(acc.data(), 1, den, p, s + size_t(n) * L, q + size_t(n) * L, valid[n], lg.data(),
+                  z ? z + n : nullptr);
     }
   }
 }
@@ -291,10 +334,7 @@ void fuse_backward(const ObservationTable& tab, const T* w, const FusionParams& 
 // z_n = argmax_k q_{n,k} (first maximum). q [N, K+1] -> z [N]
 template <class T>
 void hard_ids(const T* q, int n, int num_labels, uint16_t* z) {
-  for (int i = 0; i < n; ++i) {
-    const T* qi = q + size_t(i) * num_labels;
-    z[i] = static_cast<uint16_t>(std::max_element(qi, qi + num_labels) - qi);
-  }
+  for (int i = 0; i < n; ++i) z[i] = hard_id(q + size_t(i) * num_labels, num_labels);
 }
 
 }  // namespace hgs::hybrid

@@ -240,8 +240,8 @@ void HybridMethod::after_step(const train::StepEnd& end) {
   HybridFields fields = HybridFields::bind(end.model, "hybrid");
   // The table is rebuilt every fusion_every images seen: in the step that covers a multiple of it.
   const int prev = end.iteration - 1, cur = end.images_seen, fe = cfg_.fusion_every;
+  // Otherwise z = argmax q holds already: q changes between rebuilds only in fuse(), which writes z with it.
   if (end.densified || (fe > 0 && cur / fe > prev / fe)) assoc_.refresh(end.model, fields, near_plane());
-  else assoc_.update_hard_ids(end.model.n, fields);
 }
 
 void HybridMethod::release() {

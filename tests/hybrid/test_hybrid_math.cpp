@@ -144,48 +144,73 @@ void fuse_backward_reference(const ObservationTable& tab, const float* w, const 
 }
 
 TEST(ObservationFusion, BlockedFusionIsThePerGaussianLoopBitwise) {
-  // fuse() sums eq. 4 for 8 Gaussians at once, branch-free, and fuse_backward() likewise (fusion.h): on one
-  // thread both give the per-Gaussian loops' values bit for bit, for a Gaussian count that is not a multiple of
-  // 8, labels past the last one (counted only in the normaliser), Gaussians without any observation, rows of dq
-  // all zero, and a label count above kFuseBlockLabels (the per-Gaussian path).
+  // fuse() sums eq. 4 for 8 Gaussians at once, branch-free, over the labels some view of the block observed, and
+  // eq. 5's softmax computes exp(0 - m) once; fuse_backward() likewise runs over blocks (fusion.h): on one thread
+  // both give the per-Gaussian loops' values bit for bit, for a Gaussian count that is not a multiple of 8, labels
+  // past the last one (counted only in the normaliser), Gaussians without any observation, rows of dq all zero, a
+  // label count above kFuseBlockLabels (the per-Gaussian path), and tables whose Gaussians see every label or a few
+  // (each its own label, the background and now and then another: most labels absent from a block). z, written
+  // with q, is hard_ids() of the reference's q.
   std::mt19937 rng(4);
-  for (int L : {2, 9, 40, kFuseBlockLabels + 5}) {
-    SCOPED_TRACE(L);
-    const int N = 301, U = 37;
-    ObservationTable tab;
-    tab.n = N;
-    tab.num_views = U;
-    tab.label.resize(size_t(N) * U);
-    for (auto& l : tab.label) {
-      const unsigned r = rng() % 10;
-      l = r < 3 ? kNoObservation : r < 5 ? 0 : r == 5 ? uint16_t(L + rng() % 3) : uint16_t(rng() % L);
+  for (bool clustered : {false, true})
+    for (int L : {2, 9, 40, kFuseBlockLabels + 5}) {
+      SCOPED_TRACE(testing::Message() << "L " << L << (clustered ? ", clustered" : ", spread"));
+      const int N = 301, U = 37;
+      ObservationTable tab;
+      tab.n = N;
+      tab.num_views = U;
+      tab.label.resize(size_t(N) * U);
+      for (int n = 0; n < N; ++n) {
+        const uint16_t own = uint16_t(rng() % L);
+        for (int u = 0; u < U; ++u) {
+          const unsigned r = rng() % 10;
+          uint16_t& l = tab.label[size_t(n) * U + u];
+          if (clustered)
+            l = r < 3 ? kNoObservation : r < 5 ? 0 : r == 5 && rng() % 4 == 0 ? uint16_t(rng() % (L + 2)) : own;
+          else
+            l = r < 3 ? kNoObservation : r < 5 ? 0 : r == 5 ? uint16_t(L + rng() % 3) : uint16_t(rng() % L);
+        }
+      }
+      for (int u = 0; u < U; ++u) tab.label[size_t(7) * U + u] = kNoObservation;  // Gaussian 7: no valid view
+      std::uniform_real_distribution<float> R(0.f, 1.f);
+      std::vector<float> w(U), dq(size_t(N) * L), dw(U), dw_ref(U);
+      for (auto& x : w) x = R(rng) / U;
+      for (auto& x : dq) x = R(rng) - 0.5f;
+      // Rows of dq all zero, as for the Gaussians a step does not render (fuse_backward skips them): every third
+      // Gaussian, a whole block of 8 (16..23), and rows of -0; the reference adds their terms.
+      for (int n = 0; n < N; ++n)
+        if (n % 3 == 0 || (n >= 16 && n < 24) || n % 5 == 1)
+          std::fill_n(&dq[size_t(n) * L], L, n % 5 == 1 ? -0.f : 0.f);
+      const FusionParams p{L, 0.1, 1e-6, 0.5};
+      std::vector<float> q(size_t(N) * L, 0.3f), s(q.size()), q_ref = q, s_ref(q.size());
+      q[size_t(7) * L + L - 1] = q_ref[size_t(7) * L + L - 1] = 0.4f;  // kept: z = the last label
+      std::vector<uint8_t> valid(N), valid_ref(N);
+      std::vector<float> z(N, -1.f);
+      const int threads = omp_get_max_threads();
+      omp_set_num_threads(1);
+      fuse(tab, w.data(), p, q.data(), s.data(), valid.data(), z.data());
+      fuse_backward(tab, w.data(), p, s.data(), q.data(), valid.data(), dq.data(), dw.data());
+      omp_set_num_threads(threads);
+      fuse_reference(tab, w.data(), p, q_ref.data(), s_ref.data(), valid_ref.data());
+      fuse_backward_reference(tab, w.data(), p, s_ref.data(), q_ref.data(), valid_ref.data(), dq.data(),
+                              dw_ref.data());
+      EXPECT_EQ(valid, valid_ref);
+      EXPECT_EQ(valid[7], 0);
+      EXPECT_EQ(s, s_ref);
+      EXPECT_EQ(q, q_ref);
+      EXPECT_EQ(dw, dw_ref);
+      EXPECT_NE(dw, std::vector<float>(U, 0.f));
+      std::vector<uint16_t> z_ref(N);
+      hard_ids(q_ref.data(), N, L, z_ref.data());
+      EXPECT_EQ(z, std::vector<float>(z_ref.begin(), z_ref.end()));
+      EXPECT_EQ(z[7], float(L - 1));
+      // The clustered tables leave most labels out of most blocks (what the label list skips).
+      if (clustered && L == 40) {
+        int absent = 0;
+        for (int n = 0; n < N; ++n) absent += int(std::count(&s[size_t(n) * L], &s[size_t(n + 1) * L], 0.f));
+        EXPECT_GT(absent, N * L / 2);
+      }
     }
-    for (int u = 0; u < U; ++u) tab.label[size_t(7) * U + u] = kNoObservation;  // Gaussian 7: no valid view
-    std::uniform_real_distribution<float> R(0.f, 1.f);
-    std::vector<float> w(U), dq(size_t(N) * L), dw(U), dw_ref(U);
-    for (auto& x : w) x = R(rng) / U;
-    for (auto& x : dq) x = R(rng) - 0.5f;
-    // Rows of dq all zero, as for the Gaussians a step does not render (fuse_backward skips them): every third
-    // Gaussian, a whole block of 8 (16..23), and rows of -0; the reference adds their terms.
-    for (int n = 0; n < N; ++n)
-      if (n % 3 == 0 || (n >= 16 && n < 24) || n % 5 == 1) std::fill_n(&dq[size_t(n) * L], L, n % 5 == 1 ? -0.f : 0.f);
-    const FusionParams p{L, 0.1, 1e-6, 0.5};
-    std::vector<float> q(size_t(N) * L, 0.3f), s(q.size()), q_ref = q, s_ref(q.size());
-    std::vector<uint8_t> valid(N), valid_ref(N);
-    const int threads = omp_get_max_threads();
-    omp_set_num_threads(1);
-    fuse(tab, w.data(), p, q.data(), s.data(), valid.data());
-    fuse_backward(tab, w.data(), p, s.data(), q.data(), valid.data(), dq.data(), dw.data());
-    omp_set_num_threads(threads);
-    fuse_reference(tab, w.data(), p, q_ref.data(), s_ref.data(), valid_ref.data());
-    fuse_backward_reference(tab, w.data(), p, s_ref.data(), q_ref.data(), valid_ref.data(), dq.data(), dw_ref.data());
-    EXPECT_EQ(valid, valid_ref);
-    EXPECT_EQ(valid[7], 0);
-    EXPECT_EQ(s, s_ref);
-    EXPECT_EQ(q, q_ref);
-    EXPECT_EQ(dw, dw_ref);
-    EXPECT_NE(dw, std::vector<float>(U, 0.f));
-  }
 }
 
 TEST(ObservationFusion, BackgroundVoteWeighsTheAbsenceOfAMask) {
