@@ -196,7 +196,7 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
     const int blocks = (N + B - 1) / B;
 #pragma omp parallel
     {
-      V acc[kFuseBlockLabels];  // (a vector type loses its attribute as a template argument: no std::vector)
+      V acc[kFuseBlockLabels];   // (a vector type loses its attribute as a template argument: no std::vector)
       int ks[kFuseBlockLabels];  // the labels some view of the block observed, ascending
       std::vector<T> lg(L), col(size_t(L) * B);
 #pragma omp for schedule(static)

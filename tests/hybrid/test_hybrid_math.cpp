@@ -167,8 +167,7 @@ TEST(ObservationFusion, BlockedFusionIsThePerGaussianLoopBitwise) {
           uint16_t& l = tab.label[size_t(n) * U + u];
           if (clustered)
             l = r < 3 ? kNoObservation : r < 5 ? 0 : r == 5 && rng() % 4 == 0 ? uint16_t(rng() % (L + 2)) : own;
-          else
-            l = r < 3 ? kNoObservation : r < 5 ? 0 : r == 5 ? uint16_t(L + rng() % 3) : uint16_t(rng() % L);
+          else l = r < 3 ? kNoObservation : r < 5 ? 0 : r == 5 ? uint16_t(L + rng() % 3) : uint16_t(rng() % L);
         }
       }
       for (int u = 0; u < U; ++u) tab.label[size_t(7) * U + u] = kNoObservation;  // Gaussian 7: no valid view
@@ -192,8 +191,7 @@ TEST(ObservationFusion, BlockedFusionIsThePerGaussianLoopBitwise) {
       fuse_backward(tab, w.data(), p, s.data(), q.data(), valid.data(), dq.data(), dw.data());
       omp_set_num_threads(threads);
       fuse_reference(tab, w.data(), p, q_ref.data(), s_ref.data(), valid_ref.data());
-      fuse_backward_reference(tab, w.data(), p, s_ref.data(), q_ref.data(), valid_ref.data(), dq.data(),
-                              dw_ref.data());
+      fuse_backward_reference(tab, w.data(), p, s_ref.data(), q_ref.data(), valid_ref.data(), dq.data(), dw_ref.data());
       EXPECT_EQ(valid, valid_ref);
       EXPECT_EQ(valid[7], 0);
       EXPECT_EQ(s, s_ref);
