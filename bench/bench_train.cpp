@@ -126,6 +126,30 @@ void BM_AdamUpdate30k(benchmark::State& st) {
   }
 }
 
+// The language embeddings' row update as the full method runs it (SemanticPass::update): D = 512, values in IEEE
+// half, bfloat16 moments, every other row with a gradient (the room at 1000x700 gives 175k of 300k rows one). Arg 0:
+// rows; at 2k rows (6 MB of values and moments) the rows stay in the caches, at 300k (922 MB) every update
+// streams them from memory: the two times say whether the update is bound by arithmetic or by bandwidth.
+void BM_AdamRowsHalf(benchmark::State& st) {
+  const bench::OmpThreads threads(st, 1);
+  const int n = int(st.range(0)), D = 512;
+  train::Adam adam;
+  train::AdamParam& p = adam.add("f", D, n, 2.5e-3f, true);
+  std::vector<uint16_t> x(size_t(n) * D, 0x3800);  // 0.5
+  std::vector<float> g0(D);
+  std::mt19937 rng(3);
+  std::normal_distribution<float> N(0, 1e-3f);
+  for (auto& v : g0) v = N(rng);
+  auto rows = [&](long i, float* g) {
+    if (i % 2) return false;
+    std::copy(g0.begin(), g0.end(), g);
+    return true;
+  };
+  adam.update_rows(p, x.data(), n, rows);  // touch every page once
+  for (auto _ : st) adam.update_rows(p, x.data(), n, rows);
+  st.counters["rows_updated"] = double((n + 1) / 2);
+}
+
 void BM_TrainStep(benchmark::State& st) {
   const bench::OmpThreads threads(st, 0);
   auto& d = data();
@@ -155,5 +179,10 @@ BENCHMARK(BM_SsimWidth)
     ->UseRealTime();
 BENCHMARK(BM_PhotometricLoss)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_AdamUpdate30k)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_AdamRowsHalf)
+    ->ArgNames({"rows", "threads"})
+    ->ArgsProduct({{2048, 300000}, bench::thread_counts()})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 BENCHMARK(BM_TrainStep)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_MAIN();

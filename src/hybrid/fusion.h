@@ -198,14 +198,54 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
     {
       V acc[kFuseBlockLabels];   // (a vector type loses its attribute as a template argument: no std::vector)
       int ks[kFuseBlockLabels];  // the labels some view of the block observed, ascending
-      std::vector<T> lg(L), col(size_t(L) * B);
+      V sv[kFuseBlockLabels], ev[kFuseBlockLabels];
+      // Eq. 4's normalisation and eq. 5 for the block's lanes at once: each lane's operations are fuse_finish's in
+      // its order (vector division and max round and compare as their scalar forms), the softmax's exps scalar per
+      // lane with exp(0 - m) once; s, q and z then go to the rows. A lane without any observation keeps its q.
+      auto finish = [&](const V* acc, const int* ks, int nk, V den, int n0, int nb) {
+        const V inv = (V{} + T(1)) / (den + T(p.eps));
+        for (int k = 0; k < L; ++k) sv[k] = V{};
+        for (int i = 0; i < nk; ++i) sv[ks[i]] = acc[i] * inv;  // (an absent label's +0 * inv is +0)
+        V m = sv[0] / T(p.temperature);
+        for (int k = 0; k < L; ++k) {
+          ev[k] = sv[k] / T(p.temperature);  // the logits first, then their exps in place
+          if (k > 0) m = m < ev[k] ? ev[k] : m;
+        }
+        V e0;
+        for (int b = 0; b < B; ++b) e0[b] = std::exp(T(0) - m[b]);
+        for (int k = 0; k < L; ++k)
+          for (int b = 0; b < B; ++b) ev[k][b] = ev[k][b] == T(0) ? e0[b] : std::exp(ev[k][b] - m[b]);
+        V sum{};
+        for (int k = 0; k < L; ++k) sum += ev[k];
+        for (int k = 0; k < L; ++k) ev[k] /= sum;
+        V best = ev[0], arg{};  // the first maximum, as hard_id
+        for (int k = 1; k < L; ++k) {
+          const auto up = best < ev[k];
+          best = up ? ev[k] : best;
+          arg = up ? V{} + T(k) : arg;
+        }
+        for (int b = 0; b < nb; ++b) {
+          const size_t n = size_t(n0 + b);
+          T *sn = s + n * L, *qn = q + n * L;
+          valid[n] = den[b] > 0;
+          if (!valid[n]) {  // no view: s is the zero sums, q stays
+            std::fill(sn, sn + L, T(0));
+            if (z) z[n] = float(hard_id(qn, L));
+            continue;
+          }
+          for (int k = 0; k < L; ++k) sn[k] = sv[k][b], qn[k] = ev[k][b];
+          if (z) z[n] = float(arg[b]);
+        }
+      };
 #pragma omp for schedule(static)
       for (int blk = 0; blk < blocks; ++blk) {
         const int n0 = blk * B, nb = std::min(B, N - n0);
         const uint16_t* rows = &tab.label[size_t(n0) * U];
-        uint64_t seen[kWords] = {};
-        for (size_t e = 0; e < size_t(nb) * U; ++e)
-          if (rows[e] < L) seen[rows[e] >> 6] |= uint64_t(1) << (rows[e] & 63);
+        uint64_t seen[kWords + 1] = {};                // (+ 1: room for the bit of kFuseBlockLabels, never read)
+        for (size_t e = 0; e < size_t(nb) * U; ++e) {  // (no branch: a third of the entries are no observation)
+          const unsigned l = rows[e] < L ? rows[e] : unsigned(kFuseBlockLabels);  // past the bits in use
+          seen[l >> 6] |= uint64_t(1) << (l & 63);
+        }
         int nk = 0;
         for (int k = 0; k < L; ++k)
           if (seen[k >> 6] >> (k & 63) & 1) ks[nk++] = k;
@@ -220,13 +260,7 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
           if (k0) acc[0] += lb == I(0) ? w0 : V{};
           for (int i = k0; i < nk; ++i) acc[i] += lb == I(ks[i]) ? wu : V{};
         }
-        std::fill(col.begin(), col.end(), T(0));
-        for (int i = 0; i < nk; ++i)
-          for (int b = 0; b < B; ++b) col[size_t(ks[i]) * B + b] = acc[i][b];
-        for (int b = 0; b < nb; ++b) {
-          const size_t n = size_t(n0 + b);
-          fuse_finish(&col[b], B, den[b], p, s + n * L, q + n * L, valid[n], lg.data(), z ? z + n : nullptr);
-        }
+        finish(acc, ks, nk, den, n0, nb);
       }
     }
     return;

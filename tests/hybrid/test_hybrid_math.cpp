@@ -92,65 +92,68 @@ TEST(ObservationFusion, GradientToViewLogits) {
 
 // Eqs. 4-5 and their backward written per Gaussian and per view, as the paper states them (the reference for the
 // blocked, branch-free fuse / fuse_backward).
-void fuse_reference(const ObservationTable& tab, const float* w, const FusionParams& p, float* q, float* s,
-                    uint8_t* valid) {
+template <class T>
+void fuse_reference(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, T* s, uint8_t* valid) {
   const int L = p.num_labels, U = tab.num_views;
   for (int n = 0; n < tab.n; ++n) {
     const uint16_t* lab = &tab.label[size_t(n) * U];
-    float* sn = s + size_t(n) * L;
-    std::fill(sn, sn + L, 0.f);
-    float den = 0;
+    T* sn = s + size_t(n) * L;
+    std::fill(sn, sn + L, T(0));
+    T den = 0;
     for (int u = 0; u < U; ++u) {
       if (lab[u] == kNoObservation) continue;
       den += w[u];
-      if (lab[u] < L) sn[lab[u]] += lab[u] == 0 ? float(p.background_vote) * w[u] : w[u];
+      if (lab[u] < L) sn[lab[u]] += lab[u] == 0 ? T(p.background_vote) * w[u] : w[u];
     }
     valid[n] = den > 0;
     if (!valid[n]) continue;
-    const float inv = 1.f / (den + float(p.eps));
-    std::vector<float> lg(L);
+    const T inv = T(1) / (den + T(p.eps));
+    std::vector<T> lg(L);
     for (int k = 0; k < L; ++k) {
       sn[k] *= inv;
-      lg[k] = sn[k] / float(p.temperature);
+      lg[k] = sn[k] / T(p.temperature);
     }
     softmax(lg.data(), L, q + size_t(n) * L);
   }
 }
-void fuse_backward_reference(const ObservationTable& tab, const float* w, const FusionParams& p, const float* s,
-                             const float* q, const uint8_t* valid, const float* dq, float* dw) {
+template <class T>
+void fuse_backward_reference(const ObservationTable& tab, const T* w, const FusionParams& p, const T* s, const T* q,
+                             const uint8_t* valid, const T* dq, T* dw) {
   const int L = p.num_labels, U = tab.num_views;
-  std::fill(dw, dw + U, 0.f);
-  std::vector<float> ds(L);
+  std::fill(dw, dw + U, T(0));
+  std::vector<T> ds(L);
   for (int n = 0; n < tab.n; ++n) {
     if (!valid[n]) continue;
     softmax_backward(q + size_t(n) * L, dq + size_t(n) * L, L, ds.data());
     const uint16_t* lab = &tab.label[size_t(n) * U];
-    float den = 0;
+    T den = 0;
     for (int u = 0; u < U; ++u)
       if (lab[u] != kNoObservation) den += w[u];
-    const float inv = 1.f / (den + float(p.eps));
-    float sum_ds_s = 0;
+    const T inv = T(1) / (den + T(p.eps));
+    T sum_ds_s = 0;
     for (int k = 0; k < L; ++k) {
-      ds[k] /= float(p.temperature);
+      ds[k] /= T(p.temperature);
       sum_ds_s += ds[k] * s[size_t(n) * L + k];
     }
     for (int u = 0; u < U; ++u) {
       if (lab[u] == kNoObservation) continue;
-      float g = -sum_ds_s;
-      if (lab[u] < L) g += lab[u] == 0 ? float(p.background_vote) * ds[0] : ds[lab[u]];
+      T g = -sum_ds_s;
+      if (lab[u] < L) g += lab[u] == 0 ? T(p.background_vote) * ds[0] : ds[lab[u]];
       dw[u] += g * inv;
     }
   }
 }
 
-TEST(ObservationFusion, BlockedFusionIsThePerGaussianLoopBitwise) {
-  // fuse() sums eq. 4 for 8 Gaussians at once, branch-free, over the labels some view of the block observed, and
-  // eq. 5's softmax computes exp(0 - m) once; fuse_backward() likewise runs over blocks (fusion.h): on one thread
-  // both give the per-Gaussian loops' values bit for bit, for a Gaussian count that is not a multiple of 8, labels
-  // past the last one (counted only in the normaliser), Gaussians without any observation, rows of dq all zero, a
-  // label count above kFuseBlockLabels (the per-Gaussian path), and tables whose Gaussians see every label or a few
-  // (each its own label, the background and now and then another: most labels absent from a block). z, written
-  // with q, is hard_ids() of the reference's q.
+// fuse() sums eq. 4 for 8 Gaussians at once, branch-free, over the labels some view of the block observed, and
+// eq. 5's softmax computes exp(0 - m) once; fuse_backward() likewise runs over blocks (fusion.h): on one thread
+// both give the per-Gaussian loops' values bit for bit, for a Gaussian count that is not a multiple of 8, labels
+// past the last one (counted only in the normaliser), Gaussians without any observation, rows of dq all zero, a
+// label count above kFuseBlockLabels (the per-Gaussian path), and tables whose Gaussians see every label or a few
+// (each its own label, the background and now and then another: most labels absent from a block). z, written
+// with q, is hard_ids() of the reference's q.
+// Float and double.
+template <class T>
+void blocked_fusion_case() {
   std::mt19937 rng(4);
   for (bool clustered : {false, true})
     for (int L : {2, 9, 40, kFuseBlockLabels + 5}) {
@@ -171,18 +174,20 @@ TEST(ObservationFusion, BlockedFusionIsThePerGaussianLoopBitwise) {
         }
       }
       for (int u = 0; u < U; ++u) tab.label[size_t(7) * U + u] = kNoObservation;  // Gaussian 7: no valid view
-      std::uniform_real_distribution<float> R(0.f, 1.f);
-      std::vector<float> w(U), dq(size_t(N) * L), dw(U), dw_ref(U);
+      // Gaussian 9: observed, but only as a label past the last: every s_k is 0, q uniform, z the first label.
+      for (int u = 0; u < U; ++u) tab.label[size_t(9) * U + u] = uint16_t(L);
+      std::uniform_real_distribution<T> R(0, 1);
+      std::vector<T> w(U), dq(size_t(N) * L), dw(U), dw_ref(U);
       for (auto& x : w) x = R(rng) / U;
       for (auto& x : dq) x = R(rng) - 0.5f;
       // Rows of dq all zero, as for the Gaussians a step does not render (fuse_backward skips them): every third
       // Gaussian, a whole block of 8 (16..23), and rows of -0; the reference adds their terms.
       for (int n = 0; n < N; ++n)
         if (n % 3 == 0 || (n >= 16 && n < 24) || n % 5 == 1)
-          std::fill_n(&dq[size_t(n) * L], L, n % 5 == 1 ? -0.f : 0.f);
+          std::fill_n(&dq[size_t(n) * L], L, n % 5 == 1 ? T(-0.0) : T(0));
       const FusionParams p{L, 0.1, 1e-6, 0.5};
-      std::vector<float> q(size_t(N) * L, 0.3f), s(q.size()), q_ref = q, s_ref(q.size());
-      q[size_t(7) * L + L - 1] = q_ref[size_t(7) * L + L - 1] = 0.4f;  // kept: z = the last label
+      std::vector<T> q(size_t(N) * L, T(0.3)), s(q.size()), q_ref = q, s_ref(q.size());
+      q[size_t(7) * L + L - 1] = q_ref[size_t(7) * L + L - 1] = T(0.4);  // kept: z = the last label
       std::vector<uint8_t> valid(N), valid_ref(N);
       std::vector<float> z(N, -1.f);
       const int threads = omp_get_max_threads();
@@ -197,18 +202,25 @@ TEST(ObservationFusion, BlockedFusionIsThePerGaussianLoopBitwise) {
       EXPECT_EQ(s, s_ref);
       EXPECT_EQ(q, q_ref);
       EXPECT_EQ(dw, dw_ref);
-      EXPECT_NE(dw, std::vector<float>(U, 0.f));
+      EXPECT_NE(dw, std::vector<T>(U, T(0)));
       std::vector<uint16_t> z_ref(N);
       hard_ids(q_ref.data(), N, L, z_ref.data());
       EXPECT_EQ(z, std::vector<float>(z_ref.begin(), z_ref.end()));
       EXPECT_EQ(z[7], float(L - 1));
+      EXPECT_EQ(valid[9], 1);
+      EXPECT_EQ(z[9], 0.f);
       // The clustered tables leave most labels out of most blocks (what the label list skips).
       if (clustered && L == 40) {
         int absent = 0;
-        for (int n = 0; n < N; ++n) absent += int(std::count(&s[size_t(n) * L], &s[size_t(n + 1) * L], 0.f));
+        for (int n = 0; n < N; ++n) absent += int(std::count(&s[size_t(n) * L], &s[size_t(n + 1) * L], T(0)));
         EXPECT_GT(absent, N * L / 2);
       }
     }
+}
+
+TEST(ObservationFusion, BlockedFusionIsThePerGaussianLoopBitwise) {
+  blocked_fusion_case<float>();
+  blocked_fusion_case<double>();
 }
 
 TEST(ObservationFusion, BackgroundVoteWeighsTheAbsenceOfAMask) {
