@@ -129,9 +129,15 @@ void BM_AdamUpdate30k(benchmark::State& st) {
 // The language embeddings' row update as the full method runs it (SemanticPass::update): D = 512, values in IEEE
 // half, bfloat16 moments, every other row with a gradient (the room at 1000x700 gives 175k of 300k rows one). Arg 0:
 // rows; at 2k rows (6 MB of values and moments) the rows stay in the caches, at 300k (922 MB) every update
-// streams them from memory: the two times say whether the update is bound by arithmetic or by bandwidth.
+// streams them from memory: the two times say whether the update is bound by arithmetic or by bandwidth. Arg 1:
+// the AVX-512 kernel (1, the default where the CPU has it) or the AVX2 one (0); the same bits.
 void BM_AdamRowsHalf(benchmark::State& st) {
-  const bench::OmpThreads threads(st, 1);
+  const bench::OmpThreads threads(st, 2);
+  const bool was = train::adam_avx512();
+  if (!train::set_adam_avx512(st.range(1) != 0) && st.range(1)) {
+    st.SkipWithError("no AVX-512 on this CPU");
+    return;
+  }
   const int n = int(st.range(0)), D = 512;
   train::Adam adam;
   train::AdamParam& p = adam.add("f", D, n, 2.5e-3f, true);
@@ -148,6 +154,7 @@ void BM_AdamRowsHalf(benchmark::State& st) {
   adam.update_rows(p, x.data(), n, rows);  // touch every page once
   for (auto _ : st) adam.update_rows(p, x.data(), n, rows);
   st.counters["rows_updated"] = double((n + 1) / 2);
+  train::set_adam_avx512(was);
 }
 
 void BM_TrainStep(benchmark::State& st) {
@@ -180,8 +187,8 @@ BENCHMARK(BM_SsimWidth)
 BENCHMARK(BM_PhotometricLoss)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_AdamUpdate30k)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_AdamRowsHalf)
-    ->ArgNames({"rows", "threads"})
-    ->ArgsProduct({{2048, 300000}, bench::thread_counts()})
+    ->ArgNames({"rows", "avx512", "threads"})
+    ->ArgsProduct({{2048, 300000}, {1, 0}, bench::thread_counts()})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 BENCHMARK(BM_TrainStep)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
