@@ -241,8 +241,8 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
       for (int blk = 0; blk < blocks; ++blk) {
         const int n0 = blk * B, nb = std::min(B, N - n0);
         const uint16_t* rows = &tab.label[size_t(n0) * U];
-        // The labels observed in the block: a byte each (labels past the last and no observation share the byte
-        // after the bits in use). Plain stores: a bit set OR-ed into memory waited on the previous store.
+        // The labels observed in the block: a byte each (labels past the last and no observation share the last
+        // byte, never read). Plain stores: setting bits of a word in memory made each entry wait on the last.
         uint8_t seen[kFuseBlockLabels + 1] = {};
         for (size_t e = 0; e < size_t(nb) * U; ++e) seen[std::min<unsigned>(rows[e], kFuseBlockLabels)] = 1;
         int nk = 0;
