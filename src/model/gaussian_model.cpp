@@ -19,6 +19,13 @@ void ExtraGroup::row(size_t i, float* out) const {
     std::copy_n(data.data() + o, dim, out);
     return;
   }
+  // Callers walk rows in increasing order, often skipping some (SCL's passes over the rows a view touched): ask
+  // for the row two further on now, so that its lines arrive while this one and the next are used (2 B a value,
+  // whole lines; the hardware prefetcher stops at page boundaries, 4 rows of D = 512).
+  const size_t ahead = o + 2 * size_t(dim);
+  if (ahead + size_t(dim) <= half.size())
+    for (size_t b = 0; b < size_t(dim) * 2; b += 64)
+      __builtin_prefetch(reinterpret_cast<const char*>(half.data() + ahead) + b);
   int c = 0;
   for (; c + 8 <= dim; c += 8)
     _mm256_storeu_ps(out + c, _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(half.data() + o + c))));
