@@ -11,6 +11,10 @@ repetitions when the run has them.
       --benchmark_repetitions=5 --benchmark_enable_random_interleaving=true --benchmark_out=steps.json
   bench/amdahl.py steps.json --threads 16
 
+or from the step as `hgs train` runs it (bench/train_steps.sh at THREADS=1 and 2; each run leaves its
+train_stats.json, median ms per iteration and mean ms per part):
+  bench/amdahl.py run_t1/train_stats.json run_t2/train_stats.json --threads 16
+
 The projection is an upper bound of what the 2-thread figures allow: it assumes a part's serial share stays
 serial and its parallel share divides perfectly, and ignores memory bandwidth and the barriers of more threads.
 Where the run also measured a target thread count (HGS_BENCH_THREADS=1,2,4,8,16 on a machine with the cores),
@@ -24,11 +28,34 @@ import sys
 from collections import defaultdict
 
 
-def parse(path):
-    """{(benchmark family, threads): {counter: [values]}} from Google Benchmark's JSON (iteration rows only)."""
-    with open(path) as f:
-        data = json.load(f)
+def parse_train_stats(data, path, rows):
+    """One `hgs train` run's train_stats.json: its thread count, mean ms per iteration and per part (the mean, so
+    that the parts add up to the step; the median step leaves out the slow steps the means include)."""
+    threads = data.get("threads")
+    if not isinstance(threads, int) or threads < 1:
+        sys.exit(f"{path}: train_stats.json without a thread count")
+    key = (f"hgs train, {data.get('num_gaussians', '?')} Gaussians", threads)
+    rows[key]["step"].append(float(data["mean_ms_per_iter"]))
+    for k, v in data["mean_ms_per_part"].items():
+        if isinstance(v, (int, float)) and v > 0:
+            rows[key][k].append(float(v))
+
+
+def parse(paths):
+    """{(benchmark family, threads): {counter: [values]}} from Google Benchmark's JSON (iteration rows only), or
+    from `hgs train` runs' train_stats.json (one row per file: bench/train_steps.sh at THREADS=1 and 2)."""
     rows = defaultdict(lambda: defaultdict(list))
+    for path in paths:
+        with open(path) as f:
+            data = json.load(f)
+        if "mean_ms_per_part" in data:
+            parse_train_stats(data, path, rows)
+        else:
+            parse_benchmarks(data, rows)
+    return rows
+
+
+def parse_benchmarks(data, rows):
     for b in data.get("benchmarks", []):
         if b.get("run_type") == "aggregate":
             continue
@@ -43,7 +70,6 @@ def parse(path):
         for k, v in b.items():
             if k.startswith("ms_") and isinstance(v, (int, float)):
                 rows[key][k[3:]].append(float(v))
-    return rows
 
 
 def project(t1, t2, n):
@@ -57,7 +83,8 @@ def project(t1, t2, n):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("json", help="Google Benchmark JSON (--benchmark_out) of a run at 1 and 2 threads")
+    ap.add_argument("json", nargs="+", help="Google Benchmark JSON (--benchmark_out) of a run at 1 and 2 threads, "
+                    "or the train_stats.json of `hgs train` runs at 1 and 2 threads (--threads)")
     ap.add_argument("--threads", type=int, nargs="+", default=[16], help="thread counts to project to")
     ap.add_argument("--min-share", type=float, default=0.0,
                     help="list only the parts above this share of the 1-thread step (e.g. 0.05)")
@@ -65,7 +92,7 @@ def main():
     rows = parse(a.json)
     families = sorted({f for f, _ in rows})
     if not families:
-        sys.exit(f"{a.json}: no benchmark with a threads argument")
+        sys.exit(f"{' '.join(a.json)}: no benchmark with a threads argument")
     for fam in families:
         if (fam, 1) not in rows or (fam, 2) not in rows:
             print(f"{fam}: needs both 1 and 2 threads, skipped")

@@ -8,6 +8,9 @@
 # ITERS iterations without densification (the Gaussian count stays fixed), builds alternating, REPS rounds, and
 # the script prints each run's median ms / iteration and mean ms per part from train_stats.json. Iteration 100's
 # observation-table rebuild is in the mean, not in the median.
+# Each run's train_stats.json stays in OUT/run_SIZE_METHOD_tTHREADS_bBUILD: with runs at THREADS=1 and 2,
+# bench/amdahl.py OUT/run_paper_full_t1_b1/train_stats.json OUT/run_paper_full_t2_b1/train_stats.json projects each
+# part to more threads.
 #   bench/train_steps.sh OUT HGS [HGS2 ...]
 #   env: SIZE=paper|small (default small), METHOD=full|rgb|both (default both), ITERS (120), REPS (2), THREADS (2)
 set -uo pipefail
@@ -36,7 +39,7 @@ for rep in $(seq 1 "$REPS"); do
     i=0
     for H in "$@"; do
       i=$((i + 1))
-      run="$O/run_${SIZE}_${m}_b${i}"
+      run="$O/run_${SIZE}_${m}_t${THREADS}_b${i}"
       rm -rf "$run"
       opt=()
       [ "$m" = rgb ] && opt=(--method rgb)
