@@ -197,10 +197,12 @@ void BM_FuseViews(benchmark::State& st) {
   for (int u = 0; u < U; ++u) w[u] = (0.5f + R(rng)) / U;
   for (auto& x : dq) x = R(rng) - 0.5f;
   std::vector<uint8_t> valid(n);
+  std::vector<float> z(n), den(n);
   hybrid::FusionParams p{L, 0.1, 1e-6, 0.5};
-  for (auto _ : st) {
-    hybrid::fuse(tab, w.data(), p, q.data(), sbuf.data(), valid.data());
-    if (st.range(0)) hybrid::fuse_backward(tab, w.data(), p, sbuf.data(), q.data(), valid.data(), dq.data(), dw.data());
+  for (auto _ : st) {  // as ObjectAssociation runs them: z and the normalisers written by fuse
+    hybrid::fuse(tab, w.data(), p, q.data(), sbuf.data(), valid.data(), z.data(), den.data());
+    if (st.range(0))
+      hybrid::fuse_backward(tab, w.data(), p, sbuf.data(), q.data(), valid.data(), dq.data(), dw.data(), den.data());
   }
 }
 

@@ -51,9 +51,10 @@ void ObjectAssociation::attach(train::Adam& optim) {
 void ObjectAssociation::fuse(int n, HybridFields& h) {
   s_.resize(size_t(n) * L_);
   valid_.resize(n);
+  den_.resize(n);
   softmax(logits_.data(), int(logits_.size()), w_.data());
   FusionParams p{L_, cfg_.temperature, cfg_.fusion_eps, cfg_.background_vote};
-  hybrid::fuse(table_, w_.data(), p, h.q->data.data(), s_.data(), valid_.data(), h.z->data.data());
+  hybrid::fuse(table_, w_.data(), p, h.q->data.data(), s_.data(), valid_.data(), h.z->data.data(), den_.data());
 }
 
 const std::vector<float>& ObjectAssociation::weights() const {
@@ -92,7 +93,8 @@ void ObjectAssociation::backward(int /*n*/, const HybridFields& h, const float* 
   FusionParams p{L_, cfg_.temperature, cfg_.fusion_eps, cfg_.background_vote};
   dw_.resize(U);
   dlogits_.resize(U);
-  fuse_backward(table_, w_.data(), p, s_.data(), h.q->data.data(), valid_.data(), dq, dw_.data());
+  fuse_backward(table_, w_.data(), p, s_.data(), h.q->data.data(), valid_.data(), dq, dw_.data(),
+                den_.size() == size_t(table_.n) ? den_.data() : nullptr);
   softmax_backward(w_.data(), dw_.data(), U, dlogits_.data());
   if (first) step_dlogits_ = dlogits_;
   else

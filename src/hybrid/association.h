@@ -86,6 +86,7 @@ class ObjectAssociation {
   mutable std::vector<float> w_;  // [U] softmax(logits_)
   std::vector<float> s_;          // [N, L]
   std::vector<uint8_t> valid_;    // [N]
+  std::vector<float> den_;        // [N] eq. 4's normalisers of the last fuse() (its backward reads them)
 };
 
 }  // namespace hgs::hybrid

@@ -176,7 +176,8 @@ struct FuseBlock {
 
 // w [U] (already softmax-normalised), q [N, K+1] in/out (kept where no view is valid), s [N, K+1] out,
 // valid [N] out (1 if some view observed the Gaussian), z [N] out when not null: argmax q (hard_ids' values, as
-// float: the model's hard-id group).
+// float: the model's hard-id group), den [N] out when not null: eq. 4's normaliser sum_u w_u V_{n,u} (before eps),
+// which fuse_backward() then reads instead of summing it again.
 // Up to kFuseBlockLabels labels, the sums of eq. 4 run over blocks of 8 Gaussians, one per lane, each label's sum
 // in registers: every view adds its weight (or 0) to the sum of every label that some view of the block observed
 // (a Gaussian sees a few of the labels; the others' sums stay +0). A Gaussian's sums then run in view order with
@@ -185,7 +186,7 @@ struct FuseBlock {
 constexpr int kFuseBlockLabels = 96;
 template <class T>
 void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, T* s, uint8_t* valid,
-          float* z = nullptr) {
+          float* z = nullptr, T* den_out = nullptr) {
   const int L = p.num_labels, U = tab.num_views, N = tab.n;
   const T bv = T(p.background_vote);
   if (L <= kFuseBlockLabels) {
@@ -227,6 +228,7 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
         for (int b = 0; b < nb; ++b) {
           const size_t n = size_t(n0 + b);
           T *sn = s + n * L, *qn = q + n * L;
+          if (den_out) den_out[n] = den[b];
           valid[n] = den[b] > 0;
           if (!valid[n]) {  // no view: s is the zero sums, q stays
             std::fill(sn, sn + L, T(0));
@@ -277,16 +279,17 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
         den += w[u];
         if (lab[u] < L) acc[lab[u]] += lab[u] == 0 ? bv * w[u] : w[u];
       }
+      if (den_out) den_out[n] = den;
       fuse_finish(acc.data(), 1, den, p, s + size_t(n) * L, q + size_t(n) * L, valid[n], lg.data(),
                   z ? z + n : nullptr);
     }
   }
 }
 
-// dq [N, K+1] -> dw [U] (dL/dw, overwritten). s, q, valid from fuse().
+// dq [N, K+1] -> dw [U] (dL/dw, overwritten). s, q, valid and (when not null) den from fuse() with the same w.
 template <class T>
 void fuse_backward(const ObservationTable& tab, const T* w, const FusionParams& p, const T* s, const T* q,
-                   const uint8_t* valid, const T* dq, T* dw) {
+                   const uint8_t* valid, const T* dq, T* dw, const T* den_in = nullptr) {
   const int L = p.num_labels, U = tab.num_views, N = tab.n;
   using FB = FuseBlock<T>;  // blocks of Gaussians: their normalisers as in fuse(), then their views
   using I = typename FB::I;
@@ -318,11 +321,15 @@ void fuse_backward(const ObservationTable& tab, const T* w, const FusionParams& 
       }
       if (!any) continue;
       const uint16_t* rows = &tab.label[size_t(n0) * U];
-      V den{};  // in view order, as fuse() sums it
-      for (int u = 0; u < U; ++u) {
-        typename FB::VI lb;
-        FB::labels(rows, U, u, nb, lb);
-        den += lb != I(kNoObservation) ? V{} + w[u] : V{};
+      V den{};  // fuse()'s, or summed again in view order as fuse() sums it
+      if (den_in) {
+        for (int b = 0; b < nb; ++b) den[b] = den_in[n0 + b];
+      } else {
+        for (int u = 0; u < U; ++u) {
+          typename FB::VI lb;
+          FB::labels(rows, U, u, nb, lb);
+          den += lb != I(kNoObservation) ? V{} + w[u] : V{};
+        }
       }
       T inv_b[B] = {};
       for (int b = 0; b < nb; ++b) {

@@ -150,7 +150,7 @@ void fuse_backward_reference(const ObservationTable& tab, const T* w, const Fusi
 // past the last one (counted only in the normaliser), Gaussians without any observation, rows of dq all zero, a
 // label count above kFuseBlockLabels (the per-Gaussian path), and tables whose Gaussians see every label or a few
 // (each its own label, the background and now and then another: most labels absent from a block). z, written
-// with q, is hard_ids() of the reference's q.
+// with q, is hard_ids() of the reference's q; fuse_backward() with fuse()'s normalisers is the reference too.
 // Float and double.
 template <class T>
 void blocked_fusion_case() {
@@ -192,8 +192,10 @@ void blocked_fusion_case() {
       std::vector<float> z(N, -1.f);
       const int threads = omp_get_max_threads();
       omp_set_num_threads(1);
-      fuse(tab, w.data(), p, q.data(), s.data(), valid.data(), z.data());
+      std::vector<T> den(N, T(-1)), dw_den(U);
+      fuse(tab, w.data(), p, q.data(), s.data(), valid.data(), z.data(), den.data());
       fuse_backward(tab, w.data(), p, s.data(), q.data(), valid.data(), dq.data(), dw.data());
+      fuse_backward(tab, w.data(), p, s.data(), q.data(), valid.data(), dq.data(), dw_den.data(), den.data());
       omp_set_num_threads(threads);
       fuse_reference(tab, w.data(), p, q_ref.data(), s_ref.data(), valid_ref.data());
       fuse_backward_reference(tab, w.data(), p, s_ref.data(), q_ref.data(), valid_ref.data(), dq.data(), dw_ref.data());
@@ -202,7 +204,10 @@ void blocked_fusion_case() {
       EXPECT_EQ(s, s_ref);
       EXPECT_EQ(q, q_ref);
       EXPECT_EQ(dw, dw_ref);
+      EXPECT_EQ(dw_den, dw_ref);  // fuse()'s normalisers instead of summing them again
       EXPECT_NE(dw, std::vector<T>(U, T(0)));
+      EXPECT_EQ(den[7], T(0));  // no view
+      EXPECT_GT(den[9], T(0));  // views of labels past the last count in the normaliser
       std::vector<uint16_t> z_ref(N);
       hard_ids(q_ref.data(), N, L, z_ref.data());
       EXPECT_EQ(z, std::vector<float>(z_ref.begin(), z_ref.end()));
