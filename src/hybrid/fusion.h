@@ -200,6 +200,7 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
       V acc[kFuseBlockLabels];   // (a vector type loses its attribute as a template argument: no std::vector)
       int ks[kFuseBlockLabels];  // the labels some view of the block observed, ascending
       V sv[kFuseBlockLabels], ev[kFuseBlockLabels];
+      std::vector<I> lt(size_t(U) * B);  // the block's labels [U, B]
       // Eq. 4's normalisation and eq. 5 for the block's lanes at once: each lane's operations are fuse_finish's in
       // its order (vector division and max round and compare as their scalar forms), the softmax's exps scalar per
       // lane with exp(0 - m) once; s, q and z then go to the rows. A lane without any observation keeps its q.
@@ -250,16 +251,25 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
         int nk = 0;
         for (int k = 0; k < L; ++k)
           if (seen[k]) ks[nk++] = k;
-        const int k0 = nk > 0 && ks[0] == 0;  // the background (its own vote weight) first, when observed
-        for (int i = 0; i < nk; ++i) acc[i] = V{};
+        // The block's labels view by view, once; then each sum runs down the views in a register (summing every
+        // label's in one pass over the views kept the sums in memory, each view's add waiting on the last store).
+        for (int u = 0; u < U; ++u)
+          for (int b = 0; b < B; ++b) lt[size_t(u) * B + b] = b < nb ? I(rows[size_t(b) * U + u]) : I(kNoObservation);
+        auto labels = [&](int u) {
+          typename FB::VI v;
+          __builtin_memcpy(&v, &lt[size_t(u) * B], sizeof v);
+          return v;
+        };
         V den{};
-        for (int u = 0; u < U; ++u) {
-          typename FB::VI lb;
-          FB::labels(rows, U, u, nb, lb);
-          const V wu = V{} + w[u], w0 = V{} + bv * w[u];
-          den += lb != I(kNoObservation) ? wu : V{};
-          if (k0) acc[0] += lb == I(0) ? w0 : V{};
-          for (int i = k0; i < nk; ++i) acc[i] += lb == I(ks[i]) ? wu : V{};
+        for (int u = 0; u < U; ++u) den += labels(u) != I(kNoObservation) ? V{} + w[u] : V{};
+        for (int i = 0; i < nk; ++i) {
+          const I k = I(ks[i]);
+          V a{};
+          if (k == 0)  // the background's votes weighted by background_vote
+            for (int u = 0; u < U; ++u) a += labels(u) == k ? V{} + bv * w[u] : V{};
+          else
+            for (int u = 0; u < U; ++u) a += labels(u) == k ? V{} + w[u] : V{};
+          acc[i] = a;
         }
         finish(acc, ks, nk, den, n0, nb);
       }
