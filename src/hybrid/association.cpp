@@ -52,9 +52,11 @@ void ObjectAssociation::fuse(int n, HybridFields& h) {
   s_.resize(size_t(n) * L_);
   valid_.resize(n);
   den_.resize(n);
+  base_.resize(n);
   softmax(logits_.data(), int(logits_.size()), w_.data());
   FusionParams p{L_, cfg_.temperature, cfg_.fusion_eps, cfg_.background_vote};
-  hybrid::fuse(table_, w_.data(), p, h.q->data.data(), s_.data(), valid_.data(), h.z->data.data(), den_.data());
+  hybrid::fuse(table_, w_.data(), p, h.q->data.data(), s_.data(), valid_.data(), h.z->data.data(), den_.data(),
+               base_.data());
 }
 
 const std::vector<float>& ObjectAssociation::weights() const {

@@ -72,6 +72,8 @@ class ObjectAssociation {
   // The last fuse()'s s [N, L] and valid [N] (null before the first, and without OF).
   const float* fused_s() const { return s_.empty() ? nullptr : s_.data(); }
   const uint8_t* fused_valid() const { return valid_.empty() ? nullptr : valid_.data(); }
+  // The last fuse()'s base_association of each row of q [n] (null before the first, without OF, or for another n).
+  const float* fused_base(int n) const { return n > 0 && base_.size() == size_t(n) ? base_.data() : nullptr; }
   // Restores a saved table (checked by the caller).
   void restore_table(int n, std::vector<uint16_t> labels);
 
@@ -87,6 +89,7 @@ class ObjectAssociation {
   std::vector<float> s_;          // [N, L]
   std::vector<uint8_t> valid_;    // [N]
   std::vector<float> den_;        // [N] eq. 4's normalisers of the last fuse() (its backward reads them)
+  std::vector<float> base_;       // [N] the smallest of each row of q (the object channels' b_n)
 };
 
 }  // namespace hgs::hybrid

@@ -41,6 +41,7 @@
 #include <vector>
 
 #include "core/image.h"
+#include "hybrid/object_channels.h"
 #include "render/renderer.h"
 
 namespace hgs::hybrid {
@@ -177,7 +178,8 @@ struct FuseBlock {
 // w [U] (already softmax-normalised), q [N, K+1] in/out (kept where no view is valid), s [N, K+1] out,
 // valid [N] out (1 if some view observed the Gaussian), z [N] out when not null: argmax q (hard_ids' values, as
 // float: the model's hard-id group), den [N] out when not null: eq. 4's normaliser sum_u w_u V_{n,u} (before eps),
-// which fuse_backward() then reads instead of summing it again.
+// which fuse_backward() then reads instead of summing it again, base [N] out when not null: the smallest of each
+// row of q (base_association of object_channels.h, which the object channels of every view of the step need).
 // Up to kFuseBlockLabels labels, the sums of eq. 4 run over blocks of 8 Gaussians, one per lane, each label's sum
 // in registers: every view adds its weight (or 0) to the sum of every label that some view of the block observed
 // (a Gaussian sees a few of the labels; the others' sums stay +0). A Gaussian's sums then run in view order with
@@ -186,7 +188,7 @@ struct FuseBlock {
 constexpr int kFuseBlockLabels = 96;
 template <class T>
 void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, T* s, uint8_t* valid,
-          float* z = nullptr, T* den_out = nullptr) {
+          float* z = nullptr, T* den_out = nullptr, T* base_out = nullptr) {
   const int L = p.num_labels, U = tab.num_views, N = tab.n;
   const T bv = T(p.background_vote);
   if (L <= kFuseBlockLabels) {
@@ -220,11 +222,12 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
         V sum{};
         for (int k = 0; k < L; ++k) sum += ev[k];
         for (int k = 0; k < L; ++k) ev[k] /= sum;
-        V best = ev[0], arg{};  // the first maximum, as hard_id
+        V best = ev[0], arg{}, low = ev[0];  // the first maximum, as hard_id; the minimum, as base_association
         for (int k = 1; k < L; ++k) {
           const auto up = best < ev[k];
           best = up ? ev[k] : best;
           arg = up ? V{} + T(k) : arg;
+          low = ev[k] < low ? ev[k] : low;
         }
         for (int b = 0; b < nb; ++b) {
           const size_t n = size_t(n0 + b);
@@ -234,10 +237,12 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
           if (!valid[n]) {  // no view: s is the zero sums, q stays
             std::fill(sn, sn + L, T(0));
             if (z) z[n] = float(hard_id(qn, L));
+            if (base_out) base_out[n] = base_association(qn, L);
             continue;
           }
           for (int k = 0; k < L; ++k) sn[k] = sv[k][b], qn[k] = ev[k][b];
           if (z) z[n] = float(arg[b]);
+          if (base_out) base_out[n] = low[b];
         }
       };
 #pragma omp for schedule(static)
@@ -292,6 +297,7 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
       if (den_out) den_out[n] = den;
       fuse_finish(acc.data(), 1, den, p, s + size_t(n) * L, q + size_t(n) * L, valid[n], lg.data(),
                   z ? z + n : nullptr);
+      if (base_out) base_out[n] = base_association(q + size_t(n) * L, L);
     }
   }
 }

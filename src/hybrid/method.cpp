@@ -96,7 +96,7 @@ void HybridMethod::prepare(const train::ViewStep& v, const train::PrepareIO& io)
     const bool fused = cfg_.use_of;  // the fusion backward reads dq: labels with s != 0 keep their own entry
     build_object_groups(n, L, J, SparseLayout{sem}, objects_.data(), q, io.projected.colors, io.projected.radii,
                         fused ? assoc_.fused_s() : nullptr, fused ? assoc_.fused_valid() : nullptr, channels_.data(),
-                        groups_);
+                        groups_, fused ? assoc_.fused_base(n) : nullptr);
     io.channels.num_groups = J;
     io.channels.group_width = ObjectGroups::kWidth;
     io.channels.group_ptr = groups_.ptr.data();
@@ -211,7 +211,8 @@ void HybridMethod::backward(const train::ViewStep& v, const train::BackwardIO& i
   const float* q = fields.q->data.data();
   if (cfg_.sparse_objects)
     object_groups_backward(n, L, layout_.J, SparseLayout{layout_.S}, objects_.data(), q, io.projected.colors, groups_,
-                           io.grads.extra.data(), io.grads.group_val.data(), dq_.data(), io.grads.colors.data());
+                           io.grads.extra.data(), io.grads.group_val.data(), dq_.data(), io.grads.colors.data(),
+                           cfg_.use_of ? assoc_.fused_base(n) : nullptr);
   else
     object_channels_backward(n, L, layout_, objects_.data(), q, io.projected.colors, io.grads.extra.data(), dq_.data(),
                              io.grads.colors.data());

@@ -19,7 +19,7 @@ inline bool has_entry(const float* qi, float b, const float* si, bool fused, int
 
 void build_object_groups(int n, int L, int J, const SparseLayout& sl, const int* objs, const float* q,
                          const float* color, const int* radii, const float* s, const uint8_t* valid, float* dense,
-                         ObjectGroups& g) {
+                         ObjectGroups& g, const float* base) {
   const int C = sl.total();
   g.count.resize(n);
   g.ptr.resize(size_t(n) + 1);
@@ -27,7 +27,7 @@ void build_object_groups(int n, int L, int J, const SparseLayout& sl, const int*
   for (int i = 0; i < n; ++i) {
     const float* qi = q + size_t(i) * L;
     const float* ci = color + size_t(i) * 3;
-    const float b = base_association(qi, L);
+    const float b = base ? base[i] : base_association(qi, L);
     float* d = dense + size_t(i) * C;
     d[0] = b * ci[0];
     d[1] = b * ci[1];
@@ -51,7 +51,7 @@ void build_object_groups(int n, int L, int J, const SparseLayout& sl, const int*
     if (g.count[i] == 0) continue;
     const float* qi = q + size_t(i) * L;
     const float* ci = color + size_t(i) * 3;
-    const float b = base_association(qi, L);
+    const float b = base ? base[i] : base_association(qi, L);
     const bool fused = s && valid[i];
     const float* si = fused ? s + size_t(i) * L : nullptr;
     int e = g.ptr[i];
@@ -72,14 +72,14 @@ void build_object_groups(int n, int L, int J, const SparseLayout& sl, const int*
 
 void object_groups_backward(int n, int L, int J, const SparseLayout& sl, const int* objs, const float* q,
                             const float* color, const ObjectGroups& g, const float* grad_dense,
-                            const float* grad_groups, float* dq, float* dcolor) {
+                            const float* grad_groups, float* dq, float* dcolor, const float* base) {
   const int C = sl.total();
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
     const float* qi = q + size_t(i) * L;
     const float* ci = color + size_t(i) * 3;
     const float* gb = grad_dense + size_t(i) * C;
-    const float b = base_association(qi, L);
+    const float b = base ? base[i] : base_association(qi, L);
     float* dc = dcolor + size_t(i) * 3;
     float* dqi = dq + size_t(i) * L;
     dc[0] += b * gb[0];

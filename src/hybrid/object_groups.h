@@ -50,15 +50,16 @@ struct ObjectGroups {
 };
 
 // q [N, L], color [N, 3], radii [N] (0 = culled); s [N, L] and valid [N] from the fusion (null when the fusion
-// backward does not run) -> dense [N, 4 + S] (the base channels; the S others untouched) and the groups.
+// backward does not run) -> dense [N, 4 + S] (the base channels; the S others untouched) and the groups. base [N]:
+// base_association of each row of q when the caller has it (fuse() writes it with q), else null (computed here).
 void build_object_groups(int n, int L, int J, const SparseLayout& sl, const int* objs, const float* q,
                          const float* color, const int* radii, const float* s, const uint8_t* valid, float* dense,
-                         ObjectGroups& groups);
+                         ObjectGroups& groups, const float* base = nullptr);
 
 // grad_dense [N, 4 + S], grad_groups [E, 4] (the renderer's channel gradients) -> dq [N, L] and dcolor [N, 3]
-// (both added).
+// (both added). base as above.
 void object_groups_backward(int n, int L, int J, const SparseLayout& sl, const int* objs, const float* q,
                             const float* color, const ObjectGroups& groups, const float* grad_dense,
-                            const float* grad_groups, float* dq, float* dcolor);
+                            const float* grad_groups, float* dq, float* dcolor, const float* base = nullptr);
 
 }  // namespace hgs::hybrid

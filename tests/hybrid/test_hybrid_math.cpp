@@ -150,7 +150,8 @@ void fuse_backward_reference(const ObservationTable& tab, const T* w, const Fusi
 // past the last one (counted only in the normaliser), Gaussians without any observation, rows of dq all zero, a
 // label count above kFuseBlockLabels (the per-Gaussian path), and tables whose Gaussians see every label or a few
 // (each its own label, the background and now and then another: most labels absent from a block). z, written
-// with q, is hard_ids() of the reference's q; fuse_backward() with fuse()'s normalisers is the reference too.
+// with q, is hard_ids() of the reference's q, and the base association its smallest value; fuse_backward() with
+// fuse()'s normalisers is the reference too.
 // Float and double.
 template <class T>
 void blocked_fusion_case() {
@@ -192,8 +193,8 @@ void blocked_fusion_case() {
       std::vector<float> z(N, -1.f);
       const int threads = omp_get_max_threads();
       omp_set_num_threads(1);
-      std::vector<T> den(N, T(-1)), dw_den(U);
-      fuse(tab, w.data(), p, q.data(), s.data(), valid.data(), z.data(), den.data());
+      std::vector<T> den(N, T(-1)), dw_den(U), base(N, T(-1));
+      fuse(tab, w.data(), p, q.data(), s.data(), valid.data(), z.data(), den.data(), base.data());
       fuse_backward(tab, w.data(), p, s.data(), q.data(), valid.data(), dq.data(), dw.data());
       fuse_backward(tab, w.data(), p, s.data(), q.data(), valid.data(), dq.data(), dw_den.data(), den.data());
       omp_set_num_threads(threads);
@@ -212,6 +213,7 @@ void blocked_fusion_case() {
       hard_ids(q_ref.data(), N, L, z_ref.data());
       EXPECT_EQ(z, std::vector<float>(z_ref.begin(), z_ref.end()));
       EXPECT_EQ(z[7], float(L - 1));
+      for (int n = 0; n < N; ++n) ASSERT_EQ(base[n], base_association(&q_ref[size_t(n) * L], L)) << n;
       EXPECT_EQ(valid[9], 1);
       EXPECT_EQ(z[9], 0.f);
       // The clustered tables leave most labels out of most blocks (what the label list skips).
