@@ -209,12 +209,10 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
       auto finish = [&](const V* acc, const int* ks, int nk, V den, int n0, int nb) {
         const V inv = (V{} + T(1)) / (den + T(p.eps));
         for (int k = 0; k < L; ++k) sv[k] = V{};
-        for (int i = 0; i < nk; ++i) sv[ks[i]] = acc[i] * inv;  // (an absent label's +0 * inv is +0)
-        V m = sv[0] / T(p.temperature);
-        for (int k = 0; k < L; ++k) {
-          ev[k] = sv[k] / T(p.temperature);  // the logits first, then their exps in place
-          if (k > 0) m = m < ev[k] ? ev[k] : m;
-        }
+        for (int i = 0; i < nk; ++i) sv[ks[i]] = acc[i] * inv;         // (an absent label's +0 * inv is +0)
+        for (int k = 0; k < L; ++k) ev[k] = sv[k] / T(p.temperature);  // the logits first, then their exps in place
+        V m = ev[0];
+        for (int k = 1; k < L; ++k) m = m < ev[k] ? ev[k] : m;
         V e0;
         for (int b = 0; b < B; ++b) e0[b] = std::exp(T(0) - m[b]);
         for (int k = 0; k < L; ++k)
@@ -249,17 +247,21 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
       for (int blk = 0; blk < blocks; ++blk) {
         const int n0 = blk * B, nb = std::min(B, N - n0);
         const uint16_t* rows = &tab.label[size_t(n0) * U];
-        // The labels observed in the block: a byte each (labels past the last and no observation share the last
-        // byte, never read). Plain stores: setting bits of a word in memory made each entry wait on the last.
+        // One pass over the block's labels: transposed view by view, so that each sum below runs down the views
+        // in a register (summing every label's in one pass over the views kept the sums in memory, each view's add
+        // waiting on the last store), and which labels occur, a byte each (labels past the last and no observation
+        // share the last byte, never read; plain stores: setting bits of a word in memory made each entry wait on
+        // the last).
         uint8_t seen[kFuseBlockLabels + 1] = {};
-        for (size_t e = 0; e < size_t(nb) * U; ++e) seen[std::min<unsigned>(rows[e], kFuseBlockLabels)] = 1;
+        for (int u = 0; u < U; ++u)
+          for (int b = 0; b < B; ++b) {
+            const unsigned l = b < nb ? rows[size_t(b) * U + u] : kNoObservation;
+            lt[size_t(u) * B + b] = I(l);
+            seen[std::min<unsigned>(l, kFuseBlockLabels)] = 1;
+          }
         int nk = 0;
         for (int k = 0; k < L; ++k)
           if (seen[k]) ks[nk++] = k;
-        // The block's labels view by view, once; then each sum runs down the views in a register (summing every
-        // label's in one pass over the views kept the sums in memory, each view's add waiting on the last store).
-        for (int u = 0; u < U; ++u)
-          for (int b = 0; b < B; ++b) lt[size_t(u) * B + b] = b < nb ? I(rows[size_t(b) * U + u]) : I(kNoObservation);
         auto labels = [&](int u) {
           typename FB::VI v;
           __builtin_memcpy(&v, &lt[size_t(u) * B], sizeof v);
