@@ -44,6 +44,11 @@
 #include "hybrid/object_channels.h"
 #include "render/renderer.h"
 
+// The blocked loops below return 8-lane vectors of double (512 bits) from lambdas; GCC notes that their ABI differs
+// without AVX-512 (-Wpsabi), which does not matter for functions inlined into one translation unit.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"
+
 namespace hgs::hybrid {
 
 constexpr uint16_t kNoObservation = 0xFFFF;
@@ -409,3 +414,5 @@ void hard_ids(const T* q, int n, int num_labels, uint16_t* z) {
 }
 
 }  // namespace hgs::hybrid
+
+#pragma GCC diagnostic pop

@@ -193,24 +193,27 @@ using LineVector = std::vector<T, LineAllocator<T>>;
 template <class T>
 struct RasterWorkspace {
   struct PerThread {
-    RasterScratch vk;      // per-batch visit lists of a tile: Gaussian index (int) [visits]
-    RasterScratch vw;      // ... and its weight (forward) or extra-channel dot (backward), packs [visits]
-    RasterScratch wacc;    // forward weight-sum accumulators, packs [n, J]
-    RasterScratch dw;      // backward d(weight_sums) of the tile's Gaussians, T [n, J]
-    RasterScratch bstate;  // per-batch state, packs [batches, 7 + C + J]
-    RasterScratch blast;   // per-batch active / last-contributor masks [2, batches]
-    RasterScratch groups;  // the tile's channel groups: their list (int) [G], then flags (uint8) [G]
+    RasterScratch vk;         // per-batch visit lists of a tile: Gaussian index (int) [visits]
+    RasterScratch vw;         // ... and its weight (forward) or extra-channel dot (backward), packs [visits]
+    RasterScratch wacc;       // forward weight-sum accumulators of the walked Gaussian, packs [J]
+    RasterScratch tile_w;     // forward: the tile's Gaussians' weight sums, T [n, J] (the maps of tile_maps)
+    RasterScratch tile_maps;  // forward: the pixel-weight maps each of the tile's Gaussians added to, uint32 [n]
+    RasterScratch dw;         // backward d(weight_sums) of the tile's Gaussians, T [n, J]
+    RasterScratch bstate;     // per-batch state, packs [batches, 7 + C + J]
+    RasterScratch blast;      // per-batch active / last-contributor masks [2, batches]
+    RasterScratch groups;     // the tile's channel groups: their list (int) [G], then flags (uint8) [G]
   };
   std::vector<PerThread> threads;
-  LineVector<T> records;           // [N, 16] per-Gaussian records built by forward, reused by backward
-  LineVector<T> tile_records;      // [P, 16] records in tile order (forward gathers, backward reuses)
-  LineVector<T> chan_records;      // [N, 16] the folded walks' channel records (forward builds, backward reuses)
-  int chan_n = -1;                 // the Gaussians chan_records holds (-1: the last forward did not fold)
-  std::vector<uint32_t> masks;     // [P] per (tile, Gaussian) entry: bit b = listed in batch b
-  std::vector<T> pair_grad;        // [P, F]
-  std::vector<T> pair_w;           // [P, J] forward weight sums per pair
-  std::vector<size_t> group_off;   // [N + 1] backward: start of each Gaussian's group-gradient pair slots
-  std::vector<size_t> pair_gslot;  // [P] backward: the group-gradient slot of each pair, in tile order
+  LineVector<T> records;            // [N, 16] per-Gaussian records built by forward, reused by backward
+  LineVector<T> tile_records;       // [P, 16] records in tile order (forward gathers, backward reuses)
+  LineVector<T> chan_records;       // [N, 16] the folded walks' channel records (forward builds, backward reuses)
+  int chan_n = -1;                  // the Gaussians chan_records holds (-1: the last forward did not fold)
+  std::vector<uint32_t> masks;      // [P] per (tile, Gaussian) entry: bit b = listed in batch b
+  std::vector<T> pair_grad;         // [P, F]
+  std::vector<T> pair_w;            // [P, J] forward weight sums per pair (only the maps of pair_maps written)
+  std::vector<uint32_t> pair_maps;  // [P] the pixel-weight maps each pair added to (J <= 32)
+  std::vector<size_t> group_off;    // [N + 1] backward: start of each Gaussian's group-gradient pair slots
+  std::vector<size_t> pair_gslot;   // [P] backward: the group-gradient slot of each pair, in tile order
   std::vector<std::array<size_t, 2>> slot_rule;  // [N] backward: each Gaussian's pair -> slot rule (group_slots)
   LineVector<uint8_t> live_rows;  // [tiles, 64 m] forward: each tile's group_live flags, a cache line per tile
   std::vector<T> pair_group;      // [sum_i pairs_i * entries_i * GWg] group gradients per pair

@@ -109,7 +109,7 @@ template <class T, bool kDepth, int kX>
 inline __attribute__((always_inline)) void forward_gaussian(const RasterInputs<T>& in, const T* rc, int k, int gi,
                                                             const FoldedGaussian<T, 4>& fg, const ForwardBatches<T>& b,
                                                             const uint32_t* jmask, int tx0, int ty0, uint32_t mb,
-                                                            uint32_t& alive, simd::Pack<T>* wa,
+                                                            uint32_t& alive, simd::Pack<T>* wa, uint32_t& used,
                                                             const ForwardVisits<T>& vl) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
@@ -148,6 +148,7 @@ inline __attribute__((always_inline)) void forward_gaussian(const RasterInputs<T
       }
     }
     for_batch_maps(jmask[bt], J, [&](int jj) { wa[jj] += wgt * st[kBatchFixed + C + jj]; });
+    used |= jmask[bt];
     st[bT] = acc ? testT : Tr;
     b.last[bt] = acc ? kk : b.last[bt];
     b.act[bt] = active;
@@ -207,18 +208,39 @@ inline __attribute__((always_inline)) void write_forward_batches(const RasterInp
   }
 }
 
-// The tile's per-pair pixel-weight sums, pair_w [pairs, J]: each walked Gaussian's lane sums of wacc [n, J], zero
-// for the Gaussians after kend (never reached) or without a batch in the image.
+// Gaussian k's pixel-weight sums once its walk is done: o [J] gets the lane sums of wa [J] of the maps it added to
+// (used: the maps present in the batches it reached; more than 32 maps: every map), the others are left unwritten
+// (their sums would be +0: the reduction skips them), and wa goes back to zero for the next Gaussian.
 template <class T>
-void store_pair_weights(const Binning& bins, int tile, int n, int kend, int J, const uint32_t* masks,
-                        uint32_t all_batches, const simd::Pack<T>* wacc, T* pair_w) {
+inline void gaussian_weights(int J, uint32_t used, simd::Pack<T>* wa, T* o) {
+  if (J > 32) {
+    for (int jj = 0; jj < J; ++jj) o[jj] = simd::hsum<T>(wa[jj]), wa[jj] = simd::Pack<T>{};
+    return;
+  }
+  for (; used; used &= used - 1) {
+    const int jj = __builtin_ctz(used);
+    o[jj] = simd::hsum<T>(wa[jj]);
+    wa[jj] = simd::Pack<T>{};
+  }
+}
+
+// The tile's per-pair pixel-weight sums, pair_w [pairs, J] and pair_maps [pairs], from the tile's own tw [n, J]
+// and tu [n] (gaussian_weights' rows and maps). Written after the walk, not as each Gaussian ends: a pair's row is
+// a cache line the walk would wait on.
+template <class T>
+void store_pair_weights(const Binning& bins, int tile, int n, int J, const T* tw, const uint32_t* tu, T* pair_w,
+                        uint32_t* pair_maps) {
   const int s = bins.tile_start[tile];
   for (int k = 0; k < n; ++k) {
-    T* o = pair_w + size_t(bins.tile_pair[s + k]) * J;
-    if (k < kend && (masks[k] & all_batches))
-      for (int jj = 0; jj < J; ++jj) o[jj] = simd::hsum<T>(wacc[size_t(k) * J + jj]);
-    else
-      for (int jj = 0; jj < J; ++jj) o[jj] = 0;
+    const size_t p = size_t(bins.tile_pair[s + k]);
+    T* o = pair_w + p * J;
+    const T* t = tw + size_t(k) * J;
+    if (J > 32) {
+      for (int jj = 0; jj < J; ++jj) o[jj] = t[jj];
+      continue;
+    }
+    pair_maps[p] = tu[k];
+    for (uint32_t m = tu[k]; m; m &= m - 1) o[__builtin_ctz(m)] = t[__builtin_ctz(m)];
   }
 }
 
@@ -228,8 +250,8 @@ void store_pair_weights(const Binning& bins, int tile, int n, int kend, int J, c
 // tile's group_live flags go (null: planes written everywhere, no flags).
 template <class T, bool kDepth, int kX>
 void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, typename RasterWorkspace<T>::PerThread& w,
-                  const T* records, const T* chan, T* tile_records, uint32_t* ws_masks, T* pair_w, uint8_t* live_row,
-                  const RasterOutputs<T>& out) {
+                  const T* records, const T* chan, T* tile_records, uint32_t* ws_masks, T* pair_w, uint32_t* pair_maps,
+                  uint8_t* live_row, const RasterOutputs<T>& out) {
   using P = simd::Pack<T>;
   using M = simd::Mask<T>;
   const int C = in.num_extra, J = in.num_weights;
@@ -245,7 +267,16 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
   b.st = w.bstate.template get<P>(size_t(kBatches) * b.BS);
   b.act = w.blast.template get<M>(size_t(2) * kBatches);
   b.last = b.act + kBatches;
-  P* wacc = J > 0 ? w.wacc.template get<P>(size_t(n) * J) : nullptr;  // [n, J]
+  // The walked Gaussian's pixel-weight sums (packs, zero between Gaussians), and the tile's Gaussians' lane sums
+  // and maps (tw [n, J], tu [n]: the maps each added to; more than 32 maps: every row whole, zero where unwalked).
+  P* wa = J > 0 ? w.wacc.template get<P>(size_t(J)) : nullptr;  // [J]
+  for (int jj = 0; jj < J; ++jj) wa[jj] = P{};
+  T* tw = J > 0 ? w.tile_w.template get<T>(size_t(n) * J) : nullptr;
+  uint32_t* tu = J > 0 ? w.tile_maps.template get<uint32_t>(size_t(n)) : nullptr;
+  auto gaussian_done = [&](int k, uint32_t used) {
+    tu[k] = used;
+    gaussian_weights<T>(J, used, wa, tw + size_t(k) * J);
+  };
   uint32_t jmask[kBatches];  // pixel-weight maps present in each batch (for_batch_maps)
   uint32_t alive = start_forward_batches(in, bins, tx0, ty0, b, jmask);
   const uint32_t all_batches = alive;
@@ -257,16 +288,21 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
     kend = k + 1;
     if (kX == kFolded && k + kChanAhead < n) prefetch_chan_record(chan, gauss[k + kChanAhead]);
     const uint32_t mb = masks[k] & alive;
-    P* wa = J > 0 ? wacc + size_t(k) * J : nullptr;
-    for (int jj = 0; jj < J; ++jj) wa[jj] = P{};
-    if (!mb) continue;
+    if (!mb) {
+      if (J > 0) gaussian_done(k, 0);
+      continue;
+    }
     const T* rc = td.rec + size_t(k) * kRecord;
     FoldedGaussian<T, 4> fg;
     const T* cr = kX == kFolded ? chan + size_t(gauss[k]) * kChanRecord : nullptr;
     load_folded<T, 4>(rc, cr, kX == kFolded ? C : 0, kX == kFolded && GT > 0, in.group_width, fg);
     const int gi = kX == kVisitLists ? gauss[k] : 0;
-    forward_gaussian<T, kDepth, kX>(in, rc, k, gi, fg, b, jmask, tx0, ty0, mb, alive, wa, vl);
+    uint32_t used = 0;
+    forward_gaussian<T, kDepth, kX>(in, rc, k, gi, fg, b, jmask, tx0, ty0, mb, alive, wa, used, vl);
+    if (J > 0) gaussian_done(k, used);
   }
+  if (J > 0)  // never reached (every batch had stopped)
+    for (int k = kend; k < n; ++k) gaussian_done(k, 0);
   // Planes written only where their group has Gaussians (out.group_live): the others' values here are +0, the
   // state they were never added to.
   int ng = in.num_groups;
@@ -278,7 +314,7 @@ void forward_tile(const RasterInputs<T>& in, const Binning& bins, int tile, type
     std::memcpy(live_row, tg.used, size_t(in.num_groups));  // the tile's own line (out.group_live after the walks)
   }
   write_forward_batches<T, kDepth, kX>(in, bins, tx0, ty0, all_batches, b, vl, glist, ng, out);
-  if (J > 0 && any_g) store_pair_weights(bins, tile, n, kend, J, masks, all_batches, wacc, pair_w);
+  if (J > 0) store_pair_weights<T>(bins, tile, n, J, tw, tu, pair_w, pair_maps);
 }
 
 }  // namespace
@@ -307,7 +343,9 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
   uint8_t* LR = ws.live_rows.data();
   const int J = in.num_weights;
   if (J > 0 && ws.pair_w.size() < size_t(bins.num_pairs) * J) ws.pair_w.resize(size_t(bins.num_pairs) * J);
+  if (J > 0 && J <= 32 && ws.pair_maps.size() < size_t(bins.num_pairs)) ws.pair_maps.resize(size_t(bins.num_pairs));
   T* PW = ws.pair_w.data();
+  uint32_t* PM = ws.pair_maps.data();
   const int run = tile_run(bins.num_tiles);
 #pragma omp parallel
   {
@@ -315,12 +353,12 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
 #pragma omp for schedule(dynamic, run)
     for (int t = 0; t < bins.num_tiles; ++t) {
       uint8_t* lr = live ? LR + size_t(t) * LS : nullptr;
-      if (dep && x == kVisitLists) forward_tile<T, true, kVisitLists>(in, bins, t, w, R, CR, TR, MK, PW, lr, out);
-      else if (dep && x == kFolded) forward_tile<T, true, kFolded>(in, bins, t, w, R, CR, TR, MK, PW, lr, out);
-      else if (dep) forward_tile<T, true, kNoChannels>(in, bins, t, w, R, CR, TR, MK, PW, lr, out);
-      else if (x == kVisitLists) forward_tile<T, false, kVisitLists>(in, bins, t, w, R, CR, TR, MK, PW, lr, out);
-      else if (x == kFolded) forward_tile<T, false, kFolded>(in, bins, t, w, R, CR, TR, MK, PW, lr, out);
-      else forward_tile<T, false, kNoChannels>(in, bins, t, w, R, CR, TR, MK, PW, lr, out);
+      if (dep && x == kVisitLists) forward_tile<T, true, kVisitLists>(in, bins, t, w, R, CR, TR, MK, PW, PM, lr, out);
+      else if (dep && x == kFolded) forward_tile<T, true, kFolded>(in, bins, t, w, R, CR, TR, MK, PW, PM, lr, out);
+      else if (dep) forward_tile<T, true, kNoChannels>(in, bins, t, w, R, CR, TR, MK, PW, PM, lr, out);
+      else if (x == kVisitLists) forward_tile<T, false, kVisitLists>(in, bins, t, w, R, CR, TR, MK, PW, PM, lr, out);
+      else if (x == kFolded) forward_tile<T, false, kFolded>(in, bins, t, w, R, CR, TR, MK, PW, PM, lr, out);
+      else forward_tile<T, false, kNoChannels>(in, bins, t, w, R, CR, TR, MK, PW, PM, lr, out);
     }
     if (live) {
 #pragma omp for schedule(static)
@@ -333,8 +371,15 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
       for (int i = 0; i < in.n; ++i) {
         T* o = out.weight_sums + size_t(i) * J;
         for (int jj = 0; jj < J; ++jj) o[jj] = 0;
-        for (int p = bins.pair_offset[i]; p < bins.pair_offset[i + 1]; ++p)
-          for (int jj = 0; jj < J; ++jj) o[jj] += PW[size_t(p) * J + jj];
+        // Each map's sum over the pairs in pair order; a map a pair did not add to is +0 there, which leaves a
+        // sum that starts at +0 unchanged (such a sum is never -0), so only the maps of pair_maps are added.
+        for (int p = bins.pair_offset[i]; p < bins.pair_offset[i + 1]; ++p) {
+          const T* pw = PW + size_t(p) * J;
+          if (J > 32)
+            for (int jj = 0; jj < J; ++jj) o[jj] += pw[jj];
+          else
+            for (uint32_t m = PM[p]; m; m &= m - 1) o[__builtin_ctz(m)] += pw[__builtin_ctz(m)];
+        }
       }
     }
   }
