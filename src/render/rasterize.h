@@ -31,7 +31,9 @@
 // Gaussian's gradient sums (on the stack; a Gaussian with more than 4 group entries keeps a list of its own
 // visits instead and sums its group gradients from it), with no lists to write and read back. Both paths sum the same
 // terms in the same order: bitwise-equal results (test_groups.cpp). Pixel-weight maps are visited only where they are
-// non-zero in a batch (with hard object masks, one map per batch).
+// non-zero in a batch (with hard object masks, one map per batch); forward, a Gaussian's sums are reduced to
+// scalars as its walk in a tile ends, for those maps only, and written to their pair after the tile's walk (the
+// sum over a Gaussian's pairs adds only the maps each pair reached: the others are +0).
 // Gradients of a (tile, Gaussian) pair are stored in that pair's slot and the slots are reduced per Gaussian in a
 // fixed order, so results are bitwise deterministic for any thread count and schedule. Parallel over tiles with
 // OpenMP (dynamic schedule, runs of neighbouring tiles per chunk: detail::tile_run); all scratch lives in
