@@ -13,7 +13,7 @@ repetitions when the run has them.
 
 or from the step as `hgs train` runs it (bench/train_steps.sh at THREADS=1 and 2; each run leaves its
 train_stats.json, median ms per iteration and mean ms per part):
-  bench/amdahl.py run_t1/train_stats.json run_t2/train_stats.json --threads 16
+  bench/amdahl.py run_t1/train_stats.json run_t2/train_stats.json --threads 16 [--median]
 
 The projection is an upper bound of what the 2-thread figures allow: it assumes a part's serial share stays
 serial and its parallel share divides perfectly, and ignores memory bandwidth and the barriers of more threads.
@@ -28,20 +28,24 @@ import sys
 from collections import defaultdict
 
 
-def parse_train_stats(data, path, rows):
+def parse_train_stats(data, path, rows, median=False):
     """One `hgs train` run's train_stats.json: its thread count, mean ms per iteration and per part (the mean, so
-    that the parts add up to the step; the median step leaves out the slow steps the means include)."""
+    that the parts add up to the step; the median step leaves out the slow steps the means include), or with
+    median the median step and each part's median over the steps (median_ms_per_part: robust to steps a busy
+    machine slowed, and to a short run's first steps; the parts need not add up to the step)."""
     threads = data.get("threads")
     if not isinstance(threads, int) or threads < 1:
         sys.exit(f"{path}: train_stats.json without a thread count")
+    if median and "median_ms_per_part" not in data:
+        sys.exit(f"{path}: train_stats.json without median_ms_per_part (written by hgs train since 2026-12-07)")
     key = (f"hgs train, {data.get('num_gaussians', '?')} Gaussians", threads)
-    rows[key]["step"].append(float(data["mean_ms_per_iter"]))
-    for k, v in data["mean_ms_per_part"].items():
+    rows[key]["step"].append(float(data["median_ms_per_iter" if median else "mean_ms_per_iter"]))
+    for k, v in data["median_ms_per_part" if median else "mean_ms_per_part"].items():
         if isinstance(v, (int, float)) and v > 0:
             rows[key][k].append(float(v))
 
 
-def parse(paths):
+def parse(paths, median=False):
     """{(benchmark family, threads): {counter: [values]}} from Google Benchmark's JSON (iteration rows only), or
     from `hgs train` runs' train_stats.json (one row per file: bench/train_steps.sh at THREADS=1 and 2)."""
     rows = defaultdict(lambda: defaultdict(list))
@@ -49,7 +53,7 @@ def parse(paths):
         with open(path) as f:
             data = json.load(f)
         if "mean_ms_per_part" in data:
-            parse_train_stats(data, path, rows)
+            parse_train_stats(data, path, rows, median)
         else:
             parse_benchmarks(data, rows)
     return rows
@@ -86,10 +90,12 @@ def main():
     ap.add_argument("json", nargs="+", help="Google Benchmark JSON (--benchmark_out) of a run at 1 and 2 threads, "
                     "or the train_stats.json of `hgs train` runs at 1 and 2 threads (--threads)")
     ap.add_argument("--threads", type=int, nargs="+", default=[16], help="thread counts to project to")
+    ap.add_argument("--median", action="store_true",
+                    help="train_stats.json inputs: the median step and each part's median instead of the means")
     ap.add_argument("--min-share", type=float, default=0.0,
                     help="list only the parts above this share of the 1-thread step (e.g. 0.05)")
     a = ap.parse_args()
-    rows = parse(a.json)
+    rows = parse(a.json, a.median)
     families = sorted({f for f, _ in rows})
     if not families:
         sys.exit(f"{' '.join(a.json)}: no benchmark with a threads argument")

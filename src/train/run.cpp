@@ -123,6 +123,7 @@ void TrainingRun::score_held_out(int it, Progress& bar, double elapsed) {
 void TrainingRun::train(const StepCallback& on_step) {
   const bool progress = opt_.progress && opt_.writer;
   ms_.reserve(size_t(opt_.iters - trainer_.iteration()) / size_t(trainer_.step_views()));
+  step_parts_.reserve(ms_.capacity());
   Progress bar(opt_.label, opt_.iters - start_, progress);
   const auto t0 = std::chrono::steady_clock::now();
   while (trainer_.iteration() < opt_.iters) {
@@ -138,6 +139,7 @@ void TrainingRun::train(const StepCallback& on_step) {
     iter_.push_back(it);
     densify_ms_.push_back(float(s.times.densify));
     StepTimes::each([&](const char*, double StepTimes::*m) { parts_.*m += s.times.*m; });
+    step_parts_.push_back(s.times);
     average_.add(s, ms_.size() == 1);
     const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     score_held_out(it, bar, elapsed);
@@ -192,6 +194,16 @@ json TrainingRun::stats() const {
   StepTimes::each(
       [&](const char* name, double StepTimes::*m) { part_ms[name] = steps ? parts_.*m / double(steps) : 0.0; });
   stats["mean_ms_per_part"] = part_ms;
+  // The median of each part over the steps (robust to the steps a busy machine slows; the medians need not add up
+  // to the median step).
+  json part_median = json::object();
+  std::vector<double> v(steps);
+  StepTimes::each([&](const char* name, double StepTimes::*m) {
+    for (size_t i = 0; i < steps; ++i) v[i] = step_parts_[i].*m;
+    std::nth_element(v.begin(), v.begin() + steps / 2, v.end());
+    part_median[name] = steps ? v[steps / 2] : 0.0;
+  });
+  stats["median_ms_per_part"] = part_median;
   return stats;
 }
 

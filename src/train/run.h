@@ -96,11 +96,12 @@ class TrainingRun {
   std::string last_ckpt_, stopped_, stop_reason_;
   LossAverage average_;
   // What the run measured.
-  std::vector<float> ms_;          // wall ms of each step
-  std::vector<int> iter_;          // the images seen at the end of each step
-  std::vector<float> densify_ms_;  // ... and its densification / opacity reset / after_step part
-  StepTimes parts_;                // summed over the steps
-  double wall_ = 0;                // seconds, held-out scoring included
+  std::vector<float> ms_;              // wall ms of each step
+  std::vector<int> iter_;              // the images seen at the end of each step
+  std::vector<float> densify_ms_;      // ... and its densification / opacity reset / after_step part
+  StepTimes parts_;                    // summed over the steps
+  std::vector<StepTimes> step_parts_;  // each step's parts
+  double wall_ = 0;                    // seconds, held-out scoring included
   // The held-out curve (test_every).
   std::vector<int> test_views_;
   std::vector<Image> test_images_;

@@ -72,8 +72,17 @@ TEST_F(RunTest, CallbackSeesEveryStepAndStopsTheRunWithItsReason) {
   for (const char* key :
        {"median_ms_per_iter", "mean_ms_per_iter", "peak_rss_mb", "num_gaussians", "wall_time_s", "test_seconds",
         "test_curve", "final_train_loss_ema", "final_train_loss_terms_ema", "final_train_psnr_ema", "threads", "ranks",
-        "views_per_step", "slowest_steps", "mean_ms_per_part", "comm_bytes_per_step"})
+        "views_per_step", "slowest_steps", "mean_ms_per_part", "median_ms_per_part", "comm_bytes_per_step"})
     EXPECT_TRUE(stats.contains(key)) << key;
+  // Each part's median over the 7 steps lies within its steps' range, so at most 7 times its mean; a step
+  // renders, so the forward's median is positive.
+  for (const auto& [name, mean] : stats["mean_ms_per_part"].items()) {
+    ASSERT_TRUE(stats["median_ms_per_part"].contains(name)) << name;
+    const double median = stats["median_ms_per_part"][name].get<double>();
+    EXPECT_GE(median, 0.0) << name;
+    EXPECT_LE(median, 7 * mean.get<double>() + 1e-9) << name;
+  }
+  EXPECT_GT(stats["median_ms_per_part"]["forward"].get<double>(), 0.0);
   EXPECT_EQ(read_model_ply(out / "m" / "point_cloud.ply").n, t->model().n);
   const json config = read_json(out / "m" / "config.json");
   EXPECT_EQ(config["iters"], 50);
