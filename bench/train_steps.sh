@@ -6,11 +6,11 @@
 # thing: `hgs synth` makes the scene once (cached in OUT; the room preset at 1000x700 with 300k points is the
 # paper's LERF scale, the default tabletop 320x240 / 30k is bench_hybrid's size), then each build trains it for
 # ITERS iterations without densification (the Gaussian count stays fixed), builds alternating, REPS rounds, and
-# the script prints each run's median ms / iteration and mean ms per part from train_stats.json. Iteration 100's
-# observation-table rebuild is in the mean, not in the median.
+# the script prints each run's median ms / iteration and mean and median ms per part from train_stats.json.
+# Iteration 100's observation-table rebuild is in the mean, not in the median.
 # Each run's train_stats.json stays in OUT/run_SIZE_METHOD_tTHREADS_bBUILD: with runs at THREADS=1 and 2,
-# bench/amdahl.py OUT/run_paper_full_t1_b1/train_stats.json OUT/run_paper_full_t2_b1/train_stats.json projects each
-# part to more threads.
+# bench/amdahl.py OUT/run_paper_full_t1_b1/train_stats.json OUT/run_paper_full_t2_b1/train_stats.json [--median]
+# projects each part to more threads.
 #   bench/train_steps.sh OUT HGS [HGS2 ...]
 #   env: SIZE=paper|small (default small), METHOD=full|rgb|both (default both), ITERS (120), REPS (2), THREADS (2)
 set -uo pipefail
@@ -49,8 +49,11 @@ for rep in $(seq 1 "$REPS"); do
 import json, sys
 d = json.load(open(sys.argv[1]))
 parts = ", ".join(f"{k} {v:.1f}" for k, v in d["mean_ms_per_part"].items() if v >= 0.05)
+med = d.get("median_ms_per_part", {})
+med = ", ".join(f"{k} {v:.1f}" for k, v in med.items() if v >= 0.05)
 print(f"round {sys.argv[2]}, {sys.argv[3]}, {sys.argv[4]}: median {d['median_ms_per_iter']:.1f} ms, "
-      f"mean {d['mean_ms_per_iter']:.1f}; parts (mean ms): {parts}; peak RSS {d['peak_rss_mb']:.0f} MB")
+      f"mean {d['mean_ms_per_iter']:.1f}; parts (mean ms): {parts}" + (f"; (median ms): {med}" if med else "") +
+      f"; peak RSS {d['peak_rss_mb']:.0f} MB")
 EOF
     done
   done
