@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstring>
 #include <random>
+#include <type_traits>
 #include <vector>
 
 #include "fd_check.h"
@@ -38,23 +39,26 @@ void on_each_isa(F&& f) {
 
 // True when a and b hold the same bits. (memcmp of empty vectors would pass null pointers: undefined, UBSan
 // reports it.)
-template <class T>
-bool bitwise_equal(const std::vector<T>& a, const std::vector<T>& b) {
-  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
+// (A and B: std::vector or ScratchVector of the same scalar.)
+template <class A, class B>
+bool bitwise_equal(const A& a, const B& b) {
+  static_assert(std::is_same_v<typename A::value_type, typename B::value_type>);
+  return a.size() == b.size() &&
+         (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(typename A::value_type)) == 0);
 }
 
 // The largest |a[i] - b[i]| (a and b expected the same size) and the largest |a[i]|.
-template <class T>
-double max_abs_diff(const std::vector<T>& a, const std::vector<T>& b) {
+template <class A, class B>
+double max_abs_diff(const A& a, const B& b) {
   EXPECT_EQ(a.size(), b.size());
   double m = 0;
   for (size_t i = 0; i < std::min(a.size(), b.size()); ++i) m = std::max(m, std::abs(double(a[i]) - double(b[i])));
   return m;
 }
-template <class T>
-double max_abs(const std::vector<T>& a) {
+template <class A>
+double max_abs(const A& a) {
   double m = 0;
-  for (T v : a) m = std::max(m, std::abs(double(v)));
+  for (auto v : a) m = std::max(m, std::abs(double(v)));
   return m;
 }
 
