@@ -150,8 +150,8 @@ struct RenderOutputsT {
   std::vector<T> extra;        // [H, W, C] (empty when C = 0)
   std::vector<T> weight_sums;  // [N, J] when pixel weights were given (else empty)
   // [H, W, G * GW] (or [G, H, W, GW]: group_planes) when channel groups were given. Its growth is not zeroed
-  // (ScratchVector): the renderer writes every value it reads, or flags the tiles it left (group_live); zeroing a
-  // view's new planes took 7 ms a step on one thread at 1000x700, J = 16-24.
+  // (ScratchVector): the walks write every value, or flag the tiles they leave (group_live); zeroing a view's new
+  // planes took 7 ms a step on one thread at 1000x700 with J = 16-24.
   ScratchVector<T> groups;
   // [G, tiles_y, tiles_x] of kTileSize-pixel tiles, with group_live_tiles (else empty): 1 where group g's plane was
   // written, 0 where its values are +0 and groups holds whatever was there before.
