@@ -35,4 +35,12 @@ struct DefaultInitAllocator : std::allocator<T> {
 template <class T>
 using ScratchVector = std::vector<T, DefaultInitAllocator<T>>;
 
+// v resized to n when its old values need not survive: a growth past its storage reallocates without copying them
+// (a serial copy of megabytes where per-view buffers change size from view to view).
+template <class T>
+void resize_discarding(ScratchVector<T>& v, size_t n) {
+  if (n > v.capacity()) v.clear();
+  v.resize(n);
+}
+
 }  // namespace hgs

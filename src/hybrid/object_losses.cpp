@@ -644,9 +644,9 @@ ObjectLossValues ObjectLosses::box_path(const Image& image, const LabelMap& lab,
   }
   for (Object& o : obj_) {  // the outputs the pieces fill, row by row
     const size_t n = o.R.area() * 3;
-    o.own.resize(n);
-    o.unit.resize(bro_on ? n : 0);
-    o.pred.resize(bro_on && cfg_.bro_scale_invariant ? n : 0);
+    resize_discarding(o.own, n);  // (every value written by the pieces: the last view's need not be kept)
+    resize_discarding(o.unit, bro_on ? n : 0);
+    resize_discarding(o.pred, bro_on && cfg_.bro_scale_invariant ? n : 0);
     o.rows.assign(size_t(o.R.height()) * kTerms, 0.0);
   }
   // Step 2: tasks (-1: the base pair's eq. 6, -2: its eq. 14, j: object j) over rows [y0, y1), cut into bands.

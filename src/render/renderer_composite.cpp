@@ -79,13 +79,8 @@ void RendererT<T>::composite(const ChannelsT<T>& ch, const RenderSettings& s, Re
   else out.extra.clear();
   if (J > 0) out.weight_sums.resize(size_t(n) * J);
   else out.weight_sums.clear();
-  if (GT > 0) {
-    // Its old values need not survive (the walks write or flag every value): no copy when it outgrows its storage.
-    if (P * GT > out.groups.capacity()) out.groups.clear();
-    out.groups.resize(P * GT);
-  } else {
-    out.groups.clear();
-  }
+  if (GT > 0) resize_discarding(out.groups, P * GT);  // the walks write or flag every value
+  else out.groups.clear();
   const bool live = GT > 0 && ch.group_live_tiles;
   if (live) out.group_live.resize(size_t(ch.num_groups) * st.bins.num_tiles);
   else out.group_live.clear();
