@@ -213,15 +213,7 @@ inline __attribute__((always_inline)) void write_forward_batches(const RasterInp
 // (their sums would be +0: the reduction skips them), and wa goes back to zero for the next Gaussian.
 template <class T>
 inline void gaussian_weights(int J, uint32_t used, simd::Pack<T>* wa, T* o) {
-  if (J > 32) {
-    for (int jj = 0; jj < J; ++jj) o[jj] = simd::hsum<T>(wa[jj]), wa[jj] = simd::Pack<T>{};
-    return;
-  }
-  for (; used; used &= used - 1) {
-    const int jj = __builtin_ctz(used);
-    o[jj] = simd::hsum<T>(wa[jj]);
-    wa[jj] = simd::Pack<T>{};
-  }
+  for_batch_maps(used, J, [&](int jj) { o[jj] = simd::hsum<T>(wa[jj]), wa[jj] = simd::Pack<T>{}; });
 }
 
 // The tile's per-pair pixel-weight sums, pair_w [pairs, J] and pair_maps [pairs], from the tile's own tw [n, J]
@@ -235,12 +227,8 @@ void store_pair_weights(const Binning& bins, int tile, int n, int J, const T* tw
     const size_t p = size_t(bins.tile_pair[s + k]);
     T* o = pair_w + p * J;
     const T* t = tw + size_t(k) * J;
-    if (J > 32) {
-      for (int jj = 0; jj < J; ++jj) o[jj] = t[jj];
-      continue;
-    }
-    pair_maps[p] = tu[k];
-    for (uint32_t m = tu[k]; m; m &= m - 1) o[__builtin_ctz(m)] = t[__builtin_ctz(m)];
+    if (J <= 32) pair_maps[p] = tu[k];
+    for_batch_maps(tu[k], J, [&](int jj) { o[jj] = t[jj]; });
   }
 }
 
@@ -375,10 +363,7 @@ void rasterize_forward(const RasterInputs<T>& in, const Binning& bins, RasterWor
         // sum that starts at +0 unchanged (such a sum is never -0), so only the maps of pair_maps are added.
         for (int p = bins.pair_offset[i]; p < bins.pair_offset[i + 1]; ++p) {
           const T* pw = PW + size_t(p) * J;
-          if (J > 32)
-            for (int jj = 0; jj < J; ++jj) o[jj] += pw[jj];
-          else
-            for (uint32_t m = PM[p]; m; m &= m - 1) o[__builtin_ctz(m)] += pw[__builtin_ctz(m)];
+          for_batch_maps(J <= 32 ? PM[p] : 0u, J, [&](int jj) { o[jj] += pw[jj]; });
         }
       }
     }

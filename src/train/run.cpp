@@ -159,13 +159,15 @@ void TrainingRun::train(const StepCallback& on_step) {
 
 json TrainingRun::stats() const {
   const size_t steps = ms_.size();
-  std::vector<float> sorted = ms_;
-  std::nth_element(sorted.begin(), sorted.begin() + steps / 2, sorted.end());
+  auto median = [](auto v) {  // the upper median of a copy, 0 when empty
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    return v.empty() ? 0.0 : double(v[v.size() / 2]);
+  };
   const Reducer& red = trainer_.reducer();
   json stats = {{"iterations", trainer_.iteration()},
                 {"iterations_this_run", trainer_.iteration() - start_},
                 {"stopped", stopped_.empty() ? json(nullptr) : json(stopped_)},
-                {"median_ms_per_iter", steps ? sorted[steps / 2] : 0.0},
+                {"median_ms_per_iter", median(ms_)},
                 {"mean_ms_per_iter", steps ? (wall_ - test_seconds_) * 1000.0 / double(steps) : 0.0},
                 {"peak_rss_mb", peak_rss_mb()},
                 {"num_gaussians", trainer_.model().n},
@@ -200,8 +202,7 @@ json TrainingRun::stats() const {
   std::vector<double> v(steps);
   StepTimes::each([&](const char* name, double StepTimes::*m) {
     for (size_t i = 0; i < steps; ++i) v[i] = step_parts_[i].*m;
-    std::nth_element(v.begin(), v.begin() + steps / 2, v.end());
-    part_median[name] = steps ? v[steps / 2] : 0.0;
+    part_median[name] = median(v);
   });
   stats["median_ms_per_part"] = part_median;
   return stats;
