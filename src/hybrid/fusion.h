@@ -31,7 +31,6 @@
 // Templated on the scalar so the tests check the gradient in double precision.
 #pragma once
 #include <immintrin.h>
-#include <omp.h>
 
 #include <algorithm>
 #include <cmath>
@@ -41,6 +40,7 @@
 #include <vector>
 
 #include "core/image.h"
+#include "core/parallel.h"
 #include "hybrid/object_channels.h"
 #include "render/renderer.h"
 
@@ -319,20 +319,14 @@ void fuse_backward(const ObservationTable& tab, const T* w, const FusionParams& 
   using V = typename FB::V;
   constexpr int B = FB::B;
   const int blocks = (N + B - 1) / B;
-  std::fill(dw, dw + U, T(0));
-  // Per-thread partial sums, added in thread order (deterministic for a given thread count).
-  std::vector<std::vector<T>> partial(size_t(std::max(1, omp_get_max_threads())));
-#pragma omp parallel
-  {
-    std::vector<T>& dw_local = partial[omp_get_thread_num()];
-    dw_local.assign(U, T(0));
+  // A partial [U] per fixed chunk of blocks, added in chunk order: the same bits at any thread count.
+  chunked_sum(FixedChunks(blocks, 128, 64), size_t(U), dw, [&](long blk0, long blk1, T* dw_local) {
     // gv [B, L + 2]: the gradient of a view that observes the Gaussian with label l, before the factor 1 / (den +
     // eps) (background weighted; a label outside [0, L) gets only the normalisation's part, slot L), slot L + 1 = 0
     // for no observation.
     std::vector<T> ds(L), gv(size_t(B) * (L + 2));
-#pragma omp for schedule(static)
-    for (int blk = 0; blk < blocks; ++blk) {
-      const int n0 = blk * B, nb = std::min(B, N - n0);
+    for (long blk = blk0; blk < blk1; ++blk) {
+      const int n0 = int(blk) * B, nb = std::min(B, N - n0);
       // The Gaussians that pass a gradient: valid (elsewhere q is a constant) and with some dq != 0. A row of dq
       // all +-0 (a Gaussian this step did not render, or no loss reached) makes every term below +-0, and adding
       // +-0 to a sum that starts at +0 leaves it as it was (such a sum is never -0): skipped, the same bits.
@@ -382,7 +376,7 @@ void fuse_backward(const ObservationTable& tab, const T* w, const FusionParams& 
         const T* g = &gv[size_t(b) * (L + 2)];
         const T inv = inv_b[b];
         const uint16_t* lab = rows + size_t(b) * U;
-        T* d = dw_local.data();
+        T* d = dw_local;
         int u = 0;
 #ifdef __AVX2__
         if constexpr (std::is_same_v<T, float>) {  // 8 views at once: each d[u] gets the same fused multiply-add
@@ -402,9 +396,7 @@ void fuse_backward(const ObservationTable& tab, const T* w, const FusionParams& 
         }
       }
     }
-  }
-  for (const auto& part : partial)
-    for (int u = 0; u < U; ++u) dw[u] += part[u];
+  });
 }
 
 // z_n = argmax_k q_{n,k} (first maximum). q [N, K+1] -> z [N]

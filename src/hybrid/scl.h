@@ -13,7 +13,6 @@
 // references of the other foreground objects present in view v. sim = cosine, temperature tau2.
 //   L = -log( exp(sim(a, r_k)/tau2) / sum_{k' in F_v} exp(sim(a, r_k')/tau2) )
 #pragma once
-#include <omp.h>
 
 #include <algorithm>
 #include <cmath>
@@ -21,6 +20,8 @@
 #include <cstdint>
 #include <type_traits>
 #include <vector>
+
+#include "core/parallel.h"
 
 namespace hgs::hybrid {
 
@@ -35,29 +36,21 @@ void pooled_prediction(int n, int D, int L, int J, const T* q, const T* f, const
 template <class T, class RowFn>
 void pooled_prediction_rows(int n, int D, int L, int J, const T* q, RowFn&& row, const T* a, const int* objs,
                             const T* mass, T eps, T* P) {
-  std::fill(P, P + size_t(J) * D, T(0));
-  // Per-thread partial sums, added in thread order (deterministic for a given thread count).
-  std::vector<std::vector<T>> partial(size_t(std::max(1, omp_get_max_threads())));
-#pragma omp parallel
-  {
-    std::vector<T>& local = partial[omp_get_thread_num()];
-    local.assign(size_t(J) * D, T(0));
+  // A partial [J, D] per fixed chunk of Gaussians, added in chunk order: the same bits at any thread count.
+  chunked_sum(FixedChunks(n, 1024, 64), size_t(J) * D, P, [&](long i0, long i1, T* part) {
     std::vector<T> buf(D);
-#pragma omp for schedule(static)
-    for (int i = 0; i < n; ++i) {
+    for (long i = i0; i < i1; ++i) {
       const T* fi = nullptr;
       for (int j = 0; j < J; ++j) {
         const T w = a[size_t(i) * J + j] * q[size_t(i) * L + objs[j]];
         if (w == T(0)) continue;  // most Gaussians do not touch most masks
-        if (!fi) fi = row(long(i), buf.data());
-        T* o = &local[size_t(j) * D];
+        if (!fi) fi = row(i, buf.data());
+        T* o = &part[size_t(j) * D];
 #pragma omp simd
         for (int d = 0; d < D; ++d) o[d] += w * fi[d];
       }
     }
-  }
-  for (const auto& local : partial)
-    for (size_t k = 0; k < local.size(); ++k) P[k] += local[k];
+  });
   for (int j = 0; j < J; ++j) {
     const T inv = T(1) / (mass[j] + eps);
     for (int d = 0; d < D; ++d) P[size_t(j) * D + d] *= inv;

@@ -116,31 +116,38 @@ void fuse_reference(const ObservationTable& tab, const T* w, const FusionParams&
     softmax(lg.data(), L, q + size_t(n) * L);
   }
 }
+// dw is summed Gaussian by Gaussian within each of fuse_backward's fixed chunks (of 8-Gaussian blocks; their bounds
+// depend on N alone), and the chunks' sums are added in chunk order.
 template <class T>
 void fuse_backward_reference(const ObservationTable& tab, const T* w, const FusionParams& p, const T* s, const T* q,
                              const uint8_t* valid, const T* dq, T* dw) {
-  const int L = p.num_labels, U = tab.num_views;
+  const int L = p.num_labels, U = tab.num_views, B = FuseBlock<T>::B;
+  const FixedChunks chunks((tab.n + B - 1) / B, 128, 64);
   std::fill(dw, dw + U, T(0));
-  std::vector<T> ds(L);
-  for (int n = 0; n < tab.n; ++n) {
-    if (!valid[n]) continue;
-    softmax_backward(q + size_t(n) * L, dq + size_t(n) * L, L, ds.data());
-    const uint16_t* lab = &tab.label[size_t(n) * U];
-    T den = 0;
-    for (int u = 0; u < U; ++u)
-      if (lab[u] != kNoObservation) den += w[u];
-    const T inv = T(1) / (den + T(p.eps));
-    T sum_ds_s = 0;
-    for (int k = 0; k < L; ++k) {
-      ds[k] /= T(p.temperature);
-      sum_ds_s += ds[k] * s[size_t(n) * L + k];
+  std::vector<T> ds(L), part(U);
+  for (int c = 0; c < chunks.count; ++c) {
+    std::fill(part.begin(), part.end(), T(0));
+    for (int n = int(chunks.begin(c)) * B; n < std::min<long>(tab.n, chunks.end(c) * B); ++n) {
+      if (!valid[n]) continue;
+      softmax_backward(q + size_t(n) * L, dq + size_t(n) * L, L, ds.data());
+      const uint16_t* lab = &tab.label[size_t(n) * U];
+      T den = 0;
+      for (int u = 0; u < U; ++u)
+        if (lab[u] != kNoObservation) den += w[u];
+      const T inv = T(1) / (den + T(p.eps));
+      T sum_ds_s = 0;
+      for (int k = 0; k < L; ++k) {
+        ds[k] /= T(p.temperature);
+        sum_ds_s += ds[k] * s[size_t(n) * L + k];
+      }
+      for (int u = 0; u < U; ++u) {
+        if (lab[u] == kNoObservation) continue;
+        T g = -sum_ds_s;
+        if (lab[u] < L) g += lab[u] == 0 ? T(p.background_vote) * ds[0] : ds[lab[u]];
+        part[u] += g * inv;
+      }
     }
-    for (int u = 0; u < U; ++u) {
-      if (lab[u] == kNoObservation) continue;
-      T g = -sum_ds_s;
-      if (lab[u] < L) g += lab[u] == 0 ? T(p.background_vote) * ds[0] : ds[lab[u]];
-      dw[u] += g * inv;
-    }
+    for (int u = 0; u < U; ++u) dw[u] += part[u];
   }
 }
 
@@ -151,15 +158,16 @@ void fuse_backward_reference(const ObservationTable& tab, const T* w, const Fusi
 // label count above kFuseBlockLabels (the per-Gaussian path), and tables whose Gaussians see every label or a few
 // (each its own label, the background and now and then another: most labels absent from a block). z, written
 // with q, is hard_ids() of the reference's q, and the base association its smallest value; fuse_backward() with
-// fuse()'s normalisers is the reference too.
+// fuse()'s normalisers is the reference too. fuse_backward's sum over Gaussians gives the reference's bits at 1, 2
+// and 3 threads, in one chunk (N = 301) and in several (N = 3373, four chunks).
 // Float and double.
 template <class T>
-void blocked_fusion_case() {
+void blocked_fusion_case(int N) {
   std::mt19937 rng(4);
   for (bool clustered : {false, true})
     for (int L : {2, 9, 40, kFuseBlockLabels + 5}) {
-      SCOPED_TRACE(testing::Message() << "L " << L << (clustered ? ", clustered" : ", spread"));
-      const int N = 301, U = 37;
+      SCOPED_TRACE(testing::Message() << "N " << N << ", L " << L << (clustered ? ", clustered" : ", spread"));
+      const int U = 37;
       ObservationTable tab;
       tab.n = N;
       tab.num_views = U;
@@ -197,6 +205,11 @@ void blocked_fusion_case() {
       fuse(tab, w.data(), p, q.data(), s.data(), valid.data(), z.data(), den.data(), base.data());
       fuse_backward(tab, w.data(), p, s.data(), q.data(), valid.data(), dq.data(), dw.data());
       fuse_backward(tab, w.data(), p, s.data(), q.data(), valid.data(), dq.data(), dw_den.data(), den.data());
+      std::vector<std::vector<T>> dw_at;  // at 2 and 3 threads
+      for (int t : {2, 3}) {
+        omp_set_num_threads(t);
+        fuse_backward(tab, w.data(), p, s.data(), q.data(), valid.data(), dq.data(), dw_at.emplace_back(U).data());
+      }
       omp_set_num_threads(threads);
       fuse_reference(tab, w.data(), p, q_ref.data(), s_ref.data(), valid_ref.data());
       fuse_backward_reference(tab, w.data(), p, s_ref.data(), q_ref.data(), valid_ref.data(), dq.data(), dw_ref.data());
@@ -206,6 +219,7 @@ void blocked_fusion_case() {
       EXPECT_EQ(q, q_ref);
       EXPECT_EQ(dw, dw_ref);
       EXPECT_EQ(dw_den, dw_ref);  // fuse()'s normalisers instead of summing them again
+      for (const auto& d : dw_at) EXPECT_EQ(std::memcmp(d.data(), dw_ref.data(), U * sizeof(T)), 0);
       EXPECT_NE(dw, std::vector<T>(U, T(0)));
       EXPECT_EQ(den[7], T(0));  // no view
       EXPECT_GT(den[9], T(0));  // views of labels past the last count in the normaliser
@@ -226,8 +240,10 @@ void blocked_fusion_case() {
 }
 
 TEST(ObservationFusion, BlockedFusionIsThePerGaussianLoopBitwise) {
-  blocked_fusion_case<float>();
-  blocked_fusion_case<double>();
+  for (int N : {301, 128 * 8 * 3 + 301}) {
+    blocked_fusion_case<float>(N);
+    blocked_fusion_case<double>(N);
+  }
 }
 
 TEST(ObservationFusion, BackgroundVoteWeighsTheAbsenceOfAMask) {
@@ -477,6 +493,36 @@ TEST(ObjectChannels, GradientToQAndColour) {
   object_channels_backward(N, L, lay, objs, q.data(), c.data(), up.data(), dq.data(), dc.data());
   check_grad(q, loss, dq);
   check_grad(c, loss, dc);
+}
+
+// The pooled predictions sum over every Gaussian: in fixed chunks of Gaussians added in chunk order, the same bits
+// at 1, 2 and 3 threads (a partial per thread, added in thread order, was not), and the sums' values (a double
+// reference).
+TEST(Scl, PooledPredictionSameBitsAtEveryThreadCount) {
+  std::mt19937 rng(8);
+  const int N = 5003, D = 16, L = 6, J = 3;  // 5 chunks of at least 1024 Gaussians
+  const int objs[J] = {1, 4, 5};
+  std::vector<double> qd = randv(size_t(N) * L, rng, 0, 1), fd = randv(size_t(N) * D, rng, -3, 3),
+                      ad = randv(size_t(N) * J, rng, 0, 2);
+  for (size_t k = 0; k < ad.size(); k += 3) ad[k] = 0;  // Gaussians that miss a mask
+  const std::vector<float> q(qd.begin(), qd.end()), f(fd.begin(), fd.end()), a(ad.begin(), ad.end());
+  const float mass[J] = {500, 3, 2000};
+  std::vector<double> ref(size_t(J) * D, 0.0);
+  for (int i = 0; i < N; ++i)
+    for (int j = 0; j < J; ++j)
+      for (int d = 0; d < D; ++d)
+        ref[size_t(j) * D + d] += double(a[size_t(i) * J + j]) * q[size_t(i) * L + objs[j]] * f[size_t(i) * D + d];
+  const int threads = omp_get_max_threads();
+  std::vector<std::vector<float>> P;
+  for (int t : {1, 2, 3}) {
+    omp_set_num_threads(t);
+    pooled_prediction(N, D, L, J, q.data(), f.data(), a.data(), objs, mass, 1e-6f, P.emplace_back(J * D).data());
+  }
+  omp_set_num_threads(threads);
+  for (int k = 1; k < 3; ++k) EXPECT_EQ(std::memcmp(P[k].data(), P[0].data(), J * D * sizeof(float)), 0) << k + 1;
+  for (int j = 0; j < J; ++j)
+    for (int d = 0; d < D; ++d)
+      EXPECT_NEAR(P[0][size_t(j) * D + d], ref[size_t(j) * D + d] / (mass[j] + 1e-6), 1e-5 * N / mass[j]) << j << d;
 }
 
 TEST(Scl, PooledPredictionAndInfoNceGradients) {
