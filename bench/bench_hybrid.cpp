@@ -231,6 +231,51 @@ void BM_PooledPrediction(benchmark::State& st) {
     hybrid::pooled_prediction(kN, kD, L, kK, q.data(), f.data(), a.data(), objs.data(), mass.data(), 1e-6f, P.data());
 }
 
+// SCL's pooled predictions as the trainer runs them (half-precision f, as on the room: 300k Gaussians, D = 512,
+// J = 18 anchors, 58 % of the Gaussians touching a mask, one or two of its maps each): arg 0 `half`: 0 = each row
+// widened into a float copy by ExtraGroup::row and then added (before 2026-12-07), 1 = pooled_prediction_half,
+// converted in registers as it is added (the same bits).
+void BM_PooledPredictionHalf(benchmark::State& st) {
+  const bench::OmpThreads threads(st, 1);
+  const int n = 300000, D = 512, J = 18, L = 14;
+  static ExtraGroup f;
+  static std::vector<float> q, a;
+  if (f.half.empty()) {
+    std::mt19937 rng(2);
+    f.dim = D;
+    f.f16 = true;
+    f.half.resize(size_t(n) * D);
+    for (auto& h : f.half) h = uint16_t(0x3000 + rng() % 0x0c00);  // values in [0.125, 1)
+    q.resize(size_t(n) * L);
+    for (auto& x : q) x = float(rng() % 1000 + 1) / 1000.f;
+    a.assign(size_t(n) * J, 0.f);
+    for (int i = 0; i < n; ++i)
+      if (rng() % 100 < 58) {
+        a[size_t(i) * J + rng() % J] = 1.f;
+        if (rng() % 3 == 0) a[size_t(i) * J + rng() % J] = 0.5f;
+      }
+  }
+  std::vector<int> objs(J);
+  for (int j = 0; j < J; ++j) objs[j] = j % L;
+  std::vector<float> mass(J, 1000.f), P(size_t(J) * D);
+  const bool half = st.range(0) != 0;
+  for (auto _ : st) {
+    if (half) {
+      hybrid::pooled_prediction_half(n, D, L, J, q.data(), f.half.data(), a.data(), objs.data(), mass.data(), 1e-6f,
+                                     P.data());
+    } else {
+      hybrid::pooled_prediction_rows(
+          n, D, L, J, q.data(),
+          [&](long i, float* buf) -> const float* {
+            f.row(size_t(i), buf);
+            return buf;
+          },
+          a.data(), objs.data(), mass.data(), 1e-6f, P.data());
+    }
+    benchmark::DoNotOptimize(P.data());
+  }
+}
+
 // Render forward + backward with 4 channels per present object (9 with the background; the opacity channels
 // forward-only) and the 8 pixel-weight sums of the SCL anchors (arg 1), or the plain RGB render (arg 0).
 void BM_RenderObjects(benchmark::State& st) {
@@ -394,4 +439,9 @@ BENCHMARK(BM_FuseViews)
     ->UseRealTime();
 BENCHMARK(BM_ObjectChannels)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_PooledPrediction)->Apply(bench::at_each_thread_count)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_PooledPredictionHalf)
+    ->ArgNames({"half", "threads"})
+    ->ArgsProduct({{0, 1}, bench::thread_counts()})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 BENCHMARK_MAIN();

@@ -57,7 +57,9 @@ SemanticValues SemanticPass::contrastive(int u, int n, HybridFields& h, const fl
     lang.row(size_t(i), buf);
     return buf;
   };
-  pooled_prediction_rows(n, D_, L_, Jf, q, lang_row, a, classes_.data(), mass.data(), 1e-6f, P_.data());
+  if (lang.f16)  // the half rows converted as they are added (the same bits as widening them first)
+    pooled_prediction_half(n, D_, L_, Jf, q, lang.half.data(), a, classes_.data(), mass.data(), 1e-6f, P_.data());
+  else pooled_prediction_rows(n, D_, L_, Jf, q, lang_row, a, classes_.data(), mass.data(), 1e-6f, P_.data());
   // Anchor k in view u: positive from a random other view v whose SCL classes hold k; negatives: v's others.
   const std::vector<SclAnchor> anchors = draw_scl_anchors(classes_, views_with_, u, rng);
   out.anchors = static_cast<int>(anchors.size());

@@ -9,12 +9,14 @@
 #include <functional>
 #include <random>
 
+#include "core/half.h"
 #include "fd_check.h"
 #include "hybrid/association.h"
 #include "hybrid/bro.h"
 #include "hybrid/fusion.h"
 #include "hybrid/object_channels.h"
 #include "hybrid/scl.h"
+#include "model/gaussian_model.h"
 #include "model/render_inputs.h"
 #include "render/camera_from_view.h"
 #include "render/renderer.h"
@@ -523,6 +525,38 @@ TEST(Scl, PooledPredictionSameBitsAtEveryThreadCount) {
   for (int j = 0; j < J; ++j)
     for (int d = 0; d < D; ++d)
       EXPECT_NEAR(P[0][size_t(j) * D + d], ref[size_t(j) * D + d] / (mass[j] + 1e-6), 1e-5 * N / mass[j]) << j << d;
+}
+
+// Half-precision rows (the trainer's language embeddings) converted in registers as they are added give the bits
+// of the rows widened first by ExtraGroup::row, at D = 512 and at a D with a tail of 5 (not a multiple of 8).
+TEST(Scl, PooledPredictionHalfIsTheWidenedRowsBitwise) {
+  std::mt19937 rng(12);
+  for (int D : {512, 13}) {
+    const int N = 2600, L = 5, J = 4;  // 3 chunks
+    const int objs[J] = {0, 2, 3, 4};
+    ExtraGroup f;
+    f.dim = D;
+    f.f16 = true;
+    f.half.resize(size_t(N) * D);
+    for (auto& h : f.half) h = float_to_half(std::uniform_real_distribution<float>(-2, 2)(rng));
+    std::vector<float> q(size_t(N) * L), a(size_t(N) * J, 0.f);
+    for (auto& x : q) x = std::uniform_real_distribution<float>(0, 1)(rng);
+    for (int i = 0; i < N; ++i)
+      for (int j = 0; j < J; ++j)
+        if (rng() % 3 == 0) a[size_t(i) * J + j] = std::uniform_real_distribution<float>(0, 3)(rng);
+    const float mass[J] = {40, 7, 900, 1};
+    std::vector<float> widened(size_t(J) * D), half(size_t(J) * D);
+    pooled_prediction_rows(
+        N, D, L, J, q.data(),
+        [&](long i, float* buf) -> const float* {
+          f.row(size_t(i), buf);
+          return buf;
+        },
+        a.data(), objs, mass, 1e-6f, widened.data());
+    pooled_prediction_half(N, D, L, J, q.data(), f.half.data(), a.data(), objs, mass, 1e-6f, half.data());
+    EXPECT_EQ(std::memcmp(widened.data(), half.data(), widened.size() * sizeof(float)), 0) << "D " << D;
+    EXPECT_NE(widened, std::vector<float>(widened.size(), 0.f));
+  }
 }
 
 TEST(Scl, PooledPredictionAndInfoNceGradients) {
