@@ -77,8 +77,9 @@ void pooled_prediction_rows(int n, int D, int L, int J, const T* q, RowFn&& row,
 
 // pooled_prediction of f stored as IEEE half rows fh [N, D] (the trainer's language embeddings): each row converted
 // in registers as it is added, instead of widened into a float copy first (a store and a load of 2 KB a row at
-// D = 512; 17 % of the pass in a side-by-side benchmark). The same values and sums as pooled_prediction_rows with
-// ExtraGroup::row's widening, bit for bit (Scl.PooledPredictionHalfIsTheWidenedRowsBitwise).
+// D = 512; about a fifth of the pass at one thread, BM_PooledPredictionHalf). The same values and sums as
+// pooled_prediction_rows with ExtraGroup::row's widening, bit for bit: both form each w f + o as one fused
+// multiply-add (the compiler contracts the other's loop; Scl.PooledPredictionHalfIsTheWidenedRowsBitwise).
 inline void pooled_prediction_half(int n, int D, int L, int J, const float* q, const uint16_t* fh, const float* a,
                                    const int* objs, const float* mass, float eps, float* P) {
   auto make_adder = [&] {
