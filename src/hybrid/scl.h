@@ -34,21 +34,24 @@ void pooled_prediction(int n, int D, int L, int J, const T* q, const T* f, const
                        T eps, T* P);
 
 // pooled_prediction with f_i read through an adder: make_adder() gives each chunk of Gaussians its own callable
-// add(i, w, o) that adds w f_i to the partial row o [D] (it may keep scratch and state: the calls of a chunk come
-// from one thread, Gaussian by Gaussian in increasing i, a Gaussian's maps in increasing j), so that the embeddings
-// can be stored in any format.
+// add(i, w, o, first) that adds w f_i to the partial row o [D], first = true at Gaussian i's first map (it may keep
+// scratch and state: the calls of a chunk come from one thread, Gaussian by Gaussian in increasing i, a Gaussian's
+// maps in increasing j), so that the embeddings can be stored in any format.
 template <class T, class MakeAdder>
 void pooled_prediction_add(int n, int D, int L, int J, const T* q, MakeAdder&& make_adder, const T* a, const int* objs,
                            const T* mass, T eps, T* P) {
   // A partial [J, D] per fixed chunk of Gaussians, added in chunk order: the same bits at any thread count.
   chunked_sum(FixedChunks(n, 1024, 64), size_t(J) * D, P, [&](long i0, long i1, T* part) {
     auto add = make_adder();
-    for (long i = i0; i < i1; ++i)
+    for (long i = i0; i < i1; ++i) {
+      bool first = true;
       for (int j = 0; j < J; ++j) {
         const T w = a[size_t(i) * J + j] * q[size_t(i) * L + objs[j]];
         if (w == T(0)) continue;  // most Gaussians do not touch most masks
-        add(i, w, &part[size_t(j) * D]);
+        add(i, w, &part[size_t(j) * D], first);
+        first = false;
       }
+    }
   });
   for (int j = 0; j < J; ++j) {
     const T inv = T(1) / (mass[j] + eps);
@@ -62,12 +65,9 @@ template <class T, class RowFn>
 void pooled_prediction_rows(int n, int D, int L, int J, const T* q, RowFn&& row, const T* a, const int* objs,
                             const T* mass, T eps, T* P) {
   auto make_adder = [&] {
-    return [&row, D, buf = std::vector<T>(size_t(D)), last = -1L, fi = static_cast<const T*>(nullptr)](long i, T w,
-                                                                                                       T* o) mutable {
-      if (i != last) {
-        fi = row(i, buf.data());
-        last = i;
-      }
+    return [&row, D, buf = std::vector<T>(size_t(D)), fi = static_cast<const T*>(nullptr)](long i, T w, T* o,
+                                                                                           bool first) mutable {
+      if (first) fi = row(i, buf.data());
 #pragma omp simd
       for (int d = 0; d < D; ++d) o[d] += w * fi[d];
     };
@@ -83,14 +83,12 @@ void pooled_prediction_rows(int n, int D, int L, int J, const T* q, RowFn&& row,
 inline void pooled_prediction_half(int n, int D, int L, int J, const float* q, const uint16_t* fh, const float* a,
                                    const int* objs, const float* mass, float eps, float* P) {
   auto make_adder = [&] {
-    return [fh, D, N = size_t(n), last = -1L](long i, float w, float* o) mutable {
+    return [fh, D, N = size_t(n)](long i, float w, float* o, bool first) {
       const uint16_t* h = fh + size_t(i) * D;
-      if (i != last) {  // as ExtraGroup::row: ask for the row two further on (rows are walked in increasing order)
-        last = i;
-        if (size_t(i) + 3 <= N)
-          for (size_t b = 0; b < size_t(D) * 2; b += 64)
-            __builtin_prefetch(reinterpret_cast<const char*>(h + 2 * size_t(D)) + b);
-      }
+      // As ExtraGroup::row: ask for the row two further on (rows are walked in increasing order).
+      if (first && size_t(i) + 3 <= N)
+        for (size_t b = 0; b < size_t(D) * 2; b += 64)
+          __builtin_prefetch(reinterpret_cast<const char*>(h + 2 * size_t(D)) + b);
       const __m256 vw = _mm256_set1_ps(w);
       int d = 0;
       for (; d + 8 <= D; d += 8)
