@@ -1,11 +1,10 @@
 #include "hybrid/semantic.h"
 
-#include <omp.h>
-
 #include <algorithm>
 #include <cstring>
 
 #include "core/error.h"
+#include "core/parallel.h"
 #include "hybrid/scl.h"
 
 namespace hgs::hybrid {
@@ -84,40 +83,45 @@ SemanticValues SemanticPass::contrastive(int u, int n, HybridFields& h, const fl
   FactoredView& fv = views_.emplace_back();
   fv.objs = classes_;
   fv.G = G_;
-  // The same pass collects the Gaussians the view's masks touched (a row of a not all 0), in index order: each
-  // thread its static chunk, the chunks joined in thread order (the same rows whatever the thread count). A row
-  // of a all 0 has no dq term and da 0 (pooled_backward_row's values), so its f_n is not read (a view's masks
-  // need not cover every Gaussian it renders).
-  std::vector<std::vector<int>> touched(size_t(std::max(1, omp_get_max_threads())));
+  // The same pass collects the Gaussians the view's masks touched (a row of a not all 0), in index order: a list
+  // per chunk of rows (bounds from n alone), the lists joined in chunk order. A row of a all 0 has no dq term and
+  // da 0 (pooled_backward_row's values), so its f_n is not read (a view's masks need not cover every Gaussian it
+  // renders). Chunks on a dynamic schedule: the touched rows may cluster by index (densification appends its
+  // clones at the end, a view sees some objects), which would leave threads of a static split idle. Every value
+  // written is one row's own, so the schedule changes no bits.
+  const FixedChunks chunks(n, 1024, 4096);
+  if (touched_.size() < size_t(chunks.count)) touched_.resize(size_t(chunks.count));
 #pragma omp parallel
   {
-    std::vector<int>& mine = touched[omp_get_thread_num()];
-    mine.clear();
     alignas(64) float buf[train::kMaxRowUpdateDim];
-#pragma omp for schedule(static)
-    for (long i = 0; i < n; ++i) {
-      const float* ai = a + size_t(i) * Jf;
-      if (std::none_of(ai, ai + Jf, [](float x) { return x != 0.f; })) {
-        if (da) std::fill(da + size_t(i) * Jf, da + size_t(i + 1) * Jf, 0.f);
-        continue;
+#pragma omp for schedule(dynamic, 1)
+    for (int c = 0; c < chunks.count; ++c) {
+      std::vector<int>& mine = touched_[size_t(c)];
+      mine.clear();
+      for (long i = chunks.begin(c); i < chunks.end(c); ++i) {
+        const float* ai = a + size_t(i) * Jf;
+        if (std::none_of(ai, ai + Jf, [](float x) { return x != 0.f; })) {
+          if (da) std::fill(da + size_t(i) * Jf, da + size_t(i + 1) * Jf, 0.f);
+          continue;
+        }
+        mine.push_back(int(i));
+        pooled_backward_row<float>(i, D_, L_, Jf, q, lang_row(i, buf), a, classes_.data(), G_.data(), dq, da);
       }
-      mine.push_back(int(i));
-      pooled_backward_row<float>(i, D_, L_, Jf, q, lang_row(i, buf), a, classes_.data(), G_.data(), dq, da);
     }
   }
-  size_t rows = 0;
-  for (const auto& t : touched) rows += t.size();
-  fv.rows.resize(rows);
-  fv.a.resize(rows * Jf);
-  std::vector<size_t> start(touched.size() + 1, 0);
-  for (size_t t = 0; t < touched.size(); ++t) start[t + 1] = start[t] + touched[t].size();
-#pragma omp parallel for schedule(static, 1)
-  for (long t = 0; t < long(touched.size()); ++t)
-    for (size_t r = 0; r < touched[t].size(); ++r) {
-      const int i = touched[t][r];
-      fv.rows[start[t] + r] = i;
-      std::copy_n(a + size_t(i) * Jf, Jf, &fv.a[(start[t] + r) * Jf]);
+  std::vector<size_t> start(size_t(chunks.count) + 1, 0);
+  for (int c = 0; c < chunks.count; ++c) start[size_t(c) + 1] = start[size_t(c)] + touched_[size_t(c)].size();
+  fv.rows.resize(start.back());
+  fv.a.resize(start.back() * Jf);
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int c = 0; c < chunks.count; ++c) {
+    const std::vector<int>& mine = touched_[size_t(c)];
+    for (size_t r = 0; r < mine.size(); ++r) {
+      const int i = mine[r];
+      fv.rows[start[size_t(c)] + r] = i;
+      std::copy_n(a + size_t(i) * Jf, Jf, &fv.a[(start[size_t(c)] + r) * Jf]);
     }
+  }
   out.loss = loss / anchors.size();
   return out;
 }

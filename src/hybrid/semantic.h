@@ -70,8 +70,9 @@ class SemanticPass {
   int L_, D_;
   std::vector<std::vector<int>> views_with_;  // [L] training views whose SCL objects include l
   std::vector<int> classes_;
-  std::vector<float> P_, dP_, G_;  // [Jf, D] predictions, their gradient, dP / (m + eps)
-  std::vector<float> refs_;        // [R, D] InfoNCE candidates of one anchor
+  std::vector<float> P_, dP_, G_;          // [Jf, D] predictions, their gradient, dP / (m + eps)
+  std::vector<float> refs_;                // [R, D] InfoNCE candidates of one anchor
+  std::vector<std::vector<int>> touched_;  // per chunk of rows: the rows a view's masks touched (kept for capacity)
   // One view's f gradient in factored form: df_n = sum_j q_{n,objs[j]} a_{n,j} G_j.
   struct FactoredView {
     std::vector<int> objs;  // [Jf]

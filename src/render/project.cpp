@@ -68,7 +68,9 @@ void project_backward_packs(const CameraT<T>& cam, int n, const T* mean, const T
                             T* dlog_scale, T* dquat) {
   using P = PackOf<T>;
   const int packs = (n + kL - 1) / kL;
-#pragma omp parallel for schedule(static)
+  // On demand, 64 packs at a time: only packs with a visible Gaussian do the work, and those cluster by index
+  // once densification has appended its clones (a static split left threads idle).
+#pragma omp parallel for schedule(dynamic, 64)
   for (int pk = 0; pk < packs; ++pk) {
     const int i0 = pk * kL, cnt = std::min(kL, n - i0);
     bool any = false;
