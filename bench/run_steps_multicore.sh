@@ -9,7 +9,8 @@
 # at the most threads beside it (--measure: which regions fall short of what their tasks allow), for the hybrid
 # step and the full step; last, the step as `hgs train` runs it on a synthetic capture at the paper's scale
 # (bench/train_steps.sh: RGB and the full method, each build, at the most threads; the box scene above
-# understates the method's step, docs/performance.md "Issue 61, session twelve"). JSON and text
+# understates the method's step, docs/performance.md "Issue 61, session twelve"), and the tabletop's full step on
+# a densified model (DENSIFIED=1, "Issue 61, session sixteen"). JSON and text
 # under OUT (default /tmp/steps_multicore); `bench/amdahl.py OUT/<tag>.json --threads 4 16` prints projection and
 # measurement side by side.
 #   bench/run_steps_multicore.sh NEW_BUILD_DIR [OLD_BUILD_DIR]
@@ -73,3 +74,8 @@ train_builds=()
 for d in "${dirs[@]}"; do train_builds+=("$d/hgs"); done
 SIZE=paper METHOD=both ITERS=60 REPS=1 THREADS="$NT" "$(dirname "$0")/train_steps.sh" "$O/train" "${train_builds[@]}" |
   tee "$O/train_steps.txt"
+# The same on a densified model (the tabletop after 2900 densified iterations, then 100 timed ones per build): the
+# Gaussians a view sees cluster by index there, which loops split statically into one range per thread did not
+# survive (docs/performance.md, "Issue 61, session sixteen").
+SIZE=small METHOD=full DENSIFIED=1 ITERS=100 REPS=2 THREADS="$NT" "$(dirname "$0")/train_steps.sh" "$O/train" \
+  "${train_builds[@]}" | tee "$O/train_steps_dense.txt"
