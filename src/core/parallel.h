@@ -17,6 +17,12 @@ namespace hgs {
 // Runs fn(i) for i in [0, n) on the OpenMP threads (dynamic schedule) with a Progress bar named `label`.
 void parallel_for_progress(const std::string& label, long n, bool progress, const std::function<void(long)>& fn);
 
+// Items per chunk of a dynamic schedule over `count` items of uneven cost (say, only the visible Gaussians do
+// work, and after densification those cluster by index, so a static split leaves threads idle): about 512 chunks
+// at any size (32 per thread at 16 threads), at least min_items each (a chunk costs the scheduler an atomic add).
+// Where each item writes only its own outputs, the chunking changes no bits.
+inline int demand_chunk(long count, int min_items) { return int(std::max<long>(min_items, count / 512)); }
+
 // Sets every element of v to x on the OpenMP threads (a per-step buffer of millions of values).
 template <class T>
 void parallel_fill(std::vector<T>& v, T x) {

@@ -54,9 +54,9 @@ inline bool project_centre(const MaskView& v, const float* c, double near, doubl
 void hide_occluded(const float* means, int n, const MaskView& v, const float* surface_depth, int u,
                    ObservationTable& table) {
   const int U = table.num_views;
-  // 1024 Gaussians at a time on demand: the work is the observed ones', which cluster by index once densification
-  // has appended its clones (a static split left threads idle; occlusion_pixels likewise).
-#pragma omp parallel for schedule(dynamic, 1024)
+  // On demand (demand_chunk): the work is the observed Gaussians', which cluster by index once densification has
+  // appended its clones (a static split left threads idle; occlusion_pixels likewise).
+#pragma omp parallel for schedule(dynamic, demand_chunk(n, 128))
   for (int i = 0; i < n; ++i) {
     uint16_t& l = table.label[size_t(i) * U + u];
     double z;
@@ -70,7 +70,7 @@ void hide_occluded(const float* means, int n, const MaskView& v, const float* su
 void occlusion_pixels(const float* means, int n, const MaskView& v, int u, const ObservationTable& table,
                       uint8_t* chosen) {
   const int U = table.num_views;
-#pragma omp parallel for schedule(dynamic, 1024)
+#pragma omp parallel for schedule(dynamic, demand_chunk(n, 128))
   for (int i = 0; i < n; ++i) {
     double z;
     int ix, iy;

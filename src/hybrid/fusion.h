@@ -248,8 +248,8 @@ void fuse(const ObservationTable& tab, const T* w, const FusionParams& p, T* q, 
           if (base_out) base_out[n] = low[b];
         }
       };
-      // 64 blocks at a time on demand: a block's cost follows the labels its Gaussians observed.
-#pragma omp for schedule(dynamic, 64)
+      // On demand (demand_chunk): a block's cost follows the labels its Gaussians observed.
+#pragma omp for schedule(dynamic, demand_chunk(blocks, 16))
       for (int blk = 0; blk < blocks; ++blk) {
         const int n0 = blk * B, nb = std::min(B, N - n0);
         const uint16_t* rows = &tab.label[size_t(n0) * U];

@@ -23,9 +23,9 @@ void build_object_groups(int n, int L, int J, const SparseLayout& sl, const int*
   const int C = sl.total();
   g.count.resize(n);
   g.ptr.resize(size_t(n) + 1);
-  // Here and below, 1024 Gaussians at a time on demand: a visible Gaussian's entries are most of the work, and
-  // the visible ones cluster by index once densification has appended its clones (a static split left threads idle).
-#pragma omp parallel for schedule(dynamic, 1024)
+  // Here and below on demand (demand_chunk): a visible Gaussian's entries are most of the work, and the visible
+  // ones cluster by index once densification has appended its clones (a static split left threads idle).
+#pragma omp parallel for schedule(dynamic, demand_chunk(n, 128))
   for (int i = 0; i < n; ++i) {
     const float* qi = q + size_t(i) * L;
     const float* ci = color + size_t(i) * 3;
@@ -48,7 +48,7 @@ void build_object_groups(int n, int L, int J, const SparseLayout& sl, const int*
   const size_t E = size_t(g.ptr[n]);
   g.id.resize(E);
   g.val.resize(E * ObjectGroups::kWidth);
-#pragma omp parallel for schedule(dynamic, 1024)
+#pragma omp parallel for schedule(dynamic, demand_chunk(n, 128))
   for (int i = 0; i < n; ++i) {
     if (g.count[i] == 0) continue;
     const float* qi = q + size_t(i) * L;
@@ -76,7 +76,7 @@ void object_groups_backward(int n, int L, int J, const SparseLayout& sl, const i
                             const float* color, const ObjectGroups& g, const float* grad_dense,
                             const float* grad_groups, float* dq, float* dcolor, const float* base) {
   const int C = sl.total();
-#pragma omp parallel for schedule(dynamic, 1024)
+#pragma omp parallel for schedule(dynamic, demand_chunk(n, 128))
   for (int i = 0; i < n; ++i) {
     const float* qi = q + size_t(i) * L;
     const float* ci = color + size_t(i) * 3;

@@ -89,7 +89,7 @@ SemanticValues SemanticPass::contrastive(int u, int n, HybridFields& h, const fl
   // renders). Chunks on a dynamic schedule: the touched rows may cluster by index (densification appends its
   // clones at the end, a view sees some objects), which would leave threads of a static split idle. Every value
   // written is one row's own, so the schedule changes no bits.
-  const FixedChunks chunks(n, 1024, 4096);
+  const FixedChunks chunks(n, 128, 512);
   if (touched_.size() < size_t(chunks.count)) touched_.resize(size_t(chunks.count));
 #pragma omp parallel
   {

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "core/parallel.h"
 #include "render/rasterize.h"  // the alpha cut-off kAlphaMin = 1 / kAlphaMinInverse
 
 namespace hgs::render {
@@ -268,8 +269,8 @@ template <class T>
 void bin_gaussians(int width, int height, int n, const T* mean2d, const T* conic, const T* opacity, const T* depth,
                    const int* radius, Binning& b) {
   start_binning(width, height, n, b);
-  // 1024 Gaussians at a time on demand: the visible ones (the work) cluster by index after densification.
-#pragma omp parallel for schedule(dynamic, 1024)
+  // On demand (demand_chunk): the visible Gaussians (the work) cluster by index after densification.
+#pragma omp parallel for schedule(dynamic, demand_chunk(n, 128))
   for (int i = 0; i < n; ++i)
     gaussian_box(b, i, mean2d, conic, opacity, radius, &b.bbox[4 * size_t(i)], &b.trect[4 * size_t(i)], b.counts[i],
                  b.mahal[i]);

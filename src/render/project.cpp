@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <type_traits>
 
+#include "core/parallel.h"
 #include "render/project_pack.h"
 
 namespace hgs::render {
@@ -68,9 +69,9 @@ void project_backward_packs(const CameraT<T>& cam, int n, const T* mean, const T
                             T* dlog_scale, T* dquat) {
   using P = PackOf<T>;
   const int packs = (n + kL - 1) / kL;
-  // On demand, 64 packs at a time: only packs with a visible Gaussian do the work, and those cluster by index
-  // once densification has appended its clones (a static split left threads idle).
-#pragma omp parallel for schedule(dynamic, 64)
+  // On demand (demand_chunk): only packs with a visible Gaussian do the work, and those cluster by index once
+  // densification has appended its clones (a static split left threads idle).
+#pragma omp parallel for schedule(dynamic, demand_chunk(packs, 8))
   for (int pk = 0; pk < packs; ++pk) {
     const int i0 = pk * kL, cnt = std::min(kL, n - i0);
     bool any = false;

@@ -10,6 +10,8 @@
 
 #include <algorithm>
 #include <type_traits>
+
+#include "core/parallel.h"
 #if defined(__AVX__)
 #include <immintrin.h>
 #endif
@@ -112,14 +114,14 @@ inline void row_ptrs(P* base, size_t width, const int* idx, P** rows) {
 }
 
 // Over chunks of kChunk Gaussians in parallel: zero(i) for each inactive Gaussian, group(idx [8]) for each group of
-// 8 active ones (ascending indices), one(i) for the active ones left over. The chunks go to the threads a few at a
-// time on demand: the active (visible) Gaussians cluster by index once densification has appended its clones, and
+// 8 active ones (ascending indices), one(i) for the active ones left over. The chunks go to the threads on demand
+// (demand_chunk): the active (visible) Gaussians cluster by index once densification has appended its clones, and
 // a static split left threads idle (the tabletop after densification, 16 threads simulated: 1.85x the balanced
 // time; docs/performance.md, session sixteen).
 template <class Zero, class Group, class One>
 void each_active(int n, const int* active, Zero zero, Group group, One one) {
   const int chunks = (n + kChunk - 1) / kChunk;
-#pragma omp parallel for schedule(dynamic, 4)
+#pragma omp parallel for schedule(dynamic, demand_chunk(chunks, 1))
   for (int ch = 0; ch < chunks; ++ch) {
     int idx[kChunk], m = 0;
     for (int i = ch * kChunk, end = std::min(n, i + kChunk); i < end; ++i)
