@@ -116,7 +116,7 @@ inline void row_ptrs(P* base, size_t width, const int* idx, P** rows) {
 // Over chunks of kChunk Gaussians in parallel: zero(i) for each inactive Gaussian, group(idx [8]) for each group of
 // 8 active ones (ascending indices), one(i) for the active ones left over. The chunks go to the threads on demand
 // (demand_chunk): the active (visible) Gaussians cluster by index once densification has appended its clones, and
-// a static split left threads idle (the tabletop after densification, 16 threads simulated: 1.85x the balanced
+// a static split left threads idle (the tabletop after densification, 16 threads simulated: 1.5-1.9x the balanced
 // time; docs/performance.md, session sixteen).
 template <class Zero, class Group, class One>
 void each_active(int n, const int* active, Zero zero, Group group, One one) {
