@@ -9,7 +9,8 @@
 # the script prints each run's median ms / iteration and mean and median ms per part from train_stats.json.
 # Iteration 100's observation-table rebuild is in the mean, not in the median.
 # Each run's train_stats.json stays in OUT/run_SIZE_METHOD_tTHREADS_bBUILD (run_SIZE_dense_... with DENSIFIED=1):
-# with runs at THREADS=1 and 2, bench/amdahl.py OUT/run_paper_full_t1_b1/train_stats.json OUT/run_paper_full_t2_b1/train_stats.json [--median]
+# with runs at THREADS=1 and 2,
+#   bench/amdahl.py OUT/run_paper_full_t1_b1/train_stats.json OUT/run_paper_full_t2_b1/train_stats.json [--median]
 # projects each part to more threads.
 # DENSIFIED=1 times the step on a densified model instead: the first build trains the scene once with
 # densification for DITERS iterations (default 3000; the schedule, scaled to the run, densifies in its first half)
@@ -56,7 +57,10 @@ dense_checkpoint() {
   if [ ! -f "$ckpt" ]; then
     rm -rf "$base"
     "$first" train "$S" --out "$base" --iters "$DITERS" --save-every "$((DITERS - ITERS))" --threads "$THREADS" \
-      --seed 0 --quiet "${opt[@]}" >"$base.log" 2>&1 || { echo "densified training failed, see $base.log" >&2; return 1; }
+      --seed 0 --quiet "${opt[@]}" >"$base.log" 2>&1 || {
+      echo "densified training failed, see $base.log" >&2
+      return 1
+    }
   fi
   echo "$ckpt"
 }
